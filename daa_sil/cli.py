@@ -1,0 +1,67 @@
+"""``daa-sil`` command-line entry point: ``daa-sil <noun> [<verb>] ...``.
+
+Errors are for people: a :class:`daa_sil.errors.DaaSilError` prints one line
+(``daa-sil: error: ...``) and exits with its code (2 for usage errors); argparse errors exit 2;
+Ctrl-C exits 130. No tracebacks unless ``DAA_SIL_DEBUG=1``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+
+from . import __version__
+from .errors import DaaSilError
+
+#: modules providing ``register(subparsers)``; order = order in ``--help``
+COMMAND_MODULES = [
+    "daa_sil.commands.geometry",
+]
+
+EPILOG = """examples:
+  daa-sil geometry --own 0,0,1000,0,55,0 --intruder 0,6000,1000,0,-100,0
+  daa-sil geometry --own 0,0,1000,0,55,0 --intruder 0,6000,1000,0,-100,0 --preset paper --json
+
+Every command has --help with examples. Units are SI (m, s, m/s) in the ENU frame unless a flag says otherwise.
+"""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="daa-sil", description=__doc__.splitlines()[0] + "\n\n"
+                     "MAVLink SIL bridge and fast-time study for UAS detect-and-avoid with a delayed remote pilot.",
+                     epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"daa-sil {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: "list[str] | None" = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        rc = args.func(args)
+    except DaaSilError as exc:
+        if os.environ.get("DAA_SIL_DEBUG"):
+            raise
+        print(f"daa-sil: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("daa-sil: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+    return int(rc or 0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

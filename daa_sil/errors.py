@@ -1,0 +1,31 @@
+"""Errors meant for people: one line, naming what is wrong and what is allowed.
+
+The CLI prints ``daa-sil: error: <message>`` and exits with ``exit_code`` (2 for usage errors),
+never a traceback.
+"""
+
+from __future__ import annotations
+
+
+class DaaSilError(Exception):
+    """Base class; ``exit_code`` is the process exit status the CLI uses."""
+
+    exit_code = 1
+
+
+class UsageError(DaaSilError):
+    """Bad command-line value or bad configuration value (exit 2)."""
+
+    exit_code = 2
+
+
+class FileFormatError(DaaSilError):
+    """A file that cannot be read: corrupt, truncated, wrong version or schema (exit 2)."""
+
+    exit_code = 2
+
+
+class OutputError(DaaSilError):
+    """An output cannot be written (unwritable directory, disk full, would overwrite) (exit 1)."""
+
+    exit_code = 1

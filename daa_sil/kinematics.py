@@ -1,0 +1,244 @@
+"""Batched point-mass aircraft kinematics (ENU, SI), exact for constant-rate turns.
+
+An :class:`AircraftState` holds arrays of any common shape (e.g. ``(N,)`` ownships or ``(N, M)``
+intruders): position ``x, y, z`` (m), ground speed ``gs`` (m/s), compass track ``trk`` (rad,
+clockwise from north) and vertical speed ``vs`` (m/s, up).
+
+Two ways to move aircraft by ``dt``:
+
+* :func:`advance` -- constant turn rate (rad/s, compass sense: + = right), along-track
+  acceleration (m/s^2) and vertical acceleration (m/s^2) over the step. Position is integrated in
+  closed form (arc with linearly varying speed), so a constant-rate turn is exact for any ``dt``.
+  Speed and vertical speed saturate at the :class:`Performance` limits inside the step (the step
+  is split at the saturation time).
+* :func:`fly_command` -- fly toward a :class:`Command` (target track, vertical speed, ground
+  speed) with the performance limits: turn the short way at the maximum turn rate until the target
+  track is reached, then straight; likewise for speed and vertical speed. Exact piecewise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from .frames import TWO_PI, track_from_velocity, wrap_2pi, wrap_pi
+from .units import DEG, FPM, G0, KT
+
+_W_EPS = 1e-6
+
+
+@dataclass
+class AircraftState:
+    """Batched aircraft state (all arrays share one shape)."""
+
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    gs: np.ndarray
+    trk: np.ndarray
+    vs: np.ndarray
+
+    def __post_init__(self):
+        arrs = np.broadcast_arrays(*(np.asarray(getattr(self, f.name), dtype=float) for f in fields(self)))
+        for f, a in zip(fields(self), arrs):
+            object.__setattr__(self, f.name, np.array(a, dtype=float))
+
+    @property
+    def shape(self) -> tuple:
+        return self.x.shape
+
+    def position(self) -> np.ndarray:
+        """ENU position ``(..., 3)``, m."""
+        return np.stack([self.x, self.y, self.z], axis=-1)
+
+    def velocity(self) -> np.ndarray:
+        """ENU velocity ``(..., 3)``, m/s."""
+        return np.stack([self.gs * np.sin(self.trk), self.gs * np.cos(self.trk), self.vs], axis=-1)
+
+    @classmethod
+    def from_pos_vel(cls, pos, vel) -> "AircraftState":
+        """Build from ENU position and velocity arrays ``(..., 3)``."""
+        pos, vel = np.asarray(pos, float), np.asarray(vel, float)
+        return cls(pos[..., 0], pos[..., 1], pos[..., 2], np.hypot(vel[..., 0], vel[..., 1]),
+                   track_from_velocity(vel[..., 0], vel[..., 1]), vel[..., 2])
+
+    def copy(self) -> "AircraftState":
+        return AircraftState(*(getattr(self, f.name).copy() for f in fields(self)))
+
+    def __getitem__(self, idx) -> "AircraftState":
+        return AircraftState(*(getattr(self, f.name)[idx] for f in fields(self)))
+
+    def where(self, mask, other: "AircraftState") -> "AircraftState":
+        """Element-wise choose ``self`` where ``mask`` else ``other``."""
+        return AircraftState(*(np.where(mask, getattr(self, f.name), getattr(other, f.name)) for f in fields(self)))
+
+    def as_array(self) -> np.ndarray:
+        """Stacked ``(..., 6)`` array (x, y, z, gs, trk, vs)."""
+        return np.stack([getattr(self, f.name) for f in fields(self)], axis=-1)
+
+    @classmethod
+    def from_array(cls, a) -> "AircraftState":
+        a = np.asarray(a, float)
+        return cls(*(a[..., k] for k in range(6)))
+
+
+@dataclass(frozen=True)
+class Performance:
+    """Ownship (or intruder) performance limits, SI. Defaults follow DAIDALUS DO-365B kinematics."""
+
+    max_turn_rate: float = 3.0 * DEG  #: rad/s
+    horizontal_accel: float = 2.0  #: m/s^2
+    vertical_accel: float = 0.25 * G0  #: m/s^2
+    max_vs: float = 6000.0 * FPM  #: m/s, symmetric climb/descent limit
+    min_gs: float = 10.0 * KT  #: m/s
+    max_gs: float = 700.0 * KT  #: m/s
+
+
+DEFAULT_PERFORMANCE = Performance()
+
+
+@dataclass
+class Command:
+    """A maneuver command: target compass track (rad), vertical speed (m/s), ground speed (m/s).
+
+    ``nan`` in a field means "keep the current value". Arrays of any common shape.
+    """
+
+    trk: np.ndarray = field(default_factory=lambda: np.array(np.nan))
+    vs: np.ndarray = field(default_factory=lambda: np.array(np.nan))
+    gs: np.ndarray = field(default_factory=lambda: np.array(np.nan))
+
+    def __post_init__(self):
+        a, b, c = np.broadcast_arrays(np.asarray(self.trk, float), np.asarray(self.vs, float),
+                                      np.asarray(self.gs, float))
+        self.trk, self.vs, self.gs = np.array(a), np.array(b), np.array(c)
+
+    @property
+    def shape(self) -> tuple:
+        return self.trk.shape
+
+    @classmethod
+    def hold(cls, state: AircraftState) -> "Command":
+        """The command that keeps the current track, vertical speed and ground speed."""
+        return cls(state.trk.copy(), state.vs.copy(), state.gs.copy())
+
+    def resolved(self, state: AircraftState) -> "Command":
+        """Replace nan fields by the state's current values."""
+        return Command(np.where(np.isnan(self.trk), state.trk, self.trk),
+                       np.where(np.isnan(self.vs), state.vs, self.vs),
+                       np.where(np.isnan(self.gs), state.gs, self.gs))
+
+    def where(self, mask, other: "Command") -> "Command":
+        return Command(np.where(mask, self.trk, other.trk), np.where(mask, self.vs, other.vs),
+                       np.where(mask, self.gs, other.gs))
+
+    def __getitem__(self, idx) -> "Command":
+        return Command(self.trk[idx], self.vs[idx], self.gs[idx])
+
+    def copy(self) -> "Command":
+        return Command(self.trk.copy(), self.vs.copy(), self.gs.copy())
+
+
+def _arc(gs0, acc, trk0, w, t):
+    """Displacement (dx, dy) after time t with speed gs0 + acc*t and compass track trk0 + w*t."""
+    small = np.abs(w) < _W_EPS
+    ws = np.where(small, 1.0, w)
+    th1 = trk0 + w * t
+    # x: int (gs0 + a t) sin(trk0 + w t) dt ; y: int (gs0 + a t) cos(trk0 + w t) dt
+    dx_turn = (gs0 * (np.cos(trk0) - np.cos(th1)) / ws
+               + acc * (-t * np.cos(th1) / ws + (np.sin(th1) - np.sin(trk0)) / ws ** 2))
+    dy_turn = (gs0 * (np.sin(th1) - np.sin(trk0)) / ws
+               + acc * (t * np.sin(th1) / ws + (np.cos(th1) - np.cos(trk0)) / ws ** 2))
+    dist = gs0 * t + 0.5 * acc * t * t
+    dx_str = dist * np.sin(trk0 + 0.5 * w * t)
+    dy_str = dist * np.cos(trk0 + 0.5 * w * t)
+    return np.where(small, dx_str, dx_turn), np.where(small, dy_str, dy_turn)
+
+
+def _horizontal_segment(x, y, gs, trk, w, acc, t):
+    dx, dy = _arc(gs, acc, trk, w, t)
+    return x + dx, y + dy, gs + acc * t, trk + w * t
+
+
+def _vertical(z, vs, target_vs, v_accel, dt):
+    """Exact vertical motion toward ``target_vs`` with |acceleration| = v_accel over dt."""
+    dv = target_vs - vs
+    t1 = np.minimum(np.abs(dv) / v_accel, dt) if v_accel > 0 else np.where(dv == 0, 0.0, dt)
+    a = np.sign(dv) * v_accel
+    vs1 = vs + a * t1
+    z_new = z + vs * t1 + 0.5 * a * t1 * t1 + vs1 * (dt - t1)
+    return z_new, np.where(np.abs(dv) <= v_accel * dt, target_vs, vs1)
+
+
+def advance(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, dt: float = 1.0,
+            perf: Performance = DEFAULT_PERFORMANCE) -> AircraftState:
+    """Move aircraft by ``dt`` s with constant turn rate (rad/s, + = right), along-track acceleration
+    and vertical acceleration (m/s^2). Turn rate is clipped to ``perf.max_turn_rate``; speed and
+    vertical speed saturate at the limits inside the step (the step is split there).
+    """
+    s = state
+    w = np.clip(np.asarray(turn_rate, float), -perf.max_turn_rate, perf.max_turn_rate)
+    acc = np.asarray(accel, float)
+    acc = np.broadcast_to(acc, s.shape) if acc.ndim == 0 else acc
+    # speed saturation time within the step
+    limit = np.where(acc > 0, perf.max_gs, perf.min_gs)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_sat = np.where(acc != 0, (limit - s.gs) / np.where(acc != 0, acc, 1.0), np.inf)
+    t_sat = np.clip(t_sat, 0.0, dt)
+    x, y, gs, trk = _horizontal_segment(s.x, s.y, s.gs, s.trk, w, acc, t_sat)
+    x, y, gs, trk = _horizontal_segment(x, y, gs, trk, w, 0.0, dt - t_sat)
+    # vertical: constant acceleration toward the limit
+    av = np.asarray(vertical_accel, float)
+    vs_target = np.where(av > 0, perf.max_vs, np.where(av < 0, -perf.max_vs, s.vs))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tv = np.where(av != 0, (vs_target - s.vs) / np.where(av != 0, av, 1.0), dt)
+    tv = np.clip(tv, 0.0, dt)
+    vs1 = s.vs + av * tv
+    z = s.z + s.vs * tv + 0.5 * av * tv * tv + vs1 * (dt - tv)
+    return AircraftState(x, y, z, gs, wrap_2pi(trk), vs1)
+
+
+def fly_command(state: AircraftState, cmd: Command, dt: float = 1.0,
+                perf: Performance = DEFAULT_PERFORMANCE) -> AircraftState:
+    """Fly ``dt`` s toward ``cmd`` at the performance limits (exact piecewise motion).
+
+    Track: shortest direction at ``max_turn_rate`` until the target is reached, then straight.
+    Ground speed: ``horizontal_accel`` toward the target (clipped to [min_gs, max_gs]).
+    Vertical speed: ``vertical_accel`` toward the target (clipped to +-max_vs).
+    """
+    s = state
+    c = cmd.resolved(s)
+    tgt_gs = np.clip(c.gs, perf.min_gs, perf.max_gs)
+    tgt_vs = np.clip(c.vs, -perf.max_vs, perf.max_vs)
+    dpsi = wrap_pi(c.trk - s.trk)
+    w = np.sign(dpsi) * perf.max_turn_rate
+    t_turn = np.abs(dpsi) / perf.max_turn_rate if perf.max_turn_rate > 0 else np.zeros_like(dpsi)
+    dgs = tgt_gs - s.gs
+    acc = np.sign(dgs) * perf.horizontal_accel
+    t_spd = np.abs(dgs) / perf.horizontal_accel if perf.horizontal_accel > 0 else np.zeros_like(dgs)
+    t_turn = np.minimum(t_turn, dt)
+    t_spd = np.minimum(t_spd, dt)
+    b1 = np.minimum(t_turn, t_spd)
+    b2 = np.maximum(t_turn, t_spd)
+    x, y, gs, trk = s.x, s.y, s.gs, s.trk
+    for lo, hi in ((0.0, b1), (b1, b2), (b2, dt)):
+        seg = np.maximum(hi - lo, 0.0)
+        w_seg = np.where(t_turn > lo, w, 0.0)
+        a_seg = np.where(t_spd > lo, acc, 0.0)
+        x, y, gs, trk = _horizontal_segment(x, y, gs, trk, w_seg, a_seg, seg)
+    reached_trk = np.abs(dpsi) <= perf.max_turn_rate * dt
+    reached_gs = np.abs(dgs) <= perf.horizontal_accel * dt
+    trk = np.where(reached_trk, c.trk, trk)
+    gs = np.where(reached_gs, tgt_gs, gs)
+    z, vs = _vertical(s.z, s.vs, tgt_vs, perf.vertical_accel, dt)
+    return AircraftState(x, y, z, gs, wrap_2pi(trk), vs)
+
+
+def turn_direction(from_trk, to_trk) -> np.ndarray:
+    """+1 if the short way from ``from_trk`` to ``to_trk`` is a right turn, -1 left, 0 none."""
+    return np.sign(wrap_pi(np.asarray(to_trk, float) - np.asarray(from_trk, float)))
+
+
+__all__ = ["AircraftState", "Performance", "DEFAULT_PERFORMANCE", "Command", "advance", "fly_command",
+           "turn_direction", "TWO_PI"]
