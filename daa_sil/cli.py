@@ -47,8 +47,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: "list[str] | None" = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
     try:
+        args = parser.parse_args(argv)
         rc = args.func(args)
     except DaaSilError as exc:
         if os.environ.get("DAA_SIL_DEBUG"):

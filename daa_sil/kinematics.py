@@ -183,7 +183,7 @@ def advance(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, 
     acc = np.broadcast_to(acc, s.shape) if acc.ndim == 0 else acc
     # speed saturation time within the step
     limit = np.where(acc > 0, perf.max_gs, perf.min_gs)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(all="ignore"):
         t_sat = np.where(acc != 0, (limit - s.gs) / np.where(acc != 0, acc, 1.0), np.inf)
     t_sat = np.clip(t_sat, 0.0, dt)
     x, y, gs, trk = _horizontal_segment(s.x, s.y, s.gs, s.trk, w, acc, t_sat)
@@ -191,7 +191,7 @@ def advance(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, 
     # vertical: constant acceleration toward the limit
     av = np.asarray(vertical_accel, float)
     vs_target = np.where(av > 0, perf.max_vs, np.where(av < 0, -perf.max_vs, s.vs))
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(all="ignore"):
         tv = np.where(av != 0, (vs_target - s.vs) / np.where(av != 0, av, 1.0), dt)
     tv = np.clip(tv, 0.0, dt)
     vs1 = s.vs + av * tv

@@ -56,7 +56,7 @@ def range_rate(s, v) -> np.ndarray:
     """Horizontal range rate ``(s.v)/r``, m/s (negative = closing; nan at r = 0)."""
     s, v = _f(s), _f(v)
     r = horizontal_range(s)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(all="ignore"):
         return np.where(r > 0, _sv(s, v) / np.where(r > 0, r, 1.0), np.nan)
 
 
@@ -92,7 +92,7 @@ def tau_mod(s, v, dmod: float) -> np.ndarray:
     s, v = _f(s), _f(v)
     r = horizontal_range(s)
     sv = _sv(s, v)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(all="ignore"):
         closing = (dmod * dmod - r * r) / np.where(sv < 0, sv, -1.0)
     return np.where(r <= dmod, 0.0, np.where(sv < 0, closing, np.nan))
 
@@ -102,7 +102,7 @@ def t_coa(s, v) -> np.ndarray:
     s, v = _f(s), _f(v)
     sz, vz = s[..., 2], v[..., 2]
     conv = (sz * vz < 0) & (np.abs(vz) > _EPS)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(all="ignore"):
         t = -sz / np.where(conv, vz, 1.0)
     return np.where(sz == 0, 0.0, np.where(conv, t, np.nan))
 
@@ -126,11 +126,11 @@ def wcv(s, v, th: "Thresholds | str | None" = None) -> np.ndarray:
     s, v = _f(s), _f(v)
     r = horizontal_range(s)
     sv = _sv(s, v)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(all="ignore"):
         tau = (th.dthr ** 2 - r * r) / np.where(sv < 0, sv, -1.0)
     horiz = (r <= th.dthr) | ((d_cpa(s, v) <= th.dthr) & (sv < 0) & (tau <= th.tthr))
     sz, vz = s[..., 2], v[..., 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(all="ignore"):
         tcoa = -sz / np.where(np.abs(vz) > _EPS, vz, 1.0)
     vert = (np.abs(sz) <= th.zthr) | ((np.abs(vz) > _EPS) & (sz * vz <= 0) & (tcoa <= th.tcoa))
     return horiz & vert

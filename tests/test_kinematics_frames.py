@@ -1,0 +1,145 @@
+"""Aircraft kinematics (exact turns, limits) and frame conversions against hand-worked values."""
+
+import math
+
+import numpy as np
+import pytest
+
+from daa_sil import frames
+from daa_sil.kinematics import AircraftState, Command, Performance, advance, fly_command
+from daa_sil.units import DEG, FPM, G0
+
+PERF = Performance()
+
+
+def state(x=0.0, y=0.0, z=0.0, gs=55.0, trk=0.0, vs=0.0):
+    return AircraftState(x, y, z, gs, trk, vs)
+
+
+def test_constant_turn_is_exact_for_any_step():
+    w = 3 * DEG
+    R = 55.0 / w
+    one = advance(state(), turn_rate=w, dt=60.0)  # 180 deg right turn from north
+    assert one.x == pytest.approx(2 * R, abs=1e-9)
+    assert one.y == pytest.approx(0.0, abs=1e-9)
+    assert one.trk == pytest.approx(math.pi)
+    s = state()
+    for _ in range(60):
+        s = advance(s, turn_rate=w, dt=1.0)
+    assert s.x == pytest.approx(one.x, abs=1e-8) and s.y == pytest.approx(one.y, abs=1e-8)
+    # full circle returns to the start
+    full = advance(state(), turn_rate=w, dt=120.0)
+    assert full.x == pytest.approx(0, abs=1e-8) and full.y == pytest.approx(0, abs=1e-8)
+
+
+def test_turn_rate_is_limited():
+    s = advance(state(), turn_rate=10 * DEG, dt=1.0)
+    assert s.trk == pytest.approx(3 * DEG)
+
+
+def test_accelerating_straight_and_saturation():
+    s = advance(state(gs=55.0), accel=2.0, dt=5.0)
+    assert s.gs == pytest.approx(65.0)
+    assert s.y == pytest.approx(55 * 5 + 0.5 * 2 * 25)
+    # saturate at max_gs inside the step
+    p = Performance(max_gs=60.0)
+    s = advance(state(gs=55.0), accel=2.0, dt=5.0, perf=p)  # reaches 60 after 2.5 s
+    assert s.gs == pytest.approx(60.0)
+    assert s.y == pytest.approx(55 * 2.5 + 0.5 * 2 * 2.5 ** 2 + 60 * 2.5)
+
+
+def test_accelerating_turn_matches_fine_integration():
+    s0 = state(gs=50.0, trk=0.3)
+    exact = advance(s0, turn_rate=2 * DEG, accel=1.5, dt=10.0)
+    n = 200000
+    t = (np.arange(n) + 0.5) * (10.0 / n)
+    v = 50 + 1.5 * t
+    psi = 0.3 + 2 * DEG * t
+    assert exact.x == pytest.approx(np.sum(v * np.sin(psi)) * 10.0 / n, abs=1e-5)
+    assert exact.y == pytest.approx(np.sum(v * np.cos(psi)) * 10.0 / n, abs=1e-5)
+
+
+def test_vertical_accel_to_limit():
+    s = advance(state(vs=0.0), vertical_accel=0.25 * G0, dt=1.0)
+    assert s.vs == pytest.approx(0.25 * G0)
+    assert s.z == pytest.approx(0.5 * 0.25 * G0)
+
+
+def test_fly_command_turns_short_way_then_straight():
+    # 30 deg left from north at 3 deg/s: 10 s turning then straight
+    cmd = Command(trk=-30 * DEG)
+    s = state()
+    for _ in range(15):
+        s = fly_command(s, cmd, 1.0)
+    assert s.trk == pytest.approx(frames.wrap_2pi(-30 * DEG))
+    w = 3 * DEG
+    R = 55 / w
+    # after the 10 s arc: x = -R(1 - cos 30deg), y = R sin 30deg; then 5 s straight on 330 deg
+    x_exp = -R * (1 - math.cos(30 * DEG)) + 5 * 55 * math.sin(-30 * DEG)
+    y_exp = R * math.sin(30 * DEG) + 5 * 55 * math.cos(-30 * DEG)
+    assert s.x == pytest.approx(x_exp, abs=1e-6) and s.y == pytest.approx(y_exp, abs=1e-6)
+    # a single 15 s step gives the same answer (exact piecewise)
+    one = fly_command(state(), cmd, 15.0)
+    assert one.x == pytest.approx(x_exp, abs=1e-6) and one.y == pytest.approx(y_exp, abs=1e-6)
+
+
+def test_fly_command_vertical_and_nan_keeps():
+    cmd = Command(vs=1500 * FPM)  # trk, gs nan -> keep
+    s = fly_command(state(trk=1.0), cmd, 10.0)
+    assert s.trk == pytest.approx(1.0) and s.gs == pytest.approx(55.0)
+    assert s.vs == pytest.approx(1500 * FPM)
+    t1 = 1500 * FPM / (0.25 * G0)
+    assert s.z == pytest.approx(0.5 * 1500 * FPM * t1 + 1500 * FPM * (10 - t1))
+    # limits: a 20000 fpm request is clipped to 6000 fpm
+    s = fly_command(state(), Command(vs=20000 * FPM), 30.0)
+    assert s.vs == pytest.approx(6000 * FPM)
+
+
+def test_batched_equals_elementwise():
+    rng = np.random.default_rng(1)
+    n = 64
+    st = AircraftState(rng.uniform(-1e3, 1e3, n), rng.uniform(-1e3, 1e3, n), rng.uniform(0, 1e3, n),
+                       rng.uniform(30, 200, n), rng.uniform(0, 2 * np.pi, n), rng.uniform(-5, 5, n))
+    cmd = Command(rng.uniform(0, 2 * np.pi, n), rng.uniform(-10, 10, n), rng.uniform(30, 200, n))
+    batch = fly_command(st, cmd, 1.0)
+    for i in range(0, n, 7):
+        single = fly_command(st[i], cmd[i], 1.0)
+        np.testing.assert_allclose(single.as_array(), batch[i].as_array(), rtol=0, atol=1e-9)
+
+
+# --- frames ---------------------------------------------------------------------------------
+def test_paper_frame_head_on_overtaking_and_left():
+    own_p, own_v = np.zeros(3), frames.velocity_from_track(55, 0.0)  # north
+    hd = frames.to_paper_state(own_p, own_v, [0, 3000, 100], frames.velocity_from_track(150, math.pi, -2))
+    assert hd[frames.DX] == pytest.approx(3000) and hd[frames.DY] == pytest.approx(0, abs=1e-9)
+    assert hd[frames.THETA] == pytest.approx(math.pi)
+    assert hd[frames.DH] == pytest.approx(100) and hd[frames.VH] == pytest.approx(-2)
+    ov = frames.to_paper_state(own_p, own_v, [0, -2000, 0], frames.velocity_from_track(100, 0.0))
+    assert ov[frames.DX] == pytest.approx(-2000) and ov[frames.THETA] == pytest.approx(0, abs=1e-12)
+    left = frames.to_paper_state(own_p, own_v, [-1000, 0, 0], frames.velocity_from_track(100, math.pi / 2))
+    assert left[frames.DY] == pytest.approx(1000)  # west of a north-bound ownship is its left
+    # intruder flying east while ownship flies north: heading is 90 deg to the right = -90 CCW
+    assert left[frames.THETA] == pytest.approx(1.5 * math.pi)
+
+
+def test_paper_frame_rotates_with_ownship_and_round_trips():
+    rng = np.random.default_rng(2)
+    paper = np.column_stack([rng.uniform(-1500, 1500, 50), rng.uniform(-1500, 1500, 50),
+                             rng.uniform(-200, 200, 50), rng.uniform(70, 300, 50),
+                             rng.uniform(-5, 5, 50), rng.uniform(0, 2 * np.pi, 50)])
+    for trk in (0.0, 1.0, 4.0):
+        op, ov, ip, iv = frames.from_paper_state(paper, 55.0, trk)
+        back = frames.to_paper_state(op, ov, ip, iv)
+        np.testing.assert_allclose(back[:, :5], paper[:, :5], atol=1e-9)
+        np.testing.assert_allclose(np.cos(back[:, 5]), np.cos(paper[:, 5]), atol=1e-9)
+        np.testing.assert_allclose(np.sin(back[:, 5]), np.sin(paper[:, 5]), atol=1e-9)
+
+
+def test_geodetic_round_trip_and_scale():
+    x, y, z = np.array([0.0, 1000.0, -5000.0]), np.array([0.0, 2000.0, 7000.0]), np.array([0, 50, 500.0])
+    lat, lon, alt = frames.enu_to_geodetic(x, y, z, 36.1, -97.1, 300.0)
+    xb, yb, zb = frames.geodetic_to_enu(lat, lon, alt, 36.1, -97.1, 300.0)
+    np.testing.assert_allclose([xb, yb, zb], [x, y, z], atol=1e-6)
+    # 1 arc-minute of latitude is about 1852 m (1849-1853 m between equator and pole)
+    _, yy, _ = frames.geodetic_to_enu(36.1 + 1 / 60, -97.1, 0, 36.1, -97.1)
+    assert 1845 < yy < 1855
