@@ -1,0 +1,481 @@
+"""Fast-time Monte Carlo campaigns over the paper's groups (Table 2), chunked over executors.
+
+One code path for every executor (``reference/rerun_dask.md`` §4): chunks of encounters are
+submitted to a :class:`concurrent.futures.Executor` and collected with ``as_completed``:
+
+* ``workers=1`` -- in-process (one worker thread, so the progress bar stays live);
+* ``workers=K`` -- :class:`~concurrent.futures.ProcessPoolExecutor` (fork; the wait maps are loaded
+  once in the parent and inherited);
+* ``scheduler="local-dask"`` -- a local Dask ``LocalCluster`` with ``workers`` processes;
+* ``scheduler="tcp://host:8786"`` -- an existing Dask cluster, ``Client(addr).get_executor(pure=False)``
+  (``pure=False``: otherwise identical arguments would map to one key and run once).
+
+Determinism: the encounter set is generated once from the campaign seed and saved as
+``DIR/encounters.parquet``; every random stream of encounter ``i`` (pilot, uplink and downlink delay)
+comes from the encounter's own seed (:func:`encounter_seeds`), the same for every group (common
+random numbers), never from the chunk. Results therefore do not depend on chunking, worker count,
+executor or interruption: a killed campaign resumed with ``resume=True`` skips complete chunks and
+ends with exactly the tables of an uninterrupted run.
+
+Layout of ``DIR``::
+
+    campaign.json                      config, versions, preset, seed, status
+    encounters.parquet                 the encounter set (daa_sil.encounters format)
+    <group>/decisions-<chunk>.parquet  per-decision rows of one chunk (written first)
+    <group>/encounters-<chunk>.parquet per-encounter rows of one chunk (its presence = chunk done)
+
+Each file is written atomically by the driver (workers only compute and return Arrow tables, so a
+remote Dask cluster needs no shared file system).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import functools
+import json
+import math
+import os
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Callable, Iterator, Sequence
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import yaml
+
+from . import __version__
+from .errors import FileFormatError, OutputError, UsageError
+from .io import atomic_path, atomic_write_json, ensure_dir
+from .thresholds import PRESETS
+
+#: campaign.json format version
+CAMPAIGN_FORMAT = 1
+#: default encounter duration T (s) and step dt (s), paper §IV
+DEFAULT_DURATION_S = 240.0
+DEFAULT_DT_S = 1.0
+DEFAULT_CHUNK = 500
+
+
+# --- groups (paper Table 2, as data) --------------------------------------------------------------
+@dataclass(frozen=True)
+class GroupSpec:
+    """One experiment group: setup (baseline/integrated), one-way link latency (both directions, the
+    ``paper_results.yaml`` dict form) and the wait function (0, a constant in s, or ``"map"``)."""
+
+    name: str
+    setup: str
+    latency: dict
+    wait: "float | str"
+
+    def delay_model(self):
+        """The :mod:`daa_sil.latency` model used on the uplink and on the downlink."""
+        from .latency import delay_model_from_dict
+
+        return delay_model_from_dict(dict(self.latency), where=f"group {self.name} latency")
+
+    def policy(self):
+        """The agent's :class:`~daa_sil.agent.AllocationPolicy` for this group."""
+        from .agent import policy_for_group
+
+        return policy_for_group(self.name)
+
+    @property
+    def uses_map(self) -> bool:
+        return self.wait == "map"
+
+
+@functools.lru_cache(maxsize=1)
+def paper_groups() -> dict[str, GroupSpec]:
+    """The five groups of the paper's Table 2 from ``daa_sil/data/paper_results.yaml``."""
+    text = resources.files("daa_sil").joinpath("data/paper_results.yaml").read_text(encoding="utf-8")
+    raw = yaml.safe_load(text)["groups"]
+    return {name: GroupSpec(name, g["setup"], dict(g["latency"]), g["wait"]) for name, g in raw.items()}
+
+
+def parse_groups(text: "str | Sequence[str] | None") -> tuple[str, ...]:
+    """``"B-1,ID-2"`` (or a list) -> validated group names in the given order; None = all five."""
+    known = paper_groups()
+    if text is None:
+        return tuple(known)
+    items = [s.strip() for s in (text.split(",") if isinstance(text, str) else text)]
+    items = [s for s in items if s]
+    if not items:
+        raise UsageError(f"--groups is empty; allowed: {','.join(known)}")
+    by_upper = {k.upper(): k for k in known}
+    out = []
+    for s in items:
+        if s.upper() not in by_upper:
+            raise UsageError(f"unknown group {s!r}; allowed: {','.join(known)}")
+        name = by_upper[s.upper()]
+        if name in out:
+            raise UsageError(f"group {name} given twice in --groups")
+        out.append(name)
+    return tuple(out)
+
+
+# --- configuration --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CampaignConfig:
+    """Everything that determines a campaign's results (stored in ``campaign.json``)."""
+
+    groups: tuple[str, ...] = tuple(("B-1", "B-2", "IC-1", "ID-1", "ID-2"))
+    n_encounters: int = 10_000
+    seed: int = 0
+    chunk_size: int = DEFAULT_CHUNK
+    preset: str = "paper"
+    duration_s: float = DEFAULT_DURATION_S
+    dt_s: float = DEFAULT_DT_S
+
+    def validate(self) -> "CampaignConfig":
+        """Raise UsageError (one line) on a bad value; returns self."""
+        parse_groups(self.groups)
+        for name, val in (("--encounters", self.n_encounters), ("--chunk-size", self.chunk_size)):
+            if not isinstance(val, (int, np.integer)) or isinstance(val, bool) or val <= 0:
+                raise UsageError(f"{name} must be a positive integer, got {val!r}")
+        if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool) or self.seed < 0:
+            raise UsageError(f"--seed must be a non-negative integer, got {self.seed!r}")
+        if self.preset not in PRESETS:
+            raise UsageError(f"unknown --preset {self.preset!r}; allowed: {', '.join(PRESETS)}")
+        if not (math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise UsageError(f"duration must be > 0 s, got {self.duration_s!r}")
+        if not (math.isfinite(self.dt_s) and self.dt_s > 0):
+            raise UsageError(f"dt must be > 0 s, got {self.dt_s!r}")
+        return self
+
+    @property
+    def n_chunks(self) -> int:
+        return (self.n_encounters + self.chunk_size - 1) // self.chunk_size
+
+    def chunk_range(self, chunk: int) -> tuple[int, int]:
+        """Encounter index range ``[lo, hi)`` of a chunk."""
+        lo = chunk * self.chunk_size
+        return lo, min(lo + self.chunk_size, self.n_encounters)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["groups"] = list(self.groups)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "campaign.json") -> "CampaignConfig":
+        try:
+            return cls(groups=tuple(d["groups"]), n_encounters=int(d["n_encounters"]), seed=int(d["seed"]),
+                       chunk_size=int(d["chunk_size"]), preset=str(d["preset"]),
+                       duration_s=float(d["duration_s"]), dt_s=float(d["dt_s"])).validate()
+        except (KeyError, TypeError, ValueError) as exc:
+            raise FileFormatError(f"{where}: bad or missing config field ({exc})") from None
+        except UsageError as exc:
+            raise FileFormatError(f"{where}: {exc}") from None
+
+
+def encounter_seeds(campaign_seed: int, encounter_ids: np.ndarray) -> np.ndarray:
+    """Per-encounter seeds (int64 >= 0): ``SeedSequence(campaign_seed, spawn_key=(i,))`` hashed to 63 bits.
+
+    ``SeedSequence(seed_i)`` is the root of every random stream of encounter ``i`` in every group,
+    so a single encounter can be replayed (e.g. in the SIL) from its ``seed`` column alone.
+    """
+    ids = np.asarray(encounter_ids, dtype=np.int64).ravel()
+    out = np.empty(ids.size, dtype=np.int64)
+    for k, i in enumerate(ids):
+        word = np.random.SeedSequence(int(campaign_seed), spawn_key=(int(i),)).generate_state(1, np.uint64)[0]
+        out[k] = int(word >> np.uint64(1))
+    return out
+
+
+# --- chunk task (runs in a worker) ----------------------------------------------------------------
+@dataclass
+class ChunkTask:
+    """One chunk of one group: the work unit sent to an executor (small, picklable)."""
+
+    group: str
+    chunk: int
+    config: CampaignConfig
+    encounters: object  # EncounterSet subset for [lo, hi)
+    seeds: np.ndarray  # (n,) int64 per-encounter seeds
+
+
+@dataclass
+class ChunkResult:
+    """What a worker returns: the two result tables of one chunk and its compute time (s)."""
+
+    group: str
+    chunk: int
+    encounters: pa.Table
+    decisions: pa.Table
+    compute_s: float
+    n: int
+
+
+@functools.lru_cache(maxsize=4)
+def _wait_family(preset: str):
+    """The wait-map family for a preset, loaded once per process (builds the cache if needed)."""
+    from . import waitmap
+
+    return waitmap.default_family(preset=preset)
+
+
+def run_chunk(task: ChunkTask) -> ChunkResult:
+    """Simulate one chunk of one group (pure function of the task; safe in any worker)."""
+    from .fasttime import simulate
+
+    t0 = time.perf_counter()
+    spec = paper_groups()[task.group]
+    cfg = task.config
+    model = spec.delay_model()
+    fam = _wait_family(cfg.preset) if spec.uses_map else None
+    enc_rows, dec_rows, _ = simulate(task.encounters, spec.policy(), model, model, wait_family=fam,
+                                     seeds=task.seeds, preset=cfg.preset, duration_s=cfg.duration_s,
+                                     dt=cfg.dt_s, group=task.group, record_steps=False)
+    return ChunkResult(task.group, task.chunk, enc_rows, dec_rows, time.perf_counter() - t0, len(task.seeds))
+
+
+# --- files ----------------------------------------------------------------------------------------
+def chunk_paths(out_dir: Path, group: str, chunk: int) -> tuple[Path, Path]:
+    """``(encounters, decisions)`` Parquet paths of a chunk."""
+    return (out_dir / group / f"encounters-{chunk:05d}.parquet", out_dir / group / f"decisions-{chunk:05d}.parquet")
+
+
+def chunk_done(out_dir: Path, group: str, chunk: int) -> bool:
+    """A chunk is complete when both files exist (decisions is written first, encounters last)."""
+    enc, dec = chunk_paths(out_dir, group, chunk)
+    return enc.is_file() and dec.is_file()
+
+
+def _write_table(table: pa.Table, path: Path) -> None:
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+
+
+def write_chunk(out_dir: Path, res: ChunkResult) -> None:
+    """Write a chunk's two tables atomically, decisions first (so encounters marks completion)."""
+    enc, dec = chunk_paths(out_dir, res.group, res.chunk)
+    _write_table(res.decisions, dec)
+    _write_table(res.encounters, enc)
+
+
+def read_results(out_dir: "str | os.PathLike", kind: str = "encounters",
+                 groups: "Sequence[str] | None" = None) -> pa.Table:
+    """Concatenate the per-chunk tables of ``kind`` (``encounters`` or ``decisions``) in
+    (group, chunk) order."""
+    out = Path(out_dir)
+    if kind not in ("encounters", "decisions"):
+        raise UsageError(f"kind must be 'encounters' or 'decisions', got {kind!r}")
+    cfg = load_campaign_json(out)["config"] if (out / "campaign.json").is_file() else None
+    names = list(groups) if groups is not None else (list(cfg["groups"]) if cfg else
+                                                     sorted(p.name for p in out.iterdir() if p.is_dir()))
+    tables = []
+    for g in names:
+        for f in sorted((out / g).glob(f"{kind}-*.parquet")):
+            try:
+                tables.append(pq.read_table(f))
+            except (OSError, pa.ArrowException) as exc:
+                raise FileFormatError(f"{f} is not a readable Parquet file: {str(exc).splitlines()[0]}") from None
+    if not tables:
+        raise FileFormatError(f"{out} holds no {kind}-*.parquet results")
+    return pa.concat_tables(tables)
+
+
+def load_campaign_json(out_dir: Path) -> dict:
+    """Read ``DIR/campaign.json`` (FileFormatError if unreadable)."""
+    path = Path(out_dir) / "campaign.json"
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FileFormatError(f"{path} does not exist; not a campaign directory") from None
+    except (OSError, ValueError) as exc:
+        raise FileFormatError(f"{path} is not readable JSON: {exc}") from None
+    if not isinstance(meta, dict) or meta.get("format") != CAMPAIGN_FORMAT or "config" not in meta:
+        raise FileFormatError(f"{path}: not a daa-sil campaign file (format {CAMPAIGN_FORMAT} expected)")
+    return meta
+
+
+def _versions() -> dict:
+    out = {"daa_sil": __version__, "python": platform.python_version(), "numpy": np.__version__,
+           "pyarrow": pa.__version__}
+    return out
+
+
+def check_out_dir(out_dir: "str | os.PathLike", resume: bool) -> Path:
+    """Validate ``DIR`` before anything is written: writable, and empty unless resuming."""
+    p = Path(out_dir)
+    if p.exists() and not p.is_dir():
+        raise UsageError(f"--out {p} exists and is not a directory")
+    if p.is_dir():
+        if not os.access(p, os.W_OK | os.X_OK):
+            raise UsageError(f"--out {p} is not writable")
+        if any(p.iterdir()) and not resume:
+            raise UsageError(f"--out {p} is not empty; pass --resume to continue the campaign there "
+                             f"or choose a new directory")
+        return p
+    anc = p.absolute().parent
+    while not anc.exists():
+        anc = anc.parent
+    if not anc.is_dir() or not os.access(anc, os.W_OK | os.X_OK):
+        raise UsageError(f"--out {p} cannot be created: {anc} is not a writable directory")
+    return p
+
+
+# --- executors ------------------------------------------------------------------------------------
+DASK_HINT = "pip install 'daa-sil[dist]'"
+
+
+@contextlib.contextmanager
+def make_executor(workers: int = 1, scheduler: "str | None" = None) -> Iterator[cf.Executor]:
+    """The executor for ``workers``/``scheduler`` (see the module docstring); shut down on exit."""
+    if scheduler:
+        try:
+            from dask.distributed import Client, LocalCluster
+        except ImportError:
+            raise UsageError(f"--scheduler needs dask.distributed, which is not installed: {DASK_HINT}") from None
+        with contextlib.ExitStack() as stack:
+            if scheduler == "local-dask":
+                cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                           host="127.0.0.1", dashboard_address=None))
+                client = stack.enter_context(Client(cluster))
+            else:
+                try:
+                    client = stack.enter_context(Client(scheduler, timeout="10s"))
+                except (OSError, TimeoutError, ValueError) as exc:
+                    raise UsageError(f"cannot connect to Dask scheduler {scheduler!r}: {exc}") from None
+            ex = client.get_executor(pure=False)
+            try:
+                yield ex
+            finally:
+                ex.shutdown(wait=False)
+        return
+    if workers <= 1:
+        ex: cf.Executor = cf.ThreadPoolExecutor(max_workers=1, thread_name_prefix="daa-sil-campaign")
+    else:
+        import multiprocessing as mp
+
+        ex = cf.ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"))
+    try:
+        yield ex
+    except BaseException:
+        ex.shutdown(wait=False, cancel_futures=True)
+        raise
+    else:
+        ex.shutdown(wait=True)
+
+
+# --- the runner -----------------------------------------------------------------------------------
+@dataclass
+class CampaignSummary:
+    """What a run did: chunks computed/skipped, wall time (s), encounter-steps simulated."""
+
+    out_dir: Path
+    config: CampaignConfig
+    chunks_total: int
+    chunks_skipped: int
+    chunks_run: int
+    wall_s: float
+    compute_s: float
+    encounter_steps: int
+    groups: dict = field(default_factory=dict)
+
+
+def _progress(enabled: bool):
+    from rich.console import Console
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                               TimeRemainingColumn)
+
+    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("encounters"),
+                    TimeElapsedColumn(), TimeRemainingColumn(), console=Console(stderr=True),
+                    disable=not enabled)
+
+
+def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resume: bool = False):
+    """Validate, create ``DIR``, write or check ``campaign.json`` and the encounter set.
+
+    Returns ``(out_dir, config, encounter_set)``. On resume the stored config must equal ``config``.
+    """
+    from . import encounters as enc_mod
+
+    config.validate()
+    out = check_out_dir(out_dir, resume)
+    meta_path = out / "campaign.json"
+    enc_path = out / "encounters.parquet"
+    if resume and meta_path.is_file():
+        stored = CampaignConfig.from_dict(load_campaign_json(out)["config"], str(meta_path))
+        if stored != config:
+            diff = [k for k in config.to_dict() if config.to_dict()[k] != stored.to_dict()[k]]
+            raise UsageError(f"--resume: {meta_path} was made with different settings ({', '.join(diff)}); "
+                             f"pass the same options or omit them")
+        if not enc_path.is_file():
+            raise FileFormatError(f"{enc_path} is missing; cannot resume this campaign")
+        encs = enc_mod.load_encounters(enc_path)
+        if len(encs) != config.n_encounters:
+            raise FileFormatError(f"{enc_path} holds {len(encs)} encounters, campaign.json says {config.n_encounters}")
+        return out, config, encs
+    ensure_dir(out)
+    encs = enc_mod.sample_encounters(config.n_encounters, seed=config.seed)
+    with atomic_path(enc_path) as tmp:
+        enc_mod.save_encounters(encs, tmp)
+    meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "versions": _versions(),
+            "preset": config.preset, "seed": config.seed, "status": "running",
+            "groups": {g: asdict(paper_groups()[g]) for g in config.groups},
+            "layout": {"encounters": "<group>/encounters-<chunk>.parquet",
+                       "decisions": "<group>/decisions-<chunk>.parquet", "chunk_size": config.chunk_size}}
+    atomic_write_json(meta_path, meta)
+    return out, config, encs
+
+
+def run_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", *, workers: int = 1,
+                 scheduler: "str | None" = None, resume: bool = False, progress: bool = True,
+                 on_chunk: "Callable[[ChunkResult], None] | None" = None) -> CampaignSummary:
+    """Run (or resume) a campaign into ``out_dir``; see the module docstring for the layout."""
+    if not isinstance(workers, int) or workers < 1:
+        raise UsageError(f"--workers must be a positive integer, got {workers!r}")
+    t_start = time.perf_counter()
+    out, config, encs = prepare_campaign(config, out_dir, resume)
+    seeds = encounter_seeds(config.seed, np.arange(config.n_encounters))
+    todo, skipped = [], 0
+    for g in config.groups:
+        for c in range(config.n_chunks):
+            if resume and chunk_done(out, g, c):
+                skipped += 1
+            else:
+                todo.append((g, c))
+    if any(paper_groups()[g].uses_map for g, _ in todo) and scheduler is None:
+        _wait_family(config.preset)  # build/load once here; forked workers inherit it
+    summary = CampaignSummary(out, config, config.n_chunks * len(config.groups), skipped, 0, 0.0, 0.0, 0)
+    steps_per_enc = int(round(config.duration_s / config.dt_s))
+    with make_executor(workers, scheduler) as ex:
+        futs: dict[cf.Future, tuple[str, int]] = {}
+        for g, c in todo:
+            lo, hi = config.chunk_range(c)
+            task = ChunkTask(g, c, config, encs.subset(np.arange(lo, hi)), seeds[lo:hi])
+            futs[ex.submit(run_chunk, task)] = (g, c)
+        with _progress(progress) as prog:
+            bars = {}
+            for g in config.groups:
+                done = sum(config.chunk_range(c)[1] - config.chunk_range(c)[0]
+                           for c in range(config.n_chunks) if (g, c) not in set(todo))
+                bars[g] = prog.add_task(f"group {g:5s}", total=config.n_encounters, completed=done)
+            for fut in cf.as_completed(list(futs)):
+                futs.pop(fut)
+                res: ChunkResult = fut.result()
+                write_chunk(out, res)
+                summary.chunks_run += 1
+                summary.compute_s += res.compute_s
+                summary.encounter_steps += res.n * steps_per_enc
+                prog.advance(bars[res.group], res.n)
+                if on_chunk is not None:
+                    on_chunk(res)
+    meta = load_campaign_json(out)
+    meta["status"] = "complete"
+    atomic_write_json(out / "campaign.json", meta)
+    summary.wall_s = time.perf_counter() - t_start
+    return summary
+
+
+__all__ = ["GroupSpec", "paper_groups", "parse_groups", "CampaignConfig", "encounter_seeds", "ChunkTask",
+           "ChunkResult", "run_chunk", "chunk_paths", "chunk_done", "write_chunk", "read_results",
+           "load_campaign_json", "check_out_dir", "make_executor", "prepare_campaign", "run_campaign",
+           "CampaignSummary", "DASK_HINT"]

@@ -1,0 +1,151 @@
+"""``daa-sil campaign run|report``: the paper's fast-time Monte Carlo study over groups."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from ..errors import UsageError
+from ..io import to_jsonable
+from ..thresholds import PRESETS
+
+RUN_EXAMPLES = """examples:
+  # the paper's study: 10,000 encounters x 5 groups (B-1, B-2, IC-1, ID-1, ID-2), T = 240 s
+  daa-sil campaign run --out runs/paper --workers 2
+
+  # a quick look: 200 encounters of two groups, in-process
+  daa-sil campaign run --groups B-2,ID-2 --encounters 200 --seed 7 --out runs/quick
+
+  # continue a campaign that was interrupted (complete chunks are skipped; same final tables)
+  daa-sil campaign run --out runs/paper --resume
+
+  # on a Dask cluster (pip install 'daa-sil[dist]'), or a local Dask cluster with 2 workers
+  daa-sil campaign run --out runs/paper --scheduler tcp://head:8786
+  daa-sil campaign run --out runs/paper --scheduler local-dask --workers 2
+
+Groups (paper Table 2): B-1 baseline, const 4 s | B-2 baseline, Gaussian(5,3) s | IC-1 integrated,
+const 5 s, wait 5 s | ID-1 integrated, const 4 s, wait map | ID-2 integrated, Gaussian(5,3) s, wait map.
+Results: DIR/<group>/encounters-<chunk>.parquet, DIR/<group>/decisions-<chunk>.parquet,
+DIR/encounters.parquet (the shared encounter set) and DIR/campaign.json.
+"""
+
+REPORT_EXAMPLES = """examples:
+  daa-sil campaign report runs/paper                 # writes runs/paper/report/
+  daa-sil campaign report runs/paper --out reports/paper
+"""
+
+
+def _pos_int(name: str):
+    def conv(text: str) -> int:
+        try:
+            val = int(text)
+        except ValueError:
+            raise UsageError(f"{name} must be a positive integer, got {text!r}") from None
+        if val <= 0:
+            raise UsageError(f"{name} must be a positive integer, got {val}")
+        return val
+
+    conv.__name__ = name
+    return conv
+
+
+def _seed(text: str) -> int:
+    try:
+        val = int(text)
+    except ValueError:
+        raise UsageError(f"--seed must be a non-negative integer, got {text!r}") from None
+    if val < 0:
+        raise UsageError(f"--seed must be a non-negative integer, got {val}")
+    return val
+
+
+def register(sub) -> None:
+    p = sub.add_parser("campaign", help="fast-time Monte Carlo campaigns over the paper's groups",
+                       description="Run the paper's fast-time study (chunked, resumable, on any executor) "
+                                   "and report it next to the published numbers.",
+                       epilog=RUN_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    verbs = p.add_subparsers(dest="verb", metavar="VERB")
+    verbs.required = True
+    r = verbs.add_parser("run", help="run or resume a campaign", description="Run or resume a campaign.",
+                         epilog=RUN_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    r.add_argument("--groups", metavar="G1,G2,...", default=None,
+                   help="comma-separated groups (default: B-1,B-2,IC-1,ID-1,ID-2)")
+    r.add_argument("--encounters", type=_pos_int("--encounters"), default=None, metavar="N",
+                   help="encounters per group (default 10000)")
+    r.add_argument("--seed", type=_seed, default=None, metavar="S", help="campaign seed (default 0)")
+    r.add_argument("--chunk-size", type=_pos_int("--chunk-size"), default=None, metavar="C",
+                   help="encounters per task (default 500; 100-1000 keeps tasks >= 0.1 s)")
+    r.add_argument("--out", required=True, metavar="DIR", help="output directory (must be empty unless --resume)")
+    r.add_argument("--workers", type=_pos_int("--workers"), default=1, metavar="K",
+                   help="worker processes (1 = in-process; default 1)")
+    r.add_argument("--scheduler", default=None, metavar="ADDRESS|local-dask",
+                   help="run on a Dask cluster at ADDRESS (tcp://host:8786) or a local one (local-dask)")
+    r.add_argument("--resume", action="store_true", help="continue the campaign in DIR (skips complete chunks)")
+    r.add_argument("--preset", default=None, help=f"threshold preset: {', '.join(PRESETS)} (default paper)")
+    r.add_argument("--no-progress", action="store_true", help="no progress bars")
+    r.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    r.set_defaults(func=run_cmd)
+
+    rep = verbs.add_parser("report", help="Markdown + PNG report of a campaign directory",
+                           description="Write the paper's tables and figures with 95 % CIs next to the "
+                                       "published values.", epilog=REPORT_EXAMPLES,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+    rep.add_argument("dir", metavar="DIR", help="campaign directory (from 'campaign run')")
+    rep.add_argument("--out", default=None, metavar="DIR2", help="report directory (default DIR/report)")
+    rep.set_defaults(func=report_cmd)
+
+
+def _config_from_args(args):
+    from ..campaign import CampaignConfig, load_campaign_json, parse_groups
+
+    given = {"groups": parse_groups(args.groups) if args.groups is not None else None,
+             "n_encounters": args.encounters, "seed": args.seed, "chunk_size": args.chunk_size,
+             "preset": args.preset.lower() if args.preset else None}
+    if args.preset and args.preset.lower() not in PRESETS:
+        raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
+    base = CampaignConfig()
+    out = Path(args.out)
+    if args.resume and (out / "campaign.json").is_file():
+        base = CampaignConfig.from_dict(load_campaign_json(out)["config"], str(out / "campaign.json"))
+    fields = {k: (v if v is not None else getattr(base, k)) for k, v in given.items()}
+    return CampaignConfig(groups=tuple(fields["groups"]), n_encounters=fields["n_encounters"],
+                          seed=fields["seed"], chunk_size=fields["chunk_size"], preset=fields["preset"],
+                          duration_s=base.duration_s, dt_s=base.dt_s).validate()
+
+
+def run_cmd(args) -> int:
+    from ..campaign import run_campaign
+
+    cfg = _config_from_args(args)
+    if args.scheduler is not None and not args.scheduler.strip():
+        raise UsageError("--scheduler needs an address (tcp://host:8786) or 'local-dask'")
+    summary = run_campaign(cfg, args.out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
+                           progress=not args.no_progress and not args.json)
+    rate = summary.encounter_steps / summary.wall_s if summary.wall_s > 0 else float("nan")
+    info = {"out": str(summary.out_dir), "groups": list(cfg.groups), "encounters": cfg.n_encounters,
+            "seed": cfg.seed, "preset": cfg.preset, "chunks_total": summary.chunks_total,
+            "chunks_skipped": summary.chunks_skipped, "chunks_run": summary.chunks_run,
+            "wall_s": round(summary.wall_s, 3), "encounter_steps_per_s": rate}
+    if args.json:
+        print(json.dumps(to_jsonable(info), indent=2, sort_keys=True))
+    else:
+        print(f"campaign {summary.out_dir}: {summary.chunks_run} chunks run, {summary.chunks_skipped} skipped "
+              f"({len(cfg.groups)} groups x {cfg.n_encounters} encounters, preset {cfg.preset}) in "
+              f"{summary.wall_s:.1f} s ({rate:,.0f} encounter-steps/s)", file=sys.stderr)
+    return 0
+
+
+def report_cmd(args) -> int:
+    from .. import report
+
+    src = Path(args.dir)
+    if not (src / "campaign.json").is_file():
+        raise UsageError(f"{src} is not a campaign directory (no campaign.json)")
+    out = Path(args.out) if args.out else src / "report"
+    result = report.write_report(src, out)
+    print(f"report written to {out}", file=sys.stderr)
+    if isinstance(result, (str, Path)):
+        print(str(result))
+    return 0
