@@ -1,0 +1,307 @@
+"""Sans-IO MAVLink 2 codec for UDP: datagram bytes -> messages, messages -> bytes, optional signing.
+
+Built on the generated :mod:`daa_sil.link.dialect.daa_sil` module (pymavlink mavgen output).
+Network input is hostile, so decoding follows ``reference/mavlink_spec.md`` §3:
+
+* ``robust_parsing`` is on (garbage becomes BAD_DATA instead of an exception that wedges the parser);
+* the parser is **reset after every datagram**: a truncated datagram never corrupts the next one;
+* bad CRC, bad prefix, truncated, unknown-id, malformed, unsigned, wrong-key, replayed and stale
+  packets are counted (:class:`CodecCounters`) and dropped; ``decode`` only returns good messages
+  and never raises on bad input.
+
+Signing (MAVLink 2, 32-byte secret key): when a key is set, outgoing packets are signed and
+incoming ones must carry a valid signature (except message ids listed in ``allow_unsigned``).
+pymavlink's own ``check_signature`` records a stream's timestamp *before* comparing the
+signature, so one forged packet with a far-future timestamp locks the real stream out. The
+:class:`SecureMAVLink` subclass here verifies the signature first and only then applies the
+replay (timestamp must increase per ``(link_id, sysid, compid)`` stream) and staleness (a new
+stream may be at most 60 s behind our clock) checks, then updates the stream timestamp.
+Outgoing signing timestamps follow the wall clock (10 us units since 2015-01-01), so they never
+go backwards across restarts.
+
+Key files (:func:`load_key`): a file of exactly 32 bytes is the raw key; anything else is a
+UTF-8 passphrase (surrounding whitespace stripped) and the key is ``sha256(passphrase)``, the
+convention MAVProxy's ``signing setup`` uses. :func:`generate_key_file` writes 32 random bytes
+atomically with mode 0600.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import secrets
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable
+
+from ..errors import FileFormatError, OutputError, UsageError
+from ..io import atomic_path
+from .dialect import daa_sil as mavlink
+
+MAVError = mavlink.MAVError
+MAVLinkMessage = mavlink.MAVLink_message
+
+#: signing epoch (2015-01-01 00:00:00 UTC) in UNIX seconds
+SIGNING_EPOCH_UNIX = 1420070400
+#: a new signed stream may be at most this far behind our timestamp (10 us units) = 60 s
+STALE_LIMIT = 6_000_000
+KEY_LEN = 32
+#: signing link id for lockstep control messages (see :meth:`MavCodec.encode`)
+CONTROL_LINK_ID = 254
+
+
+def signing_timestamp_now() -> int:
+    """Current wall time as a MAVLink signing timestamp (10 us units since 2015-01-01)."""
+    return int((time.time() - SIGNING_EPOCH_UNIX) * 100_000)
+
+
+@dataclass
+class CodecCounters:
+    """Per-codec counts. ``dropped`` is the sum of every rejection reason."""
+
+    datagrams_in: int = 0
+    bytes_in: int = 0
+    messages_in: int = 0  # good messages returned by decode
+    bad_crc: int = 0
+    bad_prefix: int = 0
+    truncated: int = 0  # datagrams that ended inside a packet
+    unknown: int = 0  # well-formed packets with a message id the dialect does not know
+    malformed: int = 0  # bad length, bad flags, unpack failures, anything else
+    unsigned: int = 0  # unsigned packets refused because signing is required
+    unsigned_accepted: int = 0  # unsigned packets let through by ``allow_unsigned``
+    bad_signature: int = 0  # wrong key or forged signature
+    replayed: int = 0  # signature timestamp not newer than the stream's last one
+    stale: int = 0  # new stream more than 60 s behind our clock
+    datagrams_out: int = 0
+    messages_out: int = 0
+    bytes_out: int = 0
+
+    @property
+    def dropped(self) -> int:
+        return (self.bad_crc + self.bad_prefix + self.truncated + self.unknown + self.malformed
+                + self.unsigned + self.bad_signature + self.replayed + self.stale)
+
+    def as_dict(self) -> dict:
+        d = dict(self.__dict__)
+        d["dropped"] = self.dropped
+        return d
+
+
+class SecureMAVLink(mavlink.MAVLink):
+    """The generated ``MAVLink`` class with a signature check that verifies before it updates."""
+
+    _sig_reason: "str | None" = None
+    n_unsigned_accepted = 0
+
+    def decode(self, msgbuf: bytearray) -> MAVLinkMessage:  # noqa: D401 (pymavlink API)
+        self._sig_reason = None
+        try:
+            m = super().decode(msgbuf)
+            if self._sig_reason == "unsigned_accepted":
+                self.n_unsigned_accepted += 1
+            return m
+        except MAVError as exc:
+            if exc.message == "Invalid signature":
+                raise MAVError("signature:" + (self._sig_reason or "unsigned")) from None
+            raise
+
+    def check_signature(self, msgbuf: bytearray, srcSystem: int, srcComponent: int) -> bool:
+        """Verify the signature, then the timestamp; update stream state only for good packets."""
+        signing = self.signing
+        h = hashlib.sha256(signing.secret_key)
+        h.update(msgbuf[:-6])
+        if h.digest()[:6] != bytes(msgbuf[-6:]):
+            self._sig_reason = "bad_signature"
+            return False
+        tlow, thigh = self.mav_sign_unpacker.unpack(msgbuf[-12:-6])
+        timestamp = tlow + (thigh << 32)
+        stream = (msgbuf[-13], srcSystem, srcComponent)
+        last = signing.stream_timestamps.get(stream)
+        if last is not None:
+            if timestamp <= last:
+                self._sig_reason = "replayed"
+                return False
+        elif timestamp + STALE_LIMIT < signing.timestamp:
+            self._sig_reason = "stale"
+            return False
+        signing.stream_timestamps[stream] = timestamp
+        if timestamp > signing.timestamp:
+            signing.timestamp = timestamp
+        return True
+
+    def _unsigned_gate(self, msg_id: int) -> bool:
+        # pymavlink calls allow_unsigned_callback for unsigned packets *and* after a failed
+        # signature check; never let the latter through.
+        if self._sig_reason is not None:
+            return False
+        self._sig_reason = "unsigned"
+        if msg_id in self._allow_unsigned:
+            self._sig_reason = "unsigned_accepted"
+            return True
+        return False
+
+
+class _NullFile:
+    def write(self, buf) -> None:  # the codec returns bytes instead of writing them
+        pass
+
+
+_REASON_FIELD = {
+    "signature:unsigned": "unsigned",
+    "signature:bad_signature": "bad_signature",
+    "signature:replayed": "replayed",
+    "signature:stale": "stale",
+    "Bad prefix": "bad_prefix",
+}
+
+
+class MavCodec:
+    """Sans-IO MAVLink 2 codec for one endpoint identity (``source_system``, ``source_component``).
+
+    Build messages with the generated constructors, e.g. ``codec.mav.heartbeat_encode(...)`` or
+    ``dialect.MAVLink_sim_tick_message(tick, time_ms)``, then ``codec.encode(msg)`` to get bytes
+    (sequence numbers increment per message). ``codec.decode(datagram)`` returns the good messages
+    of one datagram.
+
+    ``key``: 32-byte secret (see :func:`load_key`); enables signing of outgoing packets
+    (``sign_outgoing``, default True with a key) and requires valid signatures on incoming ones.
+    ``allow_unsigned``: message ids accepted unsigned even with a key (e.g. ``{0}`` for HEARTBEAT).
+    ``link_id``: signing link id (0-255) of this endpoint.
+    """
+
+    def __init__(self, source_system: int = 1, source_component: int = 1, *, key: "bytes | None" = None,
+                 sign_outgoing: "bool | None" = None, allow_unsigned: Iterable[int] = (), link_id: int = 0,
+                 initial_timestamp: "int | None" = None):
+        for name, val, hi in (("source_system", source_system, 255), ("source_component", source_component, 255),
+                              ("link_id", link_id, 255)):
+            if not isinstance(val, int) or not 0 <= val <= hi:
+                raise UsageError(f"{name} must be an integer in [0, {hi}], got {val!r}")
+        self.mav = SecureMAVLink(_NullFile(), srcSystem=source_system, srcComponent=source_component)
+        self.mav.robust_parsing = True
+        self.mav._allow_unsigned = frozenset(int(i) for i in allow_unsigned)
+        self.counters = CodecCounters()
+        self.dialect = mavlink
+        self.signed = key is not None
+        if key is not None:
+            if not isinstance(key, (bytes, bytearray)) or len(key) != KEY_LEN:
+                raise UsageError(f"signing key must be {KEY_LEN} bytes, got {len(key) if key else 0}")
+            s = self.mav.signing
+            s.secret_key = bytes(key)
+            s.sign_outgoing = True if sign_outgoing is None else bool(sign_outgoing)
+            s.link_id = link_id
+            s.timestamp = signing_timestamp_now() if initial_timestamp is None else int(initial_timestamp)
+            s.allow_unsigned_callback = lambda mav, msg_id: mav._unsigned_gate(msg_id)
+
+    # -- decoding -----------------------------------------------------------------------------
+    def decode(self, datagram: "bytes | bytearray | memoryview") -> list[MAVLinkMessage]:
+        """Good messages in one datagram (in order); every bad packet is counted and dropped."""
+        c = self.counters
+        c.datagrams_in += 1
+        c.bytes_in += len(datagram)
+        mav = self.mav
+        try:
+            msgs = mav.parse_buffer(datagram)
+        except Exception:  # hostile input must never escape; pymavlink should not raise here
+            c.malformed += 1
+            msgs = None
+        if mav.buf_len() or mav.buf_index:
+            if mav.buf_len():
+                c.truncated += 1
+            mav.buf, mav.buf_index = bytearray(), 0
+            mav.expected_length = mavlink.HEADER_LEN_V1 + 2
+            mav.have_prefix_error = False
+        if not msgs:
+            return []
+        good = []
+        for m in msgs:
+            t = m._type
+            if t == "BAD_DATA":
+                reason = getattr(m, "reason", "")
+                field = _REASON_FIELD.get(reason)
+                if field is None:
+                    field = "bad_crc" if reason.startswith("invalid MAVLink CRC") else "malformed"
+                setattr(c, field, getattr(c, field) + 1)
+            elif t.startswith("UNKNOWN_"):
+                c.unknown += 1
+            else:
+                good.append(m)
+        c.unsigned_accepted = mav.n_unsigned_accepted
+        c.messages_in += len(good)
+        return good
+
+    # -- encoding -----------------------------------------------------------------------------
+    def encode(self, msg: MAVLinkMessage, link_id: "int | None" = None) -> bytes:
+        """Pack one message (signed if a key is set) and advance the sequence number.
+
+        ``link_id`` overrides the signing link id for this packet: lockstep control messages
+        (SIM_TICK / SIM_TICK_ACK) bypass the shim's delay line, so with signing they must travel
+        on their own signing stream (e.g. :data:`CONTROL_LINK_ID`) or the receiver would reject
+        the delayed, older-stamped data packets behind them as replays.
+        """
+        mav = self.mav
+        if mav.signing.sign_outgoing:
+            now = signing_timestamp_now()
+            if now > mav.signing.timestamp:
+                mav.signing.timestamp = now
+            if link_id is not None:
+                saved, mav.signing.link_id = mav.signing.link_id, link_id
+                try:
+                    buf = msg.pack(mav)
+                finally:
+                    mav.signing.link_id = saved
+            else:
+                buf = msg.pack(mav)
+        else:
+            buf = msg.pack(mav)
+        mav.seq = (mav.seq + 1) & 0xFF
+        c = self.counters
+        c.messages_out += 1
+        c.datagrams_out += 1
+        c.bytes_out += len(buf)
+        return buf
+
+    def encode_many(self, msgs: Iterable[MAVLinkMessage]) -> bytes:
+        """Pack several messages into one datagram (legal over UDP; packets are never split)."""
+        parts = [self.encode(m) for m in msgs]
+        self.counters.datagrams_out -= max(0, len(parts) - 1)
+        return b"".join(parts)
+
+
+# -- key files ------------------------------------------------------------------------------------
+def key_from_passphrase(passphrase: str) -> bytes:
+    """The 32-byte key ``sha256(passphrase)`` (MAVProxy's convention)."""
+    if not passphrase:
+        raise UsageError("signing passphrase must not be empty")
+    return hashlib.sha256(passphrase.encode("utf-8")).digest()
+
+
+def load_key(path: "str | os.PathLike") -> bytes:
+    """Read a key file: exactly 32 bytes = raw key; otherwise a UTF-8 passphrase -> sha256."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise FileFormatError(f"cannot read signing key file {p}: {exc.strerror or exc}") from None
+    if len(data) == KEY_LEN:
+        return data
+    try:
+        text = data.decode("utf-8").strip()
+    except UnicodeDecodeError:
+        raise FileFormatError(f"signing key file {p} is neither {KEY_LEN} raw bytes ({len(data)} bytes) "
+                              "nor a UTF-8 passphrase") from None
+    if not text:
+        raise FileFormatError(f"signing key file {p} is empty")
+    return key_from_passphrase(text)
+
+
+def generate_key_file(path: "str | os.PathLike", overwrite: bool = False) -> bytes:
+    """Write a new random 32-byte key to ``path`` atomically with mode 0600; returns the key."""
+    key = secrets.token_bytes(KEY_LEN)
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        try:
+            os.chmod(tmp, 0o600)
+        except OSError as exc:
+            raise OutputError(f"cannot set permissions on {path}: {exc.strerror or exc}") from None
+        tmp.write_bytes(key)
+    return key
