@@ -46,9 +46,9 @@ Schema (``*`` = required; defaults in brackets)::
       up: delay spec                [const:4] uplink (GCS -> vehicle): "const:4", "gauss:5,3",
       down: delay spec              [= up]    "uniform:1,8" or {type: constant, seconds: 4} ...
       epoch_s: float [0, 600]       [10]      piecewise-constant delay epoch (0 = per packet)
-      loss_up, loss_down: [0, 1)    [0]       Bernoulli loss probability
-      outages: list                             link down windows (packets sent inside are lost)
-        - start_s*, end_s*; direction: up | down | both [both]
+      loss: [0, 1)                  [0]       Bernoulli loss probability (each direction)
+      outages: list                             link down windows, both directions: a datagram
+        - start_s*, end_s*                      sent in [start_s, end_s) is lost
     pilot:
       mode: model | scripted        [model]
       model:                                    options of daa_sil.pilot.PilotModel
@@ -153,9 +153,10 @@ class IntruderSpec:
 
 @dataclass
 class Outage:
+    """Link down (both directions) for datagrams sent in ``[start_s, end_s)`` (sim s)."""
+
     start_s: float
     end_s: float
-    direction: str = "both"
 
 
 @dataclass
@@ -165,13 +166,12 @@ class LinkSpec:
     up: Any = "const:4"
     down: Any = None
     epoch_s: float = 10.0
-    loss_up: float = 0.0
-    loss_down: float = 0.0
+    loss: float = 0.0
     outages: list = field(default_factory=list)
 
-    def outage_windows(self, direction: str) -> list[tuple[float, float]]:
-        """``(start_s, end_s)`` windows that apply to ``direction`` (``up`` or ``down``)."""
-        return [(o.start_s, o.end_s) for o in self.outages if o.direction in (direction, "both")]
+    def outage_windows(self) -> list[tuple[float, float]]:
+        """``(start_s, end_s)`` link-down windows (sim s)."""
+        return [(o.start_s, o.end_s) for o in self.outages]
 
 
 @dataclass
@@ -417,19 +417,17 @@ def _delay(v: _V, node, path):
 
 
 def _link(v: _V, node, path, dur) -> LinkSpec:
-    m = v.mapping(node, path, set(), {"up", "down", "epoch_s", "loss_up", "loss_down", "outages"})
+    m = v.mapping(node, path, set(), {"up", "down", "epoch_s", "loss", "outages"})
     ls = LinkSpec(up=_delay(v, m["up"], f"{path}.up") if "up" in m else "const:4",
                   down=_delay(v, m["down"], f"{path}.down") if "down" in m else None,
                   epoch_s=v.opt(m, "epoch_s", path, v.number, 10.0, lo=0, hi=600),
-                  loss_up=v.opt(m, "loss_up", path, v.number, 0.0, lo=0, hi=1, hi_open=True),
-                  loss_down=v.opt(m, "loss_down", path, v.number, 0.0, lo=0, hi=1, hi_open=True))
+                  loss=v.opt(m, "loss", path, v.number, 0.0, lo=0, hi=1, hi_open=True))
     if "outages" in m:
         for j, on in enumerate(v.seq(m["outages"], f"{path}.outages", max_len=64)):
             p = f"{path}.outages[{j}]"
-            mm = v.mapping(on, p, {"start_s", "end_s"}, {"direction"})
+            mm = v.mapping(on, p, {"start_s", "end_s"}, set())
             start = v.opt(mm, "start_s", p, v.number, lo=0, hi=dur)
-            ls.outages.append(Outage(start, v.opt(mm, "end_s", p, v.number, lo=start, lo_open=True),
-                                     v.opt(mm, "direction", p, v.string, "both", choices=("up", "down", "both"))))
+            ls.outages.append(Outage(start, v.opt(mm, "end_s", p, v.number, lo=start, lo_open=True)))
     return ls
 
 
@@ -583,6 +581,13 @@ def save_scenario(sc: Scenario, path: "str | os.PathLike", overwrite: bool = Fal
     return atomic_write_text(path, dump_scenario(sc), overwrite=overwrite)
 
 
+def delay_spec_string(spec) -> str:
+    """A scenario delay spec (str or dict) as the ``--delay`` string of ``daa-sil shim``."""
+    from . import latency
+
+    return spec if isinstance(spec, str) else latency.delay_model_from_dict(spec).spec()
+
+
 def delay_models(sc: Scenario):
     """``(up, down)`` :class:`daa_sil.latency.DelayModel` objects of the scenario's link."""
     from . import latency
@@ -592,6 +597,61 @@ def delay_models(sc: Scenario):
 
     up = build(sc.link.up)
     return up, (build(sc.link.down) if sc.link.down is not None else up)
+
+
+def ownship_state(sc: Scenario):
+    """The ownship at t = 0 as an ``(1,)`` :class:`daa_sil.kinematics.AircraftState`."""
+    import numpy as np
+
+    from .kinematics import AircraftState
+
+    o = sc.ownship
+    return AircraftState(np.array([o.x_m]), np.array([o.y_m]), np.array([o.alt_m]), np.array([o.gs_mps]),
+                         np.array([math.radians(o.track_deg)]), np.array([o.vs_mps]))
+
+
+def encounter_set(sc: Scenario, encounter_id: int = 0):
+    """The scenario as a one-encounter :class:`daa_sil.encounters.EncounterSet` (N = 1, M intruders).
+
+    ``cpa`` intruders are placed by :func:`daa_sil.encounters.encounter_from_geometry` against the
+    scenario's (unmaneuvered) ownship; ``initial`` intruders start as given. Scripts become the
+    set's segments. This is the one conversion the SIL vehicle and fast-time parity runs share.
+    """
+    import numpy as np
+
+    from . import encounters as enc
+    from .kinematics import AircraftState
+
+    own = ownship_state(sc)
+    m = len(sc.intruders)
+    s_max = max(1, max(len(i.maneuvers) for i in sc.intruders))
+    seg = [np.full((1, m, s_max), np.nan)] * 2 + [np.zeros((1, m, s_max)) for _ in range(3)]
+    seg = [a.copy() for a in seg]
+    states = []
+    try:
+        for j, spec in enumerate(sc.intruders):
+            mv = [(x.start_s, x.end_s, x.turn_rate_dps, x.accel_mps2, x.vertical_accel_mps2) for x in spec.maneuvers]
+            for k, (st, en, w, a, av) in enumerate(mv):
+                seg[0][0, j, k], seg[1][0, j, k] = st, en
+                seg[2][0, j, k], seg[3][0, j, k], seg[4][0, j, k] = math.radians(w), a, av
+            if spec.cpa is not None:
+                c = spec.cpa
+                one = enc.encounter_from_geometry(
+                    [enc.IntruderGeometry(c.angle_deg, c.hmd_m, c.t_cpa_s, c.gs_mps, c.vmd_m, c.vs_mps, mv)],
+                    own=own, duration_s=sc.duration_s, dt_s=1.0, encounter_id=encounter_id, seed=sc.seed)
+                states.append(one.intr[:, 0])
+            else:
+                i = spec.initial
+                states.append(AircraftState(np.array([i.x_m]), np.array([i.y_m]), np.array([i.alt_m]),
+                                            np.array([i.gs_mps]), np.array([math.radians(i.track_deg)]),
+                                            np.array([i.vs_mps])))
+    except UsageError as exc:
+        raise FileFormatError(f"{sc.source}: intruders[{j}]: {exc}") from None
+    intr = AircraftState(*(np.stack([getattr(s_, f) for s_ in states], axis=1) for f in ("x", "y", "z", "gs", "trk", "vs")))
+    return enc.EncounterSet(own=own, intr=intr, seg_start_s=seg[0], seg_end_s=seg[1], seg_turn_rate=seg[2],
+                            seg_accel=seg[3], seg_vaccel=seg[4], encounter_id=np.array([encounter_id], np.int64),
+                            seed=np.array([sc.seed], np.int64), params={}, root_seed=None,
+                            duration_s=float(sc.duration_s), dt_s=1.0, config={"source": f"scenario:{sc.name}"})
 
 
 def check_expectation(exp: Expectation, result: dict) -> list[str]:
@@ -623,4 +683,4 @@ def check_expectation(exp: Expectation, result: dict) -> list[str]:
 __all__ = ["Scenario", "InitialState", "CpaGeometry", "Maneuver", "IntruderSpec", "LinkSpec", "Outage",
            "PilotSpec", "ScriptedCommand", "AllocationSpec", "Expectation", "Origin", "DECISIONS", "GROUPS",
            "parse_scenario", "load_scenario", "scenario_from_dict", "dump_scenario", "save_scenario",
-           "delay_models", "check_expectation"]
+           "delay_models", "delay_spec_string", "check_expectation", "encounter_set", "ownship_state"]
