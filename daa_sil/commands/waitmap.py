@@ -1,0 +1,170 @@
+"""``daa-sil waitmap build|show|plot``: build, query and plot MDP wait maps."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import UsageError
+from ..io import to_jsonable
+from ..thresholds import PRESETS
+from ._args import finite_float
+
+BUILD_EX = """examples:
+  daa-sil waitmap build --out maps/paper                      # the paper grid, 5 turn-rate maps
+  daa-sil waitmap build --grid fine --preset do365 --out maps/fine
+  daa-sil waitmap build --grid paper,dx=24,dy=24,theta=8 --out maps/custom --force
+  daa-sil waitmap build --grid mygrid.yaml --turn-rates -5,0,5 --gamma 0.9 --out maps/mine
+
+--grid takes a preset (paper, fine), a YAML file ({base: paper, dx: {min: -1500, max: 1500, n: 24},
+theta: {n: 8}}) or an inline spec "base,axis=N,axis=lo:hi:N". Existing maps are never overwritten
+without --force.
+"""
+
+SHOW_EX = """examples:
+  daa-sil waitmap show maps/paper/waitmap_turn+0.0.npz --dx 1200 --dy 300 --dh 150 --vi 155 --vh 0 --theta 180
+  daa-sil waitmap show maps/paper --turn-rate 5 --dx -900 --dy 0 --dh 180 --vi 100 --vh -2 --theta 0 --json
+
+The state is the paper's relative state: dx ahead, dy LEFT of the ownship track (m), dh intruder
+minus ownship altitude (m), vi intruder ground speed (m/s), vh intruder minus ownship vertical speed
+(m/s), theta intruder heading CCW from the ownship track (deg; 180 = head-on).
+"""
+
+PLOT_EX = """examples:
+  daa-sil waitmap plot maps/paper --out figs/             # a family directory: all figures
+  daa-sil waitmap plot maps/paper/waitmap_turn+0.0.npz --out figs/ --vi 155 --dh 150
+
+Writes PNGs: slices over (dx, dy) for head-on / crossing / overtaking, the mirrored +-5 deg/s pair
+(when the family has them), the histogram of wait times (paper Fig. 3) and a 3-D view (paper Fig. 4).
+"""
+
+
+def _turn_rates(text: str) -> list[float]:
+    try:
+        vals = [float(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise UsageError(f"--turn-rates must be comma-separated numbers in deg/s, got {text!r}") from None
+    if not vals or not all(math.isfinite(v) and abs(v) <= 30 for v in vals):
+        raise UsageError(f"--turn-rates must be finite values within [-30, 30] deg/s, got {text!r}")
+    return vals
+
+
+def register(sub) -> None:
+    p = sub.add_parser("waitmap", help="build, query and plot MDP wait maps",
+                       description="MDP wait maps (paper Sec. II, IV): how long the UAS can wait for the "
+                                   "delayed remote pilot before the onboard DAA must act.",
+                       epilog=BUILD_EX, formatter_class=argparse.RawDescriptionHelpFormatter)
+    vs = p.add_subparsers(dest="verb", metavar="VERB", parser_class=sub._parser_class)
+    vs.required = True
+
+    b = vs.add_parser("build", help="build one map per turn-rate condition", epilog=BUILD_EX,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    b.add_argument("--grid", default="paper", help="paper | fine | FILE.yaml | inline spec (default paper)")
+    b.add_argument("--preset", default="paper", help=f"LoWC threshold preset: {', '.join(PRESETS)} (default paper)")
+    b.add_argument("--out", default="waitmaps", metavar="DIR", help="output directory (default ./waitmaps)")
+    b.add_argument("--turn-rates", default="-5,-2.5,0,2.5,5", metavar="LIST",
+                   help="conditioning initial turn rates, deg/s, + = left (default -5,-2.5,0,2.5,5)")
+    b.add_argument("--gamma", type=finite_float("--gamma", 1e-6, 0.999999), default=0.95, help="discount (default 0.95)")
+    b.add_argument("--horizon", type=finite_float("--horizon", 1.0, 600.0), default=60.0, metavar="S",
+                   help="wait-time horizon H, s (default 60)")
+    b.add_argument("--force", action="store_true", help="overwrite existing maps in DIR")
+    b.add_argument("--json", action="store_true", help="print a JSON summary instead of paths")
+    b.set_defaults(func=run_build)
+
+    s = vs.add_parser("show", help="query a map at one state", epilog=SHOW_EX,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    s.add_argument("map", metavar="MAP", help="a map .npz or a family directory")
+    for name, unit, lo, hi in (("dx", "m", -1e6, 1e6), ("dy", "m", -1e6, 1e6), ("dh", "m", -1e5, 1e5),
+                               ("vi", "m/s", 0.0, 1000.0), ("vh", "m/s", -200.0, 200.0), ("theta", "deg", -720.0, 720.0)):
+        s.add_argument(f"--{name}", required=True, type=finite_float(f"--{name}", lo, hi), metavar=unit.upper())
+    s.add_argument("--turn-rate", type=finite_float("--turn-rate", -30.0, 30.0), default=0.0, metavar="DEG/S",
+                   help="intruder turn rate, + = left; picks the nearest map of a family (default 0)")
+    s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.set_defaults(func=run_show)
+
+    pl = vs.add_parser("plot", help="write PNG figures of a map or family", epilog=PLOT_EX,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    pl.add_argument("map", metavar="MAP", help="a map .npz or a family directory")
+    pl.add_argument("--out", required=True, metavar="DIR", help="directory for the PNGs")
+    pl.add_argument("--vi", type=finite_float("--vi", 1.0, 1000.0), default=155.0, help="intruder speed of the slices, m/s (default 155)")
+    pl.add_argument("--dh", type=finite_float("--dh", -1e4, 1e4), default=150.0, help="relative altitude of the slices, m (default 150)")
+    pl.add_argument("--vh", type=finite_float("--vh", -200.0, 200.0), default=-2.5, help="relative vertical speed, m/s (default -2.5)")
+    pl.add_argument("--force", action="store_true", help="overwrite existing PNGs")
+    pl.set_defaults(func=run_plot)
+
+
+def _load_any(path: str):
+    from .. import waitmap
+
+    p = Path(path)
+    if p.is_dir():
+        return waitmap.load_family(p)
+    return waitmap.WaitMapFamily([waitmap.load(p)])
+
+
+def run_build(args) -> int:
+    from rich.progress import Progress
+
+    from .. import waitmap
+    from ..io import ensure_dir
+    from ..waitmap.model import params_hash
+    from ..waitmap.store import FAMILY_INDEX, map_filename
+
+    if args.preset.lower() not in PRESETS:
+        raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
+    rates = _turn_rates(args.turn_rates)
+    grid = waitmap.resolve_grid(args.grid)
+    params = waitmap.MdpParams(preset=args.preset.lower(), gamma=args.gamma, horizon=args.horizon)
+    out = Path(args.out)
+    if not args.force:
+        clash = [out / map_filename(r) for r in rates] + [out / FAMILY_INDEX]
+        clash = [c for c in clash if c.exists()]
+        if clash:
+            from ..errors import OutputError
+
+            raise OutputError(f"{clash[0]} exists; refusing to overwrite (use --force or another --out)")
+    ensure_dir(out)
+    with Progress(transient=True) as prog:
+        task = prog.add_task(f"building {len(rates)} maps on {grid.size:,} states", total=len(rates))
+        fam = waitmap.build_family(grid, params, rates, progress=lambda r: prog.advance(task))
+    paths = waitmap.save_family(fam, out, overwrite=True,
+                                family_hash=params_hash(grid.to_dict(), params, rates))
+    if args.json:
+        print(json.dumps(to_jsonable({"maps": [str(p) for p in paths], "states": grid.size,
+                                      "stats": [m.stats for m in fam.maps]}), sort_keys=True))
+    else:
+        for p, m in zip(paths, fam.maps):
+            print(f"{p}  (turn {m.turn_rate_deg:+.1f} deg/s, {m.stats['iterations']} sweeps, "
+                  f"{m.stats['total_s']:.2f} s)")
+    return 0
+
+
+def run_show(args) -> int:
+    fam = _load_any(args.map)
+    wm = fam.map_for(args.turn_rate)
+    state = np.array([args.dx, args.dy, args.dh, args.vi, args.vh, math.radians(args.theta)])
+    r = wm.lookup(state)
+    rep = {"wait_s": float(r.wait_s), "p_lowc": float(r.p_lowc), "action": "evade" if r.evade else "wait",
+           "in_grid": bool(r.in_grid), "turn_rate_deg": wm.turn_rate_deg, "preset": wm.params.preset,
+           "horizon_s": wm.params.horizon, "content_hash": wm.content_hash,
+           "state": {"dx": args.dx, "dy": args.dy, "dh": args.dh, "vi": args.vi, "vh": args.vh, "theta_deg": args.theta}}
+    if args.json:
+        print(json.dumps(rep, sort_keys=True))
+        return 0
+    print(f"{rep['action'].upper()}: wait {rep['wait_s']:.1f} s of {rep['horizon_s']:g} s, "
+          f"P(LoWC within H if waiting) {rep['p_lowc']:.3f}, {'in' if rep['in_grid'] else 'outside'} the grid "
+          f"(map turn {wm.turn_rate_deg:+.1f} deg/s, preset {wm.params.preset})")
+    return 0
+
+
+def run_plot(args) -> int:
+    from ..waitmap.plots import write_plots
+
+    fam = _load_any(args.map)
+    for p in write_plots(fam, Path(args.out), vi=args.vi, dh=args.dh, vh=args.vh, overwrite=args.force):
+        print(p)
+    return 0

@@ -1,0 +1,39 @@
+"""MDP wait maps (Tabassum & Bai Sec. II and IV): how long the UAS may wait for its delayed remote pilot.
+
+State ``(dx, dy, dh, vi, vh, theta)`` in the paper's relative frame (``daa_sil.frames``: X ahead,
+Y left, theta CCW from the ownship track, + turn rate = left), actions wait / evade, paper Eq. 1-8
+kinematics with ownship 55 m/s along +X and dt = 1 s, intruder maneuvers from paper Table 1
+(horizontal pair OR vertical per step), multilinear mass splitting, EXIT outside the box,
+absorbing LoWC (paper Eq. 9 with the chosen threshold preset) and OUT (after evade).
+
+Our interpretations (all configurable in :class:`MdpParams`):
+
+* Rewards: ``R_w(S') = -min(C1/HMD(S'), C2/|d_h(S')|) + C3 dt`` (HMD, |d_h| floored at 1 m),
+  averaged over the continuous next states; ``R_e = 0``; terminal values LoWC
+  ``-C3 dt/(1-gamma)`` (a loss of well clear forfeits the whole discounted wait bonus), EXIT 0, OUT 0.
+* Wait time: definition B of ``reference/models.md`` §4.3 (expected time until LoWC or an
+  evade-optimal state, EXIT counts to the horizon, truncated at H = 60 s); ``p_lowc`` = P(LoWC
+  within H if the UAS keeps waiting).
+* A map for initial turn rate omega0 uses ``P(dtheta) = 0.8 [dtheta = omega0] + 0.2 Table1``
+  every step (see :mod:`.model`); Table 1 is symmetric, so the +-omega0 maps are mirror images
+  and the 0 map is symmetric.
+* Out-of-grid lookups: see :mod:`.lookup` (far: W = H or the straight-line time to LoWC; in LoWC: 0).
+
+API::
+
+    fam = waitmap.default_family(preset="paper")    # cached in $DAA_SIL_CACHE or ~/.cache/daa-sil
+    res = fam.lookup(paper_states, turn_rate)        # (..., 6) states, turn rate rad/s (+ = left)
+    res.wait_s, res.p_lowc, res.evade, res.in_grid
+"""
+
+from .build import build_family, build_map, cache_dir, default_family
+from .grid import GRID_PRESETS, Axis, Grid, fine_grid, paper_grid, resolve_grid
+from .lookup import LookupResult, WaitMap, WaitMapFamily
+from .model import PAPER_TURN_RATES, MdpParams
+from .store import FORMAT_VERSION, load, load_family, save, save_family
+
+__all__ = [
+    "Axis", "FORMAT_VERSION", "GRID_PRESETS", "Grid", "LookupResult", "MdpParams", "PAPER_TURN_RATES",
+    "WaitMap", "WaitMapFamily", "build_family", "build_map", "cache_dir", "default_family", "fine_grid",
+    "load", "load_family", "paper_grid", "resolve_grid", "save", "save_family",
+]

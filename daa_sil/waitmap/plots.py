@@ -1,0 +1,98 @@
+"""PNG figures of wait maps (matplotlib, Agg backend): the paper's Fig. 3-7 kinds of views."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..io import atomic_path
+from .lookup import WaitMap, WaitMapFamily
+from .model import DEG
+
+GEOMETRIES = (("head-on", 180.0), ("crossing-from-right", 90.0), ("crossing-from-left", 270.0), ("overtaking", 0.0))
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _slice(wm: WaitMap, theta_deg: float, vi: float, dh: float, vh: float, n: int = 121):
+    """Wait time over an (dx, dy) mesh at fixed (dh, vi, vh, theta), by lookup (s)."""
+    ax = np.linspace(wm.grid.axis("dx").lo, wm.grid.axis("dx").hi, n)
+    ay = np.linspace(wm.grid.axis("dy").lo, wm.grid.axis("dy").hi, n)
+    X, Y = np.meshgrid(ax, ay, indexing="xy")
+    st = np.stack([X, Y, np.full_like(X, dh), np.full_like(X, vi), np.full_like(X, vh),
+                   np.full_like(X, theta_deg * DEG)], axis=-1)
+    return X, Y, wm.lookup(st).wait_s
+
+
+def _save(fig, path: Path, overwrite: bool) -> Path:
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
+    _plt().close(fig)
+    return path
+
+
+def _top(ax, wm, theta, vi, dh, vh, title):
+    X, Y, W = _slice(wm, theta, vi, dh, vh)
+    m = ax.pcolormesh(X, Y, W, shading="auto", cmap="viridis", vmin=0, vmax=wm.params.horizon)
+    ax.plot([0], [0], "r^", ms=8)
+    ax.set_xlabel("dx ahead (m)")
+    ax.set_ylabel("dy left (m)")
+    ax.set_title(title, fontsize=9)
+    ax.set_aspect("equal")
+    return m
+
+
+def write_plots(fam: WaitMapFamily, out: Path, vi: float = 155.0, dh: float = 150.0, vh: float = -2.5,
+                overwrite: bool = False) -> list[Path]:
+    """Write the standard figures for a family (or a one-map family); returns the PNG paths."""
+    plt = _plt()
+    paths = []
+    base = fam.map_for(0.0)
+    tag = f"vi={vi:g} m/s, dh={dh:g} m, vh={vh:g} m/s"
+    fig, axs = plt.subplots(1, 4, figsize=(18, 4.6))
+    for ax, (name, th) in zip(axs, GEOMETRIES):
+        m = _top(ax, base, th, vi, dh, vh, f"{name} (theta {th:g} deg), turn {base.turn_rate_deg:+g} deg/s\n{tag}")
+    fig.colorbar(m, ax=axs, label="wait time (s)")
+    paths.append(_save(fig, out / "slices_geometries.png", overwrite))
+
+    rates = fam.turn_rates_deg
+    if rates.min() < 0 < rates.max():
+        lo, hi = fam.maps[int(np.argmin(rates))], fam.maps[int(np.argmax(rates))]
+        fig, axs = plt.subplots(1, 2, figsize=(10, 4.6))
+        for ax, wm in zip(axs, (lo, hi)):
+            m = _top(ax, wm, 180.0, vi, dh, vh, f"turn {wm.turn_rate_deg:+g} deg/s, head-on\n{tag}")
+        fig.colorbar(m, ax=axs, label="wait time (s)")
+        paths.append(_save(fig, out / "mirror_pair.png", overwrite))
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    w = np.concatenate([threatening_waits(wm) for wm in fam.maps])
+    ax.hist(w, bins=np.arange(0, fam.maps[0].params.horizon + 2, 2), color="tab:blue", edgecolor="k")
+    ax.set_xlabel("wait time (s)")
+    ax.set_ylabel("states")
+    ax.set_title(f"wait time over threatening states (n={w.size}, all maps)", fontsize=9)
+    paths.append(_save(fig, out / "histogram.png", overwrite))
+
+    fig = plt.figure(figsize=(7, 5.5))
+    ax = fig.add_subplot(projection="3d")
+    X, Y, W = _slice(base, 180.0, vi, dh, vh, n=61)
+    ax.plot_surface(X, Y, W, cmap="viridis", linewidth=0)
+    ax.set_xlabel("dx (m)")
+    ax.set_ylabel("dy (m)")
+    ax.set_zlabel("wait (s)")
+    ax.set_title(f"head-on wait map, turn {base.turn_rate_deg:+g} deg/s, {tag}", fontsize=9)
+    paths.append(_save(fig, out / "map_3d.png", overwrite))
+    return paths
+
+
+def threatening_waits(wm: WaitMap, p_min: float = 0.5) -> np.ndarray:
+    """Wait times (s) of wait-optimal, non-LoWC nodes that reach LoWC/evade within H with p >= p_min."""
+    sel = ~wm.evade & (wm.p_act >= p_min)
+    return wm.wait_s[sel]
