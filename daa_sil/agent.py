@@ -1,0 +1,343 @@
+"""The allocation agent (paper Algorithm 1 + Algorithm 2) as a pure, batched step function.
+
+Semantics follow ``docs/architecture.md`` "Allocation semantics":
+
+* **Active** while any intruder has alert level >= 2 (corrective), or while a wait / blend is in
+  progress (the previous step's decision was ``wait`` or ``blend`` and the ownship has not yet
+  reached that command). Outside the active phase the ownship flies the last pilot command and the
+  decision is ``none`` (not counted).
+* One decision per active step:
+  - ``link_lost``: no packet from the GCS for ``link_timeout_s`` -> the onboard DAA resolution.
+  - fresh pilot command received -> ``pilot`` if SM(u_p) > 0; else ``blend`` (Algorithm 2,
+    :func:`daa_sil.daa.search_maneuver` with the pilot's (axis, direction), closest to u_p) when
+    ``policy.blending``, or ``daa_override`` (DAA resolution) when not (baseline).
+  - no fresh command -> ``wait`` (hold the last pilot command) iff ``w >= W_T`` and no ProjL
+    within ``projl_horizon_s``, else ``no_wait`` (DAA resolution). A command older than
+    ``stale_command_s`` (by its send time) is never executed nor stored: the step is decided as
+    if no command arrived but recorded as ``stale``.
+* Wait function ``w``: ``none`` -> 0 (always DAA); ``constant`` -> ``constant_wait_s``; ``map`` ->
+  ``wait_lookup(own, intr)``. With ``wait_countdown`` (IC-1) the wait is a budget counted from the
+  start of the current waiting streak (``w - elapsed``), reset when a fresh pilot command arrives
+  or the active phase ends; without it (maps) ``w`` is re-read at the current state every step.
+* ``projl_horizon_s`` default 25 s = the DO-365 warning alerting time: a LoWC predicted that soon
+  leaves no time to wait for a command delayed by up to 10 s plus a 5-10 s maneuver.
+* Authority: ``pilot`` (pilot command or inactive), ``hold`` (wait), ``daa`` (DAA resolution,
+  blend, override, link lost).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+from typing import Callable
+
+import numpy as np
+
+from .daa import (AXIS_NONE, DaaConfig, alert_levels, classify_command, compute_bands, proj_lowc, resolve,
+                  safety_metric, search_maneuver)
+from .daa.config import AXIS_NAMES, DIR_NAMES, RULE_NAMES
+from .daa.resolution import command_deltas
+from .errors import UsageError
+from .frames import to_paper_state
+from .kinematics import AircraftState, Command
+
+DECISION_NAMES = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
+(D_NONE, D_WAIT, D_NO_WAIT, D_PILOT, D_BLEND, D_DAA_OVERRIDE, D_DAA, D_STALE, D_LINK_LOST) = range(9)
+AUTHORITY_NAMES = ("pilot", "daa", "hold")
+A_PILOT, A_DAA, A_HOLD = range(3)
+
+#: keys of the decision record (every value is an array with leading axis N)
+DECISION_FIELDS = (
+    "active", "decision", "rule", "authority", "wait_s", "projl", "link_lost", "max_alert", "alert_level",
+    "pilot_cmd_received", "pilot_cmd_age_s", "sm_pilot", "sm_exec",
+    "pilot_axis", "pilot_dir", "exec_axis", "exec_dir", "exact_match",
+    "cmd_trk", "cmd_vs", "cmd_gs", "pilot_trk", "pilot_vs", "pilot_gs", "daa_trk", "daa_vs", "daa_gs",
+    "bands_trk", "bands_trk_region",
+)
+
+#: name tables for the integer-coded fields
+CODE_NAMES = {"decision": DECISION_NAMES, "rule": RULE_NAMES, "authority": AUTHORITY_NAMES,
+              "pilot_axis": AXIS_NAMES, "exec_axis": AXIS_NAMES, "pilot_dir": DIR_NAMES, "exec_dir": DIR_NAMES}
+
+WaitLookup = Callable[[AircraftState, AircraftState], np.ndarray]
+
+
+@dataclass(frozen=True)
+class AllocationPolicy:
+    """One experimental group's allocation settings (groups are data, not code paths). Times in s."""
+
+    wait_mode: str  #: "none" (w = 0, always DAA), "constant", "map"
+    constant_wait_s: float = 5.0
+    wait_threshold_s: float = 4.0  #: W_T
+    projl_horizon_s: float = 25.0  #: the paper's N
+    blending: bool = True  #: False = baseline: unsafe pilot command -> DAA override
+    stale_command_s: float = 15.0
+    link_timeout_s: float = 20.0
+    wait_countdown: bool = False  #: wait is a budget from the start of the waiting streak
+    sm_horizon_s: "float | None" = None  #: SM horizon (None = DaaConfig.sm_horizon_s)
+    name: str = "custom"
+
+    def __post_init__(self):
+        if self.wait_mode not in ("none", "constant", "map"):
+            raise UsageError(f"wait_mode must be none, constant or map, got {self.wait_mode!r}")
+
+
+POLICIES: dict[str, AllocationPolicy] = {
+    "B-1": AllocationPolicy("none", blending=False, name="B-1"),
+    "B-2": AllocationPolicy("none", blending=False, name="B-2"),
+    "IC-1": AllocationPolicy("constant", constant_wait_s=5.0, wait_countdown=True, name="IC-1"),
+    "ID-1": AllocationPolicy("map", name="ID-1"),
+    "ID-2": AllocationPolicy("map", name="ID-2"),
+}
+
+
+def policy_for_group(group: str) -> AllocationPolicy:
+    """The policy of a paper group (B-1, B-2, IC-1, ID-1, ID-2)."""
+    try:
+        return POLICIES[group.upper()]
+    except KeyError:
+        raise UsageError(f"unknown group {group!r}; allowed: {', '.join(POLICIES)}") from None
+
+
+@dataclass
+class PilotInput:
+    """Pilot data at the vehicle this step, arrays (N,): ``received`` a command arrived this step,
+    ``cmd`` the newest one (nan fields = keep current), ``t_sent``/``t_recv`` its send/arrival time (s),
+    ``link_alive_t`` arrival time of the last packet of any kind from the GCS (s; nan = unknown)."""
+
+    received: np.ndarray
+    cmd: Command
+    t_sent: np.ndarray
+    t_recv: np.ndarray
+    link_alive_t: np.ndarray
+
+    @classmethod
+    def nothing(cls, n: int, link_alive_t=np.nan) -> "PilotInput":
+        """No command this step."""
+        nan = np.full(n, np.nan)
+        return cls(np.zeros(n, bool), Command(nan, nan, nan), nan.copy(), nan.copy(), np.full(n, link_alive_t, float))
+
+
+@dataclass
+class AgentMemory:
+    """Batched agent state carried between steps (arrays (N,)). Times in s, angles rad."""
+
+    pilot_trk: np.ndarray  #: last fresh pilot command (resolved at reception)
+    pilot_vs: np.ndarray
+    pilot_gs: np.ndarray
+    pilot_t_sent: np.ndarray  #: its send time (nan = none yet)
+    last_packet_t: np.ndarray  #: arrival time of the last GCS packet
+    authority: np.ndarray  #: A_* code of the last step
+    decision: np.ndarray  #: D_* code of the last step
+    exec_trk: np.ndarray  #: command executed last step
+    exec_vs: np.ndarray
+    exec_gs: np.ndarray
+    daa_axis: np.ndarray  #: last DAA resolution (axis, direction) codes, for persistence
+    daa_dir: np.ndarray
+    wait_start: np.ndarray  #: start of the current waiting streak (nan = none)
+
+    @classmethod
+    def initial(cls, n: int, own: AircraftState, t0: float = 0.0) -> "AgentMemory":
+        """Start: the 'last pilot command' is the current course; the link counts as alive at ``t0``."""
+        z = np.zeros(n, np.int8)
+        return cls(own.trk.copy(), own.vs.copy(), own.gs.copy(), np.full(n, np.nan), np.full(n, float(t0)),
+                   z.copy(), z.copy(), own.trk.copy(), own.vs.copy(), own.gs.copy(), z.copy(), z.copy(),
+                   np.full(n, np.nan))
+
+    def __getitem__(self, idx) -> "AgentMemory":
+        return AgentMemory(*(getattr(self, f.name)[idx] for f in fields(self)))
+
+    def pilot_command(self) -> Command:
+        return Command(self.pilot_trk, self.pilot_vs, self.pilot_gs)
+
+
+def _reached(own: AircraftState, cmd: Command) -> np.ndarray:
+    dtrk, dvs, dgs = command_deltas(own, cmd)
+    return (np.abs(dtrk) < np.radians(0.5)) & (np.abs(dvs) < 0.25) & (np.abs(dgs) < 0.5)
+
+
+def _wait_values(own, intr, policy: AllocationPolicy, lookup: "WaitLookup | None", idx) -> np.ndarray:
+    n = len(idx)
+    if policy.wait_mode == "none" or n == 0:
+        return np.zeros(n)
+    if policy.wait_mode == "constant":
+        return np.full(n, float(policy.constant_wait_s))
+    if lookup is None:
+        raise UsageError("policy wait_mode 'map' needs a wait_lookup (daa_sil.agent.make_wait_lookup)")
+    return np.asarray(lookup(own[idx], intr[idx]), float).reshape(n)
+
+
+def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotInput, memory: AgentMemory,
+               policy: AllocationPolicy, daa_cfg: "DaaConfig | None" = None,
+               wait_lookup: "WaitLookup | None" = None, bands=None
+               ) -> tuple[Command, dict, AgentMemory]:
+    """One allocation step at sim time ``t`` (s) for ownship ``(N,)`` and intruders ``(N, M)``.
+
+    Returns ``(command to fly, decision record, new memory)``; the record has the keys
+    :data:`DECISION_FIELDS` (codes in :data:`CODE_NAMES`; nan where not applicable). ``bands``
+    (a :class:`~daa_sil.daa.Bands` for the whole batch) may be passed to avoid recomputing them.
+    """
+    cfg = daa_cfg if daa_cfg is not None else DaaConfig()
+    n = own.shape[0]
+    nan = np.full(n, np.nan)
+    horizon = cfg.sm_horizon_s if policy.sm_horizon_s is None else policy.sm_horizon_s
+    alert = alert_levels(own, intr, cfg)
+    max_alert = alert.max(axis=1) if alert.shape[1] else np.zeros(n, np.int8)
+
+    # --- link and pilot input -----------------------------------------------------------------
+    received = np.asarray(pilot.received, bool)
+    link_t = np.fmax(memory.last_packet_t, np.asarray(pilot.link_alive_t, float))
+    link_t = np.where(received, np.fmax(link_t, pilot.t_recv), link_t)
+    link_lost = (t - link_t) > policy.link_timeout_s
+    age = np.where(received, t - np.asarray(pilot.t_sent, float), np.nan)
+    fresh = received & (age <= policy.stale_command_s)
+    stale = received & ~fresh
+    pcmd = pilot.cmd.resolved(own)
+    p_trk = np.where(fresh, pcmd.trk, memory.pilot_trk)
+    p_vs = np.where(fresh, pcmd.vs, memory.pilot_vs)
+    p_gs = np.where(fresh, pcmd.gs, memory.pilot_gs)
+    last_pilot = Command(p_trk, p_vs, p_gs)
+
+    # --- active phase -------------------------------------------------------------------------
+    prev_exec = Command(memory.exec_trk, memory.exec_vs, memory.exec_gs)
+    in_progress = np.isin(memory.decision, (D_WAIT, D_BLEND)) & ~_reached(own, prev_exec)
+    active = (max_alert >= 2) | in_progress
+    ia = np.nonzero(active)[0]
+    own_a, intr_a = own[ia], intr[ia]
+
+    # --- DAA: bands and resolution for the active encounters -------------------------------------
+    if bands is not None:
+        b_a = bands[ia]
+    else:
+        b_a = compute_bands(own_a, intr_a, cfg, alert[ia])
+    daa_cmd_a, daa_ax_a, daa_dir_a = resolve(own_a, intr_a, cfg, (memory.daa_axis[ia], memory.daa_dir[ia]), b_a)
+
+    # --- pilot command safety -----------------------------------------------------------------
+    sm_pilot = nan.copy()
+    fa = fresh[ia]
+    if fa.any():
+        j = ia[fa]
+        sm_pilot[j] = safety_metric(own[j], intr[j], pcmd[j], cfg, horizon)
+    p_axis, p_dir = classify_command(own, pcmd, cfg)
+    p_axis = np.where(fresh, p_axis, AXIS_NONE).astype(np.int8)
+    p_dir = np.where(fresh, p_dir, 0).astype(np.int8)
+
+    # --- wait / no wait (no fresh command) ------------------------------------------------------
+    wait_s = nan.copy()
+    projl = np.zeros(n, bool)
+    if ia.size:
+        projl[ia] = proj_lowc(own_a, intr_a, cfg, policy.projl_horizon_s).any(axis=1) if intr.shape[1] else False
+    nc = active & ~fresh & ~link_lost
+    inc = np.nonzero(nc)[0]
+    wait_start = np.where(active & ~fresh, memory.wait_start, np.nan)
+    if inc.size:
+        w = _wait_values(own, intr, policy, wait_lookup, inc)
+        if policy.wait_countdown:
+            w = w - np.where(np.isfinite(wait_start[inc]), t - wait_start[inc], 0.0)
+        wait_s[inc] = w
+    wait = nc & (np.nan_to_num(wait_s, nan=-np.inf) >= policy.wait_threshold_s) & ~projl
+    wait_start = np.where(wait & np.isnan(wait_start), t, wait_start)
+
+    # --- blend for unsafe fresh pilot commands --------------------------------------------------
+    pilot_ok = active & fresh & ~link_lost & (sm_pilot > 0)
+    unsafe = active & fresh & ~link_lost & ~(sm_pilot > 0)
+    rule = np.zeros(n, np.int8)
+    blend_cmd = Command(nan.copy(), nan.copy(), nan.copy())
+    if policy.blending and unsafe.any():
+        sel = unsafe[ia]
+        j = ia[sel]
+        bc, br = search_maneuver(own[j], intr[j], p_axis[j], p_dir[j], cfg, ref=pcmd[j], horizon_s=horizon,
+                                 bands=b_a[sel])
+        blend_cmd.trk[j], blend_cmd.vs[j], blend_cmd.gs[j] = bc.trk, bc.vs, bc.gs
+        rule[j] = br
+
+    # --- decision codes -----------------------------------------------------------------------
+    decision = np.full(n, D_NONE, np.int8)
+    decision = np.where(active & link_lost, D_LINK_LOST, decision)
+    decision = np.where(pilot_ok, D_PILOT, decision)
+    decision = np.where(unsafe, D_BLEND if policy.blending else D_DAA_OVERRIDE, decision)
+    decision = np.where(nc & wait, D_WAIT, decision)
+    decision = np.where(nc & ~wait, D_NO_WAIT, decision)
+    decision = np.where(active & stale & ~link_lost, D_STALE, decision).astype(np.int8)
+
+    daa_cmd = Command(nan.copy(), nan.copy(), nan.copy())
+    daa_cmd.trk[ia], daa_cmd.vs[ia], daa_cmd.gs[ia] = daa_cmd_a.trk, daa_cmd_a.vs, daa_cmd_a.gs
+    use_daa = active & ~pilot_ok & ~wait & ~(unsafe & policy.blending)
+    exec_cmd = last_pilot.where(~active | pilot_ok | wait, blend_cmd.where(unsafe & policy.blending, daa_cmd))
+    exec_cmd = exec_cmd.where(~use_daa, daa_cmd)
+    authority = np.where(~active | pilot_ok, A_PILOT, np.where(wait, A_HOLD, A_DAA)).astype(np.int8)
+
+    # --- safety of what is executed -------------------------------------------------------------
+    sm_exec = nan.copy()
+    sm_exec = np.where(pilot_ok, sm_pilot, sm_exec)
+    other = active & ~pilot_ok
+    if other.any():
+        j = np.nonzero(other)[0]
+        sm_exec[j] = safety_metric(own[j], intr[j], exec_cmd[j], cfg, horizon)
+    e_axis, e_dir = classify_command(own, exec_cmd, cfg)
+    exact = (decision == D_BLEND) & (p_axis != AXIS_NONE) & (e_axis == p_axis) & (e_dir == p_dir)
+
+    bt = np.full((n, b_a.trk.values.shape[1]), np.nan)
+    br_ = np.full((n, b_a.trk.values.shape[1]), -1, np.int8)
+    bt[ia], br_[ia] = np.degrees(b_a.trk.values), b_a.trk.region
+    daa_axis = np.zeros(n, np.int8)
+    daa_dir = np.zeros(n, np.int8)
+    daa_axis[ia], daa_dir[ia] = daa_ax_a, daa_dir_a
+
+    dec = {
+        "active": active, "decision": decision, "rule": rule, "authority": authority, "wait_s": wait_s,
+        "projl": projl, "link_lost": link_lost, "max_alert": max_alert.astype(np.int8), "alert_level": alert,
+        "pilot_cmd_received": received, "pilot_cmd_age_s": age, "sm_pilot": sm_pilot, "sm_exec": sm_exec,
+        "pilot_axis": p_axis, "pilot_dir": p_dir, "exec_axis": e_axis, "exec_dir": e_dir, "exact_match": exact,
+        "cmd_trk": exec_cmd.trk, "cmd_vs": exec_cmd.vs, "cmd_gs": exec_cmd.gs,
+        "pilot_trk": p_trk, "pilot_vs": p_vs, "pilot_gs": p_gs,
+        "daa_trk": daa_cmd.trk, "daa_vs": daa_cmd.vs, "daa_gs": daa_cmd.gs,
+        "bands_trk": bt, "bands_trk_region": br_,
+    }
+    new_mem = replace(memory, pilot_trk=p_trk, pilot_vs=p_vs, pilot_gs=p_gs,
+                      pilot_t_sent=np.where(fresh, pilot.t_sent, memory.pilot_t_sent), last_packet_t=link_t,
+                      authority=authority, decision=decision, exec_trk=exec_cmd.trk.copy(),
+                      exec_vs=exec_cmd.vs.copy(), exec_gs=exec_cmd.gs.copy(), daa_axis=daa_axis, daa_dir=daa_dir,
+                      wait_start=np.where(active & ~fresh, wait_start, np.nan))
+    return exec_cmd, dec, new_mem
+
+
+def decode(decisions: dict) -> dict:
+    """Copy of a decision record with the integer-coded fields as string arrays."""
+    out = dict(decisions)
+    for key, names in CODE_NAMES.items():
+        if key in out:
+            out[key] = np.asarray(names, dtype=object)[np.asarray(out[key], int)]
+    return out
+
+
+def make_wait_lookup(family, turn_rate_fn: "Callable[[AircraftState], np.ndarray] | None" = None,
+                     cfg: "DaaConfig | None" = None) -> WaitLookup:
+    """Wrap a wait-map family (``family.lookup(paper_states, turn_rate)``) as ``lookup(own, intr) -> (N,)``.
+
+    Each intruder is converted to the paper frame (:func:`daa_sil.frames.to_paper_state`); its turn
+    rate comes from ``turn_rate_fn(intr)`` (compass rad/s, + = right; default 0) and is passed in the
+    paper sense (+ = left, i.e. negated). The wait of the **most threatening** intruder is used: the
+    one with the earliest straight-line LoWC over the lookahead (ties: the smallest range).
+    """
+    cfg = cfg or DaaConfig()
+    from .daa.alerting import relative_state
+    from . import wellclear as wc
+
+    def lookup(own: AircraftState, intr: AircraftState) -> np.ndarray:
+        n, m = intr.shape
+        if m == 0:
+            return np.full(n, np.inf)
+        paper = to_paper_state(own.position()[:, None], own.velocity()[:, None], intr.position(), intr.velocity())
+        rate = np.zeros((n, m)) if turn_rate_fn is None else np.broadcast_to(turn_rate_fn(intr), (n, m))
+        res = family.lookup(paper, -np.asarray(rate, float))
+        s, v = relative_state(own, intr)
+        t_in, _ = wc.violation_interval(s, v, cfg.th, 0.0, cfg.lookahead_s)
+        key = np.minimum(t_in, 1e9) * 1e6 + wc.horizontal_range(s)
+        k = np.argmin(key, axis=1)
+        return np.asarray(res.wait_s, float)[np.arange(n), k]
+
+    return lookup
+
+
+__all__ = ["AllocationPolicy", "POLICIES", "policy_for_group", "PilotInput", "AgentMemory", "agent_step",
+           "make_wait_lookup", "decode", "DECISION_FIELDS", "DECISION_NAMES", "AUTHORITY_NAMES", "CODE_NAMES"]

@@ -1,0 +1,201 @@
+"""Maneuver search (paper Algorithm 2), the onboard DAA's own resolution, command classification.
+
+All candidates come from the kinematic bands (:mod:`daa_sil.daa.bands`): single-axis maneuvers
+(one of track / vertical speed / ground speed changed, the others held). A candidate is **safe**
+when its first LoWC time exceeds the SM horizon (``SM > 0``, :func:`daa_sil.daa.safety_metric`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..frames import wrap_pi
+from ..kinematics import AircraftState, Command
+from ..units import DEG, FPM, KT
+from .bands import Bands, compute_bands
+from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_NONE, AXIS_SPEED, AXIS_VERTICAL, DIR_AXIS, DIR_SIDE,
+                     REGION_NONE, REGION_RECOVERY, RULE_ANY, RULE_AXIS, RULE_AXIS_DIR, RULE_BEST_EFFORT, DaaConfig,
+                     axis_code, dir_code, side_to_dir)
+
+#: changes below these are "no change" when classifying a command
+CLASSIFY_DEADBAND = {"trk": 0.5 * DEG, "vs": 50.0 * FPM, "gs": 1.0 * KT}
+
+
+def command_deltas(state: AircraftState, cmd: Command) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Signed changes (track rad, - = left; vs m/s; gs m/s) that ``cmd`` asks for; nan fields are 0."""
+    c = cmd.resolved(state)
+    return wrap_pi(c.trk - state.trk), c.vs - state.vs, c.gs - state.gs
+
+
+def classify_command(state: AircraftState, cmd: Command, cfg: "DaaConfig | None" = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """(axis, direction) codes (int8 arrays) of a command relative to the current state.
+
+    The axis is the one whose change takes longest at the kinematic limits (turn rate, vertical
+    and horizontal acceleration); changes within :data:`CLASSIFY_DEADBAND` do not count, and a
+    command with no change is ``(none, none)``. Direction: left/right, up/down, faster/slower.
+    """
+    cfg = cfg or DaaConfig()
+    dtrk, dvs, dgs = command_deltas(state, cmd)
+    dtrk = np.where(np.abs(dtrk) < CLASSIFY_DEADBAND["trk"], 0.0, dtrk)
+    dvs = np.where(np.abs(dvs) < CLASSIFY_DEADBAND["vs"], 0.0, dvs)
+    dgs = np.where(np.abs(dgs) < CLASSIFY_DEADBAND["gs"], 0.0, dgs)
+    times = np.stack([np.abs(dtrk) / cfg.turn_rate, np.abs(dvs) / cfg.vertical_accel,
+                      np.abs(dgs) / cfg.horizontal_accel], axis=-1)
+    ax = np.argmax(times, axis=-1) + 1
+    moved = times.max(axis=-1) > 0
+    side = np.choose(ax - 1, [np.sign(dtrk), np.sign(dvs), np.sign(dgs)])
+    axis = np.where(moved, ax, AXIS_NONE).astype(np.int8)
+    return axis, np.where(moved, side_to_dir(axis, side), 0).astype(np.int8)
+
+
+class _Candidates:
+    """All single-axis candidates of the three axes concatenated: arrays (N, K) and (K,)."""
+
+    def __init__(self, own: AircraftState, bands: Bands):
+        ab = bands.axes()
+        self.axis = np.concatenate([np.full(a.side.shape, a.axis) for a in ab])
+        self.side = np.concatenate([a.side for a in ab])
+        self.values = np.concatenate([a.values for a in ab], axis=1)
+        self.delta = np.concatenate([a.delta for a in ab], axis=1)
+        self.t_man = np.concatenate([a.t_man for a in ab], axis=1)
+        self.t_in = np.concatenate([a.t_in for a in ab], axis=1)
+        self.t_out = np.concatenate([a.t_out for a in ab], axis=1)
+        self.region = np.concatenate([a.region for a in ab], axis=1)
+        self.own = own
+
+    def command(self, idx: np.ndarray) -> Command:
+        """Command of candidate ``idx`` (N,): the candidate's axis set, the other axes held."""
+        take = lambda a: np.take_along_axis(a, idx[:, None], -1)[:, 0]  # noqa: E731
+        ax, val = self.axis[idx], take(self.values)
+        o = self.own
+        return Command(np.where(ax == AXIS_HORIZONTAL, val, o.trk), np.where(ax == AXIS_VERTICAL, val, o.vs),
+                       np.where(ax == AXIS_SPEED, val, o.gs))
+
+    def best_effort_score(self) -> np.ndarray:
+        """Larger is better: latest first LoWC (s), then earliest regain of well clear."""
+        t_in = np.minimum(self.t_in, 1e6)
+        return t_in * 1e3 - np.maximum(self.t_out, 0.0)
+
+
+def _pick(mask, cost):
+    c = np.where(mask, cost, np.inf)
+    idx = np.argmin(c, axis=-1)
+    return idx, np.isfinite(np.take_along_axis(c, idx[:, None], -1)[:, 0])
+
+
+def _codes(val, n: int, conv) -> np.ndarray:
+    if isinstance(val, str) or np.ndim(val) == 0:
+        return np.full(n, conv(val if isinstance(val, str) else int(val)), np.int8)
+    arr = np.asarray(val)
+    if arr.dtype.kind in "US":
+        return np.array([conv(str(x)) for x in arr], np.int8)
+    return arr.astype(np.int8)
+
+
+def search_maneuver(own: AircraftState, intr: AircraftState, axis, direction, cfg: "DaaConfig | None" = None,
+                    ref: "Command | None" = None, horizon_s: "float | None" = None,
+                    bands: "Bands | None" = None) -> tuple[Command, np.ndarray]:
+    """Paper Algorithm 2 (batched): a safe maneuver for the pilot's (axis, direction).
+
+    ``axis``/``direction``: names or codes, scalar or ``(N,)``. ``ref``: the pilot's command (the
+    candidate closest to it on the axis is preferred; default the current state). Safe means
+    ``SM > 0`` with ``horizon_s`` (default ``cfg.sm_horizon_s``). Rules, first that succeeds:
+    1 ``axis_dir`` safe candidate on the axis in the direction, closest to ``ref``;
+    2 ``axis`` safe candidate on the axis (either side, not the current value), closest to ``ref``;
+    3 ``any`` safe candidate of any axis (the current value included) reached soonest;
+    4 ``best_effort`` the candidate with the largest SM (latest LoWC, then earliest recovery).
+    Returns ``(Command, rule)`` with rule codes ``RULE_*`` (int8, N).
+    """
+    cfg = cfg or DaaConfig()
+    n = own.shape[0]
+    bands = bands if bands is not None else compute_bands(own, intr, cfg)
+    cand = _Candidates(own, bands)
+    horizon = cfg.sm_horizon_s if horizon_s is None else float(horizon_s)
+    ax = _codes(axis, n, axis_code)
+    dc = _codes(direction, n, dir_code)
+    side = np.asarray(DIR_SIDE)[dc]
+    ax = np.where((np.asarray(DIR_AXIS)[dc] != ax) & (dc != 0), np.asarray(DIR_AXIS)[dc], ax)
+    safe = cand.t_in > horizon
+    # distance to the reference along the candidate's own axis, in seconds of maneuvering
+    rates = np.array([1.0, cfg.turn_rate, cfg.vertical_accel, cfg.horizontal_accel])
+    ref_d = np.zeros((n, 4))
+    if ref is not None:
+        d = command_deltas(own, ref)
+        ref_d[:, 1], ref_d[:, 2], ref_d[:, 3] = d
+    ref_t = ref_d / rates
+    cand_t = cand.delta / rates[cand.axis]
+    dist = np.abs(cand_t - ref_t[:, cand.axis])
+    on_axis = (cand.axis[None, :] == ax[:, None]) & (ax[:, None] != AXIS_NONE)
+    moving = cand.side[None, :] != 0
+    i1, f1 = _pick(safe & on_axis & moving & (cand.side[None, :] == side[:, None]) & (side[:, None] != 0), dist)
+    i2, f2 = _pick(safe & on_axis & moving, dist)
+    i3, f3 = _pick(safe, cand.t_man)
+    i4 = np.argmax(cand.best_effort_score(), axis=-1)
+    idx = np.where(f1, i1, np.where(f2, i2, np.where(f3, i3, i4)))
+    rule = np.where(f1, RULE_AXIS_DIR, np.where(f2, RULE_AXIS, np.where(f3, RULE_ANY, RULE_BEST_EFFORT)))
+    return cand.command(idx), rule.astype(np.int8)
+
+
+def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = None,
+            prev: "tuple[np.ndarray, np.ndarray] | None" = None, bands: "Bands | None" = None
+            ) -> tuple[Command, np.ndarray, np.ndarray]:
+    """The onboard DAA resolution with its (axis, direction) codes; see :func:`daa_resolution`."""
+    cfg = cfg or DaaConfig()
+    n = own.shape[0]
+    bands = bands if bands is not None else compute_bands(own, intr, cfg)
+    cand = _Candidates(own, bands)
+    k0 = np.nonzero((cand.axis == AXIS_HORIZONTAL) & (cand.side == 0))[0][0]
+    in_conflict = cand.region[:, k0] != REGION_NONE
+    none_ok = cand.region == REGION_NONE
+    rec_ok = cand.region == REGION_RECOVERY
+    moving = cand.side[None, :] != 0
+    chosen = np.full(n, -1)
+    # 1. persistence: keep the previous (axis, direction) while it still has a conflict-free candidate
+    if prev is not None:
+        p_ax, p_dir = (np.asarray(a).astype(int) for a in prev)
+        p_side = np.asarray(DIR_SIDE)[p_dir]
+        m = (none_ok | rec_ok) & (cand.axis[None, :] == p_ax[:, None]) & (cand.side[None, :] == p_side[:, None]) \
+            & (p_ax[:, None] != AXIS_NONE) & moving
+        i, f = _pick(m, cand.t_man)
+        chosen = np.where(f & in_conflict, i, chosen)
+    # 2. fresh: first axis in priority order with a NONE resolution on its preferred side, then RECOVERY
+    for okmask in (none_ok, rec_ok):
+        for name in cfg.resolution_axes:
+            a = axis_code(name)
+            ab = bands.axis(a)
+            pref = ab.preferred.astype(int)
+            m_side = (cand.side[None, :] == pref[:, None]) | (pref[:, None] == 0)
+            m = okmask & moving & (cand.axis[None, :] == a) & m_side
+            i, f = _pick(m, cand.t_man)
+            i_any, f_any = _pick(okmask & moving & (cand.axis[None, :] == a), cand.t_man)
+            i = np.where(f, i, i_any)
+            f = f | f_any
+            chosen = np.where((chosen < 0) & f & in_conflict, i, chosen)
+    # 3. best effort
+    best = np.argmax(cand.best_effort_score(), axis=-1)
+    chosen = np.where((chosen < 0) & in_conflict, best, chosen)
+    hold = chosen < 0
+    idx = np.where(hold, k0, chosen)
+    cmd = cand.command(idx)
+    axis = np.where(hold, AXIS_NONE, cand.axis[idx]).astype(np.int8)
+    direction = np.where(hold, 0, side_to_dir(axis, cand.side[idx])).astype(np.int8)
+    return cmd, axis, direction
+
+
+def daa_resolution(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = None,
+                   prev: "tuple[np.ndarray, np.ndarray] | None" = None, bands: "Bands | None" = None) -> Command:
+    """The onboard DAA's own resolution command (batched).
+
+    Not in conflict (current trajectory NONE) -> hold the current state. In conflict:
+    1. persistence: ``prev = (axis, direction)`` codes of the previous resolution are kept while that
+       axis/side still has a NONE or RECOVERY candidate (closest one taken);
+    2. otherwise the first axis of ``cfg.resolution_axes`` (horizontal, vertical, speed) with a NONE
+       candidate, on its preferred side (DAIDALUS: reached sooner, ties right/up/faster), closest
+       one; then the same with RECOVERY candidates;
+    3. otherwise the best-effort candidate (latest LoWC, then earliest recovery).
+    """
+    return resolve(own, intr, cfg, prev, bands)[0]
+
+
+__all__ = ["classify_command", "command_deltas", "search_maneuver", "daa_resolution", "resolve", "AXIS_NAMES"]
