@@ -1,0 +1,118 @@
+"""``daa-sil shim``: the UDP delay shim between a vehicle and a GCS (realtime or lockstep clock)."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import signal
+import sys
+
+from ..errors import UsageError
+from ..latency import SPEC_HELP, parse_delay_spec
+from ..link.codec import load_key
+from ..link.endpoint import format_udp_address
+from ..link.shim import CLOCKS, ShimConfig, run_shim
+from ._args import finite_float
+
+EXAMPLES = """examples:
+  # paper group B-2/ID-2 delays, vehicle sends to 14601, GCS to 14602, peers learned
+  daa-sil shim --delay gauss:5,3 --seed 7
+
+  # asymmetric constant delays, 1 % loss, a 20 s outage, stats to a file
+  daa-sil shim --vehicle udp:127.0.0.1:14600 --gcs udp:127.0.0.1:14550 \\
+      --delay-up const:4 --delay-down const:2 --loss 0.01 --outage 60:80 --stats-json shim.json
+
+  # lockstep with the vehicle's SIM_TICK clock (CI runs), OS-chosen ports printed on stderr
+  daa-sil shim --delay const:4 --clock lockstep --listen-vehicle udp:127.0.0.1:0 --listen-gcs udp:127.0.0.1:0
+
+Delay specs: """ + SPEC_HELP + """. The delay process is piecewise constant per --epoch
+seconds of sim time (0 = a new draw per datagram; that reorders traffic, so FIFO then inflates
+the delay). "up" = GCS -> vehicle (pilot commands), "down" = vehicle -> GCS (telemetry).
+Stops on Ctrl-C / SIGTERM (or after --duration) and prints its stats as JSON on stdout.
+"""
+
+
+def _outage(text: str) -> tuple[float, float]:
+    a, sep, b = str(text).partition(":")
+    try:
+        lo, hi = float(a), float(b)
+    except ValueError:
+        raise UsageError(f"--outage must be START:END in sim seconds, got {text!r}") from None
+    if not sep or not (lo < hi) or lo < 0:
+        raise UsageError(f"--outage needs 0 <= START < END (s), got {text!r}")
+    return lo, hi
+
+
+def register(sub) -> None:
+    p = sub.add_parser("shim", help="UDP delay shim between vehicle and GCS (delay, loss, dup, outages)",
+                       description="Relay MAVLink datagrams between a vehicle and a GCS with seeded per-direction "
+                                   "delay, loss, duplication, reordering and outages; bytes are never modified.",
+                       epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--vehicle", metavar="udp:HOST:PORT", help="vehicle address (default: learned from its first datagram)")
+    p.add_argument("--gcs", metavar="udp:HOST:PORT", help="GCS address (default: learned from its first datagram)")
+    p.add_argument("--listen-vehicle", default="udp:127.0.0.1:14601", metavar="udp:HOST:PORT",
+                   help="socket the vehicle sends to (default udp:127.0.0.1:14601; port 0 = OS-chosen)")
+    p.add_argument("--listen-gcs", default="udp:127.0.0.1:14602", metavar="udp:HOST:PORT",
+                   help="socket the GCS sends to (default udp:127.0.0.1:14602)")
+    p.add_argument("--delay", metavar="SPEC", help="one-way delay model for both directions")
+    p.add_argument("--delay-up", metavar="SPEC", help="GCS -> vehicle delay (overrides --delay)")
+    p.add_argument("--delay-down", metavar="SPEC", help="vehicle -> GCS delay (overrides --delay)")
+    p.add_argument("--epoch", type=finite_float("--epoch", 0.0, 3600.0), default=10.0, metavar="S",
+                   help="delay-process epoch, sim s (default 10; 0 = per-datagram draws)")
+    p.add_argument("--loss", type=finite_float("--loss", 0.0, 1.0), default=0.0, metavar="P", help="loss probability")
+    p.add_argument("--dup", type=finite_float("--dup", 0.0, 1.0), default=0.0, metavar="P", help="duplication probability")
+    p.add_argument("--reorder", type=finite_float("--reorder", 0.0, 1.0), default=0.0, metavar="P",
+                   help="probability a datagram jumps the queue (released after half its delay); not with signing")
+    p.add_argument("--outage", type=_outage, action="append", default=[], metavar="START:END",
+                   help="drop everything sent in [START, END) sim s (repeatable)")
+    p.add_argument("--seed", type=int, default=0, help="seed for delays and impairments (default 0)")
+    p.add_argument("--clock", choices=CLOCKS, default="realtime", help="realtime (default) or lockstep (SIM_TICK)")
+    p.add_argument("--speed", type=finite_float("--speed", 0.01, 1000.0), default=1.0,
+                   help="realtime: sim seconds per wall second (default 1)")
+    p.add_argument("--key", metavar="FILE", help="signing key file to verify lockstep control messages")
+    p.add_argument("--duration", type=finite_float("--duration", 0.0, 1e7), metavar="S",
+                   help="stop after S wall seconds (default: run until Ctrl-C / SIGTERM)")
+    p.add_argument("--stats-json", metavar="FILE", help="write the final stats JSON here (atomic)")
+    p.set_defaults(func=run)
+
+
+def config_from_args(args) -> ShimConfig:
+    """Build and validate a :class:`ShimConfig` from parsed arguments."""
+    up_spec = args.delay_up or args.delay
+    down_spec = args.delay_down or args.delay
+    if not up_spec or not down_spec:
+        raise UsageError("give --delay SPEC (or both --delay-up and --delay-down); e.g. --delay const:4")
+    if args.seed < 0:
+        raise UsageError(f"--seed must be >= 0, got {args.seed}")
+    cfg = ShimConfig(delay_down=parse_delay_spec(down_spec), delay_up=parse_delay_spec(up_spec),
+                     listen_vehicle=args.listen_vehicle, listen_gcs=args.listen_gcs, vehicle=args.vehicle,
+                     gcs=args.gcs, epoch_s=args.epoch, loss=args.loss, dup=args.dup, reorder=args.reorder,
+                     outages=args.outage, seed=args.seed, clock=args.clock, speed=args.speed,
+                     key=load_key(args.key) if args.key else None, stats_json=args.stats_json)
+    cfg.validate()
+    return cfg
+
+
+async def _main(cfg: ShimConfig, duration: "float | None") -> dict:
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            loop.add_signal_handler(sig, stop.set)
+        except (NotImplementedError, RuntimeError):  # non-main thread / platform without signals
+            pass
+
+    def ready(shim) -> None:
+        print(f"daa-sil shim: vehicle side {format_udp_address(shim.vehicle_side)}, "
+              f"gcs side {format_udp_address(shim.gcs_side)}, clock {cfg.clock}, "
+              f"delay down {cfg.delay_down.spec()} up {cfg.delay_up.spec()}", file=sys.stderr, flush=True)
+
+    return await run_shim(cfg, stop=stop, on_ready=ready, duration=duration)
+
+
+def run(args) -> int:
+    cfg = config_from_args(args)
+    stats = asyncio.run(_main(cfg, args.duration))
+    print(json.dumps(stats, indent=2, sort_keys=True))
+    return 0

@@ -1,0 +1,378 @@
+"""The delay shim: a UDP relay between the vehicle and the GCS with one seeded DelayLine per direction.
+
+::
+
+    vehicle  --datagrams-->  [vehicle side socket]  --down line-->  [gcs side socket]  -->  GCS
+    vehicle  <------------   [vehicle side socket]  <--up line----  [gcs side socket]  <--  GCS
+
+*down* = vehicle -> GCS (telemetry the pilot sees), *up* = GCS -> vehicle (pilot commands).
+The unit of delay is the datagram; forwarded bytes are never modified (signatures stay valid).
+Peers are the configured ``vehicle`` / ``gcs`` addresses or learned from the first datagram on
+each side; datagrams from other addresses are counted (``rejected_peer``) and dropped. A
+datagram that is due while its destination is still unknown is counted as ``no_peer`` and dropped.
+
+Seeds: ``SeedSequence(seed)`` child 0 drives the down line, child 1 the up line (see
+:func:`direction_seeds`); each line derives its delay process and impairment draws from it.
+
+Clocks
+------
+``realtime``: sim time = (loop monotonic time - start) x ``speed``. Releases are scheduled with
+``loop.call_at`` on the earliest pending release of each line (the lines keep heaps).
+
+``lockstep`` (``docs/architecture.md``, "The step order"): the shim's clock only moves on ticks.
+
+1. A datagram from the vehicle containing a valid ``SIM_TICK(k, t_k)`` sets the clock to ``t_k``
+   (never backwards), releases every packet due at or before ``t_k`` in both directions (each line
+   in release order), then forwards the tick datagram to the GCS at once (not delayed).
+2. Other datagrams enter their line stamped with the current clock (the time of the last tick).
+3. A datagram from the GCS containing a valid ``SIM_TICK_ACK(k)`` is forwarded to the vehicle
+   at once. The GCS's commands sent before the ack were already queued when they arrived
+   (datagrams on one loopback socket arrive in order), so they are stamped ``t_k``.
+
+Send ticks and acks *alone* in their datagram (a mixed datagram is treated as control and its
+other messages skip the delay; counted as ``mixed_control``). Control messages are recognised by
+a header walk and then fully decoded (CRC and, with ``key``, signature checked), so a forged or
+corrupt tick cannot move the clock (``bad_control``). With signing, send control messages on
+their own signing stream (``MavCodec.encode(msg, link_id=CONTROL_LINK_ID)``) because they
+overtake delayed data. In lockstep the GCS must be known before the first tick: give ``gcs`` or
+let the GCS send any datagram (e.g. a HEARTBEAT) to the shim first.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import inspect
+import math
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..errors import UsageError
+from ..io import atomic_write_json, to_jsonable
+from ..latency import DEFAULT_EPOCH_S, DelayModel, as_seed_sequence, child_seed
+from .codec import MavCodec, mavlink
+from .delayline import DelayLine, check_outages
+from .endpoint import Address, format_udp_address, parse_udp_address, set_rcvbuf
+
+CLOCKS = ("realtime", "lockstep")
+_TICK_ID = mavlink.MAVLINK_MSG_ID_SIM_TICK
+_ACK_ID = mavlink.MAVLINK_MSG_ID_SIM_TICK_ACK
+
+
+def direction_seeds(seed: "int | np.random.SeedSequence | None") -> dict:
+    """``{"down": SeedSequence, "up": SeedSequence}`` the shim gives its two DelayLines."""
+    ss = as_seed_sequence(seed)
+    return {"down": child_seed(ss, 0), "up": child_seed(ss, 1)}
+
+
+def control_ids(data: bytes) -> "set[int]":
+    """Message ids of the packets in a datagram by header walk only (no CRC check).
+
+    Returns only SIM_TICK / SIM_TICK_ACK ids found, plus ``-1`` if the datagram also holds other
+    packets (or bytes that are not a packet).
+    """
+    found: set[int] = set()
+    i, n = 0, len(data)
+    while i < n:
+        b0 = data[i]
+        if b0 == 0xFD and i + 10 <= n:
+            ln, flags = data[i + 1], data[i + 2]
+            mid = data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16)
+            size = 12 + ln + (13 if flags & 1 else 0)
+        elif b0 == 0xFE and i + 6 <= n:
+            ln, mid = data[i + 1], data[i + 5]
+            size = 8 + ln
+        else:
+            found.add(-1)
+            break
+        found.add(mid if mid in (_TICK_ID, _ACK_ID) else -1)
+        i += size
+    return found
+
+
+@dataclass
+class ShimConfig:
+    """Everything the shim needs. Delays are models of one-way delay in sim seconds.
+
+    ``listen_vehicle`` / ``listen_gcs``: the shim's sockets (``udp:HOST:PORT``; port 0 = OS-chosen).
+    ``vehicle`` / ``gcs``: peer addresses, or None to learn them from the first datagram.
+    ``delay_down`` (vehicle -> GCS), ``delay_up`` (GCS -> vehicle); ``epoch_s`` of the delay
+    process (0 = per-datagram draws). ``loss``/``dup``/``reorder`` probabilities and ``outages``
+    (``[(t_start, t_end), ...]`` sim s) apply to both directions. ``speed``: sim seconds per wall
+    second in realtime mode. ``key``: signing key used to verify control messages in lockstep.
+    """
+
+    delay_down: DelayModel
+    delay_up: DelayModel
+    listen_vehicle: str = "udp:127.0.0.1:14601"
+    listen_gcs: str = "udp:127.0.0.1:14602"
+    vehicle: "str | None" = None
+    gcs: "str | None" = None
+    epoch_s: float = DEFAULT_EPOCH_S
+    loss: float = 0.0
+    dup: float = 0.0
+    reorder: float = 0.0
+    fifo: bool = True
+    outages: Sequence[Sequence[float]] = ()
+    seed: "int | None" = 0
+    clock: str = "realtime"
+    speed: float = 1.0
+    key: "bytes | None" = None
+    stats_json: "str | None" = None
+    max_log: int = 100_000
+
+    def validate(self) -> None:
+        """Raise a one-line UsageError for any bad value."""
+        if self.clock not in CLOCKS:
+            raise UsageError(f"clock must be one of {', '.join(CLOCKS)}, got {self.clock!r}")
+        if not (math.isfinite(self.speed) and 0.01 <= self.speed <= 1000):
+            raise UsageError(f"speed must be within [0.01, 1000], got {self.speed!r}")
+        for name in ("delay_down", "delay_up"):
+            if not isinstance(getattr(self, name), DelayModel):
+                raise UsageError(f"{name} must be a delay model (see daa_sil.latency), got {getattr(self, name)!r}")
+        parse_udp_address(self.listen_vehicle, "--listen-vehicle")
+        parse_udp_address(self.listen_gcs, "--listen-gcs")
+        for name in ("vehicle", "gcs"):
+            if getattr(self, name) is not None:
+                parse_udp_address(getattr(self, name), f"--{name}", allow_port_zero=False)
+        check_outages(self.outages)
+
+
+class _Side(asyncio.DatagramProtocol):
+    def __init__(self, shim: "DelayShim", name: str):
+        self.shim, self.name = shim, name
+        self.transport: "asyncio.DatagramTransport | None" = None
+
+    def connection_made(self, transport) -> None:
+        self.transport = transport
+        set_rcvbuf(transport)
+
+    def datagram_received(self, data: bytes, addr) -> None:
+        self.shim._on_datagram(self.name, data, (addr[0], addr[1]))
+
+    def error_received(self, exc) -> None:
+        self.shim.counters["socket_errors"] += 1
+
+
+class DelayShim:
+    """The relay. ``await start()``, then ``vehicle_side`` / ``gcs_side`` addresses; ``await close()``."""
+
+    def __init__(self, config: ShimConfig):
+        config.validate()
+        self.config = config
+        seeds = direction_seeds(config.seed)
+        common = dict(epoch_s=config.epoch_s, fifo=config.fifo, loss=config.loss, dup=config.dup,
+                      reorder=config.reorder, outages=config.outages, max_log=config.max_log)
+        self.lines = {"down": DelayLine(config.delay_down, seed=seeds["down"], **common),
+                      "up": DelayLine(config.delay_up, seed=seeds["up"], **common)}
+        self.peers: dict[str, "Address | None"] = {
+            "vehicle": parse_udp_address(config.vehicle, "--vehicle") if config.vehicle else None,
+            "gcs": parse_udp_address(config.gcs, "--gcs") if config.gcs else None}
+        self.sides: dict[str, _Side] = {}
+        self.counters = {k: 0 for k in (
+            "datagrams_from_vehicle", "datagrams_from_gcs", "forwarded_to_vehicle", "forwarded_to_gcs",
+            "rejected_peer", "no_peer", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards",
+            "socket_errors")}
+        self.codec = MavCodec(0, 0, key=config.key, sign_outgoing=False)  # verifies control messages only
+        self.sim_time = 0.0  # lockstep clock (s)
+        self.last_tick: "int | None" = None
+        self._loop: "asyncio.AbstractEventLoop | None" = None
+        self._t0 = 0.0
+        self._timers: dict[str, "tuple[float, asyncio.TimerHandle] | None"] = {"down": None, "up": None}
+        self._lateness: list[float] = []  # realtime: wall s between scheduled and actual release
+        self._tick_waiters: list[tuple[int, asyncio.Future]] = []
+        self.closed = False
+
+    # -- lifecycle -----------------------------------------------------------------------------
+    async def start(self) -> None:
+        """Bind both sockets."""
+        self._loop = asyncio.get_running_loop()
+        self._t0 = self._loop.time()
+        for name, spec, flag in (("vehicle", self.config.listen_vehicle, "--listen-vehicle"),
+                                 ("gcs", self.config.listen_gcs, "--listen-gcs")):
+            addr = parse_udp_address(spec, flag)
+            try:
+                _, proto = await self._loop.create_datagram_endpoint(lambda n=name: _Side(self, n), local_addr=addr)
+            except OSError as exc:
+                await self.close()
+                raise UsageError(f"{flag}: cannot bind {format_udp_address(addr)}: {exc.strerror or exc}") from None
+            self.sides[name] = proto
+
+    @property
+    def vehicle_side(self) -> Address:
+        """Address the vehicle sends to."""
+        a = self.sides["vehicle"].transport.get_extra_info("sockname")
+        return a[0], a[1]
+
+    @property
+    def gcs_side(self) -> Address:
+        """Address the GCS sends to."""
+        a = self.sides["gcs"].transport.get_extra_info("sockname")
+        return a[0], a[1]
+
+    async def close(self) -> None:
+        """Cancel timers, close sockets; in-flight datagrams are dropped (reported in stats)."""
+        self.closed = True
+        for d, tm in self._timers.items():
+            if tm is not None:
+                tm[1].cancel()
+            self._timers[d] = None
+        for side in self.sides.values():
+            if side.transport is not None:
+                side.transport.close()
+        await asyncio.sleep(0)
+
+    # -- clock ---------------------------------------------------------------------------------
+    def now(self) -> float:
+        """Current sim time (s) of the shim's clock."""
+        if self.config.clock == "lockstep":
+            return self.sim_time
+        return (self._loop.time() - self._t0) * self.config.speed
+
+    def _wall_of(self, sim_t: float) -> float:
+        return self._t0 + sim_t / self.config.speed
+
+    # -- datapath ------------------------------------------------------------------------------
+    def _on_datagram(self, side: str, data: bytes, addr: Address) -> None:
+        if self.closed:
+            return
+        c = self.counters
+        c["datagrams_from_" + side] += 1
+        peer = self.peers[side]
+        if peer is None:
+            self.peers[side] = addr
+        elif peer != addr:
+            c["rejected_peer"] += 1
+            return
+        direction = "down" if side == "vehicle" else "up"
+        if self.config.clock == "lockstep":
+            ids = control_ids(data)
+            want = _TICK_ID if side == "vehicle" else _ACK_ID
+            if want in ids:
+                msg = self._decode_control(data, want)
+                if msg is not None:
+                    if -1 in ids:
+                        c["mixed_control"] += 1
+                    if side == "vehicle":
+                        self._on_tick(msg, data)
+                    else:
+                        c["acks"] += 1
+                        self._send("vehicle", data)
+                    return
+                c["bad_control"] += 1
+        self.lines[direction].push(self.now(), data)
+        if self.config.clock == "realtime":
+            self._arm(direction)
+
+    def _decode_control(self, data: bytes, want: int):
+        msgs = self.codec.decode(data)
+        for m in msgs:
+            if m.get_msgId() == want:
+                return m
+        return None
+
+    def _on_tick(self, msg, data: bytes) -> None:
+        c = self.counters
+        c["ticks"] += 1
+        t_k = msg.time_ms / 1000.0
+        if t_k < self.sim_time:
+            c["clock_backwards"] += 1
+        else:
+            self.sim_time = t_k
+        self.last_tick = int(msg.tick)
+        self._release("down", self.sim_time)
+        self._release("up", self.sim_time)
+        self._send("gcs", data)
+        for item in list(self._tick_waiters):
+            if item[0] <= self.last_tick and not item[1].done():
+                item[1].set_result(self.last_tick)
+        self._tick_waiters = [w for w in self._tick_waiters if not w[1].done()]
+
+    def _send(self, dest: str, data: bytes) -> None:
+        peer = self.peers[dest]
+        side = self.sides.get("gcs" if dest == "gcs" else "vehicle")
+        if peer is None or side is None or side.transport is None or side.transport.is_closing():
+            self.counters["no_peer"] += 1
+            return
+        side.transport.sendto(data, peer)
+        self.counters["forwarded_to_" + dest] += 1
+
+    def _release(self, direction: str, t_now: float) -> None:
+        dest = "gcs" if direction == "down" else "vehicle"
+        for data in self.lines[direction].pop_due(t_now):
+            self._send(dest, data)
+
+    # -- realtime scheduling ---------------------------------------------------------------------
+    def _arm(self, direction: str) -> None:
+        nxt = self.lines[direction].next_release()
+        if nxt is None:
+            return
+        cur = self._timers[direction]
+        if cur is not None:
+            if cur[0] <= nxt:
+                return
+            cur[1].cancel()
+        handle = self._loop.call_at(self._wall_of(nxt), self._fire, direction, nxt)
+        self._timers[direction] = (nxt, handle)
+
+    def _fire(self, direction: str, scheduled: float) -> None:
+        self._timers[direction] = None
+        if self.closed:
+            return
+        late = self._loop.time() - self._wall_of(scheduled)
+        if len(self._lateness) < 1_000_000:
+            self._lateness.append(late)
+        self._release(direction, max(self.now(), scheduled))
+        self._arm(direction)
+
+    # -- observability -----------------------------------------------------------------------------
+    async def wait_tick(self, tick: int, timeout: float) -> int:
+        """Wait (lockstep) until a tick >= ``tick`` has been processed; returns the last tick."""
+        if self.last_tick is not None and self.last_tick >= tick:
+            return self.last_tick
+        fut = asyncio.get_running_loop().create_future()
+        self._tick_waiters.append((tick, fut))
+        return await asyncio.wait_for(fut, timeout)
+
+    def stats(self) -> dict:
+        """Counters, per-direction line stats (delays in sim s) and realtime release lateness (ms)."""
+        out = {"clock": self.config.clock, "speed": self.config.speed, "sim_time_s": self.now() if self._loop else 0.0,
+               "last_tick": self.last_tick, "seed": self.config.seed, "epoch_s": self.config.epoch_s,
+               "peers": {k: (format_udp_address(v) if v else None) for k, v in self.peers.items()},
+               "counters": dict(self.counters),
+               "control_codec": {k: v for k, v in self.codec.counters.as_dict().items() if v},
+               "down": self.lines["down"].stats(), "up": self.lines["up"].stats()}
+        if self._lateness:
+            lat = np.array(self._lateness) * 1000.0
+            out["release_lateness_ms"] = {"n": int(lat.size), "p50": float(np.percentile(lat, 50)),
+                                          "p99": float(np.percentile(lat, 99)), "max": float(lat.max())}
+        return to_jsonable(out)
+
+
+async def run_shim(config: ShimConfig, *, stop: "asyncio.Event | None" = None,
+                   on_ready: "Callable[[DelayShim], object] | None" = None,
+                   duration: "float | None" = None) -> dict:
+    """Run the shim until ``stop`` is set (or ``duration`` wall seconds pass); return its stats.
+
+    ``on_ready(shim)`` is called once both sockets are bound (addresses in ``shim.vehicle_side`` /
+    ``shim.gcs_side``). Stats are written to ``config.stats_json`` (atomically) if set.
+    """
+    shim = DelayShim(config)
+    await shim.start()
+    try:
+        if on_ready is not None:
+            r = on_ready(shim)
+            if inspect.isawaitable(r):
+                await r
+        stop = stop or asyncio.Event()
+        try:
+            await asyncio.wait_for(stop.wait(), duration)
+        except asyncio.TimeoutError:
+            pass
+    finally:
+        await shim.close()
+    stats = shim.stats()
+    if config.stats_json:
+        atomic_write_json(config.stats_json, stats)
+    return stats
