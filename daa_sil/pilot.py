@@ -1,0 +1,451 @@
+"""Remote-pilot model (Guendel et al. 2017, simplified as in ``reference/models.md`` §1.5), batched.
+
+One :class:`PilotModel` steps N pilots (one per encounter) at 1 Hz with the GCS's view: the
+ownship state it sees (downlink-delayed telemetry) and the DAA guidance computed from that view
+(:class:`Guidance`). The link delay is *not* in here; the caller delays what the pilot sees and
+what it sends.
+
+Streaming (``docs/architecture.md``): from the step the pilot sees an alert (DAIDALUS level >=
+``alert_level_min``, held ``alert_hold_s``) it sends one command per step until the alert clears:
+first "hold" (track/vs/gs of the telemetry seen at alert onset), then its maneuver, replaced at
+each follow-up decision. Timeline of the first engagement: response delay
+``T_p = T_init + T_coord + T_exec`` drawn at the trigger; the maneuver is *decided* at
+``t_trigger + T_p - T_exec`` from the guidance seen then and *sent* from ``t_trigger + T_p``.
+Follow-ups: ``min[L] + extra[L]`` s after a maneuver is sent (``L`` = pilot alert level =
+DAIDALUS level + 1, 5 for a well-clear violation) a new decision is made, sent after a fresh
+execution delay. If the alert clears and returns, the (already engaged) pilot streams hold again
+and re-decides immediately, sending after a fresh execution delay.
+
+Response modes (``PilotConfig.mode``):
+
+* ``guendel``  T_init ~ Exp(5 s), T_coord ~ Gamma(5.5, 2 s), T_exec ~ Exp(3 s) (mean 19 s);
+* ``no_atc``   as guendel without T_coord (mean 8 s);
+* ``nasa_rayleigh5``  first response ~ Rayleigh(sigma = 3.989 s) (mean 5 s), decided and sent at
+  once (T_exec = 0); follow-up execution delays Exp(3 s);
+* ``fixed``    constant delays ``fixed_init_s + fixed_coord_s + fixed_exec_s`` (5 + 11 + 3 = 19 s),
+  stochastic maneuver choice;
+* ``deterministic``  fixed 5 + 11 + 3 s, follow-ups at ``min + mean`` s, always the
+  minimum-deviation direction (ties: left / climb), prefers turns, magnitudes +30 deg (primary),
+  +15 deg (opposite), +500 ft (vertical). For regression tests.
+
+Maneuver choice (models.md §1.3), per plane: the two candidate directions (closest band-free
+track to the left/right, closest vertical speed up/down) carry the band level they reach (lower
+is better, 0 = clear, 1 = recovery; 0 and 1 count as equal). A strictly better level wins;
+otherwise the smaller deviation with probability 0.8 (always if the deviations differ by more than
+40 deg), exact ties left with p 0.6 / descend with p 0.5. A turn is chosen iff (prefer turn, p =
+``prob_turn``, and turn level <= vertical level) or (not prefer turn and turn level < vertical
+level). Turn magnitude: ``min_dev + delta``, delta ~ Gamma(6.21, 9.67 deg) - 30 deg in the
+minimum-deviation direction, Gamma(5.47, 8.25 deg) - 30 deg opposite; a draw that would reverse
+the turn is clamped back to the minimum deviation; total turn at most 175 deg (so the short-way
+turn keeps the direction); track rounded to 5 deg (never across the current track). Vertical: the
+suggested vertical speed plus delta, delta ~ Gamma(9.73, 207.98 ft) - 1500 ft read as **fpm**
+(our reading: Guendel commands altitudes 500 ft beyond the suggestion flown at 500 fpm; we command
+vertical speed, so the altitude overshoot in ft becomes a vertical-speed overshoot in fpm, 1:1),
+never reversing the direction.
+
+Randomness: every encounter has its own generator (``seeds``); at construction it draws, in this
+order, the response components (T_init, T_coord, T_exec, Rayleigh) and then blocks of
+``_K`` per-decision values (see :func:`_draw_block`), so the stream does not depend on N or on
+other encounters.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Sequence
+
+import numpy as np
+
+from .errors import UsageError
+from .frames import wrap_2pi, wrap_pi
+from .kinematics import AircraftState, Command
+from .units import DEG, FPM
+
+MODES = ("guendel", "no_atc", "nasa_rayleigh5", "fixed", "deterministic")
+AXIS_NAMES = ("none", "horizontal", "vertical")
+DIR_NAMES = ("none", "left", "right", "up", "down")
+NO_BAND = np.inf  #: level of a missing candidate
+
+
+@dataclass(frozen=True)
+class PilotConfig:
+    """Pilot-model parameters (Guendel Release 6.1 defaults). Times s, angles deg, altitudes ft."""
+
+    mode: str = "guendel"
+    alert_level_min: int = 2  #: DAIDALUS level that starts streaming (2 = corrective, the agent's active phase)
+    alert_hold_s: float = 0.0  #: the alert must persist this long before streaming starts
+    init_mean_s: float = 5.0
+    coord_k: float = 5.5
+    coord_theta_s: float = 2.0
+    exec_mean_s: float = 3.0
+    rayleigh_sigma_s: float = 3.989
+    fixed_init_s: float = 5.0
+    fixed_coord_s: float = 11.0
+    fixed_exec_s: float = 3.0
+    update_min_s: tuple = (12.0, 12.0, 9.0, 6.0, 6.0, 0.0)  #: by pilot level none..WCV
+    update_mean_s: tuple = (12.0, 12.0, 6.0, 3.0, 3.0, 3.0)  #: mean of the Exp extra
+    prob_turn: float = 0.65
+    prob_follow_min_dev: float = 0.8
+    max_relative_hdg_deg: float = 40.0
+    prob_left: float = 0.6
+    prob_descend: float = 0.5
+    turn_primary: tuple = (6.21, 9.67, 30.0)  #: Gamma shape, scale (deg), offset (deg)
+    turn_opposite: tuple = (5.47, 8.25, 30.0)
+    vertical: tuple = (9.73, 207.98, 1500.0)  #: Gamma shape, scale (ft), offset (ft)
+    det_turn_primary_deg: float = 30.0
+    det_turn_opposite_deg: float = 15.0
+    det_vertical_ft: float = 500.0
+    heading_round_deg: float = 5.0
+    max_turn_deg: float = 175.0
+
+    def validate(self) -> "PilotConfig":
+        if self.mode not in MODES:
+            raise UsageError(f"pilot mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        for name in ("prob_turn", "prob_follow_min_dev", "prob_left", "prob_descend"):
+            v = getattr(self, name)
+            if not 0.0 <= v <= 1.0:
+                raise UsageError(f"pilot {name} must be within [0, 1], got {v!r}")
+        if len(self.update_min_s) != 6 or len(self.update_mean_s) != 6:
+            raise UsageError("pilot update_min_s / update_mean_s need 6 values (levels none..WCV)")
+        if self.alert_hold_s < 0 or self.heading_round_deg < 0:
+            raise UsageError("pilot alert_hold_s and heading_round_deg must be >= 0")
+        return self
+
+    @property
+    def deterministic(self) -> bool:
+        return self.mode == "deterministic"
+
+
+@dataclass
+class Guidance:
+    """What the pilot's display shows, per encounter (N,) arrays.
+
+    ``alert_level``: DAIDALUS level (0 none, 1 preventive, 2 corrective, 3 warning), max over
+    intruders; ``wcv``: well clear violated. Candidates: ``left_trk``/``right_trk`` (compass rad)
+    the closest track reached by turning left/right that has the lowest band level reachable that
+    way, ``up_vs``/``down_vs`` (m/s) likewise; ``*_level`` the band level there (0 clear,
+    1 recovery, 2 far/preventive, 3 mid/corrective, 4 near/warning; inf or nan = no candidate).
+    """
+
+    alert_level: np.ndarray
+    left_trk: np.ndarray
+    left_level: np.ndarray
+    right_trk: np.ndarray
+    right_level: np.ndarray
+    up_vs: np.ndarray
+    up_level: np.ndarray
+    down_vs: np.ndarray
+    down_level: np.ndarray
+    wcv: np.ndarray = field(default_factory=lambda: np.array(False))
+
+    def __post_init__(self):
+        names = ("alert_level", "left_trk", "left_level", "right_trk", "right_level", "up_vs", "up_level",
+                 "down_vs", "down_level", "wcv")
+        arrs = np.broadcast_arrays(*(np.asarray(getattr(self, k), float) for k in names))
+        for k, a in zip(names, arrs):
+            setattr(self, k, np.array(a))
+        self.alert_level = np.nan_to_num(self.alert_level, nan=0.0).astype(np.int64)
+        self.wcv = self.wcv.astype(bool)
+        for k in ("left_level", "right_level", "up_level", "down_level"):
+            a = getattr(self, k)
+            setattr(self, k, np.where(np.isnan(a), NO_BAND, a))
+
+
+@dataclass
+class PilotOutput:
+    """One step of N pilots: ``send`` (N,) bool; ``cmd`` (nan where not sending); ``seq`` (N,)
+    int64 sequence number of the sent command (-1 if none); ``axis``/``direction`` codes into
+    :data:`AXIS_NAMES`/:data:`DIR_NAMES` (0 for hold); ``maneuver`` (N,) number of maneuvers sent
+    so far (0 = still holding); ``t_sent`` s."""
+
+    send: np.ndarray
+    cmd: Command
+    seq: np.ndarray
+    axis: np.ndarray
+    direction: np.ndarray
+    maneuver: np.ndarray
+    t_sent: float
+
+    def axis_names(self) -> np.ndarray:
+        return np.asarray(AXIS_NAMES, dtype=object)[self.axis]
+
+    def direction_names(self) -> np.ndarray:
+        return np.asarray(DIR_NAMES, dtype=object)[self.direction]
+
+
+# --------------------------------------------------------------------------------------------------
+def sample_response_components(rng: np.random.Generator, size, cfg: PilotConfig) -> dict:
+    """Response-delay components (s) for ``size`` draws from one generator, in the fixed order
+    T_init, T_coord, T_exec, Rayleigh: ``{"init", "coord", "exec", "rayleigh"}``."""
+    return {"init": rng.exponential(cfg.init_mean_s, size), "coord": rng.gamma(cfg.coord_k, cfg.coord_theta_s, size),
+            "exec": rng.exponential(cfg.exec_mean_s, size), "rayleigh": rng.rayleigh(cfg.rayleigh_sigma_s, size)}
+
+
+_K = 32
+_BLOCK_KEYS = ("exec", "update", "u_turn", "u_follow_h", "u_tie_h", "u_follow_v", "u_tie_v", "g_primary",
+               "g_opposite", "g_vertical")
+
+
+def _draw_block(rng: np.random.Generator, cfg: PilotConfig, k: int = _K) -> dict:
+    """Per-decision draws for ``k`` decisions (fixed order: :data:`_BLOCK_KEYS`). ``update`` is
+    a unit-mean exponential scaled by the level's mean at use; gammas are in deg / ft with the
+    offset already subtracted."""
+    return {"exec": rng.exponential(cfg.exec_mean_s, k), "update": rng.exponential(1.0, k),
+            "u_turn": rng.random(k), "u_follow_h": rng.random(k), "u_tie_h": rng.random(k),
+            "u_follow_v": rng.random(k), "u_tie_v": rng.random(k),
+            "g_primary": rng.gamma(cfg.turn_primary[0], cfg.turn_primary[1], k) - cfg.turn_primary[2],
+            "g_opposite": rng.gamma(cfg.turn_opposite[0], cfg.turn_opposite[1], k) - cfg.turn_opposite[2],
+            "g_vertical": rng.gamma(cfg.vertical[0], cfg.vertical[1], k) - cfg.vertical[2]}
+
+
+def _as_rng(s) -> np.random.Generator:
+    if isinstance(s, np.random.Generator):
+        return s
+    if isinstance(s, np.random.SeedSequence):
+        return np.random.Generator(np.random.PCG64(s))
+    try:
+        v = int(s)
+    except (TypeError, ValueError):
+        raise UsageError(f"pilot seed must be a non-negative int, SeedSequence or Generator, got {s!r}") from None
+    if v < 0:
+        raise UsageError(f"pilot seed must be a non-negative int, got {s!r}")
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(v)))
+
+
+def choose_maneuver(cur_trk, cur_vs, cur_gs, g: Guidance, draws: dict, cfg: PilotConfig
+                    ) -> tuple[Command, np.ndarray, np.ndarray]:
+    """The maneuver decided from guidance ``g`` (all (n,) arrays; ``draws`` one value per pilot of
+    each :data:`_BLOCK_KEYS` entry). Returns ``(cmd, axis, direction)`` codes; axis 0 (hold the
+    current state) when no candidate exists. Pure and vectorised."""
+    det = cfg.deterministic
+    cur_trk, cur_vs, cur_gs = (np.asarray(a, float) for a in (cur_trk, cur_vs, cur_gs))
+    merge = lambda lv: np.where(lv <= 1, 0.0, lv)  # noqa: E731 - clear and recovery count equal
+    lL, lR, lU, lD = merge(g.left_level), merge(g.right_level), merge(g.up_level), merge(g.down_level)
+    lL = np.where(np.isnan(g.left_trk), NO_BAND, lL)
+    lR = np.where(np.isnan(g.right_trk), NO_BAND, lR)
+    lU = np.where(np.isnan(g.up_vs), NO_BAND, lU)
+    lD = np.where(np.isnan(g.down_vs), NO_BAND, lD)
+    aL = np.nan_to_num(wrap_2pi(cur_trk - g.left_trk), nan=np.inf)
+    aR = np.nan_to_num(wrap_2pi(g.right_trk - cur_trk), nan=np.inf)
+    dU = np.nan_to_num(np.abs(g.up_vs - cur_vs), nan=np.inf)
+    dD = np.nan_to_num(np.abs(cur_vs - g.down_vs), nan=np.inf)
+
+    # horizontal direction: +1 right, -1 left
+    mindev_h = np.where(aL < aR, -1.0, np.where(aR < aL, 1.0,
+                        np.where(det | (draws["u_tie_h"] < cfg.prob_left), -1.0, 1.0)))
+    far = np.abs(aL - aR) > cfg.max_relative_hdg_deg * DEG
+    follow = det | far | (draws["u_follow_h"] < cfg.prob_follow_min_dev)
+    same_h = np.where(follow, mindev_h, -mindev_h)
+    h_dir = np.where(lL < lR, -1.0, np.where(lR < lL, 1.0, same_h))
+    primary = h_dir == mindev_h
+    h_min = np.where(h_dir < 0, aL, aR)
+    h_lvl = np.where(h_dir < 0, lL, lR)
+    # vertical direction: +1 up, -1 down
+    mindev_v = np.where(dU < dD, 1.0, np.where(dD < dU, -1.0,
+                        np.where(det | (draws["u_tie_v"] >= cfg.prob_descend), 1.0, -1.0)))
+    follow_v = det | (draws["u_follow_v"] < cfg.prob_follow_min_dev)
+    same_v = np.where(follow_v, mindev_v, -mindev_v)
+    v_dir = np.where(lU < lD, 1.0, np.where(lD < lU, -1.0, same_v))
+    v_sugg = np.where(v_dir > 0, g.up_vs, g.down_vs)
+    v_lvl = np.where(v_dir > 0, lU, lD)
+    # plane
+    prefer_turn = det | (draws["u_turn"] < cfg.prob_turn)
+    turn = (prefer_turn & (h_lvl <= v_lvl)) | (~prefer_turn & (h_lvl < v_lvl))
+    none = ~np.isfinite(h_lvl) & ~np.isfinite(v_lvl)
+
+    # turn magnitude
+    if det:
+        delta = np.where(primary, cfg.det_turn_primary_deg, cfg.det_turn_opposite_deg) * DEG
+    else:
+        delta = np.where(primary, draws["g_primary"], draws["g_opposite"]) * DEG
+    h_min_f = np.where(np.isfinite(h_min), h_min, 0.0)
+    mag = h_min_f + delta
+    mag = np.where(mag < 0.0, h_min_f, mag)
+    mag = np.minimum(mag, cfg.max_turn_deg * DEG)
+    trk = cur_trk + h_dir * mag
+    if cfg.heading_round_deg > 0:
+        q = cfg.heading_round_deg * DEG
+        r = np.round(trk / q) * q
+        # rounding must not turn the command across the current track (or below zero turn)
+        away = np.where(h_dir > 0, np.ceil(trk / q), np.floor(trk / q)) * q
+        r = np.where(h_dir * wrap_pi(r - cur_trk) < 0, away, r)
+        trk = r
+    trk = wrap_2pi(trk)
+    # vertical magnitude (ft overshoot read as fpm)
+    dv = (cfg.det_vertical_ft if det else draws["g_vertical"]) * FPM
+    v_sugg_f = np.where(np.isfinite(v_sugg), v_sugg, cur_vs)
+    vs = v_sugg_f + v_dir * dv
+    vs = np.where(v_dir * (vs - cur_vs) < 0, v_sugg_f, vs)
+
+    cmd_trk = np.where(none, cur_trk, np.where(turn, trk, cur_trk))
+    cmd_vs = np.where(none, cur_vs, np.where(turn, cur_vs, vs))
+    axis = np.where(none, 0, np.where(turn, 1, 2)).astype(np.int64)
+    direction = np.where(none, 0, np.where(turn, np.where(h_dir < 0, 1, 2), np.where(v_dir > 0, 3, 4))).astype(np.int64)
+    return Command(cmd_trk, cmd_vs, cur_gs.copy()), axis, direction
+
+
+# --------------------------------------------------------------------------------------------------
+class PilotModel:
+    """N remote pilots stepped together at 1 Hz (see the module docstring).
+
+    ``seeds``: N ints / SeedSequences / Generators, the pilot stream of each encounter (the caller
+    picks the stream, e.g. a child of the encounter seed). ``step`` must be called with
+    non-decreasing ``t``.
+    """
+
+    def __init__(self, n: int, seeds: "Sequence | None" = None, cfg: "PilotConfig | None" = None):
+        self.cfg = (cfg or PilotConfig()).validate()
+        if not isinstance(n, (int, np.integer)) or n < 1:
+            raise UsageError(f"number of pilots must be a positive integer, got {n!r}")
+        self.n = int(n)
+        if seeds is None:
+            if not self.cfg.deterministic:
+                raise UsageError(f"pilot mode {self.cfg.mode!r} needs seeds (one per encounter)")
+            seeds = list(range(self.n))
+        seeds = list(seeds) if not isinstance(seeds, (int, np.integer)) else [seeds]
+        if len(seeds) != self.n:
+            raise UsageError(f"pilot model needs {self.n} seeds, got {len(seeds)}")
+        self._rngs = [_as_rng(s) for s in seeds]
+        c = self.cfg
+        comps = [sample_response_components(r, None, c) for r in self._rngs]
+        first = {k: np.array([d[k] for d in comps], float) for k in ("init", "coord", "exec", "rayleigh")}
+        blocks = [_draw_block(r, c) for r in self._rngs]
+        self._buf = {k: np.stack([b[k] for b in blocks]) for k in _BLOCK_KEYS}
+        if c.mode == "guendel":
+            self._resp, self._exec0 = first["init"] + first["coord"] + first["exec"], first["exec"]
+        elif c.mode == "no_atc":
+            self._resp, self._exec0 = first["init"] + first["exec"], first["exec"]
+        elif c.mode == "nasa_rayleigh5":
+            self._resp, self._exec0 = first["rayleigh"], np.zeros(self.n)
+        else:
+            tot = c.fixed_init_s + c.fixed_coord_s + c.fixed_exec_s
+            self._resp, self._exec0 = np.full(self.n, tot), np.full(self.n, c.fixed_exec_s)
+        n = self.n
+        self.engaged = np.zeros(n, bool)
+        self.streaming = np.zeros(n, bool)
+        self.alert_since = np.full(n, np.nan)
+        self.t_trigger = np.full(n, np.nan)
+        self.t_decide = np.full(n, np.inf)
+        self.t_activate = np.full(n, np.inf)
+        self.exec_next = np.zeros(n)
+        self.k_dec = np.zeros(n, np.int64)
+        self.cmd = Command(np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan))
+        self.pending = self.cmd.copy()
+        self.axis = np.zeros(n, np.int64)
+        self.direction = np.zeros(n, np.int64)
+        self.p_axis = np.zeros(n, np.int64)
+        self.p_dir = np.zeros(n, np.int64)
+        self.maneuvers = np.zeros(n, np.int64)
+        self.seq = np.full(n, -1, np.int64)
+        self.level = np.zeros(n, np.int64)
+
+    @property
+    def response_delay_s(self) -> np.ndarray:
+        """(N,) total first-response delay T_p (s) drawn for each pilot."""
+        return self._resp.copy()
+
+    def _draws(self, idx: np.ndarray) -> dict:
+        need = self.k_dec[idx].max(initial=-1) + 1
+        while need > self._buf["exec"].shape[1]:
+            more = [_draw_block(self._rngs[i], self.cfg) for i in range(self.n)]
+            for k in _BLOCK_KEYS:
+                self._buf[k] = np.concatenate([self._buf[k], np.stack([b[k] for b in more])], axis=1)
+        return {k: self._buf[k][idx, self.k_dec[idx]] for k in _BLOCK_KEYS}
+
+    def _schedule_next(self, idx: np.ndarray, t: float) -> None:
+        c = self.cfg
+        lvl = self.level[idx]
+        mins = np.asarray(c.update_min_s, float)[lvl]
+        means = np.asarray(c.update_mean_s, float)[lvl]
+        d = self._draws(idx)
+        extra = means if c.deterministic else means * d["update"]
+        self.t_decide[idx] = t + mins + extra
+        self.exec_next[idx] = c.fixed_exec_s if c.mode in ("fixed", "deterministic") else d["exec"]
+
+    def step(self, t: float, observed_own: AircraftState, guidance: "Guidance | None" = None,
+             observed_intr: "AircraftState | None" = None) -> PilotOutput:
+        """Advance the pilots to sim time ``t`` (s) given what the GCS sees; returns the commands
+        sent at ``t``. ``guidance`` (N,) from the observed state; if None it is computed with
+        :func:`guidance_from_daa` from ``observed_own``/``observed_intr``."""
+        c = self.cfg
+        n = self.n
+        own = observed_own
+        if own.shape != (n,):
+            raise UsageError(f"observed ownship must have shape ({n},), got {own.shape}")
+        if guidance is None:
+            if observed_intr is None:
+                raise UsageError("pilot step needs guidance or the observed intruders to compute it")
+            guidance = guidance_from_daa(own, observed_intr)
+        g = guidance
+        lvl_daa = np.broadcast_to(g.alert_level, (n,))
+        valid = np.isfinite(own.trk)
+        alert = valid & (lvl_daa >= c.alert_level_min)
+        self.level = np.where(np.broadcast_to(g.wcv, (n,)), 5, np.clip(lvl_daa + 1, 0, 4)).astype(np.int64)
+        self.alert_since = np.where(alert, np.where(np.isnan(self.alert_since), t, self.alert_since), np.nan)
+        # stop streaming when the alert clears
+        stop = self.streaming & ~alert
+        self.streaming &= ~stop
+        self.t_decide[stop] = np.inf
+        self.t_activate[stop] = np.inf
+        # start streaming (hold) when the alert has persisted alert_hold_s
+        start = alert & ~self.streaming & (t - self.alert_since >= c.alert_hold_s - 1e-9)
+        if start.any():
+            s = np.flatnonzero(start)
+            self.cmd.trk[s], self.cmd.vs[s], self.cmd.gs[s] = own.trk[s], own.vs[s], own.gs[s]
+            self.axis[s] = 0
+            self.direction[s] = 0
+            first = s[~self.engaged[s]]
+            again = s[self.engaged[s]]
+            self.t_trigger[first] = t
+            self.t_decide[first] = t + self._resp[first] - self._exec0[first]
+            self.exec_next[first] = self._exec0[first]
+            self.engaged[first] = True
+            self.t_decide[again] = t
+            if again.size:
+                d = self._draws(again)
+                self.exec_next[again] = c.fixed_exec_s if c.mode in ("fixed", "deterministic") else d["exec"]
+            self.streaming |= start
+        # decisions due
+        dec = self.streaming & (t >= self.t_decide - 1e-9)
+        if dec.any():
+            i = np.flatnonzero(dec)
+            sub = Guidance(*(np.broadcast_to(getattr(g, k), (n,))[i] for k in (
+                "alert_level", "left_trk", "left_level", "right_trk", "right_level", "up_vs", "up_level",
+                "down_vs", "down_level", "wcv")))
+            cmd, ax, di = choose_maneuver(own.trk[i], own.vs[i], own.gs[i], sub, self._draws(i), c)
+            self.k_dec[i] += 1
+            self.pending.trk[i], self.pending.vs[i], self.pending.gs[i] = cmd.trk, cmd.vs, cmd.gs
+            self.p_axis[i], self.p_dir[i] = ax, di
+            self.t_activate[i] = t + self.exec_next[i]
+            self.t_decide[i] = np.inf
+        # maneuvers whose execution delay has passed
+        act = self.streaming & (t >= self.t_activate - 1e-9)
+        if act.any():
+            i = np.flatnonzero(act)
+            self.cmd.trk[i], self.cmd.vs[i], self.cmd.gs[i] = self.pending.trk[i], self.pending.vs[i], self.pending.gs[i]
+            self.axis[i], self.direction[i] = self.p_axis[i], self.p_dir[i]
+            self.maneuvers[i] += 1
+            self.t_activate[i] = np.inf
+            self._schedule_next(i, t)
+        send = self.streaming.copy()
+        self.seq = np.where(send, self.seq + 1, self.seq)
+        nan = np.full(n, np.nan)
+        out = Command(np.where(send, self.cmd.trk, nan), np.where(send, self.cmd.vs, nan),
+                      np.where(send, self.cmd.gs, nan))
+        return PilotOutput(send=send, cmd=out, seq=np.where(send, self.seq, -1),
+                           axis=np.where(send, self.axis, 0), direction=np.where(send, self.direction, 0),
+                           maneuver=self.maneuvers.copy(), t_sent=float(t))
+
+
+def guidance_from_daa(own: AircraftState, intr: AircraftState, **kwargs) -> Guidance:
+    """Compute :class:`Guidance` with :mod:`daa_sil.daa` (ownship (N,), intruders (N, M))."""
+    try:
+        from . import daa  # noqa: F401
+        fn = getattr(daa, "pilot_guidance")
+    except (ImportError, AttributeError):
+        raise UsageError("daa_sil.daa does not provide pilot_guidance yet; pass Guidance explicitly") from None
+    return fn(own, intr, **kwargs)
+
+
+__all__ = ["PilotConfig", "PilotModel", "PilotOutput", "Guidance", "MODES", "AXIS_NAMES", "DIR_NAMES",
+           "choose_maneuver", "sample_response_components", "guidance_from_daa"]
