@@ -437,15 +437,50 @@ class PilotModel:
                            maneuver=self.maneuvers.copy(), t_sent=float(t))
 
 
-def guidance_from_daa(own: AircraftState, intr: AircraftState, **kwargs) -> Guidance:
-    """Compute :class:`Guidance` with :mod:`daa_sil.daa` (ownship (N,), intruders (N, M))."""
-    try:
-        from . import daa  # noqa: F401
-        fn = getattr(daa, "pilot_guidance")
-    except (ImportError, AttributeError):
-        raise UsageError("daa_sil.daa does not provide pilot_guidance yet; pass Guidance explicitly") from None
-    return fn(own, intr, **kwargs)
+_REGION_LEVEL = np.array([0.0, 2.0, 3.0, 4.0, 1.0])  # daa REGION_NONE, FAR, MID, NEAR, RECOVERY -> level
+
+
+def _side_candidate(ax, want: int) -> tuple[np.ndarray, np.ndarray]:
+    """Closest candidate (min time to reach) on side ``want`` among those with the side's lowest
+    level (0/1 merged); returns (value, level) with nan/inf where the side is empty."""
+    lvl = _REGION_LEVEL[np.asarray(ax.region, int)]
+    merged = np.where(lvl <= 1, 0.0, lvl)
+    on = (np.asarray(ax.side) == want)[None, :]
+    best = np.where(on, merged, np.inf).min(axis=1)
+    cost = np.where(on & (merged == best[:, None]), ax.t_man, np.inf)
+    k = np.argmin(cost, axis=1)
+    found = np.isfinite(np.take_along_axis(cost, k[:, None], 1)[:, 0])
+    val = np.take_along_axis(ax.values, k[:, None], 1)[:, 0]
+    level = np.take_along_axis(lvl, k[:, None], 1)[:, 0]
+    return np.where(found, val, np.nan), np.where(found, level, NO_BAND)
+
+
+def guidance_from_bands(bands) -> Guidance:
+    """:class:`Guidance` from :class:`daa_sil.daa.bands.Bands` (track and vertical-speed axes)."""
+    lt, ll = _side_candidate(bands.trk, -1)
+    rt, rl = _side_candidate(bands.trk, +1)
+    dv, dl = _side_candidate(bands.vs, -1)
+    uv, ul = _side_candidate(bands.vs, +1)
+    alert = np.asarray(bands.alert)
+    lvl = alert.max(axis=1) if alert.ndim == 2 and alert.shape[1] else np.zeros(len(lt))
+    return Guidance(alert_level=lvl, left_trk=lt, left_level=ll, right_trk=rt, right_level=rl, up_vs=uv,
+                    up_level=ul, down_vs=dv, down_level=dl)
+
+
+def guidance_from_daa(own: AircraftState, intr: AircraftState, cfg=None) -> Guidance:
+    """Compute :class:`Guidance` with :mod:`daa_sil.daa` for ownship (N,) and intruders (N, M)
+    (``cfg``: a :class:`daa_sil.daa.config.DaaConfig`, default DO-365B); ``wcv`` from the preset."""
+    from .daa.bands import compute_bands
+    from .daa.alerting import relative_state
+    from .daa.config import DaaConfig
+    from .wellclear import wcv
+
+    cfg = cfg or DaaConfig()
+    g = guidance_from_bands(compute_bands(own, intr, cfg))
+    s, v = relative_state(own, intr)
+    g.wcv = wcv(s, v, cfg.th).any(axis=1)
+    return g
 
 
 __all__ = ["PilotConfig", "PilotModel", "PilotOutput", "Guidance", "MODES", "AXIS_NAMES", "DIR_NAMES",
-           "choose_maneuver", "sample_response_components", "guidance_from_daa"]
+           "choose_maneuver", "sample_response_components", "guidance_from_daa", "guidance_from_bands"]
