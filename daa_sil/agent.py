@@ -33,7 +33,7 @@ from typing import Callable
 import numpy as np
 
 from .daa import (AXIS_NONE, DaaConfig, alert_levels, classify_command, compute_bands, proj_lowc, resolve,
-                  safety_metric, search_maneuver)
+                  safety_metric, search_maneuver, sm_from_tin)
 from .daa.config import AXIS_NAMES, DIR_NAMES, RULE_NAMES
 from .daa.resolution import command_deltas
 from .errors import UsageError
@@ -209,7 +209,10 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
         b_a = bands[ia]
     else:
         b_a = compute_bands(own_a, intr_a, cfg, alert[ia])
-    daa_cmd_a, daa_ax_a, daa_dir_a = resolve(own_a, intr_a, cfg, (memory.daa_axis[ia], memory.daa_dir[ia]), b_a)
+    daa_cmd_a, daa_ax_a, daa_dir_a, daa_tin_a = resolve(own_a, intr_a, cfg, (memory.daa_axis[ia], memory.daa_dir[ia]),
+                                                        b_a, return_t_in=True)
+    sm_daa = nan.copy()
+    sm_daa[ia] = sm_from_tin(daa_tin_a, horizon, cfg)
 
     # --- pilot command safety -----------------------------------------------------------------
     sm_pilot = nan.copy()
@@ -242,13 +245,15 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     unsafe = active & fresh & ~link_lost & ~(sm_pilot > 0)
     rule = np.zeros(n, np.int8)
     blend_cmd = Command(nan.copy(), nan.copy(), nan.copy())
+    sm_blend = nan.copy()
     if policy.blending and unsafe.any():
         sel = unsafe[ia]
         j = ia[sel]
-        bc, br = search_maneuver(own[j], intr[j], p_axis[j], p_dir[j], cfg, ref=pcmd[j], horizon_s=horizon,
-                                 bands=b_a[sel])
+        bc, br, bt_in = search_maneuver(own[j], intr[j], p_axis[j], p_dir[j], cfg, ref=pcmd[j], horizon_s=horizon,
+                                        bands=b_a[sel], return_t_in=True)
         blend_cmd.trk[j], blend_cmd.vs[j], blend_cmd.gs[j] = bc.trk, bc.vs, bc.gs
         rule[j] = br
+        sm_blend[j] = sm_from_tin(bt_in, horizon, cfg)
 
     # --- decision codes -----------------------------------------------------------------------
     decision = np.full(n, D_NONE, np.int8)
@@ -267,9 +272,10 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     authority = np.where(~active | pilot_ok, A_PILOT, np.where(wait, A_HOLD, A_DAA)).astype(np.int8)
 
     # --- safety of what is executed -------------------------------------------------------------
-    sm_exec = nan.copy()
-    sm_exec = np.where(pilot_ok, sm_pilot, sm_exec)
-    other = active & ~pilot_ok
+    # pilot: its SM; blend / DAA: the chosen band candidate's SM (same trajectory model); hold: computed
+    sm_exec = np.where(pilot_ok, sm_pilot, np.where(unsafe & policy.blending, sm_blend,
+                                                    np.where(use_daa, sm_daa, np.nan)))
+    other = active & np.isnan(sm_exec)
     if other.any():
         j = np.nonzero(other)[0]
         sm_exec[j] = safety_metric(own[j], intr[j], exec_cmd[j], cfg, horizon)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..frames import wrap_2pi
-from ..kinematics import AircraftState, advance
+from ..kinematics import AircraftState
 from .alerting import alert_levels
 from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_SPEED, AXIS_VERTICAL, REGION_MID, REGION_NAMES, REGION_NEAR,
                      REGION_NONE, REGION_RECOVERY, DaaConfig)
@@ -118,28 +118,67 @@ def _side_order(arr, j_lo: int, j_hi: int):
     return np.concatenate([lo, arr[:, 1, :1], hi], axis=1)
 
 
-def _axis_paths(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[AircraftState, np.ndarray, int, int, float]:
-    """Ownship at the knots of the low-side and high-side paths: state (N, 2, J+1), knot times (J+1,)."""
-    perf = cfg.performance()
+def _path_sizes(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[int, int]:
+    """Number of candidates on the low and high side of an axis for this batch (>= 0)."""
     if axis == AXIS_HORIZONTAL:
         j_lo = int(round(cfg.trk_range / cfg.trk_step))
-        j_hi = j_lo - 1 if np.isclose(cfg.trk_range, np.pi) else j_lo
-        knot, kw = cfg.knot_trk, {"turn_rate": np.array([[-cfg.turn_rate], [cfg.turn_rate]])}
-    elif axis == AXIS_VERTICAL:
-        knot = cfg.knot_vs
-        j_lo = int(np.ceil(np.max(own.vs + cfg.max_vs, initial=0.0) / cfg.vs_step - 1e-9))
-        j_hi = int(np.ceil(np.max(cfg.max_vs - own.vs, initial=0.0) / cfg.vs_step - 1e-9))
-        kw = {"vertical_accel": np.array([[-cfg.vertical_accel], [cfg.vertical_accel]])}
+        return j_lo, (j_lo - 1 if np.isclose(cfg.trk_range, np.pi) else j_lo)
+    cur, lo, hi, step = ((own.vs, -cfg.max_vs, cfg.max_vs, cfg.vs_step) if axis == AXIS_VERTICAL
+                         else (own.gs, cfg.min_gs, cfg.max_gs, cfg.gs_step))
+    j_lo = int(np.ceil(np.max(cur - lo, initial=0.0) / step - 1e-9))
+    j_hi = int(np.ceil(np.max(hi - cur, initial=0.0) / step - 1e-9))
+    return max(j_lo, 0), max(j_hi, 0)
+
+
+def _axis_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ownship on the low-side and high-side maneuver paths at knots 0..j.
+
+    Returns position and velocity ``(N, 2, j+1, 3)``, the axis value ``(N, 2, j+1)`` and knot times
+    ``(j+1,)``. Closed forms of :func:`daa_sil.kinematics.advance` for a constant-rate turn (the arc is
+    built once in the body frame and rotated per encounter) and for a saturating acceleration.
+    """
+    sgn = np.array([-1.0, 1.0])[None, :, None]  # low side, high side
+    x0, y0, z0 = (a[:, None, None] for a in (own.x, own.y, own.z))
+    gs0, trk0, vs0 = (a[:, None, None] for a in (own.gs, own.trk, own.vs))
+    st, ct = np.sin(trk0), np.cos(trk0)
+    if axis == AXIS_HORIZONTAL:
+        knot = cfg.knot_trk
+        t = np.arange(j + 1) * knot
+        th = cfg.turn_rate * t
+        fwd = gs0 / cfg.turn_rate * np.sin(th)  # along the initial track
+        lat = gs0 / cfg.turn_rate * (1.0 - np.cos(th))  # toward the turn side
+        x = x0 + fwd * st + sgn * lat * ct
+        y = y0 + fwd * ct - sgn * lat * st
+        z = np.broadcast_to(z0 + vs0 * t, x.shape)
+        c, s = np.cos(th), sgn * np.sin(th)
+        vx, vy = gs0 * (st * c + ct * s), gs0 * (ct * c - st * s)
+        vz = np.broadcast_to(vs0, x.shape)
+        value = wrap_2pi(trk0 + sgn * th)
     else:
-        knot = cfg.knot_gs
-        j_lo = int(np.ceil(np.max(own.gs - cfg.min_gs, initial=0.0) / cfg.gs_step - 1e-9))
-        j_hi = int(np.ceil(np.max(cfg.max_gs - own.gs, initial=0.0) / cfg.gs_step - 1e-9))
-        kw = {"accel": np.array([[-cfg.horizontal_accel], [cfg.horizontal_accel]])}
-    j_lo, j_hi = max(j_lo, 0), max(j_hi, 0)
-    j = max(j_lo, j_hi)
-    t = np.arange(j + 1) * knot
-    path = advance(own[:, None, None], dt=t, perf=perf, **kw)
-    return path, t, j_lo, j_hi, knot
+        vertical = axis == AXIS_VERTICAL
+        knot, acc = (cfg.knot_vs, cfg.vertical_accel) if vertical else (cfg.knot_gs, cfg.horizontal_accel)
+        lim = np.array([-cfg.max_vs, cfg.max_vs]) if vertical else np.array([cfg.min_gs, cfg.max_gs])
+        lim = lim[None, :, None]
+        t = np.arange(j + 1) * knot
+        v0 = vs0 if vertical else gs0
+        t_sat = np.maximum((lim - v0) * sgn / acc, 0.0)
+        tc = np.minimum(t, t_sat)
+        v_t = v0 + sgn * acc * tc
+        dist = v0 * tc + 0.5 * sgn * acc * tc * tc + v_t * (t - tc)
+        if vertical:
+            x = np.broadcast_to(x0 + gs0 * st * t, v_t.shape)
+            y = np.broadcast_to(y0 + gs0 * ct * t, v_t.shape)
+            z = z0 + dist
+            vx, vy, vz = (np.broadcast_to(a, v_t.shape) for a in (gs0 * st, gs0 * ct, v_t))
+        else:
+            x, y = x0 + dist * st, y0 + dist * ct
+            z = np.broadcast_to(z0 + vs0 * t, v_t.shape)
+            vx, vy, vz = v_t * st, v_t * ct, np.broadcast_to(vs0, v_t.shape)
+        value = v_t
+    pos = np.stack(np.broadcast_arrays(x, y, z), axis=-1)
+    vel = np.stack(np.broadcast_arrays(vx, vy, vz), axis=-1)
+    return pos, vel, value, t
 
 
 def _closest(ok, side, want: int, cost):
@@ -149,10 +188,13 @@ def _closest(ok, side, want: int, cost):
     return idx, np.isfinite(np.take_along_axis(c, idx[:, None], -1)[:, 0])
 
 
-def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig, alert: np.ndarray) -> AxisBands:
-    """Bands of one axis (AXIS_* code) for ownship ``(N,)`` and intruders ``(N, M)``."""
-    path, t, j_lo, j_hi, knot = _axis_paths(own, axis, cfg)
-    t_in, t_out = knot_path_conflicts(path.position(), path.velocity(), t, intr, cfg.th, cfg.lookahead_s)
+def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig, alert: np.ndarray,
+               sizes: "tuple[int, int] | None" = None) -> AxisBands:
+    """Bands of one axis (AXIS_* code) for ownship ``(N,)`` and intruders ``(N, M)``; ``sizes`` = candidates
+    per side (default from this batch)."""
+    j_lo, j_hi = sizes if sizes is not None else _path_sizes(own, axis, cfg)
+    pos, vel, values, t = _axis_paths(own, axis, cfg, max(j_lo, j_hi))
+    t_in, t_out = knot_path_conflicts(pos, vel, t, intr, cfg.th, cfg.lookahead_s)
     # per-intruder regions: (N, M, 2, J+1)
     horizon = np.where(alert >= 2, cfg.lookahead_s, cfg.alert_time_corrective_s)[:, :, None, None]
     conflict = t_in < horizon
@@ -162,8 +204,6 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     region = region_i.max(axis=1) if m else np.zeros((own.shape[0],) + t_in.shape[2:], int)
     t_in_all = t_in.min(axis=1) if m else np.full(region.shape, np.inf)
     t_out_c = np.where(conflict, t_out, -np.inf).max(axis=1) if m else np.full(region.shape, -np.inf)
-    values = {AXIS_HORIZONTAL: lambda: wrap_2pi(path.trk), AXIS_VERTICAL: lambda: path.vs,
-              AXIS_SPEED: lambda: path.gs}[axis]()
     cur = {AXIS_HORIZONTAL: own.trk, AXIS_VERTICAL: own.vs, AXIS_SPEED: own.gs}[axis][:, None, None]
     if axis == AXIS_HORIZONTAL:
         rate = cfg.turn_rate
@@ -206,5 +246,23 @@ def compute_bands(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | Non
     cfg = cfg or DaaConfig()
     if alert is None:
         alert = alert_levels(own, intr, cfg)
-    axes = [axis_bands(own, intr, a, cfg, alert) for a in (AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED)]
+    n = own.shape[0]
+    codes = (AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED)
+    sizes = [_path_sizes(own, a, cfg) for a in codes]
+    chunks = []
+    for lo in range(0, max(n, 1), CHUNK):
+        sl = slice(lo, min(lo + CHUNK, n))
+        chunks.append([axis_bands(own[sl], intr[sl], a, cfg, alert[sl], sz) for a, sz in zip(codes, sizes)])
+    axes = [chunks[0][k] if len(chunks) == 1 else _concat([c[k] for c in chunks]) for k in range(3)]
     return Bands(*axes, alert=alert, preset=cfg.th.name)
+
+
+#: encounters per internal chunk (keeps the working arrays cache-sized; results do not depend on it)
+CHUNK = 512
+
+
+def _concat(parts: "list[AxisBands]") -> AxisBands:
+    cat = lambda name: np.concatenate([getattr(p, name) for p in parts], axis=0)  # noqa: E731
+    p0 = parts[0]
+    return AxisBands(p0.axis, cat("values"), cat("delta"), p0.side, cat("t_man"), cat("t_in"), cat("t_out"),
+                     cat("region"), cat("res_lo"), cat("res_hi"), cat("preferred"))

@@ -64,6 +64,10 @@ class _Candidates:
         self.region = np.concatenate([a.region for a in ab], axis=1)
         self.own = own
 
+    @staticmethod
+    def take(a: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        return np.take_along_axis(a, idx[:, None], -1)[:, 0]
+
     def command(self, idx: np.ndarray) -> Command:
         """Command of candidate ``idx`` (N,): the candidate's axis set, the other axes held."""
         take = lambda a: np.take_along_axis(a, idx[:, None], -1)[:, 0]  # noqa: E731
@@ -95,7 +99,7 @@ def _codes(val, n: int, conv) -> np.ndarray:
 
 def search_maneuver(own: AircraftState, intr: AircraftState, axis, direction, cfg: "DaaConfig | None" = None,
                     ref: "Command | None" = None, horizon_s: "float | None" = None,
-                    bands: "Bands | None" = None) -> tuple[Command, np.ndarray]:
+                    bands: "Bands | None" = None, return_t_in: bool = False) -> tuple[Command, np.ndarray]:
     """Paper Algorithm 2 (batched): a safe maneuver for the pilot's (axis, direction).
 
     ``axis``/``direction``: names or codes, scalar or ``(N,)``. ``ref``: the pilot's command (the
@@ -105,7 +109,8 @@ def search_maneuver(own: AircraftState, intr: AircraftState, axis, direction, cf
     2 ``axis`` safe candidate on the axis (either side, not the current value), closest to ``ref``;
     3 ``any`` safe candidate of any axis (the current value included) reached soonest;
     4 ``best_effort`` the candidate with the largest SM (latest LoWC, then earliest recovery).
-    Returns ``(Command, rule)`` with rule codes ``RULE_*`` (int8, N).
+    Returns ``(Command, rule)`` with rule codes ``RULE_*`` (int8, N) (plus the chosen candidate's first
+    LoWC time, s, with ``return_t_in``).
     """
     cfg = cfg or DaaConfig()
     n = own.shape[0]
@@ -134,13 +139,16 @@ def search_maneuver(own: AircraftState, intr: AircraftState, axis, direction, cf
     i4 = np.argmax(cand.best_effort_score(), axis=-1)
     idx = np.where(f1, i1, np.where(f2, i2, np.where(f3, i3, i4)))
     rule = np.where(f1, RULE_AXIS_DIR, np.where(f2, RULE_AXIS, np.where(f3, RULE_ANY, RULE_BEST_EFFORT)))
+    if return_t_in:
+        return cand.command(idx), rule.astype(np.int8), cand.take(cand.t_in, idx)
     return cand.command(idx), rule.astype(np.int8)
 
 
 def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = None,
-            prev: "tuple[np.ndarray, np.ndarray] | None" = None, bands: "Bands | None" = None
-            ) -> tuple[Command, np.ndarray, np.ndarray]:
-    """The onboard DAA resolution with its (axis, direction) codes; see :func:`daa_resolution`."""
+            prev: "tuple[np.ndarray, np.ndarray] | None" = None, bands: "Bands | None" = None,
+            return_t_in: bool = False) -> tuple[Command, np.ndarray, np.ndarray]:
+    """The onboard DAA resolution with its (axis, direction) codes (and, with ``return_t_in``, its
+    first LoWC time in s); see :func:`daa_resolution`."""
     cfg = cfg or DaaConfig()
     n = own.shape[0]
     bands = bands if bands is not None else compute_bands(own, intr, cfg)
@@ -180,6 +188,8 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
     cmd = cand.command(idx)
     axis = np.where(hold, AXIS_NONE, cand.axis[idx]).astype(np.int8)
     direction = np.where(hold, 0, side_to_dir(axis, cand.side[idx])).astype(np.int8)
+    if return_t_in:
+        return cmd, axis, direction, cand.take(cand.t_in, idx)
     return cmd, axis, direction
 
 

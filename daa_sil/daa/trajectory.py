@@ -28,6 +28,43 @@ def _intruder_rel(own_pos, t, intr: AircraftState) -> np.ndarray:
     return own_pos[:, None] - (ip + t[:, None, ..., None] * iv)
 
 
+def _cannot_violate(s, v, th: Thresholds, length) -> np.ndarray:
+    """Cheap sufficient test that straight-line motion ``s + t v``, t in [0, length], never violates.
+
+    Vertical (TCOA = 0 only): ``|z|`` stays above ZTHR. Horizontal: a violation needs
+    ``r <= r* = (TTHR |v| + sqrt(TTHR^2 |v|^2 + 4 DTHR^2)) / 2`` (from ``tau_mod <= TTHR``, which implies
+    ``r^2 - DTHR^2 <= TTHR r |v|``), and ``r >= max(d_cpa, r0 - |v| length)`` along the line.
+    """
+    z0 = s[..., 2]
+    z1 = z0 + v[..., 2] * length
+    vert = (z0 * z1 > 0) & (np.minimum(np.abs(z0), np.abs(z1)) > th.zthr) if th.tcoa == 0 else False
+    vv = np.hypot(v[..., 0], v[..., 1])
+    r0 = np.hypot(s[..., 0], s[..., 1])
+    tv = th.tthr * vv
+    r_star = 0.5 * (tv + np.sqrt(tv * tv + 4.0 * th.dthr * th.dthr)) + 1e-6
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dcpa = np.abs(s[..., 0] * v[..., 1] - s[..., 1] * v[..., 0]) / np.where(vv > 0, vv, np.inf)
+    dcpa = np.where(vv > 0, dcpa, r0)
+    horiz = (np.maximum(dcpa, r0 - vv * length) > r_star)
+    return vert | horiz
+
+
+def filtered_interval(s, v, th: Thresholds, length) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`daa_sil.wellclear.violation_interval` over ``[0, length]``, evaluated only where
+    :func:`_cannot_violate` does not already rule a violation out (same result, less work)."""
+    shape = s.shape[:-1]
+    length = np.broadcast_to(length, shape)
+    todo = np.nonzero(~_cannot_violate(s, v, th, length).ravel())[0]
+    t_in = np.full(shape, np.inf)
+    t_out = np.full(shape, -np.inf)
+    if todo.size:
+        a, b = wc.violation_interval(s.reshape(-1, 3)[todo], np.broadcast_to(v, s.shape).reshape(-1, 3)[todo],
+                                     th, 0.0, length.ravel()[todo])
+        t_in.ravel()[todo] = a
+        t_out.ravel()[todo] = b
+    return t_in, t_out
+
+
 def knot_path_conflicts(own_pos, own_vel, t, intr: AircraftState, th: Thresholds, t_end: float,
                         all_tails: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """First violation time and last exit time (s) per intruder and candidate.
@@ -46,7 +83,7 @@ def knot_path_conflicts(own_pos, own_vel, t, intr: AircraftState, th: Thresholds
     if k > 1:
         h = tt[..., 1:] - tt[..., :-1]
         v_seg = (s[..., 1:, :] - s[..., :-1, :]) / h[..., None]
-        seg_in, seg_out = wc.violation_interval(s[..., :-1, :], v_seg, th, 0.0, h)
+        seg_in, seg_out = filtered_interval(s[..., :-1, :], v_seg, th, h)
         seg_in = seg_in + tt[..., :-1]
         seg_out = seg_out + tt[..., :-1]
         pre_in = np.minimum.accumulate(seg_in, axis=-1)
@@ -61,7 +98,7 @@ def knot_path_conflicts(own_pos, own_vel, t, intr: AircraftState, th: Thresholds
         s, tt, pre_in, pre_out = s[..., -1:, :], tt[..., -1:], pre_in[..., -1:], pre_out[..., -1:]
         own_vel = own_vel[..., -1:, :]
     v_tail = own_vel[:, None] - iv
-    tail_in, tail_out = wc.violation_interval(s, v_tail, th, 0.0, np.maximum(t_end - tt, 0.0))
+    tail_in, tail_out = filtered_interval(s, v_tail, th, np.maximum(t_end - tt, 0.0))
     in_window = tt <= t_end
     tail_in = np.where(in_window, tail_in + tt, np.inf)
     tail_out = np.where(in_window, tail_out + tt, -np.inf)

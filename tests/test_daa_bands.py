@@ -1,0 +1,158 @@
+"""Alerting, ProjL, bands and SM(u) against hand-worked geometry and a brute-force oracle."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from daa_sil import wellclear as wc
+from daa_sil.daa import (AXIS_HORIZONTAL, REGION_MID, REGION_NEAR, REGION_NONE, DaaConfig, alert_levels,
+                         compute_bands, proj_lowc, safety_metric)
+from daa_sil.daa.bands import _axis_paths, _path_sizes
+from daa_sil.kinematics import Command, advance
+from daa_sil.units import DEG, FT
+
+from daa_helpers import brute_first_lowc, intruders, own_state
+
+CFG = DaaConfig()
+D = CFG.th.dthr
+
+
+def head_on(rng_m, closing_intr=55.0, dz=0.0, lateral=0.0):
+    own = own_state()
+    intr = intruders([[[lateral, rng_m, 1000.0 + dz, closing_intr, np.pi, 0.0]]])
+    return own, intr
+
+
+def test_alert_levels_head_on_hand_worked():
+    # closure 110 m/s co-altitude: tau_mod = 35 s at r* = (35*110 + sqrt((35*110)^2 + 4 D^2)) / 2;
+    # the warning (25 s) is raised when r* is reached within 25 s, i.e. r0 < r* + 25*110.
+    r_star = (35 * 110 + np.sqrt((35 * 110) ** 2 + 4 * D * D)) / 2
+    cases = [(r_star + 10 * 110, 3), (r_star + 40 * 110, 2), (r_star + 70 * 110, 0)]
+    for r0, want in cases:
+        own, intr = head_on(r0)
+        assert alert_levels(own, intr, CFG)[0, 0] == want, r0
+    # 180 m above (between ZTHR 450 ft and the preventive 700 ft): preventive only
+    own, intr = head_on(r_star + 10 * 110, dz=180.0)
+    assert 450 * FT < 180.0 < 700 * FT
+    assert alert_levels(own, intr, CFG)[0, 0] == 1
+
+
+def test_proj_lowc_exact_boundary():
+    r_star = (35 * 110 + np.sqrt((35 * 110) ** 2 + 4 * D * D)) / 2
+    own, intr = head_on(r_star + 20 * 110)  # LoWC starts at t = 20 s exactly
+    assert proj_lowc(own, intr, CFG, 20.5)[0, 0]
+    assert not proj_lowc(own, intr, CFG, 19.5)[0, 0]
+
+
+def test_head_on_bands_hand_worked():
+    own, intr = head_on(6000.0, lateral=500.0)  # intruder passes 500 m to the right: conflict
+    b = compute_bands(own, intr, CFG)
+    k0 = int(np.nonzero(b.trk.side == 0)[0][0])
+    assert b.trk.region[0, k0] in (REGION_MID, REGION_NEAR)
+    # turning 90 deg right flies across the intruder's path; 90 deg left flies away from it
+    left90 = np.argmin(np.abs(b.trk.delta[0] + 90 * DEG))
+    assert b.trk.region[0, left90] == REGION_NONE
+    assert np.isfinite(b.trk.res_lo[0])
+    # the left resolution is the first NONE candidate scanning left from the current track
+    lo_side = np.nonzero(b.trk.side == -1)[0][::-1]  # -5, -10, ... deg
+    first = next(k for k in lo_side if b.trk.region[0, k] == REGION_NONE)
+    assert b.trk.res_lo[0] == pytest.approx(b.trk.values[0, first])
+    assert all(b.trk.region[0, k] != REGION_NONE for k in lo_side if k > first)
+    # climbing or descending at the 6000 fpm limit clears 450 ft long before the ~17 s to tau_mod = 35 s
+    assert b.vs.region[0, -1] == REGION_NONE and b.vs.region[0, 0] == REGION_NONE
+    # intervals cover every candidate value in order
+    iv = b.trk.intervals(0)
+    assert iv[0][0] == pytest.approx(b.trk.values[0, 0]) and iv[-1][1] == pytest.approx(b.trk.values[0, -1])
+
+
+def test_fast_paths_match_core_kinematics():
+    own = own_state(3, gs=[55.0, 80.0, 30.0], trk=[0.3, 2.0, 5.5], vs=[0.0, 3.0, -2.0])
+    for axis, kw in ((1, "turn_rate"), (2, "vertical_accel"), (3, "accel")):
+        j = max(_path_sizes(own, axis, CFG))
+        pos, vel, value, t = _axis_paths(own, axis, CFG, j)
+        perf = CFG.performance()
+        rate = {1: CFG.turn_rate, 2: CFG.vertical_accel, 3: CFG.horizontal_accel}[axis]
+        ref = advance(own[:, None, None], dt=t, perf=perf, **{kw: np.array([[-rate], [rate]])})
+        np.testing.assert_allclose(pos, ref.position(), atol=1e-6)
+        np.testing.assert_allclose(vel, ref.velocity(), atol=1e-9)
+
+
+def test_safety_metric_sign_and_range():
+    own, intr = head_on(6000.0, lateral=500.0)
+    hold = Command.hold(own)
+    sm_hold = safety_metric(own, intr, hold, CFG)
+    sm_left = safety_metric(own, intr, Command(np.array([-90 * DEG % (2 * np.pi)])), CFG)
+    assert sm_hold[0] <= 0 < sm_left[0] <= CFG.sm_margin_s
+    # violating now -> SM = -horizon
+    own, intr = head_on(800.0)
+    assert safety_metric(own, intr, hold, CFG, horizon_s=40.0)[0] == pytest.approx(-40.0)
+
+
+case = st.tuples(st.floats(2500, 9000), st.floats(-0.7, 0.7), st.floats(-3.14, 3.14), st.floats(40, 200),
+                 st.floats(-150, 150), st.floats(-8, 8))
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(case)
+def test_bands_agree_with_brute_force(c):
+    rng_m, bearing, itrk, igs, dz, ivs = c
+    own = own_state()
+    intr = intruders([[[rng_m * np.sin(bearing), rng_m * np.cos(bearing), 1000 + dz, igs, itrk, ivs]]])
+    b = compute_bands(own, intr, CFG)
+    h = 40.0
+    th = CFG.th
+    small, big = th.with_(dthr=th.dthr * 0.95, zthr=th.zthr - 5, tthr=th.tthr - 2), \
+        th.with_(dthr=th.dthr * 1.05, zthr=th.zthr + 5, tthr=th.tthr + 2)
+    for ab in b.axes():
+        keep = np.arange(0, ab.values.shape[1], 3)
+        vals = ab.values[0, keep]
+        n = len(keep)
+        o = own_state(n)
+        it = intruders([[list(intr.as_array()[0, 0])]] * n)
+        if ab.axis == AXIS_HORIZONTAL:
+            cmd = Command(vals, np.zeros(n), np.full(n, 55.0))
+        elif ab.axis == 2:
+            cmd = Command(np.zeros(n), vals, np.full(n, 55.0))
+        else:
+            cmd = Command(np.zeros(n), np.zeros(n), vals)
+        # turn in the candidate's own direction: the band's left -180 candidate is the only ambiguous one
+        ok = np.abs(np.abs(ab.delta[0, keep]) - np.pi) > 1e-6
+        ours = ab.t_in[0, keep] <= h
+        hit_small = brute_first_lowc(o, it, cmd, CFG.performance(), small, h) <= h
+        hit_big = brute_first_lowc(o, it, cmd, CFG.performance(), big, h) <= h
+        assert np.all(~ok | ~hit_small | ours), (ab.name, vals[hit_small & ~ours])
+        assert np.all(~ok | ~ours | hit_big), (ab.name, vals[ours & ~hit_big])
+
+
+@settings(max_examples=10, deadline=None)
+@given(case)
+def test_safety_metric_matches_brute_force(c):
+    rng_m, bearing, itrk, igs, dz, ivs = c
+    own = own_state()
+    intr = intruders([[[rng_m * np.sin(bearing), rng_m * np.cos(bearing), 1000 + dz, igs, itrk, ivs]]])
+    cmd = Command(np.array([(bearing + 1.0) % (2 * np.pi)]), np.array([5.0]), np.array([60.0]))  # multi-axis
+    h = 30.0
+    sm = safety_metric(own, intr, cmd, CFG, horizon_s=h)[0]
+    th = CFG.th
+    small = th.with_(dthr=th.dthr * 0.95, zthr=th.zthr - 5, tthr=th.tthr - 2)
+    big = th.with_(dthr=th.dthr * 1.05, zthr=th.zthr + 5, tthr=th.tthr + 2)
+    if brute_first_lowc(own, intr, cmd, CFG.performance(), small, h)[0] <= h:
+        assert sm <= 0
+    if brute_first_lowc(own, intr, cmd, CFG.performance(), big, h)[0] > h:
+        assert sm > 0
+
+
+def test_batch_independence_of_bands():
+    rng = np.random.default_rng(3)
+    n = 40
+    own = own_state(n, gs=rng.uniform(30, 90, n), trk=rng.uniform(0, 6.28, n), vs=rng.uniform(-5, 5, n))
+    rows = np.stack([rng.uniform(-5000, 5000, n), rng.uniform(-5000, 5000, n), 1000 + rng.uniform(-200, 200, n),
+                     rng.uniform(40, 200, n), rng.uniform(0, 6.28, n), rng.uniform(-5, 5, n)], -1)[:, None, :]
+    intr = intruders(rows)
+    b = compute_bands(own, intr, CFG)
+    for i in (0, 17, 39):
+        bi = compute_bands(own[i:i + 1], intr[i:i + 1], CFG)
+        for a, ai in zip(b.axes(), bi.axes()):
+            assert a.intervals(i) == ai.intervals(0)
+            assert np.array_equal(a.res_lo[i:i + 1], ai.res_lo, equal_nan=True)
+            assert np.array_equal(a.res_hi[i:i + 1], ai.res_hi, equal_nan=True)
