@@ -91,7 +91,7 @@ def register(sub) -> None:
     pl.add_argument("map", metavar="MAP", help="a map .npz or a family directory")
     pl.add_argument("--out", required=True, metavar="DIR", help="directory for the PNGs")
     pl.add_argument("--vi", type=finite_float("--vi", 1.0, 1000.0), default=155.0, help="intruder speed of the slices, m/s (default 155)")
-    pl.add_argument("--dh", type=finite_float("--dh", -1e4, 1e4), default=150.0, help="relative altitude of the slices, m (default 150)")
+    pl.add_argument("--dh", type=finite_float("--dh", -1e4, 1e4), default=200.0, help="relative altitude of the slices, m (default 200)")
     pl.add_argument("--vh", type=finite_float("--vh", -200.0, 200.0), default=-2.5, help="relative vertical speed, m/s (default -2.5)")
     pl.add_argument("--force", action="store_true", help="overwrite existing PNGs")
     pl.set_defaults(func=run_plot)

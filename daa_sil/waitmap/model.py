@@ -50,6 +50,7 @@ class MdpParams:
     c2: float = 122.0  #: reward weight on 1/|d_h|, m
     c3: float = 1.0  #: wait bonus per second
     sep_floor: float = 1.0  #: HMD and |d_h| are floored at this (m) before dividing
+    hmd_lookahead: "float | None" = None  #: look-ahead of the reward's HMD, s; None = the preset's tau_mod*
     gamma: float = 0.95  #: discount factor
     epsilon: float = 1e-3  #: value-iteration tolerance: stop when ||V' - V||_inf < eps (1 - g) / (2 g)
     max_iter: int = 20000  #: hard cap on sweeps (reported as not converged if reached)
@@ -89,6 +90,11 @@ class MdpParams:
         if self.lowc_value is not None:
             return float(self.lowc_value)
         return -self.c3 * self.dt / (1.0 - self.gamma)
+
+    @property
+    def hmd_horizon(self) -> float:
+        """Look-ahead (s) of the HMD in the reward (DAIDALUS ``hmd(s, v, T)``)."""
+        return self.thresholds.tthr if self.hmd_lookahead is None else float(self.hmd_lookahead)
 
     @property
     def n_horizon(self) -> int:

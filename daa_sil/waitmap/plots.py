@@ -50,7 +50,7 @@ def _top(ax, wm, theta, vi, dh, vh, title):
     return m
 
 
-def write_plots(fam: WaitMapFamily, out: Path, vi: float = 155.0, dh: float = 150.0, vh: float = -2.5,
+def write_plots(fam: WaitMapFamily, out: Path, vi: float = 155.0, dh: float = 200.0, vh: float = -2.5,
                 overwrite: bool = False) -> list[Path]:
     """Write the standard figures for a family (or a one-map family); returns the PNG paths."""
     plt = _plt()

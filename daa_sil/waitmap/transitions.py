@@ -60,11 +60,13 @@ def lowc_states(paper_states: np.ndarray, params: MdpParams) -> np.ndarray:
 def reward_of(dxn, dyn, dhn, vin, thn, params: MdpParams) -> np.ndarray:
     """Paper Eq. 12 wait reward of arriving in S': ``-min(C1/HMD, C2/|d_h|) + C3 dt``.
 
-    HMD is the DO-365 horizontal miss distance of S' (straight-line projection, t_cpa clipped at
-    0); HMD and |d_h| are floored at ``sep_floor`` so the divisions are finite.
+    HMD is the horizontal miss distance of S' within ``hmd_horizon`` s (straight-line projection,
+    t_cpa clipped to [0, T] as DAIDALUS ``hmd(s, v, T)``; T = tau_mod* by default, so an encounter
+    whose CPA is further away than the alerting look-ahead is not yet penalised); HMD and |d_h| are
+    floored at ``sep_floor`` so the divisions are finite.
     """
     s, v = relative_sv(dxn, dyn, 0.0, vin, 0.0, thn, params.v_own)
-    h = np.maximum(wc.hmd(s, v), params.sep_floor)
+    h = np.maximum(wc.hmd(s, v, params.hmd_horizon), params.sep_floor)
     d = np.maximum(np.abs(dhn), params.sep_floor)
     return -np.minimum(params.c1 / h, params.c2 / d) + params.c3 * params.dt
 

@@ -1,0 +1,90 @@
+"""`daa-sil waitmap` through the installed console script."""
+
+import json
+import shutil
+import subprocess
+
+import pytest
+
+EXE = shutil.which("daa-sil")
+pytestmark = pytest.mark.skipif(EXE is None, reason="daa-sil console script not installed")
+
+
+def run(*args, cwd=None):
+    return subprocess.run([EXE, "waitmap", *args], capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    out = tmp_path_factory.mktemp("maps")
+    r = run("build", "--grid", "paper", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    return out, r
+
+
+def test_build_writes_one_map_per_turn_rate(built):
+    out, r = built
+    paths = r.stdout.split()
+    files = sorted(p.name for p in out.glob("waitmap_turn*.npz"))
+    assert files == sorted(["waitmap_turn-5.0.npz", "waitmap_turn-2.5.npz", "waitmap_turn+0.0.npz",
+                            "waitmap_turn+2.5.npz", "waitmap_turn+5.0.npz"])
+    assert all(any(p.endswith(f) for p in paths) for f in files)
+    assert (out / "family.json").is_file()
+
+
+def test_build_refuses_to_overwrite(built):
+    out, _ = built
+    r = run("build", "--grid", "paper,dx=4,dy=4", "--out", str(out))
+    assert r.returncode == 1 and "refusing to overwrite" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_show_json(built):
+    out, _ = built
+    r = run("show", str(out / "waitmap_turn+0.0.npz"), "--dx", "-1400", "--dy", "1400", "--dh", "200",
+            "--vi", "70", "--vh", "0", "--theta", "90", "--json")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["action"] in ("wait", "evade") and 0 <= d["wait_s"] <= 60 and 0 <= d["p_lowc"] <= 1
+    assert d["in_grid"] is True and d["preset"] == "paper"
+    far = json.loads(run("show", str(out), "--turn-rate", "4", "--dx", "-5000", "--dy", "0", "--dh", "0",
+                         "--vi", "100", "--vh", "0", "--theta", "180", "--json").stdout)
+    assert far["in_grid"] is False and far["wait_s"] == 60 and far["action"] == "wait" and far["turn_rate_deg"] == 5.0
+
+
+def test_plot_writes_pngs(built, tmp_path):
+    out, _ = built
+    r = run("plot", str(out), "--out", str(tmp_path / "figs"))
+    assert r.returncode == 0, r.stderr
+    pngs = sorted((tmp_path / "figs").glob("*.png"))
+    assert {p.name for p in pngs} == {"slices_geometries.png", "mirror_pair.png", "histogram.png", "map_3d.png"}
+    for p in pngs:
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 5000
+
+
+@pytest.mark.parametrize("args", [
+    ["build", "--grid", "paper,dx=1"],
+    ["build", "--preset", "faa"],
+    ["build", "--gamma", "1.5"],
+    ["build", "--turn-rates", "a,b"],
+    ["show", "nonexistent.npz", "--dx", "0", "--dy", "0", "--dh", "0", "--vi", "100", "--vh", "0", "--theta", "0"],
+    ["show", "x.npz", "--dx", "nan", "--dy", "0", "--dh", "0", "--vi", "100", "--vh", "0", "--theta", "0"],
+    ["show", "x.npz", "--dx", "0"],
+    ["frobnicate"],
+])
+def test_bad_arguments_exit_2_with_one_line(args, tmp_path):
+    r = run(*args, cwd=tmp_path)
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert len(r.stderr.strip().splitlines()) == 1 and "error" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_corrupt_map_is_a_one_line_error(tmp_path):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"PK\x03\x04 truncated")
+    r = run("show", str(bad), "--dx", "0", "--dy", "0", "--dh", "0", "--vi", "100", "--vh", "0", "--theta", "0")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "bad.npz" in r.stderr
+
+
+def test_help_has_examples():
+    for verb in ("build", "show", "plot"):
+        r = run(verb, "--help")
+        assert r.returncode == 0 and "examples:" in r.stdout

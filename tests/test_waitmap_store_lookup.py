@@ -1,0 +1,144 @@
+"""Wait-map files (round trip, corruption, version), lookup semantics and the cached family API."""
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from daa_sil import waitmap
+from daa_sil.errors import FileFormatError
+from daa_sil.waitmap import MdpParams, build_family, build_map, resolve_grid
+from daa_sil.waitmap.store import ARRAYS
+
+SMALL = "paper,dx=6,dy=6,dh=3,vi=3,vh=3,theta=4"
+
+
+@pytest.fixture(scope="module")
+def wm():
+    return build_map(resolve_grid(SMALL), MdpParams(), 5.0)
+
+
+def test_round_trip_is_bit_exact(wm, tmp_path):
+    path = waitmap.save(wm, tmp_path / "m.npz")
+    back = waitmap.load(path)
+    for n in ARRAYS:
+        a, b = getattr(wm, n), getattr(back, n)
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+    assert back.grid == wm.grid and back.params == wm.params and back.turn_rate_deg == 5.0
+    assert back.content_hash == wm.content_hash and len(back.content_hash) == 64
+    assert back.stats["iterations"] == wm.stats["iterations"]
+
+
+def test_refuses_to_overwrite(wm, tmp_path):
+    from daa_sil.errors import OutputError
+
+    waitmap.save(wm, tmp_path / "m.npz")
+    with pytest.raises(OutputError):
+        waitmap.save(wm, tmp_path / "m.npz")
+
+
+def _one_line(exc):
+    msg = str(exc.value)
+    assert "\n" not in msg and msg
+    return msg
+
+
+def test_truncated_and_corrupt_files_fail_cleanly(wm, tmp_path):
+    good = waitmap.save(wm, tmp_path / "m.npz").read_bytes()
+    trunc = tmp_path / "trunc.npz"
+    trunc.write_bytes(good[: len(good) // 2])
+    with pytest.raises(FileFormatError) as e:
+        waitmap.load(trunc)
+    assert "trunc.npz" in _one_line(e)
+    # flip bytes inside the stored wait-time array (uncompressed npz: data sits in the file)
+    bad = bytearray(good)
+    i = bytes(good).find(wm.wait_s.tobytes()[:64])
+    assert i > 0
+    bad[i + 8: i + 16] = b"\x00\x01\x02\x03\x04\x05\x06\x07"
+    corrupt = tmp_path / "corrupt.npz"
+    corrupt.write_bytes(bytes(bad))
+    with pytest.raises(FileFormatError) as e:
+        waitmap.load(corrupt)
+    _one_line(e)
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"not a zip at all")
+    with pytest.raises(FileFormatError):
+        waitmap.load(junk)
+
+
+def test_wrong_version_fails(wm, tmp_path):
+    path = waitmap.save(wm, tmp_path / "m.npz")
+    with np.load(path) as z:
+        data = {k: z[k] for k in z.files}
+    meta = json.loads(str(data["meta_json"]))
+    meta["format"] = "daa-sil-waitmap/999"
+    data["meta_json"] = np.array(json.dumps(meta))
+    other = tmp_path / "v999.npz"
+    with open(other, "wb") as fh:
+        np.savez(fh, **data)
+    with pytest.raises(FileFormatError) as e:
+        waitmap.load(other)
+    assert "daa-sil-waitmap/999" in _one_line(e)
+    assert zipfile.is_zipfile(other)
+
+
+def test_lookup_at_nodes_and_periodic_heading(wm):
+    nodes = wm.grid.nodes().reshape(-1, 6)
+    r = wm.lookup(nodes)
+    assert np.allclose(r.wait_s, wm.wait_s.ravel(), atol=1e-9)
+    assert np.array_equal(r.evade, wm.evade.ravel())
+    assert r.in_grid.all()
+    shifted = nodes.copy()
+    shifted[:, 5] += 2 * np.pi
+    assert np.allclose(wm.lookup(shifted).wait_s, r.wait_s, atol=1e-9)
+    # between two nodes the value is the multilinear blend (away from evade/LoWC states)
+    g = wm.grid
+    w = wm.wait_s
+    ok = np.argwhere(~wm.evade[:-1] & ~wm.evade[1:] & (np.abs(w[:-1] - w[1:]) > 1))
+    i = tuple(ok[0])
+    a, b = nodes.reshape(*g.shape, 6)[i], nodes.reshape(*g.shape, 6)[(i[0] + 1,) + i[1:]]
+    mid = wm.lookup(0.25 * a + 0.75 * b)
+    assert not mid.evade  # both neighbours have Q_wait >= 0 = Q_evade
+    assert mid.wait_s == pytest.approx(0.25 * w[i] + 0.75 * w[(i[0] + 1,) + i[1:]])
+
+
+def test_out_of_grid_edges(wm):
+    H = wm.params.horizon
+    # far: 5 km behind, flying away from the ownship -> no constraint
+    far = wm.lookup(np.array([-5000.0, 0.0, 0.0, 100.0, 0.0, np.pi]))
+    assert far.wait_s == H and not far.evade and not far.in_grid and far.p_lowc == 0.0
+    # inside: just outside the box but already in LoWC (head-on, 300 m/s, co-altitude) -> 0
+    inside = wm.lookup(np.array([1600.0, 0.0, 0.0, 300.0, 0.0, np.pi]))
+    assert inside.wait_s == 0.0 and inside.evade and not inside.in_grid and inside.p_lowc == 1.0
+    # speeds outside the grid are clamped and flagged
+    fast = wm.lookup(np.array([-1400.0, 1400.0, 200.0, 400.0, 0.0, np.pi]))
+    assert not fast.in_grid and 0 <= fast.wait_s <= H
+
+
+def test_family_picks_nearest_condition_and_batches():
+    g = resolve_grid(SMALL)
+    fam = build_family(g, MdpParams(), (-5.0, 0.0, 5.0))
+    rng = np.random.default_rng(3)
+    st = np.column_stack([rng.uniform(-1500, 1500, (50, 2)), rng.uniform(-200, 200, 50), rng.uniform(70, 300, 50),
+                          rng.uniform(-5, 5, 50), rng.uniform(0, 2 * np.pi, 50)]).reshape(5, 10, 6)
+    tr = np.deg2rad(rng.choice([-4.0, -1.0, 0.5, 3.0], size=(5, 10)))
+    res = fam.lookup(st, tr)
+    assert res.wait_s.shape == (5, 10)
+    want = {-4.0: -5.0, -1.0: 0.0, 0.5: 0.0, 3.0: 5.0}
+    for k in np.ndindex(5, 10):
+        m = fam.map_for(want[round(float(np.rad2deg(tr[k])), 1)])
+        assert res.wait_s[k] == m.lookup(st[k]).wait_s
+
+
+def test_default_family_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("DAA_SIL_CACHE", str(tmp_path))
+    kw = dict(grid="paper,dx=4,dy=4,dh=2,vi=2,vh=2,theta=4", turn_rates=(-5.0, 5.0))
+    first = waitmap.default_family("paper", **kw)
+    entries = list((tmp_path / "waitmaps").iterdir())
+    assert len(entries) == 1 and (entries[0] / "family.json").is_file()
+    again = waitmap.default_family("paper", **kw)
+    for a, b in zip(first.maps, again.maps):
+        assert a.wait_s.tobytes() == b.wait_s.tobytes() and a.content_hash == b.content_hash
+    other = waitmap.default_family("do365", **kw)  # different parameters -> a different cache key
+    assert len(list((tmp_path / "waitmaps").iterdir())) == 2 and other.maps[0].params.preset == "do365"
