@@ -1,0 +1,545 @@
+"""``daa-sil run SCENARIO`` and ``daa-sil demo``: the three-process SIL (vehicle, shim, GCS).
+
+The orchestrator starts ``daa-vehicle``, the delay shim and ``daa-gcs`` as **separate processes**
+(each in its own process group) on OS-chosen loopback ports, plays the encounter, stops them
+(SIGINT, then SIGTERM, then SIGKILL, each with a timeout; also on Ctrl-C, so no orphans), and
+summarises the vehicle's step log into ``DIR/result.json``.
+
+Readiness: every child prints one ``READY key=value ...`` line on stdout once its sockets are
+bound; the orchestrator reads the addresses from it (no guessed ports, no races). All child
+output goes to ``DIR/logs/<name>.log``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+from ..errors import DaaSilError, OutputError, UsageError
+
+EXAMPLES = """examples:
+  # the main job: a head-on encounter, 4 s link delay, through the real link (lockstep)
+  daa-sil demo --out demo-out
+
+  # any scenario file, deterministic and fast (lockstep), result as JSON
+  daa-sil run scenarios/head_on.yaml --out runs/head_on --json
+
+  # the same in real time at 10x speed
+  daa-sil run scenarios/crossing_left.yaml --clock realtime --speed 10
+
+Exit status: 0 = the run matched the scenario's `expect:` block, 1 = an expectation was violated
+or a process failed, 2 = bad input, 130 = interrupted (the step log is still written).
+"""
+
+#: wall-clock limits (s)
+READY_TIMEOUT_S = 30.0
+STOP_GRACE_S = 5.0
+STOP_TERM_S = 3.0
+
+
+# --------------------------------------------------------------------------------------------
+# process management
+
+@dataclass
+class Child:
+    """One child process with its own process group and a log file."""
+
+    name: str
+    proc: subprocess.Popen
+    log_path: Path
+    ready: dict = field(default_factory=dict)
+    ready_event: threading.Event = field(default_factory=threading.Event)
+    reader: "threading.Thread | None" = None
+    tail: list = field(default_factory=list)
+    parser: "Callable[[str], dict | None]" = lambda line: None
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+
+class ProcessGroup:
+    """Start children in their own process groups; :meth:`stop_all` leaves none behind.
+
+    Use as a context manager: leaving the block (normally, by exception or by Ctrl-C) stops every
+    child that is still running: SIGINT (lets the vehicle flush its step log), then SIGTERM, then
+    SIGKILL, each after a timeout.
+    """
+
+    def __init__(self, log_dir: Path):
+        self.log_dir = Path(log_dir)
+        self.children: list[Child] = []
+
+    def __enter__(self) -> "ProcessGroup":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop_all()
+
+    def start(self, name: str, argv: Sequence[str], env: "dict | None" = None,
+              ready_parser: "Callable[[str], dict | None] | None" = None) -> Child:
+        """Start ``argv`` (stdin closed, stdout+stderr to ``logs/<name>.log``).
+
+        Readiness: the first output line for which ``ready_parser(line)`` returns a dict (default:
+        a ``READY key=value ...`` line).
+        """
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        log_path = self.log_dir / f"{name}.log"
+        full_env = dict(os.environ)
+        full_env["PYTHONUNBUFFERED"] = "1"
+        full_env.update(env or {})
+        proc = subprocess.Popen(list(argv), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, start_new_session=True, env=full_env,
+                                text=True, errors="replace", bufsize=1)
+        child = Child(name, proc, log_path, parser=ready_parser or parse_ready_line)
+        child.reader = threading.Thread(target=self._pump, args=(child,), daemon=True, name=f"log-{name}")
+        child.reader.start()
+        self.children.append(child)
+        return child
+
+    @staticmethod
+    def _pump(child: Child) -> None:
+        with open(child.log_path, "w", encoding="utf-8") as log:
+            for line in child.proc.stdout:  # type: ignore[union-attr]
+                log.write(line)
+                log.flush()
+                child.tail = (child.tail + [line.rstrip()])[-20:]
+                if not child.ready_event.is_set():
+                    info = child.parser(line)
+                    if info is not None:
+                        child.ready = info
+                        child.ready_event.set()
+        child.ready_event.set()  # EOF: unblock waiters (the process died)
+
+    def wait_ready(self, child: Child, timeout: float = READY_TIMEOUT_S) -> dict:
+        """Block until ``child`` printed READY; raise DaaSilError if it died or timed out."""
+        if not child.ready_event.wait(timeout):
+            raise DaaSilError(f"{child.name} did not become ready within {timeout:g} s (log: {child.log_path})")
+        if not child.ready:
+            child.proc.wait(timeout=5)
+            raise DaaSilError(f"{child.name} exited with status {child.proc.returncode} before it was ready: "
+                              f"{last_error_line(child)} (log: {child.log_path})")
+        return child.ready
+
+    @staticmethod
+    def _signal_group(child: Child, sig: int) -> None:
+        try:
+            os.killpg(child.proc.pid, sig)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+    def stop(self, child: Child, grace: float = STOP_GRACE_S, term: float = STOP_TERM_S) -> int:
+        """Stop one child: SIGINT, wait ``grace``; SIGTERM, wait ``term``; SIGKILL. Returns its status."""
+        for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, term), (signal.SIGKILL, 5.0)):
+            if child.proc.poll() is not None:
+                break
+            self._signal_group(child, sig)
+            try:
+                child.proc.wait(timeout=wait)
+            except subprocess.TimeoutExpired:
+                continue
+        # the group may still hold grandchildren: make sure nothing survives
+        self._signal_group(child, signal.SIGKILL)
+        if child.reader is not None:
+            child.reader.join(timeout=2.0)
+        return child.proc.returncode if child.proc.returncode is not None else -9
+
+    def stop_all(self) -> None:
+        """Stop every child (last started first); Ctrl-C during this is ignored until done."""
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN) if threading.current_thread() is threading.main_thread() else None
+        try:
+            for child in reversed(self.children):
+                self.stop(child)
+        finally:
+            if old is not None:
+                signal.signal(signal.SIGINT, old)
+
+
+def parse_ready_line(line: str) -> "dict | None":
+    """``READY key=value ...`` -> ``{key: value}``; None for any other line."""
+    if not line.startswith("READY"):
+        return None
+    return dict(kv.split("=", 1) for kv in line.split()[1:] if "=" in kv) or {"ready": "1"}
+
+
+_SHIM_READY = re.compile(r"vehicle side (udp:\S+?),? gcs side (udp:\S+?),")
+
+
+def parse_shim_ready(line: str) -> "dict | None":
+    """The ``daa-sil shim`` ready line (``... vehicle side udp:H:P, gcs side udp:H:P, ...``)."""
+    m = _SHIM_READY.search(line)
+    return {"vehicle_side": m.group(1), "gcs_side": m.group(2)} if m else None
+
+
+def shim_argv(sc, clock_args: list, key_args: list, stats_json: Path) -> list[str]:
+    """``daa-sil shim`` arguments for scenario ``sc`` (link delays, loss, outages, seed)."""
+    from ..scenario import delay_spec_string
+
+    link = sc.link
+    argv = python_module_argv("daa_sil.cli") + [
+        "shim", "--listen-vehicle", "udp:127.0.0.1:0", "--listen-gcs", "udp:127.0.0.1:0",
+        "--delay-up", delay_spec_string(link.up),
+        "--delay-down", delay_spec_string(link.down if link.down is not None else link.up),
+        "--epoch", f"{link.epoch_s:g}", "--loss", f"{link.loss:g}", "--seed", str(sc.seed),
+        "--stats-json", str(stats_json)]
+    for o in link.outages:
+        argv += ["--outage", f"{o.start_s:g}:{o.end_s:g}"]
+    return argv + clock_args + key_args
+
+
+def last_error_line(child: Child) -> str:
+    """The most informative line of a child's output tail (an ``error:`` line if there is one)."""
+    for line in reversed(child.tail):
+        if "error" in line.lower():
+            return line.strip()
+    return child.tail[-1].strip() if child.tail else "(no output)"
+
+
+def python_module_argv(module: str) -> list[str]:
+    """``[python, -m, module]`` with the running interpreter (works before console scripts exist)."""
+    return [sys.executable, "-m", module]
+
+
+# --------------------------------------------------------------------------------------------
+# result summary (pure: step log table -> result dict)
+
+def summarize_steplog(table, scenario=None) -> dict:
+    """LoWC, NMAC, minimum separation and the decision counts/sequence of one SIL run.
+
+    ``decision_sequence`` lists every active step's decision as ``{t, decision, rule, authority}``
+    (decision != ``none``), in step order. Distances in m, times in s.
+    """
+    import numpy as np
+
+    from ..scenario import DECISIONS, check_expectation
+
+    n = table.num_rows
+    col = {name: table.column(name).to_pylist() for name in
+           ("t", "decision", "rule", "authority", "lowc", "nmac", "range_m", "dh_m", "wait_s")}
+    counts = {d: 0 for d in DECISIONS}
+    seq = []
+    for i in range(n):
+        d = col["decision"][i]
+        counts[d] = counts.get(d, 0) + 1
+        if d != "none":
+            w = col["wait_s"][i]
+            seq.append({"t": col["t"][i], "decision": d, "rule": col["rule"][i],
+                        "authority": col["authority"][i],
+                        "wait_s": None if w is None or not np.isfinite(w) else round(float(w), 3)})
+    counts.pop("none", None)
+    rng = np.array([min(r) if r else np.inf for r in col["range_m"]], dtype=float) if n else np.array([np.inf])
+    k = int(np.argmin(rng)) if n else 0
+    dh_at = None
+    if n and col["dh_m"][k]:
+        j = int(np.argmin(col["range_m"][k]))
+        dh_at = float(col["dh_m"][k][j])
+    lowc_t = [col["t"][i] for i in range(n) if col["lowc"][i]]
+    link_lost_t = [e["t"] for e in seq if e["decision"] == "link_lost"]
+    handed = [e["t"] for e in seq if e["authority"] == "daa"]
+    result = {
+        "steps": n,
+        "duration_s": (col["t"][-1] + 1.0) if n else 0.0,
+        "lowc": bool(any(col["lowc"])),
+        "nmac": bool(any(col["nmac"])),
+        "lowc_steps": len(lowc_t),
+        "first_lowc_s": lowc_t[0] if lowc_t else None,
+        "min_range_m": float(rng[k]) if n and np.isfinite(rng[k]) else None,
+        "min_range_t_s": col["t"][k] if n else None,
+        "vsep_at_min_range_m": abs(dh_at) if dh_at is not None else None,
+        "n_active_steps": len(seq),
+        "decision_counts": counts,
+        "decision_sequence": seq,
+        "first_link_lost_s": link_lost_t[0] if link_lost_t else None,
+        "first_daa_authority_s": handed[0] if handed else None,
+    }
+    if scenario is not None:
+        violations = check_expectation(scenario.expect, result)
+        result["expectation"] = {"checked": True, "ok": not violations, "violations": violations}
+    return result
+
+
+def human_summary(result: dict, scenario=None, out_dir: "Path | None" = None) -> str:
+    """A few lines for people: what happened, when control moved, separation, outcome."""
+    lines = []
+    if scenario is not None:
+        lines.append(f"scenario {scenario.name}: {scenario.description.strip().splitlines()[0] if scenario.description.strip() else ''}".rstrip(": "))
+    c = result["decision_counts"]
+    active = ", ".join(f"{k} {v}" for k, v in c.items() if v) or "none"
+    lines.append(f"  active steps: {result['n_active_steps']}  decisions: {active}")
+    seq = result["decision_sequence"]
+    if seq:
+        runs = []
+        for e in seq:
+            if runs and runs[-1][0] == e["decision"] and e["t"] - runs[-1][2] <= 1.0 + 1e-9:
+                runs[-1][2] = e["t"]
+            else:
+                runs.append([e["decision"], e["t"], e["t"]])
+        parts = [f"{d} {a:.0f}s" if a == b else f"{d} {a:.0f}-{b:.0f}s" for d, a, b in runs[:12]]
+        more = f" ... (+{len(runs) - 12} more)" if len(runs) > 12 else ""
+        lines.append("  timeline: " + ", ".join(parts) + more)
+    if result.get("first_daa_authority_s") is not None:
+        lines.append(f"  onboard DAA first took control at t = {result['first_daa_authority_s']:.0f} s")
+    mr = result["min_range_m"]
+    vs = result["vsep_at_min_range_m"]
+    lines.append(f"  min horizontal range {mr:.0f} m at t = {result['min_range_t_s']:.0f} s"
+                 + (f" (vertical separation {vs:.0f} m)" if vs is not None else "") if mr is not None
+                 else "  min horizontal range: n/a")
+    lines.append(f"  LoWC: {'YES' if result['lowc'] else 'no'}   NMAC: {'YES' if result['nmac'] else 'no'}")
+    exp = result.get("expectation")
+    if exp:
+        lines.append("  expected outcome: " + ("OK" if exp["ok"] else "VIOLATED: " + "; ".join(exp["violations"])))
+    if out_dir is not None:
+        lines.append(f"  results: {out_dir / 'result.json'}  step log: {out_dir / 'steplog.parquet'}")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------------
+# the run
+
+@dataclass
+class RunOptions:
+    scenario_path: Path
+    out_dir: Path
+    clock: str = "lockstep"
+    speed: float = 1.0
+    key: "Path | None" = None
+    tick_timeout_s: float = 10.0
+    rrd: "Path | None" = None
+    spawn_viewer: bool = False
+    tap: "str | None" = None
+    progress: "Callable[[str], None] | None" = None
+
+
+def _say(opts: RunOptions, msg: str) -> None:
+    if opts.progress is not None:
+        opts.progress(msg)
+
+
+def run_sil(opts: RunOptions) -> dict:
+    """Play ``opts.scenario_path`` through vehicle, shim and GCS processes; return the result dict.
+
+    Writes ``out_dir/result.json``, ``out_dir/steplog.parquet``, ``out_dir/gcs_commands.jsonl``
+    and ``out_dir/logs/``. Raises DaaSilError if a process fails; KeyboardInterrupt propagates
+    after every child is stopped and whatever step log exists is summarised.
+    """
+    from ..io import atomic_write_json, ensure_dir
+    from ..scenario import load_scenario
+    from ..steplog import read_steplog
+
+    sc = load_scenario(opts.scenario_path)
+    out = ensure_dir(opts.out_dir)
+    steplog = out / "steplog.parquet"
+    for stale in (steplog, out / "result.json"):
+        stale.unlink(missing_ok=True)
+    key_args = ["--key", str(opts.key)] if opts.key else []
+    clock_args = ["--clock", opts.clock] + (["--speed", f"{opts.speed:g}"] if opts.clock == "realtime" else [])
+    t0 = time.monotonic()
+    interrupted = False
+    failure: "str | None" = None
+    with ProcessGroup(out / "logs") as pg:
+        try:
+            shim = pg.start("shim", shim_argv(sc, clock_args, key_args, out / "shim_stats.json"),
+                            ready_parser=parse_shim_ready)
+            sready = pg.wait_ready(shim)
+            _say(opts, f"shim ready (vehicle side {sready['vehicle_side']}, GCS side {sready['gcs_side']})")
+            gcs = pg.start("gcs", python_module_argv("gcs") + [
+                "--scenario", str(opts.scenario_path), "--listen", "udp:127.0.0.1:0",
+                "--vehicle", sready["gcs_side"], "--log", str(out / "gcs_commands.jsonl"),
+                "--no-display"] + clock_args + key_args)
+            vargs = [str(opts.scenario_path), "--listen", "udp:127.0.0.1:0", "--out", sready["vehicle_side"],
+                     "--steplog", str(steplog), "--tap", opts.tap or "none",
+                     "--tick-timeout", f"{opts.tick_timeout_s:g}", "--quiet"] + clock_args + key_args
+            # GCS and vehicle start in parallel; the vehicle re-sends tick 0 until the GCS answers
+            vehicle = pg.start("vehicle", python_module_argv("vehicle") + vargs)
+            pg.wait_ready(gcs)
+            pg.wait_ready(vehicle, timeout=READY_TIMEOUT_S + 120.0)  # may build the wait map first
+            _say(opts, f"playing {sc.duration_s:g} s of {sc.name} ({opts.clock})")
+            rc = vehicle.proc.wait()
+            if rc != 0:
+                failure = f"vehicle exited with status {rc}: {last_error_line(vehicle)} (log: {vehicle.log_path})"
+            for other in (gcs, shim):
+                if not other.alive() and other.proc.returncode not in (0, None) and failure is None:
+                    failure = (f"{other.name} exited with status {other.proc.returncode}: "
+                               f"{last_error_line(other)} (log: {other.log_path})")
+        except KeyboardInterrupt:
+            interrupted = True
+    wall = time.monotonic() - t0
+    if not steplog.exists():
+        if interrupted:
+            raise KeyboardInterrupt
+        raise DaaSilError(failure or f"the vehicle wrote no step log (logs: {out / 'logs'})")
+    table = read_steplog(steplog)
+    result = summarize_steplog(table, sc)
+    result.update({"scenario": sc.name, "scenario_file": str(opts.scenario_path), "seed": sc.seed,
+                   "preset": sc.thresholds, "clock": opts.clock, "wall_s": round(wall, 3),
+                   "realtime_ratio": round(result["duration_s"] / wall, 2) if wall > 0 else None,
+                   "interrupted": interrupted, "failure": failure,
+                   "files": {"steplog": str(steplog), "gcs_log": str(out / "gcs_commands.jsonl"),
+                             "logs": str(out / "logs")}})
+    if (opts.rrd or opts.spawn_viewer) and not interrupted:
+        from .. import viz
+
+        rrd, _ = viz.log_steplog(table, viz.SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, overwrite=True),
+                                 preset=sc.thresholds)
+        result["files"]["rrd"] = str(rrd) if rrd else None
+    atomic_write_json(out / "result.json", result)
+    if interrupted:
+        raise KeyboardInterrupt
+    if failure:
+        raise DaaSilError(failure)
+    return result
+
+
+# --------------------------------------------------------------------------------------------
+# CLI
+
+def _viz_available() -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec("daa_sil.viz") is not None
+
+
+def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
+    p.add_argument("--out", default=default_out, metavar="DIR", help=f"output directory (default {default_out})")
+    p.add_argument("--clock", choices=("lockstep", "realtime"), default="lockstep",
+                   help="lockstep: as fast as the processes go, deterministic (default); realtime: wall clock x --speed")
+    p.add_argument("--speed", type=float, default=1.0, metavar="X", help="realtime speed factor (default 1)")
+    p.add_argument("--key", type=Path, metavar="FILE", help="MAVLink 2 signing key file (all three processes)")
+    p.add_argument("--tap", metavar="udp:HOST:PORT",
+                   help="also stream undelayed telemetry to an observer (QGC/MAVProxy), e.g. udp:127.0.0.1:14550")
+    p.add_argument("--json", action="store_true", help="print result.json instead of the summary")
+    if _viz_available():
+        p.add_argument("--rrd", type=Path, metavar="FILE", help="write a Rerun recording")
+        p.add_argument("--spawn-viewer", action="store_true", help="stream to a Rerun viewer it spawns")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("run", help="play a scenario through vehicle, delay shim and GCS processes",
+                       description="Start daa-vehicle, the delay shim and daa-gcs as separate processes on "
+                                   "free loopback ports, play SCENARIO, stop them and write DIR/result.json "
+                                   "and DIR/steplog.parquet.",
+                       epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("scenario", type=Path, help="scenario YAML file (see docs/sil.md)")
+    _add_common(p, "sil-out")
+    p.set_defaults(func=run)
+    d = sub.add_parser("demo", help="head-on encounter with a 4 s link delay through the real link",
+                       description="The main job: a head-on encounter, 4 s link delay each way, remote-pilot "
+                                   "model on the GCS, allocation agent with the MDP wait map on the vehicle, "
+                                   "everything over MAVLink through the delay shim (lockstep).",
+                       epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    _add_common(d, "demo-out")
+    d.set_defaults(func=demo, scenario=None)
+
+
+def _check_args(args) -> None:
+    import math
+
+    if not (math.isfinite(args.speed) and 0.01 <= args.speed <= 1000):
+        raise UsageError(f"--speed must be within [0.01, 1000], got {args.speed:g}")
+    if args.key is not None and not args.key.is_file():
+        raise UsageError(f"--key: key file {args.key} does not exist")
+    if args.tap:
+        from ..link.endpoint import parse_udp_address
+
+        parse_udp_address(args.tap, "--tap")
+    if args.scenario is not None:
+        from ..scenario import load_scenario
+
+        load_scenario(args.scenario)  # fail fast, one line, before any process starts
+
+
+def _options(args, scenario: Path) -> RunOptions:
+    quiet = args.json
+    return RunOptions(scenario_path=scenario, out_dir=Path(args.out), clock=args.clock, speed=args.speed,
+                      key=args.key, tap=args.tap, rrd=getattr(args, "rrd", None),
+                      spawn_viewer=getattr(args, "spawn_viewer", False),
+                      progress=None if quiet else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
+
+
+def _finish(args, result: dict, sc) -> int:
+    if args.json:
+        from ..io import to_jsonable
+
+        print(json.dumps(to_jsonable(result), indent=2, sort_keys=True))
+    else:
+        print(human_summary(result, sc, Path(args.out)))
+        print(f"  wall {result['wall_s']:.1f} s for {result['duration_s']:.0f} s of sim time "
+              f"({result['realtime_ratio']}x real time, clock {result['clock']})")
+    exp = result.get("expectation") or {}
+    return 0 if exp.get("ok", True) else 1
+
+
+def run(args) -> int:
+    from ..scenario import load_scenario
+
+    _check_args(args)
+    result = run_sil(_options(args, args.scenario))
+    return _finish(args, result, load_scenario(args.scenario))
+
+
+def demo_scenario_path() -> Path:
+    """The bundled demo scenario (``scenarios/head_on.yaml``)."""
+    here = Path(__file__).resolve().parents[2] / "scenarios" / "head_on.yaml"
+    if not here.is_file():
+        raise UsageError(f"demo scenario {here} is missing (run from a source checkout)")
+    return here
+
+
+def demo(args) -> int:
+    from ..scenario import load_scenario
+
+    _check_args(args)
+    path = demo_scenario_path()
+    sc = load_scenario(path)
+    if not args.json:
+        print(f"daa-sil demo: {sc.description.strip().splitlines()[0]}", flush=True)
+        _prepare_waitmap(sc)
+    result = run_sil(_options(args, path))
+    if not args.json:
+        print(_pilot_story(Path(args.out)))
+    return _finish(args, result, sc)
+
+
+def _prepare_waitmap(sc) -> None:
+    """Build (or load) the cached wait maps up front with a visible progress line."""
+    if sc.allocation.wait != "map":
+        return
+    from .. import waitmap
+
+    t = time.monotonic()
+    print("daa-sil demo: loading the MDP wait maps (the first run builds and caches them) ...", flush=True)
+    waitmap.default_family(preset="paper")
+    print(f"daa-sil demo: wait maps ready ({time.monotonic() - t:.1f} s)", flush=True)
+
+
+def _pilot_story(out_dir: Path) -> str:
+    """One line on what the (model) pilot sent, from the GCS command log."""
+    path = out_dir / "gcs_commands.jsonl"
+    try:
+        rows = [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
+    except (OSError, ValueError):
+        return "  pilot: (no GCS command log)"
+    if not rows:
+        return "  pilot: sent no command"
+    firsts, last = [], None
+    for r in rows:
+        key = (r.get("track_deg"), r.get("vs_mps"), r.get("gs_mps"))
+        if key != last:
+            firsts.append(r)
+            last = key
+    parts = []
+    for r in firsts[:4]:
+        what = ", ".join(f"{k} {r[k]:.0f}" for k in ("track_deg", "vs_mps", "gs_mps")
+                         if isinstance(r.get(k), (int, float)))
+        parts.append(f"t={r['t']:.0f}s {r.get('kind', 'cmd')} ({what})")
+    return (f"  pilot: {len(rows)} command packets; " + "; ".join(parts)
+            + (" ..." if len(firsts) > 4 else ""))

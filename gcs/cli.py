@@ -1,0 +1,100 @@
+"""``daa-gcs``: the SIL ground station: shows the delayed telemetry and flies the pilot model or a script.
+
+Prints ``READY listen=udp:HOST:PORT vehicle=...`` once bound. Runs until Ctrl-C / SIGTERM (or
+``--duration`` wall seconds), then writes its command log (JSONL, atomic) and exits 0.
+Errors are one line (``daa-gcs: error: ...``, exit 2 for bad input).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import signal
+import sys
+from pathlib import Path
+
+from daa_sil.errors import DaaSilError, UsageError
+
+EXAMPLES = """examples:
+  # pilot model of the scenario, vehicle directly on 14550 (realtime)
+  daa-gcs --listen udp:127.0.0.1:14550 --vehicle udp:127.0.0.1:14600 --scenario scenarios/head_on.yaml
+
+  # behind the delay shim's GCS side, lockstep, scripted pilot, command log
+  daa-gcs --vehicle udp:127.0.0.1:14602 --scenario scenarios/pilot_unsafe_blend.yaml --pilot scripted \\
+      --clock lockstep --log gcs.jsonl
+"""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="daa-gcs", description=__doc__.splitlines()[0], epilog=EXAMPLES,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--listen", default="udp:127.0.0.1:14550", metavar="udp:HOST:PORT",
+                   help="local socket (default udp:127.0.0.1:14550; port 0 = OS-chosen)")
+    p.add_argument("--vehicle", default="udp:127.0.0.1:14602", metavar="udp:HOST:PORT",
+                   help="vehicle, or the delay shim's GCS side, to send to (default udp:127.0.0.1:14602)")
+    p.add_argument("--scenario", type=Path, metavar="FILE",
+                   help="scenario file: origin, intruder order, pilot model settings / scripted commands")
+    p.add_argument("--pilot", choices=("model", "scripted"), help="override the scenario's pilot mode")
+    p.add_argument("--clock", choices=("realtime", "lockstep"), default="realtime")
+    p.add_argument("--speed", type=float, default=1.0, metavar="X", help="realtime speed factor (default 1)")
+    p.add_argument("--key", type=Path, metavar="FILE", help="MAVLink 2 signing key file")
+    p.add_argument("--log", type=Path, metavar="FILE", help="write the commands sent as JSONL here")
+    p.add_argument("--no-display", action="store_true", help="no per-second console line")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S wall seconds")
+    return p
+
+
+async def _amain(args) -> int:
+    import math
+
+    from daa_sil.scenario import load_scenario
+    from gcs.node import GcsNode, GcsOptions
+
+    if not (math.isfinite(args.speed) and 0.01 <= args.speed <= 1000):
+        raise UsageError(f"--speed must be within [0.01, 1000], got {args.speed:g}")
+    sc = load_scenario(args.scenario) if args.scenario else None
+    if sc is None and args.pilot != "scripted":
+        raise UsageError("give --scenario FILE (pilot model settings, origin); without it only --pilot scripted "
+                         "with no commands is possible")
+    key = None
+    if args.key is not None:
+        from daa_sil.link.codec import load_key
+
+        key = load_key(args.key)
+    node = GcsNode(sc, GcsOptions(vehicle=args.vehicle, listen=args.listen, clock=args.clock, speed=args.speed,
+                                  key=key, pilot=args.pilot, log=args.log, display=not args.no_display))
+    await node.start()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, node.stop.set)
+    if args.duration:
+        loop.call_later(args.duration, node.stop.set)
+    print(f"READY listen={node.local_address} vehicle={args.vehicle} pilot={node.mode} clock={args.clock}", flush=True)
+    try:
+        await node.run()
+    finally:
+        path = node.write_log()
+        st = node.ep.stats()
+        node.close()
+    print(f"daa-gcs: done, {node.steps} steps, {len(node.sent)} commands sent, packets dropped {st['dropped']}"
+          + (f"; log {path}" if path else ""), flush=True)
+    return 0
+
+
+def main(argv: "list[str] | None" = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return asyncio.run(_amain(args))
+    except DaaSilError as exc:
+        if os.environ.get("DAA_SIL_DEBUG"):
+            raise
+        print(f"daa-gcs: error: {exc}", file=sys.stderr, flush=True)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        return 130

@@ -1,0 +1,43 @@
+"""One line per sim second of what the remote pilot sees (rich colours on a TTY, plain otherwise)."""
+
+from __future__ import annotations
+
+import math
+import sys
+
+_console = None
+
+
+def format_line(node, t: float, n_cmd: int) -> str:
+    """``t  own(track, alt, gs)  nearest intruder(range, dh)  authority/decision  commands`` as text."""
+    v = node.view
+    parts = [f"t={t:5.0f}s"]
+    if v.own is not None:
+        _, x, y, z, gs, trk, vs = v.own
+        parts.append(f"seen@{v.own[0]:5.0f}s own trk {math.degrees(trk) % 360:5.1f} alt {z:6.0f}m gs {gs:4.0f}")
+        if v.intruders:
+            rng = {i: math.hypot(s[0] - x, s[1] - y) for i, s in v.intruders.items()}
+            i = min(rng, key=rng.get)
+            parts.append(f"nearest {i} r {rng[i]:6.0f}m dh {v.intruders[i][2] - z:+5.0f}m")
+    else:
+        parts.append("no telemetry yet")
+    parts.append(f"alert {v.alert_regions}  {v.authority}/{v.decision}")
+    if n_cmd and node.sent:
+        c = node.sent[-1]
+        parts.append(f"sent #{c['seq']} {c['kind']} trk {c['track_deg']:.0f}")
+    return "  ".join(parts)
+
+
+def render_line(node, t: float, n_cmd: int) -> None:
+    """Print one status line (rich if stdout is a TTY)."""
+    global _console
+    line = format_line(node, t, n_cmd)
+    if sys.stdout.isatty():
+        if _console is None:
+            from rich.console import Console
+
+            _console = Console()
+        style = {"daa": "bold red", "hold": "yellow", "pilot": "green"}.get(node.view.authority, "")
+        _console.print(line, style=style, highlight=False)
+    else:
+        print(line, flush=True)

@@ -1,0 +1,270 @@
+"""The asyncio GCS node: what the remote pilot sees (downlink-delayed telemetry) and what it sends.
+
+Per step ``k`` at sim time ``t_k`` (``docs/architecture.md`` step 1):
+
+* **lockstep**: on ``SIM_TICK(k, t_k)`` (forwarded by the shim after it released every packet due
+  at ``t_k``) the node first takes in every message received before the tick, then runs the pilot,
+  sends its command(s) and a HEARTBEAT (one datagram), then ``SIM_TICK_ACK(k)`` alone in its
+  datagram. A repeated tick is re-acknowledged without stepping again.
+* **realtime**: the node's sim clock is synchronised on the first telemetry message
+  (``t = time_boot_ms + assumed downlink delay``) and advances with the wall clock x ``speed``;
+  it steps at every whole sim second.
+
+Pilot: ``model`` = :class:`daa_sil.pilot.PilotModel` (N = 1) on the observed ownship
+(LOCAL_POSITION_NED, float) and intruders (ADSB_VEHICLE), streaming per the allocation semantics;
+``scripted`` = the scenario's ``pilot.commands`` (each sent once per step over ``[t_s, until_s)``).
+Commands go out as ``PILOT_MANEUVER`` (absolute setpoint, send time in ``time_boot_ms``, ``cmd_seq``
+1, 2, ...). Every command sent is logged (JSONL, written atomically at the end).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from daa_sil.frames import geodetic_to_enu
+from daa_sil.kinematics import AircraftState
+from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec
+from daa_sil.link.codec import mavlink as M
+from daa_sil.link.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint, parse_udp_address
+
+GCS_SYSID, GCS_COMPID = 255, 190
+VEHICLE_SYSID = 1
+AUTHORITY_NAMES = ("pilot", "daa", "hold")
+DECISION_NAMES = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
+
+
+@dataclass
+class GcsOptions:
+    """Runtime options (addresses ``udp:HOST:PORT``)."""
+
+    vehicle: str = "udp:127.0.0.1:14601"
+    listen: str = "udp:127.0.0.1:14550"
+    clock: str = "realtime"
+    speed: float = 1.0
+    key: "bytes | None" = None
+    pilot: "str | None" = None  #: "model" / "scripted" (default: the scenario's)
+    log: "Path | None" = None
+    display: bool = True
+
+
+@dataclass
+class View:
+    """The newest telemetry the GCS has (vehicle sim times in s)."""
+
+    own: "tuple | None" = None  #: (t, x, y, z, gs, trk, vs) ENU
+    intruders: dict = field(default_factory=dict)  #: icao -> (x, y, z, gs, trk, vs)
+    callsigns: dict = field(default_factory=dict)
+    authority: str = "?"
+    decision: str = "?"
+    wait_s: float = math.nan
+    alert_regions: int = 0
+    last_t: float = math.nan
+    acks: int = 0
+    statustext: list = field(default_factory=list)
+
+
+class GcsNode:
+    """The GCS process logic. ``await start()``, then ``await run()`` until stopped."""
+
+    def __init__(self, scenario, opts: GcsOptions):
+        self.sc = scenario
+        self.opts = opts
+        self.peer = parse_udp_address(opts.vehicle, "--vehicle", allow_port_zero=False)
+        self.codec = MavCodec(GCS_SYSID, GCS_COMPID, key=opts.key)
+        self.ep: "MavEndpoint | None" = None
+        self.view = View()
+        self.mode = opts.pilot or (scenario.pilot.mode if scenario is not None else "scripted")
+        self.origin = scenario.origin if scenario is not None else None
+        self.order = [i.id for i in scenario.intruders] if scenario is not None else []
+        self.pilot = None
+        if self.mode == "model":
+            from daa_sil.latency import as_seed_sequence, child_seed
+            from daa_sil.pilot import PilotConfig, PilotModel
+
+            seed = child_seed(as_seed_sequence(scenario.seed if scenario is not None else 0), 2)
+            self.pilot = PilotModel(1, [seed], PilotConfig(mode=scenario.pilot.response if scenario else "guendel"))
+        self.seq = 0
+        self.sent: list[dict] = []
+        self.done_tick = -1
+        self.steps = 0
+        self.stop = asyncio.Event()
+        self._wall0: "float | None" = None
+        self._t_sync = 0.0
+
+    async def start(self) -> None:
+        """Bind, then greet the vehicle side with a HEARTBEAT (a shim learns our address from it)."""
+        self.ep = await open_endpoint(self.codec, self.opts.listen, peer=self.peer, learn_peer=False,
+                                      allow_sysids=[VEHICLE_SYSID])
+        self.ep.send(self._heartbeat())
+
+    @property
+    def local_address(self) -> str:
+        return format_udp_address(self.ep.local_address)
+
+    def close(self) -> None:
+        if self.ep is not None:
+            self.ep.close()
+
+    # -- telemetry in ---------------------------------------------------------------------------
+    def _enu(self, lat_e7: int, lon_e7: int, alt_mm: int) -> tuple:
+        o = self.origin
+        lat0, lon0, alt0 = (o.lat_deg, o.lon_deg, o.alt_m) if o is not None else (lat_e7 / 1e7, lon_e7 / 1e7, 0.0)
+        x, y, z = geodetic_to_enu(lat_e7 / 1e7, lon_e7 / 1e7, alt_mm / 1000.0, lat0, lon0, alt0)
+        return float(x), float(y), float(z)
+
+    def handle(self, r: Received) -> None:
+        """Take in one telemetry message (never raises on content)."""
+        m = r.msg
+        t = m.get_type()
+        v = self.view
+        if t == "LOCAL_POSITION_NED":
+            gs = math.hypot(m.vx, m.vy)
+            v.own = (m.time_boot_ms / 1000.0, float(m.y), float(m.x), -float(m.z), gs,
+                     math.atan2(m.vy, m.vx) % (2 * math.pi), -float(m.vz))
+            v.last_t = m.time_boot_ms / 1000.0
+        elif t == "GLOBAL_POSITION_INT" and self.origin is not None and v.own is None:
+            x, y, z = self._enu(m.lat, m.lon, m.alt)
+            vn, ve = m.vx / 100.0, m.vy / 100.0
+            v.own = (m.time_boot_ms / 1000.0, x, y, z, math.hypot(vn, ve), math.atan2(ve, vn) % (2 * math.pi),
+                     -m.vz / 100.0)
+        elif t == "ADSB_VEHICLE" and m.flags & M.ADSB_FLAGS_VALID_COORDS:
+            x, y, z = self._enu(m.lat, m.lon, m.altitude)
+            v.intruders[int(m.ICAO_address)] = (x, y, z, m.hor_velocity / 100.0, math.radians(m.heading / 100.0),
+                                                m.ver_velocity / 100.0)
+            v.callsigns[int(m.ICAO_address)] = m.callsign
+        elif t == "ALLOCATION_DECISION":
+            v.authority = AUTHORITY_NAMES[m.authority] if m.authority < 3 else "?"
+            v.decision = DECISION_NAMES[m.decision] if m.decision < len(DECISION_NAMES) else "?"
+            v.wait_s = m.wait_s
+        elif t == "DAA_BANDS" and m.part == 0:
+            v.alert_regions = max([int(x) for x in m.region[:m.count] if int(x) in (1, 2, 3)] or [0])
+        elif t == "COMMAND_ACK":
+            v.acks += 1
+        elif t == "STATUSTEXT":
+            v.statustext = (v.statustext + [m.text])[-5:]
+
+    def observed(self) -> "tuple[AircraftState, AircraftState] | None":
+        """Observed ownship (1,) and intruders (1, M) in scenario order, or None before telemetry."""
+        v = self.view
+        if v.own is None or not v.intruders:
+            return None
+        order = [i for i in self.order if i in v.intruders] or sorted(v.intruders)
+        o = v.own
+        own = AircraftState(*(np.array([val]) for val in o[1:]))
+        arr = np.array([v.intruders[i] for i in order])
+        intr = AircraftState(*(arr[None, :, k] for k in range(6)))
+        return own, intr
+
+    # -- pilot ------------------------------------------------------------------------------------
+    def pilot_commands(self, t: float) -> list[dict]:
+        """Commands (dicts: track_deg, vs_mps, gs_mps, kind) the pilot sends at sim time ``t``."""
+        if self.mode == "scripted":
+            out = []
+            for c in (self.sc.pilot.commands if self.sc is not None else []):
+                if c.t_s - 1e-9 <= t < c.until_s - 1e-9:
+                    out.append({"track_deg": c.track_deg, "vs_mps": c.vs_mps, "gs_mps": c.gs_mps, "kind": "scripted"})
+            return out[-1:]
+        obs = self.observed()
+        if obs is None:
+            return []
+        own, intr = obs
+        po = self.pilot.step(t, own, observed_intr=intr)
+        if not bool(po.send[0]):
+            return []
+        kind = "hold" if int(po.maneuver[0]) == 0 else f"maneuver{int(po.maneuver[0])}"
+        trk = float(po.cmd.trk[0])
+        return [{"track_deg": math.degrees(trk) % 360.0 if math.isfinite(trk) else math.nan,
+                 "vs_mps": float(po.cmd.vs[0]), "gs_mps": float(po.cmd.gs[0]), "kind": kind,
+                 "axis": str(po.axis_names()[0]), "dir": str(po.direction_names()[0])}]
+
+    def _heartbeat(self):
+        return M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE, 3)
+
+    def step(self, t: float) -> int:
+        """Run the pilot at ``t`` (s) and send its commands plus a HEARTBEAT; returns messages sent."""
+        msgs = [self._heartbeat()]
+        for c in self.pilot_commands(t):
+            self.seq += 1
+            msgs.append(M.MAVLink_pilot_maneuver_message(int(round(t * 1000)), self.seq, VEHICLE_SYSID, 1,
+                                                         c["track_deg"], c["vs_mps"], c["gs_mps"]))
+            self.sent.append({"t": t, "seq": self.seq, "wall_s": round(time.time(), 3), **c})
+        self.ep.send_many(msgs)
+        self.steps += 1
+        if self.opts.display:
+            self.display(t, len(msgs) - 1)
+        return len(msgs)
+
+    def display(self, t: float, n_cmd: int) -> None:
+        from .display import render_line
+
+        render_line(self, t, n_cmd)
+
+    # -- loops ------------------------------------------------------------------------------------
+    async def run(self) -> None:
+        """Run until :attr:`stop` is set (lockstep: driven by ticks; realtime: by the wall clock)."""
+        if self.opts.clock == "lockstep":
+            await self._run_lockstep()
+        else:
+            await self._run_realtime()
+
+    async def _run_lockstep(self) -> None:
+        while not self.stop.is_set():
+            try:
+                r = await asyncio.wait_for(self.ep.inbox.get(), 0.1)
+            except asyncio.TimeoutError:
+                continue
+            if r.msg.get_type() != "SIM_TICK":
+                self.handle(r)
+                continue
+            k, t = int(r.msg.tick), r.msg.time_ms / 1000.0
+            n = 0
+            if k > self.done_tick:
+                n = self.step(t)
+                self.done_tick = k
+            ack = self.codec.encode(M.MAVLink_sim_tick_ack_message(k, r.msg.time_ms, min(n, 65535)),
+                                    link_id=CONTROL_LINK_ID if self.codec.signed else None)
+            self.ep.transport.sendto(ack, self.peer)
+
+    def sim_now(self, loop) -> "float | None":
+        if self._wall0 is None:
+            return None
+        return self._t_sync + (loop.time() - self._wall0) * self.opts.speed
+
+    async def _run_realtime(self) -> None:
+        from daa_sil.scenario import delay_models
+
+        loop = asyncio.get_running_loop()
+        assumed_down = delay_models(self.sc)[1].mean() if self.sc is not None else 0.0
+        next_t = None
+        while not self.stop.is_set():
+            now = self.sim_now(loop)
+            timeout = 0.2 if now is None or next_t is None else max(0.0, (next_t - now) / self.opts.speed)
+            try:
+                r = await asyncio.wait_for(self.ep.inbox.get(), timeout)
+                self.handle(r)
+                if self._wall0 is None and not math.isnan(self.view.last_t):
+                    self._wall0, self._t_sync = loop.time(), self.view.last_t + assumed_down
+                    next_t = math.ceil(self._t_sync)
+                continue
+            except asyncio.TimeoutError:
+                pass
+            now = self.sim_now(loop)
+            if now is not None and next_t is not None and now >= next_t - 1e-6:
+                self.step(float(next_t))
+                next_t += 1.0
+
+    def write_log(self) -> "Path | None":
+        """Write the commands sent (JSONL) atomically."""
+        if self.opts.log is None:
+            return None
+        from daa_sil.io import atomic_write_text, to_jsonable
+
+        text = "".join(json.dumps(to_jsonable(r), sort_keys=True) + "\n" for r in self.sent)
+        return atomic_write_text(self.opts.log, text)

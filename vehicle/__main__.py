@@ -1,0 +1,7 @@
+"""``python -m vehicle`` = ``daa-vehicle``."""
+
+import sys
+
+from vehicle.cli import main
+
+sys.exit(main())

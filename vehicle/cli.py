@@ -1,0 +1,139 @@
+"""``daa-vehicle SCENARIO``: the SIL vehicle process (ownship, intruders, onboard DAA + allocation agent).
+
+Like a SITL autopilot it streams telemetry to a GCS at ``--out`` and takes pilot commands from
+that peer. Prints ``READY listen=udp:HOST:PORT out=...`` once bound (orchestrators read it), one
+progress line per 10 sim seconds unless ``--quiet``, and a one-line summary at the end. Errors are
+one line (``daa-vehicle: error: ...``, exit 2 for bad input, 1 for a failed run); Ctrl-C / SIGTERM
+write the step log so far and exit 130 / 143.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import signal
+import sys
+from pathlib import Path
+
+from daa_sil.errors import DaaSilError, UsageError
+
+EXAMPLES = """examples:
+  # stream to a GCS (or MAVProxy/QGC) on 14550, real time
+  daa-vehicle scenarios/head_on.yaml
+
+  # behind the delay shim, lockstep (what `daa-sil run` does), with a step log
+  daa-vehicle scenarios/head_on.yaml --out udp:127.0.0.1:14601 --clock lockstep --steplog run.parquet
+
+  # 10x real time, undelayed truth copy for QGroundControl on 14550
+  daa-vehicle scenarios/crossing_left.yaml --out udp:127.0.0.1:14601 --speed 10 --tap udp:127.0.0.1:14550
+"""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="daa-vehicle", description=__doc__.splitlines()[0], epilog=EXAMPLES,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("scenario", type=Path, help="scenario YAML file")
+    p.add_argument("--out", default="udp:127.0.0.1:14550", metavar="udp:HOST:PORT",
+                   help="GCS (or delay shim) to stream to and take commands from (default udp:127.0.0.1:14550)")
+    p.add_argument("--listen", default="udp:127.0.0.1:0", metavar="udp:HOST:PORT",
+                   help="local socket (default udp:127.0.0.1:0 = OS-chosen port)")
+    p.add_argument("--tap", default=None, metavar="udp:HOST:PORT|none",
+                   help="undelayed observer copy of the telemetry (QGC/MAVProxy); commands from it are ignored")
+    p.add_argument("--clock", choices=("realtime", "lockstep"), default="realtime",
+                   help="realtime (wall clock x --speed, default) or lockstep (SIM_TICK / SIM_TICK_ACK)")
+    p.add_argument("--speed", type=float, default=1.0, metavar="X", help="realtime speed factor (default 1)")
+    p.add_argument("--key", type=Path, metavar="FILE", help="MAVLink 2 signing key file")
+    p.add_argument("--steplog", type=Path, metavar="FILE", help="write the step log (Parquet) here")
+    p.add_argument("--tick-timeout", type=float, default=10.0, metavar="S",
+                   help="lockstep: wall seconds to wait for a SIM_TICK_ACK (default 10)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    return p
+
+
+def _options(args):
+    import math
+
+    from vehicle.node import VehicleOptions
+
+    if not (math.isfinite(args.speed) and 0.01 <= args.speed <= 1000):
+        raise UsageError(f"--speed must be within [0.01, 1000], got {args.speed:g}")
+    if not (math.isfinite(args.tick_timeout) and 0.1 <= args.tick_timeout <= 3600):
+        raise UsageError(f"--tick-timeout must be within [0.1, 3600] s, got {args.tick_timeout:g}")
+    key = None
+    if args.key is not None:
+        from daa_sil.link.codec import load_key
+
+        key = load_key(args.key)
+    tap = None if args.tap in (None, "", "none") else args.tap
+    return VehicleOptions(out=args.out, listen=args.listen, tap=tap, clock=args.clock, speed=args.speed, key=key,
+                          steplog=args.steplog, tick_timeout_s=args.tick_timeout)
+
+
+async def _amain(args) -> int:
+    from daa_sil.link.endpoint import format_udp_address
+    from daa_sil.scenario import load_scenario
+    from vehicle.node import VehicleNode
+
+    sc = load_scenario(args.scenario)
+    opts = _options(args)
+    node = VehicleNode(sc, opts)
+    await node.start()
+    loop = asyncio.get_running_loop()
+    task = asyncio.current_task()
+    got = {}
+
+    def on_signal(signum):
+        got["sig"] = signum
+        task.cancel()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, on_signal, sig)
+    print(f"READY listen={node.local_address} out={format_udp_address(node.peer)} clock={opts.clock} "
+          f"scenario={sc.name} steps={node.core.n_steps}", flush=True)
+
+    def progress(nd, out):
+        if not args.quiet and nd.k % 10 == 0:
+            print(f"t={nd.t:5.0f}s authority={nd.core.last_authority:5s} decision={nd.core.last_decision}",
+                  flush=True)
+
+    try:
+        await node.run(on_step=progress)
+    except asyncio.CancelledError:
+        path = node.write_steplog()
+        node.close()
+        sig = got.get("sig", signal.SIGINT)
+        print(f"daa-vehicle: stopped by signal {sig} at t = {node.t:g} s"
+              + (f"; step log ({node.stats.steps} steps) in {path}" if path else ""), flush=True)
+        return 128 + int(sig)
+    except BaseException:
+        node.write_steplog()
+        node.close()
+        raise
+    path = node.write_steplog()
+    st = node.ep.stats()
+    node.close()
+    g = node.gate.counters
+    print(f"daa-vehicle: done, {node.stats.steps} steps; commands accepted {g.accepted}, dropped "
+          f"{g.duplicate + g.older + g.future + g.invalid} (dup {g.duplicate}, older {g.older}, future {g.future}, "
+          f"invalid {g.invalid}); packets dropped {st['dropped']}"
+          + (f"; step log {path}" if path else ""), flush=True)
+    return 0
+
+
+def main(argv: "list[str] | None" = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return asyncio.run(_amain(args))
+    except DaaSilError as exc:
+        if os.environ.get("DAA_SIL_DEBUG"):
+            raise
+        print(f"daa-vehicle: error: {exc}", file=sys.stderr, flush=True)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        return 130

@@ -1,0 +1,192 @@
+"""Glue between a scenario and :class:`daa_sil.onboard.OnboardCore` with N = 1 (no I/O).
+
+:class:`VehicleCore` builds the onboard core from a scenario exactly as fast-time does
+(:func:`daa_sil.scenario.encounter_set` for truth and scripts, the group's
+:class:`~daa_sil.agent.AllocationPolicy` with the scenario's overrides, the cached wait-map
+family), turns accepted pilot commands into the agent's :class:`~daa_sil.agent.PilotInput`, keeps
+one step-log row per step and encodes the telemetry of a step as MAVLink messages.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from daa_sil import agent as A
+from daa_sil.kinematics import Command
+from daa_sil.scenario import Scenario, encounter_set
+
+from . import telemetry as T
+from .commands import PilotCommand
+
+
+def build_policy(sc: Scenario) -> "A.AllocationPolicy":
+    """The group's policy with the scenario's explicit overrides (wait mode, W_T, timeouts, blending)."""
+    al = sc.allocation
+    pol = A.policy_for_group(al.group)
+    changes = {"wait_mode": al.wait, "blending": al.blending, "wait_threshold_s": al.wait_threshold_s,
+               "constant_wait_s": al.wait_constant_s}
+    if al.link_timeout_s is not None:
+        changes["link_timeout_s"] = al.link_timeout_s
+    if al.stale_command_s is not None:
+        changes["stale_command_s"] = al.stale_command_s
+    return replace(pol, **changes)
+
+
+def build_onboard(sc: Scenario, policy=None):
+    """``(OnboardCore, EncounterSet, policy)`` for scenario ``sc`` (N = 1)."""
+    from daa_sil.daa.config import DaaConfig
+    from daa_sil.onboard import OnboardCore
+
+    es = encounter_set(sc)
+    policy = policy or build_policy(sc)
+    daa_cfg = DaaConfig(thresholds=sc.thresholds)
+    lookup = None
+    if policy.wait_mode == "map":
+        from daa_sil import waitmap
+
+        lookup = A.make_wait_lookup(waitmap.default_family(preset="paper"), cfg=daa_cfg)
+    core = OnboardCore(es.own, es.intr, es.intruder_controls, policy, daa_cfg, lookup, thresholds=sc.thresholds)
+    return core, es, policy
+
+
+def track_intervals(values_deg: np.ndarray, regions: np.ndarray) -> tuple[list, list, list]:
+    """Merge ordered track band samples (deg) with region codes into ``(lo, hi, region name)`` lists."""
+    from daa_sil.daa.config import REGION_NAMES
+
+    lo, hi, rg = [], [], []
+    cur = None
+    for v, r in zip(values_deg, regions):
+        if not np.isfinite(v) or r < 0:
+            continue
+        if cur is not None and cur[2] == r:
+            cur[1] = float(v)
+        else:
+            if cur is not None:
+                lo.append(cur[0]); hi.append(cur[1]); rg.append(REGION_NAMES[cur[2]])  # noqa: E702
+            cur = [float(v), float(v), int(r)]
+    if cur is not None:
+        lo.append(cur[0]); hi.append(cur[1]); rg.append(REGION_NAMES[cur[2]])  # noqa: E702
+    return lo, hi, rg
+
+
+class VehicleCore:
+    """Scenario + OnboardCore (N = 1) + pilot-command intake + step-log rows + telemetry encoding."""
+
+    def __init__(self, sc: Scenario, policy=None):
+        self.sc = sc
+        self.core, self.es, self.policy = build_onboard(sc, policy)
+        self.dt = 1.0
+        self.n_steps = sc.n_steps
+        self._new: list[PilotCommand] = []
+        self.last_cmd: "PilotCommand | None" = None
+        self.last_gcs_data_t = math.nan
+        self.last_authority = "pilot"
+        self.last_decision = "none"
+        self.rows: list[dict] = []
+        self.delay_up_s = math.nan
+        self.delay_down_s = math.nan
+        self.icao = [i.id for i in sc.intruders]
+        self.callsigns = [i.callsign for i in sc.intruders]
+
+    # -- inputs -----------------------------------------------------------------------------------
+    def note_gcs_data(self, t: float) -> None:
+        """A data packet (not lockstep control) from the GCS arrived at vehicle sim time ``t`` (s)."""
+        self.last_gcs_data_t = t
+
+    def add_command(self, cmd: PilotCommand) -> None:
+        """An accepted (gate-checked) pilot command; the newest per step goes to the agent."""
+        self._new.append(cmd)
+
+    def pilot_input(self, t: float) -> "A.PilotInput":
+        """The agent's input for step ``t``: the newest command accepted since the last step."""
+        alive = self.last_gcs_data_t
+        if not self._new:
+            return A.PilotInput.nothing(1, link_alive_t=alive)
+        c = max(self._new, key=lambda x: (x.t_sent, x.seq))
+        self._new.clear()
+        self.last_cmd = c
+        trk = math.radians(c.track_deg) if math.isfinite(c.track_deg) else math.nan
+        return A.PilotInput(np.array([True]), Command(np.array([trk]), np.array([c.vs_mps]), np.array([c.gs_mps])),
+                            np.array([c.t_sent]), np.array([t]), np.array([alive], float))
+
+    # -- step ---------------------------------------------------------------------------------------
+    def step(self, t: float):
+        """One OnboardCore step at ``t`` (s); returns its StepOutput and records the step-log row."""
+        out = self.core.step(t, self.pilot_input(t))
+        dec = A.decode(out.decisions)
+        self.last_authority = str(dec["authority"][0])
+        self.last_decision = str(dec["decision"][0])
+        self.rows.append(self._row(out, dec))
+        return out
+
+    def _row(self, out, dec) -> dict:
+        o, it, g = out.own, out.intruders, out.geometry
+
+        def deg(a):
+            return float(np.degrees(a)) if np.isfinite(a) else math.nan
+
+        lo, hi, rg = track_intervals(np.asarray(out.decisions["bands_trk"][0], float),
+                                     np.asarray(out.decisions["bands_trk_region"][0]))
+        row = {"encounter_id": 0, "step": out.step, "t": out.t,
+               "own_x": float(o.x[0]), "own_y": float(o.y[0]), "own_z": float(o.z[0]), "own_gs": float(o.gs[0]),
+               "own_trk_deg": deg(o.trk[0]), "own_vs": float(o.vs[0]),
+               "intr_x": it.x[0].tolist(), "intr_y": it.y[0].tolist(), "intr_z": it.z[0].tolist(),
+               "intr_gs": it.gs[0].tolist(), "intr_trk_deg": np.degrees(it.trk[0]).tolist(),
+               "intr_vs": it.vs[0].tolist(), "range_m": g["range_m"][0].tolist(), "hmd_m": g["hmd_m"][0].tolist(),
+               "dh_m": g["dh_m"][0].tolist(), "tau_mod_s": g["tau_mod_s"][0].tolist(),
+               "alert_level": np.asarray(out.telemetry.alert_level[0]).astype(int).tolist(),
+               "wcv": np.asarray(g["wcv"][0]).astype(bool).tolist(),
+               "lowc": bool(out.lowc[0]), "nmac": bool(out.nmac[0]),
+               "delay_up_s": self.delay_up_s, "delay_down_s": self.delay_down_s,
+               "bands_trk_lo_deg": lo, "bands_trk_hi_deg": hi, "bands_trk_region": rg}
+        for k in ("decision", "rule", "authority", "pilot_axis", "pilot_dir", "exec_axis", "exec_dir"):
+            row[k] = str(dec[k][0])
+        for k in ("wait_s", "pilot_cmd_age_s", "sm_pilot", "sm_exec", "cmd_vs", "cmd_gs", "pilot_vs", "pilot_gs",
+                  "daa_vs", "daa_gs"):
+            row[k] = float(dec[k][0])
+        for k in ("cmd_trk", "pilot_trk", "daa_trk"):
+            row[f"{k}_deg"] = deg(float(dec[k][0]))
+        row["projl"] = bool(dec["projl"][0])
+        row["pilot_cmd_received"] = bool(dec["pilot_cmd_received"][0])
+        return row
+
+    # -- outputs ------------------------------------------------------------------------------------
+    def telemetry_messages(self, t: float, out) -> list:
+        """MAVLink messages for step ``t`` (heartbeat, time, position, attitude, ADS-B, bands, decision)."""
+        row = self.rows[-1]
+        own = out.own
+        turn = 0.0
+        if np.isfinite(row["cmd_trk_deg"]):
+            d = (row["cmd_trk_deg"] - row["own_trk_deg"] + 180.0) % 360.0 - 180.0
+            turn = math.radians(max(-3.0, min(3.0, d)))
+        ko = T.Kin(float(own.x[0]), float(own.y[0]), float(own.z[0]), float(own.gs[0]), float(own.trk[0]),
+                   float(own.vs[0]), turn)
+        msgs = [T.heartbeat(self.last_authority), T.system_time(t), T.global_position(t, ko, self.sc.origin),
+                T.local_position(t, ko), T.attitude(t, ko)]
+        it = out.intruders
+        for j in range(it.shape[1]):
+            kj = T.Kin(float(it.x[0, j]), float(it.y[0, j]), float(it.z[0, j]), float(it.gs[0, j]),
+                       float(it.trk[0, j]), float(it.vs[0, j]))
+            msgs.append(T.adsb_vehicle(self.icao[j], self.callsigns[j], kj, self.sc.origin))
+        msgs += T.track_bands(t, row["bands_trk_lo_deg"], row["bands_trk_hi_deg"], row["bands_trk_region"])
+        seq = self.last_cmd.seq if self.last_cmd is not None else 0
+        msgs.append(T.allocation_decision(t, row, seq, row["pilot_cmd_age_s"]))
+        return msgs
+
+    def steplog_table(self):
+        """The rows so far as a step-log ``pyarrow.Table`` (schema of :mod:`daa_sil.steplog`)."""
+        import pyarrow as pa
+
+        from daa_sil.steplog import STEP_SCHEMA
+
+        cols = {name: [r.get(name, math.nan) for r in self.rows] for name in STEP_SCHEMA.names}
+        return pa.Table.from_pydict(cols, schema=STEP_SCHEMA)
+
+    def write_steplog(self, path: "str | Path", meta: dict) -> Path:
+        from daa_sil.steplog import write_steplog
+
+        return write_steplog(self.steplog_table(), path, metadata=meta)
