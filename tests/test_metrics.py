@@ -1,0 +1,112 @@
+"""Metrics against hand-worked tables; intervals recomputed independently with scipy."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from daa_sil import metrics as M
+from daa_sil.errors import FileFormatError, UsageError
+
+
+def table(group="ID-2", n=10_000, lowc_idx=(5, 77, 901), lowc_dur=2.0, **counts):
+    t = {"group": np.array([group] * n), "encounter_id": np.arange(n), "duration_s": np.full(n, 240.0),
+         "lowc": np.zeros(n, bool), "nmac": np.zeros(n, bool), "lowc_duration_s": np.zeros(n), "pi": np.zeros(n),
+         "dev_h_m": np.zeros(n), "dev_v_m": np.zeros(n)}
+    for c in ("n_wait", "n_no_wait", "n_pilot_received", "n_pilot_exec", "n_blend", "n_blend_exact", "n_blend_axis",
+              "n_daa_override"):
+        t[c] = np.zeros(n, np.int64)
+    t["lowc"][list(lowc_idx)] = True
+    t["lowc_duration_s"][list(lowc_idx)] = lowc_dur
+    for k, v in counts.items():
+        t[k] = np.asarray(v)
+    return t
+
+
+def merge(*ts):
+    return {k: np.concatenate([t[k] for t in ts]) for k in ts[0]}
+
+
+def test_three_lowc_in_10000_encounters_of_240_s():
+    m = M.group_metrics(table())
+    hours = 10_000 * 240 / 3600  # 666.67 h
+    assert m["flight_hours"] == pytest.approx(hours)
+    assert m["p_lowc"].value == pytest.approx(3e-4)
+    assert m["p_lowc"].lo == pytest.approx(stats.beta.ppf(0.025, 3, 9998))
+    assert m["p_lowc"].hi == pytest.approx(stats.beta.ppf(0.975, 4, 9997))
+    # event rate: 3 / 666.67 h = 4.5e-3 per hour, exact Poisson bounds chi2/2
+    assert m["lowc_rate_per_hr"].value == pytest.approx(0.0045)
+    assert m["lowc_rate_per_hr"].lo == pytest.approx(stats.chi2.ppf(0.025, 6) / 2 / hours)
+    assert m["lowc_rate_per_hr"].hi == pytest.approx(stats.chi2.ppf(0.975, 8) / 2 / hours)
+    # paper Eq.: 6 LoWC steps of 2.4e6 -> 2.5e-6, / 666.67 h = 3.75e-9 -> Extremely Remote
+    assert m["p_lowc_per_hr"].value == pytest.approx(2.5e-6 / hours)
+    assert m["p_lowc_per_hr"].value == pytest.approx(3.75e-9)
+    assert m["p_lowc_per_hr"].hi == pytest.approx(stats.beta.ppf(0.975, 7, 2_400_000 - 6) / hours)
+    assert M.faa_category(m["p_lowc_per_hr"].value) == "Extremely Remote"
+
+
+def test_zero_counts_give_upper_bounds():
+    m = M.group_metrics(table(lowc_idx=()))
+    assert m["n_nmac"].value == 0 and m["p_nmac"].lo == 0
+    assert m["p_nmac"].hi == pytest.approx(1 - 0.025 ** (1 / 10_000))
+    assert m["p_nmac"].hi < 3.7 / 10_000 and "rule of three" in m["p_nmac"].note
+    assert m["daa_override"].hi == pytest.approx(-math.log(0.025))  # Poisson k=0 upper = 3.689
+    assert math.isnan(m["pi_mean"].value) and m["pi_mean"].note == "no LoWC"
+    assert math.isnan(m["exact_match"].value)
+
+
+def test_faa_categories_from_paper_table():
+    assert M.faa_category(2.22e-7) == "Remote"
+    assert M.faa_category(5e-4) == "Probable"
+    assert M.faa_category(0.01) == "Frequent"
+    assert M.faa_category(5e-9) == "Extremely Remote"
+    assert M.faa_category(1e-10) == "Extremely Improbable"
+    assert M.faa_category(1e-7) == "Remote"  # boundary goes to the more frequent band
+
+
+def test_reduction_and_reception_vs_b2_by_hand():
+    n = 100
+    b2 = table("B-2", n, lowc_idx=(), n_no_wait=np.full(n, 9), n_pilot_received=np.full(n, 80))
+    id2 = table("ID-2", n, lowc_idx=(), n_no_wait=np.r_[np.ones(50, int), np.zeros(50, int)],
+                n_wait=np.full(n, 8), n_pilot_received=np.full(n, 92), n_blend=np.full(n, 5),
+                n_blend_exact=np.r_[np.full(50, 4), np.full(50, 5)])
+    res = M.compute_metrics(merge(b2, id2))
+    r = res["ID-2"]
+    assert r["no_wait"].value == 50 and res["B-2"]["no_wait"].value == 900
+    assert r["no_wait_reduction_pct"].value == pytest.approx(100 * (1 - 50 / 900))
+    # exact conditional interval: k=50 of 950 binomial, CP on p, RR = p/(1-p)
+    lo_p, hi_p = stats.beta.ppf(0.025, 50, 901), stats.beta.ppf(0.975, 51, 900)
+    assert r["no_wait_reduction_pct"].lo == pytest.approx(100 * (1 - hi_p / (1 - hi_p)))
+    assert r["no_wait_reduction_pct"].hi == pytest.approx(100 * (1 - lo_p / (1 - lo_p)))
+    assert r["received_change_pct"].value == pytest.approx(15.0)
+    assert r["exact_match"].value == pytest.approx(450 / 500)
+    assert r["exact_match"].lo == pytest.approx(stats.beta.ppf(0.025, 450, 51))
+    assert "no_wait_reduction_pct" not in res["B-2"]
+
+
+def test_means_use_student_t():
+    t = table(n=4, lowc_idx=(0, 1), dev_h_m=np.array([1.0, 2.0, 3.0, 6.0]), pi=np.array([0.5, 1.5, 0, 0]))
+    m = M.group_metrics(t)
+    h = stats.t.ppf(0.975, 3) * np.std([1, 2, 3, 6], ddof=1) / 2
+    assert m["dev_h_mean"].value == 3.0 and m["dev_h_mean"].hi == pytest.approx(3.0 + h)
+    assert m["pi_mean"].value == 1.0 and m["pi_max"].value == 1.5
+
+
+def test_wilson_matches_formula():
+    lo, hi = M.wilson(3, 10)
+    z = stats.norm.ppf(0.975)
+    c = (0.3 + z * z / 20) / (1 + z * z / 10)
+    assert (lo + hi) / 2 == pytest.approx(c)
+
+
+def test_errors_are_clear():
+    t = table(n=3, lowc_idx=())
+    with pytest.raises(UsageError, match="no encounters"):
+        M.group_metrics(t, "B-1")
+    bad = dict(t)
+    bad.pop("pi")
+    with pytest.raises(FileFormatError, match="pi"):
+        M.compute_metrics(bad)
+    with pytest.raises(UsageError):
+        M.compute_metrics([1, 2, 3])
