@@ -175,17 +175,13 @@ class CampaignConfig:
 
 
 def encounter_seeds(campaign_seed: int, encounter_ids: np.ndarray) -> np.ndarray:
-    """Per-encounter seeds (int64 >= 0): ``SeedSequence(campaign_seed, spawn_key=(i,))`` hashed to 63 bits.
+    """Per-encounter seeds (int64 >= 0): ``SeedSequence(campaign_seed, spawn_key=(i,))`` hashed to 63 bits
+    (:func:`daa_sil.encounters.encounter_seed`). ``SeedSequence(seed_i)`` is the root of every random
+    stream of encounter ``i`` in every group (:func:`daa_sil.fasttime.encounter_streams`), so one
+    encounter can be replayed (e.g. in the SIL) from its ``seed`` column alone."""
+    from .encounters import encounter_seed
 
-    ``SeedSequence(seed_i)`` is the root of every random stream of encounter ``i`` in every group,
-    so a single encounter can be replayed (e.g. in the SIL) from its ``seed`` column alone.
-    """
-    ids = np.asarray(encounter_ids, dtype=np.int64).ravel()
-    out = np.empty(ids.size, dtype=np.int64)
-    for k, i in enumerate(ids):
-        word = np.random.SeedSequence(int(campaign_seed), spawn_key=(int(i),)).generate_state(1, np.uint64)[0]
-        out[k] = int(word >> np.uint64(1))
-    return out
+    return encounter_seed(int(campaign_seed), encounter_ids)
 
 
 # --- chunk task (runs in a worker) ----------------------------------------------------------------
@@ -414,9 +410,9 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
             raise FileFormatError(f"{enc_path} holds {len(encs)} encounters, campaign.json says {config.n_encounters}")
         return out, config, encs
     ensure_dir(out)
-    encs = enc_mod.sample_encounters(config.n_encounters, seed=config.seed)
-    with atomic_path(enc_path) as tmp:
-        enc_mod.save_encounters(encs, tmp)
+    encs = enc_mod.sample_encounters(config.n_encounters, seed=config.seed, preset=config.preset,
+                                     duration_s=config.duration_s, dt_s=config.dt_s)
+    enc_mod.save_encounters(encs, enc_path)  # atomic
     meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "versions": _versions(),
             "preset": config.preset, "seed": config.seed, "status": "running",
             "groups": {g: asdict(paper_groups()[g]) for g in config.groups},
@@ -434,11 +430,11 @@ def run_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", *, worker
         raise UsageError(f"--workers must be a positive integer, got {workers!r}")
     t_start = time.perf_counter()
     out, config, encs = prepare_campaign(config, out_dir, resume)
-    seeds = encounter_seeds(config.seed, np.arange(config.n_encounters))
+    seeds = np.asarray(encs.seed, dtype=np.int64)
     todo, skipped = [], 0
     for g in config.groups:
         for c in range(config.n_chunks):
-            if resume and chunk_done(out, g, c):
+            if chunk_done(out, g, c):
                 skipped += 1
             else:
                 todo.append((g, c))
@@ -452,11 +448,12 @@ def run_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", *, worker
             lo, hi = config.chunk_range(c)
             task = ChunkTask(g, c, config, encs.subset(np.arange(lo, hi)), seeds[lo:hi])
             futs[ex.submit(run_chunk, task)] = (g, c)
+        todo_set = set(todo)
         with _progress(progress) as prog:
             bars = {}
             for g in config.groups:
                 done = sum(config.chunk_range(c)[1] - config.chunk_range(c)[0]
-                           for c in range(config.n_chunks) if (g, c) not in set(todo))
+                           for c in range(config.n_chunks) if (g, c) not in todo_set)
                 bars[g] = prog.add_task(f"group {g:5s}", total=config.n_encounters, completed=done)
             for fut in cf.as_completed(list(futs)):
                 futs.pop(fut)

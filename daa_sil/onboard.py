@@ -1,0 +1,188 @@
+"""The vehicle's per-step logic as a batched sans-IO state machine (step 2 of the step order).
+
+:class:`OnboardCore` is used by fast-time with N encounters and by the SIL vehicle process with
+N = 1, so the two run the same code (parity by construction). It holds the truth state (ownship
+``(N,)``, intruders ``(N, M)``, the intruders' scripted controls), the agent memory, the wait-map
+lookup, the DAA configuration and the allocation policy. :meth:`OnboardCore.step` at sim time
+``t_k``:
+
+1. runs DAA + wait map + agent (:func:`daa_sil.agent.agent_step`) on the truth state at ``t_k``
+   with the pilot input that arrived at or before ``t_k``;
+2. returns the command flown, the decision record and the telemetry for ``t_k`` (ownship,
+   intruders, alert levels, band summary) -- the caller downlinks it;
+3. advances truth by ``dt`` (ownship :func:`~daa_sil.kinematics.fly_command`, intruders
+   :func:`~daa_sil.kinematics.advance` with their scripted turn rate / accelerations);
+4. evaluates LoWC and NMAC on the continuous segment ``[t_k, t_k + dt]``
+   (:func:`daa_sil.wellclear.segment_events`; an event strictly between samples is detected),
+   the time spent in LoWC on the segment, the minimum range on it, and the penetration rate at
+   ``t_k`` (for the PI).
+
+Sans-IO: no sockets, no clock; the caller supplies ``t`` and the pilot input and moves the bytes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from . import wellclear as wc
+from .frames import to_paper_state
+from .kinematics import AircraftState, Command, Performance, advance, fly_command
+from .encounters import INTRUDER_PERFORMANCE
+from .thresholds import Thresholds, get_thresholds
+
+#: ``controls(t) -> (turn_rate rad/s compass +right, accel m/s^2, vertical_accel m/s^2)``, each (N, M)
+IntruderControls = Callable[[float], "tuple[np.ndarray, np.ndarray, np.ndarray]"]
+
+
+@dataclass
+class Telemetry:
+    """What the vehicle downlinks for sim time ``t`` (s): truth states, alert levels, band summary."""
+
+    t: float
+    own: AircraftState  #: (N,)
+    intruders: AircraftState  #: (N, M)
+    alert_level: np.ndarray  #: (N, M) int8, 0..3
+    extra: dict = field(default_factory=dict)  #: band summary arrays from the decision record
+
+
+@dataclass
+class StepOutput:
+    """Result of one :meth:`OnboardCore.step` (arrays have a leading encounter axis N)."""
+
+    step: int
+    t: float  #: s, the sample time the decision was made at
+    own: AircraftState  #: (N,) truth at t
+    intruders: AircraftState  #: (N, M) truth at t
+    command: Command  #: (N,) command flown over [t, t + dt]
+    decisions: dict  #: the agent's decision record (fields ``agent.DECISION_FIELDS``)
+    telemetry: Telemetry  #: downlink payload for t
+    geometry: dict  #: (N, M) range_m, hmd_m, dh_m, tau_mod_s, wcv at t
+    lowc: np.ndarray  #: (N,) LoWC with any intruder on [t, t + dt]
+    nmac: np.ndarray  #: (N,) NMAC with any intruder on [t, t + dt]
+    lowc_time_s: np.ndarray  #: (N,) s in LoWC on the segment (max over intruders)
+    pen_rate: np.ndarray  #: (N,) penetration rate at t (max over intruders), PI = sum * dt
+    seg_min_range_m: np.ndarray  #: (N,) minimum horizontal range on the segment (over intruders)
+    seg_vsep_m: np.ndarray  #: (N,) vertical separation at that minimum
+
+
+def _rel(own: AircraftState, intr: AircraftState) -> tuple[np.ndarray, np.ndarray]:
+    """Relative position/velocity (ownship minus intruder), (N, M, 3)."""
+    return wc.relative(own.position()[:, None, :], own.velocity()[:, None, :], intr.position(), intr.velocity())
+
+
+def band_intervals(values_deg: np.ndarray, region: np.ndarray) -> dict:
+    """Merge per-candidate track bands ``(N, K)`` (degrees, low side first; region code, -1 = none)
+    into intervals of equal region: ``bands_trk_lo_deg``, ``bands_trk_hi_deg``, ``bands_trk_region``
+    padded ``(N, R)`` and ``bands_count`` ``(N,)``. Vectorised run-length encoding."""
+    reg = np.asarray(region, dtype=np.int64)
+    vals = np.asarray(values_deg, dtype=float)
+    n, k = reg.shape
+    if k == 0:
+        z = np.zeros((n, 0))
+        return {"bands_trk_lo_deg": z, "bands_trk_hi_deg": z, "bands_trk_region": z.astype(np.int64),
+                "bands_count": np.zeros(n, np.int64)}
+    valid = reg >= 0
+    starts = valid.copy()
+    starts[:, 1:] &= reg[:, 1:] != reg[:, :-1]
+    ends = valid.copy()
+    ends[:, :-1] &= reg[:, :-1] != reg[:, 1:]
+    count = starts.sum(axis=1)
+    width = int(count.max(initial=0))
+    s_idx = np.argsort(~starts, axis=1, kind="stable")[:, :width]
+    e_idx = np.argsort(~ends, axis=1, kind="stable")[:, :width]
+    ok = np.arange(width)[None, :] < count[:, None]
+    take = lambda a, i: np.take_along_axis(a, i, axis=1)  # noqa: E731
+    return {"bands_trk_lo_deg": np.where(ok, take(vals, s_idx), np.nan),
+            "bands_trk_hi_deg": np.where(ok, take(vals, e_idx), np.nan),
+            "bands_trk_region": np.where(ok, take(reg, s_idx), 0), "bands_count": count}
+
+
+class OnboardCore:
+    """Batched vehicle logic: truth, DAA, wait map, agent. See the module docstring.
+
+    Parameters: ``own`` (N,) and ``intruders`` (N, M) initial truth states; ``controls`` the
+    intruder scripts; ``policy`` an :class:`~daa_sil.agent.AllocationPolicy`; ``daa_cfg`` a
+    :class:`~daa_sil.daa.config.DaaConfig` (its thresholds are the LoWC volume unless
+    ``thresholds`` is given); ``wait_lookup`` from :func:`daa_sil.agent.make_wait_lookup` (None when
+    the policy needs no map); ``t0`` start time (s); ``dt`` step (s); ``perf`` ownship limits
+    (default from ``daa_cfg``); ``intruder_perf`` limits for the scripted intruders.
+    """
+
+    def __init__(self, own: AircraftState, intruders: AircraftState, controls: IntruderControls, policy,
+                 daa_cfg=None, wait_lookup=None, *, thresholds: "Thresholds | str | None" = None,
+                 t0: float = 0.0, dt: float = 1.0, perf: "Performance | None" = None,
+                 intruder_perf: "Performance | None" = None, memory=None):
+        from . import agent
+        from .daa.config import DEFAULT_CONFIG
+
+        self._agent = agent
+        self.daa_cfg = daa_cfg if daa_cfg is not None else DEFAULT_CONFIG
+        self.th = get_thresholds(thresholds) if thresholds is not None else self.daa_cfg.th
+        own = own.copy()
+        intr = intruders.copy()
+        if own.x.ndim != 1 or intr.x.ndim != 2 or intr.shape[0] != own.shape[0]:
+            raise ValueError(f"own must be (N,) and intruders (N, M); got {own.shape} and {intr.shape}")
+        self.own, self.intruders = own, intr
+        self.n, self.m = intr.shape
+        self.controls = controls
+        self.policy = policy
+        self.wait_lookup = wait_lookup
+        self.dt = float(dt)
+        self.t = float(t0)
+        self.k = 0
+        self.perf = perf if perf is not None else self.daa_cfg.performance()
+        # intruders fly scripts beyond the ownship's limits (paper: up to 5 deg/s), as the sampler does
+        self.intruder_perf = intruder_perf if intruder_perf is not None else INTRUDER_PERFORMANCE
+        self.memory = memory if memory is not None else agent.AgentMemory.initial(self.n, self.own)
+
+    @classmethod
+    def from_encounters(cls, encounters, policy, daa_cfg=None, wait_lookup=None, **kw) -> "OnboardCore":
+        """Core for an :class:`~daa_sil.encounters.EncounterSet` (initial states at t = 0, its scripts)."""
+        return cls(encounters.own, encounters.intr, encounters.intruder_controls, policy, daa_cfg, wait_lookup,
+                   dt=encounters.dt_s, **kw)
+
+    def paper_state(self) -> np.ndarray:
+        """The paper's relative state (N, M, 6) of every intruder at the current time."""
+        return to_paper_state(self.own.position()[:, None, :], self.own.velocity()[:, None, :],
+                              self.intruders.position(), self.intruders.velocity())
+
+    def geometry(self) -> dict:
+        """Per-intruder well-clear quantities at the current time, (N, M) each."""
+        s, v = _rel(self.own, self.intruders)
+        return {"range_m": wc.horizontal_range(s), "hmd_m": wc.hmd(s, v, self.daa_cfg.lookahead_s),
+                "dh_m": -s[..., 2], "tau_mod_s": wc.tau_mod(s, v, self.th.dthr), "wcv": wc.wcv(s, v, self.th)}
+
+    def step(self, t: float, pilot_input) -> StepOutput:
+        """Decide, publish telemetry for ``t`` (s), then advance truth to ``t + dt`` (see module doc)."""
+        if not np.isclose(t, self.t, rtol=0.0, atol=1e-9):
+            raise ValueError(f"OnboardCore is at t={self.t:g} s, step() called with t={t:g} s")
+        own0, intr0 = self.own, self.intruders
+        cmd, dec, self.memory = self._agent.agent_step(t, own0, intr0, pilot_input, self.memory, self.policy,
+                                                       self.daa_cfg, self.wait_lookup)
+        s0, v0 = _rel(own0, intr0)
+        geom = self.geometry()
+        alert = np.asarray(dec["alert_level"], dtype=np.int8).reshape(self.n, self.m)
+        telem = Telemetry(t, own0, intr0, alert, band_intervals(dec["bands_trk"], dec["bands_trk_region"]))
+        pen = wc.penetration_rate(s0, v0, self.th).max(axis=1)
+        # --- truth advances by dt ----------------------------------------------------------------
+        turn, acc, vacc = self.controls(t)
+        own1 = fly_command(own0, cmd, self.dt, self.perf)
+        intr1 = advance(intr0, turn, acc, vacc, self.dt, self.intruder_perf)
+        s1 = own1.position()[:, None, :] - intr1.position()
+        lowc_m, nmac_m = wc.segment_events(s0, s1, self.dt, self.th)
+        t_in, t_out = wc.violation_interval(s0, (s1 - s0) / self.dt, self.th, 0.0, self.dt)
+        in_lowc = np.where(np.isfinite(t_in), np.maximum(t_out - t_in, 0.0), 0.0)
+        rmin, vsep = wc.min_separation_on_segment(s0, s1)
+        j = np.argmin(rmin, axis=1)
+        rows = np.arange(self.n)
+        out = StepOutput(step=self.k, t=float(t), own=own0, intruders=intr0, command=cmd, decisions=dec,
+                         telemetry=telem, geometry=geom, lowc=lowc_m.any(axis=1), nmac=nmac_m.any(axis=1),
+                         lowc_time_s=in_lowc.max(axis=1), pen_rate=pen, seg_min_range_m=rmin[rows, j],
+                         seg_vsep_m=vsep[rows, j])
+        self.own, self.intruders = own1, intr1
+        self.k += 1
+        self.t = float(t) + self.dt
+        return out

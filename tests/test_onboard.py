@@ -1,0 +1,82 @@
+"""OnboardCore: a hand-built head-on encounter, between-sample NMAC detection, step bookkeeping."""
+
+import numpy as np
+import pytest
+
+from daa_sil import wellclear as wc
+from daa_sil.agent import D_NO_WAIT, PilotInput, policy_for_group
+from daa_sil.daa import DaaConfig
+from daa_sil.encounters import IntruderGeometry, encounter_from_geometry
+from daa_sil.kinematics import AircraftState
+from daa_sil.onboard import OnboardCore, band_intervals
+from daa_sil.thresholds import PAPER
+
+
+def _run(core: OnboardCore, steps: int):
+    outs = []
+    for k in range(steps):
+        outs.append(core.step(float(k), PilotInput.nothing(core.n, link_alive_t=float(k))))
+    return outs
+
+
+def test_head_on_baseline_without_pilot_is_resolved_by_daa():
+    # Co-altitude head-on, HMD 0 at t = 120 s, intruder 100 m/s: flown straight this is a collision
+    # (range 0 at CPA). Baseline policy, no pilot command ever and no latency: with no command the
+    # agent must hand control to the DAA (no_wait), which turns away, so no NMAC.
+    es = encounter_from_geometry(IntruderGeometry(angle_deg=180, hmd_m=0.0, t_cpa_s=120, gs_mps=100.0))
+    core = OnboardCore.from_encounters(es, policy_for_group("B-1"), DaaConfig(thresholds="paper"))
+    outs = _run(core, 240)
+    dec = np.array([o.decisions["decision"][0] for o in outs])
+    active = np.array([o.decisions["active"][0] for o in outs])
+    assert active.any()
+    assert set(dec[active]) == {D_NO_WAIT}  # baseline, no pilot: every active step allocates to DAA
+    assert not any(o.nmac[0] for o in outs)
+    min_range = min(o.seg_min_range_m[0] for o in outs)
+    assert min_range > PAPER.nmac_h
+    # the executed track left the pilot course (north) while active
+    trk = np.degrees(np.array([o.command.trk[0] for o in outs]))
+    assert np.abs((trk[active] + 180) % 360 - 180).max() >= 5.0
+    # without any maneuver the same geometry closes to (near) zero range
+    s0 = es.own.position()[:, None] - es.intr.position()
+    v = es.own.velocity()[:, None] - es.intr.velocity()
+    assert wc.hmd(s0, v)[0, 0] < 1.0
+
+
+def test_nmac_strictly_between_samples_is_detected():
+    # Intruder 227.5 m dead ahead closing at 55 + 400 = 455 m/s: both samples (t = 0 and 1 s) are at
+    # 227.5 m > 152.4 m (500 ft) but the aircraft pass through each other in between.
+    own = AircraftState([0.0], [0.0], [1000.0], [55.0], [0.0], [0.0])
+    intr = AircraftState([[0.0]], [[227.5]], [[1000.0]], [[400.0]], [[np.pi]], [[0.0]])
+    zero = np.zeros((1, 1))
+    core = OnboardCore(own, intr, lambda t: (zero, zero, zero), policy_for_group("B-1"),
+                       DaaConfig(thresholds="paper"))
+    out = core.step(0.0, PilotInput.nothing(1, 0.0))
+    s0 = out.own.position()[:, None] - out.intruders.position()
+    s1 = core.own.position()[:, None] - core.intruders.position()
+    assert not wc.nmac(s0, PAPER).any() and not wc.nmac(s1, PAPER).any()  # sampled check misses it
+    assert out.nmac[0] and out.lowc[0]
+    assert out.seg_min_range_m[0] < 5.0
+    assert out.lowc_time_s[0] == pytest.approx(1.0)  # inside DMOD for the whole step
+
+
+def test_step_advances_time_and_rejects_wrong_time():
+    es = encounter_from_geometry(IntruderGeometry(angle_deg=90, hmd_m=500.0, t_cpa_s=120, gs_mps=80.0))
+    core = OnboardCore.from_encounters(es, policy_for_group("ID-1"), DaaConfig(thresholds="paper"),
+                                       wait_lookup=lambda own, intr: np.full(own.shape[0], 10.0))
+    out = core.step(0.0, PilotInput.nothing(1, 0.0))
+    assert out.step == 0 and core.t == 1.0 and core.k == 1
+    assert out.telemetry.t == 0.0 and out.telemetry.alert_level.shape == (1, 1)
+    # the ownship flew 55 m north in the step (no alert this early)
+    assert core.own.y[0] == pytest.approx(55.0)
+    with pytest.raises(ValueError, match="t=1 s"):
+        core.step(5.0, PilotInput.nothing(1, 0.0))
+
+
+def test_band_intervals_merge_runs_of_equal_region():
+    vals = np.array([[350.0, 355.0, 0.0, 5.0, 10.0], [0, 0, 0, 0, 0]])
+    reg = np.array([[0, 2, 2, 0, 4], [-1, -1, -1, -1, -1]])
+    b = band_intervals(vals, reg)
+    assert b["bands_count"].tolist() == [4, 0]
+    assert b["bands_trk_lo_deg"][0].tolist() == [350.0, 355.0, 5.0, 10.0]
+    assert b["bands_trk_hi_deg"][0].tolist() == [350.0, 0.0, 5.0, 10.0]
+    assert b["bands_trk_region"][0].tolist() == [0, 2, 0, 4]
