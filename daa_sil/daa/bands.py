@@ -11,10 +11,11 @@ and intruder the first well-clear violation ``t_in`` over ``[0, lookahead]`` is 
 * MID if ``t_in < H_i`` for some intruder, with ``H_i = lookahead`` for *conflict aircraft* (alert
   level >= 2 now) and ``alert_time_corrective_s`` for the others (DAIDALUS peripheral aircraft);
 * NONE otherwise. FAR (preventive) is not painted (DO-365 maps the preventive level to NONE).
-* RECOVERY: when every candidate of an axis is MID or NEAR, the candidates whose last exit from a
-  conflicting violation is within ``recovery_stability_s`` of the earliest one are relabelled
-  RECOVERY (a simplification of DAIDALUS' shrinking-cylinder search: the maneuvers that regain
-  well clear soonest).
+* RECOVERY: when every candidate of an axis is MID or NEAR, the candidates whose first LoWC is
+  later than ``sm_horizon_s`` (55 s: they stay safe, SM > 0) are relabelled RECOVERY; if there are
+  none, the candidates whose last exit from a conflicting violation is within
+  ``recovery_stability_s`` of the earliest one (a simplification of DAIDALUS' shrinking-cylinder
+  search: the maneuvers that regain well clear soonest).
 
 Resolutions (``daa_spec.md`` §4.4): when the current value (k = 0) is MID or NEAR, the closest
 NONE/RECOVERY candidate on each side (``res_lo`` = left/down/slower, ``res_hi`` = right/up/faster,
@@ -218,8 +219,10 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     t_man = np.abs(delta) / rate
     # recovery: every candidate in conflict
     saturated = np.all(region >= REGION_MID, axis=1)
+    late = t_in_all > cfg.sm_horizon_s  # LoWC only after the SM horizon: still "safe" (SM > 0)
+    any_late = late.any(axis=1, keepdims=True)
     best_exit = np.min(t_out_c, axis=1, keepdims=True)
-    rec = saturated[:, None] & (t_out_c <= best_exit + cfg.recovery_stability_s)
+    rec = saturated[:, None] & np.where(any_late, late, t_out_c <= best_exit + cfg.recovery_stability_s)
     region = np.where(rec, REGION_RECOVERY, region).astype(np.int8)
     # resolutions
     k0 = j_lo
