@@ -52,7 +52,7 @@ Schema (``*`` = required; defaults in brackets)::
     pilot:
       mode: model | scripted        [model]
       model:                                    options of daa_sil.pilot.PilotModel
-        response: fixed | guendel | no_atc | nasa_rayleigh5  [fixed]
+        response: deterministic | fixed | guendel | no_atc | nasa_rayleigh5  [deterministic]
       commands: list (scripted mode; required there, forbidden in model mode)
         - t_s*: [0, duration_s]      first send time; the command is streamed once per step
           until_s: (t_s, duration_s] [next command's t_s, else duration_s]
@@ -93,7 +93,7 @@ GROUPS = ("B-1", "B-2", "IC-1", "ID-1", "ID-2")
 #: group -> (wait policy, blending) as in the paper's Table 2 (latency is set in ``link``)
 GROUP_POLICY = {"B-1": ("none", False), "B-2": ("none", False), "IC-1": ("constant", True),
                 "ID-1": ("map", True), "ID-2": ("map", True)}
-PILOT_RESPONSES = ("fixed", "guendel", "no_atc", "nasa_rayleigh5")
+PILOT_RESPONSES = ("deterministic", "fixed", "guendel", "no_atc", "nasa_rayleigh5")
 MAX_INTRUDERS = 8
 
 
@@ -188,7 +188,7 @@ class ScriptedCommand:
 @dataclass
 class PilotSpec:
     mode: str = "model"
-    response: str = "fixed"
+    response: str = "deterministic"
     commands: list = field(default_factory=list)
 
 
@@ -436,7 +436,7 @@ def _pilot(v: _V, node, path, dur) -> PilotSpec:
     ps = PilotSpec(mode=v.opt(m, "mode", path, v.string, "model", choices=("model", "scripted")))
     if "model" in m:
         mm = v.mapping(m["model"], f"{path}.model", set(), {"response"})
-        ps.response = v.opt(mm, "response", f"{path}.model", v.string, "fixed", choices=PILOT_RESPONSES)
+        ps.response = v.opt(mm, "response", f"{path}.model", v.string, "deterministic", choices=PILOT_RESPONSES)
     if ps.mode == "model" and "commands" in m:
         v.fail(m["commands"], f"{path}.commands", "only allowed with mode: scripted")
     if ps.mode == "scripted":

@@ -65,6 +65,7 @@ class View:
     decision: str = "?"
     wait_s: float = math.nan
     alert_regions: int = 0
+    alert: tuple = (math.nan, 0)  #: (vehicle sim time, DAIDALUS alert level 0-3) from DAA_ALERT
     last_t: float = math.nan
     acks: int = 0
     statustext: list = field(default_factory=list)
@@ -85,11 +86,21 @@ class GcsNode:
         self.order = [i.id for i in scenario.intruders] if scenario is not None else []
         self.pilot = None
         if self.mode == "model":
-            from daa_sil.latency import as_seed_sequence, child_seed
             from daa_sil.pilot import PilotConfig, PilotModel
 
-            seed = child_seed(as_seed_sequence(scenario.seed if scenario is not None else 0), 2)
+            from daa_sil.fasttime import STREAM_PILOT, encounter_streams
+
+            seed = encounter_streams(scenario.seed if scenario is not None else 0)[STREAM_PILOT]
             self.pilot = PilotModel(1, [seed], PilotConfig(mode=scenario.pilot.response if scenario else "guendel"))
+        self._g_seen = math.nan
+        self._g_alert, self._g_wcv = 0, False
+        self._guide = {k: np.full(1, np.inf if k.endswith("_level") else np.nan) for k in
+                       ("left_trk", "left_level", "right_trk", "right_level", "up_vs", "up_level", "down_vs",
+                        "down_level")}
+        if scenario is not None:
+            from daa_sil.daa.config import DaaConfig
+
+            self.daa_cfg = DaaConfig(thresholds=scenario.thresholds)
         self.seq = 0
         self.sent: list[dict] = []
         self.done_tick = -1
@@ -145,6 +156,8 @@ class GcsNode:
             v.wait_s = m.wait_s
         elif t == "DAA_BANDS" and m.part == 0:
             v.alert_regions = max([int(x) for x in m.region[:m.count] if int(x) in (1, 2, 3)] or [0])
+        elif t == "NAMED_VALUE_INT" and m.name == "DAA_ALERT":
+            v.alert = (m.time_boot_ms / 1000.0, int(m.value))
         elif t == "COMMAND_ACK":
             v.acks += 1
         elif t == "STATUSTEXT":
@@ -172,10 +185,12 @@ class GcsNode:
                     out.append({"track_deg": c.track_deg, "vs_mps": c.vs_mps, "gs_mps": c.gs_mps, "kind": "scripted"})
             return out[-1:]
         obs = self.observed()
-        if obs is None:
+        if obs is None:  # nothing seen yet: the pilot steps on an unknown (nan) state, as in fast-time
+            nan = np.full(1, np.nan)
+            self.pilot.step(t, AircraftState(nan, nan, nan, nan, nan, nan), self._guide_obj())
             return []
         own, intr = obs
-        po = self.pilot.step(t, own, observed_intr=intr)
+        po = self.pilot.step(t, own, self._guidance(own, intr))
         if not bool(po.send[0]):
             return []
         kind = "hold" if int(po.maneuver[0]) == 0 else f"maneuver{int(po.maneuver[0])}"
@@ -183,6 +198,31 @@ class GcsNode:
         return [{"track_deg": math.degrees(trk) % 360.0 if math.isfinite(trk) else math.nan,
                  "vs_mps": float(po.cmd.vs[0]), "gs_mps": float(po.cmd.gs[0]), "kind": kind,
                  "axis": str(po.axis_names()[0]), "dir": str(po.direction_names()[0])}]
+
+    def _guide_obj(self):
+        from daa_sil.pilot import Guidance
+
+        return Guidance(alert_level=np.array([self._g_alert]), wcv=np.array([self._g_wcv]), **self._guide)
+
+    def _guidance(self, own: AircraftState, intr: AircraftState):
+        """The pilot's display guidance, recomputed only when newer telemetry is seen (as fast-time):
+        the vehicle's alert level (DAA_ALERT), well-clear from the observed states and, at or above the
+        pilot's trigger level, the DAA bands of the observed states."""
+        from daa_sil import wellclear as wc
+        from daa_sil.daa import compute_bands
+        from daa_sil.pilot import guidance_from_bands
+
+        t_seen = self.view.own[0]
+        if t_seen != self._g_seen:
+            self._g_seen = t_seen
+            self._g_alert = int(self.view.alert[1]) if self.view.alert[0] == t_seen else self._g_alert
+            s, v = wc.relative(own.position()[:, None, :], own.velocity()[:, None, :], intr.position(), intr.velocity())
+            self._g_wcv = bool(wc.wcv(s, v, self.daa_cfg.th).any())
+            if self._g_alert >= self.pilot.cfg.alert_level_min:
+                gb = guidance_from_bands(compute_bands(own, intr, self.daa_cfg))
+                for key in self._guide:
+                    self._guide[key] = np.asarray(getattr(gb, key), float).reshape(1)
+        return self._guide_obj()
 
     def _heartbeat(self):
         return M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE, 3)
@@ -219,6 +259,8 @@ class GcsNode:
             try:
                 r = await asyncio.wait_for(self.ep.inbox.get(), 0.1)
             except asyncio.TimeoutError:
+                if self.done_tick < 0:  # nothing yet: greet again (a shim may have started after us)
+                    self.ep.send(self._heartbeat())
                 continue
             if r.msg.get_type() != "SIM_TICK":
                 self.handle(r)

@@ -172,6 +172,7 @@ class VehicleCore:
             kj = T.Kin(float(it.x[0, j]), float(it.y[0, j]), float(it.z[0, j]), float(it.gs[0, j]),
                        float(it.trk[0, j]), float(it.vs[0, j]))
             msgs.append(T.adsb_vehicle(self.icao[j], self.callsigns[j], kj, self.sc.origin))
+        msgs.append(T.alert_level(t, int(np.max(out.telemetry.alert_level[0])) if it.shape[1] else 0))
         msgs += T.track_bands(t, row["bands_trk_lo_deg"], row["bands_trk_hi_deg"], row["bands_trk_region"])
         seq = self.last_cmd.seq if self.last_cmd is not None else 0
         msgs.append(T.allocation_decision(t, row, seq, row["pilot_cmd_age_s"]))

@@ -170,3 +170,8 @@ def local_position(t: float, own: Kin) -> "M.MAVLink_message":
     """LOCAL_POSITION_NED (float, from the scenario origin): the lossless ownship state the GCS uses."""
     vn, ve = own.gs * math.cos(own.trk), own.gs * math.sin(own.trk)
     return M.MAVLink_local_position_ned_message(time_ms(t), own.y, own.x, -own.z, vn, ve, -own.vs)
+
+
+def alert_level(t: float, level: int) -> "M.MAVLink_message":
+    """NAMED_VALUE_INT ``DAA_ALERT``: the highest DAIDALUS alert level over intruders (0-3) at ``t``."""
+    return M.MAVLink_named_value_int_message(time_ms(t), b"DAA_ALERT", int(level))

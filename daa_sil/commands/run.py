@@ -180,13 +180,30 @@ def parse_shim_ready(line: str) -> "dict | None":
     return {"vehicle_side": m.group(1), "gcs_side": m.group(2)} if m else None
 
 
-def shim_argv(sc, clock_args: list, key_args: list, stats_json: Path) -> list[str]:
+def free_udp_ports(n: int) -> list[int]:
+    """``n`` distinct UDP ports on 127.0.0.1 that were free a moment ago (bound together, then released)."""
+    import socket
+
+    socks = []
+    try:
+        for _ in range(n):
+            sk = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            sk.bind(("127.0.0.1", 0))
+            socks.append(sk)
+        return [sk.getsockname()[1] for sk in socks]
+    finally:
+        for sk in socks:
+            sk.close()
+
+
+def shim_argv(sc, clock_args: list, key_args: list, stats_json: Path, vehicle_port: int = 0,
+              gcs_port: int = 0) -> list[str]:
     """``daa-sil shim`` arguments for scenario ``sc`` (link delays, loss, outages, seed)."""
     from ..scenario import delay_spec_string
 
     link = sc.link
     argv = python_module_argv("daa_sil.cli") + [
-        "shim", "--listen-vehicle", "udp:127.0.0.1:0", "--listen-gcs", "udp:127.0.0.1:0",
+        "shim", "--listen-vehicle", f"udp:127.0.0.1:{vehicle_port}", "--listen-gcs", f"udp:127.0.0.1:{gcs_port}",
         "--delay-up", delay_spec_string(link.up),
         "--delay-down", delay_spec_string(link.down if link.down is not None else link.up),
         "--epoch", f"{link.epoch_s:g}", "--loss", f"{link.loss:g}", "--seed", str(sc.seed),
@@ -347,10 +364,12 @@ def run_sil(opts: RunOptions) -> dict:
     failure: "str | None" = None
     with ProcessGroup(out / "logs") as pg:
         try:
-            shim = pg.start("shim", shim_argv(sc, clock_args, key_args, out / "shim_stats.json"),
+            # all three start at once: the shim's ports are picked here (the shim binds them; if one was
+            # taken in between, its READY never comes and the run fails with a clear message)
+            v_side, g_side = free_udp_ports(2)
+            sready = {"vehicle_side": f"udp:127.0.0.1:{v_side}", "gcs_side": f"udp:127.0.0.1:{g_side}"}
+            shim = pg.start("shim", shim_argv(sc, clock_args, key_args, out / "shim_stats.json", v_side, g_side),
                             ready_parser=parse_shim_ready)
-            sready = pg.wait_ready(shim)
-            _say(opts, f"shim ready (vehicle side {sready['vehicle_side']}, GCS side {sready['gcs_side']})")
             gcs = pg.start("gcs", python_module_argv("gcs") + [
                 "--scenario", str(opts.scenario_path), "--listen", "udp:127.0.0.1:0",
                 "--vehicle", sready["gcs_side"], "--log", str(out / "gcs_commands.jsonl"),
@@ -360,6 +379,7 @@ def run_sil(opts: RunOptions) -> dict:
                      "--tick-timeout", f"{opts.tick_timeout_s:g}", "--quiet"] + clock_args + key_args
             # GCS and vehicle start in parallel; the vehicle re-sends tick 0 until the GCS answers
             vehicle = pg.start("vehicle", python_module_argv("vehicle") + vargs)
+            pg.wait_ready(shim)
             pg.wait_ready(gcs)
             pg.wait_ready(vehicle, timeout=READY_TIMEOUT_S + 120.0)  # may build the wait map first
             _say(opts, f"playing {sc.duration_s:g} s of {sc.name} ({opts.clock})")
