@@ -135,3 +135,24 @@ def test_stats_report_effective_delay():
     s = line.stats()
     assert s["delay_effective_mean_s"] == pytest.approx(3.0)
     assert s["pushed"] == 10 and s["in_flight"] == 10
+
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+
+@settings(max_examples=30, deadline=None)
+@given(gaps=st.lists(st.floats(0.0, 5.0), min_size=1, max_size=60), seed=st.integers(0, 2**32 - 1),
+       loss=st.sampled_from([0.0, 0.3]))
+def test_property_line_equals_pure_rule_and_never_early(gaps, seed, loss):
+    line = DelayLine(Uniform(0.2, 10.0), seed=seed, epoch_s=0, loss=loss)
+    t = np.cumsum(gaps)
+    for i, x in enumerate(t):
+        line.push(float(x), i)
+    recs = line.log
+    keep = np.array([not r.dropped for r in recs])
+    ref = fifo_release(t, np.array([r.delay for r in recs]), keep)
+    got = np.array([r.t_out if not r.dropped else np.inf for r in recs])
+    assert np.array_equal(got, ref)
+    assert np.all(got[keep] >= t[keep] + 0.2)
+    out = line.pop_due(float(t[-1]) + 20.0)
+    assert out == [i for i in range(len(t)) if keep[i]]  # FIFO, nothing lost but the dropped

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import asyncio
+import hashlib
 import json
 import math
+import signal
 import subprocess
 import sys
 import time
@@ -14,7 +16,7 @@ import pytest
 
 from daa_sil.errors import UsageError
 from daa_sil.latency import Constant, DelayProcess, TruncatedGaussian
-from daa_sil.link.codec import MavCodec, mavlink as d
+from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec, mavlink as d
 from daa_sil.link.delayline import delay_seed, fifo_release
 from daa_sil.link.endpoint import open_endpoint
 from daa_sil.link.shim import DelayShim, ShimConfig, control_ids, direction_seeds, run_shim
@@ -28,7 +30,7 @@ def _cfg(**kw) -> ShimConfig:
     return ShimConfig(**base)
 
 
-async def _lockstep_run(shim: DelayShim, steps: int):
+async def _lockstep_run(shim: DelayShim, steps: int, key: "bytes | None" = None, stats: "dict | None" = None):
     """Play the architecture's step order; returns what each side had received at each step.
 
     GCS at tick k: records the telemetry steps it has seen, sends PILOT_MANEUVER stamped t_k, acks.
@@ -36,8 +38,9 @@ async def _lockstep_run(shim: DelayShim, steps: int):
     """
     seen_by_gcs: dict[int, list[int]] = {}
     seen_by_veh: dict[int, list[int]] = {}
-    async with await open_endpoint(MavCodec(1, 1), peer=shim.vehicle_side) as veh, \
-            await open_endpoint(MavCodec(255, 190), peer=shim.gcs_side) as gcs:
+    ctl = CONTROL_LINK_ID if key else None
+    async with await open_endpoint(MavCodec(1, 1, key=key), peer=shim.vehicle_side) as veh, \
+            await open_endpoint(MavCodec(255, 190, key=key), peer=shim.gcs_side) as gcs:
         gcs.send(d.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3))  # announce the GCS to the shim
         while shim.peers["gcs"] is None:
             await asyncio.sleep(0.001)
@@ -53,14 +56,14 @@ async def _lockstep_run(shim: DelayShim, steps: int):
                     k = m.tick
                     seen_by_gcs[k] = list(telem)
                     gcs.send(d.MAVLink_pilot_maneuver_message(m.time_ms, k + 1, 1, 1, float(k), 0.0, 55.0))
-                    gcs.send(d.MAVLink_sim_tick_ack_message(k, m.time_ms, 1))
+                    gcs.send(d.MAVLink_sim_tick_ack_message(k, m.time_ms, 1), link_id=ctl)
                     if k == steps - 1:
                         return
 
         task = asyncio.create_task(gcs_node())
         cmds: list[int] = []
         for k in range(steps):
-            veh.send(d.MAVLink_sim_tick_message(k, k * 1000))
+            veh.send(d.MAVLink_sim_tick_message(k, k * 1000), link_id=ctl)
             while True:
                 m = (await veh.recv(timeout=10)).msg
                 if m.get_type() == "PILOT_MANEUVER":
@@ -71,6 +74,8 @@ async def _lockstep_run(shim: DelayShim, steps: int):
             seen_by_veh[k] = list(cmds)
             veh.send(d.MAVLink_global_position_int_message(k * 1000, 1, 1, 0, 0, 0, 0, 0, 0))
         await asyncio.wait_for(task, 10)
+        if stats is not None:
+            stats["veh"], stats["gcs"] = veh.stats(), gcs.stats()
     return seen_by_gcs, seen_by_veh
 
 
@@ -95,6 +100,23 @@ async def test_lockstep_constant_delays_deliver_on_exact_ticks():
         assert seen_by_veh[k] == list(range(0, max(0, k - 2)))  # command of step s arrives at tick s + 3
     s = shim.stats()
     assert s["counters"]["ticks"] == 12 and s["counters"]["acks"] == 12 and s["counters"]["bad_control"] == 0
+
+
+@pytest.mark.asyncio
+async def test_lockstep_signed_link_no_replay_rejections():
+    """Ticks overtake delayed data; on their own signing stream nothing is rejected as a replay."""
+    key = hashlib.sha256(b"lockstep").digest()
+    shim = DelayShim(_cfg(clock="lockstep", key=key))
+    await shim.start()
+    st: dict = {}
+    try:
+        seen_by_gcs, seen_by_veh = await asyncio.wait_for(_lockstep_run(shim, 8, key, st), 30)
+    finally:
+        await shim.close()
+    assert seen_by_gcs[7] == list(range(6)) and seen_by_veh[7] == list(range(5))
+    for side in ("veh", "gcs"):
+        assert st[side]["dropped"] == 0 and st[side]["received"] > 8
+    assert shim.codec.counters.messages_in == 16  # 8 ticks + 8 acks verified by the shim
 
 
 @pytest.mark.asyncio
@@ -232,14 +254,22 @@ def test_config_validation():
         DelayShim(_cfg(speed=math.inf))
 
 
-def test_cli_runs_and_reports(tmp_path):
+def test_cli_runs_until_sigterm_and_reports(tmp_path):
     out = tmp_path / "stats.json"
-    p = subprocess.run([sys.executable, "-m", "daa_sil.cli", "shim", "--delay", "gauss:5,3", "--seed", "3",
-                        "--listen-vehicle", LOCAL, "--listen-gcs", LOCAL, "--duration", "0.2",
-                        "--stats-json", str(out)], capture_output=True, text=True, timeout=60)
-    assert p.returncode == 0, p.stderr
-    assert "vehicle side udp:127.0.0.1:" in p.stderr
-    assert json.loads(p.stdout)["seed"] == 3 and json.loads(out.read_text())["clock"] == "realtime"
+    p = subprocess.Popen([sys.executable, "-m", "daa_sil.cli", "shim", "--delay", "gauss:5,3", "--seed", "3",
+                          "--listen-vehicle", LOCAL, "--listen-gcs", LOCAL, "--stats-json", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        ready = p.stderr.readline()
+        assert "vehicle side udp:127.0.0.1:" in ready
+        p.send_signal(signal.SIGTERM)
+        stdout, stderr = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert p.returncode == 0, stderr
+    assert json.loads(stdout)["seed"] == 3 and json.loads(out.read_text())["clock"] == "realtime"
     bad = subprocess.run([sys.executable, "-m", "daa_sil.cli", "shim", "--delay", "gauss:5"],
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "bad delay spec" in bad.stderr

@@ -261,9 +261,9 @@ class MavCodec:
         c.bytes_out += len(buf)
         return buf
 
-    def encode_many(self, msgs: Iterable[MAVLinkMessage]) -> bytes:
+    def encode_many(self, msgs: Iterable[MAVLinkMessage], link_id: "int | None" = None) -> bytes:
         """Pack several messages into one datagram (legal over UDP; packets are never split)."""
-        parts = [self.encode(m) for m in msgs]
+        parts = [self.encode(m, link_id) for m in msgs]
         self.counters.datagrams_out -= max(0, len(parts) - 1)
         return b"".join(parts)
 

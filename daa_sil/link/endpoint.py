@@ -195,17 +195,21 @@ class MavEndpoint(asyncio.DatagramProtocol):
         a = self.transport.get_extra_info("sockname")
         return a[0], a[1]
 
-    def send(self, msg: MAVLinkMessage, addr: "Address | None" = None) -> bool:
-        """Encode and send one message to ``addr`` (default: the peer). False if no peer yet."""
-        return self.send_many([msg], addr)
+    def send(self, msg: MAVLinkMessage, addr: "Address | None" = None, link_id: "int | None" = None) -> bool:
+        """Encode and send one message to ``addr`` (default: the peer). False if no peer yet.
 
-    def send_many(self, msgs: "list[MAVLinkMessage]", addr: "Address | None" = None) -> bool:
+        ``link_id``: signing stream override, e.g. ``CONTROL_LINK_ID`` for SIM_TICK / SIM_TICK_ACK.
+        """
+        return self.send_many([msg], addr, link_id)
+
+    def send_many(self, msgs: "list[MAVLinkMessage]", addr: "Address | None" = None,
+                  link_id: "int | None" = None) -> bool:
         """Encode several messages into one datagram and send it. False if no peer yet."""
         dest = addr or self.peer
         if dest is None or self.transport is None or self.transport.is_closing():
             self.counters.send_no_peer += 1
             return False
-        data = self.codec.encode_many(msgs)
+        data = self.codec.encode_many(msgs, link_id)
         self.transport.sendto(data, dest)
         self.counters.sent += len(msgs)
         self.counters.datagrams_sent += 1
