@@ -8,7 +8,8 @@ absorbing LoWC (paper Eq. 9 with the chosen threshold preset) and OUT (after eva
 
 Our interpretations (all configurable in :class:`MdpParams`):
 
-* Rewards: ``R_w(S') = -min(C1/HMD(S'), C2/|d_h(S')|) + C3 dt`` (HMD, |d_h| floored at 1 m),
+* Rewards: ``R_w(S') = -min(C1/HMD(S'), C2/|d_h(S')|) + C3 dt`` (HMD within the tau_mod*
+  look-ahead; HMD and |d_h| floored at 1 m),
   averaged over the continuous next states; ``R_e = 0``; terminal values LoWC
   ``-C3 dt/(1-gamma)`` (a loss of well clear forfeits the whole discounted wait bonus), EXIT 0, OUT 0.
 * Wait time: definition B of ``reference/models.md`` §4.3 (expected time until LoWC or an
