@@ -56,21 +56,23 @@ def main() -> None:
     lookup = lambda o, i: np.full(o.shape[0], 6.0)  # noqa: E731
     own, intr, pilot = make_batch(args.n)
     step(own[:10], intr[:10], sub_pilot(pilot, slice(0, 10)), cfg, policy, lookup)  # warm-up
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     _, dec, _ = step(own, intr, pilot, cfg, policy, lookup)
-    t_batch = time.perf_counter() - t0
+    t_batch, c_batch = time.perf_counter() - t0, time.process_time() - c0
     rate_batch = args.n / t_batch
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for i in range(args.loop):
         s = slice(i, i + 1)
         step(own[s], intr[s], sub_pilot(pilot, s), cfg, policy, lookup)
-    t_loop = time.perf_counter() - t0
+    t_loop, c_loop = time.perf_counter() - t0, time.process_time() - c0
     rate_loop = args.loop / t_loop
     active = dec["active"].mean()
     print(f"batched: {args.n} encounters x 1 intruder in {t_batch:.3f} s = {rate_batch:,.0f} encounter-steps/s "
           f"({active:.0%} active)")
     print(f"one at a time: {args.loop} encounters in {t_loop:.3f} s = {rate_loop:,.0f} encounter-steps/s")
-    print(f"speed-up batched / one-at-a-time: {rate_batch / rate_loop:.1f}x")
+    print(f"speed-up batched / one-at-a-time: {rate_batch / rate_loop:.1f}x (wall clock)")
+    print(f"CPU time: batched {args.n / c_batch:,.0f} encounter-steps/s, one at a time {args.loop / c_loop:,.0f}/s, "
+          f"ratio {(args.n / c_batch) / (args.loop / c_loop):.1f}x")
 
 
 if __name__ == "__main__":

@@ -7,6 +7,8 @@ when its first LoWC time exceeds the SM horizon (``SM > 0``, :func:`daa_sil.daa.
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 
 from ..frames import wrap_pi
@@ -54,15 +56,40 @@ class _Candidates:
 
     def __init__(self, own: AircraftState, bands: Bands):
         ab = bands.axes()
+        self._ab = ab
         self.axis = np.concatenate([np.full(a.side.shape, a.axis) for a in ab])
         self.side = np.concatenate([a.side for a in ab])
-        self.values = np.concatenate([a.values for a in ab], axis=1)
-        self.delta = np.concatenate([a.delta for a in ab], axis=1)
-        self.t_man = np.concatenate([a.t_man for a in ab], axis=1)
-        self.t_in = np.concatenate([a.t_in for a in ab], axis=1)
-        self.t_out = np.concatenate([a.t_out for a in ab], axis=1)
-        self.region = np.concatenate([a.region for a in ab], axis=1)
+        sizes = np.cumsum([0] + [len(a.side) for a in ab])
+        #: column slice of each axis code in the concatenated arrays
+        self.cols = {a.axis: slice(int(sizes[k]), int(sizes[k + 1])) for k, a in enumerate(ab)}
         self.own = own
+
+    def _cat(self, name: str) -> np.ndarray:
+        return np.concatenate([getattr(a, name) for a in self._ab], axis=1)
+
+    @cached_property
+    def values(self) -> np.ndarray:
+        return self._cat("values")
+
+    @cached_property
+    def delta(self) -> np.ndarray:
+        return self._cat("delta")
+
+    @cached_property
+    def t_man(self) -> np.ndarray:
+        return self._cat("t_man")
+
+    @cached_property
+    def t_in(self) -> np.ndarray:
+        return self._cat("t_in")
+
+    @cached_property
+    def t_out(self) -> np.ndarray:
+        return self._cat("t_out")
+
+    @cached_property
+    def region(self) -> np.ndarray:
+        return self._cat("region")
 
     @staticmethod
     def take(a: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -76,10 +103,12 @@ class _Candidates:
         return Command(np.where(ax == AXIS_HORIZONTAL, val, o.trk), np.where(ax == AXIS_VERTICAL, val, o.vs),
                        np.where(ax == AXIS_SPEED, val, o.gs))
 
-    def best_effort_score(self) -> np.ndarray:
-        """Larger is better: latest first LoWC (s), then earliest regain of well clear."""
-        t_in = np.minimum(self.t_in, 1e6)
-        return t_in * 1e3 - np.maximum(self.t_out, 0.0)
+    def best_effort(self, rows: np.ndarray) -> np.ndarray:
+        """Best-effort candidate index for ``rows``: latest first LoWC, then earliest regain of well clear."""
+        if rows.size == 0:
+            return np.zeros(0, int)
+        t_in = np.minimum(self.t_in[rows], 1e6)
+        return np.argmax(t_in * 1e3 - np.maximum(self.t_out[rows], 0.0), axis=-1)
 
 
 def _pick(mask, cost):
@@ -136,7 +165,9 @@ def search_maneuver(own: AircraftState, intr: AircraftState, axis, direction, cf
     i1, f1 = _pick(safe & on_axis & moving & (cand.side[None, :] == side[:, None]) & (side[:, None] != 0), dist)
     i2, f2 = _pick(safe & on_axis & moving, dist)
     i3, f3 = _pick(safe, cand.t_man)
-    i4 = np.argmax(cand.best_effort_score(), axis=-1)
+    i4 = np.zeros(n, int)
+    rest = np.nonzero(~(f1 | f2 | f3))[0]
+    i4[rest] = cand.best_effort(rest)
     idx = np.where(f1, i1, np.where(f2, i2, np.where(f3, i3, i4)))
     rule = np.where(f1, RULE_AXIS_DIR, np.where(f2, RULE_AXIS, np.where(f3, RULE_ANY, RULE_BEST_EFFORT)))
     if return_t_in:
@@ -154,35 +185,35 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
     bands = bands if bands is not None else compute_bands(own, intr, cfg)
     cand = _Candidates(own, bands)
     k0 = np.nonzero((cand.axis == AXIS_HORIZONTAL) & (cand.side == 0))[0][0]
-    in_conflict = cand.region[:, k0] != REGION_NONE
-    none_ok = cand.region == REGION_NONE
-    rec_ok = cand.region == REGION_RECOVERY
+    in_conflict = bands.trk.region[:, k0 - cand.cols[AXIS_HORIZONTAL].start] != REGION_NONE
     moving = cand.side[None, :] != 0
     chosen = np.full(n, -1)
     # 1. persistence: keep the previous (axis, direction) while it still has a conflict-free candidate
     if prev is not None:
         p_ax, p_dir = (np.asarray(a).astype(int) for a in prev)
         p_side = np.asarray(DIR_SIDE)[p_dir]
-        m = (none_ok | rec_ok) & (cand.axis[None, :] == p_ax[:, None]) & (cand.side[None, :] == p_side[:, None]) \
+        okr = (cand.region == REGION_NONE) | (cand.region == REGION_RECOVERY)
+        m = okr & (cand.axis[None, :] == p_ax[:, None]) & (cand.side[None, :] == p_side[:, None]) \
             & (p_ax[:, None] != AXIS_NONE) & moving
         i, f = _pick(m, cand.t_man)
         chosen = np.where(f & in_conflict, i, chosen)
     # 2. fresh: first axis in priority order with a NONE resolution on its preferred side, then RECOVERY
-    for okmask in (none_ok, rec_ok):
+    for want in (REGION_NONE, REGION_RECOVERY):
         for name in cfg.resolution_axes:
+            if not np.any((chosen < 0) & in_conflict):
+                break
             a = axis_code(name)
-            ab = bands.axis(a)
+            ab, cols = bands.axis(a), cand.cols[a]
+            ok = (ab.region == want) & (ab.side != 0)[None, :]
             pref = ab.preferred.astype(int)
-            m_side = (cand.side[None, :] == pref[:, None]) | (pref[:, None] == 0)
-            m = okmask & moving & (cand.axis[None, :] == a) & m_side
-            i, f = _pick(m, cand.t_man)
-            i_any, f_any = _pick(okmask & moving & (cand.axis[None, :] == a), cand.t_man)
-            i = np.where(f, i, i_any)
-            f = f | f_any
-            chosen = np.where((chosen < 0) & f & in_conflict, i, chosen)
+            m_side = (ab.side[None, :] == pref[:, None]) | (pref[:, None] == 0)
+            i, f = _pick(ok & m_side, ab.t_man)
+            i_any, f_any = _pick(ok, ab.t_man)
+            i = np.where(f, i, i_any) + cols.start
+            chosen = np.where((chosen < 0) & (f | f_any) & in_conflict, i, chosen)
     # 3. best effort
-    best = np.argmax(cand.best_effort_score(), axis=-1)
-    chosen = np.where((chosen < 0) & in_conflict, best, chosen)
+    rest = np.nonzero((chosen < 0) & in_conflict)[0]
+    chosen[rest] = cand.best_effort(rest)
     hold = chosen < 0
     idx = np.where(hold, k0, chosen)
     cmd = cand.command(idx)
