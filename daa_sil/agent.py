@@ -16,9 +16,11 @@ Semantics follow ``docs/architecture.md`` "Allocation semantics":
     ``stale_command_s`` (by its send time) is never executed nor stored: the step is decided as
     if no command arrived but recorded as ``stale``.
 * Wait function ``w``: ``none`` -> 0 (always DAA); ``constant`` -> ``constant_wait_s``; ``map`` ->
-  ``wait_lookup(own, intr)``. With ``wait_countdown`` (IC-1) the wait is a budget counted from the
-  start of the current waiting streak (``w - elapsed``), reset when a fresh pilot command arrives
-  or the active phase ends; without it (maps) ``w`` is re-read at the current state every step.
+  ``wait_lookup(own, intr)``. ``w`` is read at the current state every step, literally as in the
+  paper's Eq. 11; a constant wait (IC-1, 5 s >= W_T) therefore waits until ProjL fires, which is
+  what makes IC-1 the group with the most waits in the paper's Table 3. The variant
+  ``wait_countdown=True`` treats ``w`` as a budget counted from the start of the current waiting
+  streak (``w - elapsed``), reset when a fresh pilot command arrives or the active phase ends.
 * ``projl_horizon_s`` default 25 s = the DO-365 warning alerting time: a LoWC predicted that soon
   leaves no time to wait for a command delayed by up to 10 s plus a 5-10 s maneuver.
 * Authority: ``pilot`` (pilot command or inactive), ``hold`` (wait), ``daa`` (DAA resolution,
@@ -84,7 +86,7 @@ class AllocationPolicy:
 POLICIES: dict[str, AllocationPolicy] = {
     "B-1": AllocationPolicy("none", blending=False, name="B-1"),
     "B-2": AllocationPolicy("none", blending=False, name="B-2"),
-    "IC-1": AllocationPolicy("constant", constant_wait_s=5.0, wait_countdown=True, name="IC-1"),
+    "IC-1": AllocationPolicy("constant", constant_wait_s=5.0, name="IC-1"),
     "ID-1": AllocationPolicy("map", name="ID-1"),
     "ID-2": AllocationPolicy("map", name="ID-2"),
 }

@@ -146,15 +146,25 @@ def test_link_lost_and_inactive():
     assert set(DECISION_FIELDS) <= set(dec)
 
 
-def test_ic1_constant_wait_is_a_budget():
+def _frozen_decisions(pol, steps=8):
     own, intr = _no_cmd_case()
-    pol = policy_for_group("IC-1")
     mem = AgentMemory.initial(1, own)
     seen = []
-    for k in range(8):  # the ownship is frozen: only the clock runs
+    for k in range(steps):  # the ownship is frozen: only the clock runs
         _, dec, mem = agent_step(10.0 + k, own, intr, PilotInput.nothing(1, 10.0 + k), mem, pol, CFG, None)
         seen.append(int(dec["decision"][0]))
+    return seen
+
+
+def test_ic1_constant_wait_literal_eq11():
+    # Eq. 11 with w(S) = 5 s >= W_T = 4 s everywhere: wait every step while no ProjL
+    assert _frozen_decisions(policy_for_group("IC-1")) == [D_WAIT] * 8
+
+
+def test_constant_wait_as_budget_variant():
     # 5 s budget and W_T = 4 s: waits while 5 - elapsed >= 4, then hands over to the DAA
+    from dataclasses import replace
+    seen = _frozen_decisions(replace(policy_for_group("IC-1"), wait_countdown=True))
     assert seen[:2] == [D_WAIT, D_WAIT] and set(seen[2:]) == {D_NO_WAIT}
 
 
