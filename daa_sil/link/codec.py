@@ -3,8 +3,9 @@
 Built on the generated :mod:`daa_sil.link.dialect.daa_sil` module (pymavlink mavgen output).
 Network input is hostile, so decoding follows ``reference/mavlink_spec.md`` §3:
 
-* ``robust_parsing`` is on (garbage becomes BAD_DATA instead of an exception that wedges the parser);
-* the parser is **reset after every datagram**: a truncated datagram never corrupts the next one;
+* each datagram is split into packets by a header walk and each packet decoded on its own (no
+  stream-parser state survives a datagram, the effect of "reset the parser per datagram" without
+  its cost): a truncated datagram never corrupts the next one;
 * bad CRC, bad prefix, truncated, unknown-id, malformed, unsigned, wrong-key, replayed and stale
   packets are counted (:class:`CodecCounters`) and dropped; ``decode`` only returns good messages
   and never raises on bad input.
@@ -195,38 +196,66 @@ class MavCodec:
 
     # -- decoding -----------------------------------------------------------------------------
     def decode(self, datagram: "bytes | bytearray | memoryview") -> list[MAVLinkMessage]:
-        """Good messages in one datagram (in order); every bad packet is counted and dropped."""
+        """Good messages in one datagram (in order); every bad packet is counted and dropped.
+
+        The datagram is split into packets by walking the MAVLink headers (no parser state is
+        kept between datagrams, so a truncated datagram cannot corrupt the next one); each packet
+        goes through the generated ``decode`` (CRC, length, signature). Bytes before a start
+        marker count once as ``bad_prefix``; a packet cut short by the datagram end as
+        ``truncated``. Never raises on bad input.
+        """
         c = self.counters
+        data = bytes(datagram)
+        n = len(data)
         c.datagrams_in += 1
-        c.bytes_in += len(datagram)
-        mav = self.mav
-        try:
-            msgs = mav.parse_buffer(datagram)
-        except Exception:  # hostile input must never escape; pymavlink should not raise here
-            c.malformed += 1
-            msgs = None
-        if mav.buf_len() or mav.buf_index:
-            if mav.buf_len():
+        c.bytes_in += n
+        dec = self.mav.decode
+        good: list[MAVLinkMessage] = []
+        i = 0
+        while i < n:
+            b0 = data[i]
+            if b0 != 0xFD and b0 != 0xFE:
+                c.bad_prefix += 1
+                j1, j2 = data.find(b"\xfd", i + 1), data.find(b"\xfe", i + 1)
+                i = min(j for j in (j1, j2, n) if j >= 0)
+                continue
+            if b0 == 0xFD:
+                if n - i < 3:
+                    c.truncated += 1
+                    break
+                flags = data[i + 2]
+                size = data[i + 1] + 12 + (13 if flags & 1 else 0)
+            else:
+                if n - i < 2:
+                    c.truncated += 1
+                    break
+                flags = 0
+                size = data[i + 1] + 8
+            if i + size > n:
                 c.truncated += 1
-            mav.buf, mav.buf_index = bytearray(), 0
-            mav.expected_length = mavlink.HEADER_LEN_V1 + 2
-            mav.have_prefix_error = False
-        if not msgs:
-            return []
-        good = []
-        for m in msgs:
-            t = m._type
-            if t == "BAD_DATA":
-                reason = getattr(m, "reason", "")
+                break
+            pkt = bytearray(data[i:i + size])
+            i += size
+            if flags & 0xFE:  # unknown incompatibility flag: must not be parsed (MAVLink 2 spec)
+                c.malformed += 1
+                continue
+            try:
+                m = dec(pkt)
+            except MAVError as exc:
+                reason = exc.message
                 field = _REASON_FIELD.get(reason)
                 if field is None:
                     field = "bad_crc" if reason.startswith("invalid MAVLink CRC") else "malformed"
                 setattr(c, field, getattr(c, field) + 1)
-            elif t.startswith("UNKNOWN_"):
+                continue
+            except Exception:  # hostile input must never escape
+                c.malformed += 1
+                continue
+            if m._type.startswith("UNKNOWN_"):
                 c.unknown += 1
-            else:
-                good.append(m)
-        c.unsigned_accepted = mav.n_unsigned_accepted
+                continue
+            good.append(m)
+        c.unsigned_accepted = self.mav.n_unsigned_accepted
         c.messages_in += len(good)
         return good
 
