@@ -376,7 +376,7 @@ def run_sil(opts: RunOptions) -> dict:
                 "--no-display"] + clock_args + key_args)
             vargs = [str(opts.scenario_path), "--listen", "udp:127.0.0.1:0", "--out", sready["vehicle_side"],
                      "--steplog", str(steplog), "--tap", opts.tap or "none",
-                     "--tick-timeout", f"{opts.tick_timeout_s:g}", "--quiet"] + clock_args + key_args
+                     "--tick-timeout", f"{opts.tick_timeout_s:g}"] + clock_args + key_args
             # GCS and vehicle start in parallel; the vehicle re-sends tick 0 until the GCS answers
             vehicle = pg.start("vehicle", python_module_argv("vehicle") + vargs)
             pg.wait_ready(shim)
