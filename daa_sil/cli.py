@@ -21,6 +21,7 @@ COMMAND_MODULES = [
     "daa_sil.commands.daa",
     "daa_sil.commands.waitmap",
     "daa_sil.commands.shim",
+    "daa_sil.commands.run",
     "daa_sil.commands.campaign",
 ]
 
