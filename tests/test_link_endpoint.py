@@ -51,6 +51,10 @@ async def test_round_trip_and_learned_peer():
             got = [(await gcs.recv(timeout=2)).msg.tick for _ in range(2)]
             assert got == [1, 2]
             assert gcs.stats()["received"] == 2 and veh.stats()["sent"] == 2 and veh.stats()["send_no_peer"] == 1
+            gcs.send_many([hb(), d.MAVLink_sim_tick_message(9, 9000)])
+            assert (await veh.recv_match("SIM_TICK", timeout=2)).msg.tick == 9  # the HEARTBEAT is skipped
+            with pytest.raises(asyncio.TimeoutError):
+                await veh.recv_match("SIM_TICK", timeout=0.05)
 
 
 @pytest.mark.asyncio
