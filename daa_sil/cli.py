@@ -23,6 +23,7 @@ COMMAND_MODULES = [
     "daa_sil.commands.shim",
     "daa_sil.commands.run",
     "daa_sil.commands.campaign",
+    "daa_sil.commands.viz",
 ]
 
 EPILOG = """examples:

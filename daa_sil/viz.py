@@ -548,7 +548,7 @@ def _rr():
 # blueprint
 
 
-def blueprint(center: "Iterable[float] | None" = None, extent_m: float = 8000.0, top_height_m: float = 7500.0):
+def blueprint(center: "Iterable[float] | None" = None, extent_m: float = 8000.0, top_height_m: float = 6000.0):
     """Default layout: 3-D view (looking at ``center`` from ``extent_m`` away), ownship-centred top-down
     view (from ``top_height_m`` above), decision log, plots, state lanes."""
     import rerun as rr
@@ -563,7 +563,7 @@ def blueprint(center: "Iterable[float] | None" = None, extent_m: float = 8000.0,
         line_grid=rrb.LineGrid3D(visible=False))
     top = rrb.Spatial3DView(
         name="Top-down (ownship-centred)", origin="/world/ownship",
-        contents=["+ /world/**", "- /world/ownship/well_clear"],
+        contents=["+ /world/**"],
         eye_controls=rrb.EyeControls3D(position=[0.0, -1.0, top_height_m], look_target=[0.0, 0.0, 0.0],
                                        eye_up=[0, 1, 0]),
         line_grid=rrb.LineGrid3D(visible=False))
@@ -686,68 +686,53 @@ class WebServer:
             pass
 
 
-class EncounterLogger:
-    """One Rerun recording of one encounter; see the module docstring."""
+class Recording:
+    """A ``RecordingStream`` attached to the sinks of :class:`SinkOptions` (file, viewer, web).
 
-    def __init__(self, sinks: "SinkOptions | None" = None, preset: "str | Thresholds | None" = None,
-                 encounter_id: "int | str | None" = None, wait_lookup: "Callable[[np.ndarray], np.ndarray] | None" = None,
-                 center: "Iterable[float] | None" = None, extent_m: float = 8000.0, flush_interval_s: float = 0.25):
+    Raises only for a bad explicit request (an .rrd that exists without ``overwrite``, an unwritable
+    directory, a malformed ``connect`` URL); everything else that goes wrong is a :class:`VizWarning`
+    and leaves ``rec`` None (disabled).
+    """
+
+    def __init__(self, sinks: "SinkOptions | None" = None, recording_id: "str | None" = None, blueprint_=None):
         self.sinks = sinks or SinkOptions()
-        self.th = get_thresholds(preset)
         self.rec = None
         self.web: "WebServer | None" = None
         self.rrd_path: "Path | None" = None
         self._tmp: "Path | None" = None
-        self._emitter: "_Emitter | None" = None
-        self._queue: collections.deque = collections.deque()
-        self._wake = threading.Event()
-        self._stop = False
-        self._thread: "threading.Thread | None" = None
-        self._failed = False
         self._closed = False
-        self._aborted = False
-        self._lock = threading.Lock()
-        self.flush_interval_s = flush_interval_s
-        self.encounter_id = encounter_id
         if self.sinks.rrd:
             self.rrd_path = Path(self.sinks.rrd)
-            if self.rrd_path.exists() and not self.sinks.overwrite:
-                raise OutputError(f"{self.rrd_path} exists; refusing to overwrite (use --force or another path)")
             if self.rrd_path.is_dir():
                 raise OutputError(f"{self.rrd_path} is a directory, not an .rrd file path")
+            if self.rrd_path.exists() and not self.sinks.overwrite:
+                raise OutputError(f"{self.rrd_path} exists; refusing to overwrite (use --force or another path)")
+            parent = self.rrd_path.parent
+            if not parent.is_dir() or not os.access(parent, os.W_OK):
+                raise OutputError(f"cannot write {self.rrd_path}: directory {parent} is missing or not writable")
         if self.sinks.connect:
             _url_host_port(self.sinks.connect)  # a malformed URL is a usage error, not a missing viewer
         if not self.sinks.enabled:
             return
         try:
-            self._open(wait_lookup, center, extent_m)
-        except (OutputError, UsageError):
-            raise
+            self._open(recording_id, blueprint_)
         except Exception as exc:  # visualisation must never stop the caller
-            self._disable(f"Rerun logging disabled: {type(exc).__name__}: {exc}")
+            _warn(f"Rerun logging disabled: {type(exc).__name__}: {exc}")
+            self._discard()
 
-    @property
-    def enabled(self) -> bool:
-        """True while a sink is attached and nothing has failed."""
-        return self.rec is not None and not self._failed
-
-    def _open(self, wait_lookup, center, extent_m) -> None:
+    def _open(self, recording_id, blueprint_) -> None:
         import rerun as rr
 
         o = self.sinks
-        rid = f"encounter-{self.encounter_id}" if self.encounter_id is not None else None
         batcher = rr.ChunkBatcherConfig.NEVER() if o.deterministic else None
-        rec = rr.RecordingStream(o.app_id, recording_id=rid, batcher_config=batcher)
+        rec = rr.RecordingStream(o.app_id, recording_id=recording_id, batcher_config=batcher)
         if not rec.is_enabled():
             _warn("Rerun is disabled in the environment (RERUN=off); no visualisation is written")
             return
         rec.set_log_time_enabled(False)
         sinks: list = []
         if self.rrd_path is not None:
-            parent = self.rrd_path.parent if str(self.rrd_path.parent) else Path(".")
-            if not parent.is_dir() or not os.access(parent, os.W_OK):
-                raise OutputError(f"cannot write {self.rrd_path}: directory {parent} is missing or not writable")
-            fd, tmp = tempfile.mkstemp(prefix=f".{self.rrd_path.name}.", suffix=".tmp", dir=parent)
+            fd, tmp = tempfile.mkstemp(prefix=f".{self.rrd_path.name}.", suffix=".tmp", dir=self.rrd_path.parent)
             os.close(fd)
             self._tmp = Path(tmp)
             sinks.append(rr.FileSink(str(self._tmp)))
@@ -775,9 +760,90 @@ class EncounterLogger:
                 _warn(f"could not start the Rerun web viewer: {exc}")
         if not sinks:
             return
-        rec.set_sinks(*sinks, default_blueprint=blueprint(center, extent_m))
+        rec.set_sinks(*sinks, default_blueprint=blueprint_)
         self.rec = rec
-        self._emitter = _Emitter(rec, self.th, wait_lookup)
+
+    def _discard(self) -> None:
+        self.rec = None
+        if self._tmp is not None:
+            self._tmp.unlink(missing_ok=True)
+        if self.web is not None:
+            self.web.stop()
+
+    def close(self, keep_serving: bool = False, commit: bool = True) -> "Path | None":
+        """Flush, disconnect, move the .rrd into place (unless ``commit`` is False); return its path."""
+        if self._closed:
+            return self.rrd_path if self.rrd_path is not None and self.rrd_path.exists() and commit else None
+        self._closed = True
+        written = None
+        if self.rec is not None:
+            try:
+                self.rec.flush()
+                self.rec.disconnect()
+            except Exception as exc:
+                _warn(f"Rerun flush failed: {exc}")
+                commit = False
+            if commit and self._tmp is not None and self._tmp.exists() and self._tmp.stat().st_size > 0:
+                try:
+                    with open(self._tmp, "rb+") as fh:
+                        os.fsync(fh.fileno())
+                    os.replace(self._tmp, self.rrd_path)
+                    written = self.rrd_path
+                except OSError as exc:
+                    _warn(f"cannot write {self.rrd_path}: {exc.strerror or exc}")
+        if self._tmp is not None:
+            self._tmp.unlink(missing_ok=True)
+        if not keep_serving and self.web is not None:
+            self.web.stop()
+        return written
+
+
+class EncounterLogger:
+    """One Rerun recording of one encounter; see the module docstring."""
+
+    def __init__(self, sinks: "SinkOptions | None" = None, preset: "str | Thresholds | None" = None,
+                 encounter_id: "int | str | None" = None, wait_lookup: "Callable[[np.ndarray], np.ndarray] | None" = None,
+                 center: "Iterable[float] | None" = None, extent_m: float = 6000.0, flush_interval_s: float = 0.25):
+        self.th = get_thresholds(preset)
+        self.encounter_id = encounter_id
+        self.flush_interval_s = flush_interval_s
+        self._emitter: "_Emitter | None" = None
+        self._queue: collections.deque = collections.deque()
+        self._wake = threading.Event()
+        self._stop = False
+        self._thread: "threading.Thread | None" = None
+        self._failed = False
+        self._closed = False
+        self._aborted = False
+        self._lock = threading.Lock()
+        bp = None
+        if sinks is not None and sinks.enabled:
+            bp = blueprint(center, extent_m)
+        rid = f"encounter-{encounter_id}" if encounter_id is not None else None
+        self._recording = Recording(sinks, rid, bp)
+        if self._recording.rec is not None:
+            try:
+                self._emitter = _Emitter(self._recording.rec, self.th, wait_lookup)
+            except Exception as exc:
+                self._disable(f"Rerun logging disabled: {type(exc).__name__}: {exc}")
+
+    @property
+    def rec(self):
+        """The underlying ``rerun.RecordingStream`` (None when disabled)."""
+        return self._recording.rec
+
+    @property
+    def web(self) -> "WebServer | None":
+        return self._recording.web
+
+    @property
+    def rrd_path(self) -> "Path | None":
+        return self._recording.rrd_path
+
+    @property
+    def enabled(self) -> bool:
+        """True while a sink is attached and nothing has failed."""
+        return self.rec is not None and not self._failed
 
     def _disable(self, msg: str) -> None:
         if not self._failed:
@@ -833,40 +899,29 @@ class EncounterLogger:
 
     # closing ----------------------------------------------------------------------------------
     def close(self, keep_serving: bool = False) -> "Path | None":
-        """Flush and disconnect; move the .rrd into place; return its path (None if not written)."""
-        if self._closed:
-            return self.rrd_path if self.rrd_path is not None and self.rrd_path.exists() else None
-        self._closed = True
-        self._stop = True
-        self._wake.set()
-        if self._thread is not None:
-            self._thread.join()
-        written = None
-        if self.rec is not None:
-            try:
-                self.rec.flush()
-                self.rec.disconnect()
-            except Exception as exc:
-                self._disable(f"Rerun flush failed: {exc}")
-            if (not self._aborted and self._tmp is not None and self._tmp.exists()
-                    and self._tmp.stat().st_size > 0):
-                try:
-                    with open(self._tmp, "rb+") as fh:
-                        os.fsync(fh.fileno())
-                    os.replace(self._tmp, self.rrd_path)
-                    written = self.rrd_path
-                except OSError as exc:
-                    _warn(f"cannot write {self.rrd_path}: {exc.strerror or exc}")
-        if self._tmp is not None:
-            self._tmp.unlink(missing_ok=True)
-        if not keep_serving:
-            self.stop_serving()
-        return written
+        """Drain the queue, flush and disconnect; move the .rrd into place; return its path (None if not written)."""
+        if not self._closed:
+            self._closed = True
+            self._stop = True
+            self._wake.set()
+            if self._thread is not None:
+                self._thread.join()
+        return self._recording.close(keep_serving=keep_serving, commit=not self._aborted)
 
     def stop_serving(self) -> None:
         """Stop the web viewer started by this logger (if any)."""
         if self.web is not None:
             self.web.stop()
+
+    def wait_serving(self) -> None:
+        """Block until Ctrl-C while the web viewer runs, then stop it."""
+        try:
+            while self.web is not None and self.web.alive():
+                time.sleep(0.5)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self.stop_serving()
 
     def abort(self) -> None:
         """Stop without writing the .rrd (e.g. the run failed)."""
@@ -924,7 +979,9 @@ def focus(table: pa.Table) -> tuple[list[float], float]:
         j = int(np.nanargmin(rng[k]))
         intr = np.array([c.i("intr_x")[k, j], c.i("intr_y")[k, j], c.i("intr_z")[k, j]])
         if np.all(np.isfinite(intr)):
-            center = (own[k] + intr) / 2.0
+            half = (intr - own[k]) / 2.0
+            norm = float(np.linalg.norm(half))
+            center = own[k] + (half if norm <= 1500.0 else half * (1500.0 / norm))
     return center.tolist(), 6000.0
 
 
@@ -967,6 +1024,64 @@ def wait_colors(w: np.ndarray, w_max: "float | None" = None) -> np.ndarray:
     rgba = np.concatenate([rgb, np.full(rgb.shape[:-1] + (1,), 255.0)], axis=-1)
     rgba[~np.isfinite(w)] = (128, 128, 128, 80)
     return rgba.astype(np.uint8)
+
+
+def waitmap_slice(waitmap, vi: float, vh: float, theta_deg: float, turn_rate_deg: float = 0.0
+                  ) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Grid nodes (dX, dY, d_h) ``(K, 3)`` and their wait times ``(K,)`` at the grid node nearest to
+    (v_i, V_h, theta) of a :class:`~daa_sil.waitmap.WaitMap` (or a family: the map nearest ``turn_rate_deg``)."""
+    wm = waitmap.map_for(turn_rate_deg) if hasattr(waitmap, "map_for") else waitmap
+    g = wm.grid
+    idx = []
+    chosen = {}
+    for name, val in (("vi", vi), ("vh", vh), ("theta", np.radians(theta_deg))):
+        ax = g.axis(name)
+        pts = ax.values
+        d = np.abs(((pts - val + np.pi) % (2 * np.pi)) - np.pi) if ax.periodic else np.abs(pts - val)
+        k = int(np.argmin(d))
+        idx.append(k)
+        chosen[name] = float(np.degrees(pts[k])) if name == "theta" else float(pts[k])
+    dx, dy, dh = (g.axis(n).values for n in ("dx", "dy", "dh"))
+    mesh = np.stack(np.meshgrid(dx, dy, dh, indexing="ij"), axis=-1).reshape(-1, 3)
+    w = np.asarray(wm.wait_s)[:, :, :, idx[0], idx[1], idx[2]].reshape(-1)
+    chosen["turn_rate_deg"] = float(wm.turn_rate_deg)
+    chosen["preset"] = wm.params.preset
+    return mesh, w, chosen
+
+
+def log_waitmap(rec, waitmap, vi: float = 155.0, vh: float = 0.0, theta_deg: float = 180.0,
+                turn_rate_deg: float = 0.0, entity: str = "waitmap") -> dict:
+    """Log a wait-map slice as a 3-D point cloud over (dX, dY, d_h) coloured by wait time (paper frame:
+    ownship at the origin flying +X, Y to the left, d_h up); return the slice actually shown."""
+    import rerun as rr
+
+    pts, w, chosen = waitmap_slice(waitmap, vi, vh, theta_deg, turn_rate_deg)
+    title = (f"wait map (turn {chosen['turn_rate_deg']:+.1f} deg/s, {chosen['preset']}) at v_i = {chosen['vi']:.0f} m/s, "
+             f"V_h = {chosen['vh']:+.1f} m/s, theta = {chosen['theta']:.0f} deg")
+    log_waitmap_points(rec, pts, w, entity=entity, title=title)
+    th = get_thresholds(chosen["preset"])
+    rec.log(f"{entity}/well_clear", rr.Cylinders3D(lengths=[2 * th.zthr], radii=[th.dthr], colors=[WC_OK],
+                                                   fill_mode=rr.components.FillMode.MajorWireframe), static=True)
+    return chosen
+
+
+def write_waitmap(waitmap, sinks: SinkOptions, vi: float = 155.0, vh: float = 0.0, theta_deg: float = 180.0,
+                  turn_rate_deg: float = 0.0, keep_serving: bool = False) -> "tuple[Path | None, dict, Recording]":
+    """:func:`log_waitmap` into the sinks of ``sinks`` (own recording and layout)."""
+    import rerun.blueprint as rrb
+
+    bp = rrb.Blueprint(rrb.Horizontal(rrb.Spatial3DView(name="Wait map", origin="/waitmap"),
+                                      rrb.TextDocumentView(name="Slice", origin="/waitmap/info"),
+                                      column_shares=[4, 1]), collapse_panels=True)
+    recording = Recording(sinks, "waitmap", bp)
+    chosen: dict = {}
+    if recording.rec is not None:
+        try:
+            chosen = log_waitmap(recording.rec, waitmap, vi, vh, theta_deg, turn_rate_deg)
+        except (UsageError, ValueError, IndexError) as exc:
+            recording.close(commit=False)
+            raise UsageError(f"cannot show this wait-map slice: {exc}") from None
+    return recording.close(keep_serving=keep_serving), chosen, recording
 
 
 def log_waitmap_points(rec, points: np.ndarray, wait_s: np.ndarray, entity: str = "waitmap",

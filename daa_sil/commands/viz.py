@@ -1,0 +1,228 @@
+"""``daa-sil viz steplog|replay``: Rerun visualisation of step logs and of campaign encounters."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import sys
+import warnings
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from ..errors import FileFormatError, UsageError
+from ..thresholds import PRESETS
+from ._args import finite_float
+
+STEPLOG_EX = """examples:
+  daa-sil viz steplog runs/headon/steps.parquet --rrd headon.rrd
+  daa-sil viz steplog steps.parquet --encounter 42 --rrd enc42.rrd --until 150
+  daa-sil viz steplog steps.parquet --serve-web            # http://127.0.0.1:9090, Ctrl-C to stop
+  daa-sil viz steplog steps.parquet --connect rerun+http://127.0.0.1:9876/proxy
+
+A step log holds one row per encounter per step (SIL run or fast-time). --until keeps the steps up to
+that sim time, so a viewer opens the file at that moment.
+"""
+
+REPLAY_EX = """examples:
+  daa-sil viz replay results/ --group ID-1 --worst --rrd worst.rrd
+  daa-sil viz replay results/ --group B-1 --encounter 1234 --rrd b1-1234.rrd
+  daa-sil viz replay results/ --group IC-1 --worst --serve-web
+
+Re-simulates one encounter of a fast-time campaign (same encounter set, seed, group policy and latency
+model) with full step logging. --worst picks the encounter of the group with the largest penetration
+integral among those that lost well clear, ties broken by the smallest minimum range (or the smallest
+minimum range if none lost well clear).
+"""
+
+
+def _sink_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("where the visualisation goes (at least one)")
+    g.add_argument("--rrd", metavar="FILE", help="write a Rerun .rrd file (atomically)")
+    g.add_argument("--force", action="store_true", help="overwrite an existing --rrd file")
+    g.add_argument("--spawn-viewer", action="store_true", help="open the native Rerun viewer (needs a display)")
+    g.add_argument("--connect", metavar="URL", help="stream to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
+    g.add_argument("--serve-web", action="store_true", help="serve the web viewer until Ctrl-C")
+    g.add_argument("--bind", default="127.0.0.1", help="address of the web viewer (default 127.0.0.1)")
+    g.add_argument("--web-port", type=int, default=9090, help="web viewer HTTP port (default 9090)")
+    g.add_argument("--grpc-port", type=int, default=9877, help="web viewer gRPC port (default 9877)")
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("viz", help="Rerun visualisation of step logs and campaign encounters",
+                       description="Rerun visualisation: 3-D encounter, top-down view, bands, decisions, plots.")
+    vs = p.add_subparsers(dest="viz_command", metavar="VERB", parser_class=type(p))
+    vs.required = True
+    s = vs.add_parser("steplog", help="convert a step log (SIL or fast-time) to Rerun", epilog=STEPLOG_EX,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    s.add_argument("steplog", metavar="STEPLOG.parquet")
+    s.add_argument("--encounter", type=int, metavar="ID", help="encounter id (needed if the log holds several)")
+    s.add_argument("--preset", help=f"threshold preset for the well-clear volume: {', '.join(PRESETS)} "
+                                    "(default: the log's metadata, else do365)")
+    s.add_argument("--until", type=finite_float("--until", 0.0), metavar="S", help="keep steps with t <= S")
+    _sink_args(s)
+    s.set_defaults(func=run_steplog)
+    r = vs.add_parser("replay", help="re-simulate one campaign encounter with step logging", epilog=REPLAY_EX,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    r.add_argument("results", metavar="RESULTS", help="campaign results directory (with campaign.json)")
+    r.add_argument("--group", required=True, help="group, e.g. ID-1")
+    which = r.add_mutually_exclusive_group(required=True)
+    which.add_argument("--encounter", type=int, metavar="ID", help="encounter id")
+    which.add_argument("--worst", action="store_true", help="the worst LoWC of the group by penetration integral")
+    r.add_argument("--until", type=finite_float("--until", 0.0), metavar="S", help="keep steps with t <= S")
+    r.add_argument("--save-steplog", metavar="FILE", help="also write the step log as Parquet")
+    _sink_args(r)
+    r.set_defaults(func=run_replay)
+
+
+def sink_options(args):
+    """SinkOptions from the CLI flags (UsageError if none is chosen)."""
+    from ..viz import SinkOptions
+
+    if not (args.rrd or args.spawn_viewer or args.connect or args.serve_web):
+        raise UsageError("choose an output: --rrd FILE, --serve-web, --spawn-viewer or --connect URL")
+    for name in ("web_port", "grpc_port"):
+        port = getattr(args, name)
+        if not 1 <= port <= 65535:
+            raise UsageError(f"--{name.replace('_', '-')} must be a TCP port 1..65535, got {port}")
+    if args.rrd and not str(args.rrd).endswith(".rrd"):
+        raise UsageError(f"--rrd {args.rrd!r} should end in .rrd")
+    return SinkOptions(rrd=args.rrd, spawn=args.spawn_viewer, connect=args.connect, serve_web=args.serve_web,
+                       bind=args.bind, web_port=args.web_port, grpc_port=args.grpc_port, overwrite=args.force)
+
+
+@contextlib.contextmanager
+def one_line_warnings() -> Iterator[None]:
+    """Print VizWarnings as ``daa-sil: warning: ...`` (one line, no source location)."""
+    from ..viz import VizWarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, VizWarning):
+            print(f"daa-sil: warning: {message}", file=sys.stderr)
+        else:
+            previous(message, category, filename, lineno, file, line)
+
+    previous = warnings.showwarning
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", VizWarning)
+        warnings.showwarning = show
+        try:
+            yield
+        finally:
+            warnings.showwarning = previous
+
+
+def _finish(args, path, logger, summary: dict) -> int:
+    summary.update({"rrd": str(path) if path else None, "steps": logger.steps_logged,
+                    "web_url": logger.web.url if logger.web is not None and logger.web.alive() else None})
+    if args.json:
+        print(json.dumps(summary, sort_keys=True))
+    else:
+        if path:
+            print(f"wrote {path} ({Path(path).stat().st_size / 1000:.0f} kB, {logger.steps_logged} steps)")
+        if summary["web_url"]:
+            print(f"web viewer: {summary['web_url']}  (Ctrl-C to stop)")
+    if args.rrd and path is None:
+        return 1
+    if summary["web_url"]:
+        sys.stdout.flush()
+        logger.wait_serving()
+    return 0
+
+
+def run_steplog(args) -> int:
+    from .. import steplog, viz
+
+    opts = sink_options(args)
+    table = steplog.read_steplog(args.steplog)
+    meta = steplog.steplog_metadata(args.steplog)
+    preset = args.preset or meta.get("preset") or "do365"
+    if preset.lower() not in PRESETS:
+        raise UsageError(f"unknown --preset {preset!r}; allowed: {', '.join(PRESETS)}")
+    if table.num_rows == 0:
+        raise FileFormatError(f"step log {args.steplog} has no rows")
+    with one_line_warnings():
+        path, logger = viz.log_steplog(table, opts, encounter_id=args.encounter, preset=preset.lower(),
+                                       keep_serving=args.serve_web, until_s=args.until)
+        return _finish(args, path, logger, {"steplog": args.steplog, "encounter_id": logger.encounter_id,
+                                            "preset": preset.lower()})
+
+
+def pick_encounter(results, group: str, encounter: "int | None", worst: bool) -> tuple[int, dict]:
+    """The encounter id to replay and its result row (``--worst``: max PI among LoWC, else min range)."""
+    from .. import campaign
+
+    rows = campaign.read_results(results, "encounters", groups=[group])
+    ids = np.asarray(rows.column("encounter_id").to_numpy(zero_copy_only=False))
+    if worst:
+        lowc = np.asarray(rows.column("lowc").to_numpy(zero_copy_only=False), bool)
+        rng = np.asarray(rows.column("min_range_m").to_numpy(zero_copy_only=False), float)
+        if lowc.any():
+            pi = np.nan_to_num(np.asarray(rows.column("pi").to_numpy(zero_copy_only=False), float), nan=0.0)
+            cand = np.flatnonzero(lowc)
+            k = int(cand[np.lexsort((rng[cand], -pi[cand]))[0]])  # largest PI, then smallest range
+        else:
+            k = int(np.nanargmin(rng))
+    else:
+        hits = np.flatnonzero(ids == encounter)
+        if hits.size == 0:
+            raise UsageError(f"encounter {encounter} has no result in group {group} of {results}")
+        k = int(hits[0])
+    return int(ids[k]), rows.slice(k, 1).to_pylist()[0]
+
+
+def replay_steplog(results, group: str, encounter_id: int):
+    """Re-simulate one encounter of a campaign with step logging; returns (steplog, encounter row, config)."""
+    from .. import campaign, encounters, fasttime
+
+    out = Path(results)
+    cfg = campaign.CampaignConfig.from_dict(campaign.load_campaign_json(out)["config"], str(out / "campaign.json"))
+    group = campaign.parse_groups(group)[0]
+    if group not in cfg.groups:
+        raise UsageError(f"group {group} is not in the campaign {out} (it ran {', '.join(cfg.groups)})")
+    encs = encounters.load_encounters(out / "encounters.parquet")
+    pos = np.flatnonzero(np.asarray(encs.encounter_id) == encounter_id)
+    if pos.size == 0:
+        raise UsageError(f"encounter {encounter_id} is not in {out / 'encounters.parquet'}")
+    one = encs.subset(pos[:1])
+    spec = campaign.paper_groups()[group]
+    model = spec.delay_model()
+    fam = None
+    if spec.uses_map:
+        from .. import waitmap
+
+        fam = waitmap.default_family(preset=cfg.preset)
+    seeds = campaign.encounter_seeds(cfg.seed, np.array([encounter_id]))
+    enc_rows, _, steps = fasttime.simulate(one, spec.policy(), model, model, wait_family=fam, seeds=seeds,
+                                           preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s, group=group,
+                                           record_steps=True)
+    return steps, enc_rows.to_pylist()[0], cfg
+
+
+def run_replay(args) -> int:
+    from .. import campaign, steplog, viz
+
+    opts = sink_options(args)
+    group = campaign.parse_groups(args.group)[0]
+    enc_id, stored = pick_encounter(args.results, group, args.encounter, args.worst)
+    steps, row, cfg = replay_steplog(args.results, group, enc_id)
+    for key in ("lowc", "nmac"):
+        if bool(row[key]) != bool(stored[key]):
+            print(f"daa-sil: warning: the replay gives {key}={row[key]}, the campaign stored {stored[key]} "
+                  f"(different code version?)", file=sys.stderr)
+    if args.save_steplog:
+        steplog.write_steplog(steps, args.save_steplog, metadata={"preset": cfg.preset, "group": group},
+                              overwrite=args.force)
+    with one_line_warnings():
+        path, logger = viz.log_steplog(steps, opts, encounter_id=enc_id, preset=cfg.preset,
+                                       keep_serving=args.serve_web, until_s=args.until)
+        summary = {"results": args.results, "group": group, "encounter_id": enc_id, "preset": cfg.preset,
+                   "lowc": bool(row["lowc"]), "nmac": bool(row["nmac"]), "pi": row["pi"],
+                   "min_range_m": row["min_range_m"]}
+        if not args.json:
+            print(f"{group} encounter {enc_id}: LoWC {'yes' if row['lowc'] else 'no'}, PI {row['pi']:.3g}, "
+                  f"min range {row['min_range_m']:.0f} m")
+        return _finish(args, path, logger, summary)

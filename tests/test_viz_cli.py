@@ -1,0 +1,138 @@
+"""``daa-sil viz steplog|replay`` and ``log_waitmap``: exit codes, one-line errors, files read back."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+rr = pytest.importorskip("rerun")
+
+from daa_sil import steplog, viz  # noqa: E402
+from daa_sil.cli import main  # noqa: E402
+from test_viz import read_rrd, scalars  # noqa: E402
+from viz_encounter import make_steplog  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def _rerun_env(monkeypatch):
+    monkeypatch.delenv("RERUN", raising=False)
+    for var in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
+        monkeypatch.delenv(var, raising=False)
+
+
+@pytest.fixture(scope="module")
+def steplog_file(tmp_path_factory) -> Path:
+    a, b = make_steplog(encounter_id=3), make_steplog(n_steps=40, encounter_id=4)
+    table = pa.concat_tables([a, b]).cast(steplog.STEP_SCHEMA)
+    path = tmp_path_factory.mktemp("logs") / "steps.parquet"
+    steplog.write_steplog(table, path, metadata={"preset": "paper"})
+    return path
+
+
+def test_steplog_to_rrd(tmp_path, steplog_file, capsys):
+    out = tmp_path / "enc.rrd"
+    assert main(["viz", "steplog", str(steplog_file), "--encounter", "3", "--rrd", str(out)]) == 0
+    assert "240 steps" in capsys.readouterr().out
+    data = read_rrd(out)
+    assert data["/world/ownship"].num_rows == 240
+    hmd_star = scalars(data["/plots/hmd/threshold"])
+    assert np.allclose(hmd_star, 1220.0), "the preset comes from the step log's metadata (paper)"
+    # never overwritten silently; --force replaces it
+    assert main(["viz", "steplog", str(steplog_file), "--encounter", "3", "--rrd", str(out)]) == 1
+    assert "refusing to overwrite" in capsys.readouterr().err
+    assert main(["viz", "steplog", str(steplog_file), "--encounter", "4", "--rrd", str(out), "--force",
+                 "--preset", "do365", "--until", "9"]) == 0
+    data = read_rrd(out)
+    assert data["/world/ownship"].num_rows == 10
+    assert np.allclose(scalars(data["/plots/hmd/threshold"]), 1219.2)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--rrd", "X"], "holds 2 encounters"),
+    (["--encounter", "3"], "choose an output"),
+    (["--encounter", "3", "--rrd", "x.txt"], "should end in .rrd"),
+    (["--encounter", "99", "--rrd", "X"], "encounter 99 is not in the step log"),
+    (["--encounter", "3", "--rrd", "X", "--preset", "bogus"], "unknown --preset"),
+    (["--encounter", "3", "--connect", "localhost:1"], "not a Rerun gRPC URL"),
+])
+def test_usage_errors_are_one_line(tmp_path, steplog_file, capsys, argv, message):
+    argv = [str(tmp_path / "o.rrd") if a == "X" else a for a in argv]
+    assert main(["viz", "steplog", str(steplog_file)] + argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("daa-sil: error: ") and message in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_not_a_steplog(tmp_path, capsys):
+    bad = tmp_path / "bad.parquet"
+    bad.write_bytes(b"not parquet")
+    assert main(["viz", "steplog", str(bad), "--rrd", str(tmp_path / "o.rrd")]) == 2
+    assert "not a readable Parquet file" in capsys.readouterr().err
+
+
+def test_headless_spawn_viewer_warns_and_still_writes(tmp_path, steplog_file, capsys):
+    out = tmp_path / "enc.rrd"
+    assert main(["viz", "steplog", str(steplog_file), "--encounter", "4", "--rrd", str(out), "--spawn-viewer"]) == 0
+    err = capsys.readouterr().err
+    assert "daa-sil: warning: --spawn-viewer needs a display" in err
+    assert out.stat().st_size > 0
+
+
+def test_replay_worst_encounter(tmp_path, capsys):
+    """A tiny real campaign, then the replay of its worst encounter equals the stored result."""
+    from daa_sil import campaign
+
+    cfg = campaign.CampaignConfig(groups=("B-1",), n_encounters=12, seed=5, chunk_size=12)
+    campaign.run_campaign(cfg, tmp_path / "camp", workers=1, progress=False)
+    rows = campaign.read_results(tmp_path / "camp", "encounters", groups=["B-1"])
+    out = tmp_path / "worst.rrd"
+    log = tmp_path / "worst.parquet"
+    assert main(["viz", "replay", str(tmp_path / "camp"), "--group", "b-1", "--worst", "--rrd", str(out),
+                 "--save-steplog", str(log)]) == 0
+    printed = capsys.readouterr()
+    assert "warning" not in printed.err
+    enc_id = int(printed.out.split("encounter ")[1].split(":")[0])
+    row = rows.filter(pa.compute.equal(rows.column("encounter_id"), enc_id)).to_pylist()[0]
+    other = rows.to_pylist()
+    if any(r["lowc"] for r in other):
+        assert row["lowc"] and row["pi"] == max(r["pi"] for r in other if r["lowc"])
+    else:
+        assert row["min_range_m"] == min(r["min_range_m"] for r in other)
+    steps = steplog.read_steplog(log)
+    rng = np.array([v[0] for v in steps.column("range_m").to_pylist()])
+    assert np.isclose(rng.min(), row["min_range_m"], rtol=1e-6), "the replay reproduces the campaign encounter"
+    data = read_rrd(out)
+    assert data["/world/ownship"].num_rows == steps.num_rows == 240
+    assert np.allclose(scalars(data["/plots/range/0"]), rng)
+    assert main(["viz", "replay", str(tmp_path / "camp"), "--group", "B-1", "--encounter", "999",
+                 "--rrd", str(tmp_path / "x.rrd")]) == 2
+    assert "encounter 999 has no result" in capsys.readouterr().err
+
+
+def test_log_waitmap_point_cloud(tmp_path):
+    """A real (tiny) wait map solved by daa_sil.waitmap, shown as a coloured point cloud."""
+    waitmap = pytest.importorskip("daa_sil.waitmap")
+    grid = waitmap.resolve_grid("paper,dx=4,dy=4,dh=2,vi=2,vh=2,theta=4")
+    params = waitmap.MdpParams(preset="paper", gamma=0.9, horizon=20.0)
+    fam = waitmap.build_family(grid, params, [0.0])
+    path, chosen, _ = viz.write_waitmap(fam, viz.SinkOptions(rrd=tmp_path / "wm.rrd"), vi=80.0, vh=5.0,
+                                        theta_deg=170.0)
+    assert path == tmp_path / "wm.rrd"
+    assert np.isclose(chosen["theta"], 180.0) and chosen["vi"] == grid.axis("vi").values[0]
+    chunks = [c for c in rr.chunk.RrdReader(path).stream() if c.entity_path == "/waitmap/points"]
+    rb = chunks[0].to_record_batch()
+    pts = np.array(rb.column("Points3D:positions").to_pylist()[0])
+    colors = np.array(rb.column("Points3D:colors").to_pylist()[0], np.uint32)
+    assert pts.shape == (4 * 4 * 2, 3)
+    wm = fam.map_for(0.0)
+    w = wm.wait_s[:, :, :, 0, grid.axis("vh").n - 1, 2].reshape(-1)
+    assert np.array_equal(colors, _packed(viz.wait_colors(w)))
+    assert np.allclose(np.sort(np.unique(pts[:, 0])), grid.axis("dx").values)
+
+
+def _packed(rgba: np.ndarray) -> np.ndarray:
+    rgba = rgba.astype(np.uint32)
+    return (rgba[:, 0] << 24) | (rgba[:, 1] << 16) | (rgba[:, 2] << 8) | rgba[:, 3]
