@@ -411,7 +411,8 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
         return out, config, encs
     ensure_dir(out)
     encs = enc_mod.sample_encounters(config.n_encounters, seed=config.seed, preset=config.preset,
-                                     duration_s=config.duration_s, dt_s=config.dt_s)
+                                     duration_s=config.duration_s, dt_s=config.dt_s,
+                                     t_cpa_s=config.duration_s / 2.0)  # paper: CPA at T/2
     enc_mod.save_encounters(encs, enc_path)  # atomic
     meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "versions": _versions(),
             "preset": config.preset, "seed": config.seed, "status": "running",

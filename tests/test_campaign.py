@@ -1,0 +1,166 @@
+"""Campaign runner and CLI: bad config, determinism across executors, resume after SIGKILL, report."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from daa_sil.campaign import (CampaignConfig, chunk_paths, paper_groups, parse_groups, read_results,
+                              run_campaign)
+from daa_sil.cli import main
+from daa_sil.errors import UsageError
+
+SMALL = dict(groups=("B-2", "IC-1"), n_encounters=12, seed=5, chunk_size=5, preset="paper", duration_s=60.0)
+
+
+def _tables(out: Path) -> dict:
+    return {kind: read_results(out, kind) for kind in ("encounters", "decisions")}
+
+
+def _assert_same(a: dict, b: dict) -> None:
+    for kind in a:
+        ta, tb = a[kind], b[kind]
+        assert ta.schema.equals(tb.schema) and ta.num_rows == tb.num_rows, kind
+        for name in ta.column_names:
+            x, y = ta[name].to_numpy(zero_copy_only=False), tb[name].to_numpy(zero_copy_only=False)
+            np.testing.assert_array_equal(x, y, err_msg=f"{kind}.{name}")
+
+
+def test_groups_are_the_papers_table_2():
+    g = paper_groups()
+    assert list(g) == ["B-1", "B-2", "IC-1", "ID-1", "ID-2"]
+    assert g["B-2"].delay_model().kind == "gaussian" and g["IC-1"].delay_model().mean() == 5.0
+    assert g["ID-1"].uses_map and not g["IC-1"].uses_map
+    assert not g["B-1"].policy().blending and g["ID-2"].policy().wait_mode == "map"
+    assert parse_groups("id-2, B-1") == ("ID-2", "B-1")
+    with pytest.raises(UsageError, match="unknown group 'X'"):
+        parse_groups("B-1,X")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--groups", "B-1,B-9"], "unknown group 'B-9'"),
+    (["--encounters", "0"], "--encounters must be a positive integer"),
+    (["--encounters", "-3"], "--encounters must be a positive integer"),
+    (["--chunk-size", "x"], "--chunk-size must be a positive integer"),
+    (["--preset", "nope"], "unknown --preset"),
+])
+def test_bad_config_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, argv, message):
+    out = tmp_path / "camp"
+    rc = main(["campaign", "run", "--out", str(out)] + argv)
+    err = capsys.readouterr().err
+    assert rc == 2 and message in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_unwritable_out_and_non_empty_out(tmp_path, capsys):
+    blocker = tmp_path / "file.txt"
+    blocker.write_text("x")
+    rc = main(["campaign", "run", "--out", str(blocker / "sub"), "--encounters", "2"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "cannot be created" in err
+    full = tmp_path / "full"
+    full.mkdir()
+    (full / "keep.txt").write_text("mine")
+    rc = main(["campaign", "run", "--out", str(full), "--encounters", "2"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "not empty; pass --resume" in err
+    assert sorted(p.name for p in full.iterdir()) == ["keep.txt"]
+
+
+def test_same_tables_for_one_and_two_workers(tmp_path):
+    cfg = CampaignConfig(**SMALL)
+    s1 = run_campaign(cfg, tmp_path / "w1", workers=1, progress=False)
+    s2 = run_campaign(cfg, tmp_path / "w2", workers=2, progress=False)
+    assert s1.chunks_run == s2.chunks_run == 2 * cfg.n_chunks == 6
+    _assert_same(_tables(tmp_path / "w1"), _tables(tmp_path / "w2"))
+    meta = json.loads((tmp_path / "w1" / "campaign.json").read_text())
+    assert meta["status"] == "complete" and meta["preset"] == "paper" and meta["seed"] == 5
+    enc = read_results(tmp_path / "w1", "encounters")
+    assert enc.num_rows == 2 * cfg.n_encounters
+    assert set(enc["group"].to_pylist()) == {"B-2", "IC-1"}
+    # the same encounter set (ids and seeds) in every group
+    by_group = {g: enc.filter(enc["group"].to_numpy(zero_copy_only=False) == g) for g in cfg.groups}
+    assert by_group["B-2"]["seed"].equals(by_group["IC-1"]["seed"])
+
+
+def test_dask_local_matches_process_pool(tmp_path):
+    pytest.importorskip("dask.distributed")
+    cfg = CampaignConfig(**{**SMALL, "groups": ("ID-2",), "n_encounters": 8, "chunk_size": 4})
+    run_campaign(cfg, tmp_path / "pool", workers=2, progress=False)
+    run_campaign(cfg, tmp_path / "dask", workers=2, scheduler="local-dask", progress=False)
+    _assert_same(_tables(tmp_path / "pool"), _tables(tmp_path / "dask"))
+
+
+def test_resume_with_different_settings_is_refused(tmp_path):
+    cfg = CampaignConfig(**{**SMALL, "groups": ("B-1",), "n_encounters": 3})
+    run_campaign(cfg, tmp_path / "c", progress=False)
+    with pytest.raises(UsageError, match="different settings \\(seed\\)"):
+        run_campaign(CampaignConfig(**{**SMALL, "groups": ("B-1",), "n_encounters": 3, "seed": 6}),
+                     tmp_path / "c", resume=True, progress=False)
+    # resuming a complete campaign recomputes nothing
+    s = run_campaign(cfg, tmp_path / "c", resume=True, progress=False)
+    assert s.chunks_run == 0 and s.chunks_skipped == 1
+
+
+def _cli(*args) -> list:
+    return [sys.executable, "-m", "daa_sil.cli", "campaign", "run", *args]
+
+
+def test_resume_after_sigkill_gives_the_uninterrupted_tables(tmp_path):
+    args = ["--groups", "B-1,IC-1", "--encounters", "12", "--chunk-size", "3", "--seed", "3", "--no-progress"]
+    killed = tmp_path / "killed"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen(_cli(*args, "--out", str(killed)), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env=env, start_new_session=True)
+    try:
+        first = chunk_paths(killed, "B-1", 0)[0]
+        while not first.exists() and proc.poll() is None:
+            time.sleep(0.02)
+        assert proc.poll() is None, "the campaign finished before it could be killed"
+        os.killpg(proc.pid, signal.SIGKILL)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+    done = list(killed.rglob("encounters-*.parquet"))
+    assert 1 <= len(done) < 8, "kill should land after the first and before the last chunk"
+    assert json.loads((killed / "campaign.json").read_text())["status"] == "running"
+    # resume needs only --out: the stored config is used
+    res = subprocess.run(_cli("--out", str(killed), "--resume", "--json"), capture_output=True, text=True,
+                         env=env)
+    assert res.returncode == 0, res.stderr
+    info = json.loads(res.stdout)
+    assert info["chunks_skipped"] == len(done) and info["chunks_run"] == 8 - len(done)
+    full = tmp_path / "full"
+    res = subprocess.run(_cli(*args, "--out", str(full)), capture_output=True, text=True, env=env)
+    assert res.returncode == 0, res.stderr
+    for g in ("B-1", "IC-1"):
+        for c in range(4):
+            for a, b in zip(chunk_paths(killed, g, c), chunk_paths(full, g, c)):
+                assert pq.read_table(a).equals(pq.read_table(b)) or _same_values(a, b), a.name
+    assert not list(killed.rglob(".*.tmp"))  # no half-written file survived the kill
+
+
+def _same_values(a: Path, b: Path) -> bool:
+    ta, tb = pq.read_table(a), pq.read_table(b)
+    _assert_same({"t": ta}, {"t": tb})
+    return True
+
+
+def test_report_from_a_campaign(tmp_path, capsys):
+    pytest.importorskip("daa_sil.report")
+    cfg = CampaignConfig(**{**SMALL, "groups": ("B-2", "ID-2"), "n_encounters": 6})
+    run_campaign(cfg, tmp_path / "c", progress=False)
+    rc = main(["campaign", "report", str(tmp_path / "c"), "--out", str(tmp_path / "rep")])
+    assert rc == 0, capsys.readouterr().err
+    text = (tmp_path / "rep" / "report.md").read_text()
+    assert "ID-2" in text and "B-2" in text
+    rc = main(["campaign", "report", str(tmp_path / "nothing")])
+    assert rc == 2 and "not a campaign directory" in capsys.readouterr().err
