@@ -10,15 +10,6 @@ from daa_sil.latency import Constant, DelayProcess, TruncatedGaussian, Uniform
 from daa_sil.link.delayline import DelayLine, delay_seed, fifo_release
 
 
-def _drain(line, t_end, dt=0.05):
-    out = []
-    t = 0.0
-    while t <= t_end:
-        out.extend((t, x) for x in line.pop_due(t))
-        t += dt
-    return out
-
-
 def test_fifo_release_pure_function():
     t = np.array([0.0, 1.0, 2.0, 3.0])
     d = np.array([5.0, 2.0, 6.0, 1.0])

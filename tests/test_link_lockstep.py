@@ -27,7 +27,9 @@ async def test_helpers_through_shim(signed):
         async with await open_endpoint(MavCodec(1, 1, key=key), peer=shim.vehicle_side) as v_ep, \
                 await open_endpoint(MavCodec(255, 190, key=key), peer=shim.gcs_side) as g_ep:
             g_ep.send(d.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3))
-            while shim.peers["gcs"] is None:
+            for _ in range(2000):  # bounded: at most ~2 s
+                if shim.peers["gcs"] is not None:
+                    break
                 await asyncio.sleep(0.001)
             veh, gcs = LockstepVehicle(v_ep, timeout=5), LockstepGcs(g_ep)
 

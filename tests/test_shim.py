@@ -42,7 +42,9 @@ async def _lockstep_run(shim: DelayShim, steps: int, key: "bytes | None" = None,
     async with await open_endpoint(MavCodec(1, 1, key=key), peer=shim.vehicle_side) as veh, \
             await open_endpoint(MavCodec(255, 190, key=key), peer=shim.gcs_side) as gcs:
         gcs.send(d.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3))  # announce the GCS to the shim
-        while shim.peers["gcs"] is None:
+        for _ in range(2000):  # bounded: at most ~2 s
+            if shim.peers["gcs"] is not None:
+                break
             await asyncio.sleep(0.001)
 
         async def gcs_node():
