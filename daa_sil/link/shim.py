@@ -14,6 +14,13 @@ datagram that is due while its destination is still unknown is counted as ``no_p
 Seeds: ``SeedSequence(seed)`` child 0 drives the down line, child 1 the up line (see
 :func:`direction_seeds`); each line derives its delay process and impairment draws from it.
 
+Parity with fast-time: a packet sent at sim time ``t`` on direction ``dir`` of a shim seeded
+``seed`` is released at ``fifo_release(t, d)`` with ``d = DelayProcess(model,
+delay_seed(direction_seeds(seed)[dir]), epoch_s).delay(t)`` (batched:
+``BatchedDelay(model, [delay_seed(...) for each encounter], epoch_s, duration_s)``); in lockstep it is
+delivered at the first tick ``t_k >= release``. This needs ``epoch_s > 0``: with per-datagram
+draws the index counts every datagram (heartbeats too), which fast-time does not model.
+
 Clocks
 ------
 ``realtime``: sim time = (loop monotonic time - start) x ``speed``. Releases are scheduled with
