@@ -1,0 +1,103 @@
+"""GCS node: lockstep tick handling and scripted commands, against a fake vehicle on loopback."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+
+import pytest
+
+from daa_sil.link.codec import MavCodec
+from daa_sil.link.codec import mavlink as M
+from daa_sil.link.endpoint import open_endpoint
+from daa_sil.scenario import parse_scenario
+from gcs.node import GcsNode, GcsOptions
+
+SCENARIO = """\
+name: gcs-test
+duration_s: 60
+ownship: {alt_m: 1000, gs_mps: 55, track_deg: 0}
+intruders:
+  - cpa: {angle_deg: 180, hmd_m: 100, t_cpa_s: 50, gs_mps: 55}
+pilot:
+  mode: scripted
+  commands:
+    - {t_s: 2, until_s: 4, track_deg: 30}
+"""
+
+
+async def _recv_until(ep, pred, timeout=5.0) -> list:
+    got = []
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while loop.time() < end:
+        r = await ep.recv(end - loop.time())
+        got.append(r.msg)
+        if pred(r.msg):
+            return got
+    raise AssertionError(f"timed out; got {[m.get_type() for m in got]}")
+
+
+@pytest.mark.asyncio
+async def test_lockstep_tick_commands_then_ack_and_repeated_tick(tmp_path):
+    sc = parse_scenario(SCENARIO)
+    veh = await open_endpoint(MavCodec(1, 1), "udp:127.0.0.1:0")
+    node = GcsNode(sc, GcsOptions(vehicle=f"udp:127.0.0.1:{veh.local_address[1]}", listen="udp:127.0.0.1:0",
+                                  clock="lockstep", log=tmp_path / "cmds.jsonl", display=False))
+    await node.start()
+    task = asyncio.create_task(node.run())
+    try:
+        hello = await veh.recv(5.0)
+        assert hello.msg.get_type() == "HEARTBEAT" and hello.msg.get_srcSystem() == 255
+        gcs_addr = node.ep.local_address
+        for k in range(5):
+            veh.send(M.MAVLink_sim_tick_message(k, k * 1000), gcs_addr)
+            got = await _recv_until(veh, lambda m: m.get_type() == "SIM_TICK_ACK")
+            cmds = [m for m in got if m.get_type() == "PILOT_MANEUVER"]
+            assert got[-1].tick == k
+            # scripted command streamed once per step over [2, 4): steps 2 and 3 only, sent before the ack
+            assert len(cmds) == (1 if k in (2, 3) else 0)
+            for c in cmds:
+                assert c.time_boot_ms == k * 1000 and c.track_deg == pytest.approx(30.0) and math.isnan(c.vs)
+        # a repeated tick is acknowledged again without stepping again
+        veh.send(M.MAVLink_sim_tick_message(3, 3000), gcs_addr)
+        got = await _recv_until(veh, lambda m: m.get_type() == "SIM_TICK_ACK")
+        assert got[-1].tick == 3 and not [m for m in got if m.get_type() == "PILOT_MANEUVER"]
+        assert node.steps == 5 and [c["seq"] for c in node.sent] == [1, 2]
+    finally:
+        node.stop.set()
+        await asyncio.wait_for(task, 5.0)
+        node.write_log()
+        node.close()
+        veh.close()
+    rows = [json.loads(x) for x in (tmp_path / "cmds.jsonl").read_text().splitlines()]
+    assert [(r["t"], r["seq"], r["kind"]) for r in rows] == [(2.0, 1, "scripted"), (3.0, 2, "scripted")]
+
+
+@pytest.mark.asyncio
+async def test_gcs_builds_what_the_pilot_sees_from_telemetry():
+    from vehicle import telemetry as T
+
+    sc = parse_scenario(SCENARIO)
+    veh = await open_endpoint(MavCodec(1, 1), "udp:127.0.0.1:0")
+    node = GcsNode(sc, GcsOptions(vehicle=f"udp:127.0.0.1:{veh.local_address[1]}", listen="udp:127.0.0.1:0",
+                                  clock="lockstep", display=False))
+    await node.start()
+    try:
+        own = T.Kin(100.0, 2000.0, 1000.0, 55.0, math.radians(10.0), 1.5)
+        intr = T.Kin(-300.0, 6000.0, 1100.0, 60.0, math.radians(190.0), -2.0)
+        veh.send_many([T.local_position(7.0, own), T.adsb_vehicle(1000, "X", intr, sc.origin), T.alert_level(7.0, 2)],
+                      node.ep.local_address)
+        for _ in range(3):
+            node.handle(await node.ep.recv(5.0))
+        o, i = node.observed()
+        assert (o.x[0], o.y[0], o.z[0]) == pytest.approx((100.0, 2000.0, 1000.0), abs=1e-3)
+        assert (o.gs[0], math.degrees(o.trk[0]), o.vs[0]) == pytest.approx((55.0, 10.0, 1.5), abs=1e-4)
+        # ADS-B is quantised (degE7 ~ 1 cm, cm/s, centidegrees)
+        assert (i.x[0, 0], i.y[0, 0], i.z[0, 0]) == pytest.approx((-300.0, 6000.0, 1100.0), abs=0.05)
+        assert (i.gs[0, 0], math.degrees(i.trk[0, 0]), i.vs[0, 0]) == pytest.approx((60.0, 190.0, -2.0), abs=0.01)
+        assert node.view.alert == (7.0, 2)
+    finally:
+        node.close()
+        veh.close()
