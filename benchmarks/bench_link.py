@@ -2,7 +2,7 @@
 
     python benchmarks/bench_link.py                 # both parts (about 20 s)
     python benchmarks/bench_link.py --part codec --n 100000
-    python benchmarks/bench_link.py --part shim --seconds 20 --rate 50 --delay 1.0
+    python benchmarks/bench_link.py --part shim --seconds 20 --rate 50 --delay 1.0 --rt 10
 
 Codec: GLOBAL_POSITION_INT encode + decode through ``MavCodec`` (one message per datagram, parser
 reset per datagram, counters, optional signing), against two baselines measured in the same run:
@@ -99,15 +99,19 @@ def bench_codec(n: int, reps: int = 5) -> None:
     print(f"  bare MAVLink pack/parse  {n / t_bare:10,.0f} msg/s  -> MavCodec costs {t_ours / t_bare:.2f}x bare")
 
 
-async def _shim_accuracy(seconds: float, rate: float, delay: float) -> None:
+async def _shim_accuracy(seconds: float, rate: float, delay: float, rt: int = 0) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         stats_path = os.path.join(tmp, "stats.json")
         proc = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "daa_sil.cli", "shim", "--delay", f"const:{delay}", "--listen-vehicle",
             "udp:127.0.0.1:0", "--listen-gcs", "udp:127.0.0.1:0", "--stats-json", stats_path,
-            "--duration", str(seconds + delay + 5), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+            "--duration", str(seconds + delay + 5), *(["--rt-priority", str(rt)] if rt else []),
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         try:
             line = (await asyncio.wait_for(proc.stderr.readline(), 30)).decode()
+            if "warning" in line:
+                print(" ", line.strip())
+                line = (await asyncio.wait_for(proc.stderr.readline(), 30)).decode()
             ports = re.findall(r"udp:127\.0\.0\.1:(\d+)", line)
             if len(ports) != 2:
                 raise SystemExit(f"shim did not start: {line!r}")
@@ -145,8 +149,9 @@ async def _shim_accuracy(seconds: float, rate: float, delay: float) -> None:
                 await proc.wait()
     e = np.array(errs) * 1000.0
     lat = st.get("release_lateness_ms", {})
+    sched = f"SCHED_FIFO {rt}" if rt else "normal scheduling"
     print(f"shim realtime accuracy: {len(e)}/{n} packets at {rate:g} Hz, const delay {delay:g} s "
-          f"(shim in a subprocess)")
+          f"(shim in a subprocess, {sched})")
     print(f"  end-to-end error  p50 {np.percentile(e, 50):6.3f} ms  p99 {np.percentile(e, 99):6.3f} ms  "
           f"max {e.max():6.3f} ms  min {e.min():6.3f} ms  ({'PASS' if np.percentile(e, 99) <= 2.0 else 'FAIL'} p99 <= 2 ms)")
     if lat:
@@ -160,11 +165,19 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=10.0, help="shim benchmark length (s)")
     ap.add_argument("--rate", type=float, default=50.0, help="shim benchmark message rate (Hz)")
     ap.add_argument("--delay", type=float, default=1.0, help="shim constant delay (s, 0.2-10)")
+    ap.add_argument("--rt", type=int, default=0, metavar="N",
+                    help="also measure with SCHED_FIFO priority N for the shim and this process (needs root)")
     args = ap.parse_args()
     if args.part in ("all", "codec"):
         bench_codec(args.n)
     if args.part in ("all", "shim"):
         asyncio.run(_shim_accuracy(args.seconds, args.rate, args.delay))
+        if args.rt:
+            try:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.rt))
+            except OSError as exc:
+                raise SystemExit(f"--rt {args.rt}: cannot use SCHED_FIFO here ({exc})")
+            asyncio.run(_shim_accuracy(args.seconds, args.rate, args.delay, args.rt))
 
 
 if __name__ == "__main__":

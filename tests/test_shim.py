@@ -275,3 +275,10 @@ def test_cli_runs_until_sigterm_and_reports(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "daa_sil.cli", "shim", "--delay", "gauss:5"],
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "bad delay spec" in bad.stderr
+
+
+def test_rt_priority_range_is_checked():
+    from daa_sil.commands.shim import set_rt_priority
+
+    with pytest.raises(UsageError, match="rt-priority"):
+        set_rt_priority(100)

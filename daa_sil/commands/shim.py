@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import os
 import signal
 import sys
 
@@ -70,6 +71,9 @@ def register(sub) -> None:
     p.add_argument("--clock", choices=CLOCKS, default="realtime", help="realtime (default) or lockstep (SIM_TICK)")
     p.add_argument("--speed", type=finite_float("--speed", 0.01, 1000.0), default=1.0,
                    help="realtime: sim seconds per wall second (default 1)")
+    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="realtime: run under SCHED_FIFO priority N (1-99; needs CAP_SYS_NICE) so a busy "
+                        "machine does not delay releases; 0 = normal scheduling (default)")
     p.add_argument("--key", metavar="FILE", help="signing key file to verify lockstep control messages")
     p.add_argument("--duration", type=finite_float("--duration", 0.0, 1e7), metavar="S",
                    help="stop after S wall seconds (default: run until Ctrl-C / SIGTERM)")
@@ -111,8 +115,23 @@ async def _main(cfg: ShimConfig, duration: "float | None") -> dict:
     return await run_shim(cfg, stop=stop, on_ready=ready, duration=duration)
 
 
+def set_rt_priority(prio: int) -> bool:
+    """Switch this process to SCHED_FIFO priority ``prio``; warn on stderr and return False if not allowed."""
+    if not 1 <= prio <= 99:
+        raise UsageError(f"--rt-priority must be within [1, 99] (0 = off), got {prio}")
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+    except (AttributeError, OSError) as exc:
+        print(f"daa-sil shim: warning: cannot use SCHED_FIFO priority {prio} ({exc}); normal scheduling",
+              file=sys.stderr)
+        return False
+    return True
+
+
 def run(args) -> int:
     cfg = config_from_args(args)
+    if args.rt_priority:
+        set_rt_priority(args.rt_priority)
     stats = asyncio.run(_main(cfg, args.duration))
     print(json.dumps(stats, indent=2, sort_keys=True))
     return 0
