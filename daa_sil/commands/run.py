@@ -157,8 +157,22 @@ class ProcessGroup:
         """Stop every child (last started first); Ctrl-C during this is ignored until done."""
         old = signal.signal(signal.SIGINT, signal.SIG_IGN) if threading.current_thread() is threading.main_thread() else None
         try:
-            for child in reversed(self.children):
-                self.stop(child)
+            # escalate for all children together (SIGINT, SIGTERM, SIGKILL), so stopping takes one
+            # grace period, not one per child
+            for sig, wait in ((signal.SIGINT, STOP_GRACE_S), (signal.SIGTERM, STOP_TERM_S), (signal.SIGKILL, 5.0)):
+                alive = [c for c in self.children if c.proc.poll() is None]
+                if not alive:
+                    break
+                for c in alive:
+                    self._signal_group(c, sig)
+                end = time.monotonic() + wait
+                for c in alive:
+                    try:
+                        c.proc.wait(timeout=max(0.0, end - time.monotonic()))
+                    except subprocess.TimeoutExpired:
+                        pass
+            for child in self.children:
+                self.stop(child)  # reaps, kills any leftover group member, joins the log reader
         finally:
             if old is not None:
                 signal.signal(signal.SIGINT, old)
