@@ -787,6 +787,9 @@ class Recording:
                 try:
                     with open(self._tmp, "rb+") as fh:
                         os.fsync(fh.fileno())
+                    umask = os.umask(0)
+                    os.umask(umask)
+                    os.chmod(self._tmp, 0o666 & ~umask)  # mkstemp makes 0600; a normal output file
                     os.replace(self._tmp, self.rrd_path)
                     written = self.rrd_path
                 except OSError as exc:
