@@ -136,3 +136,19 @@ def test_log_waitmap_point_cloud(tmp_path):
 def _packed(rgba: np.ndarray) -> np.ndarray:
     rgba = rgba.astype(np.uint32)
     return (rgba[:, 0] << 24) | (rgba[:, 1] << 16) | (rgba[:, 2] << 8) | rgba[:, 3]
+
+
+def test_waitmap_plot_rerun_flag(tmp_path, capsys):
+    maps = tmp_path / "maps"
+    assert main(["waitmap", "build", "--grid", "paper,dx=4,dy=4,dh=2,vi=2,vh=2,theta=4", "--turn-rates", "0",
+                 "--horizon", "20", "--out", str(maps)]) == 0
+    out = tmp_path / "wm.rrd"
+    assert main(["waitmap", "plot", str(maps), "--out", str(tmp_path / "figs"), "--rerun", str(out),
+                 "--vi", "300", "--vh", "-5", "--theta", "95"]) == 0
+    assert str(out) in capsys.readouterr().out
+    chunks = [c for c in rr.chunk.RrdReader(out).stream() if c.entity_path == "/waitmap/points"]
+    pts = np.array(chunks[0].to_record_batch().column("Points3D:positions").to_pylist()[0])
+    assert pts.shape == (4 * 4 * 2, 3)
+    info = [c for c in rr.chunk.RrdReader(out).stream() if c.entity_path == "/waitmap/info"]
+    text = info[0].to_record_batch().column("TextDocument:text").to_pylist()[0][0]
+    assert "v_i = 300 m/s" in text and "theta = 90 deg" in text and "32 states" in text

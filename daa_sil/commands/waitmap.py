@@ -94,6 +94,10 @@ def register(sub) -> None:
     pl.add_argument("--dh", type=finite_float("--dh", -1e4, 1e4), default=200.0, help="relative altitude of the slices, m (default 200)")
     pl.add_argument("--vh", type=finite_float("--vh", -200.0, 200.0), default=-2.5, help="relative vertical speed, m/s (default -2.5)")
     pl.add_argument("--force", action="store_true", help="overwrite existing PNGs")
+    pl.add_argument("--rerun", metavar="FILE.rrd", help="also write the (--vi, --vh, --theta) slice as a Rerun 3-D "
+                                                        "point cloud over (dx, dy, dh) coloured by wait time")
+    pl.add_argument("--theta", type=finite_float("--theta", -360.0, 360.0), default=180.0, metavar="DEG",
+                    help="intruder heading of the --rerun slice, deg CCW from the ownship track (default 180)")
     pl.set_defaults(func=run_plot)
 
 
@@ -167,4 +171,12 @@ def run_plot(args) -> int:
     fam = _load_any(args.map)
     for p in write_plots(fam, Path(args.out), vi=args.vi, dh=args.dh, vh=args.vh, overwrite=args.force):
         print(p)
+    if args.rerun:
+        from ..viz import SinkOptions, write_waitmap
+
+        path, _, _ = write_waitmap(fam, SinkOptions(rrd=args.rerun, overwrite=args.force), vi=args.vi, vh=args.vh,
+                                   theta_deg=args.theta)
+        if path is None:
+            return 1
+        print(path)
     return 0
