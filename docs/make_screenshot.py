@@ -1,6 +1,10 @@
 """Render an encounter .rrd in the Rerun web viewer headless and save a PNG (the README screenshot).
 
-    python docs/make_screenshot.py ENCOUNTER.rrd docs/img/encounter.png [--wait 20] [--width 1600 --height 900]
+    python docs/make_screenshot.py ENCOUNTER.rrd OUT.png [--wait 20] [--width 1600 --height 900]
+    python docs/make_screenshot.py --readme      # regenerate docs/img/encounter.png from scratch:
+        daa-sil campaign run --groups B-1 --encounters 60 --seed 0 --out TMP/camp
+        daa-sil viz replay TMP/camp --group B-1 --worst --until 62 --rrd TMP/shot.rrd
+        then the screenshot of TMP/shot.rrd (the viewer opens a file at its last step, t = 62 s)
 
 Needs chromium (``apt-get install chromium``) and playwright (``pip install playwright``; the system
 chromium is used, nothing is downloaded). The web viewer is the rerun binary bound to 127.0.0.1
@@ -63,8 +67,33 @@ def _shrink(path: Path) -> None:
     img.save(path, format="PNG", optimize=True)
 
 
+README_IMAGE = Path(__file__).resolve().parent / "img" / "encounter.png"
+
+
+def readme_image(wait_s: float = 20.0) -> Path:
+    """Run a small campaign, replay its worst B-1 encounter up to t = 62 s and screenshot it."""
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        cli = [sys.executable, "-m", "daa_sil.cli"]
+        subprocess.run(cli + ["campaign", "run", "--groups", "B-1", "--encounters", "60", "--seed", "0",
+                              "--out", str(tmp / "camp"), "--no-progress"], check=True)
+        subprocess.run(cli + ["viz", "replay", str(tmp / "camp"), "--group", "B-1", "--worst", "--until", "62",
+                              "--rrd", str(tmp / "shot.rrd")], check=True)
+        README_IMAGE.parent.mkdir(parents=True, exist_ok=True)
+        return screenshot(tmp / "shot.rrd", README_IMAGE, wait_s)
+
+
 def main(argv: "list[str] | None" = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    if argv is None:
+        argv = sys.argv[1:]
+    if argv[:1] == ["--readme"]:
+        out = readme_image()
+        print(f"wrote {out} ({out.stat().st_size / 1000:.0f} kB)")
+        return 0
     ap.add_argument("rrd", type=Path)
     ap.add_argument("out", type=Path)
     ap.add_argument("--wait", type=float, default=20.0, help="seconds to let the viewer load (default 20)")
