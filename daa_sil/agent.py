@@ -4,7 +4,8 @@ Semantics follow ``docs/architecture.md`` "Allocation semantics":
 
 * **Active** while any intruder has alert level >= 2 (corrective), or while a wait / blend is in
   progress (the previous step's decision was ``wait`` or ``blend`` and the ownship has not yet
-  reached that command). Outside the active phase the ownship flies the last pilot command and the
+  reached that command), or while the DAA holds authority and the pilot's course is still unsafe
+  (SM <= 0), so that control returns to the pilot only onto a safe course. Outside the active phase the ownship flies the last pilot command and the
   decision is ``none`` (not counted).
 * One decision per active step:
   - ``link_lost``: no packet from the GCS for ``link_timeout_s`` -> the onboard DAA resolution.
@@ -136,6 +137,15 @@ class AgentMemory:
     daa_axis: np.ndarray  #: last DAA resolution (axis, direction) codes, for persistence
     daa_dir: np.ndarray
     wait_start: np.ndarray  #: start of the current waiting streak (nan = none)
+    intent_axis: "np.ndarray | None" = None  #: the pilot's (axis, direction) preference, AXIS_* / DIR_*
+    intent_dir: "np.ndarray | None" = None
+
+    def __post_init__(self):
+        n = np.shape(self.pilot_trk)
+        if self.intent_axis is None:
+            self.intent_axis = np.full(n, AXIS_NONE, np.int8)
+        if self.intent_dir is None:
+            self.intent_dir = np.zeros(n, np.int8)
 
     @classmethod
     def initial(cls, n: int, own: AircraftState, t0: float = 0.0) -> "AgentMemory":
@@ -202,7 +212,15 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     # --- active phase -------------------------------------------------------------------------
     prev_exec = Command(memory.exec_trk, memory.exec_vs, memory.exec_gs)
     in_progress = np.isin(memory.decision, (D_WAIT, D_BLEND)) & ~_reached(own, prev_exec)
-    active = (max_alert >= 2) | in_progress
+    # Once the onboard DAA (or a blend) holds authority, handing back to the pilot's course is only
+    # done when that course is safe: otherwise the ownship would fly back into the conflict it just
+    # resolved as soon as the alert clears, and alternate between the two every step.
+    unsafe_revert = np.zeros(n, bool)
+    check = (memory.authority == A_DAA) & ~((max_alert >= 2) | in_progress)
+    if check.any():
+        j = np.nonzero(check)[0]
+        unsafe_revert[j] = ~(safety_metric(own[j], intr[j], last_pilot[j], cfg, horizon) > 0)
+    active = (max_alert >= 2) | in_progress | unsafe_revert
     ia = np.nonzero(active)[0]
     own_a, intr_a = own[ia], intr[ia]
 
@@ -222,9 +240,16 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     if fa.any():
         j = ia[fa]
         sm_pilot[j] = safety_metric(own[j], intr[j], pcmd[j], cfg, horizon)
-    p_axis, p_dir = classify_command(own, pcmd, cfg)
-    p_axis = np.where(fresh, p_axis, AXIS_NONE).astype(np.int8)
-    p_dir = np.where(fresh, p_dir, 0).astype(np.int8)
+    # The pilot's (axis, direction) preference is the change from the pilot's previous course to the
+    # new command, not from the current state: once the DAA or a blend has moved the ownship, a
+    # repeated "hold" command would otherwise read as a turn back and flip the blend every step.
+    ref = AircraftState(own.x, own.y, own.z, memory.pilot_gs, memory.pilot_trk, memory.pilot_vs)
+    n_axis, n_dir = classify_command(ref, pcmd, cfg)
+    changed = fresh & (n_axis != AXIS_NONE)
+    intent_axis = np.where(changed, n_axis, memory.intent_axis).astype(np.int8)
+    intent_dir = np.where(changed, n_dir, memory.intent_dir).astype(np.int8)
+    p_axis = np.where(fresh, intent_axis, AXIS_NONE).astype(np.int8)
+    p_dir = np.where(fresh, intent_dir, 0).astype(np.int8)
 
     # --- wait / no wait (no fresh command) ------------------------------------------------------
     wait_s = nan.copy()
@@ -305,7 +330,8 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
                       pilot_t_sent=np.where(fresh, pilot.t_sent, memory.pilot_t_sent), last_packet_t=link_t,
                       authority=authority, decision=decision, exec_trk=exec_cmd.trk.copy(),
                       exec_vs=exec_cmd.vs.copy(), exec_gs=exec_cmd.gs.copy(), daa_axis=daa_axis, daa_dir=daa_dir,
-                      wait_start=np.where(active & ~fresh, wait_start, np.nan))
+                      wait_start=np.where(active & ~fresh, wait_start, np.nan),
+                      intent_axis=intent_axis, intent_dir=intent_dir)
     return exec_cmd, dec, new_mem
 
 

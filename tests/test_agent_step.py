@@ -6,7 +6,7 @@ from hypothesis import given, settings, strategies as st
 
 from daa_sil.agent import (AgentMemory, DECISION_FIELDS, D_BLEND, D_NO_WAIT, D_NONE, D_PILOT, D_STALE, D_WAIT,
                            D_LINK_LOST, D_DAA_OVERRIDE, PilotInput, agent_step, decode, policy_for_group)
-from daa_sil.daa import (AXIS_HORIZONTAL, AXIS_VERTICAL, DIR_DOWN, DIR_LEFT, DIR_UP, RULE_AXIS, RULE_AXIS_DIR,
+from daa_sil.daa import (AXIS_NONE, AXIS_HORIZONTAL, AXIS_VERTICAL, DIR_DOWN, DIR_LEFT, DIR_UP, RULE_AXIS, RULE_AXIS_DIR,
                          RULE_ANY, DaaConfig, alert_levels, compute_bands)
 from daa_sil.kinematics import Command
 from daa_sil.units import DEG
@@ -222,3 +222,22 @@ def test_batch_of_1000_equals_one_at_a_time():
             if key.startswith("bands_"):
                 continue
             np.testing.assert_array_equal(np.asarray(dec[key])[s], np.asarray(d1[key]), err_msg=key)
+
+
+def test_pilot_intent_is_relative_to_the_previous_pilot_course_not_the_current_state():
+    # the pilot's course was north (track 0); a blend has since turned the ownship to 320 deg
+    own = own_state(gs=30.0, trk=320 * DEG)
+    intr = intruders([[[0.0, 3000.0, 1000.0, 20.0, np.pi, 0.0]]])
+    mem = AgentMemory.initial(1, own_state(gs=30.0))  # pilot course: track 0, vs 0, gs 30
+    # a new command to 330 deg is a LEFT turn from the pilot's course, although it is a right turn
+    # from where the ownship now points
+    left = Command(np.array([330 * DEG]), np.array([0.0]), np.array([30.0]))
+    _, dec, mem2 = agent_step(10.0, own, intr, pilot_cmd(1, left), mem, ID2, CFG, const_lookup(0.0))
+    assert dec["pilot_axis"][0] == AXIS_HORIZONTAL and dec["pilot_dir"][0] == DIR_LEFT
+    # the same command repeated next step keeps the preference (it is not a new maneuver)
+    _, dec, _ = agent_step(11.0, own, intr, pilot_cmd(1, left, 10.0, 11.0), mem2, ID2, CFG, const_lookup(0.0))
+    assert dec["pilot_axis"][0] == AXIS_HORIZONTAL and dec["pilot_dir"][0] == DIR_LEFT
+    # a "hold" of the pilot's own course carries no maneuver preference, whatever the current track
+    hold = Command(np.array([0.0]), np.array([0.0]), np.array([30.0]))
+    _, dec, _ = agent_step(10.0, own, intr, pilot_cmd(1, hold), mem, ID2, CFG, const_lookup(0.0))
+    assert dec["pilot_axis"][0] == AXIS_NONE
