@@ -69,5 +69,19 @@ def main(argv: "list[str] | None" = None) -> int:
     return int(rc or 0)
 
 
+def run_guarded(prog: str, fn) -> int:
+    """Run ``fn()`` for a console script named ``prog``: a DaaSilError becomes one line on stderr and
+    its exit code, Ctrl-C exits 130 (tracebacks only with ``DAA_SIL_DEBUG=1``)."""
+    try:
+        return int(fn() or 0)
+    except DaaSilError as exc:
+        if os.environ.get("DAA_SIL_DEBUG"):
+            raise
+        print(f"{prog}: error: {exc}", file=sys.stderr, flush=True)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        return 130
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

@@ -9,12 +9,11 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import os
 import signal
-import sys
 from pathlib import Path
 
-from daa_sil.errors import DaaSilError, UsageError
+from daa_sil.cli import run_guarded
+from daa_sil.errors import UsageError
 
 EXAMPLES = """examples:
   # pilot model of the scenario, vehicle directly on 14550 (realtime)
@@ -89,12 +88,4 @@ async def _amain(args) -> int:
 
 def main(argv: "list[str] | None" = None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        return asyncio.run(_amain(args))
-    except DaaSilError as exc:
-        if os.environ.get("DAA_SIL_DEBUG"):
-            raise
-        print(f"daa-gcs: error: {exc}", file=sys.stderr, flush=True)
-        return exc.exit_code
-    except KeyboardInterrupt:
-        return 130
+    return run_guarded("daa-gcs", lambda: asyncio.run(_amain(args)))
