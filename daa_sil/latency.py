@@ -28,6 +28,7 @@ not depend on how many packets were sent before ``t`` or on the order of queries
 from __future__ import annotations
 
 import csv
+import abc
 import math
 import os
 from dataclasses import dataclass
@@ -58,23 +59,27 @@ def _check_delay(name: str, val: float) -> float:
     return v
 
 
-class DelayModel:
-    """Base class: a one-way delay distribution in seconds."""
+class DelayModel(abc.ABC):
+    """Abstract base: a one-way delay distribution in seconds (every model implements all four)."""
 
     kind = "model"
 
+    @abc.abstractmethod
     def sample(self, rng: np.random.Generator, t: "np.ndarray | float") -> np.ndarray:
         """Draw delays (s), one per element of ``t`` (sim times, s; only :class:`Trace` uses them)."""
         raise NotImplementedError
 
+    @abc.abstractmethod
     def mean(self) -> float:
         """Expected delay (s)."""
         raise NotImplementedError
 
+    @abc.abstractmethod
     def to_dict(self) -> dict:
         """The ``paper_results.yaml`` form (inverse of :func:`delay_model_from_dict`)."""
         raise NotImplementedError
 
+    @abc.abstractmethod
     def spec(self) -> str:
         """The ``--delay`` spec string form (inverse of :func:`parse_delay_spec`)."""
         raise NotImplementedError
