@@ -14,6 +14,9 @@ Models (one-way delay distributions, paper range 0.2-10 s, validated):
 * :class:`Trace` ``(times, delays)``                 -- a recorded trace (CSV ``t,delay``), zero-order
   hold: the delay at ``t`` is the last recorded value at or before ``t`` (the first value before
   the trace starts, the last one after it ends).
+* :class:`Spike` ``(base, peak, start, length, period)`` -- a trace built from parameters: ``base``
+  seconds, raised to ``peak`` over ``[start, start + length)`` and, with ``period > 0``, again every
+  ``period`` seconds (link-fault scenarios: delay spikes to 10 s).
 
 **Why a piecewise-constant delay process.** Drawing an independent delay per packet reorders
 about half of adjacent packets of a 10 Hz stream (48 % measured), and forcing FIFO on top of that
@@ -270,12 +273,63 @@ class Trace(DelayModel):
         return f"trace:{self.source}"
 
 
-SPEC_HELP = ("const:S | gauss:MEAN,SD[,LO,HI] | uniform:LO,HI | trace:FILE.csv "
+class Spike(Trace):
+    """Delay spikes: ``base`` s, ``peak`` s over ``[start + n*period, start + n*period + length)``.
+
+    ``period = 0`` is a single spike. It is a :class:`Trace` (zero-order hold, sampled at the
+    packet's send time whatever the epoch), built up to ``horizon_s`` (s, default 3600).
+    Spec: ``spike:BASE,PEAK,START,LENGTH[,PERIOD]`` (seconds).
+    """
+
+    kind = "spike"
+
+    def __init__(self, base: float, peak: float, start: float, length: float, period: float = 0.0,
+                 horizon_s: float = 3600.0):
+        b, p = _check_delay("spike base", base), _check_delay("spike peak", peak)
+        try:
+            st, ln, per = float(start), float(length), float(period)
+        except (TypeError, ValueError):
+            raise UsageError(f"spike start/length/period must be numbers of seconds, got {start!r}, {length!r}, "
+                             f"{period!r}") from None
+        if not (math.isfinite(st) and st >= 0):
+            raise UsageError(f"spike start must be >= 0 s, got {start!r}")
+        if not (math.isfinite(ln) and ln > 0):
+            raise UsageError(f"spike length must be > 0 s, got {length!r}")
+        if not (math.isfinite(per) and (per == 0 or per > ln)):
+            raise UsageError(f"spike period must be 0 (one spike) or longer than the spike ({ln:g} s), got {period!r}")
+        times, delays = [0.0], [b]
+        k = 0
+        while True:
+            s0 = st + k * per
+            if s0 >= horizon_s or (k and per == 0):
+                break
+            if s0 == 0.0:
+                delays[0] = p
+            else:
+                times.append(s0)
+                delays.append(p)
+            times.append(s0 + ln)
+            delays.append(b)
+            k += 1
+        self.base, self.peak, self.start, self.length, self.period = b, p, st, ln, per
+        super().__init__(times, delays, source=self.spec())
+
+    def to_dict(self) -> dict:
+        return {"type": "spike", "base_s": self.base, "peak_s": self.peak, "start_s": self.start,
+                "length_s": self.length, "period_s": self.period}
+
+    def spec(self) -> str:
+        s = f"spike:{self.base:g},{self.peak:g},{self.start:g},{self.length:g}"
+        return s + (f",{self.period:g}" if self.period else "")
+
+
+SPEC_HELP = ("const:S | gauss:MEAN,SD[,LO,HI] | uniform:LO,HI | trace:FILE.csv | spike:BASE,PEAK,START,LEN[,PERIOD] "
              f"(seconds, within [{DELAY_MIN_S:g}, {DELAY_MAX_S:g}])")
 
 
 def parse_delay_spec(spec: str) -> DelayModel:
-    """Parse ``const:4``, ``gauss:5,3``, ``gauss:5,3,0.2,10``, ``uniform:1,8`` or ``trace:FILE.csv``."""
+    """Parse ``const:4``, ``gauss:5,3``, ``gauss:5,3,0.2,10``, ``uniform:1,8``, ``trace:FILE.csv`` or
+    ``spike:4,10,60,15[,40]``."""
     text = str(spec).strip()
     kind, sep, rest = text.partition(":")
     kind = kind.strip().lower()
@@ -294,6 +348,8 @@ def parse_delay_spec(spec: str) -> DelayModel:
         return TruncatedGaussian(*nums)
     if kind in ("uniform", "unif") and len(nums) == 2:
         return Uniform(*nums)
+    if kind == "spike" and len(nums) in (4, 5):
+        return Spike(*nums)
     raise UsageError(f"bad delay spec {spec!r}; expected {SPEC_HELP}")
 
 
@@ -307,7 +363,8 @@ def delay_model_from_dict(d: dict, where: str = "latency") -> DelayModel:
     if not isinstance(d, dict):
         raise UsageError(f"{where} must be a mapping with a 'type', got {d!r}")
     allowed = {"constant": ({"seconds"}, set()), "gaussian": ({"mean_s", "sd_s"}, {"lo_s", "hi_s"}),
-               "uniform": ({"lo_s", "hi_s"}, set()), "trace": ({"file"}, set())}
+               "uniform": ({"lo_s", "hi_s"}, set()), "trace": ({"file"}, set()),
+               "spike": ({"base_s", "peak_s", "start_s", "length_s"}, {"period_s"})}
     typ = str(d.get("type", "")).lower()
     if typ not in allowed:
         raise UsageError(f"{where}.type must be one of {', '.join(allowed)}, got {d.get('type')!r}")
@@ -324,6 +381,8 @@ def delay_model_from_dict(d: dict, where: str = "latency") -> DelayModel:
         return TruncatedGaussian(d["mean_s"], d["sd_s"], d.get("lo_s", DELAY_MIN_S), d.get("hi_s", DELAY_MAX_S))
     if typ == "uniform":
         return Uniform(d["lo_s"], d["hi_s"])
+    if typ == "spike":
+        return Spike(d["base_s"], d["peak_s"], d["start_s"], d["length_s"], d.get("period_s", 0.0))
     return Trace.from_csv(d["file"])
 
 
