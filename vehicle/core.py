@@ -53,6 +53,26 @@ def build_onboard(sc: Scenario, policy=None):
     return core, es, policy
 
 
+def link_delay_processes(sc: Scenario) -> "dict | None":
+    """The scenario link's delay processes, ``{"up": DelayProcess, "down": DelayProcess}`` (None if per-packet).
+
+    These are the processes a shim seeded with the scenario's seed applies (and fast-time, for the
+    same encounter seed): the step log's ``delay_up_s`` / ``delay_down_s`` at ``t`` are their values
+    (s), i.e. the *configured* one-way delay of a packet sent at ``t`` before the FIFO rule, not a
+    measurement. With ``link.epoch_s = 0`` (a draw per datagram) there is no per-step value: None.
+    """
+    from daa_sil.latency import DelayProcess
+    from daa_sil.link.shim import delay_stream_seeds
+    from daa_sil.scenario import delay_models
+
+    if sc.link.epoch_s <= 0:
+        return None
+    up, down = delay_models(sc)
+    seeds = delay_stream_seeds(sc.seed)
+    return {"up": DelayProcess(up, seeds["up"], epoch_s=sc.link.epoch_s),
+            "down": DelayProcess(down, seeds["down"], epoch_s=sc.link.epoch_s)}
+
+
 def track_intervals(values_deg: np.ndarray, regions: np.ndarray) -> tuple[list, list, list]:
     """Merge ordered track band samples (deg) with region codes into ``(lo, hi, region name)`` lists."""
     from daa_sil.daa.config import REGION_NAMES
@@ -89,6 +109,7 @@ class VehicleCore:
         self.rows: list[dict] = []
         self.delay_up_s = math.nan
         self.delay_down_s = math.nan
+        self._delay_procs = link_delay_processes(sc)
         self.icao = [i.id for i in sc.intruders]
         self.callsigns = [i.callsign for i in sc.intruders]
 
@@ -116,6 +137,9 @@ class VehicleCore:
     # -- step ---------------------------------------------------------------------------------------
     def step(self, t: float):
         """One OnboardCore step at ``t`` (s); returns its StepOutput and records the step-log row."""
+        if self._delay_procs is not None:
+            self.delay_up_s = self._delay_procs["up"].delay(t)
+            self.delay_down_s = self._delay_procs["down"].delay(t)
         out = self.core.step(t, self.pilot_input(t))
         dec = A.decode(out.decisions)
         self.last_authority = str(dec["authority"][0])

@@ -11,15 +11,20 @@ Peers are the configured ``vehicle`` / ``gcs`` addresses or learned from the fir
 each side; datagrams from other addresses are counted (``rejected_peer``) and dropped. A
 datagram that is due while its destination is still unknown is counted as ``no_peer`` and dropped.
 
-Seeds: ``SeedSequence(seed)`` child 0 drives the down line, child 1 the up line (see
-:func:`direction_seeds`); each line derives its delay process and impairment draws from it.
+Seeds (:func:`shim_seeds`): the *delays* of a shim seeded ``seed`` are the encounter's fast-time
+delay streams, ``DelayProcess(model, encounter_streams(seed)[STREAM_UP], epoch_s)`` for the up line
+and ``[STREAM_DOWN]`` for the down line (:func:`daa_sil.fasttime.encounter_streams`), so a SIL run
+of a scenario sees draw for draw the delays fast-time gives the same encounter. The *impairment*
+draws (loss, duplication, reordering) come from ``child_seed(SeedSequence(seed), 0)`` (down) /
+``1`` (up) (:func:`direction_seeds`); fast-time has no impairments.
 
-Parity with fast-time: a packet sent at sim time ``t`` on direction ``dir`` of a shim seeded
-``seed`` is released at ``fifo_release(t, d)`` with ``d = DelayProcess(model,
-delay_seed(direction_seeds(seed)[dir]), epoch_s).delay(t)`` (batched:
-``BatchedDelay(model, [delay_seed(...) for each encounter], epoch_s, duration_s)``); in lockstep it is
-delivered at the first tick ``t_k >= release``. This needs ``epoch_s > 0``: with per-datagram
-draws the index counts every datagram (heartbeats too), which fast-time does not model.
+Parity with fast-time: a packet sent at sim time ``t`` on direction ``dir`` is released at
+``fifo_release(t, d)`` with ``d = DelayProcess(model, encounter_streams(seed)[STREAM_<DIR>],
+epoch_s).delay(t)`` -- what :func:`daa_sil.fasttime.simulate` computes with
+``BatchedDelay(model, [streams[STREAM_<DIR>]], epoch_s, duration_s)``; in lockstep it is delivered
+at the first tick ``t_k >= release`` (fast-time: the first step with ``release <= t_k``). This
+needs ``epoch_s > 0``: with per-datagram draws the index counts every datagram (heartbeats too),
+which fast-time does not model.
 
 Clocks
 ------
@@ -57,7 +62,7 @@ import numpy as np
 
 from ..errors import UsageError
 from ..io import atomic_write_json, to_jsonable
-from ..latency import DEFAULT_EPOCH_S, DelayModel, as_seed_sequence, child_seed
+from ..latency import DEFAULT_EPOCH_S, DelayModel, DelayProcess, as_seed_sequence, child_seed
 from .codec import MavCodec, mavlink
 from .delayline import DelayLine, check_outages
 from .endpoint import Address, format_udp_address, parse_udp_address, set_rcvbuf
@@ -68,9 +73,31 @@ _ACK_ID = mavlink.MAVLINK_MSG_ID_SIM_TICK_ACK
 
 
 def direction_seeds(seed: "int | np.random.SeedSequence | None") -> dict:
-    """``{"down": SeedSequence, "up": SeedSequence}`` the shim gives its two DelayLines."""
+    """``{"down": SeedSequence, "up": SeedSequence}``: the roots of each DelayLine's impairment draws."""
     ss = as_seed_sequence(seed)
     return {"down": child_seed(ss, 0), "up": child_seed(ss, 1)}
+
+
+def delay_stream_seeds(seed: "int | np.random.SeedSequence | None") -> dict:
+    """``{"down": ..., "up": ...}`` delay-process seeds: the fast-time streams of encounter ``seed``.
+
+    Equal to ``encounter_streams(seed)[STREAM_DOWN]`` / ``[STREAM_UP]`` for an int seed (the
+    children ``(2,)`` / ``(1,)`` of ``SeedSequence(seed)``; for a SeedSequence, its children).
+    """
+    from ..fasttime import STREAM_DOWN, STREAM_UP
+
+    ss = as_seed_sequence(seed)
+    return {"down": child_seed(ss, STREAM_DOWN), "up": child_seed(ss, STREAM_UP)}
+
+
+def shim_delay_processes(config: "ShimConfig", seed: "int | np.random.SeedSequence | None" = None) -> dict:
+    """``{"down": DelayProcess, "up": DelayProcess}`` of a shim (see the module docstring, Seeds).
+
+    ``seed``: a resolved seed (default ``config.seed``; None there = fresh entropy).
+    """
+    seeds = delay_stream_seeds(config.seed if seed is None else seed)
+    return {"down": DelayProcess(config.delay_down, seeds["down"], epoch_s=config.epoch_s),
+            "up": DelayProcess(config.delay_up, seeds["up"], epoch_s=config.epoch_s)}
 
 
 def control_ids(data: bytes) -> "set[int]":
@@ -174,11 +201,13 @@ class DelayShim:
     def __init__(self, config: ShimConfig):
         config.validate()
         self.config = config
-        seeds = direction_seeds(config.seed)
-        common = dict(epoch_s=config.epoch_s, fifo=config.fifo, loss=config.loss, dup=config.dup,
+        root = as_seed_sequence(config.seed)  # resolved once: seed None = fresh entropy shared by both
+        seeds = direction_seeds(root)
+        procs = shim_delay_processes(config, root)
+        common = dict(fifo=config.fifo, loss=config.loss, dup=config.dup,
                       reorder=config.reorder, outages=config.outages, max_log=config.max_log)
-        self.lines = {"down": DelayLine(config.delay_down, seed=seeds["down"], **common),
-                      "up": DelayLine(config.delay_up, seed=seeds["up"], **common)}
+        self.lines = {"down": DelayLine(procs["down"], seed=seeds["down"], **common),
+                      "up": DelayLine(procs["up"], seed=seeds["up"], **common)}
         self.peers: dict[str, "Address | None"] = {
             "vehicle": parse_udp_address(config.vehicle, "--vehicle") if config.vehicle else None,
             "gcs": parse_udp_address(config.gcs, "--gcs") if config.gcs else None}
