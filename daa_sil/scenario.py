@@ -47,6 +47,8 @@ Schema (``*`` = required; defaults in brackets)::
       down: delay spec              [= up]    "uniform:1,8" or {type: constant, seconds: 4} ...
       epoch_s: float [0, 600]       [10]      piecewise-constant delay epoch (0 = per packet)
       loss: [0, 1)                  [0]       Bernoulli loss probability (each direction)
+      dup: [0, 1)                   [0]       duplication probability (SIL shim only; fast-time ignores it)
+      reorder: [0, 1)               [0]       queue-jump reordering probability (SIL shim only)
       outages: list                             link down windows, both directions: a datagram
         - start_s*, end_s*                      sent in [start_s, end_s) is lost
     pilot:
@@ -168,6 +170,8 @@ class LinkSpec:
     epoch_s: float = 10.0
     loss: float = 0.0
     outages: list = field(default_factory=list)
+    dup: float = 0.0
+    reorder: float = 0.0
 
     def outage_windows(self) -> list[tuple[float, float]]:
         """``(start_s, end_s)`` link-down windows (sim s)."""
@@ -417,11 +421,13 @@ def _delay(v: _V, node, path):
 
 
 def _link(v: _V, node, path, dur) -> LinkSpec:
-    m = v.mapping(node, path, set(), {"up", "down", "epoch_s", "loss", "outages"})
+    m = v.mapping(node, path, set(), {"up", "down", "epoch_s", "loss", "outages", "dup", "reorder"})
     ls = LinkSpec(up=_delay(v, m["up"], f"{path}.up") if "up" in m else "const:4",
                   down=_delay(v, m["down"], f"{path}.down") if "down" in m else None,
                   epoch_s=v.opt(m, "epoch_s", path, v.number, 10.0, lo=0, hi=600),
-                  loss=v.opt(m, "loss", path, v.number, 0.0, lo=0, hi=1, hi_open=True))
+                  loss=v.opt(m, "loss", path, v.number, 0.0, lo=0, hi=1, hi_open=True),
+                  dup=v.opt(m, "dup", path, v.number, 0.0, lo=0, hi=1, hi_open=True),
+                  reorder=v.opt(m, "reorder", path, v.number, 0.0, lo=0, hi=1, hi_open=True))
     if "outages" in m:
         for j, on in enumerate(v.seq(m["outages"], f"{path}.outages", max_len=64)):
             p = f"{path}.outages[{j}]"

@@ -221,6 +221,7 @@ def shim_argv(sc, clock_args: list, key_args: list, stats_json: Path, vehicle_po
         "--delay-up", delay_spec_string(link.up),
         "--delay-down", delay_spec_string(link.down if link.down is not None else link.up),
         "--epoch", f"{link.epoch_s:g}", "--loss", f"{link.loss:g}", "--seed", str(sc.seed),
+        "--dup", f"{link.dup:g}", "--reorder", f"{link.reorder:g}",
         "--stats-json", str(stats_json)]
     for o in link.outages:
         argv += ["--outage", f"{o.start_s:g}:{o.end_s:g}"]
