@@ -59,7 +59,9 @@ CAMPAIGN_FORMAT = 1
 #: default encounter duration T (s) and step dt (s), paper §IV
 DEFAULT_DURATION_S = 240.0
 DEFAULT_DT_S = 1.0
-DEFAULT_CHUNK = 500
+#: encounters per task: the per-step numpy overhead is paid once per chunk, so bigger chunks are
+#: faster (500 -> 2000 about 1.9x per core); one 2000-encounter chunk peaks at about 0.2 GB RSS
+DEFAULT_CHUNK = 2000
 
 
 # --- groups (paper Table 2, as data) --------------------------------------------------------------

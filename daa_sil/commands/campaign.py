@@ -76,7 +76,7 @@ def register(sub) -> None:
                    help="encounters per group (default 10000)")
     r.add_argument("--seed", type=_seed, default=None, metavar="S", help="campaign seed (default 0)")
     r.add_argument("--chunk-size", type=_pos_int("--chunk-size"), default=None, metavar="C",
-                   help="encounters per task (default 500; 100-1000 keeps tasks >= 0.1 s)")
+                   help="encounters per task (default 2000, about 0.2 GB per worker; smaller chunks resume at a finer grain but run slower)")
     r.add_argument("--out", required=True, metavar="DIR", help="output directory (must be empty unless --resume)")
     r.add_argument("--workers", type=_pos_int("--workers"), default=1, metavar="K",
                    help="worker processes (1 = in-process; default 1)")
