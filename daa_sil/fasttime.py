@@ -30,8 +30,9 @@ contract ("Campaign result tables") and, with ``record_steps=True``, the step lo
 Counting (per encounter, over the active steps, one decision each -- ``agent.py``):
 ``n_active_steps = n_wait + n_no_wait + n_pilot_exec + n_blend + n_daa_override + n_stale +
 n_link_lost``; ``n_pilot_received = n_pilot_exec + n_blend + n_daa_override`` (fresh pilot commands
-received during the active phase); ``n_blend = n_blend_exact + n_blend_axis + (blends matching
-neither)``.
+received during the active phase); ``n_blend_intent`` = blends of a pilot command that carries a
+maneuver intent (an (axis, direction) -- not "hold" before the pilot's first maneuver);
+``n_blend_intent = n_blend_exact + n_blend_axis + (intent blends matching neither) <= n_blend``.
 """
 
 from __future__ import annotations
@@ -65,7 +66,7 @@ ENCOUNTER_SCHEMA = pa.schema(
      ("min_range_m", pa.float64()), ("vsep_at_min_range_m", pa.float64()), ("dev_h_m", pa.float64()),
      ("dev_v_m", pa.float64()), ("n_active_steps", _I), ("n_wait", _I), ("n_no_wait", _I),
      ("n_pilot_received", _I), ("n_pilot_exec", _I), ("n_blend", _I), ("n_blend_exact", _I),
-     ("n_blend_axis", _I), ("n_daa_override", _I), ("n_stale", _I), ("n_link_lost", _I),
+     ("n_blend_axis", _I), ("n_blend_intent", _I), ("n_daa_override", _I), ("n_stale", _I), ("n_link_lost", _I),
      ("intruder_turns", pa.bool_()), ("preset", pa.string())])
 
 DECISION_SCHEMA = pa.schema(
@@ -126,6 +127,7 @@ class _Accumulators:
         self.n_active = np.zeros(n, np.int64)
         self.n_blend_exact = np.zeros(n, np.int64)
         self.n_blend_axis = np.zeros(n, np.int64)
+        self.n_blend_intent = np.zeros(n, np.int64)
         self.p0 = own0.position()
         self.v0 = own0.velocity()
         self.dec_parts: list[tuple[np.ndarray, float, dict]] = []
@@ -154,10 +156,11 @@ class _Accumulators:
             self.n_active[ia] += 1
             blend = code == D_BLEND
             exact = blend & np.asarray(dec["exact_match"], bool)
-            axis_only = blend & ~exact & (np.asarray(dec["exec_axis"]) == np.asarray(dec["pilot_axis"])) \
-                & (np.asarray(dec["pilot_axis"]) != 0)
+            intent = blend & (np.asarray(dec["pilot_axis"]) != 0)
+            axis_only = intent & ~exact & (np.asarray(dec["exec_axis"]) == np.asarray(dec["pilot_axis"]))
             self.n_blend_exact += exact & active
             self.n_blend_axis += axis_only & active
+            self.n_blend_intent += intent & active
             self.dec_parts.append((ia, out.t, {k: np.asarray(dec[k])[ia] for k in _DEC_FIELDS}))
 
 
@@ -197,7 +200,8 @@ def _encounter_table(acc: _Accumulators, encounters, group: str, preset: str, du
         "n_wait": pa.array(c[:, D_WAIT], _I), "n_no_wait": pa.array(c[:, D_NO_WAIT], _I),
         "n_pilot_received": pa.array(received, _I), "n_pilot_exec": pa.array(c[:, D_PILOT], _I),
         "n_blend": pa.array(c[:, D_BLEND], _I), "n_blend_exact": pa.array(acc.n_blend_exact, _I),
-        "n_blend_axis": pa.array(acc.n_blend_axis, _I), "n_daa_override": pa.array(c[:, D_DAA_OVERRIDE], _I),
+        "n_blend_axis": pa.array(acc.n_blend_axis, _I),
+        "n_blend_intent": pa.array(acc.n_blend_intent, _I), "n_daa_override": pa.array(c[:, D_DAA_OVERRIDE], _I),
         "n_stale": pa.array(c[:, D_STALE], _I), "n_link_lost": pa.array(c[:, D_LINK_LOST], _I),
         "intruder_turns": pa.array(np.asarray(encounters.intruder_turns, bool)),
         "preset": pa.array(np.full(n, preset), pa.string()),

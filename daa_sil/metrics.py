@@ -12,8 +12,10 @@ What is computed per group (``group_metrics``), and the interval used:
   encounter (= the paper's count ratio for equal group sizes); exact conditional interval: given
   ``k_g + k_b``, ``k_g`` is binomial with ``p = RR n_g/(RR n_g + n_b)``; Clopper-Pearson on ``p``
   mapped to RR.
-* **Proportions** -- ``exact_match`` (blends matching the pilot's (axis, direction), among all
-  blends), ``axis_match`` (axis only), ``p_lowc`` / ``p_nmac`` (encounters with at least one
+* **Proportions** -- ``exact_match`` (blends matching the pilot's (axis, direction), among the
+  blends of a pilot command that carries a maneuver intent, ``n_blend_intent``), ``axis_match`` (axis
+  only, same denominator), ``blend_intent_share`` (intent blends among all blends; the rest are
+  blends of the "hold" commands streamed before the pilot's first maneuver), ``p_lowc`` / ``p_nmac`` (encounters with at least one
   LoWC / NMAC, among encounters): Clopper-Pearson. With k = 0 the upper bound is
   ``1 - (a/2)^(1/n)`` (about 3.7/n); the note gives the one-sided rule of three ``3/n`` too.
 * **Per flight hour** (``H = sum(duration_s)/3600``): ``p_lowc_per_hr`` is the paper's Eq.
@@ -216,13 +218,25 @@ def group_metrics(enc, group: "str | None" = None, conf: float = CONF, dt_s: flo
             lo, hi = poisson_exact(k, conf)
             out[name] = Estimate(k, lo, hi, "exact Poisson (Garwood)", "k = 0: upper bound only" if k == 0 else "")
     nb = _count(g["n_blend"])
+    # The paper's 84 % exact + 16 % axis-only = 100 % of its blends: every blend it counts carries
+    # the pilot's maneuver intent. Ours also blends "hold" commands streamed before the pilot's first
+    # maneuver (no (axis, direction) to match), so the match rates are taken over intent blends.
+    if "n_blend_intent" in g:
+        ni, basis = _count(g["n_blend_intent"]), "Clopper-Pearson over blends of a pilot maneuver"
+    else:
+        ni, basis = nb, "Clopper-Pearson over all blends (table without n_blend_intent)"
     for name, col in (("exact_match", "n_blend_exact"), ("axis_match", "n_blend_axis")):
-        if nb > 0:
+        if ni > 0:
             k = _count(g[col])
-            lo, hi = clopper_pearson(k, nb, conf)
-            out[name] = Estimate(k / nb, lo, hi, "Clopper-Pearson over blends")
+            lo, hi = clopper_pearson(k, ni, conf)
+            out[name] = Estimate(k / ni, lo, hi, basis)
         else:
-            out[name] = Estimate(math.nan, math.nan, math.nan, "Clopper-Pearson over blends", "no blends")
+            out[name] = Estimate(math.nan, math.nan, math.nan, basis, "no blends of a pilot maneuver")
+    if "n_blend_intent" in g and nb > 0:
+        lo, hi = clopper_pearson(ni, nb, conf)
+        out["blend_intent_share"] = Estimate(ni / nb, lo, hi, "Clopper-Pearson over blends")
+    else:
+        out["blend_intent_share"] = Estimate(math.nan, math.nan, math.nan, "Clopper-Pearson over blends", "no blends")
     for ev in ("lowc", "nmac"):
         k = float(np.count_nonzero(np.asarray(g[ev]).astype(bool)))
         lo, hi = clopper_pearson(k, n, conf)

@@ -135,14 +135,17 @@ def findings(res: dict) -> list[tuple[str, str, str]]:
                               for g, v in vals.items())))
     em = [(g, res[g]["exact_match"]) for g in integ if np.isfinite(res[g]["exact_match"].value)]
     if em:
-        k = sum(res[g]["blend"].value * e.value for g, e in em)
-        n = sum(res[g]["blend"].value for g, _ in em)
+        share = lambda g: res[g]["blend_intent_share"].value if np.isfinite(res[g]["blend_intent_share"].value) else 1.0  # noqa: E731
+        k = sum(res[g]["blend"].value * share(g) * e.value for g, e in em)
+        n = sum(res[g]["blend"].value * share(g) for g, _ in em)
         p = k / n
         ok = any(e.lo <= 0.84 <= e.hi for _, e in em) or abs(p - 0.84) <= 0.05
-        out.append(("about 84 % of blends match the pilot's exact (axis, direction)", "holds" if ok else "does not hold",
+        out.append(("about 84 % of blends of a pilot maneuver match its exact (axis, direction)",
+                    "holds" if ok else "does not hold",
                     f"pooled {100 * p:.1f} %; " + ", ".join(f"{g}: {100 * e.value:.1f} %" for g, e in em)))
     else:
-        out.append(("about 84 % of blends match the pilot's exact (axis, direction)", "not checked", "no blends"))
+        out.append(("about 84 % of blends of a pilot maneuver match its exact (axis, direction)", "not checked",
+                    "no blends of a pilot maneuver"))
     cats = {g: faa_category(m["p_lowc_per_hr"].value) for g, m in res.items()}
     out.append(("P(LoWC)/flight hour in the Remote band (paper Eq.)",
                 "holds" if all(c == "Remote" for c in cats.values()) else "does not hold",
@@ -293,9 +296,14 @@ def render_markdown(res: dict, source: str = "") -> str:
                    _ci(res[g]["pilot_exec"], "int"), _paper("command_execution", g, "pilot"),
                    _ci(res[g]["blend"], "int"), _paper("command_execution", g, "blending")] for g in groups]), ""]
     L += ["## Exact match among blends (paper: 84 % exact (axis, direction), 16 % axis only)", "",
-          _table(["group", "exact (axis, direction) %", "axis only %", "paper exact %"],
+          "The paper's 84 % + 16 % = 100 %: every blend it counts carries the pilot's maneuver intent. Our GCS",
+          "also streams \"hold current course\" from the alert until the pilot's first maneuver; a hold has no",
+          "(axis, direction), and when it is unsafe Algorithm 2 falls through to \"any\". The match rates are",
+          "therefore over the blends of a pilot maneuver; the share of those among all blends is given too.", "",
+          _table(["group", "exact (axis, direction) %", "axis only %", "paper exact %", "blends of a maneuver %"],
                  [[g, _ci(_scale(res[g]["exact_match"]), "f1"), _ci(_scale(res[g]["axis_match"]), "f1"),
-                   _num(float(pr.get("blending_exact_match_pct", math.nan)), "f1")] for g in groups]), "",
+                   _num(float(pr.get("blending_exact_match_pct", math.nan)), "f1"),
+                   _ci(_scale(res[g]["blend_intent_share"]), "f1")] for g in groups]), "",
           f"![exact match]({FIGURES[2]})", ""]
     L += ["## Safety — LoWC and NMAC", "",
           _table(["group", "LoWC encounters", "P(LoWC) per encounter", "NMAC encounters", "P(NMAC) per encounter",

@@ -39,7 +39,8 @@ def test_counting_identities(runs, group):
         + c["n_stale"] + c["n_link_lost"]
     np.testing.assert_array_equal(parts, c["n_active_steps"])
     np.testing.assert_array_equal(c["n_pilot_received"], c["n_pilot_exec"] + c["n_blend"] + c["n_daa_override"])
-    assert np.all(c["n_blend_exact"] + c["n_blend_axis"] <= c["n_blend"])
+    assert np.all(c["n_blend_exact"] + c["n_blend_axis"] <= c["n_blend_intent"])
+    assert np.all(c["n_blend_intent"] <= c["n_blend"])
     assert c["n_active_steps"].sum() > 0  # the sample does exercise the agent
     # the decision table has exactly n_active_steps rows per encounter, with the same labels
     ids, counts = np.unique(_col(dec, "encounter_id"), return_counts=True)
@@ -50,6 +51,9 @@ def test_counting_identities(runs, group):
     assert (labels == "no_wait").sum() == c["n_no_wait"].sum()
     assert (labels == "blend").sum() == c["n_blend"].sum()
     assert _col(dec, "exact_match").sum() == c["n_blend_exact"].sum()
+    # intent blends = blends whose pilot command carries an (axis, direction), from the decision rows
+    intent = (labels == "blend") & (_col(dec, "pilot_axis") != "none")
+    assert intent.sum() == c["n_blend_intent"].sum()
 
 
 def test_policies_show_in_the_counts(runs):

@@ -110,3 +110,22 @@ def test_errors_are_clear():
         M.compute_metrics(bad)
     with pytest.raises(UsageError):
         M.compute_metrics([1, 2, 3])
+
+
+def test_exact_match_is_over_blends_of_a_pilot_maneuver():
+    """100 blends, 40 of them of a pilot maneuver (the rest blend "hold"), 30 exact + 6 axis-only."""
+    n = 100
+    cnt = {c: np.zeros(n, np.int64) for c in ("n_blend", "n_blend_intent", "n_blend_exact", "n_blend_axis")}
+    cnt["n_blend"][:] = 1
+    cnt["n_blend_intent"][:40] = 1
+    cnt["n_blend_exact"][:30] = 1
+    cnt["n_blend_axis"][30:36] = 1
+    m = M.group_metrics(table(n=n, lowc_idx=(), **cnt))
+    assert m["exact_match"].value == pytest.approx(0.75)
+    assert m["exact_match"].lo == pytest.approx(stats.beta.ppf(0.025, 30, 11))
+    assert m["axis_match"].value == pytest.approx(0.15)
+    assert m["blend_intent_share"].value == pytest.approx(0.40)
+    # a table without the column (older results) falls back to all blends, and says so
+    del cnt["n_blend_intent"]
+    m = M.group_metrics(table(n=n, lowc_idx=(), **cnt))
+    assert m["exact_match"].value == pytest.approx(0.30) and "all blends" in m["exact_match"].method
