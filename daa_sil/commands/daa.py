@@ -13,7 +13,7 @@ from ..io import to_jsonable
 from ..kinematics import AircraftState
 from ..thresholds import PRESETS
 from ..units import FPM, KT
-from ._args import parse_vector
+from .geometry import parse_state
 
 EXAMPLES = """examples:
   # head-on, 6 km apart, the intruder passing 500 m to the right
@@ -26,6 +26,7 @@ States are "x,y,z,vx,vy,vz" in the ENU frame (m, m/s); write --intruder=-3000,..
 starts with a minus sign. Bands are printed in degrees (track, compass),
 fpm (vertical speed) and kt (ground speed); JSON gives the same units with the unit in the key.
 Regions: none (conflict free), mid (corrective), near (warning), recovery.
+Allowed ranges: |x|, |y| <= 1e7 m, z in [-1e4, 1e5] m, |vx|, |vy| <= 1000 m/s, |vz| <= 500 m/s.
 """
 
 _UNITS = {"trk": (np.degrees, "deg"), "vs": (lambda v: np.asarray(v) / FPM, "fpm"),
@@ -65,8 +66,8 @@ def daa_report(own: np.ndarray, intr: np.ndarray, preset: str = "do365") -> dict
 
 
 def run(args) -> int:
-    own = np.array(parse_vector(args.own, 6, "--own", "x,y,z,vx,vy,vz in m and m/s"))
-    intr = np.array([parse_vector(s, 6, "--intruder", "x,y,z,vx,vy,vz in m and m/s") for s in args.intruder])
+    own = parse_state(args.own, "--own")
+    intr = np.array([parse_state(s, "--intruder") for s in args.intruder])
     if args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
     if np.hypot(own[3], own[4]) <= 0:

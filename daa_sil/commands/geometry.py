@@ -22,7 +22,22 @@ EXAMPLES = """examples:
 
 States are "x,y,z,vx,vy,vz" in the ENU frame: metres east, north, up and m/s. All outputs are SI
 (m, s, m/s). JSON uses null where a quantity is undefined (e.g. tau_mod while diverging).
+Allowed ranges: |x|, |y| <= 1e7 m, z in [-1e4, 1e5] m, |vx|, |vy| <= 1000 m/s, |vz| <= 500 m/s.
 """
+
+#: physical bounds of a state given on the command line: (component, lo, hi, unit)
+STATE_BOUNDS = (("x", -1e7, 1e7, "m"), ("y", -1e7, 1e7, "m"), ("z", -1e4, 1e5, "m"),
+                ("vx", -1000.0, 1000.0, "m/s"), ("vy", -1000.0, 1000.0, "m/s"), ("vz", -500.0, 500.0, "m/s"))
+
+
+def parse_state(text: str, name: str) -> np.ndarray:
+    """``"x,y,z,vx,vy,vz"`` (m, m/s, ENU) -> array (6,), each component finite and within
+    :data:`STATE_BOUNDS`; otherwise a one-line UsageError naming the flag, component and range."""
+    vec = np.array(parse_vector(text, 6, name, "x,y,z,vx,vy,vz in m and m/s"))
+    for val, (comp, lo, hi, unit) in zip(vec, STATE_BOUNDS):
+        if not lo <= val <= hi:
+            raise UsageError(f"{name} {comp} must be within [{lo:g}, {hi:g}] {unit}, got {val:g}")
+    return vec
 
 
 def register(sub) -> None:
@@ -73,8 +88,8 @@ def _fmt(val, unit="", prec=1):
 
 
 def run(args) -> int:
-    own = np.array(parse_vector(args.own, 6, "--own", "x,y,z,vx,vy,vz in m and m/s"))
-    intr = np.array(parse_vector(args.intruder, 6, "--intruder", "x,y,z,vx,vy,vz in m and m/s"))
+    own = parse_state(args.own, "--own")
+    intr = parse_state(args.intruder, "--intruder")
     if args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
     rep = geometry_report(own, intr, args.preset, args.lookahead)

@@ -50,6 +50,15 @@ def _turn_rates(text: str) -> list[float]:
         raise UsageError(f"--turn-rates must be comma-separated numbers in deg/s, got {text!r}") from None
     if not vals or not all(math.isfinite(v) and abs(v) <= 30 for v in vals):
         raise UsageError(f"--turn-rates must be finite values within [-30, 30] deg/s, got {text!r}")
+    from ..waitmap.store import map_filename
+
+    seen: dict[str, float] = {}
+    for v in vals:
+        name = map_filename(v)
+        if name in seen:
+            raise UsageError(f"--turn-rates {seen[name]:g} and {v:g} both give the file {name}; "
+                             f"give each rate once, at least 0.1 deg/s apart")
+        seen[name] = v
     return vals
 
 

@@ -4,7 +4,9 @@
 (``Grid.to_dict``), every MDP parameter (``MdpParams.to_dict``, including the threshold preset),
 the conditioning turn rate, solver statistics, and ``content_hash`` = SHA-256 over the metadata
 (without the hash) and every array's dtype, shape and bytes. :func:`load` re-computes the hash, so
-a corrupt, truncated or edited file fails with one-line :class:`~daa_sil.errors.FileFormatError`.
+a corrupt, truncated or edited file fails with one-line :class:`~daa_sil.errors.FileFormatError`;
+it also checks that the values are physical (``wait_s`` in [0, H] s, probabilities in [0, 1], no
+NaN), so a file written by a buggy tool with a matching hash is still refused.
 Writes are atomic (``daa_sil.io.atomic_path``). A family directory also has ``family.json``
 listing its map files by turn rate.
 """
@@ -28,6 +30,8 @@ from .model import MdpParams
 FORMAT_VERSION = "daa-sil-waitmap/1"
 ARRAYS = ("wait_s", "p_lowc", "p_act", "q_wait", "q_evade", "lowc")
 FAMILY_INDEX = "family.json"
+#: first bytes of a zip archive (an .npz is one); anything else is not a wait map
+_ZIP_MAGIC = b"PK\x03\x04"
 
 
 def _content_hash(meta: dict, arrays: dict) -> str:
@@ -50,7 +54,8 @@ def _meta(wm: WaitMap) -> dict:
 
 def map_filename(turn_rate_deg: float) -> str:
     """File name of the map for one conditioning turn rate, e.g. ``waitmap_turn+2.5.npz``."""
-    return f"waitmap_turn{turn_rate_deg:+.1f}.npz"
+    r = round(float(turn_rate_deg), 1) + 0.0  # + 0.0 turns -0.0 into 0.0: one file for "zero"
+    return f"waitmap_turn{r:+.1f}.npz"
 
 
 def save(wm: WaitMap, path: "str | os.PathLike", overwrite: bool = False) -> Path:
@@ -70,6 +75,15 @@ def load(path: "str | os.PathLike") -> WaitMap:
     path = Path(path)
     if not path.is_file():
         raise UsageError(f"wait map {path} does not exist")
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except OSError as exc:
+        raise FileFormatError(f"{path}: cannot read wait map: {exc.strerror or exc}") from None
+    if head != _ZIP_MAGIC:
+        what = "empty file" if not head else "not a zip archive"
+        raise FileFormatError(f"{path}: not a daa-sil wait map ({what}; expected an .npz written by "
+                              f"'daa-sil waitmap build')")
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
@@ -97,16 +111,40 @@ def load(path: "str | os.PathLike") -> WaitMap:
         raise FileFormatError(f"{path}: bad metadata ({exc})") from None
     if any(data[n].shape != grid.shape for n in ARRAYS):
         raise FileFormatError(f"{path}: array shapes do not match the grid {grid.shape}")
+    _check_values(path, data, params.horizon)
     return WaitMap(grid=grid, params=params, turn_rate_deg=float(meta["turn_rate_deg"]),
                    stats=meta.get("stats", {}), content_hash=meta["content_hash"],
                    **{n: data[n] for n in ARRAYS})
+
+
+def _check_values(path: Path, data: dict, horizon: float) -> None:
+    """Refuse maps whose values cannot be right (NaN, negative waits, probabilities outside [0, 1])."""
+    for name, lo, hi in (("wait_s", 0.0, horizon), ("p_lowc", 0.0, 1.0), ("p_act", 0.0, 1.0)):
+        a = np.asarray(data[name])
+        if a.dtype.kind != "f":
+            raise FileFormatError(f"{path}: array {name} has dtype {a.dtype}, expected floating point")
+        bad = ~((a >= lo - 1e-9) & (a <= hi + 1e-9))  # also catches NaN
+        if bad.any():
+            v = a[bad].flat[0]
+            raise FileFormatError(f"{path}: {int(bad.sum())} values of {name} outside [{lo:g}, {hi:g}] "
+                                  f"(e.g. {float(v)!r}); the map is invalid")
+    for name in ("q_wait", "q_evade"):
+        if not np.isfinite(data[name]).all():
+            raise FileFormatError(f"{path}: array {name} has non-finite values; the map is invalid")
+    if data["lowc"].dtype != np.bool_:
+        raise FileFormatError(f"{path}: array lowc has dtype {data['lowc'].dtype}, expected bool")
 
 
 def save_family(fam: WaitMapFamily, directory: "str | os.PathLike", overwrite: bool = False,
                 family_hash: str = "") -> list[Path]:
     """Write every map plus ``family.json`` into ``directory``; returns the map paths."""
     d = Path(directory)
-    targets = [d / map_filename(m.turn_rate_deg) for m in fam.maps] + [d / FAMILY_INDEX]
+    names = [map_filename(m.turn_rate_deg) for m in fam.maps]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise UsageError(f"two maps of the family would share the file name {dup}; turn rates must differ "
+                         f"by at least 0.1 deg/s")
+    targets = [d / n for n in names] + [d / FAMILY_INDEX]
     if not overwrite:
         clash = [p for p in targets if p.exists()]
         if clash:
