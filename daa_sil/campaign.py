@@ -51,7 +51,7 @@ import yaml
 
 from . import __version__
 from .errors import FileFormatError, OutputError, UsageError
-from .io import atomic_path, atomic_write_json, ensure_dir
+from .io import atomic_path, atomic_write_json, ensure_dir, remove_stale_temps
 from .thresholds import PRESETS
 
 #: campaign.json format version
@@ -240,9 +240,17 @@ def chunk_paths(out_dir: Path, group: str, chunk: int) -> tuple[Path, Path]:
 
 
 def chunk_done(out_dir: Path, group: str, chunk: int) -> bool:
-    """A chunk is complete when both files exist (decisions is written first, encounters last)."""
+    """A chunk is complete when both files exist (decisions is written first, encounters last) and
+    both have a readable Parquet footer (a damaged chunk is computed again on resume)."""
     enc, dec = chunk_paths(out_dir, group, chunk)
-    return enc.is_file() and dec.is_file()
+    if not (enc.is_file() and dec.is_file()):
+        return False
+    try:
+        pq.read_metadata(enc)
+        pq.read_metadata(dec)
+    except (OSError, pa.ArrowException):
+        return False
+    return True
 
 
 def _write_table(table: pa.Table, path: Path) -> None:
@@ -432,7 +440,20 @@ def run_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", *, worker
     if not isinstance(workers, int) or workers < 1:
         raise UsageError(f"--workers must be a positive integer, got {workers!r}")
     t_start = time.perf_counter()
+    config.validate()
+    check_out_dir(out_dir, resume)
+    # the executor starts before anything is written: a missing or unreachable scheduler leaves no files
+    with make_executor(workers, scheduler) as ex:
+        summary = _run_with(ex, config, out_dir, scheduler, resume, progress, on_chunk)
+    summary.wall_s = time.perf_counter() - t_start
+    return summary
+
+
+def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resume: bool, progress: bool,
+              on_chunk) -> CampaignSummary:
     out, config, encs = prepare_campaign(config, out_dir, resume)
+    if resume:
+        remove_stale_temps(out)  # temporaries of a writer killed mid-write
     seeds = np.asarray(encs.seed, dtype=np.int64)
     todo, skipped = [], 0
     for g in config.groups:
@@ -445,33 +466,31 @@ def run_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", *, worker
         _wait_family(config.preset)  # build/load once here; forked workers inherit it
     summary = CampaignSummary(out, config, config.n_chunks * len(config.groups), skipped, 0, 0.0, 0.0, 0)
     steps_per_enc = int(round(config.duration_s / config.dt_s))
-    with make_executor(workers, scheduler) as ex:
-        futs: dict[cf.Future, tuple[str, int]] = {}
-        for g, c in todo:
-            lo, hi = config.chunk_range(c)
-            task = ChunkTask(g, c, config, encs.subset(np.arange(lo, hi)), seeds[lo:hi])
-            futs[ex.submit(run_chunk, task)] = (g, c)
-        todo_set = set(todo)
-        with _progress(progress) as prog:
-            bars = {}
-            for g in config.groups:
-                done = sum(config.chunk_range(c)[1] - config.chunk_range(c)[0]
-                           for c in range(config.n_chunks) if (g, c) not in todo_set)
-                bars[g] = prog.add_task(f"group {g:5s}", total=config.n_encounters, completed=done)
-            for fut in cf.as_completed(list(futs)):
-                futs.pop(fut)
-                res: ChunkResult = fut.result()
-                write_chunk(out, res)
-                summary.chunks_run += 1
-                summary.compute_s += res.compute_s
-                summary.encounter_steps += res.n * steps_per_enc
-                prog.advance(bars[res.group], res.n)
-                if on_chunk is not None:
-                    on_chunk(res)
+    futs: dict[cf.Future, tuple[str, int]] = {}
+    for g, c in todo:
+        lo, hi = config.chunk_range(c)
+        task = ChunkTask(g, c, config, encs.subset(np.arange(lo, hi)), seeds[lo:hi])
+        futs[ex.submit(run_chunk, task)] = (g, c)
+    todo_set = set(todo)
+    with _progress(progress) as prog:
+        bars = {}
+        for g in config.groups:
+            done = sum(config.chunk_range(c)[1] - config.chunk_range(c)[0]
+                       for c in range(config.n_chunks) if (g, c) not in todo_set)
+            bars[g] = prog.add_task(f"group {g:5s}", total=config.n_encounters, completed=done)
+        for fut in cf.as_completed(list(futs)):
+            futs.pop(fut)
+            res: ChunkResult = fut.result()
+            write_chunk(out, res)
+            summary.chunks_run += 1
+            summary.compute_s += res.compute_s
+            summary.encounter_steps += res.n * steps_per_enc
+            prog.advance(bars[res.group], res.n)
+            if on_chunk is not None:
+                on_chunk(res)
     meta = load_campaign_json(out)
     meta["status"] = "complete"
     atomic_write_json(out / "campaign.json", meta)
-    summary.wall_s = time.perf_counter() - t_start
     return summary
 
 
