@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -78,8 +79,8 @@ def register(sub) -> None:
     r.add_argument("--chunk-size", type=_pos_int("--chunk-size"), default=None, metavar="C",
                    help="encounters per task (default 2000, about 0.2 GB per worker; smaller chunks resume at a finer grain but run slower)")
     r.add_argument("--out", required=True, metavar="DIR", help="output directory (must be empty unless --resume)")
-    r.add_argument("--workers", type=_pos_int("--workers"), default=1, metavar="K",
-                   help="worker processes (1 = in-process; default 1)")
+    r.add_argument("--workers", type=_pos_int("--workers"), default=None, metavar="K",
+                   help="worker processes (1 = in-process; default 1); not with a remote --scheduler")
     r.add_argument("--scheduler", default=None, metavar="ADDRESS|local-dask",
                    help="run on a Dask cluster at ADDRESS (tcp://host:8786) or a local one (local-dask)")
     r.add_argument("--resume", action="store_true", help="continue the campaign in DIR (skips complete chunks)")
@@ -115,13 +116,27 @@ def _config_from_args(args):
                           duration_s=base.duration_s, dt_s=base.dt_s).validate()
 
 
+_SCHEDULER = re.compile(r"^([a-z][a-z0-9+]*://)?[^\s:/]+:\d{1,5}$")
+
+
+def check_scheduler(scheduler: "str | None", workers: "int | None") -> None:
+    """Refuse a malformed ``--scheduler`` address, and ``--workers`` with a remote cluster (its
+    workers are the cluster's), before anything starts or is written."""
+    if scheduler is None:
+        return
+    if scheduler != "local-dask" and not _SCHEDULER.match(scheduler):
+        raise UsageError(f"--scheduler must be an address like tcp://HOST:8786 or 'local-dask', got {scheduler!r}")
+    if scheduler != "local-dask" and workers is not None:
+        raise UsageError("--workers applies to local runs and --scheduler local-dask; a remote --scheduler "
+                         "uses the cluster's own workers (drop --workers)")
+
+
 def run_cmd(args) -> int:
     from ..campaign import run_campaign
 
     cfg = _config_from_args(args)
-    if args.scheduler is not None and not args.scheduler.strip():
-        raise UsageError("--scheduler needs an address (tcp://host:8786) or 'local-dask'")
-    summary = run_campaign(cfg, args.out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
+    check_scheduler(args.scheduler, args.workers)
+    summary = run_campaign(cfg, args.out, workers=args.workers or 1, scheduler=args.scheduler, resume=args.resume,
                            progress=not args.no_progress and not args.json)
     rate = summary.encounter_steps / summary.wall_s if summary.wall_s > 0 else float("nan")
     info = {"out": str(summary.out_dir), "groups": list(cfg.groups), "encounters": cfg.n_encounters,
