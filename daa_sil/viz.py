@@ -609,6 +609,9 @@ class SinkOptions:
     overwrite: bool = False  #: replace an existing .rrd
     deterministic: bool = False  #: ChunkBatcherConfig.NEVER (identical files run to run)
     app_id: str = APP_ID
+    #: where the .rrd is written before the atomic rename (default: a fresh name next to ``rrd``); a
+    #: :class:`BackgroundRecorder` picks it so that its owner can remove it if the helper is killed
+    rrd_tmp: "str | os.PathLike | None" = None
 
     @property
     def enabled(self) -> bool:
@@ -686,6 +689,19 @@ class WebServer:
             pass
 
 
+def check_rrd_path(path: "str | os.PathLike", overwrite: bool = False) -> Path:
+    """``path`` as a Path if an .rrd can be written there; OutputError naming the problem otherwise."""
+    rrd = Path(path)
+    if rrd.is_dir():
+        raise OutputError(f"{rrd} is a directory, not an .rrd file path")
+    if rrd.exists() and not overwrite:
+        raise OutputError(f"{rrd} exists; refusing to overwrite (use --force or another path)")
+    parent = rrd.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        raise OutputError(f"cannot write {rrd}: directory {parent} is missing or not writable")
+    return rrd
+
+
 class Recording:
     """A ``RecordingStream`` attached to the sinks of :class:`SinkOptions` (file, viewer, web).
 
@@ -702,14 +718,7 @@ class Recording:
         self._tmp: "Path | None" = None
         self._closed = False
         if self.sinks.rrd:
-            self.rrd_path = Path(self.sinks.rrd)
-            if self.rrd_path.is_dir():
-                raise OutputError(f"{self.rrd_path} is a directory, not an .rrd file path")
-            if self.rrd_path.exists() and not self.sinks.overwrite:
-                raise OutputError(f"{self.rrd_path} exists; refusing to overwrite (use --force or another path)")
-            parent = self.rrd_path.parent
-            if not parent.is_dir() or not os.access(parent, os.W_OK):
-                raise OutputError(f"cannot write {self.rrd_path}: directory {parent} is missing or not writable")
+            self.rrd_path = check_rrd_path(self.sinks.rrd, self.sinks.overwrite)
         if self.sinks.connect:
             _url_host_port(self.sinks.connect)  # a malformed URL is a usage error, not a missing viewer
         if not self.sinks.enabled:
@@ -732,9 +741,12 @@ class Recording:
         rec.set_log_time_enabled(False)
         sinks: list = []
         if self.rrd_path is not None:
-            fd, tmp = tempfile.mkstemp(prefix=f".{self.rrd_path.name}.", suffix=".tmp", dir=self.rrd_path.parent)
-            os.close(fd)
-            self._tmp = Path(tmp)
+            if o.rrd_tmp is not None:
+                self._tmp = Path(o.rrd_tmp)
+            else:
+                fd, tmp = tempfile.mkstemp(prefix=f".{self.rrd_path.name}.", suffix=".tmp", dir=self.rrd_path.parent)
+                os.close(fd)
+                self._tmp = Path(tmp)
             sinks.append(rr.FileSink(str(self._tmp)))
         if o.connect:
             host, port = _url_host_port(o.connect)
@@ -806,7 +818,8 @@ class EncounterLogger:
 
     def __init__(self, sinks: "SinkOptions | None" = None, preset: "str | Thresholds | None" = None,
                  encounter_id: "int | str | None" = None, wait_lookup: "Callable[[np.ndarray], np.ndarray] | None" = None,
-                 center: "Iterable[float] | None" = None, extent_m: float = 6000.0, flush_interval_s: float = 0.25):
+                 center: "Iterable[float] | None" = None, extent_m: float = 6000.0, flush_interval_s: float = 0.25,
+                 defer_blueprint: bool = False):
         self.th = get_thresholds(preset)
         self.encounter_id = encounter_id
         self.flush_interval_s = flush_interval_s
@@ -820,7 +833,7 @@ class EncounterLogger:
         self._aborted = False
         self._lock = threading.Lock()
         bp = None
-        if sinks is not None and sinks.enabled:
+        if sinks is not None and sinks.enabled and not defer_blueprint:
             bp = blueprint(center, extent_m)
         rid = f"encounter-{encounter_id}" if encounter_id is not None else None
         self._recording = Recording(sinks, rid, bp)
@@ -893,6 +906,17 @@ class EncounterLogger:
         try:
             with self._lock:
                 self._emitter.emit(StepColumns.from_table(table))
+        except Exception as exc:
+            self._disable(f"Rerun logging stopped after an error: {type(exc).__name__}: {exc}")
+
+    def send_blueprint(self, center: "Iterable[float] | None" = None, extent_m: float = 6000.0) -> None:
+        """Send the default layout now (for a logger opened with ``defer_blueprint=True``, e.g. once the
+        closest approach, the camera target, is known)."""
+        if self.rec is None or self._failed:
+            return
+        try:
+            with self._lock:
+                self.rec.send_blueprint(blueprint(center, extent_m), make_active=True, make_default=True)
         except Exception as exc:
             self._disable(f"Rerun logging stopped after an error: {type(exc).__name__}: {exc}")
 
@@ -1008,6 +1032,236 @@ def log_steplog(table: "pa.Table | pa.RecordBatch", sinks: SinkOptions, encounte
                              center=center, extent_m=extent)
     logger.log_table(table)
     return logger.close(keep_serving=keep_serving), logger
+
+
+# --------------------------------------------------------------------------------------------
+# background recording of a SIL run (helper process prepared while the run plays)
+
+#: the helper lowers its CPU priority by this much (nice), so it only uses cycles the run leaves idle
+RECORDER_NICE = 10
+RECORDER_FINISH_TIMEOUT_S = 120.0
+
+
+class BackgroundRecorder:
+    """Prepare a recording in a helper process while a SIL run plays; log its step log when it ends.
+
+    The expensive, run-independent part (starting Python, importing Rerun, opening the sinks,
+    spawning/connecting a viewer, the static entities) happens in a separate, low-priority process
+    (``nice`` +10) started with the run, so it overlaps with it and never touches the control loop
+    (other processes, other GIL). :meth:`finish` hands the helper the step log; it logs it with
+    ``send_columns`` (same :class:`_Emitter` as every other path, so the same entities and steps),
+    sends the blueprint (camera on the closest approach), and moves the ``.rrd`` into place
+    atomically. :meth:`abort` (also on errors and Ctrl-C) kills the helper and removes its
+    temporary file: the final path then never holds a partial recording.
+
+    Only a bad explicit ``.rrd`` path raises (:class:`~daa_sil.errors.OutputError`, here, before the
+    run starts); a helper that fails or hangs is a :class:`VizWarning` and ``finish`` returns None.
+    """
+
+    def __init__(self, sinks: SinkOptions, preset: "str | Thresholds | None" = None,
+                 encounter_id: "int | None" = None, nice: int = RECORDER_NICE):
+        import json
+        import queue
+
+        self.sinks = sinks
+        self.rrd_path = check_rrd_path(sinks.rrd, sinks.overwrite) if sinks.rrd else None
+        if sinks.connect:
+            _url_host_port(sinks.connect)
+        self.tmp_path: "Path | None" = None
+        if self.rrd_path is not None:
+            self.tmp_path = self.rrd_path.parent / f".{self.rrd_path.name}.{os.getpid()}.{os.urandom(4).hex()}.tmp"
+        cfg = {k: (str(v) if isinstance(v, os.PathLike) else v) for k, v in vars(sinks).items()}
+        cfg.update(overwrite=True, rrd_tmp=str(self.tmp_path) if self.tmp_path else None)
+        th = get_thresholds(preset)
+        args = {"sinks": cfg, "preset": th.name if th.name in _preset_names() else None,
+                "encounter_id": encounter_id}
+        self._lines: "queue.Queue[str | None]" = queue.Queue()
+        self.result: "dict | None" = None
+        self._done = False
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", "from daa_sil.viz import recorder_main; raise SystemExit(recorder_main())",
+             json.dumps(args)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=None, text=True, bufsize=1,
+            start_new_session=True)  # own group: a terminal Ctrl-C reaches the caller, which decides
+        try:
+            os.setpriority(os.PRIO_PROCESS, self.proc.pid, nice)
+        except (OSError, AttributeError):
+            pass
+        self._reader = threading.Thread(target=self._pump, name="daa-sil-recorder", daemon=True)
+        self._reader.start()
+
+    def _pump(self) -> None:
+        for line in self.proc.stdout:  # type: ignore[union-attr]
+            self._lines.put(line.rstrip("\n"))
+        self._lines.put(None)
+
+    def finish(self, steplog: "str | os.PathLike", timeout_s: float = RECORDER_FINISH_TIMEOUT_S) -> "Path | None":
+        """Log ``steplog`` (Parquet, one encounter) and close the sinks; return the .rrd path (None if not written).
+
+        Blocks until the helper is done (typically ~0.1 s once it is prepared). Ctrl-C while waiting
+        aborts the helper (no .rrd) and propagates.
+        """
+        import json
+        import queue
+
+        if self._done:
+            return self.rrd_path if self.result and self.result.get("rrd") else None
+        try:
+            try:
+                self.proc.stdin.write(json.dumps({"steplog": str(steplog)}) + "\n")  # type: ignore[union-attr]
+                self.proc.stdin.close()  # type: ignore[union-attr]
+            except (BrokenPipeError, OSError):
+                pass
+            deadline = time.monotonic() + timeout_s
+            while True:
+                try:
+                    line = self._lines.get(timeout=max(0.01, deadline - time.monotonic()))
+                except queue.Empty:
+                    _warn(f"the Rerun recorder did not finish within {timeout_s:g} s; no recording written")
+                    break
+                if line is None:
+                    _warn("the Rerun recorder stopped without writing the recording")
+                    break
+                if line.startswith("DONE "):
+                    self.result = json.loads(line[5:])
+                    break
+        except BaseException:
+            self.abort()
+            raise
+        self._done = True
+        try:
+            self.proc.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            pass
+        self.abort()  # reaps; removes a leftover temporary file
+        return Path(self.result["rrd"]) if self.result and self.result.get("rrd") else None
+
+    def abort(self) -> None:
+        """Stop the helper (SIGTERM, then SIGKILL) and remove its temporary file; no .rrd is written."""
+        self._done = True
+        if self.proc.poll() is None:
+            for sig, wait in ((signal.SIGTERM, 3.0), (signal.SIGKILL, 5.0)):
+                try:
+                    os.killpg(self.proc.pid, sig)
+                except (ProcessLookupError, PermissionError):
+                    pass
+                try:
+                    self.proc.wait(timeout=wait)
+                    break
+                except subprocess.TimeoutExpired:
+                    continue
+        for fh in (self.proc.stdin, self.proc.stdout):
+            try:
+                if fh is not None:
+                    fh.close()
+            except OSError:
+                pass
+        if self.tmp_path is not None:
+            self.tmp_path.unlink(missing_ok=True)
+
+
+def _warm_up(th: Thresholds) -> None:
+    """Run the finish path once on two synthetic rows into a throw-away in-memory recording, so the
+    real finish pays no first-call costs (Parquet reader, Arrow kernels, Rerun's column builders)."""
+    import io
+
+    import pyarrow.parquet as pq
+
+    from .steplog import STEP_SCHEMA
+
+    rr = _rr()
+    one = {"encounter_id": 0, "t": 0.0, "own_x": 0.0, "own_y": 0.0, "own_z": 1000.0, "own_gs": 50.0,
+           "own_trk_deg": 0.0, "own_vs": 0.0, "intr_x": [0.0], "intr_y": [5000.0], "intr_z": [1000.0],
+           "intr_gs": [50.0], "intr_trk_deg": [180.0], "intr_vs": [0.0], "range_m": [5000.0], "hmd_m": [0.0],
+           "dh_m": [0.0], "tau_mod_s": [40.0], "alert_level": [2], "wcv": [False], "decision": "pilot",
+           "rule": "-", "authority": "pilot", "wait_s": 5.0, "projl": False, "pilot_cmd_received": True,
+           "pilot_cmd_age_s": 4.0, "sm_pilot": 1.0, "sm_exec": 1.0, "cmd_trk_deg": 0.0, "cmd_vs": 0.0,
+           "cmd_gs": 50.0, "pilot_trk_deg": 0.0, "pilot_vs": 0.0, "pilot_gs": 50.0, "daa_trk_deg": 30.0,
+           "daa_vs": 0.0, "daa_gs": 50.0, "pilot_axis": "horizontal", "pilot_dir": "right",
+           "exec_axis": "horizontal", "exec_dir": "right", "delay_up_s": 4.0, "delay_down_s": 4.0,
+           "lowc": True, "nmac": False, "bands_trk_lo_deg": [350.0], "bands_trk_hi_deg": [10.0],
+           "bands_trk_region": ["near"]}
+    rows = [dict(one, step=k, t=float(k), decision=d) for k, d in enumerate(("pilot", "wait"))]
+    buf = io.BytesIO()
+    pq.write_table(pa.Table.from_pylist(rows, schema=STEP_SCHEMA), buf)
+    buf.seek(0)
+    table, _ = select_encounter(pq.ParquetFile(buf).read())
+    focus(table)
+    warm = rr.RecordingStream("daa_sil_warm_up")
+    mem = warm.memory_recording()
+    try:
+        warm.send_blueprint(blueprint([0.0, 0.0, 0.0], 6000.0))
+        _Emitter(warm, th).emit(StepColumns.from_table(table))
+        warm.flush()
+        mem.drain_as_bytes()
+    finally:
+        warm.disconnect()
+
+
+def _preset_names() -> set[str]:
+    from .thresholds import PRESETS
+
+    return set(PRESETS)
+
+
+def recorder_main(argv: "list[str] | None" = None) -> int:
+    """The :class:`BackgroundRecorder` helper: prepare, print ``READY``, read one request line on stdin
+    (``{"steplog": PATH}``; EOF = abort), log it, close, print ``DONE {json}``.
+
+    Warnings go to stderr as ``daa-sil: warning: ...``; SIGTERM removes the temporary file.
+    """
+    import json
+
+    args = json.loads((sys.argv[1:] if argv is None else argv)[0])
+    sinks = SinkOptions(**args["sinks"])
+    tmp = Path(sinks.rrd_tmp) if sinks.rrd_tmp else None
+
+    def on_term(signum, frame):
+        if tmp is not None:
+            tmp.unlink(missing_ok=True)
+        os._exit(128 + signum)
+
+    signal.signal(signal.SIGTERM, on_term)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the owner decides (it aborts with SIGTERM)
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"daa-sil: warning: {message}", file=sys.stderr, flush=True)
+
+    warnings.showwarning = show
+    warnings.simplefilter("always", VizWarning)
+    status = 1
+    try:
+        from .steplog import read_steplog
+
+        logger = EncounterLogger(sinks, preset=args.get("preset"), encounter_id=args.get("encounter_id"),
+                                 defer_blueprint=True)
+        if logger.enabled:
+            try:
+                _warm_up(logger.th)
+            except Exception:  # only a speed-up
+                pass
+        print("READY", flush=True)
+        line = sys.stdin.readline()
+        if not line.strip():  # the owner went away or aborted
+            logger.abort()
+        else:
+            req = json.loads(line)
+            table, _ = select_encounter(read_steplog(req["steplog"]))  # the only encounter
+            center, extent = focus(table)
+            logger.send_blueprint(center, extent)
+            logger.log_table(table)
+            path = logger.close()
+            print("DONE " + json.dumps({"rrd": str(path) if path else None, "steps": logger.steps_logged}),
+                  flush=True)
+        status = 0
+    except Exception as exc:
+        _warn(f"Rerun recording failed: {type(exc).__name__}: {exc}")
+    finally:
+        if tmp is not None and status != 0:
+            tmp.unlink(missing_ok=True)
+        sys.stdout.flush()
+        sys.stderr.flush()
+    os._exit(status)  # skip Rerun's atexit work: everything is flushed and the file is in place
 
 
 # --------------------------------------------------------------------------------------------

@@ -363,9 +363,8 @@ def run_sil(opts: RunOptions) -> dict:
     and ``out_dir/logs/``. Raises DaaSilError if a process fails; KeyboardInterrupt propagates
     after every child is stopped and whatever step log exists is summarised.
     """
-    from ..io import atomic_write_json, ensure_dir
+    from ..io import ensure_dir
     from ..scenario import load_scenario
-    from ..steplog import read_steplog
 
     sc = load_scenario(opts.scenario_path)
     out = ensure_dir(opts.out_dir)
@@ -374,6 +373,39 @@ def run_sil(opts: RunOptions) -> dict:
         stale.unlink(missing_ok=True)
     key_args = ["--key", str(opts.key)] if opts.key else []
     clock_args = ["--clock", opts.clock] + (["--speed", f"{opts.speed:g}"] if opts.clock == "realtime" else [])
+    recorder = _start_recorder(opts, sc)  # prepares Rerun in a helper process while the run plays
+    try:
+        return _play(opts, sc, out, steplog, key_args, clock_args, recorder)
+    finally:
+        if recorder is not None:
+            recorder.abort()  # no-op after finish; otherwise kills the helper and removes its temp file
+
+
+def _start_recorder(opts: RunOptions, sc):
+    """A :class:`daa_sil.viz.BackgroundRecorder` for ``--rrd`` / ``--spawn-viewer`` (None without them).
+
+    A bad ``--rrd`` path raises OutputError here, before any process starts.
+    """
+    if not (opts.rrd or opts.spawn_viewer):
+        return None
+    from .. import viz
+
+    return viz.BackgroundRecorder(viz.SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, overwrite=True),
+                                  preset=sc.thresholds, encounter_id=0)  # the vehicle logs encounter 0
+
+
+def _finish_recorder(recorder, steplog: Path) -> "Path | None":
+    """Hand the step log to the recorder; its warnings become ``daa-sil: warning: ...`` lines."""
+    from .viz import one_line_warnings
+
+    with one_line_warnings():
+        return recorder.finish(steplog)
+
+
+def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, recorder) -> dict:
+    from ..io import atomic_write_json
+    from ..steplog import read_steplog
+
     t0 = time.monotonic()
     interrupted = False
     failure: "str | None" = None
@@ -420,11 +452,14 @@ def run_sil(opts: RunOptions) -> dict:
                    "interrupted": interrupted, "failure": failure,
                    "files": {"steplog": str(steplog), "gcs_log": str(out / "gcs_commands.jsonl"),
                              "logs": str(out / "logs")}})
-    if (opts.rrd or opts.spawn_viewer) and not interrupted:
-        from .. import viz
-
-        rrd, _ = viz.log_steplog(table, viz.SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, overwrite=True),
-                                 preset=sc.thresholds)
+    if recorder is not None:
+        # also after Ctrl-C: the partial step log becomes a complete, readable recording (a second
+        # Ctrl-C aborts it and no .rrd is written)
+        try:
+            rrd = _finish_recorder(recorder, steplog)
+        except KeyboardInterrupt:
+            rrd, interrupted = None, True
+            result["interrupted"] = True
         result["files"]["rrd"] = str(rrd) if rrd else None
     atomic_write_json(out / "result.json", result)
     if interrupted:
@@ -486,6 +521,16 @@ def _check_args(args) -> None:
         from ..link.endpoint import parse_udp_address
 
         parse_udp_address(args.tap, "--tap")
+    rrd = getattr(args, "rrd", None)
+    if rrd is not None:
+        if rrd.suffix != ".rrd":
+            raise UsageError(f"--rrd {str(rrd)!r} should end in .rrd")
+        from ..viz import check_rrd_path
+
+        if rrd.is_dir():
+            raise UsageError(f"--rrd {str(rrd)!r} is a directory, not an .rrd file path")
+        if rrd.resolve().parent != Path(args.out).resolve():  # --out is created by the run
+            check_rrd_path(rrd, overwrite=True)  # a missing/unwritable directory fails before any process starts
     if args.scenario is not None:
         from ..scenario import load_scenario
 
@@ -509,6 +554,8 @@ def _finish(args, result: dict, sc) -> int:
         print(human_summary(result, sc, Path(args.out)))
         print(f"  wall {result['wall_s']:.1f} s for {result['duration_s']:.0f} s of sim time "
               f"({result['realtime_ratio']}x real time, clock {result['clock']})")
+        if result["files"].get("rrd"):
+            print(f"  Rerun recording: {result['files']['rrd']}  (open it with: rerun {result['files']['rrd']})")
     exp = result.get("expectation") or {}
     return 0 if exp.get("ok", True) else 1
 
