@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import signal
 from pathlib import Path
 
@@ -83,6 +84,7 @@ async def _amain(args) -> int:
         node.close()
     print(f"daa-gcs: done, {node.steps} steps, {len(node.sent)} commands sent, packets dropped {st['dropped']}"
           + (f"; log {path}" if path else ""), flush=True)
+    print("daa-gcs: link stats " + json.dumps(st, sort_keys=True), flush=True)
     return 0
 
 

@@ -110,9 +110,13 @@ class GcsNode:
         self._t_sync = 0.0
 
     async def start(self) -> None:
-        """Bind, then greet the vehicle side with a HEARTBEAT (a shim learns our address from it)."""
+        """Bind, then greet the vehicle side with a HEARTBEAT (a shim learns our address from it).
+
+        Only datagrams from the ``--vehicle`` address (the shim or the vehicle) and only messages from
+        the vehicle's system id are accepted; the rest is counted and dropped (no signing state change).
+        """
         self.ep = await open_endpoint(self.codec, self.opts.listen, peer=self.peer, learn_peer=False,
-                                      allow_sysids=[VEHICLE_SYSID])
+                                      allow_peers=[self.peer], allow_sysids=[VEHICLE_SYSID])
         self.ep.send(self._heartbeat())
 
     @property

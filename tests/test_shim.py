@@ -151,11 +151,13 @@ async def test_lockstep_forged_tick_does_not_move_the_clock():
         async with await open_endpoint(MavCodec(1, 1), peer=shim.vehicle_side) as veh:
             tick = bytearray(MavCodec(1, 1).encode(d.MAVLink_sim_tick_message(99, 99_000)))
             tick[-1] ^= 0xFF  # bad CRC
+            veh.transport.sendto(bytes(tick), shim.vehicle_side)  # garbage cannot claim the vehicle side
+            veh.send(d.MAVLink_heartbeat_message(1, 0, 0, 0, 4, 3))  # a good packet does
             veh.transport.sendto(bytes(tick), shim.vehicle_side)
             veh.send(d.MAVLink_sim_tick_message(1, 1000))
             await shim.wait_tick(1, timeout=5)
-        assert shim.sim_time == 1.0 and shim.counters["bad_control"] == 1
-        assert len(shim.lines["down"]) == 1  # the corrupt datagram is just data: delayed, not dropped
+        assert shim.sim_time == 1.0 and shim.counters["bad_control"] == 1 and shim.counters["rejected_claim"] == 1
+        assert len(shim.lines["down"]) == 2  # heartbeat + the corrupt datagram (just data: delayed, not dropped)
     finally:
         await shim.close()
 
@@ -206,9 +208,13 @@ async def test_realtime_forwards_bytes_unchanged_and_rejects_strangers():
         v_tr, _ = await loop.create_datagram_endpoint(asyncio.DatagramProtocol, local_addr=("127.0.0.1", 0))
         s_tr, _ = await loop.create_datagram_endpoint(asyncio.DatagramProtocol, local_addr=("127.0.0.1", 0))
         try:
-            g_tr.sendto(b"hello", shim.gcs_side)
-            await asyncio.sleep(0.02)
-            payload = bytes(range(256)) * 4  # not MAVLink at all: relayed verbatim
+            hello = MavCodec(255, 190).encode(d.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3))
+            g_tr.sendto(b"hello", shim.gcs_side)  # not MAVLink: cannot claim the GCS side
+            g_tr.sendto(hello, shim.gcs_side)
+            v_tr.sendto(MavCodec(1, 1).encode(d.MAVLink_heartbeat_message(1, 0, 0, 0, 4, 3)), shim.vehicle_side)
+            await asyncio.wait_for(got.get(), 5)  # the vehicle's heartbeat
+            assert shim.counters["rejected_claim"] == 1 and shim.peers["gcs"] == g_tr.get_extra_info("sockname")
+            payload = bytes(range(256)) * 4  # once the vehicle is known, any bytes are relayed verbatim
             t0 = loop.time()
             v_tr.sendto(payload, shim.vehicle_side)
             await asyncio.sleep(0.01)

@@ -103,8 +103,15 @@ class VehicleNode:
 
     # -- lifecycle -------------------------------------------------------------------------------
     async def start(self) -> None:
-        """Bind the listen socket; the peer (``--out``) is fixed, the tap only observes."""
-        self.ep = await open_endpoint(self.codec, self.opts.listen, peer=self.peer, learn_peer=False)
+        """Bind the listen socket; the peer (``--out``) is fixed, the tap only observes.
+
+        Only datagrams from the peer's and the tap's exact ``(host, port)`` are accepted; anything
+        else (another port claiming the GCS's system id, an early copy of a genuine packet, ...)
+        is counted and dropped by the endpoint without touching the signing state.
+        """
+        allow = [self.peer] + ([self.tap] if self.tap is not None else [])
+        self.ep = await open_endpoint(self.codec, self.opts.listen, peer=self.peer, learn_peer=False,
+                                      allow_peers=allow)
 
     @property
     def local_address(self) -> str:
@@ -271,7 +278,12 @@ class VehicleNode:
         """Write the step log so far (atomic Parquet); returns its path or None."""
         if self.opts.steplog is None or self.stats.steps == 0:
             return None
+        import json
+
         meta = {"scenario": self.sc.name, "seed": str(self.sc.seed), "preset": self.sc.thresholds,
                 "clock": self.opts.clock, "complete": str(self.stats.steps >= self.core.n_steps).lower(),
-                "gate": str(self.gate.counters.__dict__), "link": str(self.ep.stats() if self.ep else {})}
+                "signed": str(self.codec.signed).lower(),
+                "gate": json.dumps(self.gate.counters.__dict__, sort_keys=True),
+                "link": json.dumps(self.ep.stats() if self.ep else {}, sort_keys=True),
+                "vehicle": json.dumps({k: v for k, v in self.stats.__dict__.items() if k != "extra"}, sort_keys=True)}
         return self.core.write_steplog(self.opts.steplog, meta)

@@ -37,7 +37,6 @@ from pathlib import Path
 from typing import Iterable
 
 from ..errors import FileFormatError, OutputError, UsageError
-from ..io import atomic_path
 from .dialect import daa_sil as mavlink
 
 MAVError = mavlink.MAVError
@@ -71,6 +70,7 @@ class CodecCounters:
     malformed: int = 0  # bad length, bad flags, unpack failures, anything else
     unsigned: int = 0  # unsigned packets refused because signing is required
     unsigned_accepted: int = 0  # unsigned packets let through by ``allow_unsigned``
+    signed_in: int = 0  # good messages that carried a valid signature (of messages_in)
     bad_signature: int = 0  # wrong key or forged signature
     replayed: int = 0  # signature timestamp not newer than the stream's last one
     stale: int = 0  # new stream more than 60 s behind our clock
@@ -94,12 +94,15 @@ class SecureMAVLink(mavlink.MAVLink):
 
     _sig_reason: "str | None" = None
     n_unsigned_accepted = 0
+    #: False = dry run: check signatures and timestamps but change no stream state (packets from a
+    #: sender that will be dropped anyway must not advance the replay window: no pre-play lock-out)
+    commit = True
 
     def decode(self, msgbuf: bytearray) -> MAVLinkMessage:  # noqa: D401 (pymavlink API)
         self._sig_reason = None
         try:
             m = super().decode(msgbuf)
-            if self._sig_reason == "unsigned_accepted":
+            if self._sig_reason == "unsigned_accepted" and self.commit:
                 self.n_unsigned_accepted += 1
             return m
         except MAVError as exc:
@@ -126,9 +129,10 @@ class SecureMAVLink(mavlink.MAVLink):
         elif timestamp + STALE_LIMIT < signing.timestamp:
             self._sig_reason = "stale"
             return False
-        signing.stream_timestamps[stream] = timestamp
-        if timestamp > signing.timestamp:
-            signing.timestamp = timestamp
+        if self.commit:
+            signing.stream_timestamps[stream] = timestamp
+            if timestamp > signing.timestamp:
+                signing.timestamp = timestamp
         return True
 
     def _unsigned_gate(self, msg_id: int) -> bool:
@@ -195,7 +199,7 @@ class MavCodec:
             s.allow_unsigned_callback = lambda mav, msg_id: mav._unsigned_gate(msg_id)
 
     # -- decoding -----------------------------------------------------------------------------
-    def decode(self, datagram: "bytes | bytearray | memoryview") -> list[MAVLinkMessage]:
+    def decode(self, datagram: "bytes | bytearray | memoryview", commit: bool = True) -> list[MAVLinkMessage]:
         """Good messages in one datagram (in order); every bad packet is counted and dropped.
 
         The datagram is split into packets by walking the MAVLink headers (no parser state is
@@ -203,7 +207,21 @@ class MavCodec:
         goes through the generated ``decode`` (CRC, length, signature). Bytes before a start
         marker count once as ``bad_prefix``; a packet cut short by the datagram end as
         ``truncated``. Never raises on bad input.
+
+        ``commit=False`` (a datagram the caller will drop anyway, e.g. from an address that is not
+        the peer): every check runs and bad packets are counted by reason, but no signing state
+        changes (a valid packet does not advance its stream's replay window, so an early copy of a
+        genuine packet cannot make the genuine one look like a replay) and the good messages are
+        returned without counting them in ``messages_in`` / ``signed_in``.
         """
+        mav = self.mav
+        mav.commit = bool(commit)
+        try:
+            return self._decode(datagram, mav.commit)
+        finally:
+            mav.commit = True
+
+    def _decode(self, datagram, commit: bool) -> list[MAVLinkMessage]:
         c = self.counters
         data = bytes(datagram)
         n = len(data)
@@ -255,8 +273,10 @@ class MavCodec:
                 c.unknown += 1
                 continue
             good.append(m)
-        c.unsigned_accepted = self.mav.n_unsigned_accepted
-        c.messages_in += len(good)
+        if commit:
+            c.unsigned_accepted = self.mav.n_unsigned_accepted
+            c.messages_in += len(good)
+            c.signed_in += sum(1 for m in good if m._signed)
         return good
 
     # -- encoding -----------------------------------------------------------------------------
@@ -325,12 +345,33 @@ def load_key(path: "str | os.PathLike") -> bytes:
 
 
 def generate_key_file(path: "str | os.PathLike", overwrite: bool = False) -> bytes:
-    """Write a new random 32-byte key to ``path`` atomically with mode 0600; returns the key."""
+    """Write a new random 32-byte key to ``path`` atomically with mode 0600; returns the key.
+
+    The key never exists on disk with wider permissions: it is written to a ``mkstemp`` file
+    (created 0600) in the target directory, fsynced and renamed over ``path``.
+    """
+    import tempfile
+
+    target = Path(path)
+    if not overwrite and target.exists():
+        raise OutputError(f"{target} exists; refusing to overwrite (choose another path or remove it)")
     key = secrets.token_bytes(KEY_LEN)
-    with atomic_path(path, overwrite=overwrite) as tmp:
-        try:
-            os.chmod(tmp, 0o600)
-        except OSError as exc:
-            raise OutputError(f"cannot set permissions on {path}: {exc.strerror or exc}") from None
-        tmp.write_bytes(key)
+    tmp = None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent if str(target.parent) else ".")
+        with os.fdopen(fd, "wb") as fh:
+            os.fchmod(fh.fileno(), 0o600)
+            fh.write(key)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+        tmp = None
+    except OSError as exc:
+        raise OutputError(f"cannot write signing key file {target}: {exc.strerror or exc}") from None
+    finally:
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
     return key

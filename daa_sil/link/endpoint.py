@@ -4,7 +4,12 @@ One ``asyncio.DatagramProtocol`` per endpoint (no ``mavutil``: it blocks the loo
 datagram is decoded on its own (parser reset per datagram); good messages go to an async inbox
 as :class:`Received` tuples. Everything hostile is counted and dropped:
 
-* datagrams from addresses outside ``allow_peers`` (``rejected_peer``);
+* packets from addresses outside ``allow_peers``: they are still decoded, *without changing any
+  signing state* (``MavCodec.decode(..., commit=False)``), so each is counted once under its codec
+  reason (unsigned, bad signature, replayed, stale, bad CRC, ...) or, if it is a good packet, as
+  ``rejected_peer``; ``datagrams_rejected_peer`` counts their datagrams. Not committing matters:
+  an early copy of a genuine signed packet sent from another port must not advance the stream's
+  replay window and so turn the genuine packet (arriving later through the shim) into a "replay";
 * messages whose source system id is outside ``allow_sysids`` (``rejected_sysid``);
 * codec rejections (bad CRC, prefix, truncated, unknown, malformed, unsigned, bad signature,
   replayed, stale);
@@ -108,7 +113,8 @@ class EndpointCounters:
     send_no_peer: int = 0  # send attempts before a peer was known
     received: int = 0  # good messages delivered to the inbox
     datagrams_received: int = 0
-    rejected_peer: int = 0
+    rejected_peer: int = 0  # good packets from an address outside allow_peers (bad ones: codec reasons)
+    datagrams_rejected_peer: int = 0  # datagrams from an address outside allow_peers
     rejected_sysid: int = 0
     inbox_overflow: int = 0
     socket_errors: int = 0
@@ -162,7 +168,8 @@ class MavEndpoint(asyncio.DatagramProtocol):
         c.datagrams_received += 1
         addr = (addr[0], addr[1])
         if not self._peer_allowed(addr):
-            c.rejected_peer += 1
+            c.datagrams_rejected_peer += 1
+            c.rejected_peer += len(self.codec.decode(data, commit=False))
             return
         msgs = self.codec.decode(data)
         if not msgs:

@@ -8,7 +8,9 @@
 *down* = vehicle -> GCS (telemetry the pilot sees), *up* = GCS -> vehicle (pilot commands).
 The unit of delay is the datagram; forwarded bytes are never modified (signatures stay valid).
 Peers are the configured ``vehicle`` / ``gcs`` addresses or learned from the first datagram on
-each side; datagrams from other addresses are counted (``rejected_peer``) and dropped. A
+each side that holds a good MAVLink packet (with ``key``: a validly signed one; checked without
+changing any signing state) -- garbage and forged packets cannot claim a side (``rejected_claim``);
+datagrams from other addresses are counted (``rejected_peer``) and dropped. A
 datagram that is due while its destination is still unknown is counted as ``no_peer`` and dropped.
 
 Seeds (:func:`shim_seeds`): the *delays* of a shim seeded ``seed`` are the encounter's fast-time
@@ -134,7 +136,7 @@ class ShimConfig:
     ``delay_down`` (vehicle -> GCS), ``delay_up`` (GCS -> vehicle); ``epoch_s`` of the delay
     process (0 = per-datagram draws). ``loss``/``dup``/``reorder`` probabilities and ``outages``
     (``[(t_start, t_end), ...]`` sim s) apply to both directions. ``speed``: sim seconds per wall
-    second in realtime mode. ``key``: signing key used to verify control messages in lockstep.
+    second in realtime mode. ``key``: signing key used to verify control messages in lockstep and the first datagram of a peer.
     ``spin_s``: realtime only -- wake this many wall seconds early and poll the loop (still serving
     I/O) until the release instant; the selector's millisecond timeout rounding otherwise makes
     releases up to ~1 ms late. 0 disables (less CPU, coarser timing).
@@ -214,7 +216,7 @@ class DelayShim:
         self.sides: dict[str, _Side] = {}
         self.counters = {k: 0 for k in (
             "datagrams_from_vehicle", "datagrams_from_gcs", "forwarded_to_vehicle", "forwarded_to_gcs",
-            "rejected_peer", "no_peer", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards",
+            "rejected_peer", "rejected_claim", "no_peer", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards",
             "socket_errors")}
         self.codec = MavCodec(0, 0, key=config.key, sign_outgoing=False)  # verifies control messages only
         self.sim_time = 0.0  # lockstep clock (s)
@@ -283,6 +285,10 @@ class DelayShim:
         c["datagrams_from_" + side] += 1
         peer = self.peers[side]
         if peer is None:
+            # garbage or (with a key) unsigned / forged packets cannot claim a side of the link
+            if not self.codec.decode(data, commit=False):
+                c["rejected_claim"] += 1
+                return
             self.peers[side] = addr
         elif peer != addr:
             c["rejected_peer"] += 1
