@@ -356,3 +356,50 @@ def test_headless_web_viewer_screenshot(tmp_path, table):
     img = np.asarray(Image.open(png).convert("RGB"))
     assert img.shape == (700, 1200, 3)
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 20, "the viewer rendered more than a blank page"
+
+
+# --------------------------------------------------------------------------------------------
+# BackgroundRecorder: the helper process behind ``daa-sil run --rrd``
+
+
+def _steplog_file(tmp_path, table) -> Path:
+    from daa_sil import steplog
+
+    return steplog.write_steplog(table.cast(steplog.STEP_SCHEMA), tmp_path / "steps.parquet")
+
+
+def _wait_ready(recorder, timeout_s: float = 60.0) -> None:
+    line = recorder._lines.get(timeout=timeout_s)
+    assert line == "READY"
+
+
+def test_background_recorder_abort_and_owner_gone_leave_nothing(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    a = viz.BackgroundRecorder(viz.SinkOptions(rrd=out / "a.rrd"))
+    _wait_ready(a)
+    assert a.tmp_path.exists(), "the helper writes into its temporary file"
+    a.abort()
+    assert a.proc.returncode is not None
+    # the owner dies (its end of the pipe closes): the helper removes its file and exits by itself
+    b = viz.BackgroundRecorder(viz.SinkOptions(rrd=out / "b.rrd"))
+    _wait_ready(b)
+    b.proc.stdin.close()
+    assert b.proc.wait(timeout=60) == 0
+    b.abort()
+    assert list(out.iterdir()) == []
+
+
+def test_background_recorder_killed_helper_is_a_warning(tmp_path, table):
+    src = _steplog_file(tmp_path, table)
+    out = tmp_path / "out"
+    out.mkdir()
+    recorder = viz.BackgroundRecorder(viz.SinkOptions(rrd=out / "k.rrd"))
+    _wait_ready(recorder)
+    os.killpg(recorder.proc.pid, 9)
+    recorder.proc.wait(timeout=30)
+    with pytest.warns(viz.VizWarning, match="stopped without writing the recording"):
+        assert recorder.finish(src) is None
+    assert list(out.iterdir()) == [], "neither the .rrd nor the temporary file"
+    with pytest.raises(OutputError, match="missing or not writable"):
+        viz.BackgroundRecorder(viz.SinkOptions(rrd=tmp_path / "no" / "dir" / "x.rrd"))

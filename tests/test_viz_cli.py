@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -152,3 +158,112 @@ def test_waitmap_plot_rerun_flag(tmp_path, capsys):
     info = [c for c in rr.chunk.RrdReader(out).stream() if c.entity_path == "/waitmap/info"]
     text = info[0].to_record_batch().column("TextDocument:text").to_pylist()[0][0]
     assert "v_i = 300 m/s" in text and "theta = 90 deg" in text and "32 states" in text
+
+
+# --------------------------------------------------------------------------------------------
+# daa-sil run --rrd: the recording is prepared by a helper process while the SIL plays
+
+ROOT = Path(__file__).resolve().parents[1]
+RUN = [sys.executable, "-m", "daa_sil.cli", "run"]
+RUN_LIMIT_S = 180  # generous bound so a hung process fails the test instead of blocking CI
+
+
+def _procs_mentioning(text: str) -> list[int]:
+    """PIDs (other than ours) whose command line contains ``text``."""
+    pids = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit() and int(d.name) != os.getpid():
+            try:
+                cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            except OSError:
+                continue
+            if text in cmd:
+                pids.append(int(d.name))
+    return pids
+
+
+def _headless_env() -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET", "RERUN")}
+    return env
+
+
+def _static_entities(path) -> set[str]:
+    return {ch.entity_path for ch in rr.chunk.RrdReader(Path(path)).stream() if ch.is_static}
+
+
+def test_sil_run_rrd_equals_steplog_conversion(tmp_path):
+    """``daa-sil run --rrd`` (helper process) writes the same entities and steps as converting the run's
+    step log afterwards; headless --spawn-viewer is one warning line, not a failure."""
+    out = tmp_path / "run"
+    rrd = out / "enc.rrd"  # inside --out, which the run creates
+    cp = subprocess.run(RUN + [str(ROOT / "scenarios" / "head_on.yaml"), "--out", str(out), "--rrd", str(rrd),
+                               "--spawn-viewer", "--json"], capture_output=True, text=True, timeout=RUN_LIMIT_S,
+                        cwd=ROOT, env=_headless_env())
+    assert cp.returncode == 0, cp.stderr
+    assert "daa-sil: warning: --spawn-viewer needs a display" in cp.stderr and "Traceback" not in cp.stderr
+    result = json.loads(cp.stdout)
+    assert result["files"]["rrd"] == str(rrd)
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [], "no temporary file left"
+    reader = rr.chunk.RrdReader(rrd)
+    assert len(reader.recordings()) == 1 and reader.recordings()[0].recording_id == "encounter-0"
+    assert len(reader.blueprints()) == 1, "the layout is in the file"
+    table = steplog.read_steplog(out / "steplog.parquet")
+    ref, _ = viz.log_steplog(table, viz.SinkOptions(rrd=tmp_path / "ref.rrd"))
+    live, batch = read_rrd(rrd), read_rrd(ref)
+    assert sorted(live) == sorted(batch)
+    assert {e: t.num_rows for e, t in live.items()} == {e: t.num_rows for e, t in batch.items()}
+    assert _static_entities(rrd) == _static_entities(ref)
+    assert live["/world/ownship"].num_rows == table.num_rows == result["steps"]
+    rng = np.array([v[0] for v in table.column("range_m").to_pylist()])
+    assert np.allclose(scalars(live["/plots/range/0"]), rng)
+    assert rrd.stat().st_size <= 1_000_000
+
+
+def test_sil_run_ctrl_c_leaves_a_readable_rrd_or_none(tmp_path):
+    out = tmp_path / "run"
+    rrd = out / "enc.rrd"
+    # real time at 40x: the 180 s scenario takes ~4.5 s, so the interrupt lands mid-encounter
+    proc = subprocess.Popen(RUN + [str(ROOT / "scenarios" / "head_on.yaml"), "--out", str(out), "--rrd", str(rrd),
+                                   "--clock", "realtime", "--speed", "40"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=_headless_env())
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            log = out / "logs" / "vehicle.log"
+            if log.exists() and "t=   20s" in log.read_text():
+                break
+            time.sleep(0.05)
+        else:
+            pytest.fail("the vehicle never reached t = 20 s")
+        assert len(_procs_mentioning(str(out))) >= 4  # orchestrator, vehicle, shim, gcs (+ the recorder)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err
+    assert _procs_mentioning(str(out)) == [], "the recorder helper is gone too"
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [], "no temporary file left"
+    table = steplog.read_steplog(out / "steplog.parquet")
+    assert 20 <= table.num_rows < 180
+    result = json.loads((out / "result.json").read_text())
+    assert result["interrupted"] is True
+    # the partial step log became a complete recording (a second Ctrl-C would leave none)
+    assert result["files"]["rrd"] == str(rrd)
+    assert read_rrd(rrd)["/world/ownship"].num_rows == table.num_rows
+
+
+@pytest.mark.parametrize("argv, code, message", [
+    (["--rrd", "{tmp}/no/such/dir/x.rrd"], 1, "directory {tmp}/no/such/dir is missing or not writable"),
+    (["--rrd", "{tmp}/x.txt"], 2, "--rrd '{tmp}/x.txt' should end in .rrd"),
+])
+def test_sil_run_bad_rrd_fails_before_any_process(tmp_path, capsys, argv, code, message):
+    from daa_sil.cli import main as cli_main
+
+    argv = [a.format(tmp=tmp_path) for a in argv]
+    assert cli_main(["run", str(ROOT / "scenarios" / "head_on.yaml"), "--out", str(tmp_path / "o")] + argv) == code
+    err = capsys.readouterr().err
+    assert err.startswith("daa-sil: error: ") and message.format(tmp=tmp_path) in err and err.count("\n") == 1
+    assert not (tmp_path / "o").exists(), "nothing was started or written"
