@@ -226,7 +226,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
 
     # --- DAA: bands and resolution for the active encounters -------------------------------------
     if bands is not None:
-        b_a = bands[ia]
+        b_a = bands if ia.size == n else bands[ia]
     else:
         b_a = compute_bands(own_a, intr_a, cfg, alert[ia])
     daa_cmd_a, daa_ax_a, daa_dir_a, daa_tin_a = resolve(own_a, intr_a, cfg, (memory.daa_axis[ia], memory.daa_dir[ia]),

@@ -4,8 +4,9 @@ A *knot path* is the ownship sampled at knot times ``t_0 = 0 < t_1 < ... < t_J``
 maneuvers (turn / accelerate at the limits). Candidate ``k`` of the path flies the path up to
 knot ``k`` and then continues straight with the knot-``k`` velocity. Between knots the relative
 motion is taken as the chord (straight line) between the sampled relative positions; each chord
-and each straight tail is checked with the exact closed form
-:func:`daa_sil.wellclear.violation_interval`. The only approximation is the chord (sagitta
+and each straight tail is checked with the exact closed form of
+:func:`daa_sil.wellclear.violation_interval` (re-stated on contiguous component arrays in
+:func:`interval_soa`, which gives identical numbers about 2x faster). The only approximation is the chord (sagitta
 ``R (1 - cos(dpsi/2))``, about 1 m for a 5 deg turn at 55 m/s; ``a h^2 / 8`` for accelerations).
 """
 
@@ -20,49 +21,79 @@ from ..thresholds import Thresholds
 from .config import DaaConfig
 
 
-def _intruder_rel(own_pos, t, intr: AircraftState) -> np.ndarray:
-    """Relative position ownship minus intruder ``(N, M, ...knots, 3)`` for own ``(N, ...knots, 3)``."""
-    extra = own_pos.ndim - 2  # number of knot axes after N
-    ip = intr.position().reshape(intr.shape + (1,) * extra + (3,))
-    iv = intr.velocity().reshape(intr.shape + (1,) * extra + (3,))
-    return own_pos[:, None] - (ip + t[:, None, ..., None] * iv)
+def _components(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Contiguous x, y, z arrays of a ``(..., 3)`` array (the kernels below read each many times)."""
+    return (np.ascontiguousarray(a[..., 0]), np.ascontiguousarray(a[..., 1]), np.ascontiguousarray(a[..., 2]))
 
 
-def _cannot_violate(s, v, th: Thresholds, length) -> np.ndarray:
-    """Cheap sufficient test that straight-line motion ``s + t v``, t in [0, length], never violates.
+def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`daa_sil.wellclear.violation_interval` over ``[0, length]`` for 1-D component arrays.
 
-    Vertical (TCOA = 0 only): ``|z|`` stays above ZTHR. Horizontal: a violation needs
-    ``r <= r* = (TTHR |v| + sqrt(TTHR^2 |v|^2 + 4 DTHR^2)) / 2`` (from ``tau_mod <= TTHR``, which implies
-    ``r^2 - DTHR^2 <= TTHR r |v|``), and ``r >= max(d_cpa, r0 - |v| length)`` along the line.
+    The same closed form, operation for operation, so the results are identical; it is faster
+    because (1) the components are contiguous arrays instead of strided views of ``(..., 3)`` arrays
+    and (2) the horizontal part, which is most of the work, runs only where the vertical window is
+    not empty (elsewhere the answer is ``(inf, -inf)`` in both).
     """
-    z0 = s[..., 2]
-    z1 = z0 + v[..., 2] * length
-    vert = (z0 * z1 > 0) & (np.minimum(np.abs(z0), np.abs(z1)) > th.zthr) if th.tcoa == 0 else False
-    vv = np.hypot(v[..., 0], v[..., 1])
-    r0 = np.hypot(s[..., 0], s[..., 1])
-    tv = th.tthr * vv
-    r_star = 0.5 * (tv + np.sqrt(tv * tv + 4.0 * th.dthr * th.dthr)) + 1e-6
-    with np.errstate(invalid="ignore", divide="ignore"):
-        dcpa = np.abs(s[..., 0] * v[..., 1] - s[..., 1] * v[..., 0]) / np.where(vv > 0, vv, np.inf)
-    dcpa = np.where(vv > 0, dcpa, r0)
-    horiz = (np.maximum(dcpa, r0 - vv * length) > r_star)
-    return vert | horiz
+    D, H, TT, TC = th.dthr, th.zthr, th.tthr, th.tcoa
+    n = sx.shape[0]
+    t_in = np.full(n, np.inf)
+    t_out = np.full(n, -np.inf)
+    # -- vertical window (wellclear.violation_interval, t0 = 0, t1 = length) --------------------
+    avz = np.abs(vz)
+    vz0 = avz < wc._EPS
+    vz_s = np.where(vz0, 1.0, vz)
+    sgn = np.sign(vz_s)
+    t_ent = (-sgn * np.maximum(H, avz * TC) - sz) / vz_s
+    t_ext = (sgn * H - sz) / vz_s
+    inside_z = np.abs(sz) <= H
+    vlo = np.where(vz0, np.where(inside_z, 0.0, np.inf), np.maximum(0.0, t_ent))
+    vhi = np.where(vz0, np.where(inside_z, length, -np.inf), np.minimum(length, t_ext))
+    idx = np.flatnonzero(vlo <= vhi)
+    if not idx.size:
+        return t_in, t_out
+    t_lo = vlo[idx]
+    L = vhi[idx] - t_lo
+    hx, hy = vx[idx], vy[idx]
+    # -- horizontal interval on [0, L] from p = s + t_lo v ---------------------------------------
+    px = sx[idx] + t_lo * hx
+    py = sy[idx] + t_lo * hy
+    a = hx * hx + hy * hy
+    p2 = px * px + py * py
+    pv = px * hx + py * hy
+    moving = a >= wc._EPS
+    a_s = np.where(moving, a, 1.0)
+    inside_d = p2 <= D * D
+    t_cexit = (-pv + np.sqrt(np.maximum(pv * pv - a * (p2 - D * D), 0.0))) / a_s
+    b = 2.0 * pv + TT * a
+    c = p2 + TT * pv - D * D
+    disc = b * b - 4.0 * a * c
+    t_tau = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a_s)
+    delta = D * D * a - (px * hy - py * hx) ** 2
+    case_a = ~moving & inside_d
+    case_b = moving & inside_d
+    case_c = moving & ~inside_d & (pv < 0) & (disc >= 0) & (delta >= 0) & (t_tau <= L)
+    hlo = np.where(case_a | case_b, 0.0, np.where(case_c, np.maximum(0.0, t_tau), np.inf))
+    hhi = np.where(case_a, L, np.where(case_b | case_c, np.minimum(L, t_cexit), -np.inf))
+    point = L == 0
+    if np.any(point):  # a single-instant vertical window: the predicate there (as DAIDALUS does)
+        j = np.flatnonzero(point)
+        p3 = np.stack([px[j], py[j], sz[idx[j]] + t_lo[j] * vz[idx[j]]], axis=-1)
+        at = wc.wcv(p3, np.stack([hx[j], hy[j], vz[idx[j]]], axis=-1), th)
+        hlo[j] = np.where(at, 0.0, np.inf)
+        hhi[j] = np.where(at, 0.0, -np.inf)
+    good = hlo <= hhi
+    t_in[idx] = np.where(good, hlo + t_lo, np.inf)
+    t_out[idx] = np.where(good, hhi + t_lo, -np.inf)
+    return t_in, t_out
 
 
 def filtered_interval(s, v, th: Thresholds, length) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`daa_sil.wellclear.violation_interval` over ``[0, length]``, evaluated only where
-    :func:`_cannot_violate` does not already rule a violation out (same result, less work)."""
-    shape = s.shape[:-1]
-    length = np.broadcast_to(length, shape)
-    todo = np.nonzero(~_cannot_violate(s, v, th, length).ravel())[0]
-    t_in = np.full(shape, np.inf)
-    t_out = np.full(shape, -np.inf)
-    if todo.size:
-        a, b = wc.violation_interval(s.reshape(-1, 3)[todo], np.broadcast_to(v, s.shape).reshape(-1, 3)[todo],
-                                     th, 0.0, length.ravel()[todo])
-        t_in.ravel()[todo] = a
-        t_out.ravel()[todo] = b
-    return t_in, t_out
+    """:func:`daa_sil.wellclear.violation_interval` over ``[0, length]`` for relative positions ``s``
+    and velocities ``v`` (``(..., 3)``, broadcast together), via :func:`interval_soa`."""
+    shape = np.broadcast_shapes(s.shape[:-1], v.shape[:-1], np.shape(length))
+    comp = [np.ascontiguousarray(np.broadcast_to(a[..., i], shape)).ravel() for a in (s, v) for i in range(3)]
+    t_in, t_out = interval_soa(*comp, np.ascontiguousarray(np.broadcast_to(length, shape)).ravel(), th)
+    return t_in.reshape(shape), t_out.reshape(shape)
 
 
 def knot_path_conflicts(own_pos, own_vel, t, intr: AircraftState, th: Thresholds, t_end: float,
@@ -76,29 +107,40 @@ def knot_path_conflicts(own_pos, own_vel, t, intr: AircraftState, th: Thresholds
     result has K = 1).
     """
     n, p, k = own_pos.shape[:3]
-    t = np.broadcast_to(np.asarray(t, float), (n, p, k))
-    s = _intruder_rel(own_pos, t, intr)  # (N, M, P, K, 3)
-    iv = intr.velocity().reshape(intr.shape + (1, 1, 3))
-    tt = np.broadcast_to(t[:, None], s.shape[:-1])
+    m = intr.shape[1]
+    shape = (n, m, p, k)
+    tt = np.broadcast_to(np.asarray(t, float), (n, p, k))[:, None]  # (N, 1, P, K)
+    ipos, ivel = intr.position(), intr.velocity()  # (N, M, 3)
+    own_c, ovel_c = _components(own_pos), _components(own_vel)
+    # relative position ownship - intruder at the knots, per component (N, M, P, K)
+    s = [own_c[i][:, None] - (ipos[..., i][:, :, None, None] + tt * ivel[..., i][:, :, None, None]) for i in range(3)]
+    tt = np.broadcast_to(tt, shape)
     if k > 1:
         h = tt[..., 1:] - tt[..., :-1]
-        v_seg = (s[..., 1:, :] - s[..., :-1, :]) / h[..., None]
-        seg_in, seg_out = filtered_interval(s[..., :-1, :], v_seg, th, h)
-        seg_in = seg_in + tt[..., :-1]
-        seg_out = seg_out + tt[..., :-1]
+        seg_shape = shape[:-1] + (k - 1,)
+        comp = [np.ascontiguousarray(c[..., :-1]).ravel() for c in s]
+        vel = [((c[..., 1:] - c[..., :-1]) / h).ravel() for c in s]
+        seg_in, seg_out = interval_soa(*comp, *vel, np.ascontiguousarray(h).ravel(), th)
+        seg_in = seg_in.reshape(seg_shape) + tt[..., :-1]
+        seg_out = seg_out.reshape(seg_shape) + tt[..., :-1]
         pre_in = np.minimum.accumulate(seg_in, axis=-1)
         pre_out = np.maximum.accumulate(seg_out, axis=-1)
         inf = np.full(pre_in.shape[:-1] + (1,), np.inf)
         pre_in = np.concatenate([inf, pre_in], axis=-1)
         pre_out = np.concatenate([-inf, pre_out], axis=-1)
     else:
-        pre_in = np.full(s.shape[:-1], np.inf)
-        pre_out = np.full(s.shape[:-1], -np.inf)
+        pre_in = np.full(shape, np.inf)
+        pre_out = np.full(shape, -np.inf)
     if not all_tails:
-        s, tt, pre_in, pre_out = s[..., -1:, :], tt[..., -1:], pre_in[..., -1:], pre_out[..., -1:]
+        s = [c[..., -1:] for c in s]
+        tt, pre_in, pre_out = tt[..., -1:], pre_in[..., -1:], pre_out[..., -1:]
         own_vel = own_vel[..., -1:, :]
-    v_tail = own_vel[:, None] - iv
-    tail_in, tail_out = filtered_interval(s, v_tail, th, np.maximum(t_end - tt, 0.0))
+        ovel_c = _components(own_vel)
+    tail_shape = tt.shape
+    vel = [np.broadcast_to(ovel_c[i][:, None] - ivel[..., i][:, :, None, None], tail_shape).ravel() for i in range(3)]
+    comp = [np.ascontiguousarray(np.broadcast_to(c, tail_shape)).ravel() for c in s]
+    tail_in, tail_out = interval_soa(*comp, *vel, np.maximum(t_end - tt, 0.0).ravel(), th)
+    tail_in, tail_out = tail_in.reshape(tail_shape), tail_out.reshape(tail_shape)
     in_window = tt <= t_end
     tail_in = np.where(in_window, tail_in + tt, np.inf)
     tail_out = np.where(in_window, tail_out + tt, -np.inf)
