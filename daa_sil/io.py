@@ -37,7 +37,8 @@ _UMASK = _umask()
 
 
 def ensure_dir(path: "str | os.PathLike") -> Path:
-    """Create ``path`` (and parents) if needed; raise OutputError if it cannot be written."""
+    """Create ``path`` (and parents) if needed; raise OutputError if no file can be created in it
+    (checked by creating and removing a probe file, so it holds for root and read-only mounts too)."""
     p = Path(path)
     try:
         p.mkdir(parents=True, exist_ok=True)
@@ -45,6 +46,12 @@ def ensure_dir(path: "str | os.PathLike") -> Path:
         raise OutputError(f"cannot create output directory {p}: {exc.strerror or exc}") from None
     if not os.access(p, os.W_OK | os.X_OK):
         raise OutputError(f"output directory {p} is not writable")
+    try:  # os.access says yes to root on read-only file systems and sysfs: try for real
+        fd, probe = tempfile.mkstemp(prefix=".daa-sil-probe.", suffix=".tmp", dir=p)
+    except OSError as exc:
+        raise OutputError(f"output directory {p} is not writable: {exc.strerror or exc}") from None
+    os.close(fd)
+    os.unlink(probe)
     return p
 
 
