@@ -62,6 +62,16 @@ def _seed(text: str) -> int:
     return val
 
 
+def _duration(text: str) -> float:
+    try:
+        val = float(text)
+    except ValueError:
+        raise UsageError(f"--duration must be a number of seconds, got {text!r}") from None
+    if not (10.0 <= val <= 3600.0):
+        raise UsageError(f"--duration must be within [10, 3600] s, got {text}")
+    return val
+
+
 def register(sub) -> None:
     p = sub.add_parser("campaign", help="fast-time Monte Carlo campaigns over the paper's groups",
                        description="Run the paper's fast-time study (chunked, resumable, on any executor) "
@@ -76,6 +86,8 @@ def register(sub) -> None:
     r.add_argument("--encounters", type=_pos_int("--encounters"), default=None, metavar="N",
                    help="encounters per group (default 10000)")
     r.add_argument("--seed", type=_seed, default=None, metavar="S", help="campaign seed (default 0)")
+    r.add_argument("--duration", type=_duration, default=None, metavar="S",
+                   help="encounter length T, s (default 240 as in the paper; CPA at T/2)")
     r.add_argument("--chunk-size", type=_pos_int("--chunk-size"), default=None, metavar="C",
                    help="encounters per task (default 2000, about 0.2 GB per worker; smaller chunks resume at a finer grain but run slower)")
     r.add_argument("--out", required=True, metavar="DIR", help="output directory (must be empty unless --resume)")
@@ -103,7 +115,7 @@ def _config_from_args(args):
 
     given = {"groups": parse_groups(args.groups) if args.groups is not None else None,
              "n_encounters": args.encounters, "seed": args.seed, "chunk_size": args.chunk_size,
-             "preset": args.preset.lower() if args.preset else None}
+             "preset": args.preset.lower() if args.preset else None, "duration_s": args.duration}
     if args.preset and args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
     base = CampaignConfig()
@@ -113,7 +125,7 @@ def _config_from_args(args):
     fields = {k: (v if v is not None else getattr(base, k)) for k, v in given.items()}
     return CampaignConfig(groups=tuple(fields["groups"]), n_encounters=fields["n_encounters"],
                           seed=fields["seed"], chunk_size=fields["chunk_size"], preset=fields["preset"],
-                          duration_s=base.duration_s, dt_s=base.dt_s).validate()
+                          duration_s=fields["duration_s"], dt_s=base.dt_s).validate()
 
 
 _SCHEDULER = re.compile(r"^([a-z][a-z0-9+]*://)?[^\s:/]+:\d{1,5}$")
