@@ -1,0 +1,208 @@
+"""No data lost (issue 9 §5a): a campaign killed with SIGKILL and resumed with ``--resume`` ends with
+files byte-identical to an uninterrupted run.
+
+Kills land (1) at chosen points inside the writer (driven by a small wrapper that SIGKILLs the
+process from within: after the encounter set but before ``campaign.json``, with half a chunk file in
+its temporary, between a chunk's two files, and just before the final status) and (2) at seeded
+random times. After the last resume every file under the campaign directory -- the encounter set,
+every chunk's Parquet tables, ``campaign.json`` -- must equal the uninterrupted run's byte for
+byte, and so must the merged tables the report reads.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from daa_sil.campaign import read_results
+from daa_sil.cli import main
+
+#: wraps ``daa-sil``; argv[1] names the point at which the process SIGKILLs itself
+DRIVER = r"""
+import os, signal, sys
+from pathlib import Path
+point, argv = sys.argv[1], sys.argv[2:]
+import pyarrow.parquet as pq
+import daa_sil.campaign as camp
+
+def die():
+    os.kill(os.getpid(), signal.SIGKILL)
+
+if point in ("before-campaign-json", "before-complete"):
+    real_json = camp.atomic_write_json
+    def write_json(path, obj, **kw):
+        if Path(path).name == "campaign.json" and (point == "before-campaign-json" or obj.get("status") == "complete"):
+            die()
+        return real_json(path, obj, **kw)
+    camp.atomic_write_json = write_json
+elif point == "mid-chunk-write":
+    real_write = pq.write_table
+    def write_table(table, where, **kw):
+        real_write(table, where, **kw)
+        if Path(str(where)).name.startswith(".decisions-"):
+            data = Path(where).read_bytes()
+            Path(where).write_bytes(data[: len(data) // 2])  # half of the file is on disk ...
+            die()                                            # ... when the process dies
+    pq.write_table = write_table
+elif point == "between-chunk-files":
+    real_replace = os.replace
+    def replace(src, dst):
+        real_replace(src, dst)
+        if Path(dst).name.startswith("decisions-"):
+            die()
+    os.replace = replace
+elif point != "none":
+    raise SystemExit(f"unknown point {point}")
+from daa_sil.cli import main
+sys.exit(main(argv))
+"""
+
+LIMIT_S = 300.0  # bound on any one process, so a hang fails instead of blocking CI
+
+
+def _argv(out: Path, groups: str, n: int, chunk: int, duration: "float | None", seed: int = 3) -> list[str]:
+    argv = ["campaign", "run", "--groups", groups, "--encounters", str(n), "--chunk-size", str(chunk),
+            "--seed", str(seed), "--out", str(out), "--no-progress"]
+    return argv + (["--duration", f"{duration:g}"] if duration else [])
+
+
+def _start(point: str, argv: list[str]) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-c", DRIVER, point, *argv], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
+
+
+def _wait(proc: subprocess.Popen) -> int:
+    try:
+        proc.wait(timeout=LIMIT_S)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    return proc.returncode
+
+
+def snapshot(d: Path) -> dict:
+    return {str(p.relative_to(d)): p.read_bytes() for p in sorted(d.rglob("*")) if p.is_file()}
+
+
+def _chunks_done(d: Path) -> int:
+    return len(list(d.rglob("encounters-*.parquet")))
+
+
+def _merged_bytes(d: Path, kind: str) -> bytes:
+    buf = io.BytesIO()
+    pq.write_table(read_results(d, kind), buf, compression="zstd")
+    return buf.getvalue()
+
+
+def _kill_resume_cycle(tmp_path: Path, groups: str, n: int, chunk: int, duration: "float | None",
+                       n_random: int, seed: int) -> dict:
+    """Run the scripted kill points, then ``n_random`` seeded random-time kills, then a final resume;
+    compare with an uninterrupted run. Returns the figures (kills, chunks recomputed, ...)."""
+    killed, ref = tmp_path / "killed", tmp_path / "reference"
+    n_chunks = len(groups.split(",")) * -(-n // chunk)
+    figures = {"scripted_kills": 0, "random_kills": 0, "random_finished_first": 0, "resumes": 0}
+
+    # 1. scripted points, each on the directory the previous one left behind
+    argv = _argv(killed, groups, n, chunk, duration)
+    assert _wait(_start("before-campaign-json", argv)) == -signal.SIGKILL
+    assert (killed / "encounters.parquet").is_file() and not (killed / "campaign.json").exists()
+    figures["scripted_kills"] += 1
+    for point in ("mid-chunk-write", "between-chunk-files"):
+        before = _chunks_done(killed)
+        assert _wait(_start(point, argv + ["--resume"])) == -signal.SIGKILL, point
+        figures["scripted_kills"] += 1
+        figures["resumes"] += 1
+        if point == "mid-chunk-write":  # the half-written temporary is there, never a final file
+            tmps = [p for p in killed.rglob(".decisions-*.tmp")]
+            assert len(tmps) == 1 and tmps[0].stat().st_size > 0
+        else:  # a chunk with its decisions file but not its encounters file (= not done)
+            assert len(list(killed.rglob("decisions-*.parquet"))) == _chunks_done(killed) + 1
+        assert _chunks_done(killed) == before
+
+    # 2. seeded random kill times
+    rng = np.random.default_rng(seed)
+    for _ in range(n_random):
+        before = _chunks_done(killed)
+        proc = _start("none", argv + ["--resume"])
+        figures["resumes"] += 1
+        # the random instant is counted from the first chunk this process completes, so it lands
+        # while chunks are being computed and written, not during interpreter start-up
+        end = time.monotonic() + LIMIT_S
+        while _chunks_done(killed) == before and proc.poll() is None and time.monotonic() < end:
+            time.sleep(0.01)
+        deadline = time.monotonic() + float(rng.uniform(0.0, 1.0))
+        while time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.01)
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            figures["random_kills"] += 1
+        else:
+            figures["random_finished_first"] += 1
+        _wait(proc)
+
+    # 3. the status write itself
+    proc = _start("before-complete", argv + ["--resume"])
+    figures["resumes"] += 1
+    assert _wait(proc) == -signal.SIGKILL
+    figures["scripted_kills"] += 1
+    assert _chunks_done(killed) == n_chunks
+    assert b'"status": "running"' in (killed / "campaign.json").read_bytes()
+
+    # 4. the last resume: only --out and --resume (the stored settings are used)
+    proc = _start("none", ["campaign", "run", "--out", str(killed), "--resume", "--no-progress"])
+    figures["resumes"] += 1
+    assert _wait(proc) == 0, proc.stderr.read()
+
+    # the uninterrupted run, same options
+    rc = main(_argv(ref, groups, n, chunk, duration))
+    assert rc == 0
+    a, b = snapshot(killed), snapshot(ref)
+    assert sorted(a) == sorted(b)  # same files (no temporary left behind) ...
+    for name in b:
+        assert a[name] == b[name], f"{name} differs after kill + resume"  # ... byte for byte
+    for kind in ("encounters", "decisions"):
+        assert _merged_bytes(killed, kind) == _merged_bytes(ref, kind)
+    enc = read_results(ref, "encounters")
+    assert enc.num_rows == len(groups.split(",")) * n
+    figures.update(chunks=n_chunks, files_compared=len(b), encounter_rows=enc.num_rows,
+                   decision_rows=read_results(ref, "decisions").num_rows)
+    print(f"\nkill/resume figures: {figures}")
+    return figures
+
+
+def test_sigkill_at_scripted_and_random_points_then_resume_is_byte_identical(tmp_path):
+    f = _kill_resume_cycle(tmp_path, "B-2,ID-2", n=16, chunk=4, duration=120.0, n_random=2, seed=2024)
+    assert f["scripted_kills"] == 4 and f["random_kills"] + f["random_finished_first"] == 2
+    assert f["chunks"] == 8 and f["files_compared"] == 2 + 2 * 8
+    assert f["decision_rows"] > 0
+
+
+@pytest.mark.slow
+def test_paper_length_campaign_killed_many_times(tmp_path):
+    """2 groups x 60 encounters of the paper's 240 s, 20 chunks, 6 random kills."""
+    f = _kill_resume_cycle(tmp_path, "B-2,ID-2", n=60, chunk=6, duration=None, n_random=6, seed=7)
+    assert f["chunks"] == 20 and f["random_kills"] >= 3 and f["encounter_rows"] == 120
+
+
+def test_resume_recomputes_a_damaged_chunk_and_clears_stale_temporaries(tmp_path):
+    out = tmp_path / "c"
+    argv = _argv(out, "B-1", 6, 3, 30.0)
+    assert main(argv) == 0
+    ref = snapshot(out)
+    chunk = out / "B-1" / "encounters-00001.parquet"
+    chunk.write_bytes(chunk.read_bytes()[:200])  # damaged outside our control
+    stale = out / "B-1" / ".decisions-00000.parquet.abc123.tmp"
+    stale.write_bytes(b"left by a killed writer")
+    assert main(argv + ["--resume", "--json"]) == 0
+    assert snapshot(out) == ref  # the chunk is back, byte for byte, and the temporary is gone
