@@ -74,6 +74,9 @@ def register(sub) -> None:
     p.add_argument("--rt-priority", type=int, default=0, metavar="N",
                    help="realtime: run under SCHED_FIFO priority N (1-99; needs CAP_SYS_NICE) so a busy "
                         "machine does not delay releases; 0 = normal scheduling (default)")
+    p.add_argument("--timing", choices=("precise", "poll"), default="precise",
+                   help="realtime release timing: precise = kernel arrival stamps + timerfd wake-ups (default); "
+                        "poll = stamp on read, call_at 2 ms early then poll the loop")
     p.add_argument("--key", metavar="FILE", help="signing key file to verify lockstep control messages")
     p.add_argument("--duration", type=finite_float("--duration", 0.0, 1e7), metavar="S",
                    help="stop after S wall seconds (default: run until Ctrl-C / SIGTERM)")
@@ -93,7 +96,8 @@ def config_from_args(args) -> ShimConfig:
                      listen_vehicle=args.listen_vehicle, listen_gcs=args.listen_gcs, vehicle=args.vehicle,
                      gcs=args.gcs, epoch_s=args.epoch, loss=args.loss, dup=args.dup, reorder=args.reorder,
                      outages=args.outage, seed=args.seed, clock=args.clock, speed=args.speed,
-                     key=load_key(args.key) if args.key else None, stats_json=args.stats_json)
+                     key=load_key(args.key) if args.key else None, stats_json=args.stats_json,
+                     timing=args.timing)
     cfg.validate()
     return cfg
 

@@ -30,8 +30,11 @@ which fast-time does not model.
 
 Clocks
 ------
-``realtime``: sim time = (loop monotonic time - start) x ``speed``. Releases are scheduled with
-``loop.call_at`` on the earliest pending release of each line (the lines keep heaps).
+``realtime``: sim time = (loop monotonic time - start) x ``speed``. A datagram enters its line at
+its *kernel arrival time* (``SO_TIMESTAMPNS``), not when the loop got round to reading it; each line
+keeps a heap and one timer (a Linux ``timerfd``, nanosecond absolute expiry, no polling) armed for
+its earliest pending release (:mod:`daa_sil.link.rtclock`; ``timing="poll"`` or non-Linux: the
+``call_at`` + poll fallback). Sockets are read with ``recvmsg`` in bursts from a loop reader.
 
 ``lockstep`` (``docs/architecture.md``, "The step order"): the shim's clock only moves on ticks.
 
@@ -57,6 +60,7 @@ from __future__ import annotations
 import asyncio
 import inspect
 import math
+import socket
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -67,9 +71,12 @@ from ..io import atomic_write_json, to_jsonable
 from ..latency import DEFAULT_EPOCH_S, DelayModel, DelayProcess, as_seed_sequence, child_seed
 from .codec import MavCodec, mavlink
 from .delayline import DelayLine, check_outages
-from .endpoint import Address, format_udp_address, parse_udp_address, set_rcvbuf
+from .endpoint import RCVBUF_BYTES, Address, format_udp_address, parse_udp_address
+from .rtclock import (PreciseTimer, enable_rx_timestamps, request_short_slice, rx_buffer_size, rx_time,
+                      set_timer_slack)
 
 CLOCKS = ("realtime", "lockstep")
+TIMINGS = ("precise", "poll")
 _TICK_ID = mavlink.MAVLINK_MSG_ID_SIM_TICK
 _ACK_ID = mavlink.MAVLINK_MSG_ID_SIM_TICK_ACK
 
@@ -137,9 +144,12 @@ class ShimConfig:
     process (0 = per-datagram draws). ``loss``/``dup``/``reorder`` probabilities and ``outages``
     (``[(t_start, t_end), ...]`` sim s) apply to both directions. ``speed``: sim seconds per wall
     second in realtime mode. ``key``: signing key used to verify control messages in lockstep and the first datagram of a peer.
-    ``spin_s``: realtime only -- wake this many wall seconds early and poll the loop (still serving
-    I/O) until the release instant; the selector's millisecond timeout rounding otherwise makes
-    releases up to ~1 ms late. 0 disables (less CPU, coarser timing).
+    ``timing`` (realtime only): ``"precise"`` (default) stamps every datagram with its kernel
+    arrival time and wakes for each release with a timerfd (:mod:`daa_sil.link.rtclock`);
+    ``"poll"`` stamps on read and uses ``loop.call_at`` ``spin_s`` early, then polls the loop
+    (still serving I/O) until the release instant (the selector's millisecond timeout rounding
+    otherwise makes releases up to ~1 ms late; ``spin_s`` 0 = no polling). ``"precise"`` falls
+    back to ``"poll"`` where timerfd / kernel stamps are unavailable (non-Linux).
     """
 
     delay_down: DelayModel
@@ -161,6 +171,7 @@ class ShimConfig:
     stats_json: "str | None" = None
     max_log: int = 100_000
     spin_s: float = 0.002
+    timing: str = "precise"
 
     def validate(self) -> None:
         """Raise a one-line UsageError for any bad value."""
@@ -168,6 +179,8 @@ class ShimConfig:
             raise UsageError(f"clock must be one of {', '.join(CLOCKS)}, got {self.clock!r}")
         if not (math.isfinite(self.speed) and 0.01 <= self.speed <= 1000):
             raise UsageError(f"speed must be within [0.01, 1000], got {self.speed!r}")
+        if self.timing not in TIMINGS:
+            raise UsageError(f"timing must be one of {', '.join(TIMINGS)}, got {self.timing!r}")
         if not (math.isfinite(self.spin_s) and 0 <= self.spin_s <= 0.05):
             raise UsageError(f"spin_s must be within [0, 0.05] s, got {self.spin_s!r}")
         for name in ("delay_down", "delay_up"):
@@ -181,20 +194,71 @@ class ShimConfig:
         check_outages(self.outages)
 
 
-class _Side(asyncio.DatagramProtocol):
-    def __init__(self, shim: "DelayShim", name: str):
-        self.shim, self.name = shim, name
-        self.transport: "asyncio.DatagramTransport | None" = None
+class _Side:
+    """One shim socket, read with ``recvmsg`` from a loop reader (kernel arrival stamps if enabled)."""
 
-    def connection_made(self, transport) -> None:
-        self.transport = transport
-        set_rcvbuf(transport)
+    #: datagrams read per reader callback before timers get their turn
+    BURST = 64
 
-    def datagram_received(self, data: bytes, addr) -> None:
-        self.shim._on_datagram(self.name, data, (addr[0], addr[1]))
+    def __init__(self, shim: "DelayShim", name: str, sock: socket.socket, stamped: bool):
+        self.shim, self.name, self.sock = shim, name, sock
+        self.stamped = stamped and enable_rx_timestamps(sock)
+        self._anc = rx_buffer_size() if self.stamped else 0
+        self.closed = False
+        shim._loop.add_reader(sock.fileno(), self._readable)
 
-    def error_received(self, exc) -> None:
-        self.shim.counters["socket_errors"] += 1
+    @property
+    def sockname(self) -> Address:
+        a = self.sock.getsockname()
+        return a[0], a[1]
+
+    def _readable(self) -> None:
+        shim, counters = self.shim, self.shim.counters
+        for _ in range(self.BURST):
+            try:
+                data, anc, _flags, addr = self.sock.recvmsg(65535, self._anc)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:  # e.g. ICMP port unreachable reported on this socket
+                counters["socket_errors"] += 1
+                continue
+            shim._on_datagram(self.name, data, (addr[0], addr[1]), rx_time(anc) if self.stamped else None)
+
+    def sendto(self, data: bytes, addr: Address) -> bool:
+        try:
+            self.sock.sendto(data, addr)
+            return True
+        except (BlockingIOError, InterruptedError):
+            self.shim.counters["send_would_block"] += 1
+        except OSError:
+            self.shim.counters["socket_errors"] += 1
+        return False
+
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            try:
+                self.shim._loop.remove_reader(self.sock.fileno())
+            except (RuntimeError, ValueError):
+                pass
+            self.sock.close()
+
+
+def _bind_udp(addr: Address) -> socket.socket:
+    """A non-blocking UDP socket bound to ``addr`` with a large receive buffer."""
+    family, _, _, _, sockaddr = socket.getaddrinfo(addr[0], addr[1], type=socket.SOCK_DGRAM)[0]
+    sock = socket.socket(family, socket.SOCK_DGRAM)
+    try:
+        sock.setblocking(False)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
+        except OSError:
+            pass
+        sock.bind(sockaddr)
+    except OSError:
+        sock.close()
+        raise
+    return sock
 
 
 class DelayShim:
@@ -217,54 +281,69 @@ class DelayShim:
         self.counters = {k: 0 for k in (
             "datagrams_from_vehicle", "datagrams_from_gcs", "forwarded_to_vehicle", "forwarded_to_gcs",
             "rejected_peer", "rejected_claim", "no_peer", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards",
-            "socket_errors")}
+            "socket_errors", "send_would_block")}
         self.codec = MavCodec(0, 0, key=config.key, sign_outgoing=False)  # verifies control messages only
         self.sim_time = 0.0  # lockstep clock (s)
         self.last_tick: "int | None" = None
         self._loop: "asyncio.AbstractEventLoop | None" = None
         self._t0 = 0.0
-        self._timers: dict[str, "tuple[float, asyncio.TimerHandle] | None"] = {"down": None, "up": None}
+        self._timers: dict[str, "PreciseTimer | None"] = {"down": None, "up": None}
+        self._scheduled: dict[str, "float | None"] = {"down": None, "up": None}  # sim s the timer is armed for
         self._lateness: list[float] = []  # realtime: wall s between scheduled and actual release
         self._tick_waiters: list[tuple[int, asyncio.Future]] = []
+        self._timing_info: dict = {}
         self.closed = False
 
     # -- lifecycle -----------------------------------------------------------------------------
     async def start(self) -> None:
-        """Bind both sockets."""
+        """Bind both sockets (and, realtime, set up the release timers)."""
         self._loop = asyncio.get_running_loop()
         self._t0 = self._loop.time()
+        realtime = self.config.clock == "realtime"
+        precise = realtime and self.config.timing == "precise"
         for name, spec, flag in (("vehicle", self.config.listen_vehicle, "--listen-vehicle"),
                                  ("gcs", self.config.listen_gcs, "--listen-gcs")):
             addr = parse_udp_address(spec, flag)
             try:
-                _, proto = await self._loop.create_datagram_endpoint(lambda n=name: _Side(self, n), local_addr=addr)
+                sock = _bind_udp(addr)
             except OSError as exc:
                 await self.close()
                 raise UsageError(f"{flag}: cannot bind {format_udp_address(addr)}: {exc.strerror or exc}") from None
-            self.sides[name] = proto
+            self.sides[name] = _Side(self, name, sock, stamped=precise)
+        if realtime:
+            info = {"timing": self.config.timing, "rx_kernel_stamps": all(sd.stamped for sd in self.sides.values())}
+            if precise:
+                info["timer_slack_1us"] = set_timer_slack(1000)
+                info["short_slice"] = request_short_slice(0.0001)
+            for direction in ("down", "up"):
+                self._timers[direction] = PreciseTimer(self._loop, lambda d=direction: self._fire(d),
+                                                       spin_s=self.config.spin_s, use_timerfd=precise)
+            info["timer"] = self._timers["down"].kind
+            self._timing_info = info
+
+    def timing_info(self) -> dict:
+        """Realtime only: how releases are timed (timer kind, kernel arrival stamps, slack, short slice)."""
+        return dict(self._timing_info)
 
     @property
     def vehicle_side(self) -> Address:
         """Address the vehicle sends to."""
-        a = self.sides["vehicle"].transport.get_extra_info("sockname")
-        return a[0], a[1]
+        return self.sides["vehicle"].sockname
 
     @property
     def gcs_side(self) -> Address:
         """Address the GCS sends to."""
-        a = self.sides["gcs"].transport.get_extra_info("sockname")
-        return a[0], a[1]
+        return self.sides["gcs"].sockname
 
     async def close(self) -> None:
         """Cancel timers, close sockets; in-flight datagrams are dropped (reported in stats)."""
         self.closed = True
         for d, tm in self._timers.items():
             if tm is not None:
-                tm[1].cancel()
+                tm.close()
             self._timers[d] = None
         for side in self.sides.values():
-            if side.transport is not None:
-                side.transport.close()
+            side.close()
         await asyncio.sleep(0)
 
     # -- clock ---------------------------------------------------------------------------------
@@ -278,7 +357,8 @@ class DelayShim:
         return self._t0 + sim_t / self.config.speed
 
     # -- datapath ------------------------------------------------------------------------------
-    def _on_datagram(self, side: str, data: bytes, addr: Address) -> None:
+    def _on_datagram(self, side: str, data: bytes, addr: Address, t_rx: "float | None" = None) -> None:
+        """One datagram from ``side``; ``t_rx``: kernel arrival time (loop clock, s) if known."""
         if self.closed:
             return
         c = self.counters
@@ -309,9 +389,12 @@ class DelayShim:
                         self._send("vehicle", data)
                     return
                 c["bad_control"] += 1
-        self.lines[direction].push(self.now(), data)
         if self.config.clock == "realtime":
+            t_in = self.now() if t_rx is None else min(self.now(), (t_rx - self._t0) * self.config.speed)
+            self.lines[direction].push(t_in, data)
             self._arm(direction)
+        else:
+            self.lines[direction].push(self.sim_time, data)
 
     def _decode_control(self, data: bytes, want: int):
         msgs = self.codec.decode(data)
@@ -340,11 +423,11 @@ class DelayShim:
     def _send(self, dest: str, data: bytes) -> None:
         peer = self.peers[dest]
         side = self.sides.get("gcs" if dest == "gcs" else "vehicle")
-        if peer is None or side is None or side.transport is None or side.transport.is_closing():
+        if peer is None or side is None or side.closed:
             self.counters["no_peer"] += 1
             return
-        side.transport.sendto(data, peer)
-        self.counters["forwarded_to_" + dest] += 1
+        if side.sendto(data, peer):
+            self.counters["forwarded_to_" + dest] += 1
 
     def _release(self, direction: str, t_now: float) -> None:
         dest = "gcs" if direction == "down" else "vehicle"
@@ -353,28 +436,24 @@ class DelayShim:
 
     # -- realtime scheduling ---------------------------------------------------------------------
     def _arm(self, direction: str) -> None:
+        """Make sure the direction's timer fires at its earliest pending release."""
         nxt = self.lines[direction].next_release()
-        if nxt is None:
+        timer = self._timers[direction]
+        if nxt is None or timer is None:
             return
-        cur = self._timers[direction]
-        if cur is not None:
-            if cur[0] <= nxt:
-                return
-            cur[1].cancel()
-        handle = self._loop.call_at(self._wall_of(nxt) - self.config.spin_s, self._fire, direction, nxt)
-        self._timers[direction] = (nxt, handle)
+        cur = self._scheduled[direction]
+        if cur is not None and cur <= nxt:
+            return
+        self._scheduled[direction] = nxt
+        timer.arm(self._wall_of(nxt))
 
-    def _fire(self, direction: str, scheduled: float) -> None:
-        if self.closed:
-            self._timers[direction] = None
+    def _fire(self, direction: str) -> None:
+        scheduled = self._scheduled[direction]
+        self._scheduled[direction] = None
+        if self.closed or scheduled is None:
             return
-        late = self._loop.time() - self._wall_of(scheduled)
-        if late < 0:  # early by design (spin_s): poll again after one loop iteration (I/O still served)
-            self._timers[direction] = (scheduled, self._loop.call_soon(self._fire, direction, scheduled))
-            return
-        self._timers[direction] = None
         if len(self._lateness) < 1_000_000:
-            self._lateness.append(late)
+            self._lateness.append(self._loop.time() - self._wall_of(scheduled))
         self._release(direction, max(self.now(), scheduled))
         self._arm(direction)
 
@@ -395,6 +474,8 @@ class DelayShim:
                "counters": dict(self.counters),
                "control_codec": {k: v for k, v in self.codec.counters.as_dict().items() if v},
                "down": self.lines["down"].stats(), "up": self.lines["up"].stats()}
+        if self._timing_info:
+            out["realtime_timing"] = self.timing_info()
         if self._lateness:
             lat = np.array(self._lateness) * 1000.0
             out["release_lateness_ms"] = {"n": int(lat.size), "p50": float(np.percentile(lat, 50)),
