@@ -265,10 +265,11 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
         wait_lookup = make_wait_lookup(wait_family, cfg=cfg)
 
     streams = [encounter_streams(s) for s in seeds]
-    pilot = PilotModel(n, [s[STREAM_PILOT] for s in streams], pcfg)
+    core = OnboardCore.from_encounters(encounters, policy, cfg, wait_lookup, thresholds=preset_name)
+    # the flight plan the pilot returns to: the ownship's initial straight, level course
+    pilot = PilotModel(n, [s[STREAM_PILOT] for s in streams], pcfg, plan=core.own)
     up = BatchedDelay(latency_up, [s[STREAM_UP] for s in streams], epoch_s, duration + dt)
     down = BatchedDelay(latency_down, [s[STREAM_DOWN] for s in streams], epoch_s, duration + dt)
-    core = OnboardCore.from_encounters(encounters, policy, cfg, wait_lookup, thresholds=preset_name)
     m = core.m
     acc = _Accumulators(n, core.own)
     log = sl.StepLogBuilder(encounters.encounter_id, m) if record_steps else None

@@ -16,6 +16,15 @@ DAIDALUS level + 1, 5 for a well-clear violation) a new decision is made, sent a
 execution delay. If the alert clears and returns, the (already engaged) pilot streams hold again
 and re-decides immediately, sending after a fresh execution delay.
 
+Return to plan (``PilotConfig.recover``, needs ``plan``): when the alert clears, an engaged pilot
+that was climbing or descending levels off at once (one command: its track and speed, vs 0), then
+waits its follow-up decision time at the cleared level (``min[L] + extra[L]``, 12 + Exp(12) s at
+level none) and then streams the plan's track and ground speed with a vertical speed toward the
+plan altitude (``dz / recover_capture_s``, at most 500 fpm, Guendel's desired vertical rate), from
+the delayed state it sees, until it sees the plan altitude and track reached; it then sends the
+plan (level flight) once. Without it a vertical maneuver commanded as a vertical speed would never
+end (the paper's Fig. 8: the UAS "regains the altitude" and returns toward its original path).
+
 Response modes (``PilotConfig.mode``):
 
 * ``guendel``  T_init ~ Exp(5 s), T_coord ~ Gamma(5.5, 2 s), T_exec ~ Exp(3 s) (mean 19 s);
@@ -97,6 +106,11 @@ class PilotConfig:
     det_vertical_ft: float = 500.0
     heading_round_deg: float = 5.0
     max_turn_deg: float = 175.0
+    recover: bool = True  #: return to the flight plan after the conflict (needs a plan, see PilotModel)
+    recover_vs_fpm: float = 500.0  #: climb/descent rate back to the plan altitude (Guendel desired rate)
+    recover_capture_s: float = 15.0  #: s, altitude capture time constant (vs = dz / this, limited)
+    recover_alt_tol_m: float = 15.0  #: plan altitude reached within this (m): level off
+    recover_trk_tol_deg: float = 1.0  #: plan track reached within this (deg)
 
     def validate(self) -> "PilotConfig":
         if self.mode not in MODES:
@@ -109,6 +123,9 @@ class PilotConfig:
             raise UsageError("pilot update_min_s / update_mean_s need 6 values (levels none..WCV)")
         if self.alert_hold_s < 0 or self.heading_round_deg < 0:
             raise UsageError("pilot alert_hold_s and heading_round_deg must be >= 0")
+        for name in ("recover_vs_fpm", "recover_capture_s", "recover_alt_tol_m", "recover_trk_tol_deg"):
+            if not getattr(self, name) > 0:
+                raise UsageError(f"pilot {name} must be > 0, got {getattr(self, name)!r}")
         return self
 
     @property
@@ -293,7 +310,8 @@ class PilotModel:
     non-decreasing ``t``.
     """
 
-    def __init__(self, n: int, seeds: "Sequence | None" = None, cfg: "PilotConfig | None" = None):
+    def __init__(self, n: int, seeds: "Sequence | None" = None, cfg: "PilotConfig | None" = None,
+                 plan: "AircraftState | None" = None):
         self.cfg = (cfg or PilotConfig()).validate()
         if not isinstance(n, (int, np.integer)) or n < 1:
             raise UsageError(f"number of pilots must be a positive integer, got {n!r}")
@@ -338,6 +356,13 @@ class PilotModel:
         self.maneuvers = np.zeros(n, np.int64)
         self.seq = np.full(n, -1, np.int64)
         self.level = np.zeros(n, np.int64)
+        # flight plan (track rad, gs m/s, altitude m) the pilot returns to after the conflict
+        if plan is not None and plan.shape != (n,):
+            raise UsageError(f"pilot plan must have shape ({n},), got {plan.shape}")
+        self.plan = None if plan is None else (plan.trk.astype(float).copy(), plan.gs.astype(float).copy(),
+                                               plan.z.astype(float).copy())
+        self.recovering = np.zeros(n, bool)
+        self.t_recover = np.full(n, np.inf)
 
     @property
     def response_delay_s(self) -> np.ndarray:
@@ -382,11 +407,25 @@ class PilotModel:
         alert = valid & (lvl_daa >= c.alert_level_min)
         self.level = np.where(np.broadcast_to(g.wcv, (n,)), 5, np.clip(lvl_daa + 1, 0, 4)).astype(np.int64)
         self.alert_since = np.where(alert, np.where(np.isnan(self.alert_since), t, self.alert_since), np.nan)
-        # stop streaming when the alert clears
+        # stop streaming when the alert clears; an engaged pilot returns to the plan after its
+        # follow-up decision time at the (cleared) level
         stop = self.streaming & ~alert
         self.streaming &= ~stop
         self.t_decide[stop] = np.inf
         self.t_activate[stop] = np.inf
+        level_off = np.zeros(n, bool)
+        if c.recover and self.plan is not None and stop.any():
+            i = np.flatnonzero(stop)
+            # clear of conflict: stop any climb / descent at once (keep track and speed), one command
+            level_off[i] = np.abs(np.nan_to_num(self.cmd.vs[i])) > 0
+            self.cmd.vs[i[level_off[i]]] = 0.0
+            self.axis[i] = 0
+            self.direction[i] = 0
+            lvl = self.level[i]
+            extra = np.asarray(c.update_mean_s, float)[lvl]
+            if not c.deterministic:
+                extra = extra * self._draws(i)["update"]
+            self.t_recover[i] = t + np.asarray(c.update_min_s, float)[lvl] + extra
         # start streaming (hold) when the alert has persisted alert_hold_s
         start = alert & ~self.streaming & (t - self.alert_since >= c.alert_hold_s - 1e-9)
         if start.any():
@@ -405,6 +444,8 @@ class PilotModel:
                 d = self._draws(again)
                 self.exec_next[again] = c.fixed_exec_s if c.mode in ("fixed", "deterministic") else d["exec"]
             self.streaming |= start
+            self.recovering[s] = False
+            self.t_recover[s] = np.inf
         # decisions due
         dec = self.streaming & (t >= self.t_decide - 1e-9)
         if dec.any():
@@ -427,7 +468,8 @@ class PilotModel:
             self.maneuvers[i] += 1
             self.t_activate[i] = np.inf
             self._schedule_next(i, t)
-        send = self.streaming.copy()
+        rec = self._recovery(t, own, valid)
+        send = self.streaming | rec | level_off
         self.seq = np.where(send, self.seq + 1, self.seq)
         nan = np.full(n, np.nan)
         out = Command(np.where(send, self.cmd.trk, nan), np.where(send, self.cmd.vs, nan),
@@ -435,6 +477,35 @@ class PilotModel:
         return PilotOutput(send=send, cmd=out, seq=np.where(send, self.seq, -1),
                            axis=np.where(send, self.axis, 0), direction=np.where(send, self.direction, 0),
                            maneuver=self.maneuvers.copy(), t_sent=float(t))
+
+    def _recovery(self, t: float, own: AircraftState, valid: np.ndarray) -> np.ndarray:
+        """Return-to-plan commands (the pilot flies back to the plan's track, speed and altitude after
+        the conflict); updates ``self.cmd`` and returns who sends one at ``t``.
+
+        Each step from ``t_recover`` the pilot commands the plan track and ground speed and a vertical
+        speed ``dz / recover_capture_s`` limited to ``recover_vs_fpm`` toward the plan altitude, from
+        the (delayed) state it sees; once the seen altitude and track are within tolerance it sends
+        the plan itself (level) once and stops."""
+        c = self.cfg
+        if self.plan is None or not c.recover:
+            return np.zeros(self.n, bool)
+        begin = ~self.streaming & ~self.recovering & (t >= self.t_recover - 1e-9)
+        self.recovering |= begin
+        self.t_recover[begin] = np.inf
+        act = self.recovering & valid
+        if not act.any():
+            return act
+        i = np.flatnonzero(act)
+        p_trk, p_gs, p_z = (a[i] for a in self.plan)
+        dz = p_z - own.z[i]
+        rate = c.recover_vs_fpm * FPM
+        done = (np.abs(dz) <= c.recover_alt_tol_m) & (np.abs(wrap_pi(own.trk[i] - p_trk)) <= c.recover_trk_tol_deg * DEG)
+        vs = np.where(done, 0.0, np.clip(dz / c.recover_capture_s, -rate, rate))
+        self.cmd.trk[i], self.cmd.vs[i], self.cmd.gs[i] = p_trk, vs, p_gs
+        self.axis[i] = 0
+        self.direction[i] = 0
+        self.recovering[i[done]] = False
+        return act
 
 
 _REGION_LEVEL = np.array([0.0, 2.0, 3.0, 4.0, 1.0])  # daa REGION_NONE, FAR, MID, NEAR, RECOVERY -> level

@@ -90,8 +90,12 @@ class GcsNode:
 
             from daa_sil.fasttime import STREAM_PILOT, encounter_streams
 
+            from daa_sil.scenario import ownship_state
+
             seed = encounter_streams(scenario.seed if scenario is not None else 0)[STREAM_PILOT]
-            self.pilot = PilotModel(1, [seed], PilotConfig(mode=scenario.pilot.response if scenario else "guendel"))
+            # the plan the pilot returns to after the conflict: the scenario ownship's initial course
+            self.pilot = PilotModel(1, [seed], PilotConfig(mode=scenario.pilot.response if scenario else "guendel"),
+                                    plan=ownship_state(scenario) if scenario is not None else None)
         self._g_seen = math.nan
         self._g_alert, self._g_wcv = 0, False
         self._guide = {k: np.full(1, np.inf if k.endswith("_level") else np.nan) for k in

@@ -107,3 +107,42 @@ def test_modes_and_errors():
         PilotConfig(mode="telepathic").validate()
     with pytest.raises(UsageError):
         PilotModel(2, [1], PilotConfig())
+
+
+def _state(z, trk_deg, vs=0.0):
+    return AircraftState(np.zeros(1), np.zeros(1), np.full(1, float(z)), np.full(1, 55.0),
+                         np.full(1, trk_deg * DEG), np.full(1, float(vs)))
+
+
+def test_return_to_plan_after_a_vertical_maneuver():
+    """Deterministic: alert at t = 0, climb (vertical clear, turns worse) sent at t = 19; alert clears
+    at t = 30 -> level-off command at once; plan resumed 12 + 12 s later (follow-up at level none)
+    at vs = dz / 15 s limited to 500 fpm, and the plan itself once the seen altitude is within 15 m."""
+    plan = _state(1000.0, 0.0)
+    m = PilotModel(1, cfg=PilotConfig(mode="deterministic"), plan=plan)
+    climb = _guid(ll=3, rl=4, ul=0, dl=0, up=2.0, dn=-2.0)
+    none = _guid(alert=0)
+    outs = {t: m.step(float(t), _state(1000.0, 0.0), climb) for t in range(0, 30)}
+    assert outs[19].axis_names()[0] == "vertical" and outs[19].cmd.vs[0] == pytest.approx(2.0 + 500 * FPM)
+    seen = _state(1150.0, 20.0, vs=4.5)  # what the GCS sees after the maneuver
+    out = m.step(30.0, seen, none)
+    assert out.send[0] and out.cmd.vs[0] == 0.0 and out.cmd.trk[0] == pytest.approx(0.0)  # level off
+    quiet = [m.step(float(t), seen, none) for t in range(31, 54)]
+    assert not any(o.send[0] for o in quiet)  # waiting the follow-up time 12 + 12 s
+    out = m.step(54.0, seen, none)
+    assert out.send[0] and out.cmd.trk[0] == pytest.approx(0.0) and out.cmd.gs[0] == pytest.approx(55.0)
+    assert out.cmd.vs[0] == pytest.approx(-500 * FPM)  # -150 m / 15 s = -10 m/s, limited to 500 fpm
+    out = m.step(55.0, _state(1030.0, 0.0), none)
+    assert out.cmd.vs[0] == pytest.approx(-30.0 / 15.0)  # proportional inside the limit
+    out = m.step(56.0, _state(1010.0, 0.5), none)
+    assert out.send[0] and out.cmd.vs[0] == 0.0  # within 15 m and 1 deg: the plan, level
+    assert not m.step(57.0, _state(1010.0, 0.5), none).send[0]  # done: nothing more
+
+
+def test_no_plan_keeps_the_last_command():
+    m = PilotModel(1, cfg=PilotConfig(mode="deterministic"))
+    climb = _guid(ll=3, rl=4)
+    for t in range(0, 30):
+        m.step(float(t), _own(), climb)
+    assert not m.step(30.0, _own(), _guid(alert=0)).send[0]
+    assert not any(m.step(float(t), _own(), _guid(alert=0)).send[0] for t in range(31, 80))

@@ -188,6 +188,7 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
     in_conflict = bands.trk.region[:, k0 - cand.cols[AXIS_HORIZONTAL].start] != REGION_NONE
     moving = cand.side[None, :] != 0
     chosen = np.full(n, -1)
+    p_ax = np.full(n, AXIS_NONE)
     # 1. persistence: keep the previous (axis, direction) while it still has a conflict-free candidate
     if prev is not None:
         p_ax, p_dir = (np.asarray(a).astype(int) for a in prev)
@@ -197,20 +198,25 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
             & (p_ax[:, None] != AXIS_NONE) & moving
         i, f = _pick(m, cand.t_man)
         chosen = np.where(f & in_conflict, i, chosen)
-    # 2. fresh: first axis in priority order with a NONE resolution on its preferred side, then RECOVERY
+    # 2. fresh: first axis in priority order with a NONE resolution on its preferred side, then RECOVERY.
+    #    No reversal first: when the previous direction has lost its conflict-free candidates (the
+    #    intruder did not fly the straight line it was projected on, e.g. it turns toward us), the
+    #    other axes are tried before the opposite direction of the same axis.
     for want in (REGION_NONE, REGION_RECOVERY):
-        for name in cfg.resolution_axes:
-            if not np.any((chosen < 0) & in_conflict):
-                break
-            a = axis_code(name)
-            ab, cols = bands.axis(a), cand.cols[a]
-            ok = (ab.region == want) & (ab.side != 0)[None, :]
-            pref = ab.preferred.astype(int)
-            m_side = (ab.side[None, :] == pref[:, None]) | (pref[:, None] == 0)
-            i, f = _pick(ok & m_side, ab.t_man)
-            i_any, f_any = _pick(ok, ab.t_man)
-            i = np.where(f, i, i_any) + cols.start
-            chosen = np.where((chosen < 0) & (f | f_any) & in_conflict, i, chosen)
+        for allow_reversal in (False, True):
+            for name in cfg.resolution_axes:
+                if not np.any((chosen < 0) & in_conflict):
+                    break
+                a = axis_code(name)
+                ab, cols = bands.axis(a), cand.cols[a]
+                ok = (ab.region == want) & (ab.side != 0)[None, :]
+                pref = ab.preferred.astype(int)
+                m_side = (ab.side[None, :] == pref[:, None]) | (pref[:, None] == 0)
+                i, f = _pick(ok & m_side, ab.t_man)
+                i_any, f_any = _pick(ok, ab.t_man)
+                i = np.where(f, i, i_any) + cols.start
+                eligible = (chosen < 0) & in_conflict & (allow_reversal | (p_ax != a))
+                chosen = np.where(eligible & (f | f_any), i, chosen)
     # 3. best effort
     rest = np.nonzero((chosen < 0) & in_conflict)[0]
     chosen[rest] = cand.best_effort(rest)
@@ -233,7 +239,9 @@ def daa_resolution(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | No
        axis/side still has a NONE or RECOVERY candidate (closest one taken);
     2. otherwise the first axis of ``cfg.resolution_axes`` (horizontal, vertical, speed) with a NONE
        candidate, on its preferred side (DAIDALUS: reached sooner, ties right/up/faster), closest
-       one; then the same with RECOVERY candidates;
+       one -- except that when step 1 failed, the previous axis comes last (no reversal while
+       another axis resolves: a reversal chases an intruder that is turning into the resolution);
+       then the same with RECOVERY candidates;
     3. otherwise the best-effort candidate (latest LoWC, then earliest recovery).
     """
     return resolve(own, intr, cfg, prev, bands)[0]
