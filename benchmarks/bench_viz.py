@@ -12,11 +12,13 @@ Prints, all measured in this run:
    importing rerun, opening the file sink + static entities, the warm-up, then the part that is left
    for the end of a run (read the step log, blueprint, ``send_columns`` of all steps, flush/close/
    rename), and the interpreter exit. ``daa-sil run --rrd`` does everything up to the warm-up in a
-   low-priority helper process while the SIL plays, so only the last part is on the critical path.
+   helper process scheduled SCHED_IDLE while the SIL plays, and hands it the step log the moment the
+   vehicle exits, so the END part overlaps with stopping the shim and the GCS.
 1. **Lockstep SIL**: wall time of ``daa-sil run SCENARIO`` without and with ``--rrd``, in interleaved
    pairs (the order inside a pair alternates), as seen by the caller (process start to exit). Prints
    each pair, the median of the per-pair ratios and their spread (min..max), the median of the wall
-   times, the time after the run that the caller waits for the recorder, and the .rrd size.
+   times, the run's own wall time (does the helper slow the run?), the time after the run that the
+   caller waits for the recorder, the CPU time of all processes, and the .rrd size.
    Target: ratio <= 1.10.
 2. **Live logging cost** on the same step log: the time the control loop spends inside
    ``EncounterLogger.log_step`` (per step, it only queues the row) and the background thread's total
@@ -29,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import statistics
 import subprocess
 import sys
@@ -65,19 +68,23 @@ print(json.dumps([(b, tb - ta) for (a, ta), (b, tb) in zip(T, T[1:])]))
 """
 
 
-def _sil_run(scenario: Path, out: Path, rrd: "Path | None") -> tuple[float, float]:
-    """(wall time seen by the caller, the run's own wall_s from result.json), s."""
+def _sil_run(scenario: Path, out: Path, rrd: "Path | None") -> tuple[float, float, float]:
+    """(wall time seen by the caller, the run's own wall_s from result.json, CPU time of all its
+    processes), s."""
     cmd = [sys.executable, "-m", "daa_sil.cli", "run", str(scenario), "--out", str(out), "--json"]
     if rrd is not None:
         cmd += ["--rrd", str(rrd)]
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     res = subprocess.run(cmd, capture_output=True, text=True)
     wall = time.perf_counter() - t0
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (ru1.ru_utime + ru1.ru_stime) - (ru0.ru_utime + ru0.ru_stime)
     if res.returncode not in (0, 1) or not (out / "steplog.parquet").exists():
         raise SystemExit(f"bench_viz: daa-sil run failed ({res.returncode}): {res.stderr.strip()[-300:]}")
     if rrd is not None and not rrd.exists():
         raise SystemExit(f"bench_viz: daa-sil run --rrd wrote no recording: {res.stderr.strip()[-300:]}")
-    return wall, float(json.loads(res.stdout)["wall_s"])
+    return wall, float(json.loads(res.stdout)["wall_s"]), cpu
 
 
 def bench_profile(steplog_path: Path, tmp: Path) -> None:
@@ -96,16 +103,17 @@ def bench_profile(steplog_path: Path, tmp: Path) -> None:
 
 
 def bench_sil(scenario: Path, repeat: int, tmp: Path) -> tuple[float, Path]:
-    plain, with_rrd, own_plain, own_rrd = [], [], [], []
+    plain, with_rrd, own_plain, own_rrd, cpu_plain, cpu_rrd = [], [], [], [], [], []
     rrd = None
     for k in range(repeat):
         rrd = tmp / f"rrd{k}" / "enc.rrd"
         rrd.parent.mkdir()
         order = (None, rrd) if k % 2 == 0 else (rrd, None)
         for r in order:
-            w, own = _sil_run(scenario, tmp / (f"rrd{k}" if r else f"plain{k}"), r)
+            w, own, cpu = _sil_run(scenario, tmp / (f"rrd{k}" if r else f"plain{k}"), r)
             (with_rrd if r else plain).append(w)
             (own_rrd if r else own_plain).append(own)
+            (cpu_rrd if r else cpu_plain).append(cpu)
     ratios = [b / a for a, b in zip(plain, with_rrd)]
     a, b = statistics.median(plain), statistics.median(with_rrd)
     # the caller's wall minus the run's own wall: process start, the recorder's finish, exit
@@ -118,7 +126,11 @@ def bench_sil(scenario: Path, repeat: int, tmp: Path) -> tuple[float, Path]:
     print(f"    median wall: without {a:.2f} s, with --rrd {b:.2f} s\n"
           f"    ratio with/without: median {r_med:.3f} ({100 * (r_med - 1):+.1f} %), spread {min(ratios):.3f}"
           f"..{max(ratios):.3f}; target <= 1.10: {'met' if r_med <= 1.10 else 'NOT met'}\n"
+          f"    the run itself (result.json wall_s, while the helper prepares): median {statistics.median(own_plain):.2f}"
+          f" s without, {statistics.median(own_rrd):.2f} s with --rrd\n"
           f"    the caller waits {1000 * tail:+.0f} ms longer after the run with --rrd (median)\n"
+          f"    CPU time of all processes: median {statistics.median(cpu_plain):.2f} s without, "
+          f"{statistics.median(cpu_rrd):.2f} s with --rrd (the helper runs SCHED_IDLE during the run)\n"
           f"    .rrd {rrd.stat().st_size / 1000:.0f} kB")
     return a, tmp / "plain0" / "steplog.parquet"
 

@@ -20,6 +20,11 @@ API
       the web server (``close(keep_serving=True)`` leaves it running; :meth:`stop_serving` stops it).
 ``log_steplog(table, sinks, encounter_id=None, preset="do365") -> Path | None``
     Convert a step log (one encounter, or pick one with ``encounter_id``) into the sinks.
+``BackgroundRecorder(sinks, preset, encounter_id)`` / ``.submit(steplog)`` / ``.finish(steplog)`` / ``.abort()``
+    What ``daa-sil run --rrd/--spawn-viewer`` uses: a helper process, started with the run and
+    scheduled SCHED_IDLE, imports Rerun, opens the sinks and logs the static parts while the SIL
+    plays; given the step log it logs it (same emitter as ``log_steplog``), sends the blueprint and
+    moves the ``.rrd`` into place. Abort/Ctrl-C/owner gone: no ``.rrd`` and no temporary file.
 ``log_waitmap(rec, waitmap, vi=, vh=, theta=)``
     A wait-map slice as a 3-D point cloud over (dX, dY, d_h) coloured by wait time.
 ``blueprint(...)``
@@ -1046,8 +1051,9 @@ class BackgroundRecorder:
     """Prepare a recording in a helper process while a SIL run plays; log its step log when it ends.
 
     The expensive, run-independent part (starting Python, importing Rerun, opening the sinks,
-    spawning/connecting a viewer, the static entities) happens in a separate, low-priority process
-    (``nice`` +10) started with the run, so it overlaps with it and never touches the control loop
+    spawning/connecting a viewer, the static entities, a warm-up) happens in a separate process
+    started with the run, scheduled ``SCHED_IDLE`` (only on cycles the run leaves idle; ``nice`` +10
+    where that is not available), so it overlaps with the run and never touches the control loop
     (other processes, other GIL). :meth:`finish` hands the helper the step log; it logs it with
     ``send_columns`` (same :class:`_Emitter` as every other path, so the same entities and steps),
     sends the blueprint (camera on the closest approach), and moves the ``.rrd`` into place
@@ -1078,40 +1084,65 @@ class BackgroundRecorder:
         self._lines: "queue.Queue[str | None]" = queue.Queue()
         self.result: "dict | None" = None
         self._done = False
+        #: set once the helper is prepared. After :meth:`finish`: ``prepared_in_time`` (it was prepared
+        #: when the step log came), ``finish_s`` (step log handed over -> DONE, s), ``wait_s`` (how long
+        #: ``finish`` itself blocked, s)
+        self.ready = threading.Event()
+        self.prepared_in_time: "bool | None" = None
+        self.finish_s: "float | None" = None
+        self.wait_s: "float | None" = None
+        self._submitted_at: "float | None" = None
         self.proc = subprocess.Popen(
             [sys.executable, "-c", "from daa_sil.viz import recorder_main; raise SystemExit(recorder_main())",
              json.dumps(args)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=None, text=True, bufsize=1,
             start_new_session=True)  # own group: a terminal Ctrl-C reaches the caller, which decides
-        try:
-            os.setpriority(os.PRIO_PROCESS, self.proc.pid, nice)
-        except (OSError, AttributeError):
-            pass
+        self._idle = _set_idle_priority(self.proc.pid, nice)
         self._reader = threading.Thread(target=self._pump, name="daa-sil-recorder", daemon=True)
         self._reader.start()
 
     def _pump(self) -> None:
         for line in self.proc.stdout:  # type: ignore[union-attr]
+            if line.startswith("READY"):
+                self.ready.set()
             self._lines.put(line.rstrip("\n"))
         self._lines.put(None)
 
-    def finish(self, steplog: "str | os.PathLike", timeout_s: float = RECORDER_FINISH_TIMEOUT_S) -> "Path | None":
-        """Log ``steplog`` (Parquet, one encounter) and close the sinks; return the .rrd path (None if not written).
+    def submit(self, steplog: "str | os.PathLike") -> None:
+        """Hand the helper the (complete) step log now and return at once; :meth:`finish` waits.
 
-        Blocks until the helper is done (typically ~0.1 s once it is prepared). Ctrl-C while waiting
-        aborts the helper (no .rrd) and propagates.
+        Call it as soon as the step log is written (e.g. when the vehicle exits), so the helper's
+        work overlaps with stopping the other processes. Only the first call counts.
+        """
+        import json
+
+        if self._submitted_at is not None or self._done:
+            return
+        self._submitted_at = time.monotonic()
+        self.prepared_in_time = self.ready.is_set()
+        if self._idle:  # the run is over: the helper is now on the critical path
+            _set_normal_priority(self.proc.pid)
+        try:
+            self.proc.stdin.write(json.dumps({"steplog": str(steplog)}) + "\n")  # type: ignore[union-attr]
+            self.proc.stdin.close()  # type: ignore[union-attr]
+        except (BrokenPipeError, OSError, ValueError):
+            pass
+
+    def finish(self, steplog: "str | os.PathLike", timeout_s: float = RECORDER_FINISH_TIMEOUT_S) -> "Path | None":
+        """Log ``steplog`` (Parquet, one encounter; unless :meth:`submit` already sent one) and close the
+        sinks; return the .rrd path (None if not written).
+
+        Blocks until the helper is done (typically well under 0.1 s of CPU once it is prepared).
+        Ctrl-C while waiting aborts the helper (no .rrd) and propagates.
         """
         import json
         import queue
 
         if self._done:
-            return self.rrd_path if self.result and self.result.get("rrd") else None
+            return Path(self.result["rrd"]) if self.result and self.result.get("rrd") else None
+        t_wait = time.monotonic()
         try:
-            try:
-                self.proc.stdin.write(json.dumps({"steplog": str(steplog)}) + "\n")  # type: ignore[union-attr]
-                self.proc.stdin.close()  # type: ignore[union-attr]
-            except (BrokenPipeError, OSError):
-                pass
+            self.submit(steplog)
             deadline = time.monotonic() + timeout_s
             while True:
                 try:
@@ -1129,6 +1160,8 @@ class BackgroundRecorder:
             self.abort()
             raise
         self._done = True
+        self.wait_s = time.monotonic() - t_wait
+        self.finish_s = time.monotonic() - self._submitted_at
         try:
             self.proc.wait(timeout=5.0)
         except subprocess.TimeoutExpired:
@@ -1196,6 +1229,30 @@ def _warm_up(th: Thresholds) -> None:
         mem.drain_as_bytes()
     finally:
         warm.disconnect()
+
+
+def _set_idle_priority(pid: int, nice: int) -> bool:
+    """Run ``pid`` only on cycles nothing else wants: SCHED_IDLE where available (a waking SIL
+    process preempts it at once, which matters for lockstep's many short hops), else ``nice``.
+    Returns True if SCHED_IDLE was set."""
+    try:
+        os.sched_setscheduler(pid, os.SCHED_IDLE, os.sched_param(0))
+        return True
+    except (OSError, AttributeError):
+        pass
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, nice)
+    except (OSError, AttributeError):
+        pass
+    return False
+
+
+def _set_normal_priority(pid: int) -> None:
+    """Back to SCHED_OTHER (allowed without privileges when RLIMIT_NICE permits; else it stays idle)."""
+    try:
+        os.sched_setscheduler(pid, os.SCHED_OTHER, os.sched_param(0))
+    except (OSError, AttributeError):
+        pass
 
 
 def _preset_names() -> set[str]:

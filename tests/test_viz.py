@@ -369,8 +369,7 @@ def _steplog_file(tmp_path, table) -> Path:
 
 
 def _wait_ready(recorder, timeout_s: float = 60.0) -> None:
-    line = recorder._lines.get(timeout=timeout_s)
-    assert line == "READY"
+    assert recorder.ready.wait(timeout_s), "the helper never became ready"
 
 
 def test_background_recorder_abort_and_owner_gone_leave_nothing(tmp_path):

@@ -390,8 +390,13 @@ def _start_recorder(opts: RunOptions, sc):
         return None
     from .. import viz
 
-    return viz.BackgroundRecorder(viz.SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, overwrite=True),
-                                  preset=sc.thresholds, encounter_id=0)  # the vehicle logs encounter 0
+    try:
+        return viz.BackgroundRecorder(viz.SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, overwrite=True),
+                                      preset=sc.thresholds, encounter_id=0)  # the vehicle logs encounter 0
+    except OSError as exc:  # the helper process cannot start: the run goes on without a recording
+        print(f"daa-sil: warning: cannot start the Rerun recorder ({exc.strerror or exc}); no recording",
+              file=sys.stderr, flush=True)
+        return None
 
 
 def _finish_recorder(recorder, steplog: Path) -> "Path | None":
@@ -431,6 +436,8 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
             pg.wait_ready(vehicle, timeout=READY_TIMEOUT_S + 120.0)  # may build the wait map first
             _say(opts, f"playing {sc.duration_s:g} s of {sc.name} ({opts.clock})")
             rc = vehicle.proc.wait()
+            if recorder is not None and rc == 0 and steplog.exists():
+                recorder.submit(steplog)  # logs while the shim and GCS are stopped and the result is made
             if rc != 0:
                 failure = f"vehicle exited with status {rc}: {last_error_line(vehicle)} (log: {vehicle.log_path})"
             for other in (gcs, shim):
@@ -461,6 +468,9 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
             rrd, interrupted = None, True
             result["interrupted"] = True
         result["files"]["rrd"] = str(rrd) if rrd else None
+        result["rrd_timing"] = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in (
+            ("prepared_before_end", recorder.prepared_in_time), ("finish_s", recorder.finish_s),
+            ("wait_s", recorder.wait_s))}
     atomic_write_json(out / "result.json", result)
     if interrupted:
         raise KeyboardInterrupt
