@@ -636,3 +636,18 @@ def test_unreadable_inputs(tmp_path, maps):
     rc, _, err = cli(["run", secret_yaml, "--out", tmp_path / "o"])
     assert_one_line_error(rc, err, 2, "secret.yaml", "Permission denied")
     assert not (tmp_path / "o").exists()
+
+
+def test_corrupt_cached_wait_maps_are_rebuilt(tmp_path, monkeypatch):
+    """The vehicle and the campaign load maps through the cache: a corrupt entry is rebuilt, not used."""
+    from daa_sil import waitmap
+
+    monkeypatch.setenv("DAA_SIL_CACHE", str(tmp_path))
+    kw = dict(grid="paper,dx=4,dy=4,dh=2,vi=2,vh=2,theta=4", turn_rates=(0.0,))
+    first = waitmap.default_family("paper", **kw)
+    (entry,) = list((tmp_path / "waitmaps").iterdir())
+    f = entry / "waitmap_turn+0.0.npz"
+    f.write_bytes(f.read_bytes()[:500])  # truncated on disk
+    again = waitmap.default_family("paper", **kw)
+    assert again.maps[0].wait_s.tobytes() == first.maps[0].wait_s.tobytes()
+    assert waitmap.load(f).wait_s.tobytes() == first.maps[0].wait_s.tobytes()  # the file is whole again
