@@ -304,7 +304,8 @@ class GcsNode:
                     next_t = math.ceil(self._t_sync)
                 continue
             except asyncio.TimeoutError:
-                pass
+                if now is None:  # no telemetry yet: greet again (the shim may have started after us,
+                    self.ep.send(self._heartbeat())  # or we were restarted and it must relearn our address)
             now = self.sim_now(loop)
             if now is not None and next_t is not None and now >= next_t - 1e-6:
                 self.step(float(next_t))
