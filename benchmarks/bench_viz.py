@@ -40,6 +40,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+TIMING: list[dict] = []  #: result.json "rrd_timing" of every --rrd run
 
 PROFILE_CHILD = r"""
 import json, os, sys, time
@@ -84,7 +85,10 @@ def _sil_run(scenario: Path, out: Path, rrd: "Path | None") -> tuple[float, floa
         raise SystemExit(f"bench_viz: daa-sil run failed ({res.returncode}): {res.stderr.strip()[-300:]}")
     if rrd is not None and not rrd.exists():
         raise SystemExit(f"bench_viz: daa-sil run --rrd wrote no recording: {res.stderr.strip()[-300:]}")
-    return wall, float(json.loads(res.stdout)["wall_s"]), cpu
+    result = json.loads(res.stdout)
+    if rrd is not None:
+        TIMING.append(result.get("rrd_timing") or {})
+    return wall, float(result["wall_s"]), cpu
 
 
 def bench_profile(steplog_path: Path, tmp: Path) -> None:
@@ -127,8 +131,13 @@ def bench_sil(scenario: Path, repeat: int, tmp: Path) -> tuple[float, Path]:
           f"    ratio with/without: median {r_med:.3f} ({100 * (r_med - 1):+.1f} %), spread {min(ratios):.3f}"
           f"..{max(ratios):.3f}; target <= 1.10: {'met' if r_med <= 1.10 else 'NOT met'}\n"
           f"    the run itself (result.json wall_s, while the helper prepares): median {statistics.median(own_plain):.2f}"
-          f" s without, {statistics.median(own_rrd):.2f} s with --rrd\n"
+          f" s without, {statistics.median(own_rrd):.2f} s with --rrd, per-pair ratio median "
+          f"{statistics.median(b / a for a, b in zip(own_plain, own_rrd)):.3f}\n"
           f"    the caller waits {1000 * tail:+.0f} ms longer after the run with --rrd (median)\n"
+          f"    helper prepared before the vehicle exited in {sum(bool(t.get('prepared_before_end')) for t in TIMING)}"
+          f"/{len(TIMING)} runs; step log -> .rrd in place: median "
+          f"{1000 * statistics.median(t.get('finish_s') or 0.0 for t in TIMING):.0f} ms, of which the caller "
+          f"still waited {1000 * statistics.median(t.get('wait_s') or 0.0 for t in TIMING):.0f} ms (median)\n"
           f"    CPU time of all processes: median {statistics.median(cpu_plain):.2f} s without, "
           f"{statistics.median(cpu_rrd):.2f} s with --rrd (the helper runs SCHED_IDLE during the run)\n"
           f"    .rrd {rrd.stat().st_size / 1000:.0f} kB")
