@@ -61,8 +61,9 @@ def fifo_release(t_in: np.ndarray, delay: np.ndarray, keep: "np.ndarray | None" 
 def delay_seed(seed: "int | np.random.SeedSequence") -> np.random.SeedSequence:
     """The seed a ``DelayLine(model, seed=seed)`` gives its :class:`DelayProcess` (child 0).
 
-    Fast-time code reproduces a shim direction's delays with
-    ``BatchedDelay(model, [delay_seed(s) for s in seeds], epoch_s, duration_s)``.
+    ``BatchedDelay(model, [delay_seed(s) for s in seeds], epoch_s, duration_s)`` reproduces such
+    lines. (The shim does not use this: it passes each line the encounter's fast-time delay stream
+    as a ready :class:`DelayProcess`; see :func:`daa_sil.link.shim.shim_delay_processes`.)
     """
     return child_seed(seed, 0)
 
