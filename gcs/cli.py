@@ -82,7 +82,8 @@ async def _amain(args) -> int:
         path = node.write_log()
         st = node.ep.stats()
         node.close()
-    print(f"daa-gcs: done, {node.steps} steps, {len(node.sent)} commands sent, packets dropped {st['dropped']}"
+    print(f"daa-gcs: done, {node.steps} steps, {len(node.sent)} commands sent, packets dropped {st['dropped']}, "
+          f"telemetry rejected {node.view.rejected}"
           + (f"; log {path}" if path else ""), flush=True)
     print("daa-gcs: link stats " + json.dumps(st, sort_keys=True), flush=True)
     return 0

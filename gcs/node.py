@@ -66,7 +66,8 @@ class View:
     wait_s: float = math.nan
     alert_regions: int = 0
     alert: tuple = (math.nan, 0)  #: (vehicle sim time, DAIDALUS alert level 0-3) from DAA_ALERT
-    last_t: float = math.nan
+    last_t: float = -math.inf
+    rejected: int = 0  #: telemetry messages dropped: non-finite, or older than the newest seen
     acks: int = 0
     statustext: list = field(default_factory=list)
 
@@ -110,6 +111,7 @@ class GcsNode:
         self.done_tick = -1
         self.steps = 0
         self.stop = asyncio.Event()
+        self._fresh = True  # the last position message was accepted (ADSB in its datagram follows it)
         self._wall0: "float | None" = None
         self._t_sync = 0.0
 
@@ -144,10 +146,20 @@ class GcsNode:
         t = m.get_type()
         v = self.view
         if t == "LOCAL_POSITION_NED":
+            # hostile / reordered input: only finite and not older than what the pilot already sees
+            tm = m.time_boot_ms / 1000.0
+            vals = (float(m.x), float(m.y), float(m.z), float(m.vx), float(m.vy), float(m.vz))
+            self._fresh = all(map(math.isfinite, vals)) and not tm < v.last_t
+            if not self._fresh:
+                v.rejected += 1
+                return
             gs = math.hypot(m.vx, m.vy)
-            v.own = (m.time_boot_ms / 1000.0, float(m.y), float(m.x), -float(m.z), gs,
-                     math.atan2(m.vy, m.vx) % (2 * math.pi), -float(m.vz))
-            v.last_t = m.time_boot_ms / 1000.0
+            v.own = (tm, float(m.y), float(m.x), -float(m.z), gs, math.atan2(m.vy, m.vx) % (2 * math.pi), -float(m.vz))
+            v.last_t = tm
+        elif t == "ADSB_VEHICLE" and not self._fresh:  # rides in a datagram whose position was rejected
+            v.rejected += 1
+        elif t == "NAMED_VALUE_INT" and m.name == "DAA_ALERT" and m.time_boot_ms / 1000.0 < v.alert[0]:
+            v.rejected += 1  # an older alert level than the one shown
         elif t == "GLOBAL_POSITION_INT" and self.origin is not None and v.own is None:
             x, y, z = self._enu(m.lat, m.lon, m.alt)
             vn, ve = m.vx / 100.0, m.vy / 100.0
@@ -299,7 +311,7 @@ class GcsNode:
             try:
                 r = await asyncio.wait_for(self.ep.inbox.get(), timeout)
                 self.handle(r)
-                if self._wall0 is None and not math.isnan(self.view.last_t):
+                if self._wall0 is None and math.isfinite(self.view.last_t):
                     self._wall0, self._t_sync = loop.time(), self.view.last_t + assumed_down
                     next_t = math.ceil(self._t_sync)
                 continue

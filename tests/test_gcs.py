@@ -101,3 +101,38 @@ async def test_gcs_builds_what_the_pilot_sees_from_telemetry():
     finally:
         node.close()
         veh.close()
+
+
+@pytest.mark.asyncio
+async def test_gcs_ignores_non_finite_and_older_telemetry():
+    """A valid-CRC position with NaN fields, or an older datagram overtaking a newer one, must not
+    replace what the pilot sees (nor the ADS-B and alert that ride with it); each is counted."""
+    from vehicle import telemetry as T
+
+    sc = parse_scenario(SCENARIO)
+    veh = await open_endpoint(MavCodec(1, 1), "udp:127.0.0.1:0")
+    node = GcsNode(sc, GcsOptions(vehicle=f"udp:127.0.0.1:{veh.local_address[1]}", listen="udp:127.0.0.1:0",
+                                  clock="lockstep", display=False))
+    await node.start()
+    try:
+        own = T.Kin(100.0, 2000.0, 1000.0, 55.0, math.radians(10.0), 1.5)
+        intr = T.Kin(-300.0, 6000.0, 1100.0, 60.0, math.radians(190.0), -2.0)
+        old_own = T.Kin(0.0, 0.0, 900.0, 55.0, 0.0, 0.0)
+        old_intr = T.Kin(5000.0, 9000.0, 700.0, 60.0, 0.0, 0.0)
+        nan_pos = M.MAVLink_local_position_ned_message(9000, math.nan, 0.0, -1000.0, 55.0, 0.0, 0.0)
+        batches = [[T.local_position(7.0, own), T.adsb_vehicle(1000, "X", intr, sc.origin), T.alert_level(7.0, 2)],
+                   [T.local_position(5.0, old_own), T.adsb_vehicle(1000, "X", old_intr, sc.origin),
+                    T.alert_level(5.0, 0)],  # overtaken: older than t = 7 s
+                   [nan_pos]]
+        for b in batches:
+            veh.send_many(b, node.ep.local_address)
+            for _ in range(len(b)):
+                node.handle(await node.ep.recv(5.0))
+        o, i = node.observed()
+        assert (o.x[0], o.y[0], o.z[0]) == pytest.approx((100.0, 2000.0, 1000.0), abs=1e-3)
+        assert (i.x[0, 0], i.y[0, 0]) == pytest.approx((-300.0, 6000.0), abs=0.05)
+        assert node.view.alert == (7.0, 2) and node.view.last_t == 7.0
+        assert node.view.rejected == 4  # old position, its ADS-B, its alert, the NaN position
+    finally:
+        node.close()
+        veh.close()
