@@ -267,7 +267,7 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
     streams = [encounter_streams(s) for s in seeds]
     core = OnboardCore.from_encounters(encounters, policy, cfg, wait_lookup, thresholds=preset_name)
     # the flight plan the pilot returns to: the ownship's initial straight, level course
-    pilot = PilotModel(n, [s[STREAM_PILOT] for s in streams], pcfg, plan=core.own)
+    pilot = PilotModel(n, [s[STREAM_PILOT] for s in streams], pcfg, plan=core.own, daa_cfg=cfg)
     up = BatchedDelay(latency_up, [s[STREAM_UP] for s in streams], epoch_s, duration + dt)
     down = BatchedDelay(latency_down, [s[STREAM_DOWN] for s in streams], epoch_s, duration + dt)
     m = core.m
@@ -315,7 +315,7 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
                     for key in guide:
                         guide[key][j] = getattr(gb, key)
         guidance = Guidance(alert_level=g_alert, wcv=g_wcv, **guide)
-        pout = pilot.step(t, obs_own, guidance)
+        pout = pilot.step(t, obs_own, guidance, obs_intr)
         # GCS packet of step k (heartbeat + command if streaming), FIFO-released on the vehicle side
         d_up = up.delay_at(t)
         rel_up = fifo_release(np.full((n, 1), t), d_up[:, None], prev_release=last_up)[:, 0]

@@ -21,7 +21,9 @@ that was climbing or descending levels off at once (one command: its track and s
 waits its follow-up decision time at the cleared level (``min[L] + extra[L]``, 12 + Exp(12) s at
 level none) and then streams the plan's track and ground speed with a vertical speed toward the
 plan altitude (``dz / recover_capture_s``, at most 500 fpm, Guendel's desired vertical rate), from
-the delayed state it sees, until it sees the plan altitude and track reached; it then sends the
+the delayed state it sees -- only while its display shows that way back clear of every intruder
+(the command's safety metric is positive; needs the observed intruders) -- until it sees the plan
+altitude and track reached; it then sends the
 plan (level flight) once. Without it a vertical maneuver commanded as a vertical speed would never
 end (the paper's Fig. 8: the UAS "regains the altitude" and returns toward its original path).
 
@@ -311,7 +313,7 @@ class PilotModel:
     """
 
     def __init__(self, n: int, seeds: "Sequence | None" = None, cfg: "PilotConfig | None" = None,
-                 plan: "AircraftState | None" = None):
+                 plan: "AircraftState | None" = None, daa_cfg=None):
         self.cfg = (cfg or PilotConfig()).validate()
         if not isinstance(n, (int, np.integer)) or n < 1:
             raise UsageError(f"number of pilots must be a positive integer, got {n!r}")
@@ -363,6 +365,7 @@ class PilotModel:
                                                plan.z.astype(float).copy())
         self.recovering = np.zeros(n, bool)
         self.t_recover = np.full(n, np.inf)
+        self.daa_cfg = daa_cfg  #: DaaConfig of the display the pilot reads (checks the way back is clear)
 
     @property
     def response_delay_s(self) -> np.ndarray:
@@ -468,7 +471,7 @@ class PilotModel:
             self.maneuvers[i] += 1
             self.t_activate[i] = np.inf
             self._schedule_next(i, t)
-        rec = self._recovery(t, own, valid)
+        rec = self._recovery(t, own, valid, observed_intr)
         send = self.streaming | rec | level_off
         self.seq = np.where(send, self.seq + 1, self.seq)
         nan = np.full(n, np.nan)
@@ -478,14 +481,18 @@ class PilotModel:
                            axis=np.where(send, self.axis, 0), direction=np.where(send, self.direction, 0),
                            maneuver=self.maneuvers.copy(), t_sent=float(t))
 
-    def _recovery(self, t: float, own: AircraftState, valid: np.ndarray) -> np.ndarray:
+    def _recovery(self, t: float, own: AircraftState, valid: np.ndarray,
+                  intr: "AircraftState | None" = None) -> np.ndarray:
         """Return-to-plan commands (the pilot flies back to the plan's track, speed and altitude after
         the conflict); updates ``self.cmd`` and returns who sends one at ``t``.
 
         Each step from ``t_recover`` the pilot commands the plan track and ground speed and a vertical
         speed ``dz / recover_capture_s`` limited to ``recover_vs_fpm`` toward the plan altitude, from
         the (delayed) state it sees; once the seen altitude and track are within tolerance it sends
-        the plan itself (level) once and stops."""
+        the plan itself (level) once and stops. With the observed intruders (``intr``) the pilot only
+        turns back when its display shows the way back clear: the return command's safety metric
+        (:func:`daa_sil.daa.safety_metric`, no LoWC within the corrective alerting time) is positive;
+        otherwise it keeps its course and looks again next step."""
         c = self.cfg
         if self.plan is None or not c.recover:
             return np.zeros(self.n, bool)
@@ -501,6 +508,13 @@ class PilotModel:
         rate = c.recover_vs_fpm * FPM
         done = (np.abs(dz) <= c.recover_alt_tol_m) & (np.abs(wrap_pi(own.trk[i] - p_trk)) <= c.recover_trk_tol_deg * DEG)
         vs = np.where(done, 0.0, np.clip(dz / c.recover_capture_s, -rate, rate))
+        if intr is not None and intr.shape[1]:
+            from .daa import DaaConfig, safety_metric
+
+            clear = safety_metric(own[i], intr[i], Command(p_trk, vs, p_gs), self.daa_cfg or DaaConfig()) > 0
+            if not clear.all():
+                act[i[~clear]] = False
+                i, p_trk, p_gs, vs, done = i[clear], p_trk[clear], p_gs[clear], vs[clear], done[clear]
         self.cmd.trk[i], self.cmd.vs[i], self.cmd.gs[i] = p_trk, vs, p_gs
         self.axis[i] = 0
         self.direction[i] = 0

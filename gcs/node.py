@@ -96,7 +96,8 @@ class GcsNode:
             seed = encounter_streams(scenario.seed if scenario is not None else 0)[STREAM_PILOT]
             # the plan the pilot returns to after the conflict: the scenario ownship's initial course
             self.pilot = PilotModel(1, [seed], PilotConfig(mode=scenario.pilot.response if scenario else "guendel"),
-                                    plan=ownship_state(scenario) if scenario is not None else None)
+                                    plan=ownship_state(scenario) if scenario is not None else None,
+                                    daa_cfg=self._daa_cfg_of(scenario))
         self._g_seen = math.nan
         self._g_alert, self._g_wcv = 0, False
         self._guide = {k: np.full(1, np.inf if k.endswith("_level") else np.nan) for k in
@@ -114,6 +115,12 @@ class GcsNode:
         self._fresh = True  # the last position message was accepted (ADSB in its datagram follows it)
         self._wall0: "float | None" = None
         self._t_sync = 0.0
+
+    @staticmethod
+    def _daa_cfg_of(scenario):
+        from daa_sil.daa.config import DaaConfig
+
+        return DaaConfig(thresholds=scenario.thresholds) if scenario is not None else DaaConfig()
 
     async def start(self) -> None:
         """Bind, then greet the vehicle side with a HEARTBEAT (a shim learns our address from it).
@@ -210,7 +217,7 @@ class GcsNode:
             self.pilot.step(t, AircraftState(nan, nan, nan, nan, nan, nan), self._guide_obj())
             return []
         own, intr = obs
-        po = self.pilot.step(t, own, self._guidance(own, intr))
+        po = self.pilot.step(t, own, self._guidance(own, intr), intr)
         if not bool(po.send[0]):
             return []
         kind = "hold" if int(po.maneuver[0]) == 0 else f"maneuver{int(po.maneuver[0])}"

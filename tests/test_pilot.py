@@ -146,3 +146,28 @@ def test_no_plan_keeps_the_last_command():
         m.step(float(t), _own(), climb)
     assert not m.step(30.0, _own(), _guid(alert=0)).send[0]
     assert not any(m.step(float(t), _own(), _guid(alert=0)).send[0] for t in range(31, 80))
+
+
+def test_return_waits_until_the_way_back_is_clear():
+    """Same timeline as above, but an intruder sits on the plan track 3 km ahead, head-on: turning
+    back is a LoWC within the corrective time, so the pilot keeps its course; once the intruder seen
+    is behind (diverging), it turns back."""
+    from daa_sil.daa import DaaConfig
+
+    plan = _state(1000.0, 0.0)
+    m = PilotModel(1, cfg=PilotConfig(mode="deterministic"), plan=plan, daa_cfg=DaaConfig(thresholds="do365"))
+    climb = _guid(ll=3, rl=4, ul=0, dl=0, up=2.0, dn=-2.0)
+    none = _guid(alert=0)
+    for t in range(0, 30):
+        m.step(float(t), _state(1000.0, 0.0), climb)
+    seen = AircraftState(np.full(1, 2500.0), np.zeros(1), np.full(1, 1000.0), np.full(1, 55.0),
+                         np.full(1, 270.0 * DEG), np.zeros(1))  # 2.5 km east of the plan, flying west
+    ahead = AircraftState(np.zeros((1, 1)), np.full((1, 1), 3000.0), np.full((1, 1), 1000.0), np.full((1, 1), 60.0),
+                          np.full((1, 1), 180.0 * DEG), np.zeros((1, 1)))  # on the plan track, head-on
+    behind = AircraftState(np.zeros((1, 1)), np.full((1, 1), -6000.0), np.full((1, 1), 1000.0), np.full((1, 1), 60.0),
+                           np.full((1, 1), 180.0 * DEG), np.zeros((1, 1)))  # passed, flying away
+    m.step(30.0, seen, none, ahead)  # level-off (already level: nothing to send)
+    outs = [m.step(float(t), seen, none, ahead) for t in range(31, 60)]
+    assert not any(o.send[0] for o in outs)  # recovery due at 54 s, but the way back is not clear
+    out = m.step(60.0, seen, none, behind)
+    assert out.send[0] and out.cmd.trk[0] == pytest.approx(0.0) and out.cmd.vs[0] == 0.0
