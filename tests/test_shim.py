@@ -20,7 +20,7 @@ from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec, mavlink as d
 from daa_sil.fasttime import STREAM_DOWN, STREAM_UP, encounter_streams
 from daa_sil.link.delayline import fifo_release
 from daa_sil.link.endpoint import open_endpoint
-from daa_sil.link.shim import DelayShim, ShimConfig, control_ids, direction_seeds, run_shim
+from daa_sil.link.shim import DelayShim, ShimConfig, control_ids, run_shim
 
 LOCAL = "udp:127.0.0.1:0"
 
