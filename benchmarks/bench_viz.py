@@ -9,11 +9,12 @@ Usage::
 Prints, all measured in this run:
 
 0. **Where the time goes** (fresh interpreter, no SIL running): starting Python with numpy/pyarrow,
-   importing rerun, opening the file sink + static entities, the warm-up, then the part that is left
-   for the end of a run (read the step log, blueprint, ``send_columns`` of all steps, flush/close/
-   rename), and the interpreter exit. ``daa-sil run --rrd`` does everything up to the warm-up in a
-   helper process scheduled SCHED_IDLE while the SIL plays, and hands it the step log the moment the
-   vehicle exits, so the END part overlaps with stopping the shim and the GCS.
+   importing rerun, opening the file sink + static entities, then the part that is left for the end
+   of a run (read the step log, blueprint, ``send_columns`` of all steps, flush/close/rename), and
+   the interpreter exit. ``daa-sil run --rrd`` starts a helper process (SCHED_IDLE) once the SIL
+   processes are ready, which does everything before the END lines while the SIL plays, and hands
+   it the step log the moment the vehicle exits, so the END part overlaps with stopping the shim
+   and the GCS.
 1. **Lockstep SIL**: wall time of ``daa-sil run SCENARIO`` without and with ``--rrd``, in interleaved
    pairs (the order inside a pair alternates), as seen by the caller (process start to exit). Prints
    each pair, the median of the per-pair ratios and their spread (min..max), the median of the wall
@@ -54,8 +55,6 @@ import rerun, rerun.blueprint
 mark("import rerun")
 logger = viz.EncounterLogger(viz.SinkOptions(rrd=sys.argv[2], overwrite=True), encounter_id=0, defer_blueprint=True)
 mark("open file sink + static entities")
-viz._warm_up(logger.th)
-mark("warm-up (first-call costs)")
 table, _ = viz.select_encounter(read_steplog(sys.argv[1]))
 center, extent = viz.focus(table)
 mark("END: read step log + camera target")

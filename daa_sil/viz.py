@@ -21,10 +21,10 @@ API
 ``log_steplog(table, sinks, encounter_id=None, preset="do365") -> Path | None``
     Convert a step log (one encounter, or pick one with ``encounter_id``) into the sinks.
 ``BackgroundRecorder(sinks, preset, encounter_id)`` / ``.submit(steplog)`` / ``.finish(steplog)`` / ``.abort()``
-    What ``daa-sil run --rrd/--spawn-viewer`` uses: a helper process, started with the run and
-    scheduled SCHED_IDLE, imports Rerun, opens the sinks and logs the static parts while the SIL
-    plays; given the step log it logs it (same emitter as ``log_steplog``), sends the blueprint and
-    moves the ``.rrd`` into place. Abort/Ctrl-C/owner gone: no ``.rrd`` and no temporary file.
+    What ``daa-sil run --rrd/--spawn-viewer`` uses: a helper process, started once the SIL processes
+    are ready and scheduled SCHED_IDLE, imports Rerun, opens the sinks and logs the static parts
+    while the SIL plays; given the step log it logs it (same emitter as ``log_steplog``), sends the
+    blueprint and moves the ``.rrd`` into place. Abort, Ctrl-C, owner gone: no ``.rrd``, no temp file.
 ``log_waitmap(rec, waitmap, vi=, vh=, theta=)``
     A wait-map slice as a 3-D point cloud over (dX, dY, d_h) coloured by wait time.
 ``blueprint(...)``
@@ -1051,8 +1051,8 @@ class BackgroundRecorder:
     """Prepare a recording in a helper process while a SIL run plays; log its step log when it ends.
 
     The expensive, run-independent part (starting Python, importing Rerun, opening the sinks,
-    spawning/connecting a viewer, the static entities, a warm-up) happens in a separate process
-    started with the run, scheduled ``SCHED_IDLE`` (only on cycles the run leaves idle; ``nice`` +10
+    spawning/connecting a viewer, the static entities) happens in a separate process started
+    while the run plays, scheduled ``SCHED_IDLE`` (only on cycles the run leaves idle; ``nice`` +10
     where that is not available), so it overlaps with the run and never touches the control loop
     (other processes, other GIL). :meth:`finish` hands the helper the step log; it logs it with
     ``send_columns`` (same :class:`_Emitter` as every other path, so the same entities and steps),
@@ -1193,44 +1193,6 @@ class BackgroundRecorder:
             self.tmp_path.unlink(missing_ok=True)
 
 
-def _warm_up(th: Thresholds) -> None:
-    """Run the finish path once on two synthetic rows into a throw-away in-memory recording, so the
-    real finish pays no first-call costs (Parquet reader, Arrow kernels, Rerun's column builders)."""
-    import io
-
-    import pyarrow.parquet as pq
-
-    from .steplog import STEP_SCHEMA
-
-    rr = _rr()
-    one = {"encounter_id": 0, "t": 0.0, "own_x": 0.0, "own_y": 0.0, "own_z": 1000.0, "own_gs": 50.0,
-           "own_trk_deg": 0.0, "own_vs": 0.0, "intr_x": [0.0], "intr_y": [5000.0], "intr_z": [1000.0],
-           "intr_gs": [50.0], "intr_trk_deg": [180.0], "intr_vs": [0.0], "range_m": [5000.0], "hmd_m": [0.0],
-           "dh_m": [0.0], "tau_mod_s": [40.0], "alert_level": [2], "wcv": [False], "decision": "pilot",
-           "rule": "-", "authority": "pilot", "wait_s": 5.0, "projl": False, "pilot_cmd_received": True,
-           "pilot_cmd_age_s": 4.0, "sm_pilot": 1.0, "sm_exec": 1.0, "cmd_trk_deg": 0.0, "cmd_vs": 0.0,
-           "cmd_gs": 50.0, "pilot_trk_deg": 0.0, "pilot_vs": 0.0, "pilot_gs": 50.0, "daa_trk_deg": 30.0,
-           "daa_vs": 0.0, "daa_gs": 50.0, "pilot_axis": "horizontal", "pilot_dir": "right",
-           "exec_axis": "horizontal", "exec_dir": "right", "delay_up_s": 4.0, "delay_down_s": 4.0,
-           "lowc": True, "nmac": False, "bands_trk_lo_deg": [350.0], "bands_trk_hi_deg": [10.0],
-           "bands_trk_region": ["near"]}
-    rows = [dict(one, step=k, t=float(k), decision=d) for k, d in enumerate(("pilot", "wait"))]
-    buf = io.BytesIO()
-    pq.write_table(pa.Table.from_pylist(rows, schema=STEP_SCHEMA), buf)
-    buf.seek(0)
-    table, _ = select_encounter(pq.ParquetFile(buf).read())
-    focus(table)
-    warm = rr.RecordingStream("daa_sil_warm_up")
-    mem = warm.memory_recording()
-    try:
-        warm.send_blueprint(blueprint([0.0, 0.0, 0.0], 6000.0))
-        _Emitter(warm, th).emit(StepColumns.from_table(table))
-        warm.flush()
-        mem.drain_as_bytes()
-    finally:
-        warm.disconnect()
-
-
 def _set_idle_priority(pid: int, nice: int) -> bool:
     """Run ``pid`` only on cycles nothing else wants: SCHED_IDLE where available (a waking SIL
     process preempts it at once, which matters for lockstep's many short hops), else ``nice``.
@@ -1292,11 +1254,6 @@ def recorder_main(argv: "list[str] | None" = None) -> int:
 
         logger = EncounterLogger(sinks, preset=args.get("preset"), encounter_id=args.get("encounter_id"),
                                  defer_blueprint=True)
-        if logger.enabled:
-            try:
-                _warm_up(logger.th)
-            except Exception:  # only a speed-up
-                pass
         print("READY", flush=True)
         line = sys.stdin.readline()
         if not line.strip():  # the owner went away or aborted

@@ -373,18 +373,18 @@ def run_sil(opts: RunOptions) -> dict:
         stale.unlink(missing_ok=True)
     key_args = ["--key", str(opts.key)] if opts.key else []
     clock_args = ["--clock", opts.clock] + (["--speed", f"{opts.speed:g}"] if opts.clock == "realtime" else [])
-    recorder = _start_recorder(opts, sc)  # prepares Rerun in a helper process while the run plays
+    recorders: list = []  # the Rerun helper, started by _play once the processes are ready
     try:
-        return _play(opts, sc, out, steplog, key_args, clock_args, recorder)
+        return _play(opts, sc, out, steplog, key_args, clock_args, recorders)
     finally:
-        if recorder is not None:
-            recorder.abort()  # no-op after finish; otherwise kills the helper and removes its temp file
+        for r in recorders:
+            r.abort()  # no-op after finish; otherwise kills the helper and removes its temp file
 
 
 def _start_recorder(opts: RunOptions, sc):
     """A :class:`daa_sil.viz.BackgroundRecorder` for ``--rrd`` / ``--spawn-viewer`` (None without them).
 
-    A bad ``--rrd`` path raises OutputError here, before any process starts.
+    The ``--rrd`` path was checked by :func:`_check_args` before any process started.
     """
     if not (opts.rrd or opts.spawn_viewer):
         return None
@@ -407,9 +407,11 @@ def _finish_recorder(recorder, steplog: Path) -> "Path | None":
         return recorder.finish(steplog)
 
 
-def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, recorder) -> dict:
+def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, slot: list) -> dict:
     from ..io import atomic_write_json
     from ..steplog import read_steplog
+
+    recorder = None
 
     t0 = time.monotonic()
     interrupted = False
@@ -434,6 +436,11 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
             pg.wait_ready(shim)
             pg.wait_ready(gcs)
             pg.wait_ready(vehicle, timeout=READY_TIMEOUT_S + 120.0)  # may build the wait map first
+            # the Rerun helper starts now, not at launch: the three processes' start-up is CPU-bound
+            # (a helper importing Rerun then slowed it measurably), the lockstep play leaves a core idle
+            recorder = _start_recorder(opts, sc)
+            if recorder is not None:
+                slot.append(recorder)
             _say(opts, f"playing {sc.duration_s:g} s of {sc.name} ({opts.clock})")
             rc = vehicle.proc.wait()
             if recorder is not None and rc == 0 and steplog.exists():
