@@ -1,7 +1,7 @@
 """Benchmark: DAA bands + one agent step for N encounters x 1 intruder in one batched call,
 versus the same code called one encounter at a time (ratio measured in the same run).
 
-    python benchmarks/bench_daa.py [--n 10000] [--loop 200]
+    python benchmarks/bench_daa.py [--n 10000] [--loop 200] [--repeat 5]
 
 Encounters: ownship 55 m/s at the origin, one intruder 3-8 km away, converging at random angles
 (mostly alerting), with a random pilot command arriving in half of them.
@@ -10,6 +10,7 @@ Encounters: ownship 55 m/s at the origin, one intruder 3-8 km away, converging a
 from __future__ import annotations
 
 import argparse
+import statistics
 import time
 
 import numpy as np
@@ -50,15 +51,22 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=10000, help="encounters in the batched call")
     ap.add_argument("--loop", type=int, default=200, help="encounters timed one at a time")
+    ap.add_argument("--repeat", type=int, default=5, help="timed batched calls (median reported)")
     args = ap.parse_args()
     cfg = DaaConfig()
     policy = policy_for_group("ID-2")
     lookup = lambda o, i: np.full(o.shape[0], 6.0)  # noqa: E731
     own, intr, pilot = make_batch(args.n)
-    step(own[:10], intr[:10], sub_pilot(pilot, slice(0, 10)), cfg, policy, lookup)  # warm-up
-    t0, c0 = time.perf_counter(), time.process_time()
+    # warm-up at full size: the first call pays the first-touch page faults of its working arrays;
+    # the fast-time loop calls this every step, so the steady state is the relevant figure
     _, dec, _ = step(own, intr, pilot, cfg, policy, lookup)
-    t_batch, c_batch = time.perf_counter() - t0, time.process_time() - c0
+    walls, cpus = [], []
+    for _ in range(args.repeat):
+        t0, c0 = time.perf_counter(), time.process_time()
+        step(own, intr, pilot, cfg, policy, lookup)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    t_batch, c_batch = statistics.median(walls), statistics.median(cpus)
     rate_batch = args.n / t_batch
     t0, c0 = time.perf_counter(), time.process_time()
     for i in range(args.loop):
@@ -67,12 +75,12 @@ def main() -> None:
     t_loop, c_loop = time.perf_counter() - t0, time.process_time() - c0
     rate_loop = args.loop / t_loop
     active = dec["active"].mean()
-    print(f"batched: {args.n} encounters x 1 intruder in {t_batch:.3f} s = {rate_batch:,.0f} encounter-steps/s "
-          f"({active:.0%} active)")
+    print(f"batched: {args.n} encounters x 1 intruder, median of {args.repeat} calls {t_batch:.3f} s "
+          f"(min {min(walls):.3f}, max {max(walls):.3f}) = {rate_batch:,.0f} encounter-steps/s ({active:.0%} active)")
     print(f"one at a time: {args.loop} encounters in {t_loop:.3f} s = {rate_loop:,.0f} encounter-steps/s")
     print(f"speed-up batched / one-at-a-time: {rate_batch / rate_loop:.1f}x (wall clock)")
     print(f"CPU time: batched {args.n / c_batch:,.0f} encounter-steps/s, one at a time {args.loop / c_loop:,.0f}/s, "
-          f"ratio {(args.n / c_batch) / (args.loop / c_loop):.1f}x")
+          f"ratio {(args.n / c_batch) / (args.loop / c_loop):.1f}x  (targets: >= 20,000/s, >= 20x)")
 
 
 if __name__ == "__main__":
