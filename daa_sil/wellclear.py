@@ -136,6 +136,46 @@ def wcv(s, v, th: "Thresholds | str | None" = None) -> np.ndarray:
     return horiz & vert
 
 
+def vertical_window(sz, vz, t0, t1, zthr: float, tcoa: float) -> tuple[np.ndarray, np.ndarray]:
+    """Times ``[lo, hi]`` within ``[t0, t1]`` (s) when the vertical WCV condition holds for
+    ``sz + t vz`` (m, m/s): ``|z| <= ZTHR`` or converging with ``t_coa <= TCOA``; empty if lo > hi."""
+    avz = np.abs(vz)
+    vz0 = avz < _EPS
+    vz_s = np.where(vz0, 1.0, vz)
+    sgn = np.sign(vz_s)
+    t_ent = (-sgn * np.maximum(zthr, avz * tcoa) - sz) / vz_s
+    t_ext = (sgn * zthr - sz) / vz_s
+    inside_z = np.abs(sz) <= zthr
+    lo = np.where(vz0, np.where(inside_z, t0, np.inf), np.maximum(t0, t_ent))
+    hi = np.where(vz0, np.where(inside_z, t1, -np.inf), np.minimum(t1, t_ext))
+    return lo, hi
+
+
+def horizontal_window(px, py, vx, vy, length, dthr: float, tthr: float) -> tuple[np.ndarray, np.ndarray]:
+    """Times ``[lo, hi]`` within ``[0, length]`` (s) when the horizontal WCV condition holds for
+    ``p + t v`` (m, m/s): ``r <= DTHR``, or closing with ``d_cpa <= DTHR`` and ``tau_mod <= TTHR``
+    (closed form, DAIDALUS ``WCV_tvar``); ``(inf, -inf)`` when it never holds."""
+    D, TT = dthr, tthr
+    a = vx * vx + vy * vy
+    p2 = px * px + py * py
+    pv = px * vx + py * vy
+    moving = a >= _EPS
+    a_s = np.where(moving, a, 1.0)
+    inside_d = p2 <= D * D
+    t_cexit = (-pv + np.sqrt(np.maximum(pv * pv - a * (p2 - D * D), 0.0))) / a_s
+    b = 2.0 * pv + TT * a
+    c = p2 + TT * pv - D * D
+    disc = b * b - 4.0 * a * c
+    t_tau = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a_s)
+    delta = D * D * a - (px * vy - py * vx) ** 2
+    case_a = ~moving & inside_d
+    case_b = moving & inside_d
+    case_c = moving & ~inside_d & (pv < 0) & (disc >= 0) & (delta >= 0) & (t_tau <= length)
+    hlo = np.where(case_a | case_b, 0.0, np.where(case_c, np.maximum(0.0, t_tau), np.inf))
+    hhi = np.where(case_a, length, np.where(case_b | case_c, np.minimum(length, t_cexit), -np.inf))
+    return hlo, hhi
+
+
 def violation_interval(s, v, th: "Thresholds | str | None" = None, t0=0.0, t1=180.0
                        ) -> tuple[np.ndarray, np.ndarray]:
     """Exact interval ``[t_in, t_out]`` within ``[t0, t1]`` (s) during which the WCV predicate holds
@@ -151,41 +191,13 @@ def violation_interval(s, v, th: "Thresholds | str | None" = None, t0=0.0, t1=18
     D, H, TT, TC = th.dthr, th.zthr, th.tthr, th.tcoa
     sz, vz = s[..., 2], v[..., 2]
 
-    # -- vertical window ------------------------------------------------------------------
-    vz0 = np.abs(vz) < _EPS
-    vz_s = np.where(vz0, 1.0, vz)
-    sgn = np.sign(vz_s)
-    h_ent = np.maximum(H, np.abs(vz) * TC)
-    t_ent = (-sgn * h_ent - sz) / vz_s
-    t_ext = (sgn * H - sz) / vz_s
-    inside_z = np.abs(sz) <= H
-    vlo = np.where(vz0, np.where(inside_z, B, np.inf), np.maximum(B, t_ent))
-    vhi = np.where(vz0, np.where(inside_z, T, -np.inf), np.minimum(T, t_ext))
+    vlo, vhi = vertical_window(sz, vz, B, T, H, TC)
     ok = vlo <= vhi
     t_lo = np.where(ok, vlo, 0.0)
     L = np.where(ok, vhi - vlo, 0.0)
-
-    # -- horizontal interval on [0, L] from p = s + t_lo v -------------------------------------
     px = s[..., 0] + t_lo * v[..., 0]
     py = s[..., 1] + t_lo * v[..., 1]
-    vx, vy = v[..., 0], v[..., 1]
-    a = vx * vx + vy * vy
-    p2 = px * px + py * py
-    pv = px * vx + py * vy
-    moving = a >= _EPS
-    a_s = np.where(moving, a, 1.0)
-    inside_d = p2 <= D * D
-    t_cexit = (-pv + np.sqrt(np.maximum(pv * pv - a * (p2 - D * D), 0.0))) / a_s
-    b = 2.0 * pv + TT * a
-    c = p2 + TT * pv - D * D
-    disc = b * b - 4.0 * a * c
-    t_tau = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a_s)
-    delta = D * D * a - (px * vy - py * vx) ** 2
-    case_a = ~moving & inside_d
-    case_b = moving & inside_d
-    case_c = moving & ~inside_d & (pv < 0) & (disc >= 0) & (delta >= 0) & (t_tau <= L)
-    hlo = np.where(case_a | case_b, 0.0, np.where(case_c, np.maximum(0.0, t_tau), np.inf))
-    hhi = np.where(case_a, L, np.where(case_b | case_c, np.minimum(L, t_cexit), -np.inf))
+    hlo, hhi = horizontal_window(px, py, v[..., 0], v[..., 1], L, D, TT)
 
     # a single-instant vertical window: evaluate the predicate there (as DAIDALUS does)
     point = ok & (L == 0)

@@ -29,8 +29,8 @@ def _components(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds) -> tuple[np.ndarray, np.ndarray]:
     """:func:`daa_sil.wellclear.violation_interval` over ``[0, length]`` for 1-D component arrays.
 
-    The same closed form, operation for operation, so the results are identical; it is faster
-    because (1) the components are contiguous arrays instead of strided views of ``(..., 3)`` arrays
+    The same window functions (:func:`~daa_sil.wellclear.vertical_window`,
+    :func:`~daa_sil.wellclear.horizontal_window`), so the results are identical; it is faster because (1) the components are contiguous arrays instead of strided views of ``(..., 3)`` arrays
     and (2) the horizontal part, which is most of the work, runs only where the vertical window is
     not empty (elsewhere the answer is ``(inf, -inf)`` in both).
     """
@@ -39,41 +39,17 @@ def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds) -> tuple[np.nda
     t_in = np.full(n, np.inf)
     t_out = np.full(n, -np.inf)
     # -- vertical window (wellclear.violation_interval, t0 = 0, t1 = length) --------------------
-    avz = np.abs(vz)
-    vz0 = avz < wc._EPS
-    vz_s = np.where(vz0, 1.0, vz)
-    sgn = np.sign(vz_s)
-    t_ent = (-sgn * np.maximum(H, avz * TC) - sz) / vz_s
-    t_ext = (sgn * H - sz) / vz_s
-    inside_z = np.abs(sz) <= H
-    vlo = np.where(vz0, np.where(inside_z, 0.0, np.inf), np.maximum(0.0, t_ent))
-    vhi = np.where(vz0, np.where(inside_z, length, -np.inf), np.minimum(length, t_ext))
+    vlo, vhi = wc.vertical_window(sz, vz, 0.0, length, H, TC)
     idx = np.flatnonzero(vlo <= vhi)
     if not idx.size:
         return t_in, t_out
     t_lo = vlo[idx]
     L = vhi[idx] - t_lo
     hx, hy = vx[idx], vy[idx]
-    # -- horizontal interval on [0, L] from p = s + t_lo v ---------------------------------------
+    # -- horizontal interval on [0, L] from p = s + t_lo v, only inside the vertical window -------
     px = sx[idx] + t_lo * hx
     py = sy[idx] + t_lo * hy
-    a = hx * hx + hy * hy
-    p2 = px * px + py * py
-    pv = px * hx + py * hy
-    moving = a >= wc._EPS
-    a_s = np.where(moving, a, 1.0)
-    inside_d = p2 <= D * D
-    t_cexit = (-pv + np.sqrt(np.maximum(pv * pv - a * (p2 - D * D), 0.0))) / a_s
-    b = 2.0 * pv + TT * a
-    c = p2 + TT * pv - D * D
-    disc = b * b - 4.0 * a * c
-    t_tau = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a_s)
-    delta = D * D * a - (px * hy - py * hx) ** 2
-    case_a = ~moving & inside_d
-    case_b = moving & inside_d
-    case_c = moving & ~inside_d & (pv < 0) & (disc >= 0) & (delta >= 0) & (t_tau <= L)
-    hlo = np.where(case_a | case_b, 0.0, np.where(case_c, np.maximum(0.0, t_tau), np.inf))
-    hhi = np.where(case_a, L, np.where(case_b | case_c, np.minimum(L, t_cexit), -np.inf))
+    hlo, hhi = wc.horizontal_window(px, py, hx, hy, L, D, TT)
     point = L == 0
     if np.any(point):  # a single-instant vertical window: the predicate there (as DAIDALUS does)
         j = np.flatnonzero(point)
