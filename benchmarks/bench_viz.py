@@ -11,10 +11,10 @@ Prints, all measured in this run:
 0. **Where the time goes** (fresh interpreter, no SIL running): starting Python with numpy/pyarrow,
    importing rerun, opening the file sink + static entities, then the part that is left for the end
    of a run (read the step log, blueprint, ``send_columns`` of all steps, flush/close/rename), and
-   the interpreter exit. ``daa-sil run --rrd`` starts a helper process (SCHED_IDLE) once the SIL
-   processes are ready, which does everything before the END lines while the SIL plays, and hands
-   it the step log the moment the vehicle exits, so the END part overlaps with stopping the shim
-   and the GCS.
+   the interpreter exit. ``daa-sil run --rrd`` forks its helper at launch (so the helper inherits
+   Python, numpy and pyarrow: no start-up, no exit), lets it import rerun and log the static parts
+   at SCHED_IDLE once the SIL processes are ready, and hands it the step log the moment the vehicle
+   exits, so the END part overlaps with stopping the shim and the GCS.
 1. **Lockstep SIL**: wall time of ``daa-sil run SCENARIO`` without and with ``--rrd``, in interleaved
    pairs (the order inside a pair alternates), as seen by the caller (process start to exit). Prints
    each pair, the median of the per-pair ratios and their spread (min..max), the median of the wall

@@ -6,6 +6,8 @@ import os
 import shutil
 import socket
 import subprocess
+import sys
+import time
 import urllib.request
 import warnings
 from pathlib import Path
@@ -19,6 +21,7 @@ rr = pytest.importorskip("rerun")
 from daa_sil import viz  # noqa: E402
 from daa_sil.errors import OutputError  # noqa: E402
 from daa_sil.thresholds import get_thresholds  # noqa: E402
+from daa_sil.viz_recorder import BackgroundRecorder  # noqa: E402
 from viz_encounter import make_steplog, records  # noqa: E402
 
 NS = 1_000_000_000
@@ -359,7 +362,9 @@ def test_headless_web_viewer_screenshot(tmp_path, table):
 
 
 # --------------------------------------------------------------------------------------------
-# BackgroundRecorder: the helper process behind ``daa-sil run --rrd``
+# BackgroundRecorder: the helper process behind ``daa-sil run --rrd``. This pytest process has imported
+# Rerun, so it may not fork: mode="exec" here; the forked helper is tested from a fresh interpreter
+# (and by tests/test_viz_cli.py's ``daa-sil run --rrd`` cases).
 
 
 def _steplog_file(tmp_path, table) -> Path:
@@ -375,13 +380,14 @@ def _wait_ready(recorder, timeout_s: float = 60.0) -> None:
 def test_background_recorder_abort_and_owner_gone_leave_nothing(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
-    a = viz.BackgroundRecorder(viz.SinkOptions(rrd=out / "a.rrd"))
+    a = BackgroundRecorder(viz.SinkOptions(rrd=out / "a.rrd"), prepare_now=True)
+    assert a.mode == "exec", "never fork a process that already runs Rerun"
     _wait_ready(a)
     assert a.tmp_path.exists(), "the helper writes into its temporary file"
     a.abort()
     assert a.proc.returncode is not None
     # the owner dies (its end of the pipe closes): the helper removes its file and exits by itself
-    b = viz.BackgroundRecorder(viz.SinkOptions(rrd=out / "b.rrd"))
+    b = BackgroundRecorder(viz.SinkOptions(rrd=out / "b.rrd"), prepare_now=True, mode="exec")
     _wait_ready(b)
     b.proc.stdin.close()
     assert b.proc.wait(timeout=60) == 0
@@ -389,11 +395,41 @@ def test_background_recorder_abort_and_owner_gone_leave_nothing(tmp_path):
     assert list(out.iterdir()) == []
 
 
+def test_forked_helper_cleans_up_when_its_owner_dies(tmp_path):
+    """A fresh interpreter forks the helper, lets it prepare, then dies without a word."""
+    script = (
+        "import os, sys\n"
+        "from daa_sil.viz import SinkOptions\n"
+        "from daa_sil.viz_recorder import BackgroundRecorder\n"
+        "r = BackgroundRecorder(SinkOptions(rrd=sys.argv[1]), prepare_now=True)\n"
+        "assert r.mode == 'fork', r.mode\n"
+        "assert r.ready.wait(60)\n"
+        "print(r.proc.pid, flush=True)\n"
+        "os._exit(0)\n")
+    cp = subprocess.run([sys.executable, "-c", script, str(tmp_path / "f.rrd")], capture_output=True, text=True,
+                        timeout=120)
+    assert cp.returncode == 0, cp.stderr
+    pid = int(cp.stdout.split()[0])
+    deadline = time.monotonic() + 30
+    while _alive(pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _alive(pid), "the orphaned helper exits on EOF"
+    assert list(tmp_path.iterdir()) == [], "and removes its temporary file"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
 def test_background_recorder_killed_helper_is_a_warning(tmp_path, table):
     src = _steplog_file(tmp_path, table)
     out = tmp_path / "out"
     out.mkdir()
-    recorder = viz.BackgroundRecorder(viz.SinkOptions(rrd=out / "k.rrd"))
+    recorder = BackgroundRecorder(viz.SinkOptions(rrd=out / "k.rrd"), prepare_now=True)
     _wait_ready(recorder)
     os.killpg(recorder.proc.pid, 9)
     recorder.proc.wait(timeout=30)
@@ -401,4 +437,4 @@ def test_background_recorder_killed_helper_is_a_warning(tmp_path, table):
         assert recorder.finish(src) is None
     assert list(out.iterdir()) == [], "neither the .rrd nor the temporary file"
     with pytest.raises(OutputError, match="missing or not writable"):
-        viz.BackgroundRecorder(viz.SinkOptions(rrd=tmp_path / "no" / "dir" / "x.rrd"))
+        BackgroundRecorder(viz.SinkOptions(rrd=tmp_path / "no" / "dir" / "x.rrd"))

@@ -203,6 +203,8 @@ def test_sil_run_rrd_equals_steplog_conversion(tmp_path):
     assert "daa-sil: warning: --spawn-viewer needs a display" in cp.stderr and "Traceback" not in cp.stderr
     result = json.loads(cp.stdout)
     assert result["files"]["rrd"] == str(rrd)
+    if sys.platform.startswith("linux"):
+        assert result["rrd_timing"]["helper"] == "fork", "the orchestrator forks its helper before any thread"
     assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [], "no temporary file left"
     reader = rr.chunk.RrdReader(rrd)
     assert len(reader.recordings()) == 1 and reader.recordings()[0].recording_id == "encounter-0"

@@ -373,26 +373,28 @@ def run_sil(opts: RunOptions) -> dict:
         stale.unlink(missing_ok=True)
     key_args = ["--key", str(opts.key)] if opts.key else []
     clock_args = ["--clock", opts.clock] + (["--speed", f"{opts.speed:g}"] if opts.clock == "realtime" else [])
-    recorders: list = []  # the Rerun helper, started by _play once the processes are ready
+    recorder = _start_recorder(opts, sc)  # forked now, before any thread; prepares once the SIL is ready
     try:
-        return _play(opts, sc, out, steplog, key_args, clock_args, recorders)
+        return _play(opts, sc, out, steplog, key_args, clock_args, recorder)
     finally:
-        for r in recorders:
-            r.abort()  # no-op after finish; otherwise kills the helper and removes its temp file
+        if recorder is not None:
+            recorder.abort()  # no-op after finish; otherwise kills the helper and removes its temp file
 
 
 def _start_recorder(opts: RunOptions, sc):
-    """A :class:`daa_sil.viz.BackgroundRecorder` for ``--rrd`` / ``--spawn-viewer`` (None without them).
-
-    The ``--rrd`` path was checked by :func:`_check_args` before any process started.
+    """A :class:`daa_sil.viz_recorder.BackgroundRecorder` for ``--rrd`` / ``--spawn-viewer`` (None
+    without them): an idle helper process now; :func:`_play` lets it prepare once the SIL processes are
+    ready and hands it the step log when the vehicle exits. The ``--rrd`` path was checked by
+    :func:`_check_args` before anything started.
     """
     if not (opts.rrd or opts.spawn_viewer):
         return None
-    from .. import viz
+    from ..viz import SinkOptions
+    from ..viz_recorder import BackgroundRecorder
 
     try:
-        return viz.BackgroundRecorder(viz.SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, overwrite=True),
-                                      preset=sc.thresholds, encounter_id=0)  # the vehicle logs encounter 0
+        return BackgroundRecorder(SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, overwrite=True),
+                                  preset=sc.thresholds, encounter_id=0)  # the vehicle logs encounter 0
     except OSError as exc:  # the helper process cannot start: the run goes on without a recording
         print(f"daa-sil: warning: cannot start the Rerun recorder ({exc.strerror or exc}); no recording",
               file=sys.stderr, flush=True)
@@ -407,11 +409,10 @@ def _finish_recorder(recorder, steplog: Path) -> "Path | None":
         return recorder.finish(steplog)
 
 
-def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, slot: list) -> dict:
+def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, recorder) -> dict:
     from ..io import atomic_write_json
     from ..steplog import read_steplog
 
-    recorder = None
 
     t0 = time.monotonic()
     interrupted = False
@@ -436,11 +437,10 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
             pg.wait_ready(shim)
             pg.wait_ready(gcs)
             pg.wait_ready(vehicle, timeout=READY_TIMEOUT_S + 120.0)  # may build the wait map first
-            # the Rerun helper starts now, not at launch: the three processes' start-up is CPU-bound
-            # (a helper importing Rerun then slowed it measurably), the lockstep play leaves a core idle
-            recorder = _start_recorder(opts, sc)
             if recorder is not None:
-                slot.append(recorder)
+                # now, not at launch: the three processes' start-up is CPU-bound (a helper importing
+                # Rerun then slowed it measurably), the lockstep play leaves a core idle
+                recorder.prepare()
             _say(opts, f"playing {sc.duration_s:g} s of {sc.name} ({opts.clock})")
             rc = vehicle.proc.wait()
             if recorder is not None and rc == 0 and steplog.exists():
@@ -476,8 +476,8 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
             result["interrupted"] = True
         result["files"]["rrd"] = str(rrd) if rrd else None
         result["rrd_timing"] = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in (
-            ("prepared_before_end", recorder.prepared_in_time), ("finish_s", recorder.finish_s),
-            ("wait_s", recorder.wait_s))}
+            ("helper", recorder.mode), ("prepared_before_end", recorder.prepared_in_time),
+            ("finish_s", recorder.finish_s), ("wait_s", recorder.wait_s))}
     atomic_write_json(out / "result.json", result)
     if interrupted:
         raise KeyboardInterrupt
