@@ -75,15 +75,21 @@ async def test_lockstep_tick_commands_then_ack_and_repeated_tick(tmp_path):
     assert [(r["t"], r["seq"], r["kind"]) for r in rows] == [(2.0, 1, "scripted"), (3.0, 2, "scripted")]
 
 
-@pytest.mark.asyncio
-async def test_gcs_builds_what_the_pilot_sees_from_telemetry():
-    from vehicle import telemetry as T
-
+async def _gcs_with_fake_vehicle():
+    """A started lockstep GCS on loopback and a bare endpoint playing the vehicle."""
     sc = parse_scenario(SCENARIO)
     veh = await open_endpoint(MavCodec(1, 1), "udp:127.0.0.1:0")
     node = GcsNode(sc, GcsOptions(vehicle=f"udp:127.0.0.1:{veh.local_address[1]}", listen="udp:127.0.0.1:0",
                                   clock="lockstep", display=False))
     await node.start()
+    return sc, veh, node
+
+
+@pytest.mark.asyncio
+async def test_gcs_builds_what_the_pilot_sees_from_telemetry():
+    from vehicle import telemetry as T
+
+    sc, veh, node = await _gcs_with_fake_vehicle()
     try:
         own = T.Kin(100.0, 2000.0, 1000.0, 55.0, math.radians(10.0), 1.5)
         intr = T.Kin(-300.0, 6000.0, 1100.0, 60.0, math.radians(190.0), -2.0)
@@ -109,11 +115,7 @@ async def test_gcs_ignores_non_finite_and_older_telemetry():
     replace what the pilot sees (nor the ADS-B and alert that ride with it); each is counted."""
     from vehicle import telemetry as T
 
-    sc = parse_scenario(SCENARIO)
-    veh = await open_endpoint(MavCodec(1, 1), "udp:127.0.0.1:0")
-    node = GcsNode(sc, GcsOptions(vehicle=f"udp:127.0.0.1:{veh.local_address[1]}", listen="udp:127.0.0.1:0",
-                                  clock="lockstep", display=False))
-    await node.start()
+    sc, veh, node = await _gcs_with_fake_vehicle()
     try:
         own = T.Kin(100.0, 2000.0, 1000.0, 55.0, math.radians(10.0), 1.5)
         intr = T.Kin(-300.0, 6000.0, 1100.0, 60.0, math.radians(190.0), -2.0)
