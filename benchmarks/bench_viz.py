@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/bench_viz.py                              # scenarios/head_on.yaml, 6 pairs
+    python benchmarks/bench_viz.py                              # scenarios/head_on.yaml, 10 pairs
     python benchmarks/bench_viz.py --scenario scenarios/crossing_left.yaml --repeat 4
     python benchmarks/bench_viz.py --skip-sil                    # only [0] and [3]
 
@@ -199,7 +199,7 @@ def _any_steplog(tmp: Path) -> Path:
 def main(argv: "list[str] | None" = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", type=Path, default=ROOT / "scenarios" / "head_on.yaml")
-    ap.add_argument("--repeat", type=int, default=6, help="interleaved pairs (default 6)")
+    ap.add_argument("--repeat", type=int, default=10, help="interleaved pairs (default 10)")
     ap.add_argument("--skip-sil", action="store_true", help="only the profile [0] and fast-time [3]")
     a = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as d:
