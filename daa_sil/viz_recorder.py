@@ -42,7 +42,8 @@ from pathlib import Path
 from typing import IO
 
 from .thresholds import PRESETS, Thresholds, get_thresholds
-from .viz import EncounterLogger, SinkOptions, VizWarning, _url_host_port, _warn, check_rrd_path, focus, select_encounter
+from .viz import (EncounterLogger, SinkOptions, VizWarning, _url_host_port, _warn, check_rrd_path, focus,
+                  select_encounter)
 
 #: fallback priority (nice) where SCHED_IDLE is not available
 RECORDER_NICE = 10
@@ -334,8 +335,8 @@ def _serve(args: dict, requests: IO[str], replies: IO[str]) -> int:
             logger.send_blueprint(center, extent)  # type: ignore[union-attr]
             logger.log_table(table)  # type: ignore[union-attr]
             path = logger.close()  # type: ignore[union-attr]
-            print("DONE " + json.dumps({"rrd": str(path) if path else None, "steps": logger.steps_logged}),  # type: ignore[union-attr]
-                  file=replies, flush=True)
+            done = {"rrd": str(path) if path else None, "steps": logger.steps_logged}  # type: ignore[union-attr]
+            print("DONE " + json.dumps(done), file=replies, flush=True)
             break
         status = 0
     except Exception as exc:
