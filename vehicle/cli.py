@@ -24,6 +24,9 @@ EXAMPLES = """examples:
   # behind the delay shim, lockstep (what `daa-sil run` does), with a step log
   daa-vehicle scenarios/head_on.yaml --out udp:127.0.0.1:14601 --clock lockstep --steplog run.parquet
 
+  # each step's row to a local Rerun recorder as it happens (daa-sil run does this for live viewers)
+  daa-vehicle scenarios/head_on.yaml --live udp:127.0.0.1:9870
+
   # 10x real time, undelayed truth copy for QGroundControl on 14550
   daa-vehicle scenarios/crossing_left.yaml --out udp:127.0.0.1:14601 --speed 10 --tap udp:127.0.0.1:14550
 """
@@ -51,6 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steplog", type=Path, metavar="FILE", help="write the step log (Parquet) here")
     p.add_argument("--tick-timeout", type=float, default=10.0, metavar="S",
                    help="lockstep: wall seconds to wait for a SIM_TICK_ACK (default 10)")
+    p.add_argument("--live", default=None, metavar="udp:127.0.0.1:PORT",
+                   help="also send each step's step-log row, as soon as the step is done, to this loopback "
+                        "port (the Rerun recorder of `daa-sil run`); fire-and-forget, never slows the loop")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -70,8 +76,13 @@ def _options(args):
 
         key = load_key(args.key)
     tap = None if args.tap in (None, "", "none") else args.tap
+    live = None if args.live in (None, "", "none") else args.live
+    if live is not None:
+        from daa_sil.live import parse_live_address
+
+        parse_live_address(live)
     return VehicleOptions(out=args.out, listen=args.listen, tap=tap, clock=args.clock, speed=args.speed, key=key,
-                          steplog=args.steplog, tick_timeout_s=args.tick_timeout)
+                          steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live)
 
 
 async def _amain(args) -> int:
@@ -121,6 +132,8 @@ async def _amain(args) -> int:
     print(f"daa-vehicle: done, {node.stats.steps} steps; commands accepted {g.accepted}, dropped "
           f"{g.duplicate + g.older + g.future + g.invalid} (dup {g.duplicate}, older {g.older}, future {g.future}, "
           f"invalid {g.invalid}); packets dropped {st['dropped']}"
+          + (f"; live rows sent {node.live.stats.sent}, failed {node.live.stats.errors + node.live.stats.too_big}"
+             if node.live is not None else "")
           + (f"; step log {path}" if path else ""), flush=True)
     return 0
 

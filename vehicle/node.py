@@ -11,7 +11,8 @@ Per step ``k`` (``t_k = k`` s, ``docs/architecture.md`` "The step order"):
 
 Then ``OnboardCore.step(t_k, pilot input)`` decides, the telemetry for ``t_k`` is published (one
 datagram to the peer, and the same undelayed to the observer ``tap`` if set), a step-log row is
-kept, and truth advances. The step log is written atomically at the end, on Ctrl-C and on
+kept (and, with ``live``, sent at once to the Rerun recorder's loopback feed, fire-and-forget:
+:class:`daa_sil.live.LiveSender`), and truth advances. The step log is written atomically at the end, on Ctrl-C and on
 SIGTERM (:meth:`VehicleNode.write_steplog`).
 
 Hostile input: the endpoint/codec count and drop malformed, forged and replayed packets; the
@@ -63,6 +64,8 @@ class VehicleOptions:
     steplog: "Path | None" = None
     tick_timeout_s: float = 10.0
     tick_retry_s: float = 2.0
+    #: ``udp:127.0.0.1:PORT``: publish each step's step-log row there (:mod:`daa_sil.live`)
+    live: "str | None" = None
 
 
 @dataclass
@@ -99,6 +102,11 @@ class VehicleNode:
         self.authority = "pilot"
         self._acked = -1
         self._steplog_written = False
+        self.live = None
+        if opts.live:
+            from daa_sil.live import LiveSender
+
+            self.live = LiveSender(opts.live)
 
     # -- lifecycle -------------------------------------------------------------------------------
     async def start(self) -> None:
@@ -119,6 +127,8 @@ class VehicleNode:
     def close(self) -> None:
         if self.ep is not None:
             self.ep.close()
+        if self.live is not None:
+            self.live.close()
 
     # -- receiving -------------------------------------------------------------------------------
     def _is_tap(self, addr) -> bool:
@@ -268,6 +278,8 @@ class VehicleNode:
             self._drain()
             out = self.core.step(self.t)
             self.publish(self.t, out)
+            if self.live is not None:
+                self.live.send(self.core.rows[-1])  # non-blocking; failures are counted, never raised
             self.stats.steps = k + 1
             if on_step is not None:
                 on_step(self, out)
@@ -285,4 +297,6 @@ class VehicleNode:
                 "gate": json.dumps(self.gate.counters.__dict__, sort_keys=True),
                 "link": json.dumps(self.ep.stats() if self.ep else {}, sort_keys=True),
                 "vehicle": json.dumps({k: v for k, v in self.stats.__dict__.items() if k != "extra"}, sort_keys=True)}
+        if self.live is not None:
+            meta["live"] = json.dumps(self.live.stats.__dict__, sort_keys=True)
         return self.core.write_steplog(self.opts.steplog, meta)
