@@ -835,6 +835,8 @@ class EncounterLogger:
         self._closed = False
         self._aborted = False
         self._lock = threading.Lock()
+        #: (time.monotonic(), steps logged so far) after each batch of :meth:`log_step` rows was sent
+        self.emit_times: list[tuple[float, int]] = []
         bp = None
         if sinks is not None and sinks.enabled and not defer_blueprint:
             bp = blueprint(center, extent_m)
@@ -890,16 +892,23 @@ class EncounterLogger:
                 return
 
     def _drain(self) -> None:
-        batch = []
-        while self._queue:
-            batch.append(self._queue.popleft())
-        if not batch or self._failed:
-            return
-        try:
-            with self._lock:
+        with self._lock:  # pop and emit together: batches from two threads never interleave
+            batch = []
+            while self._queue:
+                batch.append(self._queue.popleft())
+            if not batch or self._failed:
+                return
+            try:
                 self._emitter.emit(StepColumns.from_records(batch))
-        except Exception as exc:
-            self._disable(f"Rerun logging stopped after an error: {type(exc).__name__}: {exc}")
+            except Exception as exc:
+                self._disable(f"Rerun logging stopped after an error: {type(exc).__name__}: {exc}")
+                return
+            self.emit_times.append((time.monotonic(), self._emitter.steps_logged))
+
+    def flush_queue(self) -> None:
+        """Log the rows queued by :meth:`log_step` now, in the calling thread (they keep their order)."""
+        if self._thread is not None:
+            self._drain()
 
     # batch ----------------------------------------------------------------------------------
     def log_table(self, table: "pa.Table | pa.RecordBatch") -> None:
@@ -928,15 +937,16 @@ class EncounterLogger:
         return 0 if self._emitter is None else self._emitter.steps_logged
 
     # closing ----------------------------------------------------------------------------------
-    def close(self, keep_serving: bool = False) -> "Path | None":
-        """Drain the queue, flush and disconnect; move the .rrd into place; return its path (None if not written)."""
+    def close(self, keep_serving: bool = False, commit: bool = True) -> "Path | None":
+        """Drain the queue, flush and disconnect; move the .rrd into place (not with ``commit=False``:
+        then the temporary file is removed); return its path (None if not written)."""
         if not self._closed:
             self._closed = True
             self._stop = True
             self._wake.set()
             if self._thread is not None:
                 self._thread.join()
-        return self._recording.close(keep_serving=keep_serving, commit=not self._aborted)
+        return self._recording.close(keep_serving=keep_serving, commit=commit and not self._aborted)
 
     def stop_serving(self) -> None:
         """Stop the web viewer started by this logger (if any)."""
@@ -1013,6 +1023,41 @@ def focus(table: pa.Table) -> tuple[list[float], float]:
             norm = float(np.linalg.norm(half))
             center = own[k] + (half if norm <= 1500.0 else half * (1500.0 / norm))
     return center.tolist(), 6000.0
+
+
+def predicted_focus(row: Mapping[str, Any], horizon_s: float = 600.0) -> tuple[list[float], float]:
+    """Camera target for a live view from the first step-log row: :func:`focus` at the straight-line
+    closest approach of the nearest intruder (predicted from the row's positions and velocities)."""
+    r = _normalise(row)
+
+    def g(k):
+        v = r.get(k)
+        return np.nan if v is None else float(v)
+
+    own = np.array([g("own_x"), g("own_y"), g("own_z")])
+    if not np.all(np.isfinite(own)):
+        return [0.0, 0.0, 0.0], 8000.0
+    own_v = np.append(_unit_enu(np.array(g("own_trk_deg")))[:2] * g("own_gs"), g("own_vs"))
+    best = None
+    for j in range(len(r.get("intr_x") or [])):
+        p = np.array([float(r[k][j]) if r.get(k) and r[k][j] is not None else np.nan
+                      for k in ("intr_x", "intr_y", "intr_z")])
+        gs, trk, vs = (float(r[k][j]) if r.get(k) and r[k][j] is not None else np.nan
+                       for k in ("intr_gs", "intr_trk_deg", "intr_vs"))
+        v = np.append(_unit_enu(np.array(trk))[:2] * gs, vs)
+        s, dv = p - own, v - own_v
+        if not (np.all(np.isfinite(s)) and np.all(np.isfinite(dv))):
+            continue
+        t = float(np.clip(-np.dot(s[:2], dv[:2]) / max(float(np.dot(dv[:2], dv[:2])), 1e-9), 0.0, horizon_s))
+        d = float(np.linalg.norm((s + dv * t)[:2]))
+        if best is None or d < best[0]:
+            best = (d, own + own_v * t, p + v * t)
+    if best is None:
+        return own.tolist(), 8000.0
+    _, o, i = best
+    half = (i - o) / 2.0
+    norm = float(np.linalg.norm(half))
+    return (o + (half if norm <= 1500.0 else half * (1500.0 / norm))).tolist(), 6000.0
 
 
 def log_steplog(table: "pa.Table | pa.RecordBatch", sinks: SinkOptions, encounter_id: "int | None" = None,

@@ -23,8 +23,25 @@ path holds a complete recording or nothing. A helper that fails is a
 :class:`~daa_sil.viz.VizWarning` and ``finish`` returns None; only a bad explicit ``.rrd`` path
 raises (:class:`~daa_sil.errors.OutputError`), in the constructor.
 
-Helper protocol (one line each): requests ``prepare`` and ``{"steplog": PATH}`` (EOF = abort);
-replies ``READY`` and ``DONE {"rrd": PATH | null, "steps": N}``.
+**Live mode** (``live=True``; ``daa-sil run`` uses it for ``--clock realtime`` runs with a viewer
+sink, ``--spawn-viewer`` / ``--connect``, or with ``--viz-live on``): the constructor also binds a UDP
+socket on 127.0.0.1 (:attr:`BackgroundRecorder.live_address`, passed to ``daa-vehicle --live``),
+which the helper inherits. Once prepared, the helper logs every step row the vehicle sends there
+(:mod:`daa_sil.live`) as it arrives, with :meth:`~daa_sil.viz.EncounterLogger.log_step`: the same
+entities, timelines and values as the deferred path; the blueprint goes out with the first row
+(camera on the predicted closest approach). Garbage and out-of-order datagrams are counted and
+ignored. When the step log comes, the helper logs what is still queued, then every step-log row
+that did not arrive (or arrived different) is backfilled into the live sinks; if there was any, the
+``.rrd`` is rewritten from the step log by the deferred path, so the file is always complete and
+identical in content to what the deferred path writes. The lockstep default keeps deferred logging:
+any CPU used next to a ~3 s lockstep run slows it.
+
+Helper protocol (one line each): requests ``prepare`` and ``{"steplog": PATH, "vehicle_exit": T}``
+(EOF = abort; ``T`` is ``time.monotonic()`` when the vehicle exited, or null); replies ``READY`` and
+``DONE {"rrd": PATH | null, "steps": N, "live": null | {...}}``; ``live`` holds the feed's counters
+(``received``, ``logged``, ``bad``, ``stale``), ``backfilled`` (rows taken from the step log),
+``rewritten`` (the .rrd was rewritten from the step log), ``before_exit`` (steps logged before
+the vehicle exited) and ``first_logged_before_exit_s``.
 """
 
 from __future__ import annotations
@@ -32,18 +49,21 @@ from __future__ import annotations
 import json
 import os
 import queue
+import select
 import signal
+import socket
 import subprocess
 import sys
 import threading
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from typing import IO
 
 from .thresholds import PRESETS, Thresholds, get_thresholds
 from .viz import (EncounterLogger, SinkOptions, VizWarning, _url_host_port, _warn, check_rrd_path, focus,
-                  select_encounter)
+                  log_steplog, predicted_focus, select_encounter)
 
 #: fallback priority (nice) where SCHED_IDLE is not available
 RECORDER_NICE = 10
@@ -51,6 +71,11 @@ RECORDER_NICE = 10
 RECORDER_FINISH_TIMEOUT_S = 120.0
 #: how long :meth:`BackgroundRecorder.abort` waits after SIGTERM before SIGKILL, s
 RECORDER_TERM_S = 3.0
+#: receive buffer asked for the live feed's socket (the kernel may grant less); holds the rows that
+#: arrive while the helper is still importing Rerun
+LIVE_RCVBUF = 8 << 20
+#: how often the live helper hands queued rows to Rerun, s
+LIVE_FLUSH_S = 0.1
 
 
 class _Forked:
@@ -84,12 +109,13 @@ class BackgroundRecorder:
     """A Rerun recording of one SIL run, made by a helper process; see the module docstring.
 
     ``mode``: ``"auto"`` (fork if possible: POSIX and no other Python thread running, else exec),
-    ``"fork"`` or ``"exec"``. ``prepare_now`` sends :meth:`prepare` at once.
+    ``"fork"`` or ``"exec"``. ``prepare_now`` sends :meth:`prepare` at once. ``live``: also log the
+    step rows sent to :attr:`live_address` as they arrive (module docstring).
     """
 
     def __init__(self, sinks: SinkOptions, preset: "str | Thresholds | None" = None,
                  encounter_id: "int | None" = None, mode: str = "auto", prepare_now: bool = False,
-                 nice: int = RECORDER_NICE):
+                 nice: int = RECORDER_NICE, live: bool = False):
         self.sinks = sinks
         self.rrd_path = check_rrd_path(sinks.rrd, sinks.overwrite) if sinks.rrd else None
         if sinks.connect:
@@ -120,7 +146,23 @@ class BackgroundRecorder:
         if mode not in ("fork", "exec"):
             raise ValueError(f"mode must be auto, fork or exec, got {mode!r}")
         self.mode = mode
-        self.proc = self._fork() if mode == "fork" else self._exec()
+        #: ``udp:127.0.0.1:PORT`` of the live feed (None without ``live``)
+        self.live_address: "str | None" = None
+        live_sock = None
+        if live:
+            live_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                live_sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, LIVE_RCVBUF)
+            except OSError:
+                pass
+            live_sock.bind(("127.0.0.1", 0))
+            self.live_address = f"udp:127.0.0.1:{live_sock.getsockname()[1]}"
+            self._args["live_fd"] = live_sock.fileno()
+        try:
+            self.proc = self._fork() if mode == "fork" else self._exec()
+        finally:
+            if live_sock is not None:
+                live_sock.close()  # the helper holds its own copy
         self._reader = threading.Thread(target=self._pump, name="daa-sil-recorder", daemon=True)
         self._reader.start()
         if prepare_now:
@@ -132,7 +174,8 @@ class BackgroundRecorder:
             [sys.executable, "-c", "from daa_sil.viz_recorder import main; raise SystemExit(main())",
              json.dumps(self._args)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=None, text=True, bufsize=1,
-            start_new_session=True)  # own group: a terminal Ctrl-C reaches the caller, which decides
+            start_new_session=True,  # own group: a terminal Ctrl-C reaches the caller, which decides
+            pass_fds=(self._args["live_fd"],) if self._args.get("live_fd") is not None else ())
         _set_idle_priority(proc.pid, self._args["nice"])
         return proc
 
@@ -177,18 +220,19 @@ class BackgroundRecorder:
             self._prepared = True
             self._send("prepare")
 
-    def submit(self, steplog: "str | os.PathLike") -> None:
+    def submit(self, steplog: "str | os.PathLike", vehicle_exit: "float | None" = None) -> None:
         """Hand the helper the complete step log now and return at once; :meth:`finish` waits.
 
-        Call it as soon as the step log is written (e.g. when the vehicle exits), so the helper's
-        work overlaps with stopping the other processes. Only the first call counts.
+        Call it as soon as the step log is written (e.g. when the vehicle exits, ``vehicle_exit`` =
+        that ``time.monotonic()``), so the helper's work overlaps with stopping the other processes.
+        Only the first call counts.
         """
         if self._submitted_at is not None or self._done:
             return
         self._submitted_at = time.monotonic()
         self.prepared_in_time = self.ready.is_set()
         _set_normal_priority(self.proc.pid)  # the run is over: the helper is on the critical path now
-        self._send(json.dumps({"steplog": str(steplog)}))
+        self._send(json.dumps({"steplog": str(steplog), "vehicle_exit": vehicle_exit}))
         try:
             self.proc.stdin.close()  # type: ignore[union-attr]
         except OSError:
@@ -292,6 +336,90 @@ def _set_normal_priority(pid: int) -> None:
 # the helper
 
 
+class _Lines:
+    """Request lines read straight from a file descriptor (so ``select`` sees every unread byte)."""
+
+    def __init__(self, fh: IO[str]):
+        self.fd = fh.fileno()
+        self.buf = b""
+        self.eof = False
+
+    def ready(self) -> bool:
+        return b"\n" in self.buf or self.eof
+
+    def fill(self) -> None:
+        data = os.read(self.fd, 65536)
+        self.eof = self.eof or not data
+        self.buf += data
+
+    def readline(self) -> str:
+        """The next line ("" at EOF); blocks until it is complete."""
+        while not self.ready():
+            self.fill()
+        if b"\n" in self.buf:
+            line, self.buf = self.buf.split(b"\n", 1)
+            return line.decode(errors="replace") + "\n"
+        line, self.buf = self.buf, b""
+        return line.decode(errors="replace")
+
+
+class _LiveIn:
+    """The helper's end of the live feed: datagrams -> :class:`~daa_sil.live.LiveFeed` -> ``log_step``."""
+
+    def __init__(self, fd: int):
+        from .live import LiveFeed
+
+        self.sock = socket.socket(fileno=fd)
+        self.sock.setblocking(False)
+        self.feed = LiveFeed()
+        self.blueprint_sent = False
+
+    def take(self, logger: EncounterLogger, limit: int = 10_000) -> None:
+        """Log every datagram waiting now (at most ``limit``)."""
+        for _ in range(limit):
+            try:
+                data = self.sock.recv(65536)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                return
+            row = self.feed.feed(data)
+            if row is None:
+                continue
+            if not self.blueprint_sent:  # camera on the predicted closest approach, before the first row
+                self.blueprint_sent = True
+                logger.send_blueprint(*predicted_focus(row))
+            logger.log_step(row)
+
+    def finish(self, logger: EncounterLogger, table, sinks: SinkOptions, args: dict,
+               vehicle_exit: "float | None") -> tuple["Path | None", dict]:
+        """Log what is left, backfill what never came, close; rewrite the .rrd if anything was backfilled."""
+        self.take(logger)  # the vehicle has exited: everything it sent is in the socket buffer
+        logger.flush_queue()
+        before = [(t, n) for t, n in logger.emit_times if vehicle_exit is not None and t <= vehicle_exit]
+        missing = self.feed.missing(table)
+        if missing:  # lost, refused or different rows: the live sinks get them from the step log
+            if not self.blueprint_sent:
+                center, extent = focus(table)
+                logger.send_blueprint(center, extent)
+            logger.log_table(table.take(missing))
+        info = dict(self.feed.counters(), backfilled=len(missing), rewritten=False,
+                    before_exit=before[-1][1] if before else 0,
+                    first_logged_before_exit_s=(round(vehicle_exit - logger.emit_times[0][0], 3)
+                                                if before else None))
+        if not missing or not sinks.rrd:
+            return logger.close(), info
+        # the .rrd must equal the deferred path's: rewrite it from the step log (live sinks are done)
+        logger.close(commit=False)
+        file_only = replace(sinks, spawn=False, connect=None, serve_web=False)
+        path, _ = log_steplog(table, file_only, encounter_id=args.get("encounter_id"), preset=args.get("preset"))
+        info["rewritten"] = path is not None
+        return path, info
+
+    def close(self) -> None:
+        self.sock.close()
+
+
 def _serve(args: dict, requests: IO[str], replies: IO[str]) -> int:
     """The helper's work (see the module docstring); returns its exit status. Never raises."""
     sinks = SinkOptions(**args["sinks"])
@@ -311,17 +439,28 @@ def _serve(args: dict, requests: IO[str], replies: IO[str]) -> int:
     warnings.showwarning = show
     warnings.simplefilter("always", VizWarning)
     logger: "EncounterLogger | None" = None
+    live = _LiveIn(args["live_fd"]) if args.get("live_fd") is not None else None
+    lines = _Lines(requests)
     status = 1
     try:
         from .steplog import read_steplog
 
         while True:
-            line = requests.readline()
+            if live is not None and logger is not None and not lines.ready():
+                readable, _, _ = select.select([lines.fd, live.sock], [], [], 1.0)
+                if live.sock in readable:
+                    live.take(logger)
+                if lines.fd not in readable:
+                    continue
+                lines.fill()
+                if not lines.ready():
+                    continue
+            line = lines.readline()
             if line.strip() == "prepare" and logger is not None:
                 continue
             if logger is None and line.strip():  # prepare (or a step log before any prepare)
                 logger = EncounterLogger(sinks, preset=args.get("preset"), encounter_id=args.get("encounter_id"),
-                                         defer_blueprint=True)
+                                         defer_blueprint=True, flush_interval_s=LIVE_FLUSH_S)
                 print("READY", file=replies, flush=True)
                 if line.strip() == "prepare":
                     continue
@@ -331,17 +470,24 @@ def _serve(args: dict, requests: IO[str], replies: IO[str]) -> int:
                 break
             req = json.loads(line)
             table, _ = select_encounter(read_steplog(req["steplog"]))  # the only encounter
-            center, extent = focus(table)
-            logger.send_blueprint(center, extent)  # type: ignore[union-attr]
-            logger.log_table(table)  # type: ignore[union-attr]
-            path = logger.close()  # type: ignore[union-attr]
-            done = {"rrd": str(path) if path else None, "steps": logger.steps_logged}  # type: ignore[union-attr]
+            info = None
+            if live is not None:
+                path, info = live.finish(logger, table, sinks, args, req.get("vehicle_exit"))  # type: ignore[arg-type]
+            else:
+                center, extent = focus(table)
+                logger.send_blueprint(center, extent)  # type: ignore[union-attr]
+                logger.log_table(table)  # type: ignore[union-attr]
+                path = logger.close()  # type: ignore[union-attr]
+            done = {"rrd": str(path) if path else None, "steps": table.num_rows if info else logger.steps_logged,  # type: ignore[union-attr]
+                    "live": info}
             print("DONE " + json.dumps(done), file=replies, flush=True)
             break
         status = 0
     except Exception as exc:
         _warn(f"Rerun recording failed: {type(exc).__name__}: {exc}")
     finally:
+        if live is not None:
+            live.close()
         if tmp is not None and status != 0:
             tmp.unlink(missing_ok=True)
         try:

@@ -37,6 +37,13 @@ EXAMPLES = """examples:
   # the same in real time at 10x speed
   daa-sil run scenarios/crossing_left.yaml --clock realtime --speed 10
 
+  # watch it in Rerun step by step as it plays (a viewer it spawns, or one already running)
+  daa-sil run scenarios/head_on.yaml --clock realtime --speed 4 --spawn-viewer --rrd head_on.rrd
+  daa-sil run scenarios/head_on.yaml --clock realtime --connect rerun+http://127.0.0.1:9876/proxy
+
+Rerun: lockstep runs record from the step log when the vehicle exits (nothing runs next to the
+SIL); realtime runs with --spawn-viewer/--connect stream every step live (--viz-live).
+
 Exit status: 0 = the run matched the scenario's `expect:` block, 1 = an expectation was violated
 or a process failed, 2 = bad input, 130 = interrupted (the step log is still written).
 """
@@ -347,6 +354,10 @@ class RunOptions:
     tick_timeout_s: float = 10.0
     rrd: "Path | None" = None
     spawn_viewer: bool = False
+    connect: "str | None" = None
+    #: stream the steps to the Rerun sinks as they happen: "auto" (realtime runs with a viewer sink,
+    #: --spawn-viewer / --connect), "on" or "off" (log the step log when the vehicle exits)
+    viz_live: str = "auto"
     tap: "str | None" = None
     progress: "Callable[[str], None] | None" = None
 
@@ -381,20 +392,30 @@ def run_sil(opts: RunOptions) -> dict:
             recorder.abort()  # no-op after finish; otherwise kills the helper and removes its temp file
 
 
+def live_viz(opts: RunOptions) -> bool:
+    """True if the run streams its steps to Rerun as they happen (``--viz-live``, see RunOptions)."""
+    if not (opts.rrd or opts.spawn_viewer or opts.connect) or opts.viz_live == "off":
+        return False
+    return opts.viz_live == "on" or (opts.clock == "realtime" and bool(opts.spawn_viewer or opts.connect))
+
+
 def _start_recorder(opts: RunOptions, sc):
-    """A :class:`daa_sil.viz_recorder.BackgroundRecorder` for ``--rrd`` / ``--spawn-viewer`` (None
-    without them): an idle helper process now; :func:`_play` lets it prepare once the SIL processes are
-    ready and hands it the step log when the vehicle exits. The ``--rrd`` path was checked by
-    :func:`_check_args` before anything started.
+    """A :class:`daa_sil.viz_recorder.BackgroundRecorder` for ``--rrd`` / ``--spawn-viewer`` /
+    ``--connect`` (None without them): an idle helper process now; :func:`_play` lets it prepare once
+    the SIL processes are ready and hands it the step log when the vehicle exits. In live mode
+    (:func:`live_viz`) it also logs the rows the vehicle sends to ``recorder.live_address`` during the
+    run. The ``--rrd`` path was checked by :func:`_check_args` before anything started.
     """
-    if not (opts.rrd or opts.spawn_viewer):
+    if not (opts.rrd or opts.spawn_viewer or opts.connect):
         return None
     from ..viz import SinkOptions
     from ..viz_recorder import BackgroundRecorder
 
     try:
-        return BackgroundRecorder(SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, overwrite=True),
-                                  preset=sc.thresholds, encounter_id=0)  # the vehicle logs encounter 0
+        return BackgroundRecorder(SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, connect=opts.connect,
+                                              overwrite=True),
+                                  preset=sc.thresholds, encounter_id=0,  # the vehicle logs encounter 0
+                                  live=live_viz(opts))
     except OSError as exc:  # the helper process cannot start: the run goes on without a recording
         print(f"daa-sil: warning: cannot start the Rerun recorder ({exc.strerror or exc}); no recording",
               file=sys.stderr, flush=True)
@@ -432,6 +453,8 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
             vargs = [str(opts.scenario_path), "--listen", "udp:127.0.0.1:0", "--out", sready["vehicle_side"],
                      "--steplog", str(steplog), "--tap", opts.tap or "none",
                      "--tick-timeout", f"{opts.tick_timeout_s:g}"] + clock_args + key_args
+            if recorder is not None and recorder.live_address:
+                vargs += ["--live", recorder.live_address]  # each step's row, fire-and-forget
             # GCS and vehicle start in parallel; the vehicle re-sends tick 0 until the GCS answers
             vehicle = pg.start("vehicle", python_module_argv("vehicle") + vargs)
             pg.wait_ready(shim)
@@ -443,8 +466,10 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
                 recorder.prepare()
             _say(opts, f"playing {sc.duration_s:g} s of {sc.name} ({opts.clock})")
             rc = vehicle.proc.wait()
+            exited = time.monotonic()
             if recorder is not None and rc == 0 and steplog.exists():
-                recorder.submit(steplog)  # logs while the shim and GCS are stopped and the result is made
+                # logs (deferred) or completes (live) while the shim and GCS are stopped and the result is made
+                recorder.submit(steplog, vehicle_exit=exited)
             if rc != 0:
                 failure = f"vehicle exited with status {rc}: {last_error_line(vehicle)} (log: {vehicle.log_path})"
             for other in (gcs, shim):
@@ -478,6 +503,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
         result["rrd_timing"] = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in (
             ("helper", recorder.mode), ("prepared_before_end", recorder.prepared_in_time),
             ("finish_s", recorder.finish_s), ("wait_s", recorder.wait_s))}
+        result["rrd_timing"]["live"] = (recorder.result or {}).get("live")
     atomic_write_json(out / "result.json", result)
     if interrupted:
         raise KeyboardInterrupt
@@ -507,6 +533,14 @@ def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
     if _viz_available():
         p.add_argument("--rrd", type=Path, metavar="FILE", help="write a Rerun recording")
         p.add_argument("--spawn-viewer", action="store_true", help="stream to a Rerun viewer it spawns")
+        p.add_argument("--connect", metavar="URL",
+                       help="stream to a running Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
+        p.add_argument("--viz-live", choices=("auto", "on", "off"), default="auto",
+                       help="auto (default): with --clock realtime and a viewer (--spawn-viewer/--connect) "
+                            "every step appears in Rerun as it happens (the vehicle sends each step's row "
+                            "to the recorder over loopback, fire-and-forget); otherwise, e.g. lockstep, the "
+                            "recording is made from the step log when the vehicle exits, so nothing runs "
+                            "next to the SIL. on/off force either way; the .rrd is the same")
 
 
 def register(sub) -> None:
@@ -538,6 +572,10 @@ def _check_args(args) -> None:
         from ..link.endpoint import parse_udp_address
 
         parse_udp_address(args.tap, "--tap")
+    if getattr(args, "connect", None):
+        from ..viz import _url_host_port
+
+        _url_host_port(args.connect)  # a malformed URL is a usage error; a missing viewer only a warning
     rrd = getattr(args, "rrd", None)
     if rrd is not None:
         if rrd.suffix != ".rrd":
@@ -558,7 +596,8 @@ def _options(args, scenario: Path) -> RunOptions:
     quiet = args.json
     return RunOptions(scenario_path=scenario, out_dir=Path(args.out), clock=args.clock, speed=args.speed,
                       key=args.key, tap=args.tap, rrd=getattr(args, "rrd", None),
-                      spawn_viewer=getattr(args, "spawn_viewer", False),
+                      spawn_viewer=getattr(args, "spawn_viewer", False), connect=getattr(args, "connect", None),
+                      viz_live=getattr(args, "viz_live", "auto"),
                       progress=None if quiet else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
 
 
