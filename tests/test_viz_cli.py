@@ -203,6 +203,7 @@ def test_sil_run_rrd_equals_steplog_conversion(tmp_path):
     assert "daa-sil: warning: --spawn-viewer needs a display" in cp.stderr and "Traceback" not in cp.stderr
     result = json.loads(cp.stdout)
     assert result["files"]["rrd"] == str(rrd)
+    assert result["rrd_timing"]["live"] is None, "lockstep records from the step log, nothing runs next to it"
     if sys.platform.startswith("linux"):
         assert result["rrd_timing"]["helper"] == "fork", "the orchestrator forks its helper before any thread"
     assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [], "no temporary file left"
@@ -260,6 +261,7 @@ def test_sil_run_ctrl_c_leaves_a_readable_rrd_or_none(tmp_path):
 @pytest.mark.parametrize("argv, code, message", [
     (["--rrd", "{tmp}/no/such/dir/x.rrd"], 1, "directory {tmp}/no/such/dir is missing or not writable"),
     (["--rrd", "{tmp}/x.txt"], 2, "--rrd '{tmp}/x.txt' should end in .rrd"),
+    (["--connect", "localhost:9876", "--clock", "realtime"], 2, "not a Rerun gRPC URL"),
 ])
 def test_sil_run_bad_rrd_fails_before_any_process(tmp_path, capsys, argv, code, message):
     from daa_sil.cli import main as cli_main
