@@ -21,6 +21,13 @@ def test_kernel_arrival_stamp_lies_between_send_and_read():
         a.bind(("127.0.0.1", 0))
         b.bind(("127.0.0.1", 0))
         assert rtclock.enable_rx_timestamps(a) == LINUX
+        # Linux turns arrival stamping on lazily (a deferred static key) when the first socket in the
+        # system asks for it; until then skbs carry no stamp and recvmsg stamps them at read. Let one
+        # warm-up datagram through and give the kernel a moment before the timed one.
+        b.sendto(b"w", a.getsockname())
+        a.settimeout(5)
+        a.recvmsg(2048, rtclock.rx_buffer_size())
+        time.sleep(0.05)
         t_send = time.monotonic()
         b.sendto(b"x", a.getsockname())  # loopback: the kernel stamps it inside this call
         t_sent = time.monotonic()
