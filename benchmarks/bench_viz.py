@@ -26,6 +26,10 @@ Prints, all measured in this run:
    (until ``close()``), each as a fraction of the SIL run's wall time.
 3. **Fast-time**: one encounter simulated by ``daa_sil.fasttime.simulate(record_steps=True)``
    against ``log_steplog`` of its step log (the batch path, ``send_columns``).
+4. **Realtime with live streaming** (``--clock realtime --speed 20``, ``--viz-live on --rrd``, what a
+   ``--spawn-viewer`` / ``--connect`` run does): how late the vehicle finished its steps after their
+   due wall time (mean and max, from the step log's metadata) without and with the live stream, in
+   interleaved pairs, and how many steps were in Rerun before the vehicle exited.
 """
 
 from __future__ import annotations
@@ -68,10 +72,10 @@ print(json.dumps([(b, tb - ta) for (a, ta), (b, tb) in zip(T, T[1:])]))
 """
 
 
-def _sil_run(scenario: Path, out: Path, rrd: "Path | None") -> tuple[float, float, float]:
+def _sil_run(scenario: Path, out: Path, rrd: "Path | None", extra: tuple = ()) -> tuple[float, float, float]:
     """(wall time seen by the caller, the run's own wall_s from result.json, CPU time of all its
     processes), s."""
-    cmd = [sys.executable, "-m", "daa_sil.cli", "run", str(scenario), "--out", str(out), "--json"]
+    cmd = [sys.executable, "-m", "daa_sil.cli", "run", str(scenario), "--out", str(out), "--json", *extra]
     if rrd is not None:
         cmd += ["--rrd", str(rrd)]
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -183,6 +187,32 @@ def bench_fasttime(tmp: Path) -> None:
           f"(ratio {t_log / t_sim:.2f}); .rrd {path.stat().st_size / 1000:.0f} kB")
 
 
+def bench_realtime_live(scenario: Path, repeat: int, tmp: Path, speed: float = 20.0) -> None:
+    from daa_sil.steplog import steplog_metadata
+
+    clock = ("--clock", "realtime", "--speed", f"{speed:g}")
+    late: dict = {"plain": [], "live": []}
+    before, steps = [], 0
+    for k in range(repeat):
+        for kind in (("plain", "live") if k % 2 == 0 else ("live", "plain")):
+            out = tmp / f"rt-{kind}{k}"
+            rrd = out / "enc.rrd" if kind == "live" else None
+            if rrd is not None:
+                rrd.parent.mkdir(parents=True)
+            _sil_run(scenario, out, rrd, clock + (("--viz-live", "on") if rrd else ()))
+            v = json.loads(steplog_metadata(out / "steplog.parquet")["vehicle"])
+            late[kind].append((v["late_mean_ms"], v["late_max_ms"]))
+            if rrd is not None:
+                info = TIMING[-1].get("live") or {}
+                before.append(info.get("before_exit", 0))
+                steps = v["steps"]
+    med = {k: (statistics.median(m for m, _ in x), statistics.median(mx for _, mx in x)) for k, x in late.items()}
+    print(f"[4] realtime SIL {scenario.name} at {speed:g}x, {repeat} interleaved pairs: step done after its due "
+          f"wall time, median of the runs' mean / max: without {med['plain'][0]:.2f} / {med['plain'][1]:.2f} ms, "
+          f"with live streaming + --rrd {med['live'][0]:.2f} / {med['live'][1]:.2f} ms\n"
+          f"    steps in Rerun before the vehicle exited: {before} of {steps} (per run)")
+
+
 def _any_steplog(tmp: Path) -> Path:
     """A real step log for [0] without a SIL run: one fast-time encounter."""
     from daa_sil import campaign, steplog
@@ -201,6 +231,8 @@ def main(argv: "list[str] | None" = None) -> int:
     ap.add_argument("--scenario", type=Path, default=ROOT / "scenarios" / "head_on.yaml")
     ap.add_argument("--repeat", type=int, default=10, help="interleaved pairs (default 10)")
     ap.add_argument("--skip-sil", action="store_true", help="only the profile [0] and fast-time [3]")
+    ap.add_argument("--live-repeat", type=int, default=3, help="interleaved realtime pairs for [4] (default 3; "
+                                                               "0 skips it)")
     a = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
@@ -213,6 +245,8 @@ def main(argv: "list[str] | None" = None) -> int:
             wall, log = bench_sil(a.scenario, a.repeat, tmp)
             bench_live(log, wall, tmp)
         bench_fasttime(tmp)
+        if not a.skip_sil and a.live_repeat > 0:
+            bench_realtime_live(a.scenario, a.live_repeat, tmp)
     return 0
 
 

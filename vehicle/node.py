@@ -77,6 +77,9 @@ class VehicleStats:
     commands_from_tap_ignored: int = 0
     foreign_messages_ignored: int = 0
     authority_changes: int = 0
+    #: realtime: how late each step was done (telemetry and live row sent) after its due wall time, ms
+    late_mean_ms: float = 0.0
+    late_max_ms: float = 0.0
     extra: dict = field(default_factory=dict)
 
 
@@ -102,6 +105,7 @@ class VehicleNode:
         self.authority = "pilot"
         self._acked = -1
         self._steplog_written = False
+        self._late_sum_ms = 0.0
         self.live = None
         if opts.live:
             from daa_sil.live import LiveSender
@@ -281,6 +285,11 @@ class VehicleNode:
             if self.live is not None:
                 self.live.send(self.core.rows[-1])  # non-blocking; failures are counted, never raised
             self.stats.steps = k + 1
+            if not lockstep:
+                late = 1000.0 * (loop.time() - (wall0 + self.t / self.opts.speed))
+                self.stats.late_max_ms = round(max(self.stats.late_max_ms, late), 3)
+                self._late_sum_ms += late
+                self.stats.late_mean_ms = round(self._late_sum_ms / (k + 1), 3)
             if on_step is not None:
                 on_step(self, out)
             await asyncio.sleep(0)
