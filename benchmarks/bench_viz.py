@@ -26,10 +26,11 @@ Prints, all measured in this run:
    (until ``close()``), each as a fraction of the SIL run's wall time.
 3. **Fast-time**: one encounter simulated by ``daa_sil.fasttime.simulate(record_steps=True)``
    against ``log_steplog`` of its step log (the batch path, ``send_columns``).
-4. **Realtime with live streaming** (``--clock realtime --speed 20``, ``--viz-live on --rrd``, what a
-   ``--spawn-viewer`` / ``--connect`` run does): how late the vehicle finished its steps after their
-   due wall time (mean and max, from the step log's metadata) without and with the live stream, in
-   interleaved pairs, and how many steps were in Rerun before the vehicle exited.
+4. **Realtime with live streaming** (``--clock realtime --speed 20 --connect URL --rrd FILE`` to a
+   headless viewer, the rerun binary serving gRPC on 127.0.0.1): how late the vehicle finished its
+   steps after their due wall time (mean and max, from the step log's metadata) without and with
+   the live stream, in interleaved pairs, and how many steps were in the viewer before the vehicle
+   exited.
 """
 
 from __future__ import annotations
@@ -188,6 +189,30 @@ def bench_fasttime(tmp: Path) -> None:
 
 
 def bench_realtime_live(scenario: Path, repeat: int, tmp: Path, speed: float = 20.0) -> None:
+    import os
+    import signal
+    import socket
+
+    from daa_sil import viz
+
+    with socket.socket() as sk:
+        sk.bind(("127.0.0.1", 0))
+        port = sk.getsockname()[1]
+    srv = subprocess.Popen([viz.rerun_binary(), "--serve-grpc", "--bind", "127.0.0.1", "--port", str(port)],
+                           stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                           start_new_session=True)
+    try:
+        for _ in range(500):
+            if viz._port_open("127.0.0.1", port, 0.1):
+                break
+            time.sleep(0.02)
+        _realtime_pairs(scenario, repeat, tmp, speed, f"rerun+http://127.0.0.1:{port}/proxy")
+    finally:
+        os.killpg(srv.pid, signal.SIGTERM)
+        srv.wait(timeout=10)
+
+
+def _realtime_pairs(scenario: Path, repeat: int, tmp: Path, speed: float, url: str) -> None:
     from daa_sil.steplog import steplog_metadata
 
     clock = ("--clock", "realtime", "--speed", f"{speed:g}")
@@ -199,7 +224,7 @@ def bench_realtime_live(scenario: Path, repeat: int, tmp: Path, speed: float = 2
             rrd = out / "enc.rrd" if kind == "live" else None
             if rrd is not None:
                 rrd.parent.mkdir(parents=True)
-            _sil_run(scenario, out, rrd, clock + (("--viz-live", "on") if rrd else ()))
+            _sil_run(scenario, out, rrd, clock + (("--connect", url) if rrd else ()))
             v = json.loads(steplog_metadata(out / "steplog.parquet")["vehicle"])
             late[kind].append((v["late_mean_ms"], v["late_max_ms"]))
             if rrd is not None:
@@ -209,8 +234,8 @@ def bench_realtime_live(scenario: Path, repeat: int, tmp: Path, speed: float = 2
     med = {k: (statistics.median(m for m, _ in x), statistics.median(mx for _, mx in x)) for k, x in late.items()}
     print(f"[4] realtime SIL {scenario.name} at {speed:g}x, {repeat} interleaved pairs: step done after its due "
           f"wall time, median of the runs' mean / max: without {med['plain'][0]:.2f} / {med['plain'][1]:.2f} ms, "
-          f"with live streaming + --rrd {med['live'][0]:.2f} / {med['live'][1]:.2f} ms\n"
-          f"    steps in Rerun before the vehicle exited: {before} of {steps} (per run)")
+          f"with live streaming to a viewer + --rrd {med['live'][0]:.2f} / {med['live'][1]:.2f} ms\n"
+          f"    steps in the viewer before the vehicle exited: {before} of {steps} (per run)")
 
 
 def _any_steplog(tmp: Path) -> Path:

@@ -27,21 +27,22 @@ raises (:class:`~daa_sil.errors.OutputError`), in the constructor.
 sink, ``--spawn-viewer`` / ``--connect``, or with ``--viz-live on``): the constructor also binds a UDP
 socket on 127.0.0.1 (:attr:`BackgroundRecorder.live_address`, passed to ``daa-vehicle --live``),
 which the helper inherits. Once prepared, the helper logs every step row the vehicle sends there
-(:mod:`daa_sil.live`) as it arrives, with :meth:`~daa_sil.viz.EncounterLogger.log_step`: the same
-entities, timelines and values as the deferred path; the blueprint goes out with the first row
-(camera on the predicted closest approach). Garbage and out-of-order datagrams are counted and
-ignored. When the step log comes, the helper logs what is still queued, then every step-log row
-that did not arrive (or arrived different) is backfilled into the live sinks; if there was any, the
-``.rrd`` is rewritten from the step log by the deferred path, so the file is always complete and
-identical in content to what the deferred path writes. The lockstep default keeps deferred logging:
-any CPU used next to a ~3 s lockstep run slows it.
+(:mod:`daa_sil.live`) to the viewer sinks as it arrives, with
+:meth:`~daa_sil.viz.EncounterLogger.log_step`: the same entities, timelines and values as the
+deferred path; the blueprint goes out with the first row (camera on the predicted closest
+approach). Garbage and out-of-order datagrams are counted and ignored. When the step log comes, the
+helper logs what is still queued and backfills every step-log row that did not arrive (or arrived
+different). The ``.rrd`` is not streamed: it is written from the step log by the deferred path at
+the end, so it is always complete, identical in content to a lockstep run's and compact (a file
+streamed row by row holds one chunk per entity per row: 6 MB instead of 0.4 MB for 180 s). The
+lockstep default keeps deferred logging: any CPU used next to a ~3 s lockstep run slows it.
 
 Helper protocol (one line each): requests ``prepare`` and ``{"steplog": PATH, "vehicle_exit": T}``
 (EOF = abort; ``T`` is ``time.monotonic()`` when the vehicle exited, or null); replies ``READY`` and
 ``DONE {"rrd": PATH | null, "steps": N, "live": null | {...}}``; ``live`` holds the feed's counters
 (``received``, ``logged``, ``bad``, ``stale``), ``backfilled`` (rows taken from the step log),
-``rewritten`` (the .rrd was rewritten from the step log), ``before_exit`` (steps logged before
-the vehicle exited) and ``first_logged_before_exit_s``.
+``viewer`` (a viewer sink was attached), ``before_exit`` (steps in the viewer sinks before the
+vehicle exited) and ``first_logged_before_exit_s``.
 """
 
 from __future__ import annotations
@@ -393,27 +394,25 @@ class _LiveIn:
 
     def finish(self, logger: EncounterLogger, table, sinks: SinkOptions, args: dict,
                vehicle_exit: "float | None") -> tuple["Path | None", dict]:
-        """Log what is left, backfill what never came, close; rewrite the .rrd if anything was backfilled."""
+        """Log what is left, backfill what never came, close the viewer sinks; write the .rrd from the
+        step log (the deferred path)."""
         self.take(logger)  # the vehicle has exited: everything it sent is in the socket buffer
         logger.flush_queue()
         before = [(t, n) for t, n in logger.emit_times if vehicle_exit is not None and t <= vehicle_exit]
         missing = self.feed.missing(table)
-        if missing:  # lost, refused or different rows: the live sinks get them from the step log
+        if missing:  # lost, refused or different rows: the viewer gets them from the step log
             if not self.blueprint_sent:
-                center, extent = focus(table)
-                logger.send_blueprint(center, extent)
+                logger.send_blueprint(*focus(table))
             logger.log_table(table.take(missing))
-        info = dict(self.feed.counters(), backfilled=len(missing), rewritten=False,
+        info = dict(self.feed.counters(), backfilled=len(missing), viewer=logger.rec is not None,
                     before_exit=before[-1][1] if before else 0,
                     first_logged_before_exit_s=(round(vehicle_exit - logger.emit_times[0][0], 3)
                                                 if before else None))
-        if not missing or not sinks.rrd:
-            return logger.close(), info
-        # the .rrd must equal the deferred path's: rewrite it from the step log (live sinks are done)
-        logger.close(commit=False)
+        logger.close()
+        if not sinks.rrd:
+            return None, info
         file_only = replace(sinks, spawn=False, connect=None, serve_web=False)
         path, _ = log_steplog(table, file_only, encounter_id=args.get("encounter_id"), preset=args.get("preset"))
-        info["rewritten"] = path is not None
         return path, info
 
     def close(self) -> None:
@@ -459,7 +458,9 @@ def _serve(args: dict, requests: IO[str], replies: IO[str]) -> int:
             if line.strip() == "prepare" and logger is not None:
                 continue
             if logger is None and line.strip():  # prepare (or a step log before any prepare)
-                logger = EncounterLogger(sinks, preset=args.get("preset"), encounter_id=args.get("encounter_id"),
+                # live: the rows go to the viewer sinks; the .rrd is made from the step log at the end
+                opened = replace(sinks, rrd=None, rrd_tmp=None) if live is not None else sinks
+                logger = EncounterLogger(opened, preset=args.get("preset"), encounter_id=args.get("encounter_id"),
                                          defer_blueprint=True, flush_interval_s=LIVE_FLUSH_S)
                 print("READY", file=replies, flush=True)
                 if line.strip() == "prepare":

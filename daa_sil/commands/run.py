@@ -41,8 +41,9 @@ EXAMPLES = """examples:
   daa-sil run scenarios/head_on.yaml --clock realtime --speed 4 --spawn-viewer --rrd head_on.rrd
   daa-sil run scenarios/head_on.yaml --clock realtime --connect rerun+http://127.0.0.1:9876/proxy
 
-Rerun: lockstep runs record from the step log when the vehicle exits (nothing runs next to the
-SIL); realtime runs with --spawn-viewer/--connect stream every step live (--viz-live).
+Rerun: realtime runs with --spawn-viewer/--connect show every step in the viewer as it happens;
+lockstep runs are logged from the step log when the vehicle exits, so nothing runs next to the SIL
+(--viz-live). An --rrd file is always written from the step log at the end.
 
 Exit status: 0 = the run matched the scenario's `expect:` block, 1 = an expectation was violated
 or a process failed, 2 = bad input, 130 = interrupted (the step log is still written).
@@ -393,10 +394,11 @@ def run_sil(opts: RunOptions) -> dict:
 
 
 def live_viz(opts: RunOptions) -> bool:
-    """True if the run streams its steps to Rerun as they happen (``--viz-live``, see RunOptions)."""
-    if not (opts.rrd or opts.spawn_viewer or opts.connect) or opts.viz_live == "off":
+    """True if the run streams its steps to a Rerun viewer as they happen (``--viz-live``, see
+    RunOptions; only with a viewer: the .rrd is always made from the step log)."""
+    if not (opts.spawn_viewer or opts.connect) or opts.viz_live == "off":
         return False
-    return opts.viz_live == "on" or (opts.clock == "realtime" and bool(opts.spawn_viewer or opts.connect))
+    return opts.viz_live == "on" or opts.clock == "realtime"
 
 
 def _start_recorder(opts: RunOptions, sc):
@@ -536,11 +538,11 @@ def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
         p.add_argument("--connect", metavar="URL",
                        help="stream to a running Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
         p.add_argument("--viz-live", choices=("auto", "on", "off"), default="auto",
-                       help="auto (default): with --clock realtime and a viewer (--spawn-viewer/--connect) "
-                            "every step appears in Rerun as it happens (the vehicle sends each step's row "
-                            "to the recorder over loopback, fire-and-forget); otherwise, e.g. lockstep, the "
-                            "recording is made from the step log when the vehicle exits, so nothing runs "
-                            "next to the SIL. on/off force either way; the .rrd is the same")
+                       help="auto (default): with --clock realtime, every step appears in the viewer "
+                            "(--spawn-viewer/--connect) as it happens (the vehicle sends each step's row to "
+                            "the recorder over loopback, fire-and-forget); lockstep runs are shown when the "
+                            "vehicle exits, so nothing runs next to the SIL. on: live in lockstep too; off: "
+                            "never. The --rrd file is always made from the step log (the same either way)")
 
 
 def register(sub) -> None:
