@@ -17,13 +17,13 @@ import re
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
 from daa_sil.io import is_temp_file
 from daa_sil.steplog import read_steplog, steplog_metadata
+from sil_helpers import wait_for_vehicle_time
 
 ROOT = Path(__file__).resolve().parents[1]
 HEAD_ON = ROOT / "scenarios" / "head_on.yaml"
@@ -76,14 +76,7 @@ def test_ctrl_c_mid_run_flushes_the_steplog_and_leaves_no_process(tmp_path):
                             stderr=subprocess.PIPE, text=True, cwd=ROOT, start_new_session=True)
     roles: dict[str, int] = {}
     try:
-        log = out / "logs" / "vehicle.log"
-        end = time.monotonic() + WAIT_S
-        while time.monotonic() < end and proc.poll() is None:
-            if log.exists() and "t=   30s" in log.read_text():
-                break
-            time.sleep(0.05)
-        else:
-            pytest.fail("the vehicle never reached t = 30 s")
+        wait_for_vehicle_time(out, 30, proc, WAIT_S)
         for pid in _children(proc.pid):
             roles[_role(_cmdline(pid))] = pid
         assert set(roles) >= {"vehicle", "shim", "gcs"}, roles

@@ -7,7 +7,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +14,7 @@ import pytest
 
 from daa_sil.scenario import delay_models, encounter_set, load_scenario
 from daa_sil.steplog import read_steplog
+from sil_helpers import wait_for_vehicle_time
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.yaml"))
@@ -108,14 +108,7 @@ def test_ctrl_c_leaves_no_orphans_and_a_valid_steplog(tmp_path):
                                    "--clock", "realtime", "--speed", "20"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            log = out / "logs" / "vehicle.log"
-            if log.exists() and "t=   20s" in log.read_text():
-                break
-            time.sleep(0.1)
-        else:
-            pytest.fail("the vehicle never reached t = 20 s")
+        wait_for_vehicle_time(out, 20, proc)
         assert len(_procs_mentioning(str(out))) >= 3  # orchestrator + vehicle + shim + gcs
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=60)

@@ -7,7 +7,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -19,14 +18,11 @@ rr = pytest.importorskip("rerun")
 from daa_sil import steplog, viz  # noqa: E402
 from daa_sil.cli import main  # noqa: E402
 from test_viz import read_rrd, scalars  # noqa: E402
-from viz_encounter import make_steplog  # noqa: E402
+from sil_helpers import wait_for_vehicle_time  # noqa: E402
+from viz_encounter import make_steplog, rerun_env  # noqa: E402,F401
 
 
-@pytest.fixture(autouse=True)
-def _rerun_env(monkeypatch):
-    monkeypatch.delenv("RERUN", raising=False)
-    for var in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
-        monkeypatch.delenv(var, raising=False)
+pytestmark = pytest.mark.usefixtures("rerun_env")
 
 
 @pytest.fixture(scope="module")
@@ -230,14 +226,7 @@ def test_sil_run_ctrl_c_leaves_a_readable_rrd_or_none(tmp_path):
                                    "--clock", "realtime", "--speed", "40"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=_headless_env())
     try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            log = out / "logs" / "vehicle.log"
-            if log.exists() and "t=   20s" in log.read_text():
-                break
-            time.sleep(0.05)
-        else:
-            pytest.fail("the vehicle never reached t = 20 s")
+        wait_for_vehicle_time(out, 20, proc)
         assert len(_procs_mentioning(str(out))) >= 4  # orchestrator, vehicle, shim, gcs (+ the recorder)
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=60)

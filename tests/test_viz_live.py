@@ -18,17 +18,13 @@ import pytest
 
 from daa_sil import live, steplog
 from daa_sil.errors import UsageError
-from viz_encounter import make_steplog, records
+from viz_encounter import make_steplog, records, rerun_env  # noqa: F401 (fixture)
 
 ROOT = Path(__file__).resolve().parents[1]
 PROC_LIMIT_S = 180  # generous bound so a hung process fails the test instead of blocking CI
 
 
-@pytest.fixture(autouse=True)
-def _rerun_env(monkeypatch):
-    monkeypatch.delenv("RERUN", raising=False)
-    for var in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
-        monkeypatch.delenv(var, raising=False)
+pytestmark = pytest.mark.usefixtures("rerun_env")
 
 
 @pytest.fixture(scope="module")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pyarrow as pa
+import pytest
 
 from daa_sil import wellclear as wc
 from daa_sil.kinematics import AircraftState, Command, advance, fly_command
@@ -18,6 +19,14 @@ from daa_sil.thresholds import get_thresholds
 from daa_sil.units import DEG
 
 TRACKS = np.arange(0.0, 360.0, 5.0)
+
+
+@pytest.fixture
+def rerun_env(monkeypatch):
+    """Rerun enabled and no display: a spawned viewer must fail cleanly (a warning), never hang."""
+    monkeypatch.delenv("RERUN", raising=False)
+    for var in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
+        monkeypatch.delenv(var, raising=False)
 
 
 def _bands(own: AircraftState, ipos: np.ndarray, ivel: np.ndarray, th) -> tuple[list, list, list]:

@@ -1,0 +1,22 @@
+"""Shared helpers for tests that drive a real ``daa-sil run`` (processes on loopback)."""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+import pytest
+
+
+def wait_for_vehicle_time(out: Path, t_s: int, proc=None, timeout: float = 60.0) -> None:
+    """Block until ``OUT/logs/vehicle.log`` reports sim time ``t_s`` (the vehicle prints ``t=  NNs``
+    every 10 s); fail the test if it does not within ``timeout`` s of wall time or ``proc`` exits."""
+    log = Path(out) / "logs" / "vehicle.log"
+    pattern = re.compile(rf"^t=\s*{int(t_s)}s\b", re.M)
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and (proc is None or proc.poll() is None):
+        if log.exists() and pattern.search(log.read_text()):
+            return
+        time.sleep(0.05)
+    pytest.fail(f"the vehicle never reached t = {t_s} s")
