@@ -13,6 +13,7 @@ import os
 import sys
 
 from . import __version__
+from .commands._args import OneLineParser as _Parser
 from .errors import DaaSilError
 
 #: modules providing ``register(subparsers)``; order = order in ``--help``
@@ -32,11 +33,6 @@ EPILOG = """examples:
 
 Every command has --help with examples. Units are SI (m, s, m/s) in the ENU frame unless a flag says otherwise.
 """
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # one line, exit 2
-        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def build_parser() -> argparse.ArgumentParser:

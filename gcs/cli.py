@@ -14,6 +14,7 @@ import signal
 from pathlib import Path
 
 from daa_sil.cli import run_guarded
+from daa_sil.commands._args import OneLineParser as _Parser, check_speed, load_key_option
 from daa_sil.errors import UsageError
 
 EXAMPLES = """examples:
@@ -24,11 +25,6 @@ EXAMPLES = """examples:
   daa-gcs --vehicle udp:127.0.0.1:14602 --scenario scenarios/pilot_unsafe_blend.yaml --pilot scripted \\
       --clock lockstep --log gcs.jsonl
 """
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -51,22 +47,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 async def _amain(args) -> int:
-    import math
-
     from daa_sil.scenario import load_scenario
     from gcs.node import GcsNode, GcsOptions
 
-    if not (math.isfinite(args.speed) and 0.01 <= args.speed <= 1000):
-        raise UsageError(f"--speed must be within [0.01, 1000], got {args.speed:g}")
+    check_speed(args.speed)
     sc = load_scenario(args.scenario) if args.scenario else None
     if sc is None and args.pilot != "scripted":
         raise UsageError("give --scenario FILE (pilot model settings, origin); without it only --pilot scripted "
                          "with no commands is possible")
-    key = None
-    if args.key is not None:
-        from daa_sil.link.codec import load_key
-
-        key = load_key(args.key)
+    key = load_key_option(args.key)
     node = GcsNode(sc, GcsOptions(vehicle=args.vehicle, listen=args.listen, clock=args.clock, speed=args.speed,
                                   key=key, pilot=args.pilot, log=args.log, display=not args.no_display))
     await node.start()

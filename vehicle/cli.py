@@ -15,6 +15,7 @@ import signal
 from pathlib import Path
 
 from daa_sil.cli import run_guarded
+from daa_sil.commands._args import OneLineParser as _Parser, check_speed, load_key_option
 from daa_sil.errors import UsageError
 
 EXAMPLES = """examples:
@@ -30,11 +31,6 @@ EXAMPLES = """examples:
   # 10x real time, undelayed truth copy for QGroundControl on 14550
   daa-vehicle scenarios/crossing_left.yaml --out udp:127.0.0.1:14601 --speed 10 --tap udp:127.0.0.1:14550
 """
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -66,15 +62,10 @@ def _options(args):
 
     from vehicle.node import VehicleOptions
 
-    if not (math.isfinite(args.speed) and 0.01 <= args.speed <= 1000):
-        raise UsageError(f"--speed must be within [0.01, 1000], got {args.speed:g}")
+    check_speed(args.speed)
     if not (math.isfinite(args.tick_timeout) and 0.1 <= args.tick_timeout <= 3600):
         raise UsageError(f"--tick-timeout must be within [0.1, 3600] s, got {args.tick_timeout:g}")
-    key = None
-    if args.key is not None:
-        from daa_sil.link.codec import load_key
-
-        key = load_key(args.key)
+    key = load_key_option(args.key)
     tap = None if args.tap in (None, "", "none") else args.tap
     live = None if args.live in (None, "", "none") else args.live
     if live is not None:

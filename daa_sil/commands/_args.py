@@ -1,10 +1,55 @@
-"""Shared argument parsing helpers: numbers and vectors with one-line errors."""
+"""Shared argument parsing helpers: numbers and vectors with one-line errors, the one-line-error
+parser of every console script, and the options the node scripts share (speed, signing key)."""
 
 from __future__ import annotations
 
+import argparse
 import math
 
 from ..errors import UsageError
+
+#: realtime speed factor range of ``--speed`` (daa-sil run/demo, daa-vehicle, daa-gcs)
+SPEED_MIN, SPEED_MAX = 0.01, 1000.0
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """``argparse`` with the project's error form: one line ``prog: error: message``, exit 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def check_speed(speed: float) -> float:
+    """``--speed`` (realtime factor) finite within [0.01, 1000]; otherwise a one-line UsageError."""
+    if not (math.isfinite(speed) and SPEED_MIN <= speed <= SPEED_MAX):
+        raise UsageError(f"--speed must be within [{SPEED_MIN:g}, {SPEED_MAX:g}], got {speed:g}")
+    return speed
+
+
+def load_key_option(path) -> "bytes | None":
+    """The MAVLink 2 signing key of ``--key FILE`` (None without the option)."""
+    if path is None:
+        return None
+    from ..link.codec import load_key
+
+    return load_key(path)
+
+
+def int_at_least(name: str, lo: int):
+    """argparse ``type=`` factory: an integer >= ``lo`` (0: non-negative, 1: positive)."""
+    what = {0: "a non-negative integer", 1: "a positive integer"}.get(lo, f"an integer >= {lo}")
+
+    def conv(text: str) -> int:
+        try:
+            val = int(text)
+        except ValueError:
+            raise UsageError(f"{name} must be {what}, got {text!r}") from None
+        if val < lo:
+            raise UsageError(f"{name} must be {what}, got {val}")
+        return val
+
+    conv.__name__ = name
+    return conv
 
 
 def parse_vector(text: str, n: int, name: str, units: str = "") -> list[float]:

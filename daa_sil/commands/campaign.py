@@ -11,6 +11,7 @@ from pathlib import Path
 from ..errors import UsageError
 from ..io import to_jsonable
 from ..thresholds import PRESETS
+from ._args import finite_float, int_at_least
 
 RUN_EXAMPLES = """examples:
   # the paper's study: 10,000 encounters x 5 groups (B-1, B-2, IC-1, ID-1, ID-2), T = 240 s
@@ -38,40 +39,6 @@ REPORT_EXAMPLES = """examples:
 """
 
 
-def _pos_int(name: str):
-    def conv(text: str) -> int:
-        try:
-            val = int(text)
-        except ValueError:
-            raise UsageError(f"{name} must be a positive integer, got {text!r}") from None
-        if val <= 0:
-            raise UsageError(f"{name} must be a positive integer, got {val}")
-        return val
-
-    conv.__name__ = name
-    return conv
-
-
-def _seed(text: str) -> int:
-    try:
-        val = int(text)
-    except ValueError:
-        raise UsageError(f"--seed must be a non-negative integer, got {text!r}") from None
-    if val < 0:
-        raise UsageError(f"--seed must be a non-negative integer, got {val}")
-    return val
-
-
-def _duration(text: str) -> float:
-    try:
-        val = float(text)
-    except ValueError:
-        raise UsageError(f"--duration must be a number of seconds, got {text!r}") from None
-    if not (10.0 <= val <= 3600.0):
-        raise UsageError(f"--duration must be within [10, 3600] s, got {text}")
-    return val
-
-
 def register(sub) -> None:
     p = sub.add_parser("campaign", help="fast-time Monte Carlo campaigns over the paper's groups",
                        description="Run the paper's fast-time study (chunked, resumable, on any executor) "
@@ -83,15 +50,15 @@ def register(sub) -> None:
                          epilog=RUN_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     r.add_argument("--groups", metavar="G1,G2,...", default=None,
                    help="comma-separated groups (default: B-1,B-2,IC-1,ID-1,ID-2)")
-    r.add_argument("--encounters", type=_pos_int("--encounters"), default=None, metavar="N",
+    r.add_argument("--encounters", type=int_at_least("--encounters", 1), default=None, metavar="N",
                    help="encounters per group (default 10000)")
-    r.add_argument("--seed", type=_seed, default=None, metavar="S", help="campaign seed (default 0)")
-    r.add_argument("--duration", type=_duration, default=None, metavar="S",
+    r.add_argument("--seed", type=int_at_least("--seed", 0), default=None, metavar="S", help="campaign seed (default 0)")
+    r.add_argument("--duration", type=finite_float("--duration", 10.0, 3600.0), default=None, metavar="S",
                    help="encounter length T, s (default 240 as in the paper; CPA at T/2)")
-    r.add_argument("--chunk-size", type=_pos_int("--chunk-size"), default=None, metavar="C",
+    r.add_argument("--chunk-size", type=int_at_least("--chunk-size", 1), default=None, metavar="C",
                    help="encounters per task (default 2000, about 0.2 GB per worker; smaller chunks resume at a finer grain but run slower)")
     r.add_argument("--out", required=True, metavar="DIR", help="output directory (must be empty unless --resume)")
-    r.add_argument("--workers", type=_pos_int("--workers"), default=None, metavar="K",
+    r.add_argument("--workers", type=int_at_least("--workers", 1), default=None, metavar="K",
                    help="worker processes (1 = in-process; default 1); not with a remote --scheduler")
     r.add_argument("--scheduler", default=None, metavar="ADDRESS|local-dask",
                    help="run on a Dask cluster at ADDRESS (tcp://host:8786) or a local one (local-dask)")

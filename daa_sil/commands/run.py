@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from ..errors import DaaSilError, OutputError, UsageError
+from ._args import check_speed
 
 EXAMPLES = """examples:
   # the main job: a head-on encounter, 4 s link delay, through the real link (lockstep)
@@ -564,10 +565,7 @@ def register(sub) -> None:
 
 
 def _check_args(args) -> None:
-    import math
-
-    if not (math.isfinite(args.speed) and 0.01 <= args.speed <= 1000):
-        raise UsageError(f"--speed must be within [0.01, 1000], got {args.speed:g}")
+    check_speed(args.speed)
     if args.key is not None and not args.key.is_file():
         raise UsageError(f"--key: key file {args.key} does not exist")
     if args.tap:
