@@ -4,10 +4,9 @@ At step ``k`` (``t_k = k dt``, ``dt = 1 s``, ``T = 240 s``; ``docs/architecture.
 
 1. **GCS / pilot** -- the pilot observes the newest telemetry whose downlink release time is
    ``<= t_k`` (per-encounter telemetry history + FIFO release rule of
-   :func:`daa_sil.link.delayline.fifo_release`), computes its DAA guidance from that view
-   (:func:`daa_sil.pilot.guidance_from_bands` on :func:`daa_sil.daa.compute_bands`, only for
-   encounters whose observed alert reaches ``PilotConfig.alert_level_min`` and whose view changed;
-   bit-identical to :func:`daa_sil.pilot.guidance_from_daa` there, and unused elsewhere), and
+   :func:`daa_sil.link.delayline.fifo_release`), its display (:class:`daa_sil.pilot.PilotDisplay`,
+   the same one the SIL GCS uses) is refreshed from that view where it changed (DAA bands only
+   where the observed alert reaches ``PilotConfig.alert_level_min``), and
    :meth:`daa_sil.pilot.PilotModel.step` decides. The GCS sends a packet every step (a heartbeat,
    plus the streamed command when the pilot has one) stamped ``t_k``; packets are released on the
    vehicle side at ``max(t_k + d_up(t_k), previous release)``.
@@ -45,16 +44,14 @@ import pyarrow as pa
 from . import steplog as sl
 from .agent import (CODE_NAMES, D_BLEND, D_DAA_OVERRIDE, D_LINK_LOST, D_NO_WAIT, D_PILOT, D_STALE, D_WAIT,
                     AllocationPolicy, PilotInput, make_wait_lookup)
-from .daa import compute_bands
 from .daa.config import DaaConfig
 from .errors import UsageError
 from .kinematics import AircraftState, Command
 from .latency import DEFAULT_EPOCH_S, BatchedDelay, DelayModel
 from .link.delayline import fifo_release
 from .onboard import OnboardCore, StepOutput
-from .pilot import Guidance, PilotConfig, PilotModel, guidance_from_bands
+from .pilot import PilotConfig, PilotDisplay, PilotModel
 from .thresholds import get_thresholds
-from .wellclear import wcv
 
 #: stream indices under an encounter's seed
 STREAM_PILOT, STREAM_UP, STREAM_DOWN = 0, 1, 2
@@ -289,10 +286,7 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
     last_cmd_slot = np.full(n, -1, np.int64)  # newest command slot delivered to the vehicle
     last_down, last_up = np.full(n, -np.inf), np.full(n, -np.inf)
     nan_n = np.full(n, np.nan)
-    guide = {k: np.full(n, np.inf if k.endswith("_level") else np.nan) for k in
-             ("left_trk", "left_level", "right_trk", "right_level", "up_vs", "up_level", "down_vs", "down_level")}
-    g_alert = np.zeros(n, np.int64)
-    g_wcv = np.zeros(n, bool)
+    display = PilotDisplay(n, cfg, pcfg.alert_level_min)
 
     for k in range(n_steps):
         t = k * dt
@@ -303,19 +297,9 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
         seen = obs
         obs_own = _gather_state(hist_own, obs)
         obs_intr = _gather_state(hist_intr, obs)
-        if new.any():
-            i = np.flatnonzero(new & (obs >= 0))
-            g_alert[i] = hist_alert[obs[i], i]
-            if i.size:
-                ow, it = obs_own[i], obs_intr[i]
-                g_wcv[i] = wcv(*_rel(ow, it), cfg.th).any(axis=1)
-                j = i[g_alert[i] >= pcfg.alert_level_min]
-                if j.size:
-                    gb = guidance_from_bands(compute_bands(obs_own[j], obs_intr[j], cfg))
-                    for key in guide:
-                        guide[key][j] = getattr(gb, key)
-        guidance = Guidance(alert_level=g_alert, wcv=g_wcv, **guide)
-        pout = pilot.step(t, obs_own, guidance, obs_intr)
+        i = np.flatnonzero(new & (obs >= 0))
+        display.refresh(i, obs_own[i], obs_intr[i], hist_alert[obs[i], i])
+        pout = pilot.step(t, obs_own, display.guidance(), obs_intr)
         # GCS packet of step k (heartbeat + command if streaming), FIFO-released on the vehicle side
         d_up = up.delay_at(t)
         rel_up = fifo_release(np.full((n, 1), t), d_up[:, None], prev_release=last_up)[:, 0]
@@ -353,12 +337,6 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
     enc = _encounter_table(acc, encounters, group, preset_name, n_steps * dt)
     dec = _decision_table(acc, np.asarray(encounters.encounter_id, np.int64), group)
     return enc, dec, (log.finish() if log is not None else None)
-
-
-def _rel(own: AircraftState, intr: AircraftState):
-    from .wellclear import relative
-
-    return relative(own.position()[:, None, :], own.velocity()[:, None, :], intr.position(), intr.velocity())
 
 
 __all__ = ["simulate", "encounter_streams", "ENCOUNTER_SCHEMA", "DECISION_SCHEMA", "STREAM_PILOT", "STREAM_UP",

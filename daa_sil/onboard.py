@@ -30,6 +30,7 @@ import numpy as np
 from . import wellclear as wc
 from .frames import to_paper_state
 from .kinematics import AircraftState, Command, Performance, advance, fly_command
+from .daa.alerting import relative_state
 from .encounters import INTRUDER_PERFORMANCE
 from .thresholds import Thresholds, get_thresholds
 
@@ -66,11 +67,6 @@ class StepOutput:
     pen_rate: np.ndarray  #: (N,) penetration rate at t (max over intruders), PI = sum * dt
     seg_min_range_m: np.ndarray  #: (N,) minimum horizontal range on the segment (over intruders)
     seg_vsep_m: np.ndarray  #: (N,) vertical separation at that minimum
-
-
-def _rel(own: AircraftState, intr: AircraftState) -> tuple[np.ndarray, np.ndarray]:
-    """Relative position/velocity (ownship minus intruder), (N, M, 3)."""
-    return wc.relative(own.position()[:, None, :], own.velocity()[:, None, :], intr.position(), intr.velocity())
 
 
 def band_intervals(values_deg: np.ndarray, region: np.ndarray) -> dict:
@@ -151,7 +147,7 @@ class OnboardCore:
 
     def geometry(self) -> dict:
         """Per-intruder well-clear quantities at the current time, (N, M) each."""
-        s, v = _rel(self.own, self.intruders)
+        s, v = relative_state(self.own, self.intruders)
         return {"range_m": wc.horizontal_range(s), "hmd_m": wc.hmd(s, v, self.daa_cfg.lookahead_s),
                 "dh_m": -s[..., 2], "tau_mod_s": wc.tau_mod(s, v, self.th.dthr), "wcv": wc.wcv(s, v, self.th)}
 
@@ -162,7 +158,7 @@ class OnboardCore:
         own0, intr0 = self.own, self.intruders
         cmd, dec, self.memory = self._agent.agent_step(t, own0, intr0, pilot_input, self.memory, self.policy,
                                                        self.daa_cfg, self.wait_lookup)
-        s0, v0 = _rel(own0, intr0)
+        s0, v0 = relative_state(own0, intr0)
         geom = self.geometry()
         alert = np.asarray(dec["alert_level"], dtype=np.int8).reshape(self.n, self.m)
         telem = Telemetry(t, own0, intr0, alert, band_intervals(dec["bands_trk"], dec["bands_trk_region"]))

@@ -552,6 +552,48 @@ def guidance_from_bands(bands) -> Guidance:
                     up_level=ul, down_vs=dv, down_level=dl)
 
 
+class PilotDisplay:
+    """What N pilots' displays show, refreshed only for the pilots that see newer telemetry (the GCS
+    of the SIL and the fast-time loop both use this, so the pilot reads the same guidance in both).
+
+    Per pilot: the vehicle's DAIDALUS alert level sent with that telemetry, well clear violated on
+    the observed states and, at or above ``alert_level_min``, the DAA bands' candidates of the
+    observed states (``cfg`` a :class:`daa_sil.daa.config.DaaConfig`); below it the last bands stay.
+    """
+
+    _KEYS = ("left_trk", "left_level", "right_trk", "right_level", "up_vs", "up_level", "down_vs", "down_level")
+
+    def __init__(self, n: int, cfg, alert_level_min: int):
+        self.cfg = cfg
+        self.alert_level_min = int(alert_level_min)
+        self.alert = np.zeros(n, np.int64)
+        self.wcv = np.zeros(n, bool)
+        self.bands = {k: np.full(n, np.inf if k.endswith("_level") else np.nan) for k in self._KEYS}
+
+    def refresh(self, rows: np.ndarray, own: AircraftState, intr: AircraftState, alert: np.ndarray) -> None:
+        """Pilots ``rows`` (indices) now see ownship ``own`` (R,), intruders ``intr`` (R, M) and the
+        vehicle's alert level ``alert`` (R,) sent with them."""
+        from .daa.alerting import relative_state
+        from .daa.bands import compute_bands
+        from .wellclear import wcv
+
+        rows = np.asarray(rows, np.int64)
+        if not rows.size:
+            return
+        alert = np.asarray(alert, np.int64)
+        self.alert[rows] = alert
+        self.wcv[rows] = wcv(*relative_state(own, intr), self.cfg.th).any(axis=1)
+        sel = alert >= self.alert_level_min
+        if sel.any():
+            gb = guidance_from_bands(compute_bands(own[sel], intr[sel], self.cfg))
+            for key in self._KEYS:
+                self.bands[key][rows[sel]] = getattr(gb, key)
+
+    def guidance(self) -> Guidance:
+        """The current :class:`Guidance` of every pilot (N,)."""
+        return Guidance(alert_level=self.alert, wcv=self.wcv, **self.bands)
+
+
 def guidance_from_daa(own: AircraftState, intr: AircraftState, cfg=None) -> Guidance:
     """Compute :class:`Guidance` with :mod:`daa_sil.daa` for ownship (N,) and intruders (N, M)
     (``cfg``: a :class:`daa_sil.daa.config.DaaConfig`, default DO-365B); ``wcv`` from the preset."""
@@ -567,5 +609,5 @@ def guidance_from_daa(own: AircraftState, intr: AircraftState, cfg=None) -> Guid
     return g
 
 
-__all__ = ["PilotConfig", "PilotModel", "PilotOutput", "Guidance", "MODES", "AXIS_NAMES", "DIR_NAMES",
+__all__ = ["PilotConfig", "PilotModel", "PilotOutput", "Guidance", "PilotDisplay", "MODES", "AXIS_NAMES", "DIR_NAMES",
            "choose_maneuver", "sample_response_components", "guidance_from_daa", "guidance_from_bands"]

@@ -85,28 +85,22 @@ class GcsNode:
         self.mode = opts.pilot or (scenario.pilot.mode if scenario is not None else "scripted")
         self.origin = scenario.origin if scenario is not None else None
         self.order = [i.id for i in scenario.intruders] if scenario is not None else []
+        from daa_sil.daa.config import DaaConfig
+
+        self.daa_cfg = DaaConfig(thresholds=scenario.thresholds) if scenario is not None else DaaConfig()
         self.pilot = None
         if self.mode == "model":
-            from daa_sil.pilot import PilotConfig, PilotModel
-
             from daa_sil.fasttime import STREAM_PILOT, encounter_streams
-
+            from daa_sil.pilot import PilotConfig, PilotDisplay, PilotModel
             from daa_sil.scenario import ownship_state
 
             seed = encounter_streams(scenario.seed if scenario is not None else 0)[STREAM_PILOT]
             # the plan the pilot returns to after the conflict: the scenario ownship's initial course
             self.pilot = PilotModel(1, [seed], PilotConfig(mode=scenario.pilot.response if scenario else "guendel"),
                                     plan=ownship_state(scenario) if scenario is not None else None,
-                                    daa_cfg=self._daa_cfg_of(scenario))
+                                    daa_cfg=self.daa_cfg)
+            self.display = PilotDisplay(1, self.daa_cfg, self.pilot.cfg.alert_level_min)
         self._g_seen = math.nan
-        self._g_alert, self._g_wcv = 0, False
-        self._guide = {k: np.full(1, np.inf if k.endswith("_level") else np.nan) for k in
-                       ("left_trk", "left_level", "right_trk", "right_level", "up_vs", "up_level", "down_vs",
-                        "down_level")}
-        if scenario is not None:
-            from daa_sil.daa.config import DaaConfig
-
-            self.daa_cfg = DaaConfig(thresholds=scenario.thresholds)
         self.seq = 0
         self.sent: list[dict] = []
         self.done_tick = -1
@@ -115,12 +109,6 @@ class GcsNode:
         self._fresh = True  # the last position message was accepted (ADSB in its datagram follows it)
         self._wall0: "float | None" = None
         self._t_sync = 0.0
-
-    @staticmethod
-    def _daa_cfg_of(scenario):
-        from daa_sil.daa.config import DaaConfig
-
-        return DaaConfig(thresholds=scenario.thresholds) if scenario is not None else DaaConfig()
 
     async def start(self) -> None:
         """Bind, then greet the vehicle side with a HEARTBEAT (a shim learns our address from it).
@@ -214,7 +202,7 @@ class GcsNode:
         obs = self.observed()
         if obs is None:  # nothing seen yet: the pilot steps on an unknown (nan) state, as in fast-time
             nan = np.full(1, np.nan)
-            self.pilot.step(t, AircraftState(nan, nan, nan, nan, nan, nan), self._guide_obj())
+            self.pilot.step(t, AircraftState(nan, nan, nan, nan, nan, nan), self.display.guidance())
             return []
         own, intr = obs
         po = self.pilot.step(t, own, self._guidance(own, intr), intr)
@@ -226,30 +214,16 @@ class GcsNode:
                  "vs_mps": float(po.cmd.vs[0]), "gs_mps": float(po.cmd.gs[0]), "kind": kind,
                  "axis": str(po.axis_names()[0]), "dir": str(po.direction_names()[0])}]
 
-    def _guide_obj(self):
-        from daa_sil.pilot import Guidance
-
-        return Guidance(alert_level=np.array([self._g_alert]), wcv=np.array([self._g_wcv]), **self._guide)
-
     def _guidance(self, own: AircraftState, intr: AircraftState):
-        """The pilot's display guidance, recomputed only when newer telemetry is seen (as fast-time):
-        the vehicle's alert level (DAA_ALERT), well-clear from the observed states and, at or above the
-        pilot's trigger level, the DAA bands of the observed states."""
-        from daa_sil import wellclear as wc
-        from daa_sil.daa import compute_bands
-        from daa_sil.pilot import guidance_from_bands
-
+        """The pilot's display guidance, refreshed only when newer telemetry is seen (as fast-time,
+        with the same :class:`daa_sil.pilot.PilotDisplay`): the vehicle's alert level (DAA_ALERT) sent
+        with that telemetry, well clear on the observed states and the DAA bands of the observed states."""
         t_seen = self.view.own[0]
         if t_seen != self._g_seen:
             self._g_seen = t_seen
-            self._g_alert = int(self.view.alert[1]) if self.view.alert[0] == t_seen else self._g_alert
-            s, v = wc.relative(own.position()[:, None, :], own.velocity()[:, None, :], intr.position(), intr.velocity())
-            self._g_wcv = bool(wc.wcv(s, v, self.daa_cfg.th).any())
-            if self._g_alert >= self.pilot.cfg.alert_level_min:
-                gb = guidance_from_bands(compute_bands(own, intr, self.daa_cfg))
-                for key in self._guide:
-                    self._guide[key] = np.asarray(getattr(gb, key), float).reshape(1)
-        return self._guide_obj()
+            alert = int(self.view.alert[1]) if self.view.alert[0] == t_seen else int(self.display.alert[0])
+            self.display.refresh(np.array([0]), own, intr, np.array([alert]))
+        return self.display.guidance()
 
     def _heartbeat(self):
         return M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE, 3)
