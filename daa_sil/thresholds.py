@@ -1,13 +1,18 @@
 """Well-clear and NMAC threshold presets.
 
-Two presets (``daa_sil.thresholds.PRESETS``):
+Three presets (``daa_sil.thresholds.PRESETS``):
 
 ``do365`` (default)
-    RTCA DO-365 Phase I cooperative DAA well clear as implemented by DAIDALUS: DMOD = HMD* =
+    RTCA DO-365 Phase I cooperative DAA well clear as the standard's text states it: DMOD = HMD* =
     4000 ft (1219.2 m), ZTHR = h* = 450 ft (137.16 m), TAUMOD* = 35 s, TCOA = 0; NMAC 500 ft
     horizontal / 100 ft vertical (RTCA SC-147).
 ``paper``
     Tabassum & Bai: HMD* = 1220 m, d_h* = 122 m, tau_mod* = 35 s; NMAC 500 ft / 120 ft.
+``daidalus``
+    NASA DAIDALUS v2.0.4 ``DO_365B_no_SUM.conf``: the same volume with DMOD = HMD* = 0.66 nmi
+    (1222.32 m, 3.1 m more than 4000 ft), ZTHR 450 ft, TTHR 35 s, TCOA 0; NMAC 500 ft / 100 ft.
+    With this preset the onboard DAA also uses DAIDALUS's band grids, horizons, recovery and
+    hysteresis (:meth:`daa_sil.daa.DaaConfig.for_preset`).
 
 Every output of daa-sil records the preset name it used. Boundaries are closed (``<=``) for both
 the well-clear violation and NMAC.
@@ -18,7 +23,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, replace
 
 from .errors import UsageError
-from .units import FT
+from .units import FT, NMI
 
 
 @dataclass(frozen=True)
@@ -48,7 +53,10 @@ DO365 = Thresholds(name="do365", dthr=4000.0 * FT, zthr=450.0 * FT, tthr=35.0, t
 PAPER = Thresholds(name="paper", dthr=1220.0, zthr=122.0, tthr=35.0, tcoa=0.0,
                    nmac_h=500.0 * FT, nmac_v=120.0 * FT)
 
-PRESETS: dict[str, Thresholds] = {"do365": DO365, "paper": PAPER}
+DAIDALUS = Thresholds(name="daidalus", dthr=0.66 * NMI, zthr=450.0 * FT, tthr=35.0, tcoa=0.0,
+                      nmac_h=500.0 * FT, nmac_v=100.0 * FT)
+
+PRESETS: dict[str, Thresholds] = {"do365": DO365, "paper": PAPER, "daidalus": DAIDALUS}
 DEFAULT_PRESET = "do365"
 
 

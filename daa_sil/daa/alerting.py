@@ -14,32 +14,59 @@ def relative_state(own: AircraftState, intr: AircraftState) -> tuple[np.ndarray,
     return wc.relative(own.position()[:, None], own.velocity()[:, None], intr.position(), intr.velocity())
 
 
+def _alerting_times(cfg: DaaConfig, early_level, shape) -> np.ndarray:
+    """Alerting time (s) of levels 1..3 per intruder ``(3, N, M)``: a level's early alerting time where
+    ``early_level`` (N, M) equals that level (DAIDALUS hysteresis), else its alerting time."""
+    times = np.array([cfg.alert_time_preventive_s, cfg.alert_time_corrective_s, cfg.alert_time_warning_s])
+    early = np.array([cfg.early_alert_time_preventive_s, cfg.early_alert_time_corrective_s,
+                      cfg.early_alert_time_warning_s])
+    out = np.broadcast_to(times[:, None, None], (3,) + shape).copy()
+    if early_level is not None:
+        e = np.asarray(early_level)
+        for lv in (1, 2, 3):
+            out[lv - 1] = np.where(e == lv, early[lv - 1], out[lv - 1])
+    return out
+
+
+def _conflict_before(t_in, t_al) -> np.ndarray:
+    """DAIDALUS ``conflictBefore``: the violation starts now (``t_in == 0``) or before ``t_al``."""
+    return (t_in == 0.0) | (t_in < t_al)
+
+
 def alert_levels(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = None,
                  prev: "np.ndarray | None" = None) -> np.ndarray:
-    """Alert level per intruder ``(N, M)`` int8: 0 none, 1 preventive, 2 corrective, 3 warning.
+    """Raw alert level per intruder ``(N, M)`` int8: 0 none, 1 preventive, 2 corrective, 3 warning.
 
     Level i is raised when the straight-line time to violation ``t_in`` of its volume over
     ``[0, lookahead]`` satisfies DAIDALUS ``conflictBefore(t_al)`` (``t_in == 0`` or ``t_in < t_al``),
-    checked from 3 down to 1 (``daa_spec.md`` §3.3). Volumes: warning and corrective use
-    ``cfg.th``; preventive uses ZTHR = 700 ft. Alerting times 25 / 55 / 55 s. Hysteresis: if ``prev``
-    levels are given, a level the intruder already had uses its early alerting time (55 / 75 / 75 s);
-    the M-of-N filter is not applied.
+    checked from 3 down to 1 (``docs/daa.md``). Volumes: warning and corrective use ``cfg.th``;
+    preventive uses ZTHR = ``cfg.preventive_zthr`` (700 ft). Alerting times 25 / 55 / 55 s. ``prev``
+    (N, M): the intruder's current (filtered) level from :class:`daa_sil.daa.DaaState`; the level equal
+    to it uses its early alerting time (55 / 75 / 75 s), as DAIDALUS does. No M-of-N here.
     """
     cfg = cfg or DaaConfig()
     s, v = relative_state(own, intr)
     t_c, _ = wc.violation_interval(s, v, cfg.th, 0.0, cfg.lookahead_s)
     t_p, _ = wc.violation_interval(s, v, cfg.th_preventive, 0.0, cfg.lookahead_s)
-    times = np.array([cfg.alert_time_preventive_s, cfg.alert_time_corrective_s, cfg.alert_time_warning_s])
-    early = np.array([cfg.early_alert_time_preventive_s, cfg.early_alert_time_corrective_s,
-                      cfg.early_alert_time_warning_s])
+    t_al = _alerting_times(cfg, prev, t_c.shape)
     level = np.zeros(t_c.shape, np.int8)
     for lv, t_in in ((3, t_c), (2, t_c), (1, t_p)):
-        t_al = times[lv - 1]
-        if prev is not None:
-            t_al = np.where(np.asarray(prev) >= lv, early[lv - 1], t_al)
-        hit = (t_in == 0.0) | (t_in < t_al)
+        hit = _conflict_before(t_in, t_al[lv - 1])
         level = np.where((level == 0) & hit, lv, level).astype(np.int8)
     return level
+
+
+def conflict_lists(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = None,
+                   early_level: "np.ndarray | None" = None) -> tuple[np.ndarray, np.ndarray]:
+    """(NEAR, MID) *conflict aircraft* flags ``(N, M)``: the straight-line violation of the warning /
+    corrective volume starts within that level's alerting time (25 / 55 s; the early time 55 / 75 s
+    where ``early_level`` equals the level). Their bands use the whole lookahead (DAIDALUS
+    ``conflict_aircraft``); the other intruders are *peripheral* (:mod:`daa_sil.daa.bands`)."""
+    cfg = cfg or DaaConfig()
+    s, v = relative_state(own, intr)
+    t_c, _ = wc.violation_interval(s, v, cfg.th, 0.0, cfg.lookahead_s)
+    t_al = _alerting_times(cfg, early_level, t_c.shape)
+    return _conflict_before(t_c, t_al[2]), _conflict_before(t_c, t_al[1])
 
 
 def proj_lowc(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = None,

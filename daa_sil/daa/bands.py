@@ -1,51 +1,72 @@
 """DAIDALUS-style kinematic bands for track, vertical speed and ground speed (batched).
 
-For each axis the candidates lie on a grid anchored at the current value (``config`` module
-docstring). Candidate ``k`` on a side is flown kinematically: turn at the turn-rate limit (or
-accelerate at the vertical / horizontal limit) until the candidate value is reached after
-``k * knot`` s, then straight; intruders fly straight (``daa_spec.md`` §4.2). For each candidate
-and intruder the first well-clear violation ``t_in`` over ``[0, lookahead]`` is computed
-(:mod:`daa_sil.daa.trajectory`). Regions (``daa_spec.md`` §4.1, §4.3):
+For each axis the candidates lie on a grid anchored at the current value (:mod:`daa_sil.daa.config`).
+Candidate ``k`` on a side is flown kinematically: turn at the turn-rate limit (or accelerate at the
+vertical / horizontal limit) until the candidate value is reached after ``t_k = k * knot`` s, then
+straight; intruders fly straight. For each candidate and intruder the first well-clear violation
+``t_in`` over ``[0, lookahead]`` is computed on the true trajectory (:mod:`daa_sil.daa.trajectory`).
+``docs/daa.md`` states every rule below in full.
 
-* NEAR if ``t_in < alert_time_warning_s`` for some intruder;
-* MID if ``t_in < H_i`` for some intruder, with ``H_i = lookahead`` for *conflict aircraft* (alert
-  level >= 2 now) and ``alert_time_corrective_s`` for the others (DAIDALUS peripheral aircraft);
-* NONE otherwise. FAR (preventive) is not painted (DO-365 maps the preventive level to NONE).
-* RECOVERY: when every candidate of an axis is MID or NEAR, the candidates whose first LoWC is
-  later than ``sm_horizon_s`` (55 s: they stay safe, SM > 0) are relabelled RECOVERY; if there are
-  none, the candidates whose last exit from a conflicting violation is within
-  ``recovery_stability_s`` of the earliest one (a simplification of DAIDALUS' shrinking-cylinder
-  search: the maneuvers that regain well clear soonest).
+Regions. A candidate is NEAR (warning) if it is red for the NEAR level of some intruder, else MID
+(corrective) if red for the MID level of some intruder, else NONE (FAR, the preventive level, is not
+painted: DO-365 maps it to no band). "Red for a level" depends on ``cfg.horizon_from_maneuver``:
 
-Resolutions (``daa_spec.md`` §4.4): when the current value (k = 0) is MID or NEAR, the closest
-NONE/RECOVERY candidate on each side (``res_lo`` = left/down/slower, ``res_hi`` = right/up/faster,
-nan if none or if the current value is not in conflict); the preferred side is the one reached
-sooner (ties: right/up/faster).
+* ``False`` (``do365``, ``paper``; DAIDALUS v1 / v2.0.1): MID if ``t_in < lookahead`` for an intruder
+  at alert level >= 2 and ``t_in < alert_time_corrective_s`` for the others; NEAR if
+  ``t_in < alert_time_warning_s``, horizons counted from now.
+* ``True`` (``daidalus``; DAIDALUS v2.0.4 with ``bands_add_time_to_maneuver = false``): per level, an
+  intruder whose straight-line conflict starts within that level's alerting time (a *conflict
+  aircraft*) is red when ``t_in < lookahead``; any other intruder when ``t_in < alerting time + t_k``.
+
+With ``cfg.daidalus_grid`` a conflict-free run of a single candidate is not a band (DAIDALUS builds
+bands as intervals between candidates and drops zero-width ones).
+
+Recovery (every candidate of an axis MID or worse), ``cfg.recovery``:
+
+* ``"earliest_exit"`` (``do365``, ``paper``): the candidates whose first LoWC is later than
+  ``sm_horizon_s`` (they stay safe, SM > 0) are relabelled RECOVERY; if there are none, those whose last
+  exit from a conflicting violation is within ``recovery_stability_s`` of the earliest one.
+* ``"cylinder"`` (``daidalus``): DAIDALUS's search. If every candidate hits the NMAC cylinder, the axis
+  is saturated. Otherwise, starting from the (``min_horizontal_recovery``, ``min_vertical_recovery``)
+  cylinder: bisect (0.5 s) for the earliest time ``t_r`` at which some candidate avoids the cylinder on
+  ``[0, t_r]`` and the corrective volume after ``t_r``; the RECOVERY band is the set of candidates that do
+  so for ``t_r + recovery_stability_s``. If none does, shrink the cylinder by ``1 - ca_factor`` (never
+  below NMAC, ``ca_bands``) and repeat. ``recovery_nfactor`` counts the shrinks.
+
+Resolutions: when the current value (k = 0) is MID or NEAR, the first NONE/RECOVERY candidate scanning
+away from it on each side (``res_lo`` = left/down/slower, ``res_hi`` = right/up/faster), ``-inf``/``+inf``
+when a side has none, ``nan`` when the current value is not in conflict (DAIDALUS conventions). The
+preferred side is the one reached sooner; equal distances (up to rounding) go right/up/faster.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from ..frames import wrap_2pi
 from ..kinematics import AircraftState
-from .alerting import alert_levels
+from ..thresholds import Thresholds
+from .alerting import alert_levels, conflict_lists
 from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_SPEED, AXIS_VERTICAL, REGION_MID, REGION_NAMES, REGION_NEAR,
                      REGION_NONE, REGION_RECOVERY, DaaConfig)
-from .trajectory import knot_path_conflicts
+from .trajectory import ManeuverPaths, PathConflicts, PathEvaluator
 
 
 @dataclass
 class AxisBands:
     """Candidates of one axis for N encounters; K candidates ordered from the low side to the high side.
 
-    ``values`` (N, K) absolute (track rad [0, 2pi) / vs m/s / gs m/s); ``delta`` (N, K) signed change
-    from the current value (rad or m/s; track: - = left); ``side`` (K,) -1/0/+1; ``t_man`` (N, K) s to
-    reach; ``t_in`` (N, K) first LoWC with any intruder over the lookahead (inf = none); ``t_out``
-    (N, K) last exit from a conflicting violation; ``region`` (N, K) REGION_* codes; ``res_lo``,
-    ``res_hi`` (N,) resolutions (nan = none); ``preferred`` (N,) side -1/0/+1.
+    ``values`` (N, K) absolute (track rad [0, 2pi) / vs m/s / gs m/s; a speed candidate past a limit is
+    shown at the limit); ``delta`` (N, K) signed change from the current value (rad or m/s; track:
+    - = left); ``side`` (K,) -1/0/+1; ``t_man`` (N, K) s to reach; ``t_in`` (N, K) first LoWC with any
+    intruder over the lookahead (inf = none); ``t_out`` (N, K) last exit from a conflicting violation;
+    ``region`` (N, K) REGION_* codes; ``gap_region`` (N, K-1) region of the open interval between
+    candidates k and k+1; ``res_lo``, ``res_hi`` (N,) resolutions (nan = no conflict, -inf / +inf = no
+    resolution on that side); ``preferred`` (N,) side -1/0/+1; ``recovery_time`` (N,) s (nan = no
+    recovery bands, -inf = saturated); ``recovery_nfactor`` (N,) cylinder shrinks (-1 = none);
+    ``recovery_h``/``recovery_v`` (N,) m, the cylinder the recovery band keeps clear of.
     """
 
     axis: int
@@ -59,10 +80,39 @@ class AxisBands:
     res_lo: np.ndarray
     res_hi: np.ndarray
     preferred: np.ndarray
+    gap_region: "np.ndarray | None" = None
+    recovery_time: "np.ndarray | None" = None
+    recovery_nfactor: "np.ndarray | None" = None
+    recovery_h: "np.ndarray | None" = None
+    recovery_v: "np.ndarray | None" = None
+
+    def __post_init__(self):
+        n = self.values.shape[0]
+        for name, fill in (("recovery_time", np.nan), ("recovery_nfactor", -1), ("recovery_h", np.nan),
+                           ("recovery_v", np.nan)):
+            if getattr(self, name) is None:
+                setattr(self, name, np.full(n, fill, np.int16 if name == "recovery_nfactor" else float))
 
     @property
     def name(self) -> str:
         return AXIS_NAMES[self.axis]
+
+    def gaps(self) -> np.ndarray:
+        """``gap_region`` (computed from ``region`` by :func:`gap_regions` when not given)."""
+        if self.gap_region is None:
+            self.gap_region = gap_regions(self.region)
+        return self.gap_region
+
+    @property
+    def k0(self) -> int:
+        """Column of the current value."""
+        return int(np.nonzero(self.side == 0)[0][0])
+
+    def rows(self, idx) -> "AxisBands":
+        """The bands of encounters ``idx``."""
+        keep = lambda f: f.name in ("axis", "side") or getattr(self, f.name) is None  # noqa: E731
+        return AxisBands(**{f.name: (getattr(self, f.name) if keep(f) else getattr(self, f.name)[idx])
+                            for f in fields(self)})
 
     def intervals(self, i: int = 0) -> list[tuple[float, float, str]]:
         """Bands of encounter ``i`` as ``[(lo, hi, region_name), ...]`` in SI units, low side first.
@@ -82,6 +132,34 @@ class AxisBands:
                 start = j
         return out
 
+    def band_intervals(self, i: int = 0) -> list[tuple[float, float, str]]:
+        """DAIDALUS-style bands of encounter ``i``: ``[(lo, hi, region_name), ...]`` whose bounds are
+        candidate values and whose regions are those of the intervals between candidates (so they cover
+        the whole candidate range without gaps); low side first, SI units, tracks may wrap."""
+        vals, gap = self.values[i], self.gaps()[i]
+        width = np.abs(np.diff(self.delta[i]))
+        out: list[tuple[float, float, str]] = []
+        for j in range(len(gap)):
+            if width[j] <= 1e-12:
+                continue
+            name = REGION_NAMES[int(gap[j])]
+            if out and out[-1][2] == name:
+                out[-1] = (out[-1][0], float(vals[j + 1]), name)
+            else:
+                out.append((float(vals[j]), float(vals[j + 1]), name))
+        return out
+
+
+def gap_regions(region: np.ndarray) -> np.ndarray:
+    """Region (N, K-1) of the open interval between neighbouring candidates from their regions: the
+    more severe of the two; RECOVERY only between two RECOVERY candidates; NONE between NONE and
+    RECOVERY."""
+    a, b = region[:, :-1].astype(np.int16), region[:, 1:].astype(np.int16)
+    ca, cb = np.where(a == REGION_RECOVERY, 0, a), np.where(b == REGION_RECOVERY, 0, b)
+    worse = np.maximum(ca, cb)
+    both_rec = (a == REGION_RECOVERY) & (b == REGION_RECOVERY)
+    return np.where(both_rec, REGION_RECOVERY, worse).astype(np.int8)
+
 
 @dataclass
 class Bands:
@@ -100,16 +178,12 @@ class Bands:
         return {AXIS_HORIZONTAL: self.trk, AXIS_VERTICAL: self.vs, AXIS_SPEED: self.gs}[code]
 
     def in_conflict(self) -> np.ndarray:
-        """(N,) bool: the current trajectory (k = 0) is in a conflict region (MID or worse)."""
-        k0 = np.nonzero(self.trk.side == 0)[0][0]
-        r = self.trk.region[:, k0]
-        return (r >= REGION_MID) & (r != REGION_RECOVERY) | (r == REGION_RECOVERY)
+        """(N,) bool: the current trajectory (k = 0) is in a conflict region (MID or worse) or RECOVERY."""
+        r = self.trk.region[:, self.trk.k0]
+        return r >= REGION_MID
 
     def __getitem__(self, idx) -> "Bands":
-        def sub(a: AxisBands) -> AxisBands:
-            return AxisBands(a.axis, a.values[idx], a.delta[idx], a.side, a.t_man[idx], a.t_in[idx], a.t_out[idx],
-                             a.region[idx], a.res_lo[idx], a.res_hi[idx], a.preferred[idx])
-        return Bands(sub(self.trk), sub(self.vs), sub(self.gs), self.alert[idx], self.preset)
+        return Bands(self.trk.rows(idx), self.vs.rows(idx), self.gs.rows(idx), self.alert[idx], self.preset)
 
 
 def _side_order(arr, j_lo: int, j_hi: int):
@@ -123,7 +197,8 @@ def _path_sizes(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[int, int
     """Number of candidates on the low and high side of an axis for this batch (>= 0)."""
     if axis == AXIS_HORIZONTAL:
         j_lo = int(round(cfg.trk_range / cfg.trk_step))
-        return j_lo, (j_lo - 1 if np.isclose(cfg.trk_range, np.pi) else j_lo)
+        full_circle = np.isclose(cfg.trk_range, np.pi)
+        return j_lo, (j_lo - 1 if full_circle and not cfg.daidalus_grid else j_lo)
     cur, lo, hi, step = ((own.vs, -cfg.max_vs, cfg.max_vs, cfg.vs_step) if axis == AXIS_VERTICAL
                          else (own.gs, cfg.min_gs, cfg.max_gs, cfg.gs_step))
     j_lo = int(np.ceil(np.max(cur - lo, initial=0.0) / step - 1e-9))
@@ -131,80 +206,253 @@ def _path_sizes(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[int, int
     return max(j_lo, 0), max(j_hi, 0)
 
 
-def _axis_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Ownship on the low-side and high-side maneuver paths at knots 0..j.
-
-    Returns position and velocity ``(N, 2, j+1, 3)``, the axis value ``(N, 2, j+1)`` and knot times
-    ``(j+1,)``. Closed forms of :func:`daa_sil.kinematics.advance` for a constant-rate turn (the arc is
-    built once in the body frame and rotated per encounter) and for a saturating acceleration.
-    """
-    sgn = np.array([-1.0, 1.0])[None, :, None]  # low side, high side
-    x0, y0, z0 = (a[:, None, None] for a in (own.x, own.y, own.z))
-    gs0, trk0, vs0 = (a[:, None, None] for a in (own.gs, own.trk, own.vs))
+def _axis_state(axis: int, cfg: DaaConfig, x0, y0, z0, gs0, trk0, vs0, sgn, t):
+    """Ownship position, velocity (..., 3) and axis value on the maneuver of ``axis`` toward side
+    ``sgn`` (+-1) after ``t`` s (all arguments broadcast): closed forms of
+    :func:`daa_sil.kinematics.advance` for a constant-rate turn and for an acceleration that saturates
+    at the axis limit (with ``cfg.daidalus_grid`` it runs past the limit by up to one step, as
+    DAIDALUS evaluates its last candidate, but never below zero speed)."""
     st, ct = np.sin(trk0), np.cos(trk0)
     if axis == AXIS_HORIZONTAL:
-        knot = cfg.knot_trk
-        t = np.arange(j + 1) * knot
-        th = cfg.turn_rate * t
-        fwd = gs0 / cfg.turn_rate * np.sin(th)  # along the initial track
-        lat = gs0 / cfg.turn_rate * (1.0 - np.cos(th))  # toward the turn side
+        w = cfg.turn_rate
+        th = w * t
+        sth, cth = np.sin(th), np.cos(th)
+        fwd = gs0 / w * sth  # along the initial track
+        lat = gs0 / w * (1.0 - cth)  # toward the turn side
         x = x0 + fwd * st + sgn * lat * ct
         y = y0 + fwd * ct - sgn * lat * st
-        z = np.broadcast_to(z0 + vs0 * t, x.shape)
-        c, s = np.cos(th), sgn * np.sin(th)
-        vx, vy = gs0 * (st * c + ct * s), gs0 * (ct * c - st * s)
-        vz = np.broadcast_to(vs0, x.shape)
+        z = z0 + vs0 * t
+        ssth = sgn * sth  # sin / cos of the track trk0 + sgn * th by angle addition
+        vx, vy, vz = gs0 * (st * cth + ct * ssth), gs0 * (ct * cth - st * ssth), vs0 + 0.0 * t
         value = wrap_2pi(trk0 + sgn * th)
     else:
         vertical = axis == AXIS_VERTICAL
-        knot, acc = (cfg.knot_vs, cfg.vertical_accel) if vertical else (cfg.knot_gs, cfg.horizontal_accel)
-        lim = np.array([-cfg.max_vs, cfg.max_vs]) if vertical else np.array([cfg.min_gs, cfg.max_gs])
-        lim = lim[None, :, None]
-        t = np.arange(j + 1) * knot
+        acc = cfg.vertical_accel if vertical else cfg.horizontal_accel
+        if cfg.daidalus_grid:
+            lim = np.where(sgn < 0, -np.inf if vertical else 0.0, np.inf)
+        else:
+            lim = np.where(sgn < 0, -cfg.max_vs if vertical else cfg.min_gs, cfg.max_vs if vertical else cfg.max_gs)
         v0 = vs0 if vertical else gs0
         t_sat = np.maximum((lim - v0) * sgn / acc, 0.0)
         tc = np.minimum(t, t_sat)
         v_t = v0 + sgn * acc * tc
         dist = v0 * tc + 0.5 * sgn * acc * tc * tc + v_t * (t - tc)
         if vertical:
-            x = np.broadcast_to(x0 + gs0 * st * t, v_t.shape)
-            y = np.broadcast_to(y0 + gs0 * ct * t, v_t.shape)
-            z = z0 + dist
-            vx, vy, vz = (np.broadcast_to(a, v_t.shape) for a in (gs0 * st, gs0 * ct, v_t))
+            x, y, z = x0 + gs0 * st * t, y0 + gs0 * ct * t, z0 + dist
+            vx, vy, vz = gs0 * st + 0.0 * t, gs0 * ct + 0.0 * t, v_t
         else:
-            x, y = x0 + dist * st, y0 + dist * ct
-            z = np.broadcast_to(z0 + vs0 * t, v_t.shape)
-            vx, vy, vz = v_t * st, v_t * ct, np.broadcast_to(vs0, v_t.shape)
+            x, y, z = x0 + dist * st, y0 + dist * ct, z0 + vs0 * t
+            vx, vy, vz = v_t * st, v_t * ct, vs0 + 0.0 * t
         value = v_t
     pos = np.stack(np.broadcast_arrays(x, y, z), axis=-1)
     vel = np.stack(np.broadcast_arrays(vx, vy, vz), axis=-1)
-    return pos, vel, value, t
+    return pos, vel, value
 
 
-def _closest(ok, side, want: int, cost):
-    """Index of the cheapest ``ok`` candidate with ``side == want`` (k >= 1), and whether one exists."""
-    c = np.where(ok & (side == want), cost, np.inf)
-    idx = np.argmin(c, axis=-1)
-    return idx, np.isfinite(np.take_along_axis(c, idx[:, None], -1)[:, 0])
+def _axis_state_soa(axis: int, cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, sgn, t) -> tuple:
+    """Ownship position and velocity (six component arrays) on the maneuver of ``axis`` (as
+    :func:`_axis_state`; ``st``/``ct`` are the sine and cosine of the initial track)."""
+    if axis == AXIS_HORIZONTAL:
+        w = cfg.turn_rate
+        th = w * t
+        r = gs0 / w
+        sth, cth = np.sin(th), np.cos(th)
+        fwd, lat = r * sth, sgn * r * (1.0 - cth)
+        ssth = sgn * sth
+        return (x0 + fwd * st + lat * ct, y0 + fwd * ct - lat * st, z0 + vs0 * t,
+                gs0 * (st * cth + ct * ssth), gs0 * (ct * cth - st * ssth), vs0 + 0.0 * t)
+    vertical = axis == AXIS_VERTICAL
+    acc = cfg.vertical_accel if vertical else cfg.horizontal_accel
+    if cfg.daidalus_grid:
+        lim = np.where(sgn < 0, -np.inf if vertical else 0.0, np.inf)
+    else:
+        lim = np.where(sgn < 0, -cfg.max_vs if vertical else cfg.min_gs, cfg.max_vs if vertical else cfg.max_gs)
+    v0 = vs0 if vertical else gs0
+    tc = np.minimum(t, np.maximum((lim - v0) * sgn / acc, 0.0))
+    dist = v0 * t + sgn * acc * tc * (t - 0.5 * tc)
+    v_t = v0 + sgn * acc * tc
+    if vertical:
+        return x0 + gs0 * st * t, y0 + gs0 * ct * t, z0 + dist, gs0 * st + 0.0 * t, gs0 * ct + 0.0 * t, v_t
+    return x0 + dist * st, y0 + dist * ct, z0 + vs0 * t, v_t * st, v_t * ct, vs0 + 0.0 * t
+
+
+def _axis_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ownship on the low-side and high-side maneuver paths at knots 0..j: position and velocity
+    ``(N, 2, j+1, 3)``, the axis value ``(N, 2, j+1)`` and the knot times ``(j+1,)``."""
+    paths, value = _maneuver_paths(own, axis, cfg, j)
+    return paths.pos, paths.vel, value, paths.knot_times()[0, 0] if own.shape[0] else np.asarray(paths.t)[0, 0]
+
+
+def _maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int) -> tuple[ManeuverPaths, np.ndarray]:
+    """Low-side and high-side maneuver paths of ``axis`` at knots 0..j (P = 2) and the axis value at
+    each knot ``(N, 2, j+1)``."""
+    knot = {AXIS_HORIZONTAL: cfg.knot_trk, AXIS_VERTICAL: cfg.knot_vs, AXIS_SPEED: cfg.knot_gs}[axis]
+    t = np.arange(j + 1) * knot
+    sgn = np.array([-1.0, 1.0])
+    params = [a[:, None, None] for a in (own.x, own.y, own.z, own.gs, own.trk, own.vs)]
+    pos, vel, value = _axis_state(axis, cfg, *params, sgn[None, :, None], t[None, None, :])
+    n = own.shape[0]
+    if axis == AXIS_HORIZONTAL:  # constant-rate turn: |a| = V w
+        acc_h, acc_v = own.gs * cfg.turn_rate, np.zeros(n)
+    elif axis == AXIS_SPEED:  # along-track acceleration until the speed limit
+        acc_h, acc_v = np.full(n, cfg.horizontal_accel), np.zeros(n)
+    else:  # vertical acceleration: the horizontal motion is straight
+        acc_h, acc_v = np.zeros(n), np.full(n, cfg.vertical_accel)
+    st, ct = np.sin(own.trk), np.cos(own.trk)
+    x0, y0, z0, gs0, vs0 = own.x.copy(), own.y.copy(), own.z.copy(), own.gs.copy(), own.vs.copy()
+
+    def state_at(ni, pi):  # f(t): true ownship state on paths pi of encounters ni at times t
+        args = (x0[ni], y0[ni], z0[ni], gs0[ni], st[ni], ct[ni], vs0[ni], sgn[pi])
+        return lambda tq: _axis_state_soa(axis, cfg, *args, tq)
+
+    two = lambda a: np.repeat(a[:, None], 2, 1)  # noqa: E731
+    paths = ManeuverPaths(pos, vel, t[None, None, :], state_at, two(acc_h), two(acc_v),
+                          vz_const=axis != AXIS_VERTICAL)
+    return paths, np.broadcast_to(value, (n, 2, j + 1))
+
+
+def _first_on_side(ok, side, want: int, k0: int):
+    """Index of the first ``ok`` candidate scanning away from column ``k0`` toward side ``want``, and
+    whether one exists (candidates ordered low side, k0, high side)."""
+    part = ok[:, k0 + 1:] if want > 0 else ok[:, k0 - 1::-1] if k0 > 0 else ok[:, :0]
+    if part.shape[1] == 0:
+        return np.full(ok.shape[0], k0), np.zeros(ok.shape[0], bool)
+    j = np.argmax(part, axis=1)
+    found = part[np.arange(ok.shape[0]), j]
+    return (k0 + 1 + j) if want > 0 else (k0 - 1 - j), found
+
+
+def _runs2(green: np.ndarray) -> np.ndarray:
+    """``green`` without isolated candidates (a run of one is not a band)."""
+    left = np.zeros_like(green)
+    right = np.zeros_like(green)
+    left[:, 1:] = green[:, :-1]
+    right[:, :-1] = green[:, 1:]
+    return green & (left | right)
+
+
+def _cylinder(h: float, v: float) -> Thresholds:
+    return Thresholds(name=f"cylinder {h:.1f} m / {v:.1f} m", dthr=h, zthr=v, tthr=0.0, tcoa=0.0)
+
+
+class _Recovery:
+    """DAIDALUS's shrinking-cylinder recovery search for the rows of one axis that saturate (module doc)."""
+
+    def __init__(self, ev: PathEvaluator, corrective: PathConflicts, listed, horizon, cfg: DaaConfig, order, runs):
+        self.ev, self.cfg, self.order, self.runs = ev, cfg, order, runs
+        L = cfg.lookahead_s
+        self.tk = np.broadcast_to(corrective.t, ev.shape)
+        self.horizon = horizon[:, :, None, None]  # (R, M, 1, 1) aircraft time horizon
+        self.window = np.minimum(L, self.horizon + self.tk)  # conflict-detector window end per candidate
+        self.listed = listed[:, :, None, None]
+        self.c_pre_out = corrective.prefix()[1]
+        self.c_in, self.c_out = corrective.tail_in, corrective.tail_out
+
+    def _green(self, red_i) -> np.ndarray:
+        red = np.any(red_i & self.listed, axis=1)  # (R, 2, J+1)
+        return self.runs(~self.order(red))
+
+    def cylinder_only(self, cyl: PathConflicts) -> np.ndarray:
+        """Green where the cylinder is the conflict detector over ``[0, window]``."""
+        pre_in, _ = cyl.prefix()
+        red = (pre_in < self.window) | (cyl.tail_in < np.minimum(cyl.tail_out, self.window))
+        return self._green(red)
+
+    def at_pivot(self, cyl: PathConflicts, pivot: np.ndarray) -> np.ndarray:
+        """Green where the candidate avoids the cylinder on [0, B] and the corrective volume after B."""
+        B = pivot[:, None, None, None]
+        cyl_pre_in, _ = cyl.prefix()
+        red = (self.c_pre_out > B) | (cyl_pre_in < B)
+        red |= np.maximum(self.c_in, B) < np.minimum(self.c_out, self.window)
+        red |= (self.tk < B) & (cyl.tail_in < np.minimum(cyl.tail_out, B))
+        only = B > self.horizon
+        if only.any():
+            pre_in, _ = cyl.prefix()
+            red_only = (pre_in < self.window) | (cyl.tail_in < np.minimum(cyl.tail_out, self.window))
+            red = np.where(only, red_only, red)
+        return self._green(red)
+
+    def run(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(recovery green (R, K), time, nfactor, h, v); rows without recovery have no green candidate
+        and time -inf."""
+        cfg, th = self.cfg, self.cfg.th
+        n_rows = self.listed.shape[0]
+        k = self.order(np.zeros(self.ev.shape[0:1] + self.ev.shape[2:], bool)).shape[1]
+        green = np.zeros((n_rows, k), bool)
+        r_time = np.full(n_rows, -np.inf)
+        nfac = np.zeros(n_rows, np.int16)
+        r_h, r_v = np.full(n_rows, -np.inf), np.full(n_rows, -np.inf)
+        nmac = self.ev.evaluate(_cylinder(th.nmac_h, th.nmac_v))
+        active = self.cylinder_only(nmac).any(axis=1)
+        h, v = cfg.recovery_cylinder
+        n = 0
+        L = cfg.lookahead_s
+        while active.any() and (h > th.nmac_h or v > th.nmac_v):
+            cyl = self.ev.evaluate(_cylinder(h, v))
+            some = self.cylinder_only(cyl).any(axis=1)
+            search = active & some
+            if search.any():
+                red_p = np.zeros(n_rows)
+                green_p = np.full(n_rows, L + 1.0)
+                pivot = np.full(n_rows, L)
+                going = search & (green_p - red_p > 0.5)
+                while going.any():
+                    solid = ~self.at_pivot(cyl, pivot).any(axis=1)
+                    red_p = np.where(going & solid, pivot, red_p)
+                    green_p = np.where(going & ~solid, pivot, green_p)
+                    pivot = np.where(going, 0.5 * (red_p + green_p), pivot)
+                    going = search & (green_p - red_p > 0.5)
+                rt = np.where(green_p <= L, np.minimum(L, green_p + cfg.recovery_stability_s), red_p)
+                g = self.at_pivot(cyl, rt)
+                ok = search & g.any(axis=1)
+                green[ok], r_time[ok], nfac[ok], r_h[ok], r_v[ok] = g[ok], rt[ok], n, h, v
+                active &= ~ok
+                if not cfg.ca_bands:
+                    active &= ~search
+            if not cfg.ca_bands:
+                active &= some
+            n += 1
+            h = max(th.nmac_h, h * (1.0 - cfg.ca_factor))
+            v = max(th.nmac_v, v * (1.0 - cfg.ca_factor))
+        return green, r_time, nfac, r_h, r_v
 
 
 def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig, alert: np.ndarray,
-               sizes: "tuple[int, int] | None" = None) -> AxisBands:
+               sizes: "tuple[int, int] | None" = None,
+               lists: "tuple[np.ndarray, np.ndarray] | None" = None) -> AxisBands:
     """Bands of one axis (AXIS_* code) for ownship ``(N,)`` and intruders ``(N, M)``; ``sizes`` = candidates
-    per side (default from this batch)."""
+    per side (default from this batch); ``lists`` = (NEAR, MID) conflict-aircraft flags ``(N, M)`` used
+    with ``cfg.horizon_from_maneuver`` (default :func:`daa_sil.daa.alerting.conflict_lists`)."""
     j_lo, j_hi = sizes if sizes is not None else _path_sizes(own, axis, cfg)
-    pos, vel, values, t = _axis_paths(own, axis, cfg, max(j_lo, j_hi))
-    t_in, t_out = knot_path_conflicts(pos, vel, t, intr, cfg.th, cfg.lookahead_s)
-    # per-intruder regions: (N, M, 2, J+1)
-    horizon = np.where(alert >= 2, cfg.lookahead_s, cfg.alert_time_corrective_s)[:, :, None, None]
-    conflict = t_in < horizon
-    near = t_in < cfg.alert_time_warning_s
-    region_i = np.where(near, REGION_NEAR, np.where(conflict, REGION_MID, REGION_NONE))
-    m = t_in.shape[1]
-    region = region_i.max(axis=1) if m else np.zeros((own.shape[0],) + t_in.shape[2:], int)
-    t_in_all = t_in.min(axis=1) if m else np.full(region.shape, np.inf)
-    t_out_c = np.where(conflict, t_out, -np.inf).max(axis=1) if m else np.full(region.shape, -np.inf)
+    n, m = intr.shape
+    paths, values = _maneuver_paths(own, axis, cfg, max(j_lo, j_hi))
+    t = np.asarray(paths.t, float)[0, 0]
+    ev = PathEvaluator(paths, intr, cfg.lookahead_s)
+    pc = ev.evaluate(cfg.th)
+    t_in, t_out = pc.candidates()  # (N, M, 2, J+1)
+    L = cfg.lookahead_s
+    tk = t[None, None, None, :]
+    if cfg.horizon_from_maneuver:
+        if lists is None:
+            lists = conflict_lists(own, intr, cfg)
+        near_list, mid_list = (np.asarray(a, bool)[:, :, None, None] for a in lists)
+        red_near_i = t_in < np.where(near_list, L, np.minimum(L, cfg.alert_time_warning_s + tk))
+        red_mid_i = t_in < np.where(mid_list, L, np.minimum(L, cfg.alert_time_corrective_s + tk))
+    else:
+        horizon = np.where(np.asarray(alert) >= 2, L, cfg.alert_time_corrective_s)[:, :, None, None]
+        red_mid_i = t_in < horizon
+        red_near_i = t_in < cfg.alert_time_warning_s
+        mid_list = None
+    order = lambda a: _side_order(a, j_lo, j_hi)  # noqa: E731
+    runs = _runs2 if cfg.daidalus_grid else (lambda g: g)
+    red_near = order(red_near_i.any(axis=1)) if m else np.zeros((n, j_lo + j_hi + 1), bool)
+    red_mid = order((red_near_i | red_mid_i).any(axis=1) if not cfg.horizon_from_maneuver else red_mid_i.any(axis=1)) \
+        if m else np.zeros((n, j_lo + j_hi + 1), bool)
+    g_near, g_mid = runs(~red_near), runs(~red_mid)
+    region = np.where(~g_near, REGION_NEAR, np.where(~g_mid, REGION_MID, REGION_NONE)).astype(np.int8)
+    t_in_all = order(t_in.min(axis=1)) if m else np.full(region.shape, np.inf)
+    t_out_c = order(np.where(red_mid_i | red_near_i, t_out, -np.inf).max(axis=1)) if m else np.full(region.shape, -np.inf)
     cur = {AXIS_HORIZONTAL: own.trk, AXIS_VERTICAL: own.vs, AXIS_SPEED: own.gs}[axis][:, None, None]
     if axis == AXIS_HORIZONTAL:
         rate = cfg.turn_rate
@@ -212,60 +460,111 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     else:
         rate = cfg.vertical_accel if axis == AXIS_VERTICAL else cfg.horizontal_accel
         delta = values - cur
-    order = lambda a: _side_order(a, j_lo, j_hi)  # noqa: E731
     values, delta = order(values), order(delta)
-    region, t_in_all, t_out_c = order(region), order(t_in_all), order(t_out_c)
+    if axis != AXIS_HORIZONTAL and cfg.daidalus_grid:  # a candidate past a limit is shown at the limit
+        lo, hi = (-cfg.max_vs, cfg.max_vs) if axis == AXIS_VERTICAL else (cfg.min_gs, cfg.max_gs)
+        values = np.clip(values, lo, hi)
     side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
     t_man = np.abs(delta) / rate
-    # recovery: every candidate in conflict
-    saturated = np.all(region >= REGION_MID, axis=1)
-    late = t_in_all > cfg.sm_horizon_s  # LoWC only after the SM horizon: still "safe" (SM > 0)
-    any_late = late.any(axis=1, keepdims=True)
-    best_exit = np.min(t_out_c, axis=1, keepdims=True)
-    rec = saturated[:, None] & np.where(any_late, late, t_out_c <= best_exit + cfg.recovery_stability_s)
-    region = np.where(rec, REGION_RECOVERY, region).astype(np.int8)
-    # resolutions
     k0 = j_lo
-    cur_conflict = (region[:, k0] == REGION_MID) | (region[:, k0] == REGION_NEAR)
+    # -- recovery: every candidate MID or worse ---------------------------------------------------------
+    rec_time = np.full(n, np.nan)
+    rec_n = np.full(n, -1, np.int16)
+    rec_h, rec_v = np.full(n, np.nan), np.full(n, np.nan)
+    gap = None
+    if cfg.recovery == "cylinder":
+        saturated = ~g_near.any(axis=1) | ~g_mid.any(axis=1)
+    else:
+        saturated = np.all(region >= REGION_MID, axis=1)
+    rows = np.flatnonzero(saturated & (m > 0))
+    if cfg.recovery == "cylinder":
+        rec_green = np.zeros(region.shape, bool)
+        if rows.size:
+            if mid_list is None:
+                mid_flag = np.asarray(alert)[rows] >= 2
+            else:
+                mid_flag = mid_list[rows, :, 0, 0]
+            listed = mid_flag | red_mid_i[rows].any(axis=(2, 3))
+            horizon = np.where(mid_flag, L, min(L, cfg.alert_time_corrective_s))
+            sub = PathEvaluator(paths.subset(rows), intr[rows], L)
+            corr = PathConflicts(pc.seg_in[rows], pc.seg_out[rows], pc.tail_in[rows], pc.tail_out[rows],
+                                 pc.t[rows], pc.t_end)
+            g, rt, nf, hh, vv = _Recovery(sub, corr, listed, horizon, cfg, order, runs).run()
+            rec_green[rows] = g
+            rec_time[rows], rec_n[rows], rec_h[rows], rec_v[rows] = rt, nf, hh, vv
+        region = np.where(rec_green, REGION_RECOVERY, region).astype(np.int8)
+        both = lambda a: a[:, :-1] & a[:, 1:]  # noqa: E731
+        gap = np.where(both(rec_green), REGION_RECOVERY,
+                       np.where(~both(g_near), REGION_NEAR, np.where(~both(g_mid), REGION_MID, REGION_NONE))
+                       ).astype(np.int8)
+    else:
+        late = t_in_all > cfg.sm_horizon_s  # LoWC only after the SM horizon: still "safe" (SM > 0)
+        any_late = late.any(axis=1, keepdims=True)
+        best_exit = np.min(t_out_c, axis=1, keepdims=True)
+        rec = saturated[:, None] & np.where(any_late, late, t_out_c <= best_exit + cfg.recovery_stability_s)
+        region = np.where(rec, REGION_RECOVERY, region).astype(np.int8)
+        if cfg.daidalus_grid:
+            both = lambda a: a[:, :-1] & a[:, 1:]  # noqa: E731
+            gap = np.where(both(rec), REGION_RECOVERY,
+                           np.where(~both(g_near), REGION_NEAR, np.where(~both(g_mid), REGION_MID, REGION_NONE))
+                           ).astype(np.int8)
+    # -- resolutions ------------------------------------------------------------------------------------
+    res_lo, res_hi, pref = resolutions(region, values, delta, side, t_man, k0, axis, cfg)
+    return AxisBands(axis, values, delta, side, t_man, t_in_all, t_out_c, region, res_lo, res_hi, pref, gap,
+                     rec_time, rec_n, rec_h, rec_v)
+
+
+def resolutions(region, values, delta, side, t_man, k0: int, axis: int, cfg: DaaConfig):
+    """(res_lo, res_hi, preferred) of candidates ``(N, K)`` (see the module docstring)."""
+    cur = region[:, k0]
+    cur_conflict = (cur == REGION_MID) | (cur == REGION_NEAR)
     ok = (region == REGION_NONE) | (region == REGION_RECOVERY)
-    i_lo, f_lo = _closest(ok, side, -1, t_man)
-    i_hi, f_hi = _closest(ok, side, +1, t_man)
-    f_lo &= cur_conflict
-    f_hi &= cur_conflict
+    if axis == AXIS_HORIZONTAL and cfg.daidalus_grid:  # a resolution is never exactly 180 deg away
+        ok &= np.abs(delta) < np.pi - 1e-9
+    i_lo, f_lo = _first_on_side(ok, side, -1, k0)
+    i_hi, f_hi = _first_on_side(ok, side, +1, k0)
     take = lambda a, i: np.take_along_axis(a, i[:, None], -1)[:, 0]  # noqa: E731
-    res_lo = np.where(f_lo, take(values, i_lo), np.nan)
-    res_hi = np.where(f_hi, take(values, i_hi), np.nan)
-    pref = np.where(f_lo & f_hi, np.where(take(t_man, i_hi) <= take(t_man, i_lo), 1, -1),
-                    np.where(f_hi, 1, np.where(f_lo, -1, 0))).astype(np.int8)
-    return AxisBands(axis, values, delta, side, t_man, t_in_all, t_out_c, region, res_lo, res_hi, pref)
+    res_lo = np.where(cur_conflict, np.where(f_lo, take(values, i_lo), -np.inf), np.nan)
+    res_hi = np.where(cur_conflict, np.where(f_hi, take(values, i_hi), np.inf), np.nan)
+    d_lo, d_hi = take(t_man, i_lo), take(t_man, i_hi)
+    hi_first = d_hi <= d_lo + 1e-9 * np.maximum(d_lo, 1.0)  # equal distances: right / up / faster
+    pref = np.where(f_lo & f_hi, np.where(hi_first, 1, -1), np.where(f_hi, 1, np.where(f_lo, -1, 0)))
+    return res_lo, res_hi, np.where(cur_conflict, pref, 0).astype(np.int8)
 
 
 def compute_bands(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = None,
-                  alert: "np.ndarray | None" = None) -> Bands:
+                  alert: "np.ndarray | None" = None,
+                  lists: "tuple[np.ndarray, np.ndarray] | None" = None) -> Bands:
     """Kinematic track, vertical-speed and ground-speed bands for ownship ``(N,)`` vs intruders ``(N, M)``.
 
-    ``alert`` (N, M) are the current alert levels (computed with :func:`alert_levels` if omitted).
+    ``alert`` (N, M) are the current alert levels (computed with :func:`alert_levels` if omitted);
+    ``lists`` the (NEAR, MID) conflict-aircraft flags for ``cfg.horizon_from_maneuver`` (computed
+    without hysteresis if omitted; :class:`daa_sil.daa.DaaState` passes its early-alerting ones).
     """
     cfg = cfg or DaaConfig()
     if alert is None:
         alert = alert_levels(own, intr, cfg)
+    if cfg.horizon_from_maneuver and lists is None:
+        lists = conflict_lists(own, intr, cfg)
     n = own.shape[0]
     codes = (AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED)
     sizes = [_path_sizes(own, a, cfg) for a in codes]
     chunks = []
     for lo in range(0, max(n, 1), CHUNK):
         sl = slice(lo, min(lo + CHUNK, n))
-        chunks.append([axis_bands(own[sl], intr[sl], a, cfg, alert[sl], sz) for a, sz in zip(codes, sizes)])
+        li = None if lists is None else (lists[0][sl], lists[1][sl])
+        chunks.append([axis_bands(own[sl], intr[sl], a, cfg, alert[sl], sz, li) for a, sz in zip(codes, sizes)])
     axes = [chunks[0][k] if len(chunks) == 1 else _concat([c[k] for c in chunks]) for k in range(3)]
     return Bands(*axes, alert=alert, preset=cfg.th.name)
 
 
 #: encounters per internal chunk (keeps the working arrays cache-sized; results do not depend on it)
-CHUNK = 512
+CHUNK = 4096
 
 
 def _concat(parts: "list[AxisBands]") -> AxisBands:
-    cat = lambda name: np.concatenate([getattr(p, name) for p in parts], axis=0)  # noqa: E731
     p0 = parts[0]
-    return AxisBands(p0.axis, cat("values"), cat("delta"), p0.side, cat("t_man"), cat("t_in"), cat("t_out"),
-                     cat("region"), cat("res_lo"), cat("res_hi"), cat("preferred"))
+    keep = lambda f: f.name in ("axis", "side") or any(getattr(p, f.name) is None for p in parts)  # noqa: E731
+    return AxisBands(**{f.name: ((getattr(p0, f.name) if f.name in ("axis", "side") else None) if keep(f)
+                                 else np.concatenate([getattr(p, f.name) for p in parts], axis=0))
+                        for f in fields(p0)})

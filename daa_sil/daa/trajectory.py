@@ -1,16 +1,31 @@
 """Conflict detection along kinematic ownship trajectories against straight-line intruders.
 
-A *knot path* is the ownship sampled at knot times ``t_0 = 0 < t_1 < ... < t_J`` while it
-maneuvers (turn / accelerate at the limits). Candidate ``k`` of the path flies the path up to
-knot ``k`` and then continues straight with the knot-``k`` velocity. Between knots the relative
-motion is taken as the chord (straight line) between the sampled relative positions; each chord
-and each straight tail is checked with the exact closed form of
-:func:`daa_sil.wellclear.violation_interval` (re-stated on contiguous component arrays in
-:func:`interval_soa`, which gives identical numbers about 2x faster). The only approximation is the chord (sagitta
-``R (1 - cos(dpsi/2))``, about 1 m for a 5 deg turn at 55 m/s; ``a h^2 / 8`` for accelerations).
+A *maneuver path* is the ownship flying a maneuver (turn at the turn-rate limit, accelerate at the
+horizontal or vertical limit, or a multi-axis command), sampled at knot times
+``t_0 = 0 < t_1 < ... < t_J``. Candidate ``k`` of the path flies the path up to knot ``k`` and then
+continues straight with the knot-``k`` velocity. Two parts are evaluated:
+
+* **tails** (straight after knot ``k``): the exact closed form of
+  :func:`daa_sil.wellclear.violation_interval` (re-stated on contiguous component arrays in
+  :func:`interval_soa`, identical numbers, about 2x faster);
+* **the maneuver between knots** on the true trajectory (arc, parabola), not on its chords. Each
+  knot-to-knot piece is compared with its chord using the bounds ``|p - chord| <= A h^2 / 8`` and
+  ``|v - v_chord| <= A h / 2`` (``A`` = the path's acceleration bound, ``h`` = the piece's duration).
+  With them a piece is certified *clear* (no violation anywhere on the true path), *inside* (the
+  whole piece violates) or *undecided*; only undecided pieces are split (in :data:`SPLIT` parts) and
+  examined again, until the chord of a piece is within :data:`V_TOL` / :data:`P_TOL` of the path, and
+  then that chord's exact interval is taken. So a violation that the chord misses (a short clip of the
+  tau_mod boundary during a turn) is found, at the cost of the few pieces that straddle a boundary.
+
+The certification uses the form ``|s + (TTHR/2) v| <= sqrt(DTHR^2 + (TTHR/2)^2 |v|^2)`` of the
+tau_mod test (``docs/daa.md``); it is exact for TCOA = 0 (every preset). Times are absolute (s from
+now); no violation is ``(inf, -inf)``.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -20,26 +35,48 @@ from ..kinematics import AircraftState, Command, fly_command
 from ..thresholds import Thresholds
 from .config import DaaConfig
 
+#: m/s, the largest velocity error |v - v_chord| left where a chord is used: at a boundary it moves the tau_mod
+#: test by at most TTHR/2 * V_TOL = 10.5 m of |s + (TTHR/2) v| (TTHR = 35 s), under 0.1 s at 100 m/s closure;
+#: DAIDALUS's own 1 deg coast segments are off by up to 0.96 m/s at 55 m/s
+V_TOL = 0.6
+#: m, the largest position error |p - chord| left when a piece's chord is used
+P_TOL = 0.5
+#: most parts an undecided segment is split into (as many as its parts' chords need to meet V_TOL / P_TOL)
+MAX_SPLIT = 16
+#: s, how closely an entry into / an exit from the volume on the true path is located (bisection brackets;
+#: entries decide when a candidate conflicts, exits only rank recovery candidates)
+BISECT_DT_IN = 0.01
+BISECT_DT_OUT = 0.05
+#: most rounds of splitting an undecided piece
+MAX_DEPTH = 8
+#: knot-to-knot segments examined together first (a block far from the volume is clear as a whole)
+BLOCK = 4
+
+#: ``state_at(n, p) -> f`` with ``f(t) -> (x, y, z, vx, vy, vz)``: the true ownship state on path ``p[i]`` of
+#: encounter ``n[i]`` at time ``t[i]`` (the per-path parameters are gathered once, then ``f`` is cheap)
+StateAt = Callable[[np.ndarray, np.ndarray], Callable[[np.ndarray], tuple]]
+
 
 def _components(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Contiguous x, y, z arrays of a ``(..., 3)`` array (the kernels below read each many times)."""
     return (np.ascontiguousarray(a[..., 0]), np.ascontiguousarray(a[..., 1]), np.ascontiguousarray(a[..., 2]))
 
 
-def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds) -> tuple[np.ndarray, np.ndarray]:
+def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`daa_sil.wellclear.violation_interval` over ``[0, length]`` for 1-D component arrays.
 
     The same window functions (:func:`~daa_sil.wellclear.vertical_window`,
     :func:`~daa_sil.wellclear.horizontal_window`), so the results are identical; it is faster because (1) the components are contiguous arrays instead of strided views of ``(..., 3)`` arrays
     and (2) the horizontal part, which is most of the work, runs only where the vertical window is
-    not empty (elsewhere the answer is ``(inf, -inf)`` in both).
+    not empty (elsewhere the answer is ``(inf, -inf)`` in both). ``window`` = the vertical window
+    ``(lo, hi)`` when the caller has it.
     """
     D, H, TT, TC = th.dthr, th.zthr, th.tthr, th.tcoa
     n = sx.shape[0]
     t_in = np.full(n, np.inf)
     t_out = np.full(n, -np.inf)
     # -- vertical window (wellclear.violation_interval, t0 = 0, t1 = length) --------------------
-    vlo, vhi = wc.vertical_window(sz, vz, 0.0, length, H, TC)
+    vlo, vhi = wc.vertical_window(sz, vz, 0.0, length, H, TC) if window is None else window
     idx = np.flatnonzero(vlo <= vhi)
     if not idx.size:
         return t_in, t_out
@@ -72,78 +109,514 @@ def filtered_interval(s, v, th: Thresholds, length) -> tuple[np.ndarray, np.ndar
     return t_in.reshape(shape), t_out.reshape(shape)
 
 
-def knot_path_conflicts(own_pos, own_vel, t, intr: AircraftState, th: Thresholds, t_end: float,
-                        all_tails: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """First violation time and last exit time (s) per intruder and candidate.
+# --------------------------------------------------------------------------------------------------
+# certification of a piece of the true path against its chord
+# --------------------------------------------------------------------------------------------------
+CLEAR, INSIDE, UNDECIDED = 0, 1, 2
 
-    ``own_pos``/``own_vel``: ``(N, P, K, 3)`` ownship at the knots of P paths; ``t``: knot times
-    broadcastable to ``(N, P, K)``; ``intr``: intruders ``(N, M)``. Returns ``(t_in, t_out)`` of shape
-    ``(N, M, P, K)`` for candidate k (path to knot k, then straight) over ``[0, t_end]``; no violation
-    is ``(inf, -inf)``. With ``all_tails=False`` only the last knot's candidate is evaluated (the
-    result has K = 1).
+
+def _line_min2(ax, ay, bx, by, lo, hi):
+    """Smallest ``|a + t b|^2`` for ``t`` in ``[lo, hi]`` (2-D, elementwise)."""
+    bb = bx * bx + by * by
+    ab = ax * bx + ay * by
+    t = np.clip(-ab / np.where(bb > 1e-18, bb, np.inf), lo, hi)
+    return ax * ax + ay * ay + t * (2.0 * ab + t * bb)
+
+
+def classify_pieces(x0, y0, z0, x1, y1, z1, h, th: Thresholds, e_p, e_v, e_z=0.0, window=None) -> np.ndarray:
+    """CLEAR / INSIDE / UNDECIDED code (int8) of pieces of a true relative path.
+
+    A piece runs from relative position ``(x0, y0, z0)`` to ``(x1, y1, z1)`` in ``h`` s; at every instant
+    the true path is within ``e_p`` (horizontal position), ``e_z`` (altitude) and ``e_v`` (horizontal
+    velocity) of the chord (arrays or scalars). CLEAR: no instant of the true path violates ``th``;
+    INSIDE: every instant does; UNDECIDED otherwise. Both verdicts are guaranteed for TCOA = 0: the
+    tau_mod test is used in the form ``|s + (TTHR/2) v| <= sqrt(DTHR^2 + (TTHR/2)^2 |v|^2)`` with
+    ``s.v < 0`` and ``|s x v| <= DTHR |v|`` (d_cpa), each bounded on the piece (``docs/daa.md``).
+    ``window`` = ``(lo, hi)``: the pieces' exact vertical windows (s from the piece start) when the
+    caller knows them.
     """
-    n, p, k = own_pos.shape[:3]
-    m = intr.shape[1]
-    shape = (n, m, p, k)
-    tt = np.broadcast_to(np.asarray(t, float), (n, p, k))[:, None]  # (N, 1, P, K)
-    ipos, ivel = intr.position(), intr.velocity()  # (N, M, 3)
-    own_c, ovel_c = _components(own_pos), _components(own_vel)
-    # relative position ownship - intruder at the knots, per component (N, M, P, K)
-    s = [own_c[i][:, None] - (ipos[..., i][:, :, None, None] + tt * ivel[..., i][:, :, None, None]) for i in range(3)]
-    tt = np.broadcast_to(tt, shape)
-    if k > 1:
-        h = tt[..., 1:] - tt[..., :-1]
-        seg_shape = shape[:-1] + (k - 1,)
-        comp = [np.ascontiguousarray(c[..., :-1]).ravel() for c in s]
-        vel = [((c[..., 1:] - c[..., :-1]) / h).ravel() for c in s]
-        seg_in, seg_out = interval_soa(*comp, *vel, np.ascontiguousarray(h).ravel(), th)
-        seg_in = seg_in.reshape(seg_shape) + tt[..., :-1]
-        seg_out = seg_out.reshape(seg_shape) + tt[..., :-1]
-        pre_in = np.minimum.accumulate(seg_in, axis=-1)
-        pre_out = np.maximum.accumulate(seg_out, axis=-1)
-        inf = np.full(pre_in.shape[:-1] + (1,), np.inf)
-        pre_in = np.concatenate([inf, pre_in], axis=-1)
-        pre_out = np.concatenate([-inf, pre_out], axis=-1)
+    D, H, TT = th.dthr, th.zthr, th.tthr
+    half = 0.5 * TT
+    inv = 1.0 / np.where(h > 0, h, 1.0)
+    if window is None:
+        lo, hi = wc.vertical_window(z0, (z1 - z0) * inv, 0.0, h, H + e_z, th.tcoa)
     else:
-        pre_in = np.full(shape, np.inf)
-        pre_out = np.full(shape, -np.inf)
-    if not all_tails:
-        s = [c[..., -1:] for c in s]
-        tt, pre_in, pre_out = tt[..., -1:], pre_in[..., -1:], pre_out[..., -1:]
-        own_vel = own_vel[..., -1:, :]
-        ovel_c = _components(own_vel)
-    tail_shape = tt.shape
-    vel = [np.broadcast_to(ovel_c[i][:, None] - ivel[..., i][:, :, None, None], tail_shape).ravel() for i in range(3)]
-    comp = [np.ascontiguousarray(np.broadcast_to(c, tail_shape)).ravel() for c in s]
-    tail_in, tail_out = interval_soa(*comp, *vel, np.maximum(t_end - tt, 0.0).ravel(), th)
-    tail_in, tail_out = tail_in.reshape(tail_shape), tail_out.reshape(tail_shape)
-    in_window = tt <= t_end
-    tail_in = np.where(in_window, tail_in + tt, np.inf)
-    tail_out = np.where(in_window, tail_out + tt, -np.inf)
-    t_in = np.minimum(pre_in, tail_in)
-    t_out = np.maximum(pre_out, tail_out)
-    t_in = np.where(t_in <= t_end, t_in, np.inf)
-    return t_in, np.where(np.isfinite(t_in), np.minimum(t_out, t_end), -np.inf)
+        lo, hi = window
+    vert_any = lo <= hi
+    lo = np.where(vert_any, lo, 0.0)
+    hi = np.where(vert_any, hi, 0.0)
+    # -- clear: the chord, inflated by the error bounds, meets neither the DTHR circle nor the tau_mod
+    #    circle on its vertical window, or the tau_mod part is excluded by d_cpa or by never closing
+    vx, vy = (x1 - x0) * inv, (y1 - y0) * inv
+    vv = vx * vx + vy * vy
+    pv = x0 * vx + y0 * vy
+    pp = x0 * x0 + y0 * y0
+    tau0 = -pv / np.where(vv > 1e-18, vv, np.inf)
+    tau = np.minimum(np.maximum(tau0, lo), hi)
+    near_d = pp + tau * (2.0 * pv + tau * vv) <= (D + e_p) ** 2  # min |p|^2 on the window
+    qv = pv + half * vv
+    qq = pp + half * (pv + qv)  # |p + (TT/2) v|^2 at the start
+    tau = np.minimum(np.maximum(tau0 - half, lo), hi)
+    speed = np.sqrt(vv)
+    rho_out = np.sqrt(D * D + (half * (speed + e_v)) ** 2) + e_p + half * e_v
+    near_tau = qq + tau * (2.0 * qv + tau * vv) <= rho_out * rho_out
+    rmax = np.sqrt(np.maximum(pp, x1 * x1 + y1 * y1))
+    slack = e_p * (speed + e_v) + rmax * e_v  # >= |s x v - s_c x v_c| and |s.v - s_c.v_c|
+    cross = np.abs(x0 * vy - y0 * vx)  # |s_c x v_c|, constant along the chord
+    wide = cross - slack > D * (speed + e_v)  # d_cpa > DTHR everywhere on the true path
+    opening = pv - slack >= 0  # never closing on the true path (s_c.v_c grows along the chord)
+    maybe = vert_any & (near_d | (near_tau & ~wide & ~opening))
+    # -- inside: the chord, deflated by the error bounds, violates throughout [0, h] -------------------
+    inside = rmax <= D - e_p
+    if TT > 0:
+        slow = np.maximum(speed - e_v, 0.0)
+        rho_in = np.sqrt(D * D + (half * slow) ** 2) - e_p - half * e_v
+        q1 = qq + h * (2.0 * qv + h * vv)
+        sv1 = pv + h * vv  # s_c . v_c at the end of the chord
+        inside |= ((np.maximum(qq, q1) <= np.where(rho_in > 0, rho_in * rho_in, -1.0))
+                   & (cross + slack <= D * slow) & (sv1 + slack < 0))
+    inside &= maybe & (np.maximum(np.abs(z0), np.abs(z1)) <= H - e_z) & (h > 0)
+    return maybe.astype(np.int8) * UNDECIDED - inside.astype(np.int8)  # UNDECIDED - 1 = INSIDE
 
 
+def _settle_time(acc_h, acc_v) -> np.ndarray:
+    """Longest piece duration (s) whose chord is within V_TOL / P_TOL of the true path."""
+    with np.errstate(divide="ignore"):
+        t_v = np.where(acc_h > 0, 2.0 * V_TOL / np.where(acc_h > 0, acc_h, 1.0), np.inf)
+        a = np.maximum(acc_h, acc_v)
+        t_p = np.where(a > 0, np.sqrt(8.0 * P_TOL / np.where(a > 0, a, 1.0)), np.inf)
+    return np.minimum(t_v, t_p)
+
+
+# --------------------------------------------------------------------------------------------------
+# maneuver paths
+# --------------------------------------------------------------------------------------------------
+@dataclass
+class ManeuverPaths:
+    """P maneuver paths per encounter sampled at knots, and the exact ownship state at any time.
+
+    ``pos``/``vel`` ``(N, P, K, 3)`` ownship at the knots; ``t`` knot times broadcastable to
+    ``(N, P, K)`` (s); ``state_at(n, p)`` a function of time giving the true ownship position and
+    velocity (six component arrays) on paths ``p`` of encounters ``n`` (flat index arrays, :data:`StateAt`); ``acc_h``/``acc_v`` ``(N, P)`` bounds
+    on the ownship's horizontal / vertical acceleration along the path, m/s^2 (the chord of a piece of
+    duration h is then within ``acc h^2 / 8`` of the path and its velocity within ``acc_h h / 2``);
+    ``vz_const``: the vertical speed is the same all along every path (turns and speed changes).
+    """
+
+    pos: np.ndarray
+    vel: np.ndarray
+    t: np.ndarray
+    state_at: StateAt
+    acc_h: np.ndarray
+    acc_v: np.ndarray
+    vz_const: bool = False
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.pos.shape[:3]
+
+    def knot_times(self) -> np.ndarray:
+        return np.broadcast_to(np.asarray(self.t, float), self.shape)
+
+    def subset(self, idx: np.ndarray) -> "ManeuverPaths":
+        """The paths of encounters ``idx`` (state_at keeps addressing the original encounters)."""
+        idx = np.asarray(idx)
+        base = self.state_at
+        return ManeuverPaths(self.pos[idx], self.vel[idx], self.knot_times()[idx],
+                             lambda n, p: base(idx[n], p), self.acc_h[idx], self.acc_v[idx], self.vz_const)
+
+
+@dataclass
+class PathConflicts:
+    """Violation intervals (absolute s) of P paths against M intruders, ``t_end`` the horizon.
+
+    ``seg_in``/``seg_out`` ``(N, M, P, K-1)``: first entry and last exit on the true maneuver between
+    knots j and j+1; ``tail_in``/``tail_out`` ``(N, M, P, K)``: the straight tail from knot k over
+    ``[t_k, t_end]``; ``t`` ``(N, 1, P, K)`` knot times.
+    """
+
+    seg_in: np.ndarray
+    seg_out: np.ndarray
+    tail_in: np.ndarray
+    tail_out: np.ndarray
+    t: np.ndarray
+    t_end: float
+
+    def prefix(self) -> tuple[np.ndarray, np.ndarray]:
+        """First entry / last exit on the maneuver up to knot k, ``(N, M, P, K)`` (k = 0: none)."""
+        shape = self.tail_in.shape
+        if shape[-1] > 1:
+            pre_in = np.minimum.accumulate(self.seg_in, axis=-1)
+            pre_out = np.maximum.accumulate(self.seg_out, axis=-1)
+            edge = np.full(shape[:-1] + (1,), np.inf)
+            return np.concatenate([edge, pre_in], axis=-1), np.concatenate([-edge, pre_out], axis=-1)
+        return np.full(shape, np.inf), np.full(shape, -np.inf)
+
+    def candidates(self) -> tuple[np.ndarray, np.ndarray]:
+        """First violation and last exit of candidate k (maneuver to knot k, then straight) over
+        ``[0, t_end]``, ``(N, M, P, K)``; no violation is ``(inf, -inf)``."""
+        pre_in, pre_out = self.prefix()
+        t_in = np.minimum(pre_in, self.tail_in)
+        t_out = np.maximum(pre_out, self.tail_out)
+        t_in = np.where(t_in <= self.t_end, t_in, np.inf)
+        return t_in, np.where(np.isfinite(t_in), np.minimum(t_out, self.t_end), -np.inf)
+
+
+class PathEvaluator:
+    """Relative geometry of maneuver paths against straight-line intruders, evaluated for any volume.
+
+    Built once per (paths, intruders); :meth:`evaluate` then gives :class:`PathConflicts` for a
+    well-clear volume or a cylinder (a :class:`~daa_sil.thresholds.Thresholds` with TTHR = 0).
+    ``tails``: True (every knot), ``"last"`` (only the last knot's) or False. ``exits=False``: the last
+    exits are not searched (a segment that starts violating ends its violation at its end; use it when
+    only first entries matter, as for SM).
+    """
+
+    def __init__(self, paths: ManeuverPaths, intr: AircraftState, t_end: float, tails: "bool | str" = True,
+                 exits: bool = True):
+        n, p, k = paths.shape
+        m = intr.shape[1]
+        self.paths, self.t_end, self.with_tails, self.exits = paths, float(t_end), tails, exits
+        self.shape = (n, m, p, k)
+        tt = paths.knot_times()[:, None]  # (N, 1, P, K)
+        self.t = tt
+        self.ipos, self.ivel = intr.position(), intr.velocity()  # (N, M, 3)
+        own_c, ovel_c = _components(paths.pos), _components(paths.vel)
+        ip = [self.ipos[..., i][:, :, None, None] for i in range(3)]
+        iv = [self.ivel[..., i][:, :, None, None] for i in range(3)]
+        #: relative position ownship - intruder at the knots, per component (N, M, P, K)
+        self.s = [own_c[i][:, None] - (ip[i] + tt * iv[i]) for i in range(3)]
+        #: relative velocity of the tails (N, M, P, K)
+        self.v = [np.broadcast_to(ovel_c[i][:, None] - iv[i], self.shape) for i in range(3)]
+        self._vwin = None
+
+    def evaluate(self, th: Thresholds) -> PathConflicts:
+        """Segment and tail intervals for volume ``th`` (see :class:`PathConflicts`)."""
+        n, m, p, k = self.shape
+        tt = np.broadcast_to(self.t, self.shape)
+        seg_shape = (n, m, p, max(k - 1, 0))
+        self._vwin = None
+        if self.paths.vz_const:  # relative altitude linear in time on every path: one vertical window each
+            self._vwin = wc.vertical_window(self.s[2][..., :1], self.v[2][..., :1], 0.0, self.t_end, th.zthr, th.tcoa)
+        pc = PathConflicts(np.full(seg_shape, np.inf), np.full(seg_shape, -np.inf), np.full(self.shape, np.inf),
+                           np.full(self.shape, -np.inf), self.t, self.t_end)
+        if k > 1:
+            self._segments(th, tt, pc)
+        if self.with_tails:
+            want = None
+            if self.with_tails == "last":
+                want = np.zeros(self.shape, bool)
+                want[..., -1] = True
+            self._tails(th, pc, want)
+        return pc
+
+    def _tails(self, th: Thresholds, pc: PathConflicts, want: "np.ndarray | None") -> None:
+        tt = np.broadcast_to(self.t, self.shape)
+        if want is None:
+            sel = slice(None)
+            comp = [np.ascontiguousarray(c).ravel() for c in self.s]
+            vel = [np.ascontiguousarray(c).ravel() for c in self.v]
+            tk = np.ascontiguousarray(tt).ravel()
+        else:
+            sel = np.flatnonzero(want)
+            if not sel.size:
+                return
+            comp = [c.reshape(-1)[sel] for c in self.s]
+            vel = [c.reshape(-1)[sel] for c in self.v]
+            tk = self._flat_times()[sel]
+        win = None
+        if self._vwin is not None:
+            path = np.arange(np.prod(self.shape)).reshape(-1)[sel] // self.shape[3] if want is None else sel // self.shape[3]
+            lo, hi = self._vwin[0].reshape(-1)[path], self._vwin[1].reshape(-1)[path]
+            win = (np.maximum(lo, tk) - tk, np.minimum(hi, self.t_end) - tk)
+        t_in, t_out = interval_soa(*comp, *vel, np.maximum(self.t_end - tk, 0.0), th, win)
+        ok = tk <= self.t_end
+        pc.tail_in.reshape(-1)[sel] = np.where(ok, t_in + tk, np.inf)
+        pc.tail_out.reshape(-1)[sel] = np.where(ok, t_out + tk, -np.inf)
+
+    def _classify_between(self, th: Thresholds, tt, ja, jb) -> np.ndarray:
+        """Codes ``(N, M, P, len(ja))`` of the pieces from knot ``ja[i]`` to knot ``jb[i]`` of every path."""
+        t0, t1 = tt[..., ja], tt[..., jb]
+        h = t1 - t0
+        s0 = [np.ascontiguousarray(c[..., ja]).ravel() for c in self.s]
+        s1 = [np.ascontiguousarray(c[..., jb]).ravel() for c in self.s]
+        acc_h = self.paths.acc_h[:, None, :, None]
+        e_p = np.ascontiguousarray(np.broadcast_to(acc_h * h * h * 0.125, h.shape)).ravel()
+        e_v = np.ascontiguousarray(np.broadcast_to(acc_h * h * 0.5, h.shape)).ravel()
+        if np.any(self.paths.acc_v):
+            e_z = np.ascontiguousarray(np.broadcast_to(self.paths.acc_v[:, None, :, None] * h * h * 0.125, h.shape)).ravel()
+        else:
+            e_z = 0.0
+        win = None
+        if self._vwin is not None:
+            lo, hi = self._vwin
+            win = (np.ascontiguousarray(np.maximum(lo, t0) - t0).ravel(), np.ascontiguousarray(np.minimum(hi, t1) - t0).ravel())
+        code = classify_pieces(*s0, *s1, np.ascontiguousarray(h).ravel(), th, e_p, e_v, e_z, win)
+        return code.reshape(h.shape)
+
+    def _segments(self, th: Thresholds, tt: np.ndarray, pc: PathConflicts) -> None:
+        """Fill ``pc.seg_in``/``pc.seg_out`` (module docstring)."""
+        n, m, p, k = self.shape
+        seg_shape = (n, m, p, k - 1)
+        live = tt[..., :-1] < self.t_end
+        j = np.arange(k - 1)
+        if k - 1 > BLOCK:  # coarse pass: blocks of BLOCK segments decided at once (most are far away)
+            edges = np.r_[np.arange(0, k - 1, BLOCK), k - 1]
+            bcode = self._classify_between(th, tt, edges[:-1], edges[1:])
+            per_seg = np.repeat(bcode, np.diff(edges), axis=-1)
+            code = np.where(per_seg == INSIDE, INSIDE, CLEAR).astype(np.int8)
+            fb = np.flatnonzero(bcode == UNDECIDED)  # undecided blocks: classify their segments
+            if fb.size:
+                nb = edges.size - 1
+                path, b = np.divmod(fb, nb)
+                width = np.diff(edges)[b]
+                offs = np.arange(BLOCK)
+                seg = (path * (k - 1) + edges[b])[:, None] + offs[None, :]
+                fine = seg[offs[None, :] < width[:, None]]
+                code.ravel()[fine] = self._classify_flat(th, fine, seg_shape)
+        else:
+            code = self._classify_between(th, tt, j, j + 1)
+        code[~live] = CLEAR
+        inside = code == INSIDE
+        np.copyto(pc.seg_in, tt[..., :-1], where=inside)
+        np.copyto(pc.seg_out, tt[..., 1:], where=inside)
+        todo = np.flatnonzero(code == UNDECIDED)
+        if todo.size:
+            self._resolve(todo, th, pc.seg_in.reshape(-1), pc.seg_out.reshape(-1))
+
+    def _flat_times(self) -> np.ndarray:
+        """Knot times as a flat contiguous (N*M*P*K) array (cached)."""
+        if getattr(self, "_tt_flat", None) is None:
+            self._tt_flat = np.ascontiguousarray(np.broadcast_to(self.t, self.shape)).ravel()
+        return self._tt_flat
+
+    def _path_tables(self):
+        """Per path (flat n, m, p) lookups, cached: encounter, path index, flat (n, m), acceleration
+        bounds and the vertical window bounds."""
+        if getattr(self, "_tables", None) is None:
+            n, m, p, k = self.shape
+            nn, mm, pp = (a.ravel() for a in np.indices((n, m, p)))
+            self._tables = dict(n=nn, p=pp, nm=nn * m + mm, acc_h=self.paths.acc_h[nn, pp], acc_v=self.paths.acc_v[nn, pp])
+        return self._tables
+
+    def _pieces(self, flat_seg):
+        """Path (flat n, m, p), first-knot flat index, start, duration and end points of segments ``flat_seg``."""
+        k = self.shape[3]
+        path = flat_seg // (k - 1)
+        ka = flat_seg + path  # = path * k + (flat_seg - path * (k - 1))
+        tt = self._flat_times()
+        t0 = tt[ka]
+        h = tt[ka + 1] - t0
+        return path, ka, t0, h
+
+    def _classify_flat(self, th, flat_seg, seg_shape) -> np.ndarray:
+        path, ka, t0, h = self._pieces(flat_seg)
+        tab = self._path_tables()
+        a_h, a_v = tab["acc_h"][path], tab["acc_v"][path]
+        win = None
+        if self._vwin is not None:
+            lo, hi = self._vwin[0].reshape(-1)[path], self._vwin[1].reshape(-1)[path]
+            win = (np.maximum(lo, t0) - t0, np.minimum(hi, t0 + h) - t0)
+        e_z = a_v * h * h * 0.125 if np.any(a_v) else 0.0
+        s = [c.reshape(-1) for c in self.s]
+        return classify_pieces(s[0][ka], s[1][ka], s[2][ka], s[0][ka + 1], s[1][ka + 1], s[2][ka + 1], h, th,
+                               a_h * h * h * 0.125, a_h * h * 0.5, e_z, win)
+
+    def _mover(self, path):
+        """``f(t)``: the true relative state (6 component arrays) of flat paths ``path`` at times ``t``."""
+        tab = self._path_tables()
+        own = self.paths.state_at(tab["n"][path], tab["p"][path])
+        nm = tab["nm"][path]
+        ip, iv = self.ipos.reshape(-1, 3)[nm], self.ivel.reshape(-1, 3)[nm]
+        ipx, ipy, ipz, ivx, ivy, ivz = ip[:, 0], ip[:, 1], ip[:, 2], iv[:, 0], iv[:, 1], iv[:, 2]
+
+        def f(t):
+            ox, oy, oz, ovx, ovy, ovz = own(t)
+            return ox - (ipx + t * ivx), oy - (ipy + t * ivy), oz - (ipz + t * ivz), ovx - ivx, ovy - ivy, ovz - ivz
+        return f
+
+    def _state(self, path, t):
+        """True relative state (6 component arrays) of flat paths ``path`` at times ``t``."""
+        return self._mover(path)(t)
+
+    def _bisect(self, th, path, lo, hi, lo_in: bool):
+        """Bracket ``(lo, hi)`` (s) of a crossing of the violation boundary on the true path between times
+        ``lo`` and ``hi`` (the predicate is ``lo_in`` at ``lo`` and the opposite at ``hi``), at most
+        BISECT_DT_IN (an entry) or BISECT_DT_OUT (an exit) wide."""
+        lo, hi = lo.copy(), hi.copy()
+        f = self._mover(path)
+        dt = BISECT_DT_OUT if lo_in else BISECT_DT_IN
+        steps = int(np.ceil(np.log2(max(np.max(hi - lo, initial=0.0), dt) / dt)))
+        for _ in range(steps):
+            mid = 0.5 * (lo + hi)
+            same = _wcv_soa(*f(mid), th) == lo_in
+            lo = np.where(same, mid, lo)
+            hi = np.where(same, hi, mid)
+        return lo, hi
+
+    def _resolve(self, flat_seg, th, seg_in, seg_out) -> None:
+        """Undecided segments on the true path (module docstring); updates the flat ``seg_in``/``seg_out``.
+
+        The predicate is exact at both ends (true states). Both violate: first entry at the start, last
+        exit at the end. One violates: the boundary is found by bisection on the true path and the other
+        side is certified CLEAR. Neither violates (a possible clip inside), or the certificate fails: the
+        piece is split into parts (each with exact end flags) and examined again; a both-clear part whose
+        chord is within V_TOL / P_TOL of the path is decided by its chord (a clip the chord sees is then
+        placed by bisection from its middle).
+        """
+        path, ka, t0, h = self._pieces(flat_seg)
+        s = [c.reshape(-1) for c in self.s]
+        v = [c.reshape(-1) for c in self.v]
+        f0 = _wcv_soa(*(c[ka] for c in s), *(c[ka] for c in v), th)
+        f1 = _wcv_soa(*(c[ka + 1] for c in s), *(c[ka + 1] for c in v), th)
+        pieces = (flat_seg, path, t0, t0 + h, [c[ka] for c in s], [c[ka + 1] for c in s], f0, f1)
+        tab = self._path_tables()
+        for depth in range(MAX_DEPTH):
+            sid, pth, ta, tb, pa, pb, fa, fb = pieces
+            if not sid.size:
+                return
+            both = fa & fb
+            if both.any():
+                _update(seg_in, seg_out, sid[both], ta[both], tb[both])
+            split = np.zeros(sid.size, bool)
+            last = depth == MAX_DEPTH - 1
+            settled = ((tb - ta) <= _settle_time(tab["acc_h"][pth], tab["acc_v"][pth]) * (1.0 + 1e-9)) | last
+            for entry in (True, False):  # entries (start clear, end violating), exits (start violating)
+                sel = np.flatnonzero((fb & ~fa) if entry else (fa & ~fb))
+                if not sel.size:
+                    continue
+                if not entry and not self.exits:  # first entry at the start; the last exit is not needed
+                    _update(seg_in, seg_out, sid[sel], ta[sel], tb[sel])
+                    continue
+                lo, hi = self._bisect(th, pth[sel], ta[sel], tb[sel], lo_in=not entry)
+                # certify that the other side of the crossing is clear: before an entry, after an exit
+                c_a, c_b = (ta[sel], lo) if entry else (hi, tb[sel])
+                mid_state = self._state(pth[sel], lo if entry else hi)
+                p_a = [pa[c][sel] for c in range(3)] if entry else list(mid_state[:3])
+                p_b = list(mid_state[:3]) if entry else [pb[c][sel] for c in range(3)]
+                ok = (self._classify_part(th, pth[sel], c_a, c_b, p_a, p_b) == CLEAR) | settled[sel]
+                t_cross = 0.5 * (lo + hi)
+                good = sel[ok]
+                if entry:
+                    _update(seg_in, seg_out, sid[good], t_cross[ok], tb[good])
+                else:
+                    _update(seg_in, seg_out, sid[good], ta[good], t_cross[ok])
+                split[sel[~ok]] = True
+            neither = ~fa & ~fb
+            final = neither & settled
+            if final.any():
+                self._clip(th, sid[final], pth[final], ta[final], tb[final],
+                           [c[final] for c in pa], [c[final] for c in pb], seg_in, seg_out)
+            j = np.flatnonzero(neither & ~settled)
+            if j.size:  # split only the both-clear pieces that are not certified clear as a whole
+                code = self._classify_part(th, pth[j], ta[j], tb[j], [c[j] for c in pa], [c[j] for c in pb])
+                split[j[code != CLEAR]] = True
+            idx = np.flatnonzero(split)
+            if not idx.size:
+                return
+            pieces = self._split(th, *(a[idx] for a in (sid, pth, ta, tb)), [c[idx] for c in pa], [c[idx] for c in pb],
+                                 fa[idx], fb[idx])
+
+    def _classify_part(self, th, pth, ta, tb, pa, pb) -> np.ndarray:
+        tab = self._path_tables()
+        h = tb - ta
+        a_h, a_v = tab["acc_h"][pth], tab["acc_v"][pth]
+        win = None
+        if self._vwin is not None:
+            vlo, vhi = self._vwin[0].reshape(-1)[pth], self._vwin[1].reshape(-1)[pth]
+            win = (np.maximum(vlo, ta) - ta, np.minimum(vhi, tb) - ta)
+        e_z = a_v * h * h * 0.125 if np.any(a_v) else 0.0
+        return classify_pieces(*pa, *pb, h, th, a_h * h * h * 0.125, a_h * h * 0.5, e_z, win)
+
+    def _split(self, th, sid, pth, ta, tb, pa, pb, fa, fb):
+        """Split pieces into the fewest equal parts that settle (at least 2, at most MAX_SPLIT), with
+        exact states and flags at the new ends."""
+        tab = self._path_tables()
+        settle = _settle_time(tab["acc_h"][pth], tab["acc_v"][pth])
+        q = int(min(MAX_SPLIT, max(2, np.ceil(np.max((tb - ta) / settle) - 1e-9))))
+        L = sid.size
+        ts = ta[:, None] + (tb - ta)[:, None] * (np.arange(1, q) / q)[None, :]  # (L, q-1)
+        st = self._state(np.repeat(pth, q - 1), ts.ravel())
+        flag = _wcv_soa(*st, th).reshape(L, q - 1)
+        times = np.concatenate([ta[:, None], ts, tb[:, None]], axis=1)
+        pos = [np.concatenate([pa[c][:, None], st[c].reshape(L, q - 1), pb[c][:, None]], axis=1) for c in range(3)]
+        flags = np.concatenate([fa[:, None], flag, fb[:, None]], axis=1)
+        rep = lambda a: np.repeat(a, q)  # noqa: E731
+        return (rep(sid), rep(pth), times[:, :-1].ravel(), times[:, 1:].ravel(), [c[:, :-1].ravel() for c in pos],
+                [c[:, 1:].ravel() for c in pos], flags[:, :-1].ravel(), flags[:, 1:].ravel())
+
+    def _clip(self, th, sid, pth, ta, tb, pa, pb, seg_in, seg_out) -> None:
+        """Settled pieces whose ends are clear: their chord's violation interval, and where the true path
+        violates at that interval's middle, its ends found by bisection on the true path."""
+        h = tb - ta
+        v = [(pb[c] - pa[c]) / h for c in range(3)]
+        win = None
+        if self._vwin is not None:
+            vlo, vhi = self._vwin[0].reshape(-1)[pth], self._vwin[1].reshape(-1)[pth]
+            win = (np.maximum(vlo, ta) - ta, np.minimum(vhi, tb) - ta)
+        lo, hi = interval_soa(*pa, *v, h, th, win)
+        hit = np.flatnonzero(np.isfinite(lo))
+        if not hit.size:
+            return
+        a, b = lo[hit] + ta[hit], hi[hit] + ta[hit]
+        mid = 0.5 * (a + b)
+        at = _wcv_soa(*self._state(pth[hit], mid), th)
+        t_in, t_out = a.copy(), b.copy()
+        j = np.flatnonzero(at)
+        if j.size:
+            l1, h1 = self._bisect(th, pth[hit][j], ta[hit][j], mid[j], lo_in=False)
+            l2, h2 = self._bisect(th, pth[hit][j], mid[j], tb[hit][j], lo_in=True)
+            t_in[j], t_out[j] = 0.5 * (l1 + h1), 0.5 * (l2 + h2)
+        _update(seg_in, seg_out, sid[hit], t_in, t_out)
+
+
+def _update(seg_in, seg_out, sid, t_in, t_out) -> None:
+    """seg_in[sid] = min(seg_in[sid], t_in), seg_out[sid] = max(...) (repeated ids allowed)."""
+    np.minimum.at(seg_in, sid, t_in)
+    np.maximum.at(seg_out, sid, t_out)
+
+
+def _wcv_soa(sx, sy, sz, vx, vy, vz, th: Thresholds) -> np.ndarray:
+    """:func:`daa_sil.wellclear.wcv` on component arrays (relative position and velocity)."""
+    D, TT = th.dthr, th.tthr
+    r2 = sx * sx + sy * sy
+    sv = sx * vx + sy * vy
+    vv = vx * vx + vy * vy
+    dcpa2 = r2 - sv * sv / np.where(vv > 0, vv, np.inf)
+    horiz = (r2 <= D * D) | ((sv < 0) & (dcpa2 <= D * D) & (D * D - r2 >= TT * sv))
+    vert = np.abs(sz) <= th.zthr
+    if th.tcoa > 0:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tcoa = -sz / np.where(np.abs(vz) > 1e-12, vz, np.inf)
+        vert |= (np.abs(vz) > 1e-12) & (sz * vz <= 0) & (tcoa <= th.tcoa)
+    return horiz & vert
+
+
+def path_conflicts(paths: ManeuverPaths, intr: AircraftState, th: Thresholds, t_end: float,
+                   tails: "bool | str" = True, exits: bool = True) -> PathConflicts:
+    """:class:`PathConflicts` of ``paths`` against intruders ``(N, M)`` for volume ``th`` over ``[0, t_end]``."""
+    return PathEvaluator(paths, intr, t_end, tails, exits).evaluate(th)
+
+
+# --------------------------------------------------------------------------------------------------
+# commands (SM)
+# --------------------------------------------------------------------------------------------------
 def maneuver_times(own: AircraftState, cmd: Command, cfg: DaaConfig) -> tuple[np.ndarray, ...]:
     """Time (s) to reach the commanded track, vertical speed and ground speed at the limits."""
     c = cmd.resolved(own)
+    perf = cfg.performance()
     t_trk = np.abs(wrap_pi(c.trk - own.trk)) / cfg.turn_rate
-    t_vs = np.abs(np.clip(c.vs, -cfg.max_vs, cfg.max_vs) - own.vs) / cfg.vertical_accel
-    t_gs = np.abs(np.clip(c.gs, cfg.min_gs, cfg.max_gs) - own.gs) / cfg.horizontal_accel
+    t_vs = np.abs(np.clip(c.vs, -perf.max_vs, perf.max_vs) - own.vs) / cfg.vertical_accel
+    t_gs = np.abs(np.clip(c.gs, perf.min_gs, perf.max_gs) - own.gs) / cfg.horizontal_accel
     return t_trk, t_vs, t_gs
 
 
-def command_conflicts(own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
-                      t_end: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(t_in, t_out)`` per intruder ``(N, M)`` when the ownship flies ``cmd`` (kinematically, as
-    :func:`daa_sil.kinematics.fly_command`) and the intruders fly straight, over ``[0, t_end]`` s.
-
-    The maneuver phase is sampled at the knot spacing of the axes the command changes (the finest
-    one if several), so a single-axis command gives exactly the same answer as its band candidate.
-    """
+def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverPaths:
+    """The single path (P = 1) of each ownship flying ``cmd`` kinematically (as
+    :func:`daa_sil.kinematics.fly_command`), with knots at the spacing of the axes the command changes
+    (the finest one if several), so a single-axis command has the knots of its band candidate."""
     cmd = cmd.resolved(own)
+    perf = cfg.performance()
     t_trk, t_vs, t_gs = maneuver_times(own, cmd, cfg)
     eps = 1e-9
     knots = np.stack([np.where(t_trk > eps, cfg.knot_trk, np.inf), np.where(t_vs > eps, cfg.knot_vs, np.inf),
@@ -153,11 +626,37 @@ def command_conflicts(own: AircraftState, intr: AircraftState, cmd: Command, cfg
     n_knots = np.where(t_man > eps, np.ceil(t_man / h - 1e-9), 0.0)
     j_max = int(n_knots.max()) if n_knots.size else 0
     t = np.arange(j_max + 1)[None, :] * h[:, None]  # (N, J+1)
-    path = fly_command(own[:, None], cmd[:, None], dt=t, perf=cfg.performance())
-    pos = path.position()[:, None]
-    vel = path.velocity()[:, None]
-    t_in, t_out = knot_path_conflicts(pos, vel, t[:, None], intr, cfg.th, t_end, all_tails=False)
-    return t_in[..., 0, 0], t_out[..., 0, 0]
+    path = fly_command(own[:, None], cmd[:, None], dt=t, perf=perf)
+    gs_max = np.maximum(own.gs, np.clip(cmd.gs, perf.min_gs, perf.max_gs))
+    acc_h = np.where(t_trk > eps, gs_max * cfg.turn_rate, 0.0) + np.where(t_gs > eps, cfg.horizontal_accel, 0.0)
+    acc_v = np.where(t_vs > eps, cfg.vertical_accel, 0.0)
+
+    def state_at(n, p):
+        o, c = own[n], cmd[n]
+
+        def f(tq):
+            st = fly_command(o, c, dt=tq, perf=perf)
+            return st.x, st.y, st.z, st.gs * np.sin(st.trk), st.gs * np.cos(st.trk), st.vs
+        return f
+
+    return ManeuverPaths(path.position()[:, None], path.velocity()[:, None], t[:, None], state_at,
+                         acc_h[:, None], acc_v[:, None], vz_const=not np.any(t_vs > eps))
+
+
+def command_conflicts(own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
+                      t_end: float, exits: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """``(t_in, t_out)`` per intruder ``(N, M)`` when the ownship flies ``cmd`` (kinematically, as
+    :func:`daa_sil.kinematics.fly_command`, evaluated on the true trajectory) and the intruders fly
+    straight, over ``[0, t_end]`` s. With ``exits=False`` only ``t_in`` is exact (``t_out`` may be
+    late by up to one knot interval during the maneuver)."""
+    paths = command_paths(own, cmd, cfg)
+    pc = path_conflicts(paths, intr, cfg.th, t_end, tails="last", exits=exits)
+    pre_in, pre_out = pc.prefix()
+    t_in = np.minimum(pre_in[..., -1], pc.tail_in[..., -1])
+    t_out = np.maximum(pre_out[..., -1], pc.tail_out[..., -1])
+    t_in = np.where(t_in <= t_end, t_in, np.inf)
+    t_out = np.where(np.isfinite(t_in), np.minimum(t_out, t_end), -np.inf)
+    return t_in[..., 0], t_out[..., 0]
 
 
 def safety_metric(own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
@@ -173,7 +672,7 @@ def safety_metric(own: AircraftState, intr: AircraftState, cmd: Command, cfg: Da
     """
     horizon = cfg.sm_horizon_s if horizon_s is None else float(horizon_s)
     t_end = horizon + cfg.sm_margin_s
-    t_in, _ = command_conflicts(own, intr, cmd, cfg, t_end)
+    t_in, _ = command_conflicts(own, intr, cmd, cfg, t_end, exits=False)
     return sm_from_tin(t_in.min(axis=-1) if t_in.shape[-1] else np.full(own.shape, np.inf), horizon, cfg)
 
 
