@@ -35,8 +35,8 @@ from typing import Callable
 
 import numpy as np
 
-from .daa import (AXIS_NONE, DaaConfig, alert_levels, classify_command, compute_bands, proj_lowc, resolve,
-                  safety_metric, search_maneuver, sm_from_tin)
+from .daa import (AXIS_NONE, DaaConfig, DaaState, alert_levels, classify_command, compute_bands, conflict_lists,
+                  proj_lowc, resolve, safety_metric, search_maneuver, sm_from_tin)
 from .daa.config import AXIS_NAMES, DIR_NAMES, RULE_NAMES
 from .daa.resolution import command_deltas
 from .errors import UsageError
@@ -139,6 +139,7 @@ class AgentMemory:
     wait_start: np.ndarray  #: start of the current waiting streak (nan = none)
     intent_axis: "np.ndarray | None" = None  #: the pilot's (axis, direction) preference, AXIS_* / DIR_*
     intent_dir: "np.ndarray | None" = None
+    daa_state: "DaaState | None" = None  #: DAA alert/band hysteresis (only with DaaConfig.stateful)
 
     def __post_init__(self):
         n = np.shape(self.pilot_trk)
@@ -156,7 +157,7 @@ class AgentMemory:
                    np.full(n, np.nan))
 
     def __getitem__(self, idx) -> "AgentMemory":
-        return AgentMemory(*(getattr(self, f.name)[idx] for f in fields(self)))
+        return AgentMemory(*(None if getattr(self, f.name) is None else getattr(self, f.name)[idx] for f in fields(self)))
 
     def pilot_command(self) -> Command:
         return Command(self.pilot_trk, self.pilot_vs, self.pilot_gs)
@@ -192,7 +193,13 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     n = own.shape[0]
     nan = np.full(n, np.nan)
     horizon = cfg.sm_horizon_s if policy.sm_horizon_s is None else policy.sm_horizon_s
-    alert = alert_levels(own, intr, cfg)
+    # --- DAA alerting: stateless, or with DAIDALUS hysteresis / M-of-N / persistence (cfg.stateful) ----
+    daa_state = memory.daa_state
+    if cfg.stateful:
+        daa_state = daa_state.copy() if daa_state is not None else DaaState.initial(n, intr.shape[1], cfg)
+        alert = daa_state.update_alerts(t, alert_levels(own, intr, cfg, prev=daa_state.early_alert_level(t)), cfg)
+    else:
+        alert = alert_levels(own, intr, cfg)
     max_alert = alert.max(axis=1) if alert.shape[1] else np.zeros(n, np.int8)
 
     # --- link and pilot input -----------------------------------------------------------------
@@ -228,7 +235,10 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     if bands is not None:
         b_a = bands if ia.size == n else bands[ia]
     else:
-        b_a = compute_bands(own_a, intr_a, cfg, alert[ia])
+        lists = conflict_lists(own_a, intr_a, cfg, daa_state.band_early_level(t)[ia]) if cfg.stateful else None
+        b_a = compute_bands(own_a, intr_a, cfg, alert[ia], lists)
+    if cfg.stateful:  # band, resolution and preferred-direction hysteresis
+        b_a = daa_state.update_bands(t, b_a, cfg, ia)
     daa_cmd_a, daa_ax_a, daa_dir_a, daa_tin_a = resolve(own_a, intr_a, cfg, (memory.daa_axis[ia], memory.daa_dir[ia]),
                                                         b_a, return_t_in=True)
     sm_daa = nan.copy()
@@ -331,7 +341,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
                       authority=authority, decision=decision, exec_trk=exec_cmd.trk.copy(),
                       exec_vs=exec_cmd.vs.copy(), exec_gs=exec_cmd.gs.copy(), daa_axis=daa_axis, daa_dir=daa_dir,
                       wait_start=np.where(active & ~fresh, wait_start, np.nan),
-                      intent_axis=intent_axis, intent_dir=intent_dir)
+                      intent_axis=intent_axis, intent_dir=intent_dir, daa_state=daa_state)
     return exec_cmd, dec, new_mem
 
 

@@ -15,17 +15,18 @@ SI units, compass radians):
 * :func:`daa_resolution` ``(own, intr, cfg, prev=None) -> Command`` and :func:`classify_command`.
 """
 
-from .alerting import alert_levels, proj_lowc, relative_state
+from .alerting import alert_levels, conflict_lists, proj_lowc, relative_state
 from .bands import AxisBands, Bands, compute_bands
 from .config import (ALERT_NAMES, AXIS_HORIZONTAL, AXIS_NAMES, AXIS_NONE, AXIS_SPEED, AXIS_VERTICAL, DEFAULT_CONFIG,
                      DIR_DOWN, DIR_FASTER, DIR_LEFT, DIR_NAMES, DIR_NONE, DIR_RIGHT, DIR_SLOWER, DIR_UP,
                      REGION_FAR, REGION_MID, REGION_NAMES, REGION_NEAR, REGION_NONE, REGION_RECOVERY, RULE_ANY,
                      RULE_AXIS, RULE_AXIS_DIR, RULE_BEST_EFFORT, RULE_NAMES, RULE_NONE, DaaConfig)
+from .hysteresis import DaaState
 from .resolution import classify_command, daa_resolution, resolve, search_maneuver
 from .trajectory import command_conflicts, safety_metric, sm_from_tin
 
 __all__ = [
-    "DaaConfig", "DEFAULT_CONFIG", "alert_levels", "proj_lowc", "relative_state", "compute_bands", "Bands",
+    "DaaConfig", "DEFAULT_CONFIG", "DaaState", "alert_levels", "conflict_lists", "proj_lowc", "relative_state", "compute_bands", "Bands",
     "AxisBands", "safety_metric", "command_conflicts", "sm_from_tin", "search_maneuver", "daa_resolution",
     "resolve", "classify_command",
     "ALERT_NAMES", "REGION_NAMES", "AXIS_NAMES", "DIR_NAMES", "RULE_NAMES",
