@@ -293,12 +293,16 @@ def _maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int) -> tu
     params = [a[:, None, None] for a in (own.x, own.y, own.z, own.gs, own.trk, own.vs)]
     pos, vel, value = _axis_state(axis, cfg, *params, sgn[None, :, None], t[None, None, :])
     n = own.shape[0]
-    if axis == AXIS_HORIZONTAL:  # constant-rate turn: |a| = V w
-        acc_h, acc_v = own.gs * cfg.turn_rate, np.zeros(n)
-    elif axis == AXIS_SPEED:  # along-track acceleration until the speed limit
-        acc_h, acc_v = np.full(n, cfg.horizontal_accel), np.zeros(n)
+    kink = None
+    if axis == AXIS_HORIZONTAL:  # constant-rate turn: |a| = V w, |da/dt| = V w^2
+        acc_h, acc_v, jerk = own.gs * cfg.turn_rate, np.zeros(n), own.gs * cfg.turn_rate ** 2
+    elif axis == AXIS_SPEED:  # along-track acceleration until the speed limit (a kink there)
+        acc_h, acc_v, jerk = np.full(n, cfg.horizontal_accel), np.zeros(n), np.zeros(n)
+        if not cfg.daidalus_grid:
+            lim = np.array([cfg.min_gs, cfg.max_gs])[None, :]
+            kink = np.maximum((lim - own.gs[:, None]) * sgn[None, :] / cfg.horizontal_accel, 0.0)
     else:  # vertical acceleration: the horizontal motion is straight
-        acc_h, acc_v = np.zeros(n), np.full(n, cfg.vertical_accel)
+        acc_h, acc_v, jerk = np.zeros(n), np.full(n, cfg.vertical_accel), np.zeros(n)
     st, ct = np.sin(own.trk), np.cos(own.trk)
     x0, y0, z0, gs0, vs0 = own.x.copy(), own.y.copy(), own.z.copy(), own.gs.copy(), own.vs.copy()
 
@@ -308,7 +312,7 @@ def _maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int) -> tu
 
     two = lambda a: np.repeat(a[:, None], 2, 1)  # noqa: E731
     paths = ManeuverPaths(pos, vel, t[None, None, :], state_at, two(acc_h), two(acc_v),
-                          vz_const=axis != AXIS_VERTICAL)
+                          vz_const=axis != AXIS_VERTICAL, jerk_h=two(jerk), kink_t=kink)
     return paths, np.broadcast_to(value, (n, 2, j + 1))
 
 
@@ -559,7 +563,7 @@ def compute_bands(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | Non
 
 
 #: encounters per internal chunk (keeps the working arrays cache-sized; results do not depend on it)
-CHUNK = 4096
+CHUNK = 2048
 
 
 def _concat(parts: "list[AxisBands]") -> AxisBands:

@@ -45,8 +45,11 @@ P_TOL = 0.5
 MAX_SPLIT = 16
 #: s, how closely an entry into / an exit from the volume on the true path is located (bisection brackets;
 #: entries decide when a candidate conflicts, exits only rank recovery candidates)
-BISECT_DT_IN = 0.01
-BISECT_DT_OUT = 0.05
+BISECT_DT_IN = 0.04
+BISECT_DT_OUT = 0.1
+#: s, sampling interval of the true predicate inside a short piece whose ends are clear but which is not
+#: certified clear (a clip of the volume shorter than this can be missed)
+CLIP_DT = 0.01
 #: most rounds of splitting an undecided piece
 MAX_DEPTH = 8
 #: knot-to-knot segments examined together first (a block far from the volume is clear as a whole)
@@ -115,14 +118,6 @@ def filtered_interval(s, v, th: Thresholds, length) -> tuple[np.ndarray, np.ndar
 CLEAR, INSIDE, UNDECIDED = 0, 1, 2
 
 
-def _line_min2(ax, ay, bx, by, lo, hi):
-    """Smallest ``|a + t b|^2`` for ``t`` in ``[lo, hi]`` (2-D, elementwise)."""
-    bb = bx * bx + by * by
-    ab = ax * bx + ay * by
-    t = np.clip(-ab / np.where(bb > 1e-18, bb, np.inf), lo, hi)
-    return ax * ax + ay * ay + t * (2.0 * ab + t * bb)
-
-
 def classify_pieces(x0, y0, z0, x1, y1, z1, h, th: Thresholds, e_p, e_v, e_z=0.0, window=None) -> np.ndarray:
     """CLEAR / INSIDE / UNDECIDED code (int8) of pieces of a true relative path.
 
@@ -179,6 +174,68 @@ def classify_pieces(x0, y0, z0, x1, y1, z1, h, th: Thresholds, e_p, e_v, e_z=0.0
     return maybe.astype(np.int8) * UNDECIDED - inside.astype(np.int8)  # UNDECIDED - 1 = INSIDE
 
 
+def _quad_range(c0, c1, c2, lo, hi):
+    """(min, max) of ``c0 + c1 t + c2 t^2`` over ``t`` in ``[lo, hi]`` (elementwise, lo <= hi)."""
+    f_lo = c0 + lo * (c1 + lo * c2)
+    f_hi = c0 + hi * (c1 + hi * c2)
+    mn, mx = np.minimum(f_lo, f_hi), np.maximum(f_lo, f_hi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tv = -c1 / (2.0 * c2)
+        mid = (tv > lo) & (tv < hi)
+        fv = c0 + tv * (c1 + tv * c2) if np.any(mid) else None
+    if fv is not None:
+        mn = np.where(mid, np.minimum(mn, fv), mn)
+        mx = np.where(mid, np.maximum(mx, fv), mx)
+    return mn, mx
+
+
+def _line_min2(ax, ay, bx, by, lo, hi):
+    """Smallest ``|a + t b|^2`` for ``t`` in ``[lo, hi]`` (2-D, elementwise)."""
+    bb = bx * bx + by * by
+    ab = ax * bx + ay * by
+    t = np.minimum(np.maximum(-ab / np.where(bb > 1e-18, bb, np.inf), lo), hi)
+    return ax * ax + ay * ay + t * (2.0 * ab + t * bb)
+
+
+def clear_second_order(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, th: Thresholds, e_p, e_v, e_z=0.0) -> np.ndarray:
+    """True where a piece is certified CLEAR with a second-order model: the chord for position and the
+    line between the true end velocities ``u0``, ``u1`` for the horizontal velocity, the true path within
+    ``e_p`` / ``e_z`` (position) and ``e_v`` (velocity, ``|d^2v/dt^2| h^2 / 8``) of it. Much tighter than
+    :func:`classify_pieces` on short pieces, used where a clip of the volume must be excluded."""
+    D, H, TT = th.dthr, th.zthr, th.tthr
+    half = 0.5 * TT
+    inv = 1.0 / np.where(h > 0, h, 1.0)
+    lo, hi = wc.vertical_window(z0, (z1 - z0) * inv, 0.0, h, H + e_z, th.tcoa)
+    vert = lo <= hi
+    lo, hi = np.where(vert, lo, 0.0), np.where(vert, hi, 0.0)
+    wx, wy = (x1 - x0) * inv, (y1 - y0) * inv
+    bx, by = (u1x - u0x) * inv, (u1y - u0y) * inv
+    near_d = _line_min2(x0, y0, wx, wy, lo, hi) <= (D + e_p) ** 2
+    vmax = np.sqrt(np.maximum(u0x * u0x + u0y * u0y, u1x * u1x + u1y * u1y))
+    # tau_mod part: f = |s + (TT/2) v|^2 - (TT/2)^2 |v|^2 - DTHR^2 <= 0, a quadratic in t on the model
+    qx, qy, qdx, qdy = x0 + half * u0x, y0 + half * u0y, wx + half * bx, wy + half * by
+    f_mn = _quad_range(qx * qx + qy * qy - half * half * (u0x * u0x + u0y * u0y) - D * D,
+                       2.0 * (qx * qdx + qy * qdy) - 2.0 * half * half * (u0x * bx + u0y * by),
+                       qdx * qdx + qdy * qdy - half * half * (bx * bx + by * by), lo, hi)[0]
+    q_max = np.maximum(np.hypot(qx, qy), np.hypot(qx + h * qdx, qy + h * qdy))
+    dq = e_p + half * e_v
+    near_tau = f_mn <= 2.0 * q_max * dq + dq * dq + half * half * (2.0 * vmax * e_v + e_v * e_v)
+    rmax = np.sqrt(np.maximum(x0 * x0 + y0 * y0, x1 * x1 + y1 * y1))
+    slack = e_p * (vmax + e_v) + rmax * e_v
+    # d_cpa > DTHR everywhere: |s x v| > DTHR |v|; s x v is quadratic on the model and |v| is below the
+    # line between its end values (a norm is convex), so check c(t) - DTHR * l(t) > slack + DTHR e_v
+    c0, c1, c2 = x0 * u0y - y0 * u0x, wx * u0y - wy * u0x + x0 * by - y0 * bx, wx * by - wy * bx
+    f_mn, f_mx = _quad_range(c0, c1, c2, lo, hi)
+    sgn = np.where(f_mn > 0, 1.0, np.where(f_mx < 0, -1.0, 0.0))  # 0: s x v changes sign, d_cpa reaches 0
+    n0, n1 = np.hypot(u0x, u0y), np.hypot(u1x, u1y)
+    hs = np.where(h > 0, h, 1.0)
+    m_mn = _quad_range(sgn * c0 - D * n0, sgn * c1 - D * (n1 - n0) / hs, sgn * c2, lo, hi)[0]
+    wide = (sgn != 0) & (m_mn > slack + D * e_v)
+    g_mn = _quad_range(x0 * u0x + y0 * u0y, wx * u0x + wy * u0y + x0 * bx + y0 * by, wx * bx + wy * by, lo, hi)[0]
+    opening = g_mn - slack >= 0  # never closing on the window
+    return ~vert | ~(near_d | (near_tau & ~wide & ~opening))
+
+
 def _settle_time(acc_h, acc_v) -> np.ndarray:
     """Longest piece duration (s) whose chord is within V_TOL / P_TOL of the true path."""
     with np.errstate(divide="ignore"):
@@ -200,7 +257,9 @@ class ManeuverPaths:
     velocity (six component arrays) on paths ``p`` of encounters ``n`` (flat index arrays, :data:`StateAt`); ``acc_h``/``acc_v`` ``(N, P)`` bounds
     on the ownship's horizontal / vertical acceleration along the path, m/s^2 (the chord of a piece of
     duration h is then within ``acc h^2 / 8`` of the path and its velocity within ``acc_h h / 2``);
-    ``vz_const``: the vertical speed is the same all along every path (turns and speed changes).
+    ``vz_const``: the vertical speed is the same all along every path (turns and speed changes);
+    ``jerk_h``/``kink_t`` bound how far the velocity between two instants is from the line between its
+    true values there (``jerk h^2 / 8``, or ``acc_h h / 2`` across a kink), used to exclude clips.
     """
 
     pos: np.ndarray
@@ -210,6 +269,8 @@ class ManeuverPaths:
     acc_h: np.ndarray
     acc_v: np.ndarray
     vz_const: bool = False
+    jerk_h: "np.ndarray | None" = None  #: (N, P) bound on |d^2 v / dt^2| (m/s^3) away from kinks (None = unknown)
+    kink_t: "np.ndarray | None" = None  #: (N, P) s, time the horizontal acceleration jumps (inf = never)
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -222,8 +283,9 @@ class ManeuverPaths:
         """The paths of encounters ``idx`` (state_at keeps addressing the original encounters)."""
         idx = np.asarray(idx)
         base = self.state_at
-        return ManeuverPaths(self.pos[idx], self.vel[idx], self.knot_times()[idx],
-                             lambda n, p: base(idx[n], p), self.acc_h[idx], self.acc_v[idx], self.vz_const)
+        sub = lambda a: None if a is None else a[idx]  # noqa: E731
+        return ManeuverPaths(self.pos[idx], self.vel[idx], self.knot_times()[idx], lambda n, p: base(idx[n], p),
+                             self.acc_h[idx], self.acc_v[idx], self.vz_const, sub(self.jerk_h), sub(self.kink_t))
 
 
 @dataclass
@@ -396,7 +458,10 @@ class PathEvaluator:
         if getattr(self, "_tables", None) is None:
             n, m, p, k = self.shape
             nn, mm, pp = (a.ravel() for a in np.indices((n, m, p)))
-            self._tables = dict(n=nn, p=pp, nm=nn * m + mm, acc_h=self.paths.acc_h[nn, pp], acc_v=self.paths.acc_v[nn, pp])
+            P = self.paths
+            self._tables = dict(n=nn, p=pp, nm=nn * m + mm, acc_h=P.acc_h[nn, pp], acc_v=P.acc_v[nn, pp],
+                                jerk=None if P.jerk_h is None else P.jerk_h[nn, pp],
+                                kink=None if P.kink_t is None else P.kink_t[nn, pp])
         return self._tables
 
     def _pieces(self, flat_seg):
@@ -460,19 +525,19 @@ class PathEvaluator:
         The predicate is exact at both ends (true states). Both violate: first entry at the start, last
         exit at the end. One violates: the boundary is found by bisection on the true path and the other
         side is certified CLEAR. Neither violates (a possible clip inside), or the certificate fails: the
-        piece is split into parts (each with exact end flags) and examined again; a both-clear part whose
-        chord is within V_TOL / P_TOL of the path is decided by its chord (a clip the chord sees is then
-        placed by bisection from its middle).
+        piece is split into parts (each with exact end flags) and examined again; a both-clear part as
+        short as V_TOL / P_TOL allow is sampled every CLIP_DT for a clip of the volume (:meth:`_clip`).
         """
         path, ka, t0, h = self._pieces(flat_seg)
         s = [c.reshape(-1) for c in self.s]
         v = [c.reshape(-1) for c in self.v]
         f0 = _wcv_soa(*(c[ka] for c in s), *(c[ka] for c in v), th)
         f1 = _wcv_soa(*(c[ka + 1] for c in s), *(c[ka + 1] for c in v), th)
-        pieces = (flat_seg, path, t0, t0 + h, [c[ka] for c in s], [c[ka + 1] for c in s], f0, f1)
+        pieces = (flat_seg, path, t0, t0 + h, [c[ka] for c in s], [c[ka + 1] for c in s], f0, f1,
+                  [c[ka] for c in v[:2]], [c[ka + 1] for c in v[:2]])
         tab = self._path_tables()
         for depth in range(MAX_DEPTH):
-            sid, pth, ta, tb, pa, pb, fa, fb = pieces
+            sid, pth, ta, tb, pa, pb, fa, fb, ua, ub = pieces
             if not sid.size:
                 return
             both = fa & fb
@@ -502,20 +567,24 @@ class PathEvaluator:
                 else:
                     _update(seg_in, seg_out, sid[good], ta[good], t_cross[ok])
                 split[sel[~ok]] = True
-            neither = ~fa & ~fb
-            final = neither & settled
-            if final.any():
-                self._clip(th, sid[final], pth[final], ta[final], tb[final],
-                           [c[final] for c in pa], [c[final] for c in pb], seg_in, seg_out)
-            j = np.flatnonzero(neither & ~settled)
-            if j.size:  # split only the both-clear pieces that are not certified clear as a whole
+            j = np.flatnonzero(~fa & ~fb)  # both ends clear: a clip may lie inside unless certified clear
+            if j.size:
                 code = self._classify_part(th, pth[j], ta[j], tb[j], [c[j] for c in pa], [c[j] for c in pb])
-                split[j[code != CLEAR]] = True
+                j = j[code != CLEAR]
+            if j.size and tab["jerk"] is not None:  # the tighter second-order certificate (true end velocities)
+                j = j[~self._clear2(th, pth[j], ta[j], tb[j], [c[j] for c in pa], [c[j] for c in pb],
+                                    [c[j] for c in ua], [c[j] for c in ub])]
+            if j.size:
+                final = j[settled[j]]
+                if final.size:
+                    self._clip(th, sid[final], pth[final], ta[final], tb[final],
+                               [c[final] for c in pa], [c[final] for c in pb], seg_in, seg_out)
+                split[j[~settled[j]]] = True
             idx = np.flatnonzero(split)
             if not idx.size:
                 return
             pieces = self._split(th, *(a[idx] for a in (sid, pth, ta, tb)), [c[idx] for c in pa], [c[idx] for c in pb],
-                                 fa[idx], fb[idx])
+                                 fa[idx], fb[idx], [c[idx] for c in ua], [c[idx] for c in ub])
 
     def _classify_part(self, th, pth, ta, tb, pa, pb) -> np.ndarray:
         tab = self._path_tables()
@@ -528,7 +597,19 @@ class PathEvaluator:
         e_z = a_v * h * h * 0.125 if np.any(a_v) else 0.0
         return classify_pieces(*pa, *pb, h, th, a_h * h * h * 0.125, a_h * h * 0.5, e_z, win)
 
-    def _split(self, th, sid, pth, ta, tb, pa, pb, fa, fb):
+    def _clear2(self, th, pth, ta, tb, pa, pb, ua, ub) -> np.ndarray:
+        """Second-order CLEAR certificate of pieces (see :func:`clear_second_order`)."""
+        tab = self._path_tables()
+        h = tb - ta
+        a_h, a_v, jerk = tab["acc_h"][pth], tab["acc_v"][pth], tab["jerk"][pth]
+        e_v = jerk * h * h * 0.125
+        if tab["kink"] is not None:
+            kt = tab["kink"][pth]
+            e_v = e_v + np.where((kt > ta) & (kt < tb), a_h * h * 0.5, 0.0)
+        e_z = a_v * h * h * 0.125 if np.any(a_v) else 0.0
+        return clear_second_order(*pa, *pb, *ua, *ub, h, th, a_h * h * h * 0.125, e_v, e_z)
+
+    def _split(self, th, sid, pth, ta, tb, pa, pb, fa, fb, ua, ub):
         """Split pieces into the fewest equal parts that settle (at least 2, at most MAX_SPLIT), with
         exact states and flags at the new ends."""
         tab = self._path_tables()
@@ -541,33 +622,35 @@ class PathEvaluator:
         times = np.concatenate([ta[:, None], ts, tb[:, None]], axis=1)
         pos = [np.concatenate([pa[c][:, None], st[c].reshape(L, q - 1), pb[c][:, None]], axis=1) for c in range(3)]
         flags = np.concatenate([fa[:, None], flag, fb[:, None]], axis=1)
+        vel = [np.concatenate([ua[c][:, None], st[3 + c].reshape(L, q - 1), ub[c][:, None]], axis=1) for c in range(2)]
         rep = lambda a: np.repeat(a, q)  # noqa: E731
         return (rep(sid), rep(pth), times[:, :-1].ravel(), times[:, 1:].ravel(), [c[:, :-1].ravel() for c in pos],
-                [c[:, 1:].ravel() for c in pos], flags[:, :-1].ravel(), flags[:, 1:].ravel())
+                [c[:, 1:].ravel() for c in pos], flags[:, :-1].ravel(), flags[:, 1:].ravel(),
+                [c[:, :-1].ravel() for c in vel], [c[:, 1:].ravel() for c in vel])
 
     def _clip(self, th, sid, pth, ta, tb, pa, pb, seg_in, seg_out) -> None:
-        """Settled pieces whose ends are clear: their chord's violation interval, and where the true path
-        violates at that interval's middle, its ends found by bisection on the true path."""
+        """Short pieces whose ends are clear but which are not certified clear (a clip of the volume may
+        lie inside): the true predicate sampled every CLIP_DT, and around the first and last violating
+        samples the entry and exit found by bisection on the true path."""
         h = tb - ta
-        v = [(pb[c] - pa[c]) / h for c in range(3)]
-        win = None
-        if self._vwin is not None:
-            vlo, vhi = self._vwin[0].reshape(-1)[pth], self._vwin[1].reshape(-1)[pth]
-            win = (np.maximum(vlo, ta) - ta, np.minimum(vhi, tb) - ta)
-        lo, hi = interval_soa(*pa, *v, h, th, win)
-        hit = np.flatnonzero(np.isfinite(lo))
-        if not hit.size:
+        q = int(np.ceil(np.max(h) / CLIP_DT - 1e-9))
+        if q < 1:
             return
-        a, b = lo[hit] + ta[hit], hi[hit] + ta[hit]
-        mid = 0.5 * (a + b)
-        at = _wcv_soa(*self._state(pth[hit], mid), th)
-        t_in, t_out = a.copy(), b.copy()
-        j = np.flatnonzero(at)
-        if j.size:
-            l1, h1 = self._bisect(th, pth[hit][j], ta[hit][j], mid[j], lo_in=False)
-            l2, h2 = self._bisect(th, pth[hit][j], mid[j], tb[hit][j], lo_in=True)
-            t_in[j], t_out[j] = 0.5 * (l1 + h1), 0.5 * (l2 + h2)
-        _update(seg_in, seg_out, sid[hit], t_in, t_out)
+        frac = (np.arange(q) + 0.5) / q
+        ts = ta[:, None] + h[:, None] * frac[None, :]  # (L, q)
+        L = sid.size
+        hit = _wcv_soa(*self._state(np.repeat(pth, q), ts.ravel()), th).reshape(L, q)
+        rows = np.flatnonzero(hit.any(axis=1))
+        if not rows.size:
+            return
+        first = np.argmax(hit[rows], axis=1)
+        last = q - 1 - np.argmax(hit[rows, ::-1], axis=1)
+        t_first, t_last = ts[rows, first], ts[rows, last]
+        before = np.where(first > 0, ts[rows, np.maximum(first - 1, 0)], ta[rows])
+        after = np.where(last < q - 1, ts[rows, np.minimum(last + 1, q - 1)], tb[rows])
+        l1, h1 = self._bisect(th, pth[rows], before, t_first, lo_in=False)
+        l2, h2 = self._bisect(th, pth[rows], t_last, after, lo_in=True)
+        _update(seg_in, seg_out, sid[rows], 0.5 * (l1 + h1), 0.5 * (l2 + h2))
 
 
 def _update(seg_in, seg_out, sid, t_in, t_out) -> None:
