@@ -20,6 +20,7 @@ from .errors import DaaSilError
 COMMAND_MODULES = [
     "daa_sil.commands.geometry",
     "daa_sil.commands.daa",
+    "daa_sil.commands.conformance",
     "daa_sil.commands.waitmap",
     "daa_sil.commands.shim",
     "daa_sil.commands.run",

@@ -22,10 +22,16 @@ EXAMPLES = """examples:
   # two intruders, paper thresholds, JSON for a script
   daa-sil daa --own 0,0,1000,0,55,0 --intruder 500,6000,1000,0,-55,0 --intruder=-3000,2000,1100,60,0,-2 --preset paper --json
 
+  # DAIDALUS v2.0.4 DO_365B_no_SUM.conf semantics (1 deg / 5 kt / 100 fpm grids, its horizons and recovery)
+  daa-sil daa --own 0,0,1000,0,55,0 --intruder 5670.18,3933.31,772.05,-148.70,-65.81,1.64 --preset daidalus
+
 States are "x,y,z,vx,vy,vz" in the ENU frame (m, m/s); write --intruder=-3000,... when a value
 starts with a minus sign. Bands are printed in degrees (track, compass),
 fpm (vertical speed) and kt (ground speed); JSON gives the same units with the unit in the key.
-Regions: none (conflict free), mid (corrective), near (warning), recovery.
+Regions: none (conflict free), mid (corrective), near (warning), recovery. Bands are intervals between
+candidate values, each with the region of the values inside it (DAIDALUS's representation). A
+resolution is the nearest conflict-free value on that side; "inf" / "-inf" means there is none on
+that side, null that the current value is not in conflict.
 Allowed ranges: |x|, |y| <= 1e7 m, z in [-1e4, 1e5] m, |vx|, |vy| <= 1000 m/s, |vz| <= 500 m/s.
 """
 
@@ -41,14 +47,14 @@ def register(sub) -> None:
     p.add_argument("--own", required=True, metavar="X,Y,Z,VX,VY,VZ", help="ownship ENU state (m, m/s)")
     p.add_argument("--intruder", required=True, action="append", metavar="X,Y,Z,VX,VY,VZ",
                    help="intruder ENU state (m, m/s); repeat for several intruders")
-    p.add_argument("--preset", default="do365", help=f"threshold preset: {', '.join(PRESETS)} (default do365)")
+    p.add_argument("--preset", default="do365", help=f"DAA preset: {', '.join(PRESETS)} (default do365)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
 
 def daa_report(own: np.ndarray, intr: np.ndarray, preset: str = "do365") -> dict:
     """Alert levels, bands (intervals per axis) and resolutions as a JSON-ready dict."""
-    cfg = DaaConfig(thresholds=preset)
+    cfg = DaaConfig.for_preset(preset)
     o = AircraftState.from_pos_vel(own[None, :3], own[None, 3:])
     i = AircraftState.from_pos_vel(intr[None, :, :3], intr[None, :, 3:])
     b = compute_bands(o, i, cfg)
@@ -57,12 +63,18 @@ def daa_report(own: np.ndarray, intr: np.ndarray, preset: str = "do365") -> dict
            "resolutions": {}}
     for key, ab in zip(("trk", "vs", "gs"), b.axes()):
         conv, unit = _UNITS[key]
-        out["bands"][f"{key}_{unit}"] = [[float(conv(lo)), float(conv(hi)), reg] for lo, hi, reg in ab.intervals(0)]
-        out["resolutions"][ab.name] = {f"lo_{unit}": float(conv(ab.res_lo[0])), f"hi_{unit}": float(conv(ab.res_hi[0])),
+        out["bands"][f"{key}_{unit}"] = [[float(conv(lo)), float(conv(hi)), reg] for lo, hi, reg in ab.band_intervals(0)]
+        out["resolutions"][ab.name] = {f"lo_{unit}": _res(conv(ab.res_lo[0])), f"hi_{unit}": _res(conv(ab.res_hi[0])),
                                        "preferred": {-1: "lo", 0: "none", 1: "hi"}[int(ab.preferred[0])]}
     out["daa_command"] = {"trk_deg": float(np.degrees(cmd.trk[0])), "vs_fpm": float(cmd.vs[0] / FPM),
                           "gs_kt": float(cmd.gs[0] / KT), "axis": AXIS_NAMES[int(ax[0])], "direction": DIR_NAMES[int(dr[0])]}
     return to_jsonable(out)
+
+
+def _res(v) -> "float | str | None":
+    """A resolution for JSON: the value, "inf" / "-inf" (none on that side) or None (no conflict)."""
+    v = float(v)
+    return v if np.isfinite(v) else (None if np.isnan(v) else ("inf" if v > 0 else "-inf"))
 
 
 def run(args) -> int:
