@@ -1,10 +1,12 @@
 """Benchmark: DAA bands + one agent step for N encounters x 1 intruder in one batched call,
 versus the same code called one encounter at a time (ratio measured in the same run).
 
-    python benchmarks/bench_daa.py [--n 10000] [--loop 200] [--repeat 5]
+    python benchmarks/bench_daa.py [--n 10000] [--loop 200] [--repeat 5] [--preset do365|paper|daidalus]
 
 Encounters: ownship 55 m/s at the origin, one intruder 3-8 km away, converging at random angles
-(mostly alerting), with a random pilot command arriving in half of them.
+(mostly alerting), with a random pilot command arriving in half of them. The target (>= 20,000
+encounter-steps/s) is for the default preset; ``--preset daidalus`` (1 deg / 5 kt / 100 fpm grids,
+about 2.7x the candidates, cylinder recovery, hysteresis) is reported, not held to it.
 """
 
 from __future__ import annotations
@@ -52,8 +54,9 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=10000, help="encounters in the batched call")
     ap.add_argument("--loop", type=int, default=200, help="encounters timed one at a time")
     ap.add_argument("--repeat", type=int, default=5, help="timed batched calls (median reported)")
+    ap.add_argument("--preset", default="do365", help="DAA preset (default do365)")
     args = ap.parse_args()
-    cfg = DaaConfig()
+    cfg = DaaConfig.for_preset(args.preset)
     policy = policy_for_group("ID-2")
     lookup = lambda o, i: np.full(o.shape[0], 6.0)  # noqa: E731
     own, intr, pilot = make_batch(args.n)
@@ -75,12 +78,12 @@ def main() -> None:
     t_loop, c_loop = time.perf_counter() - t0, time.process_time() - c0
     rate_loop = args.loop / t_loop
     active = dec["active"].mean()
-    print(f"batched: {args.n} encounters x 1 intruder, median of {args.repeat} calls {t_batch:.3f} s "
+    print(f"preset {args.preset}; batched: {args.n} encounters x 1 intruder, median of {args.repeat} calls {t_batch:.3f} s "
           f"(min {min(walls):.3f}, max {max(walls):.3f}) = {rate_batch:,.0f} encounter-steps/s ({active:.0%} active)")
     print(f"one at a time: {args.loop} encounters in {t_loop:.3f} s = {rate_loop:,.0f} encounter-steps/s")
     print(f"speed-up batched / one-at-a-time: {rate_batch / rate_loop:.1f}x (wall clock)")
     print(f"CPU time: batched {args.n / c_batch:,.0f} encounter-steps/s, one at a time {args.loop / c_loop:,.0f}/s, "
-          f"ratio {(args.n / c_batch) / (args.loop / c_loop):.1f}x  (targets: >= 20,000/s, >= 20x)")
+          f"ratio {(args.n / c_batch) / (args.loop / c_loop):.1f}x  (targets for do365: >= 20,000/s, >= 20x)")
 
 
 if __name__ == "__main__":

@@ -246,7 +246,7 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
         raise UsageError("simulate needs at least one encounter")
     preset_name = get_thresholds(preset if preset is not None else
                                  (daa_cfg.th.name if daa_cfg is not None else "paper")).name
-    cfg = daa_cfg if daa_cfg is not None else DaaConfig(thresholds=preset_name)
+    cfg = daa_cfg if daa_cfg is not None else DaaConfig.for_preset(preset_name)
     pcfg = pilot_cfg if pilot_cfg is not None else PilotConfig()
     dt = float(dt if dt is not None else encounters.dt_s)
     duration = float(duration_s if duration_s is not None else encounters.duration_s)

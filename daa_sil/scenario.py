@@ -13,7 +13,7 @@ Schema (``*`` = required; defaults in brackets)::
     description: str                [""]
     seed: int >= 0                  [1]     root of every random stream (pilot, link up/down)
     duration_s: float (0, 3600]     [240]   sim length; steps are dt = 1 s
-    thresholds: do365 | paper       [do365] well-clear / NMAC preset
+    thresholds: do365 | paper | daidalus   [do365] well-clear / NMAC / DAA preset
     origin:                                 geodetic reference of the ENU frame (MAVLink output)
       lat_deg: [-80, 80]            [37.4]
       lon_deg: [-180, 180]          [-122.05]
@@ -518,7 +518,7 @@ def _scenario(v: _V, root) -> Scenario:
         description=v.opt(m, "description", "", v.string, ""),
         seed=v.opt(m, "seed", "", v.integer, 1, lo=0, hi=2 ** 63 - 1),
         duration_s=dur,
-        thresholds=v.opt(m, "thresholds", "", v.string, "do365", choices=("do365", "paper")),
+        thresholds=v.opt(m, "thresholds", "", v.string, "do365", choices=("do365", "paper", "daidalus")),
         ownship=_state(v, m["ownship"], "ownship", dur),
         intruders=[_intruder(v, n, f"intruders[{i}]", i, dur)
                    for i, n in enumerate(v.seq(m["intruders"], "intruders", 1, MAX_INTRUDERS))],

@@ -87,7 +87,7 @@ class GcsNode:
         self.order = [i.id for i in scenario.intruders] if scenario is not None else []
         from daa_sil.daa.config import DaaConfig
 
-        self.daa_cfg = DaaConfig(thresholds=scenario.thresholds) if scenario is not None else DaaConfig()
+        self.daa_cfg = DaaConfig.for_preset(scenario.thresholds) if scenario is not None else DaaConfig()
         self.pilot = None
         if self.mode == "model":
             from daa_sil.fasttime import STREAM_PILOT, encounter_streams

@@ -43,7 +43,7 @@ def build_onboard(sc: Scenario, policy=None):
 
     es = encounter_set(sc)
     policy = policy or build_policy(sc)
-    daa_cfg = DaaConfig(thresholds=sc.thresholds)
+    daa_cfg = DaaConfig.for_preset(sc.thresholds)
     lookup = None
     if policy.wait_mode == "map":
         from daa_sil import waitmap
