@@ -37,6 +37,16 @@ Resolutions: when the current value (k = 0) is MID or NEAR, the first NONE/RECOV
 away from it on each side (``res_lo`` = left/down/slower, ``res_hi`` = right/up/faster), ``-inf``/``+inf``
 when a side has none, ``nan`` when the current value is not in conflict (DAIDALUS conventions). The
 preferred side is the one reached sooner; equal distances (up to rounding) go right/up/faster.
+
+Which preset gets which rule (issue 15), and why:
+
+* the exact tie-break -- every preset: "faster / right / up wins ties" was the documented rule, and
+  comparing floating-point maneuver times broke it at random;
+* the v2.0.4 band horizons, the shrinking-cylinder recovery and the DAIDALUS grid -- ``daidalus``
+  only: they are DAIDALUS's semantics, while ``do365`` and ``paper`` keep the v1-style horizons and the
+  earliest-exit recovery the paper study was built and validated with (both are defensible readings of
+  DO-365; changing them would change the study's numbers, not fix an error);
+* the true trajectory (:mod:`daa_sil.daa.trajectory`) -- every preset (a correctness fix).
 """
 
 from __future__ import annotations

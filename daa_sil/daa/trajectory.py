@@ -8,18 +8,26 @@ continues straight with the knot-``k`` velocity. Two parts are evaluated:
 * **tails** (straight after knot ``k``): the exact closed form of
   :func:`daa_sil.wellclear.violation_interval` (re-stated on contiguous component arrays in
   :func:`interval_soa`, identical numbers, about 2x faster);
-* **the maneuver between knots** on the true trajectory (arc, parabola), not on its chords. Each
-  knot-to-knot piece is compared with its chord using the bounds ``|p - chord| <= A h^2 / 8`` and
-  ``|v - v_chord| <= A h / 2`` (``A`` = the path's acceleration bound, ``h`` = the piece's duration).
-  With them a piece is certified *clear* (no violation anywhere on the true path), *inside* (the
-  whole piece violates) or *undecided*; only undecided pieces are split (in :data:`SPLIT` parts) and
-  examined again, until the chord of a piece is within :data:`V_TOL` / :data:`P_TOL` of the path, and
-  then that chord's exact interval is taken. So a violation that the chord misses (a short clip of the
-  tau_mod boundary during a turn) is found, at the cost of the few pieces that straddle a boundary.
+* **the maneuver between knots** on the true trajectory (arc, parabola), not on its chords. A piece of
+  duration ``h`` is within ``A h^2 / 8`` of its chord in position and ``A h / 2`` in velocity (``A`` the
+  path's acceleration bound); with these bounds :func:`classify_pieces` certifies it *clear* (no
+  instant of the true path violates) or *inside* (every instant does), blocks of :data:`BLOCK`
+  segments first. A segment left undecided is resolved with the exact predicate on the true state
+  (:meth:`PathEvaluator._resolve`): both ends violating give its first entry and last exit exactly;
+  one end violating, the boundary by bisection (:data:`BISECT_DT_IN`, :data:`BISECT_DT_OUT`) with
+  the other side certified clear; both ends clear, a second-order certificate
+  (:func:`clear_second_order`) or, for the few it cannot clear, sampling every :data:`CLIP_DT`.
 
-The certification uses the form ``|s + (TTHR/2) v| <= sqrt(DTHR^2 + (TTHR/2)^2 |v|^2)`` of the
-tau_mod test (``docs/daa.md``); it is exact for TCOA = 0 (every preset). Times are absolute (s from
-now); no violation is ``(inf, -inf)``.
+This replaces the chords of the previous version in **every preset**: a chord's velocity is wrong by
+up to half a knot step (2.4 m/s for 5 deg at 55 m/s) and it missed short violations during turns
+(issue 15, example 4). It is a correctness fix, not a choice of semantics, so ``do365`` and
+``paper`` get it as well as ``daidalus``; their bands change only where the chords were wrong. We
+also differ here from DAIDALUS, whose straight *coast* segments keep each knot's velocity for a
+whole knot interval (``docs/daa.md``, "Differences from DAIDALUS we keep").
+
+The certificates use the form ``|s + (TTHR/2) v| <= sqrt(DTHR^2 + (TTHR/2)^2 |v|^2)`` of the tau_mod
+test, with d_cpa and closing bounded separately; they are exact for TCOA = 0 (every preset). Times
+are absolute (s from now); no violation is ``(inf, -inf)``.
 """
 
 from __future__ import annotations
