@@ -95,10 +95,26 @@ class _Candidates:
     def take(a: np.ndarray, idx: np.ndarray) -> np.ndarray:
         return np.take_along_axis(a, idx[:, None], -1)[:, 0]
 
+    def at(self, name: str, idx: np.ndarray) -> np.ndarray:
+        """Field ``name`` of candidate ``idx[i]`` of encounter i (as ``take(self.<name>, idx)``, without
+        concatenating the axes)."""
+        out = None
+        for a in self._ab:
+            c = self.cols[a.axis]
+            arr = getattr(a, name)
+            if out is None:
+                out = np.empty(idx.shape, arr.dtype)
+            sel = np.flatnonzero((idx >= c.start) & (idx < c.stop))
+            out[sel] = arr[sel, idx[sel] - c.start]
+        return out
+
+    def rows(self, name: str, rows: np.ndarray) -> np.ndarray:
+        """Field ``name`` of encounters ``rows`` (as ``self.<name>[rows]``)."""
+        return np.concatenate([getattr(a, name)[rows] for a in self._ab], axis=1)
+
     def command(self, idx: np.ndarray) -> Command:
         """Command of candidate ``idx`` (N,): the candidate's axis set, the other axes held."""
-        take = lambda a: np.take_along_axis(a, idx[:, None], -1)[:, 0]  # noqa: E731
-        ax, val = self.axis[idx], take(self.values)
+        ax, val = self.axis[idx], self.at("values", idx)
         o = self.own
         return Command(np.where(ax == AXIS_HORIZONTAL, val, o.trk), np.where(ax == AXIS_VERTICAL, val, o.vs),
                        np.where(ax == AXIS_SPEED, val, o.gs))
@@ -107,8 +123,8 @@ class _Candidates:
         """Best-effort candidate index for ``rows``: latest first LoWC, then earliest regain of well clear."""
         if rows.size == 0:
             return np.zeros(0, int)
-        t_in = np.minimum(self.t_in[rows], 1e6)
-        return np.argmax(t_in * 1e3 - np.maximum(self.t_out[rows], 0.0), axis=-1)
+        t_in = np.minimum(self.rows("t_in", rows), 1e6)
+        return np.argmax(t_in * 1e3 - np.maximum(self.rows("t_out", rows), 0.0), axis=-1)
 
 
 def _pick(mask, cost):
@@ -189,15 +205,18 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
     moving = cand.side[None, :] != 0
     chosen = np.full(n, -1)
     p_ax = np.full(n, AXIS_NONE)
+    # (each step works on the rows it can still change only)
     # 1. persistence: keep the previous (axis, direction) while it still has a conflict-free candidate
     if prev is not None:
         p_ax, p_dir = (np.asarray(a).astype(int) for a in prev)
         p_side = np.asarray(DIR_SIDE)[p_dir]
-        okr = (cand.region == REGION_NONE) | (cand.region == REGION_RECOVERY)
-        m = okr & (cand.axis[None, :] == p_ax[:, None]) & (cand.side[None, :] == p_side[:, None]) \
-            & (p_ax[:, None] != AXIS_NONE) & moving
-        i, f = _pick(m, cand.t_man)
-        chosen = np.where(f & in_conflict, i, chosen)
+        r = np.flatnonzero((p_ax != AXIS_NONE) & in_conflict)
+        if r.size:
+            region = cand.rows("region", r)
+            okr = (region == REGION_NONE) | (region == REGION_RECOVERY)
+            m = okr & (cand.axis[None, :] == p_ax[r, None]) & (cand.side[None, :] == p_side[r, None]) & moving
+            i, f = _pick(m, cand.rows("t_man", r))
+            chosen[r] = np.where(f, i, chosen[r])
     # 2. fresh: first axis in priority order with a NONE resolution on its preferred side, then RECOVERY.
     #    No reversal first: when the previous direction has lost its conflict-free candidates (the
     #    intruder did not fly the straight line it was projected on, e.g. it turns toward us), the
@@ -209,14 +228,17 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
                     break
                 a = axis_code(name)
                 ab, cols = bands.axis(a), cand.cols[a]
-                ok = (ab.region == want) & (ab.side != 0)[None, :]
-                pref = ab.preferred.astype(int)
+                r = np.flatnonzero((chosen < 0) & in_conflict & (allow_reversal | (p_ax != a)))
+                if not r.size:
+                    continue
+                ok = (ab.region[r] == want) & (ab.side != 0)[None, :]
+                pref = ab.preferred[r].astype(int)
                 m_side = (ab.side[None, :] == pref[:, None]) | (pref[:, None] == 0)
-                i, f = _pick(ok & m_side, ab.t_man)
-                i_any, f_any = _pick(ok, ab.t_man)
+                t_man = ab.t_man[r]
+                i, f = _pick(ok & m_side, t_man)
+                i_any, f_any = _pick(ok, t_man)
                 i = np.where(f, i, i_any) + cols.start
-                eligible = (chosen < 0) & in_conflict & (allow_reversal | (p_ax != a))
-                chosen = np.where(eligible & (f | f_any), i, chosen)
+                chosen[r] = np.where(f | f_any, i, chosen[r])
     # 3. best effort
     rest = np.nonzero((chosen < 0) & in_conflict)[0]
     chosen[rest] = cand.best_effort(rest)
@@ -226,7 +248,7 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
     axis = np.where(hold, AXIS_NONE, cand.axis[idx]).astype(np.int8)
     direction = np.where(hold, 0, side_to_dir(axis, cand.side[idx])).astype(np.int8)
     if return_t_in:
-        return cmd, axis, direction, cand.take(cand.t_in, idx)
+        return cmd, axis, direction, cand.at("t_in", idx)
     return cmd, axis, direction
 
 

@@ -38,8 +38,8 @@ from typing import Callable
 import numpy as np
 
 from .. import wellclear as wc
-from ..frames import wrap_pi
-from ..kinematics import AircraftState, Command, fly_command
+from ..frames import wrap_2pi, wrap_pi
+from ..kinematics import _W_EPS, AircraftState, Command, _horizontal_segment, _vertical, fly_command
 from ..thresholds import Thresholds
 from .config import DaaConfig
 
@@ -60,6 +60,8 @@ BISECT_DT_OUT = 0.1
 CLIP_DT = 0.01
 #: most rounds of splitting an undecided piece
 MAX_DEPTH = 8
+#: elements per pass of the elementwise kernels (their temporaries then stay in the CPU cache)
+KERNEL_BLOCK = 16384
 #: knot-to-knot segments examined together first (a block far from the volume is clear as a whole)
 BLOCK = 4
 
@@ -68,11 +70,36 @@ BLOCK = 4
 StateAt = Callable[[np.ndarray, np.ndarray], Callable[[np.ndarray], tuple]]
 
 
+def _in_blocks(fn):
+    """Run an elementwise kernel of 1-D arrays in pieces of KERNEL_BLOCK elements (its temporaries then
+    stay in the CPU cache; the kernels are memory-bound and about 3x faster so). Array arguments (also
+    inside tuples) of the length of the first one are sliced, others passed as they are."""
+    def cut(a, sl, n):
+        if isinstance(a, np.ndarray) and a.ndim == 1 and a.shape[0] == n:
+            return a[sl]
+        if isinstance(a, tuple):
+            return tuple(cut(b, sl, n) for b in a)
+        return a
+
+    def run(*args, **kw):
+        n = args[0].shape[0] if args[0].ndim == 1 else 0
+        if n <= KERNEL_BLOCK:
+            return fn(*args, **kw)
+        parts = [fn(*(cut(a, sl, n) for a in args), **{k: cut(v, sl, n) for k, v in kw.items()})
+                 for sl in (slice(i, i + KERNEL_BLOCK) for i in range(0, n, KERNEL_BLOCK))]
+        if isinstance(parts[0], tuple):
+            return tuple(np.concatenate(c) for c in zip(*parts))
+        return np.concatenate(parts)
+    run.__doc__, run.__name__, run.__wrapped__ = fn.__doc__, fn.__name__, fn
+    return run
+
+
 def _components(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Contiguous x, y, z arrays of a ``(..., 3)`` array (the kernels below read each many times)."""
     return (np.ascontiguousarray(a[..., 0]), np.ascontiguousarray(a[..., 1]), np.ascontiguousarray(a[..., 2]))
 
 
+@_in_blocks
 def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`daa_sil.wellclear.violation_interval` over ``[0, length]`` for 1-D component arrays.
 
@@ -82,30 +109,43 @@ def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) ->
     not empty (elsewhere the answer is ``(inf, -inf)`` in both). ``window`` = the vertical window
     ``(lo, hi)`` when the caller has it.
     """
-    D, H, TT, TC = th.dthr, th.zthr, th.tthr, th.tcoa
     n = sx.shape[0]
-    t_in = np.full(n, np.inf)
-    t_out = np.full(n, -np.inf)
+    D, H, TT, TC = th.dthr, th.zthr, th.tthr, th.tcoa
     # -- vertical window (wellclear.violation_interval, t0 = 0, t1 = length) --------------------
     vlo, vhi = wc.vertical_window(sz, vz, 0.0, length, H, TC) if window is None else window
-    idx = np.flatnonzero(vlo <= vhi)
-    if not idx.size:
-        return t_in, t_out
-    t_lo = vlo[idx]
-    L = vhi[idx] - t_lo
-    hx, hy = vx[idx], vy[idx]
+    ok = vlo <= vhi
+    count = int(np.count_nonzero(ok))
+    if count == 0:
+        return np.full(n, np.inf), np.full(n, -np.inf)
+    if count < 0.75 * n:  # sparse: gather the rows with a vertical window
+        idx = np.flatnonzero(ok)
+        t_lo = vlo[idx]
+        L = vhi[idx] - t_lo
+        hx, hy, qx, qy, qz, wz = vx[idx], vy[idx], sx[idx], sy[idx], sz[idx], vz[idx]
+    else:  # dense: every row (those without a window are masked at the end)
+        idx = None
+        t_lo = np.where(ok, vlo, 0.0)
+        L = np.where(ok, vhi - t_lo, 0.0)
+        hx, hy, qx, qy, qz, wz = vx, vy, sx, sy, sz, vz
     # -- horizontal interval on [0, L] from p = s + t_lo v, only inside the vertical window -------
-    px = sx[idx] + t_lo * hx
-    py = sy[idx] + t_lo * hy
+    px = qx + t_lo * hx
+    py = qy + t_lo * hy
     hlo, hhi = wc.horizontal_window(px, py, hx, hy, L, D, TT)
     point = L == 0
+    if idx is None:
+        point &= ok
     if np.any(point):  # a single-instant vertical window: the predicate there (as DAIDALUS does)
         j = np.flatnonzero(point)
-        p3 = np.stack([px[j], py[j], sz[idx[j]] + t_lo[j] * vz[idx[j]]], axis=-1)
-        at = wc.wcv(p3, np.stack([hx[j], hy[j], vz[idx[j]]], axis=-1), th)
+        p3 = np.stack([px[j], py[j], qz[j] + t_lo[j] * wz[j]], axis=-1)
+        at = wc.wcv(p3, np.stack([hx[j], hy[j], wz[j]], axis=-1), th)
         hlo[j] = np.where(at, 0.0, np.inf)
         hhi[j] = np.where(at, 0.0, -np.inf)
     good = hlo <= hhi
+    if idx is None:
+        good &= ok
+        return np.where(good, hlo + t_lo, np.inf), np.where(good, hhi + t_lo, -np.inf)
+    t_in = np.full(n, np.inf)
+    t_out = np.full(n, -np.inf)
     t_in[idx] = np.where(good, hlo + t_lo, np.inf)
     t_out[idx] = np.where(good, hhi + t_lo, -np.inf)
     return t_in, t_out
@@ -126,6 +166,7 @@ def filtered_interval(s, v, th: Thresholds, length) -> tuple[np.ndarray, np.ndar
 CLEAR, INSIDE, UNDECIDED = 0, 1, 2
 
 
+@_in_blocks
 def classify_pieces(x0, y0, z0, x1, y1, z1, h, th: Thresholds, e_p, e_v, e_z=0.0, window=None) -> np.ndarray:
     """CLEAR / INSIDE / UNDECIDED code (int8) of pieces of a true relative path.
 
@@ -169,17 +210,30 @@ def classify_pieces(x0, y0, z0, x1, y1, z1, h, th: Thresholds, e_p, e_v, e_z=0.0
     wide = cross - slack > D * (speed + e_v)  # d_cpa > DTHR everywhere on the true path
     opening = pv - slack >= 0  # never closing on the true path (s_c.v_c grows along the chord)
     maybe = vert_any & (near_d | (near_tau & ~wide & ~opening))
+    code = maybe.astype(np.int8) * UNDECIDED
     # -- inside: the chord, deflated by the error bounds, violates throughout [0, h] -------------------
+    cand = maybe & (h > 0)
+    count = int(np.count_nonzero(cand))
+    if count == 0:
+        return code
+    idx = np.flatnonzero(cand) if count < 0.5 * cand.size else None  # few candidates: only those rows
+    g = (lambda a: a) if idx is None else (lambda a: a[idx] if np.ndim(a) else a)  # noqa: E731
+    rmax, e_p, e_v, e_z, z0, z1 = g(rmax), g(e_p), g(e_v), g(e_z), g(z0), g(z1)
     inside = rmax <= D - e_p
     if TT > 0:
+        speed, qq, qv, vv, h, pv, cross, slack = g(speed), g(qq), g(qv), g(vv), g(h), g(pv), g(cross), g(slack)
         slow = np.maximum(speed - e_v, 0.0)
         rho_in = np.sqrt(D * D + (half * slow) ** 2) - e_p - half * e_v
         q1 = qq + h * (2.0 * qv + h * vv)
         sv1 = pv + h * vv  # s_c . v_c at the end of the chord
         inside |= ((np.maximum(qq, q1) <= np.where(rho_in > 0, rho_in * rho_in, -1.0))
                    & (cross + slack <= D * slow) & (sv1 + slack < 0))
-    inside &= maybe & (np.maximum(np.abs(z0), np.abs(z1)) <= H - e_z) & (h > 0)
-    return maybe.astype(np.int8) * UNDECIDED - inside.astype(np.int8)  # UNDECIDED - 1 = INSIDE
+    inside &= np.maximum(np.abs(z0), np.abs(z1)) <= H - e_z
+    if idx is None:
+        inside &= cand
+        return code - inside.astype(np.int8)  # UNDECIDED - 1 = INSIDE
+    code[idx] -= inside.astype(np.int8)
+    return code
 
 
 def _quad_range(c0, c1, c2, lo, hi):
@@ -205,6 +259,7 @@ def _line_min2(ax, ay, bx, by, lo, hi):
     return ax * ax + ay * ay + t * (2.0 * ab + t * bb)
 
 
+@_in_blocks
 def clear_second_order(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, th: Thresholds, e_p, e_v, e_z=0.0) -> np.ndarray:
     """True where a piece is certified CLEAR with a second-order model: the chord for position and the
     line between the true end velocities ``u0``, ``u1`` for the horizontal velocity, the true path within
@@ -260,8 +315,8 @@ def _settle_time(acc_h, acc_v) -> np.ndarray:
 class ManeuverPaths:
     """P maneuver paths per encounter sampled at knots, and the exact ownship state at any time.
 
-    ``pos``/``vel`` ``(N, P, K, 3)`` ownship at the knots; ``t`` knot times broadcastable to
-    ``(N, P, K)`` (s); ``state_at(n, p)`` a function of time giving the true ownship position and
+    ``pos``/``vel`` ownship position / velocity at the knots as three component arrays (x, y, z) each
+    broadcastable to ``(N, P, K)``; ``t`` knot times broadcastable to ``(N, P, K)`` (s); ``state_at(n, p)`` a function of time giving the true ownship position and
     velocity (six component arrays) on paths ``p`` of encounters ``n`` (flat index arrays, :data:`StateAt`); ``acc_h``/``acc_v`` ``(N, P)`` bounds
     on the ownship's horizontal / vertical acceleration along the path, m/s^2 (the chord of a piece of
     duration h is then within ``acc h^2 / 8`` of the path and its velocity within ``acc_h h / 2``);
@@ -270,19 +325,25 @@ class ManeuverPaths:
     true values there (``jerk h^2 / 8``, or ``acc_h h / 2`` across a kink), used to exclude clips.
     """
 
-    pos: np.ndarray
-    vel: np.ndarray
+    pos: tuple
+    vel: tuple
     t: np.ndarray
     state_at: StateAt
     acc_h: np.ndarray
     acc_v: np.ndarray
     vz_const: bool = False
     jerk_h: "np.ndarray | None" = None  #: (N, P) bound on |d^2 v / dt^2| (m/s^3) away from kinks (None = unknown)
-    kink_t: "np.ndarray | None" = None  #: (N, P) s, time the horizontal acceleration jumps (inf = never)
+    kink_t: "np.ndarray | None" = None  #: (N, P) or (N, P, Q) s, times the horizontal acceleration jumps (inf = never)
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        return self.pos.shape[:3]
+        return np.broadcast_shapes(*(np.shape(a) for a in self.pos + self.vel), np.shape(self.t),
+                                   np.shape(self.acc_h) + (1,))
+
+    def stacked(self) -> tuple[np.ndarray, np.ndarray]:
+        """Position and velocity at the knots as ``(N, P, K, 3)`` arrays."""
+        shape = self.shape
+        return tuple(np.stack([np.broadcast_to(a, shape) for a in c], axis=-1) for c in (self.pos, self.vel))
 
     def knot_times(self) -> np.ndarray:
         return np.broadcast_to(np.asarray(self.t, float), self.shape)
@@ -292,7 +353,8 @@ class ManeuverPaths:
         idx = np.asarray(idx)
         base = self.state_at
         sub = lambda a: None if a is None else a[idx]  # noqa: E731
-        return ManeuverPaths(self.pos[idx], self.vel[idx], self.knot_times()[idx], lambda n, p: base(idx[n], p),
+        return ManeuverPaths(tuple(a[idx] for a in self.pos), tuple(a[idx] for a in self.vel), self.knot_times()[idx],
+                             lambda n, p: base(idx[n], p),
                              self.acc_h[idx], self.acc_v[idx], self.vz_const, sub(self.jerk_h), sub(self.kink_t))
 
 
@@ -325,11 +387,15 @@ class PathConflicts:
     def candidates(self) -> tuple[np.ndarray, np.ndarray]:
         """First violation and last exit of candidate k (maneuver to knot k, then straight) over
         ``[0, t_end]``, ``(N, M, P, K)``; no violation is ``(inf, -inf)``."""
-        pre_in, pre_out = self.prefix()
-        t_in = np.minimum(pre_in, self.tail_in)
-        t_out = np.maximum(pre_out, self.tail_out)
-        t_in = np.where(t_in <= self.t_end, t_in, np.inf)
-        return t_in, np.where(np.isfinite(t_in), np.minimum(t_out, self.t_end), -np.inf)
+        t_in, t_out = self.tail_in.copy(), self.tail_out.copy()
+        if t_in.shape[-1] > 1:  # min / max with the prefix (k = 0 has none)
+            np.minimum(t_in[..., 1:], np.minimum.accumulate(self.seg_in, axis=-1), out=t_in[..., 1:])
+            np.maximum(t_out[..., 1:], np.maximum.accumulate(self.seg_out, axis=-1), out=t_out[..., 1:])
+        none = ~(t_in <= self.t_end)
+        t_in[none] = np.inf
+        np.minimum(t_out, self.t_end, out=t_out)
+        t_out[none] = -np.inf
+        return t_in, t_out
 
 
 class PathEvaluator:
@@ -351,13 +417,15 @@ class PathEvaluator:
         tt = paths.knot_times()[:, None]  # (N, 1, P, K)
         self.t = tt
         self.ipos, self.ivel = intr.position(), intr.velocity()  # (N, M, 3)
-        own_c, ovel_c = _components(paths.pos), _components(paths.vel)
+        own_c, ovel_c = paths.pos, paths.vel
         ip = [self.ipos[..., i][:, :, None, None] for i in range(3)]
         iv = [self.ivel[..., i][:, :, None, None] for i in range(3)]
         #: relative position ownship - intruder at the knots, per component (N, M, P, K)
-        self.s = [own_c[i][:, None] - (ip[i] + tt * iv[i]) for i in range(3)]
-        #: relative velocity of the tails (N, M, P, K)
-        self.v = [np.broadcast_to(ovel_c[i][:, None] - iv[i], self.shape) for i in range(3)]
+        t4 = np.asarray(paths.t, float)[..., None, :, :] if np.ndim(paths.t) == 3 else tt
+        self.s = [own_c[i][:, None] - (ip[i] + t4 * iv[i]) for i in range(3)]  # (intruder: no side axis)
+        self.s = [c if c.shape == self.shape else np.ascontiguousarray(np.broadcast_to(c, self.shape)) for c in self.s]
+        #: relative velocity of the tails (N, M, P, K), contiguous
+        self.v = [np.ascontiguousarray(np.broadcast_to(ovel_c[i][:, None] - iv[i], self.shape)) for i in range(3)]
         self._vwin = None
 
     def evaluate(self, th: Thresholds) -> PathConflicts:
@@ -368,8 +436,10 @@ class PathEvaluator:
         self._vwin = None
         if self.paths.vz_const:  # relative altitude linear in time on every path: one vertical window each
             self._vwin = wc.vertical_window(self.s[2][..., :1], self.v[2][..., :1], 0.0, self.t_end, th.zthr, th.tcoa)
-        pc = PathConflicts(np.full(seg_shape, np.inf), np.full(seg_shape, -np.inf), np.full(self.shape, np.inf),
-                           np.full(self.shape, -np.inf), self.t, self.t_end)
+        full_tails = self.with_tails is True
+        tail = (lambda fill: np.empty(self.shape)) if full_tails else (lambda fill: np.full(self.shape, fill))  # noqa: E731
+        pc = PathConflicts(np.full(seg_shape, np.inf), np.full(seg_shape, -np.inf), tail(np.inf), tail(-np.inf), self.t,
+                           self.t_end)
         if k > 1:
             self._segments(th, tt, pc)
         if self.with_tails:
@@ -381,22 +451,33 @@ class PathEvaluator:
         return pc
 
     def _tails(self, th: Thresholds, pc: PathConflicts, want: "np.ndarray | None") -> None:
-        tt = np.broadcast_to(self.t, self.shape)
+        """Tail intervals of every knot (``want`` None) or of the knots where ``want``."""
         if want is None:
-            sel = slice(None)
-            comp = [np.ascontiguousarray(c).ravel() for c in self.s]
-            vel = [np.ascontiguousarray(c).ravel() for c in self.v]
-            tk = np.ascontiguousarray(tt).ravel()
-        else:
-            sel = np.flatnonzero(want)
-            if not sel.size:
-                return
-            comp = [c.reshape(-1)[sel] for c in self.s]
-            vel = [c.reshape(-1)[sel] for c in self.v]
-            tk = self._flat_times()[sel]
+            tk = self._flat_times()
+            win = None
+            if self._vwin is not None:  # (ufunc broadcasting: no copy of the per-path windows)
+                tt = np.broadcast_to(self.t, self.shape)
+                win = ((np.maximum(self._vwin[0], tt) - tt).reshape(-1),
+                       (np.minimum(self._vwin[1], self.t_end) - tt).reshape(-1))
+            t_in, t_out = interval_soa(*(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v),
+                                       np.maximum(self.t_end - tk, 0.0), th, win)
+            ok = tk <= self.t_end
+            t_in += tk
+            t_out += tk
+            if not ok.all():
+                t_in[~ok], t_out[~ok] = np.inf, -np.inf
+            pc.tail_in[...] = t_in.reshape(self.shape)
+            pc.tail_out[...] = t_out.reshape(self.shape)
+            return
+        sel = np.flatnonzero(want)  # the chosen knots
+        if not sel.size:
+            return
+        comp = [c.reshape(-1)[sel] for c in self.s]
+        vel = [c.reshape(-1)[sel] for c in self.v]
+        tk = self._flat_times()[sel]
         win = None
         if self._vwin is not None:
-            path = np.arange(np.prod(self.shape)).reshape(-1)[sel] // self.shape[3] if want is None else sel // self.shape[3]
+            path = sel // self.shape[3]
             lo, hi = self._vwin[0].reshape(-1)[path], self._vwin[1].reshape(-1)[path]
             win = (np.maximum(lo, tk) - tk, np.minimum(hi, self.t_end) - tk)
         t_in, t_out = interval_soa(*comp, *vel, np.maximum(self.t_end - tk, 0.0), th, win)
@@ -512,19 +593,28 @@ class PathEvaluator:
         """True relative state (6 component arrays) of flat paths ``path`` at times ``t``."""
         return self._mover(path)(t)
 
-    def _bisect(self, th, path, lo, hi, lo_in: bool):
+    def _bisect(self, th, path, lo, hi, lo_in):
         """Bracket ``(lo, hi)`` (s) of a crossing of the violation boundary on the true path between times
-        ``lo`` and ``hi`` (the predicate is ``lo_in`` at ``lo`` and the opposite at ``hi``), at most
-        BISECT_DT_IN (an entry) or BISECT_DT_OUT (an exit) wide."""
+        ``lo`` and ``hi`` (the predicate is ``lo_in`` at ``lo`` and the opposite at ``hi``; bool or array), at
+        most BISECT_DT_IN (an entry) or BISECT_DT_OUT (an exit) wide."""
         lo, hi = lo.copy(), hi.copy()
         f = self._mover(path)
-        dt = BISECT_DT_OUT if lo_in else BISECT_DT_IN
-        steps = int(np.ceil(np.log2(max(np.max(hi - lo, initial=0.0), dt) / dt)))
-        for _ in range(steps):
+        lo_in = np.broadcast_to(np.asarray(lo_in, bool), lo.shape)
+
+        def steps(mask, dt):
+            return int(np.ceil(np.log2(max(np.max(hi[mask] - lo[mask], initial=0.0), dt) / dt)))
+        n_in, n_out = steps(~lo_in, BISECT_DT_IN), steps(lo_in, BISECT_DT_OUT)
+        mixed = n_in != n_out and lo_in.any() and not lo_in.all()
+        for k in range(max(n_in, n_out) if lo.size else 0):
             mid = 0.5 * (lo + hi)
             same = _wcv_soa(*f(mid), th) == lo_in
-            lo = np.where(same, mid, lo)
-            hi = np.where(same, hi, mid)
+            if mixed:  # the same number of halvings per kind as when they are bisected apart
+                live = np.where(lo_in, k < n_out, k < n_in)
+                lo = np.where(same & live, mid, lo)
+                hi = np.where(~same & live, mid, hi)
+            else:
+                lo = np.where(same, mid, lo)
+                hi = np.where(same, hi, mid)
         return lo, hi
 
     def _resolve(self, flat_seg, th, seg_in, seg_out) -> None:
@@ -554,29 +644,26 @@ class PathEvaluator:
             split = np.zeros(sid.size, bool)
             last = depth == MAX_DEPTH - 1
             settled = ((tb - ta) <= _settle_time(tab["acc_h"][pth], tab["acc_v"][pth]) * (1.0 + 1e-9)) | last
-            for entry in (True, False):  # entries (start clear, end violating), exits (start violating)
-                sel = np.flatnonzero((fb & ~fa) if entry else (fa & ~fb))
-                if not sel.size:
-                    continue
-                if not entry and not self.exits:  # first entry at the start; the last exit is not needed
-                    _update(seg_in, seg_out, sid[sel], ta[sel], tb[sel])
-                    continue
-                lo, hi = self._bisect(th, pth[sel], ta[sel], tb[sel], lo_in=not entry)
+            cross = np.flatnonzero(fa != fb)  # entries (start clear, end violating) and exits (start violating)
+            if cross.size and not self.exits:  # an exit: first entry at the start; the last exit is not needed
+                ex = cross[fa[cross]]
+                _update(seg_in, seg_out, sid[ex], ta[ex], tb[ex])
+                cross = cross[fb[cross]]
+            if cross.size:
+                entry = fb[cross]
+                lo, hi = self._bisect(th, pth[cross], ta[cross], tb[cross], lo_in=~entry)
                 # certify that the other side of the crossing is clear: before an entry, after an exit
-                c_a, c_b = (ta[sel], lo) if entry else (hi, tb[sel])
-                mid_state = self._state(pth[sel], lo if entry else hi)
-                p_a = [pa[c][sel] for c in range(3)] if entry else list(mid_state[:3])
-                p_b = list(mid_state[:3]) if entry else [pb[c][sel] for c in range(3)]
-                ok = (self._classify_part(th, pth[sel], c_a, c_b, p_a, p_b) == CLEAR) | settled[sel]
+                mid_state = self._state(pth[cross], np.where(entry, lo, hi))
+                c_a, c_b = np.where(entry, ta[cross], hi), np.where(entry, lo, tb[cross])
+                p_a = [np.where(entry, pa[c][cross], mid_state[c]) for c in range(3)]
+                p_b = [np.where(entry, mid_state[c], pb[c][cross]) for c in range(3)]
+                ok = (self._classify_part(th, pth[cross], c_a, c_b, p_a, p_b) == CLEAR) | settled[cross]
                 t_cross = 0.5 * (lo + hi)
-                good = sel[ok]
-                if entry:
-                    _update(seg_in, seg_out, sid[good], t_cross[ok], tb[good])
-                else:
-                    _update(seg_in, seg_out, sid[good], ta[good], t_cross[ok])
-                split[sel[~ok]] = True
+                good, e, tc = cross[ok], entry[ok], t_cross[ok]
+                _update(seg_in, seg_out, sid[good], np.where(e, tc, ta[good]), np.where(e, tb[good], tc))
+                split[cross[~ok]] = True
             j = np.flatnonzero(~fa & ~fb)  # both ends clear: a clip may lie inside unless certified clear
-            if j.size:
+            if j.size and depth > 0:  # (at depth 0 these are the segments the first-order test left undecided)
                 code = self._classify_part(th, pth[j], ta[j], tb[j], [c[j] for c in pa], [c[j] for c in pb])
                 j = j[code != CLEAR]
             if j.size and tab["jerk"] is not None:  # the tighter second-order certificate (true end velocities)
@@ -613,7 +700,8 @@ class PathEvaluator:
         e_v = jerk * h * h * 0.125
         if tab["kink"] is not None:
             kt = tab["kink"][pth]
-            e_v = e_v + np.where((kt > ta) & (kt < tb), a_h * h * 0.5, 0.0)
+            across = (kt > ta) & (kt < tb) if kt.ndim == 1 else ((kt > ta[:, None]) & (kt < tb[:, None])).any(axis=-1)
+            e_v = e_v + np.where(across, a_h * h * 0.5, 0.0)
         e_z = a_v * h * h * 0.125 if np.any(a_v) else 0.0
         return clear_second_order(*pa, *pb, *ua, *ub, h, th, a_h * h * h * 0.125, e_v, e_z)
 
@@ -667,6 +755,7 @@ def _update(seg_in, seg_out, sid, t_in, t_out) -> None:
     np.maximum.at(seg_out, sid, t_out)
 
 
+@_in_blocks
 def _wcv_soa(sx, sy, sz, vx, vy, vz, th: Thresholds) -> np.ndarray:
     """:func:`daa_sil.wellclear.wcv` on component arrays (relative position and velocity)."""
     D, TT = th.dthr, th.tthr
@@ -702,6 +791,68 @@ def maneuver_times(own: AircraftState, cmd: Command, cfg: DaaConfig) -> tuple[np
     return t_trk, t_vs, t_gs
 
 
+class _CommandMotion:
+    """:func:`daa_sil.kinematics.fly_command` from one state, with the start of each of its three phases
+    (turn and speed change together, then the longer one alone, then straight) computed once. The state
+    at a time is then one piece of one phase: the same operations as ``fly_command`` (so the same
+    numbers), with the sines and cosines of each phase's initial track reused (4 instead of 20 per state)."""
+
+    def __init__(self, own: AircraftState, cmd: Command, perf):
+        c = cmd.resolved(own)
+        self.own, self.perf, self.trk_cmd = own, perf, c.trk
+        self.tgt_gs = np.clip(c.gs, perf.min_gs, perf.max_gs)
+        self.tgt_vs = np.clip(c.vs, -perf.max_vs, perf.max_vs)
+        self.dpsi = wrap_pi(c.trk - own.trk)
+        w = np.sign(self.dpsi) * perf.max_turn_rate
+        t_turn = np.abs(self.dpsi) / perf.max_turn_rate if perf.max_turn_rate > 0 else np.zeros_like(self.dpsi)
+        self.dgs = self.tgt_gs - own.gs
+        acc = np.sign(self.dgs) * perf.horizontal_accel
+        t_spd = np.abs(self.dgs) / perf.horizontal_accel if perf.horizontal_accel > 0 else np.zeros_like(self.dgs)
+        b1, b2 = np.minimum(t_turn, t_spd), np.maximum(t_turn, t_spd)
+        starts = [(own.x, own.y, own.gs, own.trk)]
+        params = []
+        for lo, hi in ((0.0, b1), (b1, b2), (b2, None)):
+            w_p, a_p = np.where(t_turn > lo, w, 0.0), np.where(t_spd > lo, acc, 0.0)
+            params.append((w_p, a_p))
+            if hi is not None:
+                starts.append(_horizontal_segment(*starts[-1], w_p, a_p, np.maximum(hi - lo, 0.0)))
+        #: (3, N) phase start times, x, y, gs, trk, turn rate, acceleration, and sin / cos of the start track
+        self.t0 = np.stack([np.zeros_like(b1), b1, b2])
+        self.x, self.y, self.gs, self.trk = (np.stack([st[i] for st in starts]) for i in range(4))
+        self.w, self.acc = (np.stack([pr[i] for pr in params]) for i in range(2))
+        self.sin0, self.cos0 = np.sin(self.trk), np.cos(self.trk)
+        self.exotic = bool(np.any((self.w != 0.0) & (np.abs(self.w) < _W_EPS)))  # (as _arc's "small" branch)
+
+    def state(self, n: np.ndarray, tau: np.ndarray) -> tuple:
+        """Position and velocity (six arrays) of encounters ``n`` at times ``tau`` (broadcast together)."""
+        if self.exotic:  # a turn rate _arc treats as straight: the reference implementation
+            st = fly_command(self.own[n], Command(self.trk_cmd[n], self.tgt_vs[n], self.tgt_gs[n]), dt=tau,
+                             perf=self.perf)
+            return st.x, st.y, st.z, st.gs * np.sin(st.trk), st.gs * np.cos(st.trk), st.vs
+        n, tau = np.broadcast_arrays(n, tau)
+        ph = (tau > self.t0[1, n]).astype(np.intp) + (tau > self.t0[2, n])
+        g = lambda a: a[ph, n]  # noqa: E731
+        t = tau - g(self.t0)
+        gs0, acc, w, trk0, s0, c0 = g(self.gs), g(self.acc), g(self.w), g(self.trk), g(self.sin0), g(self.cos0)
+        turning = w != 0.0
+        ws = np.where(turning, w, 1.0)
+        th1 = trk0 + w * t
+        s1, c1 = np.sin(th1), np.cos(th1)
+        dist = gs0 * t + 0.5 * acc * t * t
+        # _arc's two branches (straight: w = 0, so trk0 + 0.5 w t = trk0 exactly)
+        dx = np.where(turning, gs0 * (c0 - c1) / ws + acc * (-t * c1 / ws + (s1 - s0) / ws ** 2), dist * s0)
+        dy = np.where(turning, gs0 * (s1 - s0) / ws + acc * (t * s1 / ws + (c1 - c0) / ws ** 2), dist * c0)
+        x, y = g(self.x) + dx, g(self.y) + dy
+        gs, trk = gs0 + acc * t, th1
+        perf = self.perf
+        trk = np.where(np.abs(self.dpsi[n]) <= perf.max_turn_rate * tau, self.trk_cmd[n], trk)
+        gs = np.where(np.abs(self.dgs[n]) <= perf.horizontal_accel * tau, self.tgt_gs[n], gs)
+        o = self.own
+        z, vs = _vertical(o.z[n], o.vs[n], self.tgt_vs[n], perf.vertical_accel, tau)
+        trk = wrap_2pi(trk)
+        return x, y, z, gs * np.sin(trk), gs * np.cos(trk), vs
+
+
 def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverPaths:
     """The single path (P = 1) of each ownship flying ``cmd`` kinematically (as
     :func:`daa_sil.kinematics.fly_command`), with knots at the spacing of the axes the command changes
@@ -717,21 +868,24 @@ def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverP
     n_knots = np.where(t_man > eps, np.ceil(t_man / h - 1e-9), 0.0)
     j_max = int(n_knots.max()) if n_knots.size else 0
     t = np.arange(j_max + 1)[None, :] * h[:, None]  # (N, J+1)
-    path = fly_command(own[:, None], cmd[:, None], dt=t, perf=perf)
+    motion = _CommandMotion(own, cmd, perf)
+    px, py, pz, vx, vy, vz = motion.state(np.arange(own.shape[0])[:, None], t)
     gs_max = np.maximum(own.gs, np.clip(cmd.gs, perf.min_gs, perf.max_gs))
     acc_h = np.where(t_trk > eps, gs_max * cfg.turn_rate, 0.0) + np.where(t_gs > eps, cfg.horizontal_accel, 0.0)
     acc_v = np.where(t_vs > eps, cfg.vertical_accel, 0.0)
+    # v = g(t) u(trk(t)): |v''| <= 2 |g'| w + g w^2 between the instants the turn or the speed change
+    # ends (the horizontal acceleration jumps there)
+    w = np.where(t_trk > eps, cfg.turn_rate, 0.0)
+    jerk = 2.0 * np.where(t_gs > eps, cfg.horizontal_accel, 0.0) * w + gs_max * w * w
+    kink = np.stack([np.where(t_trk > eps, t_trk, np.inf), np.where(t_gs > eps, t_gs, np.inf)], axis=-1)
 
     def state_at(n, p):
-        o, c = own[n], cmd[n]
+        return lambda tq: motion.state(n, tq)
 
-        def f(tq):
-            st = fly_command(o, c, dt=tq, perf=perf)
-            return st.x, st.y, st.z, st.gs * np.sin(st.trk), st.gs * np.cos(st.trk), st.vs
-        return f
-
-    return ManeuverPaths(path.position()[:, None], path.velocity()[:, None], t[:, None], state_at,
-                         acc_h[:, None], acc_v[:, None], vz_const=not np.any(t_vs > eps))
+    return ManeuverPaths((px[:, None], py[:, None], pz[:, None]), (vx[:, None], vy[:, None], vz[:, None]),
+                         t[:, None], state_at,
+                         acc_h[:, None], acc_v[:, None], vz_const=not np.any(t_vs > eps), jerk_h=jerk[:, None],
+                         kink_t=kink[:, None])
 
 
 def command_conflicts(own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
