@@ -571,7 +571,7 @@ def compute_bands(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | Non
 
 
 #: encounters per internal chunk (keeps the working arrays cache-sized; results do not depend on it)
-CHUNK = 2048
+CHUNK = 16384
 
 
 def _concat(parts: "list[AxisBands]") -> AxisBands:

@@ -94,6 +94,12 @@ def _in_blocks(fn):
     return run
 
 
+def _row_blocks(n: int, per_row: int):
+    """Slices of encounter rows holding about KERNEL_BLOCK elements of ``per_row`` each."""
+    step = max(1, KERNEL_BLOCK // max(per_row, 1))
+    return [slice(i, min(i + step, n)) for i in range(0, n, step)]
+
+
 def _components(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Contiguous x, y, z arrays of a ``(..., 3)`` array (the kernels below read each many times)."""
     return (np.ascontiguousarray(a[..., 0]), np.ascontiguousarray(a[..., 1]), np.ascontiguousarray(a[..., 2]))
@@ -387,14 +393,18 @@ class PathConflicts:
     def candidates(self) -> tuple[np.ndarray, np.ndarray]:
         """First violation and last exit of candidate k (maneuver to knot k, then straight) over
         ``[0, t_end]``, ``(N, M, P, K)``; no violation is ``(inf, -inf)``."""
-        t_in, t_out = self.tail_in.copy(), self.tail_out.copy()
-        if t_in.shape[-1] > 1:  # min / max with the prefix (k = 0 has none)
-            np.minimum(t_in[..., 1:], np.minimum.accumulate(self.seg_in, axis=-1), out=t_in[..., 1:])
-            np.maximum(t_out[..., 1:], np.maximum.accumulate(self.seg_out, axis=-1), out=t_out[..., 1:])
-        none = ~(t_in <= self.t_end)
-        t_in[none] = np.inf
-        np.minimum(t_out, self.t_end, out=t_out)
-        t_out[none] = -np.inf
+        shape = self.tail_in.shape
+        t_in, t_out = np.empty(shape), np.empty(shape)
+        for sl in _row_blocks(shape[0], int(np.prod(shape[1:]))):  # (cache-sized pieces)
+            ti, to = self.tail_in[sl].copy(), self.tail_out[sl].copy()
+            if shape[-1] > 1:  # min / max with the prefix (k = 0 has none)
+                np.minimum(ti[..., 1:], np.minimum.accumulate(self.seg_in[sl], axis=-1), out=ti[..., 1:])
+                np.maximum(to[..., 1:], np.maximum.accumulate(self.seg_out[sl], axis=-1), out=to[..., 1:])
+            none = ~(ti <= self.t_end)
+            ti[none] = np.inf
+            np.minimum(to, self.t_end, out=to)
+            to[none] = -np.inf
+            t_in[sl], t_out[sl] = ti, to
         return t_in, t_out
 
 
@@ -452,22 +462,25 @@ class PathEvaluator:
 
     def _tails(self, th: Thresholds, pc: PathConflicts, want: "np.ndarray | None") -> None:
         """Tail intervals of every knot (``want`` None) or of the knots where ``want``."""
-        if want is None:
-            tk = self._flat_times()
-            win = None
-            if self._vwin is not None:  # (ufunc broadcasting: no copy of the per-path windows)
-                tt = np.broadcast_to(self.t, self.shape)
-                win = ((np.maximum(self._vwin[0], tt) - tt).reshape(-1),
-                       (np.minimum(self._vwin[1], self.t_end) - tt).reshape(-1))
-            t_in, t_out = interval_soa(*(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v),
-                                       np.maximum(self.t_end - tk, 0.0), th, win)
-            ok = tk <= self.t_end
-            t_in += tk
-            t_out += tk
-            if not ok.all():
-                t_in[~ok], t_out[~ok] = np.inf, -np.inf
-            pc.tail_in[...] = t_in.reshape(self.shape)
-            pc.tail_out[...] = t_out.reshape(self.shape)
+        if want is None:  # every knot, in cache-sized blocks of encounters
+            n, m, p, k = self.shape
+            tt_all = np.broadcast_to(self.t, self.shape)
+            for sl in _row_blocks(n, m * p * k):
+                tt = tt_all[sl]
+                tk = tt.reshape(-1)
+                win = None
+                if self._vwin is not None:
+                    win = ((np.maximum(self._vwin[0][sl], tt) - tt).reshape(-1),
+                           (np.minimum(self._vwin[1][sl], self.t_end) - tt).reshape(-1))
+                t_in, t_out = interval_soa(*(c[sl].reshape(-1) for c in self.s), *(c[sl].reshape(-1) for c in self.v),
+                                           np.maximum(self.t_end - tk, 0.0), th, win)
+                t_in += tk
+                t_out += tk
+                late = tk > self.t_end
+                if late.any():
+                    t_in[late], t_out[late] = np.inf, -np.inf
+                pc.tail_in[sl] = t_in.reshape(tt.shape)
+                pc.tail_out[sl] = t_out.reshape(tt.shape)
             return
         sel = np.flatnonzero(want)  # the chosen knots
         if not sel.size:
