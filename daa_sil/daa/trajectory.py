@@ -393,18 +393,14 @@ class PathConflicts:
     def candidates(self) -> tuple[np.ndarray, np.ndarray]:
         """First violation and last exit of candidate k (maneuver to knot k, then straight) over
         ``[0, t_end]``, ``(N, M, P, K)``; no violation is ``(inf, -inf)``."""
-        shape = self.tail_in.shape
-        t_in, t_out = np.empty(shape), np.empty(shape)
-        for sl in _row_blocks(shape[0], int(np.prod(shape[1:]))):  # (cache-sized pieces)
-            ti, to = self.tail_in[sl].copy(), self.tail_out[sl].copy()
-            if shape[-1] > 1:  # min / max with the prefix (k = 0 has none)
-                np.minimum(ti[..., 1:], np.minimum.accumulate(self.seg_in[sl], axis=-1), out=ti[..., 1:])
-                np.maximum(to[..., 1:], np.maximum.accumulate(self.seg_out[sl], axis=-1), out=to[..., 1:])
-            none = ~(ti <= self.t_end)
-            ti[none] = np.inf
-            np.minimum(to, self.t_end, out=to)
-            to[none] = -np.inf
-            t_in[sl], t_out[sl] = ti, to
+        t_in, t_out = self.tail_in.copy(), self.tail_out.copy()
+        if t_in.shape[-1] > 1:  # min / max with the prefix (k = 0 has none)
+            np.minimum(t_in[..., 1:], np.minimum.accumulate(self.seg_in, axis=-1), out=t_in[..., 1:])
+            np.maximum(t_out[..., 1:], np.maximum.accumulate(self.seg_out, axis=-1), out=t_out[..., 1:])
+        none = ~(t_in <= self.t_end)
+        t_in[none] = np.inf
+        np.minimum(t_out, self.t_end, out=t_out)
+        t_out[none] = -np.inf
         return t_in, t_out
 
 
