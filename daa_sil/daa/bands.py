@@ -273,9 +273,10 @@ def _axis_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int
     return *paths.stacked(), value, paths.knot_times()[0, 0] if own.shape[0] else np.asarray(paths.t)[0, 0]
 
 
-def _maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int) -> tuple[ManeuverPaths, np.ndarray]:
+def _maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int,
+                    with_values: bool = True) -> tuple[ManeuverPaths, "np.ndarray | None"]:
     """Low-side and high-side maneuver paths of ``axis`` at knots 0..j (P = 2) and the axis value at
-    each knot ``(N, 2, j+1)``."""
+    each knot ``(N, 2, j+1)`` (None without ``with_values``)."""
     knot = {AXIS_HORIZONTAL: cfg.knot_trk, AXIS_VERTICAL: cfg.knot_vs, AXIS_SPEED: cfg.knot_gs}[axis]
     t = np.arange(j + 1) * knot
     sgn = np.array([-1.0, 1.0])
@@ -286,9 +287,10 @@ def _maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int) -> tu
     s3, t3 = sgn[None, :, None], t[None, None, :]
     if axis == AXIS_HORIZONTAL:
         comp, value = _turn_knots(cfg, col(x0), col(y0), col(z0), col(gs0), col(st), col(ct), col(vs0), t3)
-        value = col(own.trk) + value
-        # wrap to [0, 2pi) as frames.wrap_2pi (the same numbers: |turn| <= pi, fmod there is one subtraction)
-        value = np.where(value < 0.0, value + TWO_PI, np.where(value >= TWO_PI, value - TWO_PI, value))
+        if with_values:
+            value = col(own.trk) + value
+            # wrap to [0, 2pi) as frames.wrap_2pi (the same numbers: |turn| <= pi, fmod there is one subtraction)
+            value = np.where(value < 0.0, value + TWO_PI, np.where(value >= TWO_PI, value - TWO_PI, value))
     else:
         comp, value = _axis_state_soa(axis, cfg, col(x0), col(y0), col(z0), col(gs0), col(st), col(ct), col(vs0), s3,
                                       t3, with_value=True)
@@ -310,7 +312,33 @@ def _maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int) -> tu
     two = lambda a: np.repeat(a[:, None], 2, 1)  # noqa: E731
     paths = ManeuverPaths(comp[:3], comp[3:], t[None, None, :], state_at, two(acc_h), two(acc_v),
                           vz_const=axis != AXIS_VERTICAL, jerk_h=two(jerk), kink_t=kink)
-    return paths, np.broadcast_to(value, (n, 2, j + 1))
+    return paths, (np.broadcast_to(value, (n, 2, j + 1)) if with_values else None)
+
+
+def _over_intruders(a: np.ndarray, reduce) -> np.ndarray:
+    """``reduce(a, axis=1)`` (a view for one intruder)."""
+    return a[:, 0] if a.shape[1] == 1 else reduce(a, axis=1)
+
+
+def _candidate_values(own: AircraftState, axis: int, cfg: DaaConfig, sgn: np.ndarray, t: np.ndarray):
+    """Values ``(N, K)``, signed changes ``(N, K)`` and the axis rate of the candidates reached on side
+    ``sgn`` (K,) after ``t`` (K,) s of maneuvering (the same numbers as the paths' axis values)."""
+    n = own.shape[0]
+    if axis == AXIS_HORIZONTAL:
+        th = sgn * (cfg.turn_rate * t)
+        value = own.trk[:, None] + th[None, :]
+        value = np.where(value < 0.0, value + TWO_PI, np.where(value >= TWO_PI, value - TWO_PI, value))
+        return value, np.repeat(th[None, :], n, axis=0), cfg.turn_rate
+    vertical = axis == AXIS_VERTICAL
+    acc = cfg.vertical_accel if vertical else cfg.horizontal_accel
+    if cfg.daidalus_grid:
+        lim = np.where(sgn < 0, -np.inf if vertical else 0.0, np.inf)
+    else:
+        lim = np.where(sgn < 0, -cfg.max_vs if vertical else cfg.min_gs, cfg.max_vs if vertical else cfg.max_gs)
+    v0 = (own.vs if vertical else own.gs)[:, None]
+    tc = np.minimum(t, np.maximum((lim - v0) * sgn / acc, 0.0))
+    value = v0 + sgn * acc * tc
+    return value, value - v0, acc
 
 
 def _first_on_side(ok, side, want: int, k0: int):
@@ -438,7 +466,7 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     with ``cfg.horizon_from_maneuver`` (default :func:`daa_sil.daa.alerting.conflict_lists`)."""
     j_lo, j_hi = sizes if sizes is not None else _path_sizes(own, axis, cfg)
     n, m = intr.shape
-    paths, values = _maneuver_paths(own, axis, cfg, max(j_lo, j_hi))
+    paths, _ = _maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
     t = np.asarray(paths.t, float)[0, 0]
     ev = PathEvaluator(paths, intr, cfg.lookahead_s)
     pc = ev.evaluate(cfg.th)
@@ -458,21 +486,20 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
         mid_list = None
     order = lambda a: _side_order(a, j_lo, j_hi)  # noqa: E731
     runs = _runs2 if cfg.daidalus_grid else (lambda g: g)
-    red_near = order(red_near_i.any(axis=1)) if m else np.zeros((n, j_lo + j_hi + 1), bool)
-    red_mid = order((red_near_i | red_mid_i).any(axis=1) if not cfg.horizon_from_maneuver else red_mid_i.any(axis=1)) \
+    red_near = order(_over_intruders(red_near_i, np.any)) if m else np.zeros((n, j_lo + j_hi + 1), bool)
+    red_mid = order(_over_intruders((red_near_i | red_mid_i) if not cfg.horizon_from_maneuver else red_mid_i, np.any)) \
         if m else np.zeros((n, j_lo + j_hi + 1), bool)
     g_near, g_mid = runs(~red_near), runs(~red_mid)
-    region = np.where(~g_near, REGION_NEAR, np.where(~g_mid, REGION_MID, REGION_NONE)).astype(np.int8)
-    t_in_all = order(t_in.min(axis=1)) if m else np.full(region.shape, np.inf)
-    t_out_c = order(np.where(red_mid_i | red_near_i, t_out, -np.inf).max(axis=1)) if m else np.full(region.shape, -np.inf)
-    cur = {AXIS_HORIZONTAL: own.trk, AXIS_VERTICAL: own.vs, AXIS_SPEED: own.gs}[axis][:, None, None]
-    if axis == AXIS_HORIZONTAL:
-        rate = cfg.turn_rate
-        delta = np.broadcast_to(np.array([[-1.0], [1.0]]) * cfg.turn_rate * t, values.shape)
-    else:
-        rate = cfg.vertical_accel if axis == AXIS_VERTICAL else cfg.horizontal_accel
-        delta = values - cur
-    values, delta = order(values), order(delta)
+    region = np.full(red_near.shape, REGION_NONE, np.int8)
+    region[~g_mid] = REGION_MID
+    region[~g_near] = REGION_NEAR
+    t_in_all = order(_over_intruders(t_in, np.min)) if m else np.full(region.shape, np.inf)
+    t_out_c = order(_over_intruders(np.where(red_mid_i | red_near_i, t_out, -np.inf), np.max)) if m \
+        else np.full(region.shape, -np.inf)
+    # candidate values in the column order (low side outward-in, current, high side)
+    knot = np.r_[np.arange(j_lo, 0, -1), np.arange(j_hi + 1)]
+    sgn = np.r_[-np.ones(j_lo), np.ones(j_hi + 1)]
+    values, delta, rate = _candidate_values(own, axis, cfg, sgn, t[knot])
     if axis != AXIS_HORIZONTAL and cfg.daidalus_grid:  # a candidate past a limit is shown at the limit
         lo, hi = (-cfg.max_vs, cfg.max_vs) if axis == AXIS_VERTICAL else (cfg.min_gs, cfg.max_gs)
         values = np.clip(values, lo, hi)

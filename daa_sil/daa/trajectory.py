@@ -590,8 +590,9 @@ class PathEvaluator:
         tab = self._path_tables()
         own = self.paths.state_at(tab["n"][path], tab["p"][path])
         nm = tab["nm"][path]
-        ip, iv = self.ipos.reshape(-1, 3)[nm], self.ivel.reshape(-1, 3)[nm]
-        ipx, ipy, ipz, ivx, ivy, ivz = ip[:, 0], ip[:, 1], ip[:, 2], iv[:, 0], iv[:, 1], iv[:, 2]
+        if getattr(self, "_intr_flat", None) is None:  # intruder position / velocity components, flat (N * M)
+            self._intr_flat = [np.ascontiguousarray(a[..., i]).reshape(-1) for a in (self.ipos, self.ivel) for i in range(3)]
+        ipx, ipy, ipz, ivx, ivy, ivz = (a[nm] for a in self._intr_flat)
 
         def f(t):
             ox, oy, oz, ovx, ovy, ovz = own(t)
@@ -638,10 +639,10 @@ class PathEvaluator:
         path, ka, t0, h = self._pieces(flat_seg)
         s = [c.reshape(-1) for c in self.s]
         v = [c.reshape(-1) for c in self.v]
-        f0 = _wcv_soa(*(c[ka] for c in s), *(c[ka] for c in v), th)
-        f1 = _wcv_soa(*(c[ka + 1] for c in s), *(c[ka + 1] for c in v), th)
-        pieces = (flat_seg, path, t0, t0 + h, [c[ka] for c in s], [c[ka + 1] for c in s], f0, f1,
-                  [c[ka] for c in v[:2]], [c[ka + 1] for c in v[:2]])
+        sa, sb = [c[ka] for c in s], [c[ka + 1] for c in s]
+        va, vb = [c[ka] for c in v], [c[ka + 1] for c in v]
+        f0, f1 = _wcv_soa(*sa, *va, th), _wcv_soa(*sb, *vb, th)
+        pieces = (flat_seg, path, t0, t0 + h, sa, sb, f0, f1, va[:2], vb[:2])
         tab = self._path_tables()
         for depth in range(MAX_DEPTH):
             sid, pth, ta, tb, pa, pb, fa, fb, ua, ub = pieces
