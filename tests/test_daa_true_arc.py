@@ -17,7 +17,7 @@ from daa_sil.daa import DaaConfig, compute_bands
 from daa_sil.daa import conformance as conf
 from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_SPEED, AXIS_VERTICAL, REGION_MID, REGION_NEAR, REGION_NONE
 from daa_sil.kinematics import AircraftState, Command, fly_command
-from daa_sil.units import DEG, FPM, KT
+from daa_sil.units import DEG, KT
 
 from daa_helpers import brute_first_lowc, intruders, own_state
 from test_conformance import DATA

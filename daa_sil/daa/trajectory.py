@@ -100,11 +100,6 @@ def _row_blocks(n: int, per_row: int):
     return [slice(i, min(i + step, n)) for i in range(0, n, step)]
 
 
-def _components(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Contiguous x, y, z arrays of a ``(..., 3)`` array (the kernels below read each many times)."""
-    return (np.ascontiguousarray(a[..., 0]), np.ascontiguousarray(a[..., 1]), np.ascontiguousarray(a[..., 2]))
-
-
 @_in_blocks
 def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`daa_sil.wellclear.violation_interval` over ``[0, length]`` for 1-D component arrays.
