@@ -53,6 +53,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--live", default=None, metavar="udp:127.0.0.1:PORT",
                    help="also send each step's step-log row, as soon as the step is done, to this loopback "
                         "port (the Rerun recorder of `daa-sil run`); fire-and-forget, never slows the loop")
+    p.add_argument("--tick-sync", choices=("auto", "wait"), default="auto",
+                   help="realtime: auto (default) = start at once and pace SIM_TICKs by the wall clock, waiting "
+                        "for the shim's (or a direct GCS's) answer only if it gives them (a stock GCS does not); "
+                        "wait = start the clock only once tick 0 is acknowledged (daa-sil run), so the run makes "
+                        "the same decisions as lockstep")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -72,8 +77,12 @@ def _options(args):
         from daa_sil.live import parse_live_address
 
         parse_live_address(live)
+    def clock_start(wall0: float) -> None:  # orchestrators time scheduled faults from this line
+        print(f"CLOCK t0_monotonic={wall0:.6f} speed={args.speed:g}", flush=True)
+
     return VehicleOptions(out=args.out, listen=args.listen, tap=tap, clock=args.clock, speed=args.speed, key=key,
-                          steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live)
+                          steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live,
+                          tick_sync=args.tick_sync, on_clock_start=clock_start)
 
 
 async def _amain(args) -> int:
@@ -83,6 +92,11 @@ async def _amain(args) -> int:
 
     sc = load_scenario(args.scenario)
     opts = _options(args)
+    if sc.faults:
+        import sys
+
+        print(f"daa-vehicle: note: the scenario's faults ({'; '.join(f.describe() for f in sc.faults)}) are "
+              f"carried out by `daa-sil run --clock realtime`, not by daa-vehicle", file=sys.stderr, flush=True)
     node = VehicleNode(sc, opts)
     await node.start()
     loop = asyncio.get_running_loop()
@@ -126,6 +140,14 @@ async def _amain(args) -> int:
           + (f"; live rows sent {node.live.stats.sent}, failed {node.live.stats.errors + node.live.stats.too_big}"
              if node.live is not None else "")
           + (f"; step log {path}" if path else ""), flush=True)
+    if opts.clock == "realtime":
+        v = node.stats
+        print(f"daa-vehicle: realtime: ticks answered by {v.sync_partner}, steps run before their tick was "
+              f"confirmed {v.steps_unconfirmed}, GCS acks late {v.acks_late}; step lateness mean {v.late_mean_ms:.1f} "
+              f"ms, max {v.late_max_ms:.1f} ms", flush=True)
+    drops = node.ep.drops.summary()
+    if drops:
+        print(f"daa-vehicle: {drops}", flush=True)
     return 0
 
 
