@@ -11,9 +11,9 @@ Per step ``k`` (``t_k = k`` s, ``docs/architecture.md`` "The step order"):
   ``docs/sil.md``, "Realtime and lockstep"). ``SIM_TICK(k)`` goes out a lead of half a step
   (at most 0.25 s) before the step's deadline ``W_k = t0 + t_k / speed``; the shim releases
   everything due at ``t_k``, forwards the tick to the GCS (which steps on it) and echoes it back.
-  At ``W_k`` the vehicle steps with what arrived, after waiting (at most half a step past
-  ``W_k``) for that echo if it has not come yet, so every step sees exactly what the lockstep
-  step sees. Partner = the shim (it echoes) or, wired straight to a GCS, the GCS (it acks); a
+  Once the echo is in, every input of step ``k`` is there (uplink is released only at ticks), so
+  the vehicle computes the step then and publishes it at ``W_k``; it waits at most half a step
+  past ``W_k`` for a late echo, so every step sees exactly what the lockstep step sees. Partner = the shim (it echoes) or, wired straight to a GCS, the GCS (it acks); a
   peer that answers no tick (a stock GCS) gives free-running realtime with no waiting.
   ``tick_sync="wait"`` (what ``daa-sil run`` uses) starts the clock only once tick 0 is
   acknowledged, so the GCS plays from step 0 as in lockstep. A partner silent for 3 s is
@@ -65,6 +65,7 @@ TICK_LEAD_MAX_S = 0.25
 CONFIRM_GRACE_FRACTION = 0.5
 #: wall seconds without an answer to ticks before the partner is reported silent (and not waited for)
 SILENT_AFTER_S = 3.0
+SILENT_AFTER_STEPS = 10
 TICK_SYNC_MODES = ("auto", "wait")
 
 
@@ -103,7 +104,7 @@ class VehicleStats:
     commands_from_tap_ignored: int = 0
     foreign_messages_ignored: int = 0
     authority_changes: int = 0
-    #: realtime: how late each step was done (telemetry and live row sent) after its due wall time, ms
+    #: realtime: how late each step's telemetry went out after its due wall time ``W_k``, ms
     late_mean_ms: float = 0.0
     late_max_ms: float = 0.0
     #: ticks the shim echoed back (it is alive, and the uplink due at that tick was sent)
@@ -293,13 +294,19 @@ class VehicleNode:
             self.stats.sync_partner = "gcs"
 
     def _check_silence(self) -> None:
-        """Report (once, until it answers again) a shim or GCS that answered ticks and then stopped."""
+        """Report (once, until it answers again) a shim or GCS that answered ticks and then stopped.
+
+        Silent = no answer for SILENT_AFTER_S wall seconds, or for SILENT_AFTER_STEPS steps if that is
+        shorter (fast runs), but never less than 1 s."""
         now = asyncio.get_running_loop().time()
+        limit = max(1.0, min(SILENT_AFTER_S, SILENT_AFTER_STEPS * self.core.dt / self.opts.speed))
         for who in ("shim", "gcs"):
             last = self._last_answer[who]
-            if last is None or self._silent[who] or now - last < SILENT_AFTER_S:
+            if last is None or self._silent[who] or now - last < limit:
                 continue
             self._silent[who] = True
+            if who == "gcs" and self._silent["shim"]:
+                continue  # the shim between us is silent: that is the news, not the GCS behind it
             self.stats.silence_warnings += 1
             peer = format_udp_address(self.peer)
             if who == "shim":
@@ -375,8 +382,11 @@ class VehicleNode:
             self.handle(r)
 
     async def _realtime_tick(self, k: int, t: float, period: float) -> float:
-        """Realtime step ``k``: send its tick a lead before the deadline, wait for the deadline (and the
-        partner's answer, at most a grace past it). Returns the step's deadline (loop time)."""
+        """Realtime step ``k``: send its tick a lead before the deadline, then wait for the partner's
+        answer (at most a grace past the deadline; without a partner, until the deadline). Once the
+        shim has echoed tick ``k`` every input of step ``k`` is in (uplink is released only at ticks),
+        so the step may be computed before its deadline; :meth:`run` publishes it at the deadline.
+        Returns the step's deadline (loop time)."""
         loop = asyncio.get_running_loop()
         lead = min(TICK_LEAD_FRACTION * period, TICK_LEAD_MAX_S)
         if k == 0:
@@ -388,20 +398,22 @@ class VehicleNode:
             if callable(self.opts.on_clock_start):
                 self.opts.on_clock_start(self._wall0)
         else:
-            if self._acked < k - 1 and self._last_answer["gcs"] is not None and not self._silent["gcs"]:
+            if (self._acked < k - 1 and self._last_answer["gcs"] is not None and not self._silent["gcs"]
+                    and not self._silent["shim"]):
                 self.stats.acks_late += 1
             await self._receive_until(self._wall0 + t / self.opts.speed - lead)
             self._drain()
             self._send_tick(k, t)
         due = self._wall0 + t / self.opts.speed
-        await self._receive_until(due)
         self._check_silence()
         partner = self.stats.sync_partner
-        waiting_for = "shim" if partner == "shim" else "gcs"
-        if not self._confirmed(k) and not self._silent[waiting_for]:
+        if partner == "none" or self._silent["shim" if partner == "shim" else "gcs"]:
+            await self._receive_until(due)  # nobody to wait for: take what arrived by the deadline
+        else:
             await self._receive_until(due + CONFIRM_GRACE_FRACTION * period, until=lambda: self._confirmed(k))
         if not self._confirmed(k):
             self.stats.steps_unconfirmed += 1
+        self._check_silence()
         return due
 
     def publish(self, t: float, out) -> None:
@@ -434,6 +446,10 @@ class VehicleNode:
                 due = await self._realtime_tick(k, self.t, period)
             self._drain()
             out = self.core.step(self.t)
+            if not lockstep:  # computed ahead (inputs complete once the tick is echoed): out at the deadline
+                wait = due - loop.time()
+                if wait > 0:
+                    await asyncio.sleep(wait)
             self.publish(self.t, out)
             if self.live is not None:
                 self.live.send(self.core.rows[-1])  # non-blocking; failures are counted, never raised

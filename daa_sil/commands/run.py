@@ -378,7 +378,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
                    "interrupted": interrupted, "failure": failure,
                    "process_died": monitor.death if monitor is not None else None,
                    "files": {"steplog": str(steplog), "gcs_log": str(out / "gcs_commands.jsonl"),
-                             "gcs_logs": [str(x) for x in gcs_logs], "logs": str(out / "logs")}})
+                             "gcs_logs": [str(x) for x in gcs_logs if x.is_file()], "logs": str(out / "logs")}})
     if sc.faults:
         result["faults"] = monitor.fault_report() if monitor is not None else []
     if opts.clock == "realtime":

@@ -315,8 +315,9 @@ class RunMonitor:
         self.death = {"process": child.name, "pid": child.proc.pid, "returncode": child.proc.returncode,
                       "wall_s": round(wall, 3), "vehicle_t_s": _round(t)}
         when = f"{wall:.1f} s into the run" + (f" (vehicle at t = {t:.0f} s)" if t is not None else "")
-        return (f"the {child.name} (pid {child.proc.pid}) {describe_exit(child)} {when}: {last_error_line(child)} "
-                f"(log: {child.log_path})")
+        said = [x.strip() for x in child.tail if "error" in x.lower() or "traceback" in x.lower()]
+        return (f"the {child.name} (pid {child.proc.pid}) {describe_exit(child)} {when}"
+                + (f": {said[-1]}" if said else "") + f" (log: {child.log_path})")
 
     def _run_faults(self) -> None:
         if not self.faults:
