@@ -50,6 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steplog", type=Path, metavar="FILE", help="write the step log (Parquet) here")
     p.add_argument("--tick-timeout", type=float, default=10.0, metavar="S",
                    help="lockstep: wall seconds to wait for a SIM_TICK_ACK (default 10)")
+    p.add_argument("--start-timeout", type=float, default=None, metavar="S",
+                   help="wall seconds to wait for the answer to tick 0, while the shim and GCS may still be "
+                        "starting (default: --tick-timeout)")
     p.add_argument("--live", default=None, metavar="udp:127.0.0.1:PORT",
                    help="also send each step's step-log row, as soon as the step is done, to this loopback "
                         "port (the Rerun recorder of `daa-sil run`); fire-and-forget, never slows the loop")
@@ -70,6 +73,8 @@ def _options(args):
     check_speed(args.speed)
     if not (math.isfinite(args.tick_timeout) and 0.1 <= args.tick_timeout <= 3600):
         raise UsageError(f"--tick-timeout must be within [0.1, 3600] s, got {args.tick_timeout:g}")
+    if args.start_timeout is not None and not (math.isfinite(args.start_timeout) and 0.1 <= args.start_timeout <= 3600):
+        raise UsageError(f"--start-timeout must be within [0.1, 3600] s, got {args.start_timeout:g}")
     key = load_key_option(args.key)
     tap = None if args.tap in (None, "", "none") else args.tap
     live = None if args.live in (None, "", "none") else args.live
@@ -82,6 +87,7 @@ def _options(args):
 
     return VehicleOptions(out=args.out, listen=args.listen, tap=tap, clock=args.clock, speed=args.speed, key=key,
                           steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live,
+                          start_timeout_s=args.start_timeout,
                           tick_sync=args.tick_sync, on_clock_start=clock_start)
 
 

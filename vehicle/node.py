@@ -86,6 +86,8 @@ class VehicleOptions:
     steplog: "Path | None" = None
     tick_timeout_s: float = 10.0
     tick_retry_s: float = 2.0
+    #: wall seconds to wait for the answer to tick 0 (the partner may still be starting); None = tick_timeout_s
+    start_timeout_s: "float | None" = None
     #: ``udp:127.0.0.1:PORT``: publish each step's step-log row there (:mod:`daa_sil.live`)
     live: "str | None" = None
     #: realtime: "auto" (start at once, wait for tick answers only from a partner that gives them) or
@@ -107,6 +109,7 @@ class VehicleStats:
     #: realtime: how late each step's telemetry went out after its due wall time ``W_k``, ms
     late_mean_ms: float = 0.0
     late_max_ms: float = 0.0
+    late_p99_ms: float = 0.0
     #: ticks the shim echoed back (it is alive, and the uplink due at that tick was sent)
     tick_echoes: int = 0
     #: realtime: who confirms ticks: "shim" (echoes), "gcs" (acks, no shim between) or "none"
@@ -147,6 +150,7 @@ class VehicleNode:
         self._silent = {"shim": False, "gcs": False}
         self._steplog_written = False
         self._late_sum_ms = 0.0
+        self._lates: list = []  # realtime: per-step lateness (ms)
         self.live = None
         if opts.live:
             from daa_sil.live import LiveSender
@@ -341,14 +345,17 @@ class VehicleNode:
 
     async def _await_ack(self, k: int, t: float) -> None:
         loop = asyncio.get_running_loop()
-        deadline = loop.time() + self.opts.tick_timeout_s
+        limit = self.opts.tick_timeout_s
+        if k == 0 and self.opts.start_timeout_s is not None:
+            limit = self.opts.start_timeout_s
+        deadline = loop.time() + limit
         retry = self.opts.tick_retry_s if k > 0 else min(0.2, self.opts.tick_retry_s)  # GCS may still start
         next_retry = loop.time() + retry
         self._send_tick(k, t)
         while self._acked < k:
             now = loop.time()
             if now >= deadline:
-                raise TickTimeout(f"no SIM_TICK_ACK for tick {k} (t = {t:g} s) within {self.opts.tick_timeout_s:g} s: "
+                raise TickTimeout(f"no SIM_TICK_ACK for tick {k} (t = {t:g} s) within {limit:g} s: "
                                   + self._who_is_silent(k))
             try:
                 r = await asyncio.wait_for(self.ep.inbox.get(), min(deadline, next_retry) - now)
@@ -437,6 +444,13 @@ class VehicleNode:
         lockstep = self.opts.clock == "lockstep"
         period = self.core.dt / self.opts.speed
         self._wall0 = loop.time()
+        if not lockstep:
+            # like the shim: wake at the deadline without timer coalescing, and ask for a short EEVDF
+            # slice so a woken vehicle preempts sooner on a busy machine (unprivileged; no-op elsewhere)
+            from daa_sil.link.rtclock import request_short_slice, set_timer_slack
+
+            self.stats.extra["timer_slack_1us"] = set_timer_slack(1000)
+            self.stats.extra["short_slice"] = request_short_slice(0.0001)
         for k in range(n):
             self.k, self.t = k, float(k) * self.core.dt
             if lockstep:
@@ -459,6 +473,7 @@ class VehicleNode:
                 self.stats.late_max_ms = round(max(self.stats.late_max_ms, late), 3)
                 self._late_sum_ms += late
                 self.stats.late_mean_ms = round(self._late_sum_ms / (k + 1), 3)
+                self._lates.append(late)
             if on_step is not None:
                 on_step(self, out)
             await asyncio.sleep(0)
@@ -469,6 +484,10 @@ class VehicleNode:
             return None
         import json
 
+        if self._lates:
+            import numpy as np
+
+            self.stats.late_p99_ms = round(float(np.percentile(self._lates, 99)), 3)
         meta = {"scenario": self.sc.name, "seed": str(self.sc.seed), "preset": self.sc.thresholds,
                 "clock": self.opts.clock, "complete": str(self.stats.steps >= self.core.n_steps).lower(),
                 "signed": str(self.codec.signed).lower(),
@@ -477,4 +496,8 @@ class VehicleNode:
                 "vehicle": json.dumps({k: v for k, v in self.stats.__dict__.items() if k != "extra"}, sort_keys=True)}
         if self.live is not None:
             meta["live"] = json.dumps(self.live.stats.__dict__, sort_keys=True)
+        if self._lates:  # realtime: per-step lateness (ms) and the wall origin, for timing analyses
+            meta["realtime_timing"] = json.dumps({"t0_monotonic": round(self._wall0, 6), "speed": self.opts.speed,
+                                                  "late_ms": [round(x, 2) for x in self._lates],
+                                                  **self.stats.extra})
         return self.core.write_steplog(self.opts.steplog, meta)

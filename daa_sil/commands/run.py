@@ -14,21 +14,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
-import signal
-import subprocess
 import sys
-import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable
 
 from ..errors import DaaSilError, OutputError, UsageError
 from ._args import check_speed
 from .supervise import (READY_TIMEOUT_S, STOP_GRACE_S, STOP_TERM_S, Child, ProcessGroup, RunMonitor,  # noqa: F401
                         free_udp_ports, last_error_line, parse_ready_line, parse_shim_ready, python_module_argv)
+
+#: wall s the vehicle waits for the answer to tick 0 under ``daa-sil run`` (start-up on a busy machine)
+START_TIMEOUT_S = 120.0
 
 EXAMPLES = """examples:
   # the main job: a head-on encounter, 4 s link delay, through the real link (lockstep)
@@ -286,7 +285,7 @@ def realtime_report(steplog_meta: dict, shim_stats: "dict | None", gcs_skipped: 
     c = (shim_stats or {}).get("counters", {})
     rep = {"sync_partner": veh.get("sync_partner"), "steps_unconfirmed": veh.get("steps_unconfirmed"),
            "gcs_acks_late": veh.get("acks_late"), "late_mean_ms": veh.get("late_mean_ms"),
-           "late_max_ms": veh.get("late_max_ms"), "shim_release": (shim_stats or {}).get("release"),
+           "late_max_ms": veh.get("late_max_ms"), "late_p99_ms": veh.get("late_p99_ms"), "shim_release": (shim_stats or {}).get("release"),
            "released_late": c.get("released_late"), "gcs_lagged": c.get("gcs_lagged"),
            "gcs_unresponsive": c.get("gcs_unresponsive"), "gcs_ticks_skipped": gcs_skipped,
            "shim_release_lateness_ms": (shim_stats or {}).get("release_lateness_ms"),
@@ -330,7 +329,9 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
             gcs = pg.start("gcs", _gcs_argv(opts, out, gcs_listen, sready["gcs_side"], clock_args, key_args))
             vargs = [str(opts.scenario_path), "--listen", "udp:127.0.0.1:0", "--out", sready["vehicle_side"],
                      "--steplog", str(steplog), "--tap", opts.tap or "none",
-                     "--tick-timeout", f"{opts.tick_timeout_s:g}"] + clock_args + key_args
+                     "--tick-timeout", f"{opts.tick_timeout_s:g}",
+                     # tick 0: the GCS may still be starting (the monitor below notices a dead one at once)
+                     "--start-timeout", f"{max(opts.tick_timeout_s, START_TIMEOUT_S):g}"] + clock_args + key_args
             if opts.clock == "realtime":
                 vargs += ["--tick-sync", "wait"]  # start once tick 0 is acked: the GCS plays from step 0
             if recorder is not None and recorder.live_address:

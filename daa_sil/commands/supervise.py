@@ -28,7 +28,7 @@ from typing import Callable, Sequence
 from ..errors import DaaSilError
 
 #: wall-clock limits (s)
-READY_TIMEOUT_S = 30.0
+READY_TIMEOUT_S = 60.0  # start-up guard: 20 runs starting together on 2 cores take a while
 STOP_GRACE_S = 5.0
 STOP_TERM_S = 3.0
 #: how often the monitor looks at every child (s)
