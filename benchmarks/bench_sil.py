@@ -46,6 +46,9 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=None, help="realtime: sim s per run (default: the scenario's)")
     ap.add_argument("--stagger", type=float, default=0.5, help="realtime: wall s between launches (default 0.5)")
     ap.add_argument("--keep", type=Path, default=None, help="realtime: keep the run directories here")
+    ap.add_argument("--ab-slice", action="store_true",
+                    help="realtime: every other concurrent run's vehicle without the short EEVDF slice "
+                         "(DAA_SIL_VEHICLE_SLICE_US=0), and compare the two halves")
     args = ap.parse_args()
     if args.part == "realtime":
         return bench_realtime(args)
@@ -97,11 +100,11 @@ def _same(a, b) -> bool:
     return a == b
 
 
-def _launch(scenario: Path, out: Path, clock: list) -> subprocess.Popen:
+def _launch(scenario: Path, out: Path, clock: list, env: "dict | None" = None) -> subprocess.Popen:
     out.mkdir(parents=True, exist_ok=True)
     return subprocess.Popen([sys.executable, "-m", "daa_sil.cli", "run", str(scenario), "--out", str(out), "--json"]
                             + clock, stdout=open(out / "stdout.json", "w"), stderr=open(out / "stderr.txt", "w"),
-                            cwd=ROOT)
+                            cwd=ROOT, env={**os.environ, **(env or {})})
 
 
 def _evaluate(out: Path, rc: int, ref_rows: list, ref: dict) -> dict:
@@ -118,6 +121,7 @@ def _evaluate(out: Path, rc: int, ref_rows: list, ref: dict) -> dict:
     rows = read_steplog(out / "steplog.parquet").to_pylist()
     timing = json.loads(steplog_metadata(out / "steplog.parquet").get("realtime_timing", "{}"))
     ev["t0"], ev["late_ms"] = timing.get("t0_monotonic"), timing.get("late_ms", [])
+    ev["ready_ms"] = timing.get("ready_ms", [])
     ev["speed"], ev["short_slice"] = timing.get("speed"), timing.get("short_slice")
     cells = sum(1 for ra, rb in zip(ref_rows, rows) for k in ra if not _same(ra[k], rb[k]))
     rt = res.get("realtime") or {}
@@ -133,7 +137,8 @@ def _evaluate(out: Path, rc: int, ref_rows: list, ref: dict) -> dict:
     return ev
 
 
-def _play_batch(scenario: Path, base: Path, n: int, clock: list, stagger: float, ref_rows, ref) -> tuple:
+def _play_batch(scenario: Path, base: Path, n: int, clock: list, stagger: float, ref_rows, ref,
+                ab_slice: bool = False) -> tuple:
     loads, stop = [], threading.Event()
 
     def sample():
@@ -146,7 +151,9 @@ def _play_batch(scenario: Path, base: Path, n: int, clock: list, stagger: float,
     procs = []
     t0 = time.monotonic()
     for i in range(n):
-        procs.append((base / f"run{i:02d}", _launch(scenario, base / f"run{i:02d}", clock)))
+        # --ab-slice: every other run's vehicle keeps the default scheduler slice (interleaved A/B)
+        env = {"DAA_SIL_VEHICLE_SLICE_US": "0"} if ab_slice and i % 2 else None
+        procs.append((base / f"run{i:02d}", _launch(scenario, base / f"run{i:02d}", clock, env)))
         if stagger and i + 1 < n:
             time.sleep(stagger)
     evs = [_evaluate(out, p.wait(), ref_rows, ref) for out, p in procs]
@@ -220,7 +227,8 @@ def bench_realtime(args) -> None:
     for speed in speeds:
         clock = ["--clock", "realtime", "--speed", f"{speed:g}"]
         alone, loads0, wall0 = _play_batch(path, base / f"x{speed:g}_alone", 1, clock, 0.0, ref_rows, ref)
-        evs, loads, wall = _play_batch(path, base / f"x{speed:g}_load", args.runs, clock, args.stagger, ref_rows, ref)
+        evs, loads, wall = _play_batch(path, base / f"x{speed:g}_load", args.runs, clock, args.stagger, ref_rows, ref,
+                                       ab_slice=args.ab_slice)
         a, s_ = _summary(alone), _summary(evs)
         print(f"\n  speed {speed:g}x, 1 run alone (load avg {_fmt(max(loads0, default=None), 2)}): "
               f"identical to lockstep {a['identical']}/1; step lateness mean {_fmt(a['late_mean'])} p99 "
@@ -251,11 +259,28 @@ def bench_realtime(args) -> None:
             print(f"    => while all {args.runs} were playing ({win[1] - win[0]:.0f} s, after the last start-up): "
                   f"{inside.size} steps, lateness mean {inside.mean():.1f} p99 {np.percentile(inside, 99):.1f} max "
                   f"{inside.max():.1f} ms; runs with a step over {LATE_TARGET_MS:g} ms: {over}/{len(evs)}")
+            late_steps = [(x, r) for e in evs for k, (x, r) in enumerate(zip(e["late_ms"], e.get("ready_ms") or []))
+                          if win[0] <= e["t0"] + k / e["speed"] <= win[1] and x > LATE_TARGET_MS]
+            if late_steps:
+                computed_late = sum(1 for x, r in late_steps if r > 0)
+                print(f"    => of the {len(late_steps)} steps over {LATE_TARGET_MS:g} ms in that window, {computed_late} "
+                      f"were still being computed at their deadline (echo or computation late); the other "
+                      f"{len(late_steps) - computed_late} were ready before it and woke up late")
             outside = np.array([x for e in evs for k, x in enumerate(e["late_ms"])
                                 if not win[0] <= e["t0"] + k / e["speed"] <= win[1]])
             if outside.size:
                 print(f"    => outside that window (other runs starting or finishing): {outside.size} steps, max "
                       f"{outside.max():.1f} ms, {int((outside > LATE_TARGET_MS).sum())} over {LATE_TARGET_MS:g} ms")
+        if args.ab_slice and win is not None:
+            import numpy as np
+
+            for label, want in (("with the short slice", True), ("default slice", False)):
+                grp = [e for e in evs if "error" not in e and bool(e.get("short_slice")) == want]
+                x = np.array([v for e in grp for v in _late_in(e, win)])
+                if x.size:
+                    print(f"    => A/B {label} ({len(grp)} runs, same window): mean {x.mean():.1f} p99 "
+                          f"{np.percentile(x, 99):.1f} max {x.max():.1f} ms, steps over {LATE_TARGET_MS:g} ms "
+                          f"{int((x > LATE_TARGET_MS).sum())} of {x.size}")
         print(f"    => shim release lateness (delay error) p99: median over runs {_fmt(s_['shim_p99_median'], 2)} ms, "
               f"worst {_fmt(s_['shim_p99_max'], 2)} ms; short EEVDF slice granted to the vehicles: "
               f"{sum(bool(e.get('short_slice')) for e in evs)}/{len(evs)}")

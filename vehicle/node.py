@@ -151,6 +151,7 @@ class VehicleNode:
         self._steplog_written = False
         self._late_sum_ms = 0.0
         self._lates: list = []  # realtime: per-step lateness (ms)
+        self._ready: list = []  # realtime: when each step's computation was done, ms after its deadline
         self.live = None
         if opts.live:
             from daa_sil.live import LiveSender
@@ -447,10 +448,14 @@ class VehicleNode:
         if not lockstep:
             # like the shim: wake at the deadline without timer coalescing, and ask for a short EEVDF
             # slice so a woken vehicle preempts sooner on a busy machine (unprivileged; no-op elsewhere)
+            import os
+
             from daa_sil.link.rtclock import request_short_slice, set_timer_slack
 
             self.stats.extra["timer_slack_1us"] = set_timer_slack(1000)
-            self.stats.extra["short_slice"] = request_short_slice(0.0001)
+            # DAA_SIL_VEHICLE_SLICE_US: the slice asked for (0 = keep the default; benchmarks compare both)
+            slice_us = float(os.environ.get("DAA_SIL_VEHICLE_SLICE_US", "100") or 0)
+            self.stats.extra["short_slice"] = request_short_slice(slice_us * 1e-6) if slice_us > 0 else False
         for k in range(n):
             self.k, self.t = k, float(k) * self.core.dt
             if lockstep:
@@ -461,6 +466,7 @@ class VehicleNode:
             self._drain()
             out = self.core.step(self.t)
             if not lockstep:  # computed ahead (inputs complete once the tick is echoed): out at the deadline
+                self._ready.append(1000.0 * (loop.time() - due))
                 wait = due - loop.time()
                 if wait > 0:
                     await asyncio.sleep(wait)
@@ -499,5 +505,6 @@ class VehicleNode:
         if self._lates:  # realtime: per-step lateness (ms) and the wall origin, for timing analyses
             meta["realtime_timing"] = json.dumps({"t0_monotonic": round(self._wall0, 6), "speed": self.opts.speed,
                                                   "late_ms": [round(x, 2) for x in self._lates],
+                                                  "ready_ms": [round(x, 2) for x in self._ready],
                                                   **self.stats.extra})
         return self.core.write_steplog(self.opts.steplog, meta)
