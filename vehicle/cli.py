@@ -111,6 +111,7 @@ async def _amain(args) -> int:
 
     def on_signal(signum):
         got["sig"] = signum
+        node.request_stop()  # also if the cancellation below is lost in a wait_for race
         task.cancel()
 
     for sig in (signal.SIGINT, signal.SIGTERM):

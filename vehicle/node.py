@@ -149,6 +149,10 @@ class VehicleNode:
         self._last_answer = {"shim": None, "gcs": None}  # wall time (loop clock) of the last echo / ack
         self._silent = {"shim": False, "gcs": False}
         self._steplog_written = False
+        #: set by :meth:`request_stop` (SIGINT / SIGTERM): the loop stops at the next step or wait even if
+        #: the task's cancellation was lost (Python 3.11's ``asyncio.wait_for`` can swallow a cancel that
+        #: arrives together with the awaited message)
+        self.stop_requested = False
         self._late_sum_ms = 0.0
         self._lates: list = []  # realtime: per-step lateness (ms)
         self._ready: list = []  # realtime: when each step's computation was done, ms after its deadline
@@ -171,6 +175,14 @@ class VehicleNode:
                                       allow_peers=allow, name="daa-vehicle", peer_label="--out / --tap",
                                       drop_hint="if that is your GCS or shim, give its address as --out "
                                                 "(commands are taken only from --out)")
+
+    def request_stop(self) -> None:
+        """Stop playing: :meth:`run` raises ``asyncio.CancelledError`` at its next step or wait."""
+        self.stop_requested = True
+
+    def _check_stop(self) -> None:
+        if self.stop_requested:
+            raise asyncio.CancelledError("stop requested")
 
     @property
     def local_address(self) -> str:
@@ -354,6 +366,7 @@ class VehicleNode:
         next_retry = loop.time() + retry
         self._send_tick(k, t)
         while self._acked < k:
+            self._check_stop()
             now = loop.time()
             if now >= deadline:
                 raise TickTimeout(f"no SIM_TICK_ACK for tick {k} (t = {t:g} s) within {limit:g} s: "
@@ -380,6 +393,7 @@ class VehicleNode:
         """Handle messages until loop time ``when`` (or until ``until()`` is true)."""
         loop = asyncio.get_running_loop()
         while until is None or not until():
+            self._check_stop()
             left = when - loop.time()
             if left <= 0:
                 return
@@ -457,6 +471,7 @@ class VehicleNode:
             slice_us = float(os.environ.get("DAA_SIL_VEHICLE_SLICE_US", "100") or 0)
             self.stats.extra["short_slice"] = request_short_slice(slice_us * 1e-6) if slice_us > 0 else False
         for k in range(n):
+            self._check_stop()
             self.k, self.t = k, float(k) * self.core.dt
             if lockstep:
                 self._drain()
@@ -470,6 +485,7 @@ class VehicleNode:
                 wait = due - loop.time()
                 if wait > 0:
                     await asyncio.sleep(wait)
+                self._check_stop()
             self.publish(self.t, out)
             if self.live is not None:
                 self.live.send(self.core.rows[-1])  # non-blocking; failures are counted, never raised
