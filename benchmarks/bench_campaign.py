@@ -24,13 +24,14 @@ from pathlib import Path
 
 
 def _loop_ratio(n: int, group: str) -> float:
-    from daa_sil.campaign import _wait_family, paper_groups
+    from daa_sil.campaign import CampaignConfig, campaign_family
     from daa_sil.encounters import sample_encounters
     from daa_sil.fasttime import simulate
+    from daa_sil.groups import group_spec
 
-    spec = paper_groups()[group]
+    spec = group_spec(group)
     model = spec.delay_model()
-    fam = _wait_family("paper") if spec.uses_map else None
+    fam = campaign_family(CampaignConfig()) if spec.uses_map else None
     es = sample_encounters(n, seed=99, preset="paper")
     t0 = time.perf_counter()
     vec = simulate(es, spec.policy(), model, model, wait_family=fam, group=group)[0]
@@ -52,7 +53,8 @@ from daa_sil.campaign import CampaignConfig, ChunkTask, run_chunk
 from daa_sil.encounters import sample_encounters
 n = int(sys.argv[1]); chunk = int(sys.argv[2])
 es = sample_encounters(n, seed=1, preset="paper")
-cfg = CampaignConfig(groups=("B-2",), n_encounters=n, chunk_size=chunk)
+from daa_sil.groups import parse_groups
+cfg = CampaignConfig(groups=parse_groups("B-2"), n_encounters=n, chunk_size=chunk)
 for c in range(cfg.n_chunks):
     lo, hi = cfg.chunk_range(c)
     run_chunk(ChunkTask("B-2", c, cfg, es.subset(list(range(lo, hi))), es.seed[lo:hi]))

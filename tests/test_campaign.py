@@ -12,8 +12,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from daa_sil.campaign import (CampaignConfig, chunk_paths, paper_groups, parse_groups, read_results,
-                              run_campaign)
+from daa_sil.campaign import CampaignConfig, chunk_paths, read_results, run_campaign
 from daa_sil.cli import main
 from daa_sil.errors import UsageError
 
@@ -31,17 +30,6 @@ def _assert_same(a: dict, b: dict) -> None:
         for name in ta.column_names:
             x, y = ta[name].to_numpy(zero_copy_only=False), tb[name].to_numpy(zero_copy_only=False)
             np.testing.assert_array_equal(x, y, err_msg=f"{kind}.{name}")
-
-
-def test_groups_are_the_papers_table_2():
-    g = paper_groups()
-    assert list(g) == ["B-1", "B-2", "IC-1", "ID-1", "ID-2"]
-    assert g["B-2"].delay_model().kind == "gaussian" and g["IC-1"].delay_model().mean() == 5.0
-    assert g["ID-1"].uses_map and not g["IC-1"].uses_map
-    assert not g["B-1"].policy().blending and g["ID-2"].policy().wait_mode == "map"
-    assert parse_groups("id-2, B-1") == ("ID-2", "B-1")
-    with pytest.raises(UsageError, match="unknown group 'X'"):
-        parse_groups("B-1,X")
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -86,7 +74,7 @@ def test_same_tables_for_one_and_two_workers(tmp_path):
     assert enc.num_rows == 2 * cfg.n_encounters
     assert set(enc["group"].to_pylist()) == {"B-2", "IC-1"}
     # the same encounter set (ids and seeds) in every group
-    by_group = {g: enc.filter(enc["group"].to_numpy(zero_copy_only=False) == g) for g in cfg.groups}
+    by_group = {g: enc.filter(enc["group"].to_numpy(zero_copy_only=False) == g) for g in cfg.group_names}
     assert by_group["B-2"]["seed"].equals(by_group["IC-1"]["seed"])
 
 

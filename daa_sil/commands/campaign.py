@@ -23,12 +23,26 @@ RUN_EXAMPLES = """examples:
   # continue a campaign that was interrupted (complete chunks are skipped; same final tables)
   daa-sil campaign run --out runs/paper --resume
 
+  # the wait-map ablation: what the map adds to ProjL alone, on the paper's own grid
+  daa-sil campaign run --groups ID-2,ID-2-projl,ID-2-map --waitmap paper --out runs/ablation
+
+  # every knob of the agent from the command line (recorded in campaign.json, checked on --resume)
+  daa-sil campaign run --groups B-2,ID-2 --wt 8 --projl-lookahead 15 --latency gauss:5,3 --out runs/knobs
+
+  # your own groups (YAML: name -> fields, 'base: ID-2' to start from a built-in group)
+  daa-sil campaign run --groups mygroups.yaml --out runs/mine
+
   # on a Dask cluster (pip install 'daa-sil[dist]'), or a local Dask cluster with 2 workers
   daa-sil campaign run --out runs/paper --scheduler tcp://head:8786
   daa-sil campaign run --out runs/paper --scheduler local-dask --workers 2
 
-Groups (paper Table 2): B-1 baseline, const 4 s | B-2 baseline, Gaussian(5,3) s | IC-1 integrated,
-const 5 s, wait 5 s | ID-1 integrated, const 4 s, wait map | ID-2 integrated, Gaussian(5,3) s, wait map.
+Groups (daa_sil/data/groups.yaml; paper Table 2 plus ablations): B-1 baseline, const 4 s |
+B-2 baseline, Gaussian(5,3) s | IC-1 integrated, const 5 s, wait 5 s | ID-1 integrated, const 4 s,
+wait map | ID-2 integrated, Gaussian(5,3) s, wait map | ID-2-projl: ID-2 with the map ignored
+(wait unless ProjL) | ID-2-map: ID-2 with the map alone (no ProjL).
+Wait maps (--waitmap): alerting (default; the DO-365 alerting region, 120 s horizon), paper (the
+paper's +-1,500 m grid, 60 s; states outside read the nearest point of the box), fine, a grid spec,
+or a directory from 'daa-sil waitmap build'. Built once and cached in ~/.cache/daa-sil.
 Results: DIR/<group>/encounters-<chunk>.parquet, DIR/<group>/decisions-<chunk>.parquet,
 DIR/encounters.parquet (the shared encounter set) and DIR/campaign.json.
 """
@@ -48,8 +62,23 @@ def register(sub) -> None:
     verbs.required = True
     r = verbs.add_parser("run", help="run or resume a campaign", description="Run or resume a campaign.",
                          epilog=RUN_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
-    r.add_argument("--groups", metavar="G1,G2,...", default=None,
-                   help="comma-separated groups (default: B-1,B-2,IC-1,ID-1,ID-2)")
+    r.add_argument("--groups", metavar="G1,G2,...|FILE.yaml", default=None,
+                   help="comma-separated groups of the group table, or a YAML file of group definitions "
+                        "(default: B-1,B-2,IC-1,ID-1,ID-2)")
+    r.add_argument("--waitmap", default=None, metavar="PRESET|GRID|DIR",
+                   help="wait maps of the map groups: alerting (default), paper, fine, a grid spec or a "
+                        "'waitmap build' directory")
+    r.add_argument("--gamma", type=finite_float("--gamma", 1e-6, 0.999999), default=None,
+                   help="MDP discount of the wait maps (default: the map preset's, 0.95)")
+    r.add_argument("--wt", type=finite_float("--wt", 0.0, 600.0), default=None, metavar="S",
+                   help="wait threshold W_T of every group with a wait function (default: each group's, 4 s)")
+    r.add_argument("--projl-lookahead", type=finite_float("--projl-lookahead", 0.0, 600.0), default=None,
+                   metavar="S", help="ProjL look-ahead N of every group (default: each group's, 25 s)")
+    r.add_argument("--latency", default=None, metavar="SPEC",
+                   help="one-way delay of every group's links: const:4, gauss:5,3, uniform:1,8 "
+                        "(default: each group's)")
+    r.add_argument("--intruders", type=int_at_least("--intruders", 1), default=None, metavar="M",
+                   help="intruders per encounter (default 1)")
     r.add_argument("--encounters", type=int_at_least("--encounters", 1), default=None, metavar="N",
                    help="encounters per group (default 10000)")
     r.add_argument("--seed", type=int_at_least("--seed", 0), default=None, metavar="S", help="campaign seed (default 0)")
@@ -82,7 +111,9 @@ def _config_from_args(args):
 
     given = {"groups": parse_groups(args.groups) if args.groups is not None else None,
              "n_encounters": args.encounters, "seed": args.seed, "chunk_size": args.chunk_size,
-             "preset": args.preset.lower() if args.preset else None, "duration_s": args.duration}
+             "preset": args.preset.lower() if args.preset else None, "duration_s": args.duration,
+             "waitmap": args.waitmap, "gamma": args.gamma, "wt": args.wt, "projl_lookahead": args.projl_lookahead,
+             "latency": args.latency, "n_intruders": args.intruders}
     if args.preset and args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
     base = CampaignConfig()
@@ -90,9 +121,7 @@ def _config_from_args(args):
     if args.resume and (out / "campaign.json").is_file():
         base = CampaignConfig.from_dict(load_campaign_json(out)["config"], str(out / "campaign.json"))
     fields = {k: (v if v is not None else getattr(base, k)) for k, v in given.items()}
-    return CampaignConfig(groups=tuple(fields["groups"]), n_encounters=fields["n_encounters"],
-                          seed=fields["seed"], chunk_size=fields["chunk_size"], preset=fields["preset"],
-                          duration_s=fields["duration_s"], dt_s=base.dt_s).validate()
+    return CampaignConfig(dt_s=base.dt_s, **fields).validate()
 
 
 _SCHEDULER = re.compile(r"^([a-z][a-z0-9+]*://)?[^\s:/]+:\d{1,5}$")
@@ -118,7 +147,7 @@ def run_cmd(args) -> int:
     summary = run_campaign(cfg, args.out, workers=args.workers or 1, scheduler=args.scheduler, resume=args.resume,
                            progress=not args.no_progress and not args.json)
     rate = summary.encounter_steps / summary.wall_s if summary.wall_s > 0 else float("nan")
-    info = {"out": str(summary.out_dir), "groups": list(cfg.groups), "encounters": cfg.n_encounters,
+    info = {"out": str(summary.out_dir), "groups": list(cfg.group_names), "encounters": cfg.n_encounters,
             "seed": cfg.seed, "preset": cfg.preset, "chunks_total": summary.chunks_total,
             "chunks_skipped": summary.chunks_skipped, "chunks_run": summary.chunks_run,
             "wall_s": round(summary.wall_s, 3), "encounter_steps_per_s": rate}
@@ -126,7 +155,8 @@ def run_cmd(args) -> int:
         print(json.dumps(to_jsonable(info), indent=2, sort_keys=True))
     else:
         print(f"campaign {summary.out_dir}: {summary.chunks_run} chunks run, {summary.chunks_skipped} skipped "
-              f"({len(cfg.groups)} groups x {cfg.n_encounters} encounters, preset {cfg.preset}) in "
+              f"({len(cfg.groups)} groups x {cfg.n_encounters} encounters, preset {cfg.preset}, wait maps "
+              f"{cfg.waitmap}) in "
               f"{summary.wall_s:.1f} s ({rate:,.0f} encounter-steps/s)", file=sys.stderr)
     return 0
 
