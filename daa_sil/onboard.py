@@ -6,8 +6,10 @@ N = 1, so the two run the same code (parity by construction). It holds the truth
 lookup, the DAA configuration and the allocation policy. :meth:`OnboardCore.step` at sim time
 ``t_k``:
 
-1. runs DAA + wait map + agent (:func:`daa_sil.agent.agent_step`) on the truth state at ``t_k``
-   with the pilot input that arrived at or before ``t_k``;
+1. updates each intruder's turn-rate estimate from the tracks it has seen
+   (:class:`TurnRateEstimator`; it picks the wait map), then runs DAA + wait map + agent
+   (:func:`daa_sil.agent.agent_step`) on the truth state at ``t_k`` with the pilot input that
+   arrived at or before ``t_k``;
 2. returns the command flown, the decision record and the telemetry for ``t_k`` (ownship,
    intruders, alert levels, band summary) -- the caller downlinks it;
 3. advances truth by ``dt`` (ownship :func:`~daa_sil.kinematics.fly_command`, intruders
@@ -28,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from . import wellclear as wc
-from .frames import to_paper_state
+from .frames import to_paper_state, wrap_pi
 from .kinematics import AircraftState, Command, Performance, advance, fly_command
 from .daa.alerting import relative_state
 from .encounters import INTRUDER_PERFORMANCE
@@ -67,6 +69,39 @@ class StepOutput:
     pen_rate: np.ndarray  #: (N,) penetration rate at t (max over intruders), PI = sum * dt
     seg_min_range_m: np.ndarray  #: (N,) minimum horizontal range on the segment (over intruders)
     seg_vsep_m: np.ndarray  #: (N,) vertical separation at that minimum
+    turn_est: "np.ndarray | None" = None  #: (N, M) estimated intruder turn rates, compass rad/s
+
+
+class TurnRateEstimator:
+    """Each intruder's turn rate from its observed track history (batched, sans-IO).
+
+    :meth:`update` takes the intruders the core sees at sim time ``t`` (s) and returns ``(N, M)``
+    estimates in compass rad/s (+ = right): the wrapped track change from the oldest of the last
+    ``window`` observations to the newest, over the time between them (0 until two observations).
+    Window 3 (2 s at dt = 1 s) follows a constant-rate turn exactly two steps after it starts and
+    does not mistake a single step's change for a turn rate. The same object runs in fast-time and
+    in the SIL vehicle (inside :class:`OnboardCore`), so both pick the same wait map.
+    """
+
+    def __init__(self, shape: tuple[int, int], window: int = 3):
+        if window < 2:
+            raise ValueError(f"window must be >= 2 observations, got {window}")
+        self.window = int(window)
+        self._trk: list[np.ndarray] = []
+        self._t: list[float] = []
+        self.shape = tuple(shape)
+
+    def update(self, t: float, intruders: AircraftState) -> np.ndarray:
+        """Add the observation at ``t`` and return the current estimates ``(N, M)``, rad/s."""
+        self._trk.append(np.array(intruders.trk, float))
+        self._t.append(float(t))
+        if len(self._t) > self.window:
+            self._trk.pop(0)
+            self._t.pop(0)
+        span = self._t[-1] - self._t[0]
+        if span <= 0:
+            return np.zeros(self.shape)
+        return wrap_pi(self._trk[-1] - self._trk[0]) / span
 
 
 def band_intervals(values_deg: np.ndarray, region: np.ndarray) -> dict:
@@ -133,6 +168,7 @@ class OnboardCore:
         # intruders fly scripts beyond the ownship's limits (paper: up to 5 deg/s), as the sampler does
         self.intruder_perf = intruder_perf if intruder_perf is not None else INTRUDER_PERFORMANCE
         self.memory = memory if memory is not None else agent.AgentMemory.initial(self.n, self.own)
+        self.turn_estimator = TurnRateEstimator((self.n, self.m))
 
     @classmethod
     def from_encounters(cls, encounters, policy, daa_cfg=None, wait_lookup=None, **kw) -> "OnboardCore":
@@ -156,8 +192,9 @@ class OnboardCore:
         if not np.isclose(t, self.t, rtol=0.0, atol=1e-9):
             raise ValueError(f"OnboardCore is at t={self.t:g} s, step() called with t={t:g} s")
         own0, intr0 = self.own, self.intruders
+        turn_est = self.turn_estimator.update(t, intr0)
         cmd, dec, self.memory = self._agent.agent_step(t, own0, intr0, pilot_input, self.memory, self.policy,
-                                                       self.daa_cfg, self.wait_lookup)
+                                                       self.daa_cfg, self.wait_lookup, turn_rate=turn_est)
         s0, v0 = relative_state(own0, intr0)
         geom = self.geometry()
         alert = np.asarray(dec["alert_level"], dtype=np.int8).reshape(self.n, self.m)
@@ -175,6 +212,7 @@ class OnboardCore:
         j = np.argmin(rmin, axis=1)
         rows = np.arange(self.n)
         out = StepOutput(step=self.k, t=float(t), own=own0, intruders=intr0, command=cmd, decisions=dec,
+                         turn_est=turn_est,
                          telemetry=telem, geometry=geom, lowc=lowc_m.any(axis=1), nmac=nmac_m.any(axis=1),
                          lowc_time_s=in_lowc.max(axis=1), pen_rate=pen, seg_min_range_m=rmin[rows, j],
                          seg_vsep_m=vsep[rows, j])
