@@ -408,7 +408,7 @@ def make_wait_lookup(family, cfg: "DaaConfig | None" = None) -> WaitLookup:
         r = np.arange(n)
         return WaitValue(np.asarray(res.wait_s, float)[r, k], np.asarray(res.p_lowc, float)[r, k],
                          np.asarray(res.in_box, bool)[r, k], np.degrees(rate[r, k]),
-                         -np.asarray(res.map_turn_deg, float)[r, k])
+                         0.0 - np.asarray(res.map_turn_deg, float)[r, k])  # 0.0 - x: no -0.0 for the 0 map
 
     return lookup
 

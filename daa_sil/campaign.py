@@ -434,6 +434,11 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
                              f"pass the same options or omit them")
         if not enc_path.is_file():
             raise FileFormatError(f"{enc_path} is missing; cannot resume this campaign")
+        stored_map = load_campaign_json(out).get("waitmap")
+        fam = campaign_family(config)
+        if stored_map and fam is not None and stored_map.get("content_hashes") != _describe_family(fam)["content_hashes"]:
+            raise UsageError(f"--resume: the wait maps of {config.waitmap!r} are not the ones this campaign started with "
+                             f"(their content hashes differ: rebuilt with other code or parameters); start a new campaign")
         encs = enc_mod.load_encounters(enc_path)
         if len(encs) != config.n_encounters:
             raise FileFormatError(f"{enc_path} holds {len(encs)} encounters, campaign.json says {config.n_encounters}")

@@ -28,6 +28,9 @@ EXAMPLES = """examples:
   # each step's row to a local Rerun recorder as it happens (daa-sil run does this for live viewers)
   daa-vehicle scenarios/head_on.yaml --live udp:127.0.0.1:9870
 
+  # the paper's own 72,000-state wait map instead of the default alerting-region map
+  daa-vehicle scenarios/head_on.yaml --waitmap paper
+
   # 10x real time, undelayed truth copy for QGroundControl on 14550
   daa-vehicle scenarios/crossing_left.yaml --out udp:127.0.0.1:14601 --speed 10 --tap udp:127.0.0.1:14550
 """
@@ -53,6 +56,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--live", default=None, metavar="udp:127.0.0.1:PORT",
                    help="also send each step's step-log row, as soon as the step is done, to this loopback "
                         "port (the Rerun recorder of `daa-sil run`); fire-and-forget, never slows the loop")
+    p.add_argument("--waitmap", default=None, metavar="PRESET|GRID|DIR",
+                   help="wait maps: alerting (default), paper, fine, a grid spec or a 'waitmap build' directory "
+                        "(built and cached on first use; the same lookup as 'campaign run --waitmap')")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -73,7 +79,7 @@ def _options(args):
 
         parse_live_address(live)
     return VehicleOptions(out=args.out, listen=args.listen, tap=tap, clock=args.clock, speed=args.speed, key=key,
-                          steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live)
+                          steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live, waitmap=args.waitmap)
 
 
 async def _amain(args) -> int:

@@ -66,6 +66,8 @@ class VehicleOptions:
     tick_retry_s: float = 2.0
     #: ``udp:127.0.0.1:PORT``: publish each step's step-log row there (:mod:`daa_sil.live`)
     live: "str | None" = None
+    #: ``--waitmap``: map preset, grid spec or family directory (None = the default map)
+    waitmap: "str | None" = None
 
 
 @dataclass
@@ -93,7 +95,7 @@ class VehicleNode:
     def __init__(self, scenario, opts: VehicleOptions, core: "VehicleCore | None" = None):
         self.sc = scenario
         self.opts = opts
-        self.core = core if core is not None else VehicleCore(scenario)
+        self.core = core if core is not None else VehicleCore(scenario, waitmap=opts.waitmap)
         self.peer = parse_udp_address(opts.out, "--out", allow_port_zero=False)
         self.tap = parse_udp_address(opts.tap, "--tap", allow_port_zero=False) if opts.tap else None
         self.codec = MavCodec(VEHICLE_SYSID, VEHICLE_COMPID, key=opts.key, allow_unsigned=())
