@@ -36,8 +36,6 @@ from .model import MdpParams, Outcome, outcomes
 
 #: offsets of the special states after the S grid states
 EXIT, LOWC, OUT = 0, 1, 2
-#: largest kinematic block (nodes of (vi, vh, theta)) applied as a dense matrix
-DENSE_KIN_MAX = 1024
 
 
 def relative_sv(dx, dy, dh, vi, vh, theta, v_own: float) -> tuple[np.ndarray, np.ndarray]:
@@ -180,11 +178,11 @@ class Transitions:
     def nk(self) -> int:
         return self.kin.shape[0]
 
-    def _kin_T(self) -> "np.ndarray | sp.csr_matrix":
-        # K as a dense transposed matrix when small (one BLAS gemm per sweep beats a sparse product
-        # by ~3x for nk = 300), else sparse
+    def _kin_T(self) -> sp.csr_matrix:
+        # K^T as CSR: ``V (nx, nk) @ K^T`` is a dense-times-sparse product with no transposed copies
+        # (and no BLAS threads, which under load were 3-10x slower than this for small nk)
         if getattr(self, "_kt", None) is None:
-            self._kt = self.kin.T.toarray() if self.nk <= DENSE_KIN_MAX else self.kin.T.tocsr()
+            self._kt = self.kin.T.tocsr()
         return self._kt
 
     def apply(self, V: np.ndarray, dtype=np.float64) -> np.ndarray:
