@@ -67,7 +67,7 @@ A_PILOT, A_DAA, A_HOLD = range(3)
 DECISION_FIELDS = (
     "active", "decision", "rule", "authority", "wait_s", "projl", "decided_by", "wait_p_lowc", "wait_in_box",
     "wait_turn_dps", "wait_map_turn_dps", "link_lost", "max_alert", "alert_level",
-    "pilot_cmd_received", "pilot_cmd_age_s", "sm_pilot", "sm_exec",
+    "pilot_cmd_received", "pilot_cmd_fresh", "pilot_cmd_age_s", "sm_pilot", "sm_exec",
     "pilot_axis", "pilot_dir", "exec_axis", "exec_dir", "exact_match",
     "cmd_trk", "cmd_vs", "cmd_gs", "pilot_trk", "pilot_vs", "pilot_gs", "daa_trk", "daa_vs", "daa_gs",
     "bands_trk", "bands_trk_region",
@@ -357,7 +357,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
         "active": active, "decision": decision, "rule": rule, "authority": authority, "wait_s": wait_s,
         "projl": projl, "decided_by": decided_by, "wait_p_lowc": w_pl, "wait_in_box": w_box, "wait_turn_dps": w_turn,
         "wait_map_turn_dps": w_map, "link_lost": link_lost, "max_alert": max_alert.astype(np.int8), "alert_level": alert,
-        "pilot_cmd_received": received, "pilot_cmd_age_s": age, "sm_pilot": sm_pilot, "sm_exec": sm_exec,
+        "pilot_cmd_received": received, "pilot_cmd_fresh": fresh, "pilot_cmd_age_s": age, "sm_pilot": sm_pilot, "sm_exec": sm_exec,
         "pilot_axis": p_axis, "pilot_dir": p_dir, "exec_axis": e_axis, "exec_dir": e_dir, "exact_match": exact,
         "cmd_trk": exec_cmd.trk, "cmd_vs": exec_cmd.vs, "cmd_gs": exec_cmd.gs,
         "pilot_trk": p_trk, "pilot_vs": p_vs, "pilot_gs": p_gs,

@@ -89,6 +89,8 @@ class CampaignConfig:
     projl_lookahead: "float | None" = None
     latency: "str | None" = None
     n_intruders: int = 1
+    reading: str = "literal"  #: a named reading of :mod:`daa_sil.readings`
+    reading_set: dict = field(default_factory=dict)  #: overrides of the reading's settings
 
     def __post_init__(self):
         # groups may be given by name (``("B-2", "ID-2")``) or as a --groups string
@@ -126,7 +128,15 @@ class CampaignConfig:
 
             parse_delay_spec(self.latency)
         self.effective_groups  # noqa: B018 -- validates the overridden definitions
+        self.effective_reading  # noqa: B018
         return self
+
+    @property
+    def effective_reading(self):
+        """The :class:`daa_sil.readings.Reading` flown and counted (named bundle + overrides)."""
+        from .readings import reading_for
+
+        return reading_for(self.reading, **dict(self.reading_set))
 
     @property
     def group_names(self) -> tuple[str, ...]:
@@ -172,6 +182,8 @@ class CampaignConfig:
     def to_dict(self) -> dict:
         d = asdict(self)
         d["groups"] = [g.to_dict() for g in self.groups]
+        d["reading_set"] = dict(self.reading_set)
+        d["readings"] = self.effective_reading.to_dict()  # derived: every setting of the reading
         return d
 
     @classmethod
@@ -183,7 +195,8 @@ class CampaignConfig:
             return cls(groups=groups, n_encounters=int(d["n_encounters"]), seed=int(d["seed"]),
                        chunk_size=int(d["chunk_size"]), preset=str(d["preset"]),
                        duration_s=float(d["duration_s"]), dt_s=float(d["dt_s"]), waitmap=str(d["waitmap"]),
-                       n_intruders=int(d.get("n_intruders", 1)), **opt).validate()
+                       n_intruders=int(d.get("n_intruders", 1)), reading=str(d.get("reading", "literal")),
+                       reading_set=dict(d.get("reading_set") or {}), **opt).validate()
         except (KeyError, TypeError, ValueError) as exc:
             raise FileFormatError(f"{where}: bad or missing config field ({exc})") from None
         except UsageError as exc:
@@ -246,7 +259,8 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
     spec = cfg.group(task.group)
     model = spec.delay_model()
     fam = campaign_family(cfg) if spec.uses_map else None
-    enc_rows, dec_rows, _ = simulate(task.encounters, spec.policy(), model, model, wait_family=fam,
+    pilot_cfg = cfg.effective_reading.pilot_config()
+    enc_rows, dec_rows, _ = simulate(task.encounters, spec.policy(), model, model, pilot_cfg, wait_family=fam,
                                      seeds=task.seeds, preset=cfg.preset, duration_s=cfg.duration_s,
                                      dt=cfg.dt_s, group=task.group, record_steps=False)
     return ChunkResult(task.group, task.chunk, enc_rows, dec_rows, time.perf_counter() - t0, len(task.seeds))
@@ -447,7 +461,8 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
     encs = enc_mod.sample_encounters(config.n_encounters, seed=config.seed, preset=config.preset,
                                      duration_s=config.duration_s, dt_s=config.dt_s,
                                      t_cpa_s=config.duration_s / 2.0,  # paper: CPA at T/2
-                                     n_intruders=config.n_intruders)
+                                     n_intruders=config.n_intruders,
+                                     **config.effective_reading.encounter_overrides())
     enc_mod.save_encounters(encs, enc_path)  # atomic
     fam = campaign_family(config)
     meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "versions": _versions(),

@@ -32,6 +32,12 @@ n_link_lost``; ``n_pilot_received = n_pilot_exec + n_blend + n_daa_override`` (f
 received during the active phase); ``n_blend_intent`` = blends of a pilot command that carries a
 maneuver intent (an (axis, direction) -- not "hold" before the pilot's first maneuver);
 ``n_blend_intent = n_blend_exact + n_blend_axis + (intent blends matching neither) <= n_blend``.
+Over the whole encounter (the ``whole`` counting window of :mod:`daa_sil.readings`):
+``n_pilot_received_whole`` fresh pilot commands that reached the vehicle at any step, and
+``n_pilot_exec_whole`` of them executed as sent (outside the active phase the ownship flies the
+received command; inside, the ``pilot`` decisions). Decision provenance: ``n_by_map``,
+``n_by_projl``, ``n_by_both`` count the no-wait decisions by ``decided_by``; ``n_lookup_in_box``
+the wait/no-wait decisions whose map lookup was inside the map's box.
 """
 
 from __future__ import annotations
@@ -65,6 +71,7 @@ ENCOUNTER_SCHEMA = pa.schema(
      ("n_pilot_received", _I), ("n_pilot_exec", _I), ("n_blend", _I), ("n_blend_exact", _I),
      ("n_blend_axis", _I), ("n_blend_intent", _I), ("n_daa_override", _I), ("n_stale", _I), ("n_link_lost", _I),
      ("n_by_map", _I), ("n_by_projl", _I), ("n_by_both", _I), ("n_lookup_in_box", _I),
+     ("n_pilot_received_whole", _I), ("n_pilot_exec_whole", _I),
      ("intruder_turns", pa.bool_()), ("preset", pa.string())])
 
 DECISION_SCHEMA = pa.schema(
@@ -131,6 +138,8 @@ class _Accumulators:
         self.n_blend_intent = np.zeros(n, np.int64)
         self.by = np.zeros((n, len(CODE_NAMES["decided_by"])), np.int64)
         self.n_in_box = np.zeros(n, np.int64)
+        self.n_recv_whole = np.zeros(n, np.int64)
+        self.n_exec_whole = np.zeros(n, np.int64)
         self.p0 = own0.position()
         self.v0 = own0.velocity()
         self.dec_parts: list[tuple[np.ndarray, float, dict]] = []
@@ -153,6 +162,9 @@ class _Accumulators:
         self.deviation(out.own, out.t)
         active = np.asarray(dec["active"], bool)
         code = np.asarray(dec["decision"], np.int64)
+        fresh = np.asarray(dec["pilot_cmd_fresh"], bool)
+        self.n_recv_whole += fresh
+        self.n_exec_whole += fresh & (~active | (code == D_PILOT))  # outside the active phase it is flown as sent
         ia = np.flatnonzero(active)
         if ia.size:
             np.add.at(self.counts, (ia, code[ia]), 1)
@@ -213,6 +225,7 @@ def _encounter_table(acc: _Accumulators, encounters, group: str, preset: str, du
         "n_stale": pa.array(c[:, D_STALE], _I), "n_link_lost": pa.array(c[:, D_LINK_LOST], _I),
         "n_by_map": pa.array(acc.by[:, BY_MAP], _I), "n_by_projl": pa.array(acc.by[:, BY_PROJL], _I),
         "n_by_both": pa.array(acc.by[:, BY_BOTH], _I), "n_lookup_in_box": pa.array(acc.n_in_box, _I),
+        "n_pilot_received_whole": pa.array(acc.n_recv_whole, _I), "n_pilot_exec_whole": pa.array(acc.n_exec_whole, _I),
         "intruder_turns": pa.array(np.asarray(encounters.intruder_turns, bool)),
         "preset": pa.array(np.full(n, preset), pa.string()),
     }

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from ..errors import UsageError
 from ..io import to_jsonable
+from ..readings import READINGS, parse_reading_settings
 from ..thresholds import PRESETS
 from ._args import finite_float, int_at_least
 
@@ -45,6 +46,9 @@ paper's +-1,500 m grid, 60 s; states outside read the nearest point of the box),
 or a directory from 'daa-sil waitmap build'. Built once and cached in ~/.cache/daa-sil.
 Results: DIR/<group>/encounters-<chunk>.parquet, DIR/<group>/decisions-<chunk>.parquet,
 DIR/encounters.parquet (the shared encounter set) and DIR/campaign.json.
+
+Readings (--reading; what the paper leaves open about its simulator, daa_sil/readings.py):
+""" + "\n".join(f"  {r.name:13s} {r.description}" for r in READINGS.values()) + """
 """
 
 REPORT_EXAMPLES = """examples:
@@ -79,6 +83,12 @@ def register(sub) -> None:
                         "(default: each group's)")
     r.add_argument("--intruders", type=int_at_least("--intruders", 1), default=None, metavar="M",
                    help="intruders per encounter (default 1)")
+    r.add_argument("--reading", default=None, metavar="NAME",
+                   help=f"a named reading of the paper's simulator: {', '.join(READINGS)} (default literal; "
+                        f"see 'Readings' below)")
+    r.add_argument("--reading-set", default=None, metavar="KEY=VALUE,...",
+                   help="override settings of the reading: units=metres|feet, pilot_start=corrective|preventive|"
+                        "detection, hold_commands=true|false, window=active|whole, received=arrived|pilot+blend|executed")
     r.add_argument("--encounters", type=int_at_least("--encounters", 1), default=None, metavar="N",
                    help="encounters per group (default 10000)")
     r.add_argument("--seed", type=int_at_least("--seed", 0), default=None, metavar="S", help="campaign seed (default 0)")
@@ -113,7 +123,8 @@ def _config_from_args(args):
              "n_encounters": args.encounters, "seed": args.seed, "chunk_size": args.chunk_size,
              "preset": args.preset.lower() if args.preset else None, "duration_s": args.duration,
              "waitmap": args.waitmap, "gamma": args.gamma, "wt": args.wt, "projl_lookahead": args.projl_lookahead,
-             "latency": args.latency, "n_intruders": args.intruders}
+             "latency": args.latency, "n_intruders": args.intruders, "reading": args.reading,
+             "reading_set": parse_reading_settings(args.reading_set) if args.reading_set else None}
     if args.preset and args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
     base = CampaignConfig()
