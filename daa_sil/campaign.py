@@ -129,6 +129,10 @@ class CampaignConfig:
             parse_delay_spec(self.latency)
         self.effective_groups  # noqa: B018 -- validates the overridden definitions
         self.effective_reading  # noqa: B018
+        if self.uses_map:
+            from .waitmap.build import check_source
+
+            check_source(self.waitmap, self.preset, self.gamma)
         return self
 
     @property
@@ -457,6 +461,7 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
         if len(encs) != config.n_encounters:
             raise FileFormatError(f"{enc_path} holds {len(encs)} encounters, campaign.json says {config.n_encounters}")
         return out, config, encs
+    fam = campaign_family(config)  # built (or loaded) before anything is written
     ensure_dir(out)
     encs = enc_mod.sample_encounters(config.n_encounters, seed=config.seed, preset=config.preset,
                                      duration_s=config.duration_s, dt_s=config.dt_s,
@@ -464,7 +469,6 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
                                      n_intruders=config.n_intruders,
                                      **config.effective_reading.encounter_overrides())
     enc_mod.save_encounters(encs, enc_path)  # atomic
-    fam = campaign_family(config)
     meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "versions": _versions(),
             "preset": config.preset, "seed": config.seed, "status": "running",
             "seeds": {"campaign": config.seed,

@@ -38,6 +38,14 @@ def _assert_same(a: dict, b: dict) -> None:
     (["--encounters", "-3"], "--encounters must be a positive integer"),
     (["--chunk-size", "x"], "--chunk-size must be a positive integer"),
     (["--preset", "nope"], "unknown --preset"),
+    (["--waitmap", "nosuchgrid"], "--waitmap 'nosuchgrid'"),
+    (["--wt", "-1"], "--wt must be within"),
+    (["--projl-lookahead", "nan"], "--projl-lookahead"),
+    (["--gamma", "1.5"], "--gamma must be within"),
+    (["--latency", "gauss:5"], "bad delay spec 'gauss:5'"),
+    (["--intruders", "0"], "--intruders must be"),
+    (["--reading", "yards"], "unknown reading 'yards'"),
+    (["--reading-set", "units=yards"], "units must be one of metres, feet"),
 ])
 def test_bad_config_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, argv, message):
     out = tmp_path / "camp"
@@ -152,3 +160,21 @@ def test_report_from_a_campaign(tmp_path, capsys):
     assert "ID-2" in text and "B-2" in text
     rc = main(["campaign", "report", str(tmp_path / "nothing")])
     assert rc == 2 and "not a campaign directory" in capsys.readouterr().err
+
+
+def test_every_knob_is_recorded_and_checked_on_resume(tmp_path, capsys):
+    out = tmp_path / "knobs"
+    argv = ["campaign", "run", "--groups", "B-2,ID-2-projl", "--encounters", "4", "--chunk-size", "4",
+            "--duration", "60", "--wt", "7", "--projl-lookahead", "12", "--latency", "const:0.5",
+            "--waitmap", "paper", "--out", str(out), "--no-progress"]
+    assert main(argv) == 0
+    meta = json.loads((out / "campaign.json").read_text())
+    c = meta["config"]
+    assert (c["wt"], c["projl_lookahead"], c["latency"], c["waitmap"]) == (7.0, 12.0, "const:0.5", "paper")
+    assert meta["groups"]["ID-2-projl"]["wait_threshold_s"] == 7.0 and meta["groups"]["B-2"]["wait_threshold_s"] == 4.0
+    assert meta["groups"]["B-2"]["latency"] == {"type": "constant", "seconds": 0.5}
+    assert meta["seeds"]["campaign"] == 0 and meta["waitmap"] is None  # neither group reads the map
+    capsys.readouterr()
+    assert main(argv[:-3] + ["--wt", "8", "--out", str(out), "--resume", "--no-progress"]) == 2
+    assert "different settings (wt)" in capsys.readouterr().err
+    assert main(["campaign", "run", "--out", str(out), "--resume", "--no-progress"]) == 0  # stored knobs reused

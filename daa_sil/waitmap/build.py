@@ -133,13 +133,23 @@ def family_for(source: "str | os.PathLike | None", preset: str = "paper", gamma:
             raise UsageError(f"wait maps in {source} were built for the {fam.params.preset!r} threshold preset; "
                              f"this run uses {preset!r} (rebuild with 'daa-sil waitmap build --preset {preset}')")
         return fam
+    g, p = check_source(source, preset, gamma)
+    return default_family(preset, g, p, progress=progress)
+
+
+def check_source(source: "str | os.PathLike | None", preset: str = "paper", gamma: "float | None" = None):
+    """Validate a ``--waitmap`` value without building anything: ``(grid, params)`` of a map preset or
+    grid spec, or ``(None, None)`` for an existing directory; one-line UsageError otherwise."""
+    from ..errors import UsageError
+
+    if source is not None and Path(str(source)).is_dir():
+        return None, None
     name = DEFAULT_MAP if source is None else str(source)
     try:
-        g, p = map_params(name, preset, **({"gamma": float(gamma)} if gamma is not None else {}))
-    except UsageError as exc:
-        raise UsageError(f"--waitmap {name!r}: {exc}; use a map preset ({', '.join(MAP_PRESETS)}), a grid spec "
-                         f"or a directory from 'daa-sil waitmap build'") from None
-    return default_family(preset, g, p, progress=progress)
+        return map_params(name, preset, **({"gamma": float(gamma)} if gamma is not None else {}))
+    except UsageError:
+        raise UsageError(f"--waitmap {name!r} is not a map preset ({', '.join(MAP_PRESETS)}), a grid spec "
+                         f"(paper,dx=24,...), a grid YAML file or a directory from 'daa-sil waitmap build'") from None
 
 
 def describe(fam: WaitMapFamily) -> dict:

@@ -162,6 +162,6 @@ def wait_time(tr: Transitions, evade: np.ndarray, params: MdpParams,
     t_lowc = np.clip(t_lowc, 0.0, params.horizon)
     out = {}
     for name in defs:
-        w = paper_wait(t_lowc, p_lowc, G, params) if name == "paper" else w_b
+        w = paper_wait(t_lowc, p_lowc, G, params) if name == "paper" else np.clip(w_b, 0.0, params.horizon)
         out[name] = WaitFields(wait_s=np.asarray(w, f32), p_lowc=p_lowc, t_lowc=t_lowc)
     return out if definitions is not None else out[defs[0]]
