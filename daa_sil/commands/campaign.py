@@ -36,6 +36,20 @@ DIR/encounters.parquet (the shared encounter set) and DIR/campaign.json.
 REPORT_EXAMPLES = """examples:
   daa-sil campaign report runs/paper                 # writes runs/paper/report/
   daa-sil campaign report runs/paper --out reports/paper
+
+  # several readings side by side (one campaign directory per reading; the name comes from
+  # campaign.json config.reading, "default" when absent)
+  daa-sil campaign report runs/literal runs/paper-counts --out reports/readings
+
+  # the same simulation counted another way as an extra reading (received = pilot + blend,
+  # the paper's Table 5 arithmetic)
+  daa-sil campaign report runs/literal --recount paper-arith:received=pilot+blend
+
+  # more bootstrap replicates, another bootstrap seed (both recorded in the report)
+  daa-sil campaign report runs/paper --replicates 5000 --bootstrap-seed 3
+
+Writes report.md (findings table with verdicts, per-group tables, ablation, provenance, methods),
+findings.json and PNG figures with 95 % CIs.
 """
 
 
@@ -68,12 +82,21 @@ def register(sub) -> None:
     r.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     r.set_defaults(func=run_cmd)
 
-    rep = verbs.add_parser("report", help="Markdown + PNG report of a campaign directory",
-                           description="Write the paper's tables and figures with 95 % CIs next to the "
-                                       "published values.", epilog=REPORT_EXAMPLES,
+    rep = verbs.add_parser("report", help="Markdown + PNG report of one or more campaign directories",
+                           description="Write every finding of the paper with our value, its encounter-level "
+                                       "95 % CI and a verdict under each reading (one campaign directory per "
+                                       "reading), plus the paper's tables and figures.", epilog=REPORT_EXAMPLES,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
-    rep.add_argument("dir", metavar="DIR", help="campaign directory (from 'campaign run')")
-    rep.add_argument("--out", default=None, metavar="DIR2", help="report directory (default DIR/report)")
+    rep.add_argument("dirs", nargs="+", metavar="DIR", help="campaign directories (from 'campaign run'), one per reading")
+    rep.add_argument("--out", default=None, metavar="DIR2", help="report directory (default: FIRST_DIR/report)")
+    rep.add_argument("--replicates", type=int_at_least("--replicates", 100), default=None, metavar="B",
+                     help="bootstrap replicates (default 2000)")
+    rep.add_argument("--bootstrap-seed", type=int_at_least("--bootstrap-seed", 0), default=None, metavar="S",
+                     help="bootstrap seed (default 14)")
+    rep.add_argument("--recount", action="append", default=[], metavar="NAME:key=value[,...]",
+                     help="add a reading counted differently from the same results (keys: received, window); "
+                          "repeatable")
+    rep.add_argument("--json", action="store_true", help="print a JSON summary (paths, verdict counts) on stdout")
     rep.set_defaults(func=report_cmd)
 
 
@@ -133,13 +156,30 @@ def run_cmd(args) -> int:
 
 def report_cmd(args) -> int:
     from .. import report
+    from ..findings import VERDICTS
+    from ..metrics import COUNT_SOURCES  # noqa: F401 -- imported so a broken table fails before any output
+    from ..stats import DEFAULT_REPLICATES, DEFAULT_SEED
 
-    src = Path(args.dir)
-    if not (src / "campaign.json").is_file():
-        raise UsageError(f"{src} is not a campaign directory (no campaign.json)")
-    out = Path(args.out) if args.out else src / "report"
-    result = report.write_report(src, out)
-    print(f"report written to {out}", file=sys.stderr)
-    if isinstance(result, (str, Path)):
-        print(str(result))
+    dirs = [Path(d) for d in args.dirs]
+    for d in dirs:
+        if not (d / "campaign.json").is_file():
+            raise UsageError(f"{d} is not a campaign directory (no campaign.json)")
+    if len(set(map(str, (d.resolve() for d in dirs)))) != len(dirs):
+        raise UsageError("a campaign directory is given twice")
+    for spec in args.recount:
+        report.parse_recount(spec)  # one-line error before anything is read or written
+    out = Path(args.out) if args.out else dirs[0] / "report"
+    reps = args.replicates or DEFAULT_REPLICATES
+    seed = DEFAULT_SEED if args.bootstrap_seed is None else args.bootstrap_seed
+    path = report.write_report(dirs if len(dirs) > 1 else dirs[0], out, replicates=reps, seed=seed,
+                               recount=args.recount)
+    if args.json:
+        data = json.loads((out / "findings.json").read_text(encoding="utf-8"))
+        counts = {r["label"]: {v: sum(1 for f in data["findings"] if f["outcomes"][r["label"]]["verdict"] == v)
+                               for v in VERDICTS} for r in data["readings"]}
+        print(json.dumps({"report": str(path), "findings": str(out / "findings.json"), "bootstrap": data["bootstrap"],
+                          "verdicts": counts}, indent=2, sort_keys=True))
+    else:
+        print(f"report written to {out}", file=sys.stderr)
+        print(str(path))
     return 0
