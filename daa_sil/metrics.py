@@ -416,9 +416,12 @@ def normalise_decisions(dec) -> "dict | None":
         if "decided_by" in names:
             col = pc.cast(arr("decided_by"), pa.string())
             out["decided_by"] = np.asarray(pc.fill_null(col, "").to_numpy(zero_copy_only=False)).astype(str)
-        if "in_box" in names:
-            col = pc.cast(arr("in_box"), pa.int8())
-            out["in_box"] = np.asarray(pc.fill_null(col, -1).to_numpy(zero_copy_only=False), np.int8)
+        if "in_box" in names:  # bool (or 0/1 numbers); null or nan = no lookup
+            col = arr("in_box")
+            valid = np.asarray(pc.is_valid(col).to_numpy(zero_copy_only=False), bool)
+            vals = np.asarray(pc.fill_null(pc.cast(col, pa.float64()), 0.0).to_numpy(zero_copy_only=False), float)
+            valid &= np.isfinite(vals)
+            out["in_box"] = np.where(valid, (vals != 0).astype(np.int8), np.int8(-1)).astype(np.int8)
         return out
     out["group"] = np.asarray(dec["group"]).astype(str)
     out["encounter_id"] = np.asarray(dec["encounter_id"], np.int64)

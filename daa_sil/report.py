@@ -26,8 +26,7 @@ from .errors import FileFormatError, UsageError
 from .findings import (NOT_TESTABLE, RULES, VERDICTS, evaluate_all, fmt, untestable_statements)
 from .io import atomic_path, atomic_write_text, ensure_dir
 from .metrics import (BASELINE_GROUP, CONF, COUNTING_DEFAULTS, COUNTING_HELP, DECISION_COLUMNS, PAPER_FLIGHT_HOURS,
-                      Estimate, Reading, Study, as_columns, compute_metrics, faa_category, paper_results,
-                      paper_setup)
+                      Estimate, Reading, Study, as_columns, compute_metrics, paper_results, paper_setup)
 from .stats import DEFAULT_REPLICATES, DEFAULT_SEED
 
 FIGURES = ("fig9_allocation.png", "fig10_safety.png", "fig_exact_match.png")
@@ -228,7 +227,13 @@ def _paper_group(section: str, key: str, per_enc: bool = False):
     return f
 
 
-# (label, metric or ("change", metric, kind), value format, paper value fn(group) or None, show total)
+def _paper_if(text: str):
+    """The paper's statement (text) for its five groups."""
+    return lambda g: text if paper_setup(g) else None
+
+
+# (label, metric or ("change", metric, kind), value format, paper value fn(group) -> number | text | None,
+#  show the total)
 GROUP_TABLES = (
     ("Table 3 — waiting status (per encounter; paper: its total / 10,000)", (
         ("wait decisions", "wait", "g3", _paper_group("waiting_status", "wait", True), True),
@@ -255,7 +260,7 @@ GROUP_TABLES = (
         ("LoWC encounters", "n_lowc", "int", None, False),
         ("P(LoWC) per encounter", "p_lowc", "pct", None, False),
         ("NMAC encounters", "n_nmac", "int", lambda g: 0.0 if paper_setup(g) else None, False),
-        ("LoWC encounters with a turning intruder", "lowc_turning_share", "pct", None, False))),
+        ("LoWC encounters with a turning intruder", "lowc_turning_share", "pct", _paper_if("98 % on average"), False))),
     ("Table 7 — P(LoWC) per flight hour", (
         ("P(LoWC) = time in LoWC / flight time", "p_lowc_step", "sci",
          lambda g: (_paper_group("lowc_per_flight_hour", "p")(g) or math.nan) * PAPER_FLIGHT_HOURS, False),
@@ -265,10 +270,10 @@ GROUP_TABLES = (
          _paper_group("lowc_per_flight_hour", "p"), False),
         ("LoWC encounters per flight hour (a rate)", "lowc_rate_per_hr", "sci", None, False))),
     ("Penetration integral of LoWC encounters (s)", (
-        ("mean PI, paper's Eq. constants (4000 ft / 450 ft / 35 s)", "pi_paper_mean", "f2", None, False),
+        ("mean PI, paper's Eq. constants (4000 ft / 450 ft / 35 s)", "pi_paper_mean", "f2", _paper_if("< 1"), False),
         ("mean PI, the preset's constants", "pi_mean", "f2", None, False),
-        ("LoWC encounters with PI > 3.79 (the paper's maximum)", "n_lowc_pi_gt_max", "int", None, False),
-        ("LoWC encounters with PI > 10 (significant)", "n_lowc_pi_significant", "int", None, False),
+        ("LoWC encounters with PI > 3.79 (the paper's maximum)", "n_lowc_pi_gt_max", "int", _paper_if("0"), False),
+        ("LoWC encounters with PI > 10 (significant)", "n_lowc_pi_significant", "int", _paper_if("0"), False),
         ("LoWC encounters of positive duration with PI = 0", "n_lowc_pi_zero", "int", None, False))),
     ("Table 8 — mean trajectory deviation (m)", (
         ("horizontal", "dev_h_mean", "f0", _paper_group("trajectory_deviation_m", "horizontal"), False),
@@ -367,7 +372,10 @@ def _group_tables(studies: dict) -> list[str]:
             rows = []
             for g in groups:
                 pv = paper_fn(g) if paper_fn else None
-                r = [g, fmt(pv, kind) if pv is not None and math.isfinite(pv) else "–"]
+                if isinstance(pv, str):
+                    r = [g, pv]
+                else:
+                    r = [g, fmt(pv, kind) if pv is not None and math.isfinite(pv) else "–"]
                 r += [_cell(studies[lab], g, metric, kind, total) for lab in labels]
                 rows.append(r)
             L += [f"**{label}**", "", _table(["group", "paper"] + labels, rows), ""]

@@ -219,3 +219,16 @@ def test_decision_provenance_by_hand():
     assert st.estimate("ID-2", "map_or_both_share").value == pytest.approx(3 / 5)
     assert st.estimate("ID-2", "in_box_share").value == pytest.approx(3 / 5)
     assert not _study(t).provenance["ID-2"]
+
+
+@pytest.mark.parametrize("in_box", [[True, None, False, True], [1.0, float("nan"), 0.0, 1.0]])
+def test_decision_tables_from_parquet_types(in_box):
+    """Dictionary-encoded decided_by with nulls, in_box as nullable bool or as 0/1 floats with nan."""
+    import pyarrow as pa
+
+    t = pa.table({"group": ["ID-2"] * 4, "encounter_id": [0, 0, 1, 5], "decision": ["wait", "no_wait", "wait", "wait"],
+                  "decided_by": pa.array(["map", None, "projl", "map"]).dictionary_encode(), "in_box": in_box})
+    d = M.normalise_decisions(t)
+    assert d["decided_by"].tolist() == ["map", "", "projl", "map"] and d["in_box"].tolist() == [1, -1, 0, 1]
+    st = _study(table("ID-2", 3, lowc_idx=()), dec=t)  # encounter 5 is not in the results: ignored
+    assert st.sum("ID-2", "n_dec").value == 2 and st.sum("ID-2", "n_lookup").value == 2

@@ -157,7 +157,6 @@ def run_cmd(args) -> int:
 def report_cmd(args) -> int:
     from .. import report
     from ..findings import VERDICTS
-    from ..metrics import COUNT_SOURCES  # noqa: F401 -- imported so a broken table fails before any output
     from ..stats import DEFAULT_REPLICATES, DEFAULT_SEED
 
     dirs = [Path(d) for d in args.dirs]
