@@ -330,6 +330,18 @@ COUNT_SOURCES: dict[str, tuple[tuple[str, ...], dict[tuple[str, ...], tuple[str,
     "stale": (("window",), {("active",): ("n_stale",)}),
     "link_lost": (("window",), {("active",): ("n_link_lost",)}),
 }
+def counting_options() -> dict[str, list[str]]:
+    """The values each counting setting can take: every value some entry of :data:`COUNT_SOURCES`
+    uses (so a new table entry is a new allowed value; :data:`COUNTING_HELP` only describes them)."""
+    out: dict[str, list[str]] = {k: [] for k in COUNTING_DEFAULTS}
+    for keys, table in COUNT_SOURCES.values():
+        for opt in table:
+            for k, v in zip(keys, opt):
+                if v not in out.setdefault(k, []):
+                    out[k].append(v)
+    return out
+
+
 #: quantities a report can do without (older result tables lack their columns)
 OPTIONAL_QUANTITIES = ("blend_intent", "stale", "link_lost")
 #: the paper's flight hours per group (10,000 encounters x 240 s)
@@ -777,4 +789,5 @@ METRICS: dict[str, MetricSpec] = _build_metrics()
 __all__ = ["Estimate", "clopper_pearson", "wilson", "poisson_exact", "rate_ratio", "mean_t", "faa_category",
            "paper_results", "as_columns", "groups_of", "group_metrics", "compute_metrics", "REQUIRED_COLUMNS",
            "BASELINE_GROUP", "GROUP_ORDER", "Study", "Reading", "METRICS", "MetricSpec", "COUNT_SOURCES",
-           "COUNTING_DEFAULTS", "COUNTING_HELP", "PAPER_FLIGHT_HOURS", "paper_setup"]
+           "COUNTING_DEFAULTS", "COUNTING_HELP", "PAPER_FLIGHT_HOURS", "paper_setup", "counting_options",
+           "normalise_decisions"]

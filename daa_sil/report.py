@@ -26,8 +26,9 @@ from .errors import FileFormatError, UsageError
 from .findings import (NOT_TESTABLE, RULES, VERDICTS, evaluate_all, fmt, untestable_statements)
 from .io import atomic_path, atomic_write_text, ensure_dir
 from .metrics import (BASELINE_GROUP, CONF, COUNTING_DEFAULTS, COUNTING_HELP, DECISION_COLUMNS, PAPER_FLIGHT_HOURS,
-                      Estimate, Reading, Study, as_columns, compute_metrics, paper_results, paper_setup)
-from .stats import DEFAULT_REPLICATES, DEFAULT_SEED
+                      Estimate, Reading, Study, as_columns, compute_metrics, counting_options, paper_results,
+                      paper_setup)
+from .stats import DEFAULT_REPLICATES, DEFAULT_SEED, independent_difference
 
 FIGURES = ("fig9_allocation.png", "fig10_safety.png", "fig_exact_match.png")
 #: the wait-map ablation: (group with the map and ProjL, ablation group, what the difference measures)
@@ -155,15 +156,16 @@ def parse_recount(text: str) -> tuple[str, dict]:
     if not name:
         raise UsageError(f"--recount {text!r}: the name before ':' is empty")
     out = {}
+    options = counting_options()
     for item in filter(None, (p.strip() for p in body.split(","))):
         k, eq, v = item.partition("=")
         k, v = k.strip(), v.strip()
-        if not eq or k not in COUNTING_HELP:
+        if not eq or k not in options:
             raise UsageError(f"--recount {text!r}: {item!r} is not a counting setting; allowed keys: "
-                             f"{', '.join(COUNTING_HELP)}")
-        if v not in COUNTING_HELP[k]:
+                             f"{', '.join(options)}")
+        if v not in options[k]:
             raise UsageError(f"--recount {text!r}: {k}={v!r} is not allowed; {k} is one of "
-                             f"{', '.join(COUNTING_HELP[k])}")
+                             f"{', '.join(options[k])}")
         out[k] = v
     if not out:
         raise UsageError(f"--recount {text!r}: no setting given")
@@ -320,8 +322,10 @@ def _sources(blocks: Sequence[Block], studies: dict) -> list[str]:
     L = ["## Readings and sources", "",
          _table(["reading", "results", "campaign seed", "encounters", "groups", "preset", "settings"], rows), ""]
     L += ["Counting settings (the same simulation can be counted several ways; `--recount` adds a reading):", ""]
-    for k, opts in COUNTING_HELP.items():
-        L.append(f"- `{k}` (default `{COUNTING_DEFAULTS[k]}`): " + "; ".join(f"`{o}` = {t}" for o, t in opts.items()))
+    for k, opts in counting_options().items():
+        helps = COUNTING_HELP.get(k, {})
+        L.append(f"- `{k}` (default `{COUNTING_DEFAULTS.get(k, '–')}`): "
+                 + "; ".join(f"`{o}` = {helps.get(o, 'see daa_sil/metrics.py COUNT_SOURCES')}" for o in opts))
     L.append("")
     return L
 
@@ -452,15 +456,20 @@ def _ablation_section(studies: dict) -> list[str]:
             L += [f"### {lab}: {what}", "",
                   _table(["metric", full, abl, f"{full} − {abl} [95 % CI]", "test", "measurable?"], body), ""]
             nothing = [r for r in rows if not r["measurable"]]
+            why = ""
+            if st.provenance.get(full):
+                why = (f" In {full} the map decided {_cell(st, full, 'map_decided_share', 'pct', False)} of the "
+                       f"wait/no-wait decisions (the rest would be the same with \"always wait\"), and "
+                       f"{_cell(st, full, 'in_box_share', 'pct', False)} of its lookups fell inside the map's box.")
             if rows and len(nothing) == len(rows):
                 L += [f"**The difference is not measurable on any metric**: every paired 95 % CI of {full} − {abl} "
                       f"includes 0 (and McNemar p ≥ 0.05 for LoWC encounters) over {st.n:,} encounters. "
                       + ("The map adds nothing measurable to ProjL here." if abl.endswith("projl") else
-                         "ProjL adds nothing measurable to the map here."), ""]
+                         "ProjL adds nothing measurable to the map here.") + why, ""]
             else:
                 yes = ", ".join(r["label"] for r in rows if r["measurable"])
                 no = ", ".join(r["label"] for r in nothing) or "none"
-                L += [f"Measurable differences: {yes}. Not measurable (CI includes 0): {no}.", ""]
+                L += [f"Measurable differences: {yes}. Not measurable (CI includes 0): {no}.{why}", ""]
     if not any_:
         L += ["No ablation groups in these results (run `ID-2-projl` and/or `ID-2-map` beside `ID-2`).", ""]
     return L
@@ -496,8 +505,8 @@ def _seed_section(blocks, studies, rows) -> list[str]:
     if not pairs:
         return []
     L = ["## Agreement between campaign seeds", "",
-         "The same reading on different encounter sets (independent bootstraps): the seeds agree on a finding when the "
-         "95 % CI of the difference of the two estimates includes 0.", ""]
+         "The same reading on different encounter sets: the seeds agree on a finding when the 95 % CI of the "
+         "difference of the two estimates (independent bootstraps, percentile interval) includes 0.", ""]
     for a, b in pairs:
         sa, sb = studies[a.label], studies[b.label]
         body, disagree = [], 0
@@ -508,7 +517,7 @@ def _seed_section(blocks, studies, rows) -> list[str]:
                 xa, xb = _finding_sample(f, sa), _finding_sample(f, sb)
             except (UsageError, KeyError):
                 continue
-            d = xa - xb
+            d = independent_difference(xa, xb, sa.boot.seed)
             lo, hi = d.interval(sa.conf)
             if not math.isfinite(d.value):
                 continue

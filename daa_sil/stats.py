@@ -79,7 +79,11 @@ class Sample:
         a, ar, aj = _vals(self)
         b, br, bj = _vals(other)
         with np.errstate(all="ignore"):
-            jack = None if aj is None or bj is None else f(aj, bj)
+            # jackknife values pair up only within one bootstrap (same encounters); numbers broadcast
+            jack = None
+            if aj is not None and bj is not None and (np.ndim(aj) == 0 or np.ndim(bj) == 0
+                                                      or np.shape(aj) == np.shape(bj)):
+                jack = f(aj, bj)
             return Sample(float(f(np.float64(a), np.float64(b))), f(ar, br), jack)
 
     def __add__(self, o):
@@ -158,6 +162,17 @@ def _bca_levels(value: float, r: np.ndarray, jack, a: float) -> "list[float] | N
             return None
         out.append(float(sps.norm.cdf(z0 + z / den_q)))
     return out
+
+
+def independent_difference(a: Sample, b: Sample, seed: int = DEFAULT_SEED) -> Sample:
+    """``a - b`` for statistics of two *independent* samples (e.g. two campaigns on different
+    seeds): ``b``'s replicates are permuted (seeded) so they no longer share ``a``'s resampling
+    weights; percentile intervals (no common jackknife)."""
+    if a.reps.size != b.reps.size:
+        raise UsageError(f"replicate counts differ ({a.reps.size} vs {b.reps.size})")
+    perm = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0xD1FF,))).permutation(b.reps.size)
+    with np.errstate(all="ignore"):
+        return Sample(a.value - b.value, a.reps - b.reps[perm], None)
 
 
 def combine(f, *samples: Sample) -> Sample:
@@ -288,5 +303,6 @@ def ratio_linearized(y, x, conf: float = CONF) -> tuple[float, float, float]:
     return float(r), float(r - z * se), float(r + z * se)
 
 
-__all__ = ["CONF", "DEFAULT_REPLICATES", "DEFAULT_SEED", "BLOCK", "Sample", "combine", "ClusterBootstrap",
+__all__ = ["CONF", "DEFAULT_REPLICATES", "DEFAULT_SEED", "BLOCK", "Sample", "combine", "independent_difference",
+           "ClusterBootstrap",
            "clopper_pearson", "zero_upper_bounds", "McNemar", "mcnemar_exact", "ratio_linearized"]

@@ -232,3 +232,17 @@ def test_decision_tables_from_parquet_types(in_box):
     assert d["decided_by"].tolist() == ["map", "", "projl", "map"] and d["in_box"].tolist() == [1, -1, 0, 1]
     st = _study(table("ID-2", 3, lowc_idx=()), dec=t)  # encounter 5 is not in the results: ignored
     assert st.sum("ID-2", "n_dec").value == 2 and st.sum("ID-2", "n_lookup").value == 2
+
+
+def test_a_new_counting_is_one_table_entry(monkeypatch):
+    """A simulator column for a new way of counting plus one COUNT_SOURCES entry is all a reading
+    needs: the study, the allowed values and --recount pick it up."""
+    from daa_sil.report import parse_recount
+
+    keys, tab = M.COUNT_SOURCES["received"]
+    monkeypatch.setitem(M.COUNT_SOURCES, "received", (keys, {**tab, ("overridden", "active"): ("n_daa_override",)}))
+    assert "overridden" in M.counting_options()["received"]
+    assert parse_recount("ov:received=overridden") == ("ov", {"received": "overridden"})
+    t = table("B-2", 4, lowc_idx=(), n_daa_override=np.array([1, 2, 3, 6]))
+    st = _study(t, reading=M.Reading("ov", {"received": "overridden"}))
+    assert st.estimate("B-2", "received").value == 3.0

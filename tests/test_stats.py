@@ -148,3 +148,18 @@ def test_pairing_narrows_a_change_without_losing_coverage():
     lo_u, hi_u = S.Sample(rg.value / rb.value, rg.reps / rb.reps).interval()
     assert hi_p - lo_p < 0.8 * (hi_u - lo_u)
     assert lo_p <= yg.sum() / yb.sum() <= hi_p
+
+
+def test_independent_difference_of_two_campaigns():
+    """Two independent campaigns of different sizes with the same mean: the difference's interval
+    covers 0 and is about sqrt(2) times one campaign's; jackknife values of different encounter sets
+    are never combined."""
+    rng = np.random.default_rng(4)
+    a = S.ClusterBootstrap(3000, 2000, 1).sample_sums({"x": rng.poisson(2.0, 3000)})["x"] / 3000
+    b = S.ClusterBootstrap(2000, 2000, 1).sample_sums({"x": rng.poisson(2.0, 2000)})["x"] / 2000
+    assert (a - b).jack is None  # 3000 vs 2000 leave-one-out values: not paired
+    d = S.independent_difference(a, b)
+    lo, hi = d.interval()
+    assert lo < 0 < hi
+    sd_a, sd_b = a.reps.std(), b.reps.std()
+    assert d.reps.std() == pytest.approx(math.hypot(sd_a, sd_b), rel=0.1)
