@@ -194,7 +194,8 @@ def load_findings() -> list[Finding]:
     out = []
     for f in _raw()["findings"]:
         if f["kind"] not in KINDS:
-            raise FileFormatError(f"paper_findings.yaml: {f['id']}: unknown kind {f['kind']!r}; allowed: {', '.join(KINDS)}")
+            raise FileFormatError(f"paper_findings.yaml: {f['id']}: unknown kind {f['kind']!r}; "
+                                  f"allowed: {', '.join(KINDS)}")
         if f["metric"] not in METRICS:
             raise FileFormatError(f"paper_findings.yaml: {f['id']}: unknown metric {f['metric']!r}")
         base = dict(id=f["id"], claim=f["claim"], source=f.get("source", ""), kind=f["kind"], metric=f["metric"],
@@ -308,7 +309,8 @@ def _zero(f: Finding, st: Study) -> Outcome:
     k_enc = int(np.count_nonzero(e[col][ok] > 0))
     if k == 0:
         one, two = zero_upper_bounds(n, st.conf)
-        return Outcome(REPRODUCED, f"0 of {n:,} enc. (share ≤ {fmt(one, 'pct2')} one-sided, ≤ {fmt(two, 'pct2')})",
+        return Outcome(REPRODUCED,
+                       f"0 of {n:,} enc. (share ≤ {fmt(one, 'pct2')} one-sided, ≤ {fmt(two, 'pct2')} two-sided)",
                        f"exact upper bounds on the share of encounters with one: {one:.3g} (one-sided "
                        f"{100 * st.conf:.0f} %), {two:.3g} (upper limit of the two-sided interval)",
                        0.0, 0.0, two)

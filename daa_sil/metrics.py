@@ -309,8 +309,8 @@ def compute_metrics(enc, baseline: str = BASELINE_GROUP, conf: float = CONF, dt_
 COUNTING_DEFAULTS = {"received": "arrived", "window": "active"}
 #: allowed values of each counting setting, as documented for readers of a report
 COUNTING_HELP = {
-    "received": {"arrived": "every fresh pilot command that arrived during the window (incl. the ones the DAA overrode)",
-                 "pilot+blend": "executed as sent + blended (the paper's Table 5 arithmetic: received = pilot + blending)",
+    "received": {"arrived": "every fresh pilot command that arrived during the window (incl. those the DAA overrode)",
+                 "pilot+blend": "executed as sent + blended (the paper's Table 5 arithmetic: received = pilot + blend)",
                  "executed": "executed as sent only"},
     "window": {"active": "steps where the agent decides (corrective alert, a wait or blend in progress, DAA holding)"},
 }
@@ -658,7 +658,8 @@ class Study:
             return a - b
         raise UsageError(f"change kind must be ratio, reduction or difference, got {kind!r}")
 
-    def pooled_change_sample(self, metric: str, groups: Sequence[str], over: Sequence[str], kind: str = "ratio") -> Sample:
+    def pooled_change_sample(self, metric: str, groups: Sequence[str], over: Sequence[str],
+                             kind: str = "ratio") -> Sample:
         """Change of the mean of ``metric`` over ``groups`` from its mean over ``over`` (paired)."""
         a = sum((self.sample(g, metric) for g in groups[1:]), self.sample(groups[0], metric)) / len(groups)
         b = sum((self.sample(g, metric) for g in over[1:]), self.sample(over[0], metric)) / len(over)
@@ -730,10 +731,12 @@ def _build_metrics() -> dict:
     m["axis_match"] = MetricSpec(_ratio("blend_axis", "blend_intent"), ("blend_axis", "blend_intent"),
                                  "ratio estimator over blends of a pilot maneuver")
     m["neither_match"] = MetricSpec(
-        lambda st, g: (st.sum(g, "blend_intent") - st.sum(g, "blend_exact") - st.sum(g, "blend_axis")) / st.sum(g, "blend_intent"),
+        lambda st, g: ((st.sum(g, "blend_intent") - st.sum(g, "blend_exact") - st.sum(g, "blend_axis"))
+                       / st.sum(g, "blend_intent")),
         ("blend_exact", "blend_axis", "blend_intent"), "ratio estimator over blends of a pilot maneuver")
     m["blend_neither"] = MetricSpec(_ratio("blend_neither", "present"), ("blend_neither",),
-                                    "per encounter (blends of a maneuver matching neither)", zero_of="blend_neither_any")
+                                    "per encounter (blends of a maneuver matching neither)",
+                                    zero_of="blend_neither_any")
     m["blend_intent_share"] = MetricSpec(_ratio("blend_intent", "blend"), ("blend_intent", "blend"),
                                          "ratio estimator over blends")
     m["executed_share"] = MetricSpec(_ratio("pilot_exec", "received"), ("pilot_exec", "received"),
@@ -762,8 +765,9 @@ def _build_metrics() -> dict:
     m["dev_v_mean"] = MetricSpec(_ratio("dev_v_m", "present"), ("dev_v_m",), "mean over encounters", "m")
     m["map_decided_share"] = MetricSpec(_ratio("n_dec_map", "n_dec"), ("n_dec_map", "n_dec"),
                                         "ratio estimator over wait/no-wait decisions")
-    m["map_or_both_share"] = MetricSpec(lambda st, g: (st.sum(g, "n_dec_map") + st.sum(g, "n_dec_both")) / st.sum(g, "n_dec"),
-                                        ("n_dec_map", "n_dec_both", "n_dec"), "ratio estimator over wait/no-wait decisions")
+    m["map_or_both_share"] = MetricSpec(
+        lambda st, g: (st.sum(g, "n_dec_map") + st.sum(g, "n_dec_both")) / st.sum(g, "n_dec"),
+        ("n_dec_map", "n_dec_both", "n_dec"), "ratio estimator over wait/no-wait decisions")
     m["in_box_share"] = MetricSpec(_ratio("n_in_box", "n_lookup"), ("n_in_box", "n_lookup"),
                                    "ratio estimator over wait-map lookups")
     return m

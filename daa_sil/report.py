@@ -254,7 +254,8 @@ GROUP_TABLES = (
         ("pilot commands executed as sent", "pilot_exec", "g3", _paper_group("command_execution", "pilot", True), True),
         ("blended commands", "blend", "g3", _paper_group("command_execution", "blending", True), True))),
     ("Blending — (axis, direction) match among blends of a pilot maneuver", (
-        ("exact (axis, direction)", "exact_match", "pct", lambda g: 0.84 if paper_setup(g) == "integrated" else None, False),
+        ("exact (axis, direction)", "exact_match", "pct", lambda g: 0.84 if paper_setup(g) == "integrated" else None,
+         False),
         ("axis only", "axis_match", "pct", lambda g: 0.16 if paper_setup(g) == "integrated" else None, False),
         ("neither", "neither_match", "pct", lambda g: 0.0 if paper_setup(g) == "integrated" else None, False),
         ("blends of a pilot maneuver among all blends", "blend_intent_share", "pct", None, False))),
@@ -449,8 +450,8 @@ def _ablation_section(studies: dict) -> list[str]:
             rows = ablation_rows(st, full, abl)
             body = []
             for r in rows:
-                test = (f"McNemar {r['mcnemar'].a_only}/{r['mcnemar'].b_only} discordant, p = {r['mcnemar'].p_value:.3g}"
-                        if "mcnemar" in r else "paired bootstrap")
+                m = r.get("mcnemar")
+                test = (f"McNemar {m.a_only}/{m.b_only} discordant, p = {m.p_value:.3g}" if m else "paired bootstrap")
                 body.append([r["label"], _ci(r["full"], r["kind"]), _ci(r["ablation"], r["kind"]),
                              _ci(r["diff"], r["kind"]), test, "yes" if r["measurable"] else "no"])
             L += [f"### {lab}: {what}", "",
@@ -556,7 +557,8 @@ def _width_section(blocks, studies) -> list[str]:
     rows = []
     for g in st.groups:
         r = [g]
-        for key, old_key, scale in (("no_wait", "no_wait", st.n_encounters(g)), ("received", "received", st.n_encounters(g)),
+        n_g = st.n_encounters(g)
+        for key, old_key, scale in (("no_wait", "no_wait", n_g), ("received", "received", n_g),
                                     ("exact_match", "exact_match", 1.0), ("p_lowc_per_hr", "p_lowc_per_hr", 1.0)):
             new = st.estimate(g, key)
             o = old[g].get(old_key)

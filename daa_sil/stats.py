@@ -25,8 +25,7 @@ the narrower, correct interval.
 **Interval**: BCa (bias-corrected and accelerated; Efron 1987) from the replicates, with the
 acceleration from the leave-one-encounter-out jackknife, which for functions of sums is exact and
 vectorised (``total - x_i``); the plain percentile interval is available and is the fallback where
-BCa is undefined. On clustered campaign-like data the percentile interval of a ratio undercovers by
-1-3 points at a few hundred active encounters; BCa corrects most of that. Resamples on which a statistic is undefined (e.g. a mean PI over LoWC encounters when
+BCa is undefined. Resamples on which a statistic is undefined (e.g. a mean PI over LoWC encounters when
 a resample holds no LoWC encounter) are dropped and counted (:attr:`Sample.undefined`).
 ``tests/test_stats.py`` checks the coverage on clustered data with a known answer.
 

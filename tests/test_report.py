@@ -19,9 +19,11 @@ COLS = ("n_wait", "n_no_wait", "n_pilot_received", "n_pilot_exec", "n_blend", "n
 def _group_table(group, n, rng, wait, nmac=False, no_wait_scale=1.0):
     active = rng.random(n) < 0.3
     c = {"group": [group] * n, "encounter_id": np.arange(n), "duration_s": np.full(n, 240.0),
-         "lowc": np.arange(n) < 3, "nmac": (np.arange(n) == 1) & nmac, "lowc_duration_s": np.r_[3.0, 2.0, 1.0, np.zeros(n - 3)],
+         "lowc": np.arange(n) < 3, "nmac": (np.arange(n) == 1) & nmac,
+         "lowc_duration_s": np.r_[3.0, 2.0, 1.0, np.zeros(n - 3)],
          "pi": np.r_[0.7, 0.4, 0.2, np.zeros(n - 3)], "pi_paper": np.r_[0.8, 0.5, 0.25, np.zeros(n - 3)],
-         "dev_h_m": rng.normal(1700, 100, n), "dev_v_m": rng.normal(180, 10, n), "intruder_turns": np.arange(n) % 2 == 0}
+         "dev_h_m": rng.normal(1700, 100, n), "dev_v_m": rng.normal(180, 10, n),
+         "intruder_turns": np.arange(n) % 2 == 0}
     k = rng.poisson(9, n) * active
     c["n_wait"] = k * 8 // 9 if wait else np.zeros(n, int)
     c["n_no_wait"] = np.rint((k // 9 if wait else k) * no_wait_scale).astype(int)
@@ -51,7 +53,8 @@ def _campaign(d, groups, n=60, reading=None, settings=None, seed=0, decisions=No
     return d
 
 
-PAPER5 = [("B-1", False, {"nmac": True}), ("B-2", False, {}), ("IC-1", True, {}), ("ID-1", True, {}), ("ID-2", True, {})]
+PAPER5 = [("B-1", False, {"nmac": True}), ("B-2", False, {}), ("IC-1", True, {}), ("ID-1", True, {}),
+          ("ID-2", True, {})]
 
 
 def test_report_renders_findings_tables_and_figures(tmp_path):

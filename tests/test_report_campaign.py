@@ -113,7 +113,8 @@ def test_a_planted_override_is_not_reproduced(campaign, tmp_path):
     col[0] = 2
     t = t.set_column(t.schema.get_field_index("n_daa_override"), "n_daa_override", pa.array(col))
     pq.write_table(t, f0)
-    rc = main(["campaign", "report", str(campaign), str(planted), "--out", str(tmp_path / "rep"), "--replicates", "300"])
+    rc = main(["campaign", "report", str(campaign), str(planted), "--out", str(tmp_path / "rep"),
+               "--replicates", "300"])
     assert rc == 0
     data = json.loads((tmp_path / "rep" / "findings.json").read_text())
     assert [r["label"] for r in data["readings"]] == ["default", "planted"]

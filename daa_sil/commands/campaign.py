@@ -87,7 +87,8 @@ def register(sub) -> None:
                                        "95 % CI and a verdict under each reading (one campaign directory per "
                                        "reading), plus the paper's tables and figures.", epilog=REPORT_EXAMPLES,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
-    rep.add_argument("dirs", nargs="+", metavar="DIR", help="campaign directories (from 'campaign run'), one per reading")
+    rep.add_argument("dirs", nargs="+", metavar="DIR",
+                     help="campaign directories (from 'campaign run'), one per reading")
     rep.add_argument("--out", default=None, metavar="DIR2", help="report directory (default: FIRST_DIR/report)")
     rep.add_argument("--replicates", type=int_at_least("--replicates", 100), default=None, metavar="B",
                      help="bootstrap replicates (default 2000)")
