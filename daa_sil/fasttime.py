@@ -66,7 +66,7 @@ _I = pa.int64()
 ENCOUNTER_SCHEMA = pa.schema(
     [("group", pa.string()), ("encounter_id", _I), ("seed", _I), ("duration_s", pa.float64()),
      ("lowc", pa.bool_()), ("nmac", pa.bool_()), ("lowc_duration_s", pa.float64()), ("pi", pa.float64()),
-     ("min_range_m", pa.float64()), ("vsep_at_min_range_m", pa.float64()), ("dev_h_m", pa.float64()),
+     ("pi_paper", pa.float64()), ("min_range_m", pa.float64()), ("vsep_at_min_range_m", pa.float64()), ("dev_h_m", pa.float64()),
      ("dev_v_m", pa.float64()), ("n_active_steps", _I), ("n_wait", _I), ("n_no_wait", _I),
      ("n_pilot_received", _I), ("n_pilot_exec", _I), ("n_blend", _I), ("n_blend_exact", _I),
      ("n_blend_axis", _I), ("n_blend_intent", _I), ("n_daa_override", _I), ("n_stale", _I), ("n_link_lost", _I),
@@ -126,7 +126,8 @@ class _Accumulators:
         self.lowc = np.zeros(n, bool)
         self.nmac = np.zeros(n, bool)
         self.lowc_time = np.zeros(n)
-        self.pi = np.zeros(n)
+        self.pi = np.zeros(n)  # PI (s), preset constants, integrated on the LoWC segments
+        self.pi_paper = np.zeros(n)  # PI (s), the paper's Eq. constants (4000 ft / 450 ft / 35 s)
         self.min_range = np.full(n, np.inf)
         self.vsep_at_min = np.full(n, np.nan)
         self.dev_h = np.zeros(n)
@@ -155,7 +156,8 @@ class _Accumulators:
         self.lowc |= out.lowc
         self.nmac |= out.nmac
         self.lowc_time += out.lowc_time_s
-        self.pi += out.pen_rate * dt
+        self.pi += out.pi_s
+        self.pi_paper += out.pi_paper_s
         closer = out.seg_min_range_m < self.min_range
         self.min_range = np.where(closer, out.seg_min_range_m, self.min_range)
         self.vsep_at_min = np.where(closer, out.seg_vsep_m, self.vsep_at_min)
@@ -215,7 +217,7 @@ def _encounter_table(acc: _Accumulators, encounters, group: str, preset: str, du
         "group": pa.array(np.full(n, group), pa.string()), "encounter_id": pa.array(encounters.encounter_id, _I),
         "seed": pa.array(encounters.seed, _I), "duration_s": pa.array(np.full(n, float(duration))),
         "lowc": pa.array(acc.lowc), "nmac": pa.array(acc.nmac), "lowc_duration_s": pa.array(acc.lowc_time),
-        "pi": pa.array(acc.pi), "min_range_m": pa.array(acc.min_range), "vsep_at_min_range_m": pa.array(acc.vsep_at_min),
+        "pi": pa.array(acc.pi), "pi_paper": pa.array(acc.pi_paper), "min_range_m": pa.array(acc.min_range), "vsep_at_min_range_m": pa.array(acc.vsep_at_min),
         "dev_h_m": pa.array(acc.dev_h), "dev_v_m": pa.array(acc.dev_v), "n_active_steps": pa.array(acc.n_active, _I),
         "n_wait": pa.array(c[:, D_WAIT], _I), "n_no_wait": pa.array(c[:, D_NO_WAIT], _I),
         "n_pilot_received": pa.array(received, _I), "n_pilot_exec": pa.array(c[:, D_PILOT], _I),

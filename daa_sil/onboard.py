@@ -16,8 +16,9 @@ lookup, the DAA configuration and the allocation policy. :meth:`OnboardCore.step
    :func:`~daa_sil.kinematics.advance` with their scripted turn rate / accelerations);
 4. evaluates LoWC and NMAC on the continuous segment ``[t_k, t_k + dt]``
    (:func:`daa_sil.wellclear.segment_events`; an event strictly between samples is detected),
-   the time spent in LoWC on the segment, the minimum range on it, and the penetration rate at
-   ``t_k`` (for the PI).
+   the time spent in LoWC on the segment, the minimum range on it, the penetration rate at
+   ``t_k``, and the penetration integral over the segment's LoWC interval
+   (:func:`daa_sil.wellclear.segment_penetration`, with the preset's and with the paper's constants).
 
 Sans-IO: no sockets, no clock; the caller supplies ``t`` and the pilot input and moves the bytes.
 """
@@ -70,6 +71,9 @@ class StepOutput:
     seg_min_range_m: np.ndarray  #: (N,) minimum horizontal range on the segment (over intruders)
     seg_vsep_m: np.ndarray  #: (N,) vertical separation at that minimum
     turn_est: "np.ndarray | None" = None  #: (N, M) estimated intruder turn rates, compass rad/s
+    # -- PI on the continuous segment (issue 14): integrated over the LoWC interval of [t, t + dt] --
+    pi_s: "np.ndarray | None" = None  #: (N,) s, PI on the segment with the preset's constants (max over intruders)
+    pi_paper_s: "np.ndarray | None" = None  #: (N,) s, same with the paper's Eq. constants (4000 ft/450 ft/35 s)
 
 
 class TurnRateEstimator:
@@ -208,6 +212,10 @@ class OnboardCore:
         lowc_m, nmac_m = wc.segment_events(s0, s1, self.dt, self.th)
         t_in, t_out = wc.violation_interval(s0, (s1 - s0) / self.dt, self.th, 0.0, self.dt)
         in_lowc = np.where(np.isfinite(t_in), np.maximum(t_out - t_in, 0.0), 0.0)
+        # PI on the same segment and LoWC interval that detect the LoWC (issue 14)
+        v_seg = (s1 - s0) / self.dt
+        pi_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.pi_constants(self.th)).max(axis=1)
+        pi_paper_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.PAPER_PI_CONSTANTS).max(axis=1)
         rmin, vsep = wc.min_separation_on_segment(s0, s1)
         j = np.argmin(rmin, axis=1)
         rows = np.arange(self.n)
@@ -215,7 +223,7 @@ class OnboardCore:
                          turn_est=turn_est,
                          telemetry=telem, geometry=geom, lowc=lowc_m.any(axis=1), nmac=nmac_m.any(axis=1),
                          lowc_time_s=in_lowc.max(axis=1), pen_rate=pen, seg_min_range_m=rmin[rows, j],
-                         seg_vsep_m=vsep[rows, j])
+                         seg_vsep_m=vsep[rows, j], pi_s=pi_s, pi_paper_s=pi_paper_s)
         self.own, self.intruders = own1, intr1
         self.k += 1
         self.t = float(t) + self.dt

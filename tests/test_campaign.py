@@ -151,7 +151,6 @@ def _same_values(a: Path, b: Path) -> bool:
 
 
 def test_report_from_a_campaign(tmp_path, capsys):
-    pytest.importorskip("daa_sil.report")
     cfg = CampaignConfig(**{**SMALL, "groups": ("B-2", "ID-2"), "n_encounters": 6})
     run_campaign(cfg, tmp_path / "c", progress=False)
     rc = main(["campaign", "report", str(tmp_path / "c"), "--out", str(tmp_path / "rep")])

@@ -597,8 +597,7 @@ def _check_args(args) -> None:
     if args.scenario is not None:
         from ..scenario import load_scenario
 
-        sc = load_scenario(args.scenario)  # fail fast, one line, before any process starts
-        prepare_waitmap(sc, args.waitmap, None if args.json else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
+        load_scenario(args.scenario)  # fail fast, one line, before any process starts
 
 
 def _options(args, scenario: Path) -> RunOptions:
@@ -626,9 +625,13 @@ def _finish(args, result: dict, sc) -> int:
 
 
 def run(args) -> int:
+    from ..io import ensure_dir
     from ..scenario import load_scenario
 
     _check_args(args)
+    ensure_dir(args.out)  # an unusable --out fails here, before the maps are built or anything starts
+    prepare_waitmap(load_scenario(args.scenario), args.waitmap,
+                    None if args.json else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
     result = run_sil(_options(args, args.scenario))
     return _finish(args, result, load_scenario(args.scenario))
 
@@ -642,6 +645,7 @@ def demo_scenario_path() -> Path:
 
 
 def demo(args) -> int:
+    from ..io import ensure_dir
     from ..scenario import load_scenario
 
     _check_args(args)
@@ -649,6 +653,7 @@ def demo(args) -> int:
     sc = load_scenario(path)
     if not args.json:
         print(f"daa-sil demo: {sc.description.strip().splitlines()[0]}", flush=True)
+    ensure_dir(args.out)
     prepare_waitmap(sc, args.waitmap, None if args.json else (lambda m: print(f"daa-sil demo: {m}", flush=True)))
     result = run_sil(_options(args, path))
     if not args.json:
@@ -674,6 +679,8 @@ def prepare_waitmap(sc, source: "str | None", say: "Callable[[str], None] | None
     from .. import waitmap
 
     t = time.monotonic()
+    if waitmap.is_cached(source, preset="paper"):
+        say = None  # loaded in well under a second: nothing to report
     if say:
         say(f"loading the MDP wait maps ({source or waitmap.DEFAULT_MAP}; the first run builds and caches them) ...")
     progress = (lambda r: say(f"  built the {r:+g} deg/s map ({time.monotonic() - t:.0f} s)")) if say else None

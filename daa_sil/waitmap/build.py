@@ -118,6 +118,15 @@ def default_family(preset: str = "paper", grid: "Grid | str | None" = None, para
     return fam
 
 
+def is_cached(source: "str | os.PathLike | None", preset: str = "paper", gamma: "float | None" = None,
+              turn_rates=PAPER_TURN_RATES) -> bool:
+    """True if :func:`family_for` would load the family (a directory, or a built cache entry)."""
+    g, p = check_source(source, preset, gamma)
+    if g is None:
+        return True
+    return (cache_dir() / "waitmaps" / params_hash(g.to_dict(), p, turn_rates)[:24] / "family.json").is_file()
+
+
 def family_for(source: "str | os.PathLike | None", preset: str = "paper", gamma: "float | None" = None,
                progress: "Callable[[float], None] | None" = None) -> WaitMapFamily:
     """The wait-map family of a ``--waitmap`` value: a family directory written by ``waitmap build``,
