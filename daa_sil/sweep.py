@@ -209,7 +209,10 @@ def render(meta: dict, rows: Sequence[dict], image_prefix: str = "") -> str:
             cells = []
             for g in groups:
                 r = next((r for r in sel if r["value"] == v and r["group"] == g), None)
-                cells.append("–" if r is None else f"{_fmt(r['estimate'])} [{_fmt(r['lo'])}, {_fmt(r['hi'])}]")
+                if r is None or not math.isfinite(r["estimate"]):
+                    cells.append("–")
+                else:
+                    cells.append(f"{_fmt(r['estimate'])} [{_fmt(r['lo'])}, {_fmt(r['hi'])}]")
             L.append(f"| {v} | " + " | ".join(cells) + " |")
         L += ["", f"![{label}]({image_prefix}sensitivity_{metric}.png)", ""]
     return "\n".join(L)
