@@ -128,12 +128,19 @@ class CampaignConfig:
 
             parse_delay_spec(self.latency)
         self.effective_groups  # noqa: B018 -- validates the overridden definitions
-        self.effective_reading  # noqa: B018
+        r = self.effective_reading
+        if r.waitmap is not None and self.waitmap not in (DEFAULT_MAP, r.waitmap):
+            raise UsageError(f"reading {r.name!r} sets the wait maps to {r.waitmap!r}; drop --waitmap {self.waitmap}")
         if self.uses_map:
             from .waitmap.build import check_source
 
-            check_source(self.waitmap, self.preset, self.gamma)
+            check_source(self.map_source, self.preset, self.gamma)
         return self
+
+    @property
+    def map_source(self) -> str:
+        """The ``--waitmap`` the map groups read: the reading's, else the campaign's."""
+        return self.effective_reading.waitmap or self.waitmap
 
     @property
     def effective_reading(self):
@@ -251,7 +258,7 @@ def _wait_family(source: str, preset: str, gamma: "float | None" = None):
 
 def campaign_family(config: CampaignConfig):
     """The wait-map family a campaign's map groups read (None if no group uses the map)."""
-    return _wait_family(config.waitmap, config.preset, config.gamma) if config.uses_map else None
+    return _wait_family(config.map_source, config.preset, config.gamma) if config.uses_map else None
 
 
 def run_chunk(task: ChunkTask) -> ChunkResult:
@@ -455,7 +462,7 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
         stored_map = load_campaign_json(out).get("waitmap")
         fam = campaign_family(config)
         if stored_map and fam is not None and stored_map.get("content_hashes") != _describe_family(fam)["content_hashes"]:
-            raise UsageError(f"--resume: the wait maps of {config.waitmap!r} are not the ones this campaign started with "
+            raise UsageError(f"--resume: the wait maps of {config.map_source!r} are not the ones this campaign started with "
                              f"(their content hashes differ: rebuilt with other code or parameters); start a new campaign")
         encs = enc_mod.load_encounters(enc_path)
         if len(encs) != config.n_encounters:
@@ -475,7 +482,7 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
                       "encounters": "encounter i: SeedSequence(campaign, spawn_key=(i,)); its 'seed' column in "
                                     "encounters.parquet roots the pilot, uplink and downlink streams of every group"},
             "groups": {g.name: g.to_dict() for g in config.effective_groups},
-            "waitmap": ({"source": config.waitmap, **_describe_family(fam)} if fam is not None else None),
+            "waitmap": ({"source": config.map_source, **_describe_family(fam)} if fam is not None else None),
             "layout": {"encounters": "<group>/encounters-<chunk>.parquet",
                        "decisions": "<group>/decisions-<chunk>.parquet", "chunk_size": config.chunk_size}}
     atomic_write_json(meta_path, meta)

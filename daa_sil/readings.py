@@ -15,7 +15,10 @@ Settings that change the **simulation** (one campaign each):
   then) or ``detection`` ("hold" from the first telemetry, maneuvering from the corrective alert:
   the model "captures pilot response from the beginning of an encounter till safe avoidance");
 * ``hold_commands`` -- the GCS streams "hold" as a pilot command until the pilot's first maneuver
-  (true) or sends only maneuvers (false).
+  (true) or sends only maneuvers (false);
+* ``waitmap`` -- the wait maps' grid: the paper's own ±1,500 m grid read at the nearest point of the
+  box for states outside it (``paper``, the literal reading of "the agent matches the current state
+  with a state in the wait map"), or unset (the campaign's ``--waitmap``, default ``alerting``).
 
 Settings that change only the **counting** (the report recounts the same results):
 
@@ -45,6 +48,7 @@ class Reading:
     units: str = "metres"
     pilot_start: str = "corrective"
     hold_commands: bool = True
+    waitmap: "str | None" = None
     window: str = "active"
     received: str = "arrived"
     description: str = ""
@@ -76,7 +80,7 @@ class Reading:
 
     def simulation_key(self) -> tuple:
         """The settings that change what is simulated (two readings with the same key share results)."""
-        return (self.units, self.pilot_start, self.hold_commands)
+        return (self.units, self.pilot_start, self.hold_commands, self.waitmap)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -106,6 +110,8 @@ READINGS: dict[str, Reading] = {r.name: r for r in (
                         "alert; paper counting"),
     Reading("no-hold", hold_commands=False,
             description="as literal, but the GCS sends only the pilot's maneuvers, no 'hold'"),
+    Reading("paper-grid", waitmap="paper",
+            description="as literal, on the paper's own +-1,500 m wait-map grid (nearest point of the box outside)"),
 )}
 
 

@@ -716,12 +716,14 @@ def _slug(label: str) -> str:
 
 # --- report ---------------------------------------------------------------------------------------
 def render_markdown(blocks: Sequence[Block], studies: dict, rows, *, replicates: int, seed: int, conf: float,
-                    figures: dict) -> str:
-    """The report text (see the module docstring)."""
+                    figures: dict, notes: Sequence[str] = ()) -> str:
+    """The report text (see the module docstring); ``notes`` are paragraphs printed after the intro."""
     L = ["# daa-sil campaign report", "",
          "Tabassum & Bai's findings against our fast-time study, one column block per named reading of the "
          "paper, with encounter-level 95 % confidence intervals and a verdict rule that can fail. Paper values: "
          "`daa_sil/data/paper_results.yaml`.", ""]
+    for note in notes:
+        L += [str(note), ""]
     L += _sources(blocks, studies)
     L += _findings_section(blocks, rows)
     L += _ablation_section(studies)
@@ -753,7 +755,8 @@ def _finite(x):
 
 
 def write_report(src, out_dir: "str | os.PathLike", baseline: str = BASELINE_GROUP, conf: float = CONF, *,
-                 replicates: int = DEFAULT_REPLICATES, seed: int = DEFAULT_SEED, recount: Sequence[str] = ()) -> Path:
+                 replicates: int = DEFAULT_REPLICATES, seed: int = DEFAULT_SEED, recount: Sequence[str] = (),
+                 notes: Sequence[str] = ()) -> Path:
     """Compute the study of ``src`` (a campaign directory, a list of them, or one results source)
     and write ``out_dir/report.md``, ``out_dir/findings.json`` and the PNG figures; returns the report
     path. FileFormatError for a missing, empty or corrupt results source (nothing is written)."""
@@ -765,7 +768,8 @@ def write_report(src, out_dir: "str | os.PathLike", baseline: str = BASELINE_GRO
     figures = {}
     for i, b in enumerate(blocks):
         figures[b.label] = _figures(studies[b.label], out, "" if i == 0 else f"-{_slug(b.label)}")
-    text = render_markdown(blocks, studies, rows, replicates=replicates, seed=seed, conf=conf, figures=figures)
+    text = render_markdown(blocks, studies, rows, replicates=replicates, seed=seed, conf=conf, figures=figures,
+                           notes=notes)
     from .io import atomic_write_json
 
     atomic_write_json(out / "findings.json", findings_json(blocks, rows, replicates, seed, conf))

@@ -14,7 +14,7 @@ from daa_sil.units import FT
 
 def test_bundles_and_what_they_change():
     lit = reading_for("literal")
-    assert lit.encounter_overrides() == {} and lit.simulation_key() == ("metres", "corrective", True)
+    assert lit.encounter_overrides() == {} and lit.simulation_key() == ("metres", "corrective", True, None)
     p = lit.pilot_config()
     assert (p.alert_level_min, p.stream_level_min, p.stream_hold) == (2, None, True)
     feet = reading_for("feet")

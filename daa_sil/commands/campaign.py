@@ -130,6 +130,9 @@ def register(sub) -> None:
     rep.add_argument("--recount", action="append", default=[], metavar="NAME:key=value[,...]",
                      help="add a reading counted differently from the same results (keys: received, window); "
                           "repeatable")
+    rep.add_argument("--note", action="append", default=[], metavar="TEXT",
+                     help="a paragraph printed under the report's introduction (e.g. the seeds used while "
+                          "developing); repeatable")
     rep.add_argument("--json", action="store_true", help="print a JSON summary (paths, verdict counts) on stdout")
     rep.set_defaults(func=report_cmd)
 
@@ -279,7 +282,7 @@ def report_cmd(args) -> int:
     reps = args.replicates or DEFAULT_REPLICATES
     seed = DEFAULT_SEED if args.bootstrap_seed is None else args.bootstrap_seed
     path = report.write_report(dirs if len(dirs) > 1 else dirs[0], out, replicates=reps, seed=seed,
-                               recount=args.recount)
+                               recount=args.recount, notes=args.note)
     if args.json:
         data = json.loads((out / "findings.json").read_text(encoding="utf-8"))
         counts = {r["label"]: {v: sum(1 for f in data["findings"] if f["outcomes"][r["label"]]["verdict"] == v)
