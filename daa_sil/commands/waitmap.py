@@ -107,7 +107,7 @@ def register(sub) -> None:
 
     s = vs.add_parser("show", help="query a map at one state", epilog=SHOW_EX,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    s.add_argument("map", metavar="MAP", help="a map .npz or a family directory")
+    s.add_argument("map", metavar="MAP", help="a map .npz, a family directory or a map preset (paper, alerting, fine)")
     for name, unit, lo, hi in (("dx", "m", -1e6, 1e6), ("dy", "m", -1e6, 1e6), ("dh", "m", -1e5, 1e5),
                                ("vi", "m/s", 0.0, 1000.0), ("vh", "m/s", -200.0, 200.0), ("theta", "deg", -720.0, 720.0)):
         s.add_argument(f"--{name}", required=True, type=finite_float(f"--{name}", lo, hi), metavar=unit.upper())
@@ -124,7 +124,7 @@ def register(sub) -> None:
 
     pl = vs.add_parser("plot", help="write PNG figures of a map or family", epilog=PLOT_EX,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    pl.add_argument("map", metavar="MAP", help="a map .npz or a family directory")
+    pl.add_argument("map", metavar="MAP", help="a map .npz, a family directory or a map preset (paper, alerting, fine)")
     pl.add_argument("--out", required=True, metavar="DIR", help="directory for the PNGs")
     pl.add_argument("--vi", type=finite_float("--vi", 1.0, 1000.0), default=155.0, help="intruder speed of the slices, m/s (default 155)")
     pl.add_argument("--dh", type=finite_float("--dh", -1e4, 1e4), default=200.0, help="relative altitude of the slices, m (default 200)")
@@ -138,11 +138,14 @@ def register(sub) -> None:
 
 
 def _load_any(path: str):
+    """A family directory, one map file, or a map preset (built and cached like a campaign's)."""
     from .. import waitmap
 
     p = Path(path)
     if p.is_dir():
         return waitmap.load_family(p)
+    if not p.exists() and str(path) in waitmap.MAP_PRESETS:
+        return waitmap.family_for(str(path))
     return waitmap.WaitMapFamily([waitmap.load(p)])
 
 
@@ -207,7 +210,7 @@ def run_check(args) -> int:
     from .. import waitmap
     from ..waitmap.oracles import check_family
 
-    fam = waitmap.family_for(args.map) if not Path(args.map).is_dir() else waitmap.load_family(args.map)
+    fam = _load_any(args.map)
     rep = check_family(fam)
     ok = rep["head_on_vs_overtaking"]["holds"] and rep["converging_lines"]["holds"]
     mir = rep["mirror"]
