@@ -44,21 +44,27 @@ def interpolate(grid: Grid, fields: np.ndarray, states: np.ndarray) -> tuple[np.
     """Multilinear interpolation of ``fields`` (``(*grid.shape, m)``) at ``states`` (``(N, 6)``).
 
     Returns ``(values (N, m), inside_box (N,), inside_all (N,))``; axes are clamped at their ends.
+    All 64 corners at once: an ``(N, 64)`` index matrix (the non-periodic axes' upper node is always
+    the lower one + 1, so their corner offsets are constants; theta wraps) and the outer product of
+    the per-axis weights.
     """
     w = [grid.axes[a].weights(states[:, a]) for a in range(6)]
     inside_box = w[0][3] & w[1][3] & w[2][3]
     inside_all = inside_box & w[3][3] & w[4][3]
     flat = fields.reshape(-1, fields.shape[-1])
     strides = np.cumprod((1,) + grid.shape[::-1][:-1])[::-1]
-    out = np.zeros((states.shape[0], fields.shape[-1]))
-    for c in range(64):
-        idx = np.zeros(states.shape[0], np.int64)
-        wt = np.ones(states.shape[0])
-        for a in range(6):
-            hi = (c >> a) & 1
-            idx += (w[a][1] if hi else w[a][0]) * strides[a]
-            wt *= w[a][2] if hi else 1.0 - w[a][2]
-        out += wt[:, None] * flat[idx]
+    n = states.shape[0]
+    base = sum(w[a][0] * strides[a] for a in range(5))
+    bits = (np.arange(32)[:, None] >> np.arange(5)[None, :]) & 1  # corner c -> upper node on axis a?
+    # an axis with one node (or clamped to one) has i1 == i0: the offset follows the actual indices
+    step = np.stack([(w[a][1] - w[a][0]) * strides[a] for a in range(5)], axis=1)  # (N, 5)
+    idx5 = base[:, None] + step @ bits.T  # (N, 32)
+    idx = (idx5[:, None, :] + np.stack([w[5][0], w[5][1]], axis=1)[:, :, None] * strides[5]).reshape(n, 64)
+    wt = np.ones((n, 32))
+    for a in range(5):
+        wt *= np.where(bits[:, a][None, :] == 1, w[a][2][:, None], 1.0 - w[a][2][:, None])
+    wt = (np.stack([1.0 - w[5][2], w[5][2]], axis=1)[:, :, None] * wt[:, None, :]).reshape(n, 64)
+    out = np.einsum("nc,ncm->nm", wt, flat[idx].astype(float))
     return out, inside_box, inside_all
 
 
