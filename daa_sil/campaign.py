@@ -1,7 +1,7 @@
 """Fast-time Monte Carlo campaigns over the paper's groups (Table 2), chunked over executors.
 
-One code path for every executor (``reference/rerun_dask.md`` §4): chunks of encounters are
-submitted to a :class:`concurrent.futures.Executor` and collected with ``as_completed``:
+One code path for every executor: chunks of encounters are submitted to a
+:class:`concurrent.futures.Executor` and collected with ``as_completed``, whichever executor it is:
 
 * ``workers=1`` -- in-process (one worker thread, so the progress bar stays live);
 * ``workers=K`` -- :class:`~concurrent.futures.ProcessPoolExecutor` (fork; the wait maps are loaded

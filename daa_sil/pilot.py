@@ -1,4 +1,4 @@
-"""Remote-pilot model (Guendel et al. 2017, simplified as in ``reference/models.md`` §1.5), batched.
+"""Remote-pilot model (after Guendel et al. 2017, simplified as ``docs/models.md`` describes), batched.
 
 One :class:`PilotModel` steps N pilots (one per encounter) at 1 Hz with the GCS's view: the
 ownship state it sees (downlink-delayed telemetry) and the DAA guidance computed from that view

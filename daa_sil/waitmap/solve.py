@@ -5,7 +5,7 @@
 nodes; ``V = max(Q_w, Q_e)`` elsewhere (ties go to wait). **Stopping rule** (Puterman Thm 6.3.1):
 stop at the first sweep with ``||V_{n+1} - V_n||_inf < eps (1 - gamma) / (2 gamma)``; then
 ``||V_{n+1} - V*||_inf < eps / 2`` and the greedy policy is eps-optimal. (The span rule used by
-pymdptoolbox only bounds the policy, not V; we need V, see ``reference/models.md`` §2.2.)
+pymdptoolbox only bounds the policy, not V; the wait map needs V: ``docs/waitmap.md``.)
 
 **Wait time.** Under the *waiting chain* (the UAS keeps waiting whatever the policy says; EXIT is
 absorbing and never LoWC), with T the first step in a LoWC node and L the LoWC nodes:
