@@ -99,7 +99,7 @@ class GcsNode:
             self.pilot = PilotModel(1, [seed], PilotConfig(mode=scenario.pilot.response if scenario else "guendel"),
                                     plan=ownship_state(scenario) if scenario is not None else None,
                                     daa_cfg=self.daa_cfg)
-            self.display = PilotDisplay(1, self.daa_cfg, self.pilot.cfg.alert_level_min)
+            self.pilot_display = PilotDisplay(1, self.daa_cfg, self.pilot.cfg.alert_level_min)
         self._g_seen = math.nan
         self.seq = 0
         self.sent: list[dict] = []
@@ -202,7 +202,7 @@ class GcsNode:
         obs = self.observed()
         if obs is None:  # nothing seen yet: the pilot steps on an unknown (nan) state, as in fast-time
             nan = np.full(1, np.nan)
-            self.pilot.step(t, AircraftState(nan, nan, nan, nan, nan, nan), self.display.guidance())
+            self.pilot.step(t, AircraftState(nan, nan, nan, nan, nan, nan), self.pilot_display.guidance())
             return []
         own, intr = obs
         po = self.pilot.step(t, own, self._guidance(own, intr), intr)
@@ -221,9 +221,9 @@ class GcsNode:
         t_seen = self.view.own[0]
         if t_seen != self._g_seen:
             self._g_seen = t_seen
-            alert = int(self.view.alert[1]) if self.view.alert[0] == t_seen else int(self.display.alert[0])
-            self.display.refresh(np.array([0]), own, intr, np.array([alert]))
-        return self.display.guidance()
+            alert = int(self.view.alert[1]) if self.view.alert[0] == t_seen else int(self.pilot_display.alert[0])
+            self.pilot_display.refresh(np.array([0]), own, intr, np.array([alert]))
+        return self.pilot_display.guidance()
 
     def _heartbeat(self):
         return M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE, 3)
