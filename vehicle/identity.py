@@ -1,0 +1,89 @@
+"""The vehicle's MAVLink identity: an ArduPlane-compatible fixed wing, and its flight modes.
+
+Why ArduPlane: ground stations decode ``custom_mode`` by the HEARTBEAT's autopilot field. With
+``MAV_AUTOPILOT_GENERIC`` MAVProxy falls back to ArduPlane's table anyway (our old codes 0/1/2 read
+as MANUAL / CIRCLE / STABILIZE) and MAVSDK decodes modes only for PX4 and ArduPilot. Presenting as
+ArduPilot (``MAV_AUTOPILOT_ARDUPILOTMEGA``, ``MAV_TYPE_FIXED_WING``) and mapping each authority to
+the ArduPlane mode that does the same thing makes every stock client show a true name:
+
+======================  ==============  =====================================================
+authority (agent)       ArduPlane mode  why this mode
+======================  ==============  =====================================================
+pilot                   GUIDED (15)     the aircraft flies setpoints sent from the ground
+daa (DAA, blend,        AVOID_ADSB (14) ArduPilot's mode while its ADS-B avoidance flies
+override, link lost)
+hold (agent waits)      CRUISE (7)      holds the last course, climb rate and speed: what the
+                                        agent does while it waits for the delayed pilot
+======================  ==============  =====================================================
+
+(LOITER would read "Hold" in MAVSDK, but an ArduPlane in LOITER circles; ours flies straight on.)
+
+Mode requests (``MAV_CMD_DO_SET_MODE``, the ``SET_MODE`` message) switch the onboard agent, the
+one thing a mode can honestly change here, because the agent decides authority every step:
+
+* ``GUIDED`` -- the remote pilot alone: the agent is switched off (``DAA_ENABLE`` 0), so the
+  HEARTBEAT shows GUIDED from then on;
+* ``AVOID_ADSB`` -- onboard DAA armed: the agent is switched on (``DAA_ENABLE`` 1); the HEARTBEAT
+  then shows whatever the agent decides (GUIDED while no conflict, AVOID_ADSB / CRUISE in one);
+* any other mode, or a request without ``MAV_MODE_FLAG_CUSTOM_MODE_ENABLED``: ``DENIED``.
+
+``base_mode`` follows ArduPlane: CUSTOM_MODE_ENABLED | STABILIZE | SAFETY_ARMED, plus GUIDED in
+GUIDED and AVOID_ADSB. The aircraft is always airborne and armed: ARM is accepted (it already is),
+DISARM fails.
+"""
+
+from __future__ import annotations
+
+from daa_sil.link.codec import mavlink as M
+
+AUTOPILOT = M.MAV_AUTOPILOT_ARDUPILOTMEGA
+VEHICLE_TYPE = M.MAV_TYPE_FIXED_WING
+
+#: ArduPlane mode numbers (ArduPlane's ``Mode::Number``) -> names, as MAVProxy / pymavlink spell them
+PLANE_MODES = {0: "MANUAL", 1: "CIRCLE", 2: "STABILIZE", 3: "TRAINING", 4: "ACRO", 5: "FBWA", 6: "FBWB",
+               7: "CRUISE", 8: "AUTOTUNE", 10: "AUTO", 11: "RTL", 12: "LOITER", 13: "TAKEOFF", 14: "AVOID_ADSB",
+               15: "GUIDED", 16: "INITIALISING"}
+GUIDED, AVOID_ADSB, CRUISE = 15, 14, 7
+#: authority -> ArduPlane mode number
+AUTHORITY_MODE = {"pilot": GUIDED, "daa": AVOID_ADSB, "hold": CRUISE}
+#: mode numbers a GCS may request -> the agent switch they set (True = on)
+SETTABLE_MODES = {GUIDED: False, AVOID_ADSB: True}
+
+#: capabilities actually served (AUTOPILOT_VERSION): MAVLink 2, COMMAND_INT (DO_REPOSITION, modes),
+#: SET_POSITION_TARGET_GLOBAL_INT velocity setpoints, and the C-cast parameter encoding (integer
+#: parameters travel as their float value, as ArduPilot does). No missions, no FTP.
+CAPABILITIES = (M.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+                | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
+
+
+def mode_of(authority: str, agent_enabled: bool = True) -> int:
+    """ArduPlane mode number shown for ``authority`` (GUIDED whenever the agent is off)."""
+    if not agent_enabled:
+        return GUIDED
+    return AUTHORITY_MODE.get(authority, GUIDED)
+
+
+def base_mode(mode: int) -> int:
+    """HEARTBEAT ``base_mode`` for ArduPlane mode ``mode`` (airborne, armed)."""
+    b = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED | M.MAV_MODE_FLAG_SAFETY_ARMED
+    if mode in (GUIDED, AVOID_ADSB):
+        b |= M.MAV_MODE_FLAG_GUIDED_ENABLED
+    return b
+
+
+def mode_name(mode: int) -> str:
+    return PLANE_MODES.get(int(mode), f"MODE{int(mode)}")
+
+
+def mode_request(base: int, custom: int) -> "tuple[int, bool | None, str]":
+    """Decide a mode request: ``(MAV_RESULT, agent switch to set or None, one-line reason)``."""
+    if not int(base) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        return M.MAV_RESULT_DENIED, None, "mode request without CUSTOM_MODE_ENABLED; send an ArduPlane mode number"
+    custom = int(custom)
+    if custom in SETTABLE_MODES:
+        on = SETTABLE_MODES[custom]
+        what = "DAA agent on (onboard DAA may take over)" if on else "DAA agent off (pilot flies alone)"
+        return M.MAV_RESULT_ACCEPTED, on, f"mode {mode_name(custom)}: {what}"
+    allowed = " or ".join(mode_name(m) for m in SETTABLE_MODES)
+    return M.MAV_RESULT_DENIED, None, f"mode {mode_name(custom)} not available; use {allowed}"
