@@ -80,6 +80,29 @@ def test_identity_is_an_arduplane_in_guided(link):
     assert av.flight_sw_version >> 8 == 0x000100  # daa-sil 0.1.0
 
 
+def test_mode_requests_are_answered_and_never_override_the_agent(link):
+    from pymavlink import mavutil
+
+    conn, tapc, proc, tmp = link
+    m = mavutil.mavlink
+    conn.mav.command_long_send(1, 1, m.MAV_CMD_DO_SET_MODE, 0, 1, 15, 0, 0, 0, 0, 0)  # GUIDED: the pilot's mode
+    assert _ack(conn, m.MAV_CMD_DO_SET_MODE)[0].result == m.MAV_RESULT_ACCEPTED
+    conn.mav.set_mode_send(1, 1, 14)  # the SET_MODE message, AVOID_ADSB: only the agent enters it
+    ack, got = _ack(conn, m.MAVLINK_MSG_ID_SET_MODE)
+    assert ack.result == m.MAV_RESULT_DENIED
+    conn.mav.command_long_send(1, 1, m.MAV_CMD_DO_SET_MODE, 0, 1, 11, 0, 0, 0, 0, 0)  # RTL: not available
+    assert _ack(conn, m.MAV_CMD_DO_SET_MODE)[0].result == m.MAV_RESULT_DENIED
+    conn.mav.command_long_send(1, 1, m.MAV_CMD_DO_SET_MODE, 0, 0, 15, 0, 0, 0, 0, 0)  # no custom-mode flag
+    assert _ack(conn, m.MAV_CMD_DO_SET_MODE)[0].result == m.MAV_RESULT_DENIED
+    tapc.mav.command_long_send(1, 1, m.MAV_CMD_DO_SET_MODE, 0, 1, 15, 0, 0, 0, 0, 0)  # tap: read-only
+    assert _ack(tapc, m.MAV_CMD_DO_SET_MODE)[0].result == m.MAV_RESULT_DENIED
+    hb = recv_until(conn, lambda x: x.get_type() == "HEARTBEAT", 3.0)[-1]
+    assert hb.custom_mode == 15
+    conn.mav.param_request_read_send(1, 1, b"DAA_ENABLE", -1)
+    v, _ = _param(conn, "DAA_ENABLE")
+    assert v.param_value == 1.0  # no mode request switched the agent
+
+
 def test_standard_telemetry_set_is_consistent(link):
     conn, *_ = link
     want = {"SYS_STATUS", "GPS_RAW_INT", "GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD", "EXTENDED_SYS_STATE",
@@ -239,28 +262,6 @@ def test_parameter_protocol_list_read_set_and_refusals(link):
     assert v.param_value == 6.0
 
 
-def test_modes_switch_the_agent_and_are_logged(link):
-    from pymavlink import mavutil
-
-    conn, tapc, proc, tmp = link
-    m = mavutil.mavlink
-    conn.mav.command_long_send(1, 1, m.MAV_CMD_DO_SET_MODE, 0, 1, 15, 0, 0, 0, 0, 0)  # GUIDED: agent off
-    assert _ack(conn, m.MAV_CMD_DO_SET_MODE)[0].result == m.MAV_RESULT_ACCEPTED
-    conn.mav.param_request_read_send(1, 1, b"DAA_ENABLE", -1)
-    v, _ = _param(conn, "DAA_ENABLE")
-    assert v is not None and v.param_value == 0.0
-    conn.mav.set_mode_send(1, 1, 14)  # the SET_MODE message, AVOID_ADSB: agent on again
-    ack, _ = _ack(conn, m.MAVLINK_MSG_ID_SET_MODE)
-    assert ack.result == m.MAV_RESULT_ACCEPTED
-    conn.mav.command_long_send(1, 1, m.MAV_CMD_DO_SET_MODE, 0, 1, 11, 0, 0, 0, 0, 0)  # RTL: not available
-    assert _ack(conn, m.MAV_CMD_DO_SET_MODE)[0].result == m.MAV_RESULT_DENIED
-    tapc.mav.command_long_send(1, 1, m.MAV_CMD_DO_SET_MODE, 0, 1, 15, 0, 0, 0, 0, 0)  # tap: read-only
-    assert _ack(tapc, m.MAV_CMD_DO_SET_MODE)[0].result == m.MAV_RESULT_DENIED
-    conn.mav.param_request_read_send(1, 1, b"DAA_ENABLE", -1)
-    v, _ = _param(conn, "DAA_ENABLE")
-    assert v.param_value == 1.0
-
-
 def test_do_reposition_is_a_pilot_command(link):
     from pymavlink import mavutil
 
@@ -283,6 +284,24 @@ def test_do_reposition_is_a_pilot_command(link):
     assert _ack(conn, m.MAV_CMD_DO_REPOSITION)[0].result == m.MAV_RESULT_DENIED
 
 
+def test_guided_is_refused_while_the_agent_holds_authority(link):
+    """Later in the encounter the agent takes authority (AVOID_ADSB / CRUISE): GUIDED is then refused."""
+    from pymavlink import mavutil
+
+    conn, *_ = link
+    m = mavutil.mavlink
+    got = recv_until(conn, lambda x: x.get_type() == "HEARTBEAT" and x.custom_mode in (7, 14), 60.0)
+    assert got and got[-1].get_type() == "HEARTBEAT" and got[-1].custom_mode in (7, 14), "the agent never took over"
+    assert conn.flightmode in ("CRUISE", "AVOID_ADSB")
+    conn.mav.command_long_send(1, 1, m.MAV_CMD_DO_SET_MODE, 0, 1, 15, 0, 0, 0, 0, 0)
+    ack, around = _ack(conn, m.MAV_CMD_DO_SET_MODE)
+    modes = [x.custom_mode for x in around if x.get_type() == "HEARTBEAT"]
+    if ack.result == m.MAV_RESULT_ACCEPTED:  # the agent handed back in between: the heartbeat says so
+        assert 15 in modes, modes
+    else:
+        assert ack.result == m.MAV_RESULT_TEMPORARILY_REJECTED
+
+
 def test_settings_are_in_the_step_log(link):
     """Run last in this module: stops the vehicle and reads the settings it logged."""
     import json
@@ -298,4 +317,6 @@ def test_settings_are_in_the_step_log(link):
     assert wt[0]["old"] == 4.0 and wt[0]["new"] == 6.0 and wt[0]["t_sent"] is None  # mavutil stamps no send time
     assert wt[0]["t_applied"] >= wt[0]["t_received"] - 1e-9 and wt[0]["t_applied"] == round(wt[0]["t_applied"])
     modes = [(e["name"], e["status"]) for e in ev if e["kind"] == "mode"]
-    assert modes == [("GUIDED", "accepted"), ("AVOID_ADSB", "accepted"), ("RTL", "denied"), ("GUIDED", "denied_tap")]
+    assert modes[:5] == [("GUIDED", "accepted"), ("AVOID_ADSB", "denied"), ("RTL", "denied"), ("GUIDED", "denied"),
+                         ("GUIDED", "denied_tap")]
+    assert modes[5][1] in ("temporarily_rejected", "accepted")

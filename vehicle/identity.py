@@ -18,14 +18,17 @@ hold (agent waits)      CRUISE (7)      holds the last course, climb rate and sp
 
 (LOITER would read "Hold" in MAVSDK, but an ArduPlane in LOITER circles; ours flies straight on.)
 
-Mode requests (``MAV_CMD_DO_SET_MODE``, the ``SET_MODE`` message) switch the onboard agent, the
-one thing a mode can honestly change here, because the agent decides authority every step:
+Mode requests (``MAV_CMD_DO_SET_MODE``, the ``SET_MODE`` message): the agent decides authority
+every step (the paper's Algorithm 1), and a ground station cannot override it, so
 
-* ``GUIDED`` -- the remote pilot alone: the agent is switched off (``DAA_ENABLE`` 0), so the
-  HEARTBEAT shows GUIDED from then on;
-* ``AVOID_ADSB`` -- onboard DAA armed: the agent is switched on (``DAA_ENABLE`` 1); the HEARTBEAT
-  then shows whatever the agent decides (GUIDED while no conflict, AVOID_ADSB / CRUISE in one);
+* ``GUIDED`` (the pilot's own mode) is ``ACCEPTED`` while the pilot has authority (nothing to
+  change; clients such as MAVSDK ask for it before a DO_REPOSITION) and ``TEMPORARILY_REJECTED``
+  while the agent holds it (AVOID_ADSB / CRUISE: it hands back when the conflict is resolved);
+* ``AVOID_ADSB`` and ``CRUISE`` are ``DENIED``: only the agent enters them;
 * any other mode, or a request without ``MAV_MODE_FLAG_CUSTOM_MODE_ENABLED``: ``DENIED``.
+
+The agent itself is switched on and off with the ``DAA_ENABLE`` parameter (as ArduPilot's ADS-B
+avoidance with ``AVD_ENABLE``), never by a mode. Every request is logged like a parameter write.
 
 ``base_mode`` follows ArduPlane: CUSTOM_MODE_ENABLED | STABILIZE | SAFETY_ARMED, plus GUIDED in
 GUIDED and AVOID_ADSB. The aircraft is always airborne and armed: ARM is accepted (it already is),
@@ -46,9 +49,6 @@ PLANE_MODES = {0: "MANUAL", 1: "CIRCLE", 2: "STABILIZE", 3: "TRAINING", 4: "ACRO
 GUIDED, AVOID_ADSB, CRUISE = 15, 14, 7
 #: authority -> ArduPlane mode number
 AUTHORITY_MODE = {"pilot": GUIDED, "daa": AVOID_ADSB, "hold": CRUISE}
-#: mode numbers a GCS may request -> the agent switch they set (True = on)
-SETTABLE_MODES = {GUIDED: False, AVOID_ADSB: True}
-
 #: capabilities actually served (AUTOPILOT_VERSION): MAVLink 2, COMMAND_INT (DO_REPOSITION, modes),
 #: SET_POSITION_TARGET_GLOBAL_INT velocity setpoints, and the C-cast parameter encoding (integer
 #: parameters travel as their float value, as ArduPilot does). No missions, no FTP.
@@ -76,14 +76,16 @@ def mode_name(mode: int) -> str:
     return PLANE_MODES.get(int(mode), f"MODE{int(mode)}")
 
 
-def mode_request(base: int, custom: int) -> "tuple[int, bool | None, str]":
-    """Decide a mode request: ``(MAV_RESULT, agent switch to set or None, one-line reason)``."""
+def mode_request(base: int, custom: int, current: int) -> "tuple[int, str]":
+    """Decide a mode request while the vehicle shows mode ``current``: ``(MAV_RESULT, one-line reason)``."""
     if not int(base) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-        return M.MAV_RESULT_DENIED, None, "mode request without CUSTOM_MODE_ENABLED; send an ArduPlane mode number"
+        return M.MAV_RESULT_DENIED, "mode request without CUSTOM_MODE_ENABLED; send an ArduPlane mode number"
     custom = int(custom)
-    if custom in SETTABLE_MODES:
-        on = SETTABLE_MODES[custom]
-        what = "DAA agent on (onboard DAA may take over)" if on else "DAA agent off (pilot flies alone)"
-        return M.MAV_RESULT_ACCEPTED, on, f"mode {mode_name(custom)}: {what}"
-    allowed = " or ".join(mode_name(m) for m in SETTABLE_MODES)
-    return M.MAV_RESULT_DENIED, None, f"mode {mode_name(custom)} not available; use {allowed}"
+    if custom == GUIDED:
+        if int(current) == GUIDED:
+            return M.MAV_RESULT_ACCEPTED, "mode GUIDED: the pilot has authority"
+        return (M.MAV_RESULT_TEMPORARILY_REJECTED,
+                f"mode GUIDED: the DAA agent holds authority ({mode_name(current)}) until the conflict is resolved")
+    if custom in (AVOID_ADSB, CRUISE):
+        return M.MAV_RESULT_DENIED, f"mode {mode_name(custom)} is entered by the DAA agent only"
+    return M.MAV_RESULT_DENIED, f"mode {mode_name(custom)} not available; GUIDED is the pilot's mode"

@@ -124,7 +124,7 @@ class VehicleNode:
         self.latest: dict = {}
         self.services = GcsServices(ParamTable(scenario.thresholds), lambda: self.core.core.policy, self._set_policy,
                                     lambda: self.latest, self.sim_now, dt=self.core.dt, tap_writable=opts.tap_writable,
-                                    step_t=lambda: self.t)
+                                    step_t=lambda: self.t, current_mode=self._mode_now)
         self.live = None
         if opts.live:
             from daa_sil.live import LiveSender
@@ -137,6 +137,11 @@ class VehicleNode:
         if self._peer is None and self.ep is not None and self.ep.peer is not None:
             self._peer = tuple(self.ep.peer)
         return self._peer
+
+    def _mode_now(self) -> int:
+        from .identity import mode_of
+
+        return mode_of(self.core.last_authority, bool(self.core.core.policy.enabled))
 
     def _set_policy(self, policy) -> None:
         """Swap the onboard core's AllocationPolicy (called at a step boundary: it holds from this step)."""

@@ -9,11 +9,12 @@ split the way the timing needs it:
   GET_HOME_POSITION, SET_ / GET_MESSAGE_INTERVAL, REQUEST_AUTOPILOT_CAPABILITIES, ARM / DISARM,
   unknown commands). Rates are per link, so a tap asking for rates changes only its own stream.
   In realtime the node answers reads as they arrive; in lockstep at the step boundary.
-* **writes** (:meth:`GcsServices.write`): PARAM_SET, SET_MODE and DO_SET_MODE. They change the
-  agent's policy, so the node applies them only at a step boundary (the change holds from the
-  step after arrival) and only from the GCS link (through the shim, delayed like pilot commands);
-  from the tap only with ``tap_writable``. Each write is returned as a :class:`SettingEvent` for
-  the step log.
+* **writes** (:meth:`GcsServices.write`): PARAM_SET, SET_MODE and DO_SET_MODE. A PARAM_SET changes
+  the agent's policy, so the node applies writes only at a step boundary (the change holds from
+  the step after arrival) and only from the GCS link (through the shim, delayed like pilot
+  commands); from the tap only with ``tap_writable``. Mode requests change nothing the agent
+  decides (:mod:`vehicle.identity`) but are answered and logged the same way. Each write is kept
+  as a :class:`SettingEvent` for the step log.
 
 Pilot commands (PILOT_MANEUVER, SET_POSITION_TARGET_GLOBAL_INT, COMMAND_INT DO_REPOSITION) are
 the node's (they go through :class:`vehicle.commands.CommandGate`).
@@ -23,7 +24,7 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 from daa_sil.link.codec import mavlink as M
 
@@ -104,6 +105,7 @@ class GcsServices:
     dt: float = 1.0
     tap_writable: bool = False
     step_t: object = None  #: () -> the step a write takes effect at (s); default ``now``
+    current_mode: object = None  #: () -> the ArduPlane mode the vehicle shows now
     rates: dict = field(default_factory=dict)
     events: list = field(default_factory=list)
     answered: int = 0
@@ -272,20 +274,13 @@ class GcsServices:
 
     def _mode(self, msg, ack_cmd, base, custom, link, t_received, t_sent) -> list:
         src = (msg.get_srcSystem(), msg.get_srcComponent())
-        pol = self.get_policy()
-        result, on, reason = ident.mode_request(base, custom)
-        status = "accepted" if result == M.MAV_RESULT_ACCEPTED else "denied"
-        old = float(bool(pol.enabled))
-        new = old
+        current = int(self.current_mode()) if self.current_mode is not None else ident.GUIDED
+        result, reason = ident.mode_request(base, custom, current)
+        status = {M.MAV_RESULT_ACCEPTED: "accepted", M.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily_rejected"}.get(
+            result, "denied")
         if link == "tap" and not self.tap_writable:
             result, status, reason = M.MAV_RESULT_DENIED, "denied_tap", "mode: the tap is read-only (--tap-writable)"
-        elif on is not None:
-            new = float(on)
-            if bool(on) != bool(pol.enabled):
-                self.set_policy(replace(pol, enabled=bool(on)))
-            else:
-                status = "unchanged"
-        self._log(kind="mode", name=ident.mode_name(custom), old=old, new=new, status=status,
+        self._log(kind="mode", name=ident.mode_name(custom), old=float(current), new=float(current), status=status,
                   link="tap" if link == "tap" else "gcs", source=src, t_received=t_received, t_sent=t_sent,
                   reason=reason)
         self.answered += 1
