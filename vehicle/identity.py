@@ -79,13 +79,12 @@ def mode_name(mode: int) -> str:
 def mode_request(base: int, custom: int, current: int) -> "tuple[int, str]":
     """Decide a mode request while the vehicle shows mode ``current``: ``(MAV_RESULT, one-line reason)``."""
     if not int(base) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-        return M.MAV_RESULT_DENIED, "mode request without CUSTOM_MODE_ENABLED; send an ArduPlane mode number"
+        return M.MAV_RESULT_DENIED, "mode: CUSTOM_MODE_ENABLED flag missing"
     custom = int(custom)
     if custom == GUIDED:
         if int(current) == GUIDED:
             return M.MAV_RESULT_ACCEPTED, "mode GUIDED: the pilot has authority"
-        return (M.MAV_RESULT_TEMPORARILY_REJECTED,
-                f"mode GUIDED: the DAA agent holds authority ({mode_name(current)}) until the conflict is resolved")
+        return M.MAV_RESULT_TEMPORARILY_REJECTED, f"GUIDED refused: DAA agent flies ({mode_name(current)})"
     if custom in (AVOID_ADSB, CRUISE):
-        return M.MAV_RESULT_DENIED, f"mode {mode_name(custom)} is entered by the DAA agent only"
-    return M.MAV_RESULT_DENIED, f"mode {mode_name(custom)} not available; GUIDED is the pilot's mode"
+        return M.MAV_RESULT_DENIED, f"mode {mode_name(custom)}: set by the DAA agent only"
+    return M.MAV_RESULT_DENIED, f"mode {mode_name(custom)} not available; use GUIDED"

@@ -138,13 +138,12 @@ class ParamTable:
         if found is None:
             shown = name.decode("ascii", "replace") if isinstance(name, bytes) else str(name)
             shown = shown.split("\0", 1)[0]
-            return SetResult("unknown", None, math.nan, math.nan,
-                             reason=f"unknown parameter {shown!r}; known: {', '.join(s.name for s in self.specs)}")
+            return SetResult("unknown", None, math.nan, math.nan, reason=f"unknown parameter {shown!r}")
         _, spec = found
         old = self.value(spec, policy)
         v = float(value)
         if not spec.writable:
-            return SetResult("read_only", spec, old, old, reason=f"{spec.name} is read-only ({spec.doc})")
+            return SetResult("read_only", spec, old, old, reason=f"{spec.name} is read-only")
         if not math.isfinite(v) or v > spec.hi or v < spec.lo or (spec.lo_open and v <= spec.lo):
             return SetResult("out_of_range", spec, old, old,
                              reason=f"{spec.name} {value!r} out of range {spec.range_text()}; kept {old:g}")

@@ -256,7 +256,7 @@ class GcsServices:
         name = res.spec.name if res.spec is not None else str(msg.param_id).split("\0", 1)[0]
         status, reason = res.status, res.reason
         if link == "tap" and not self.tap_writable and res.spec is not None:
-            status, reason = "denied_tap", f"{name}: the tap is read-only (daa-vehicle --tap-writable)"
+            status, reason = "denied_tap", f"{name}: tap is read-only (--tap-writable)"
         elif res.status == "accepted":
             self.set_policy(res.policy)
         value = res.value if status in ("accepted", "unchanged") else res.old
@@ -279,7 +279,7 @@ class GcsServices:
         status = {M.MAV_RESULT_ACCEPTED: "accepted", M.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily_rejected"}.get(
             result, "denied")
         if link == "tap" and not self.tap_writable:
-            result, status, reason = M.MAV_RESULT_DENIED, "denied_tap", "mode: the tap is read-only (--tap-writable)"
+            result, status, reason = M.MAV_RESULT_DENIED, "denied_tap", "mode: tap is read-only (--tap-writable)"
         self._log(kind="mode", name=ident.mode_name(custom), old=float(current), new=float(current), status=status,
                   link="tap" if link == "tap" else "gcs", source=src, t_received=t_received, t_sent=t_sent,
                   reason=reason)

@@ -102,8 +102,7 @@ class StreamRates:
         else:
             s = interval_us / 1e6
             if s < self.dt - 1e-9:
-                return M.MAV_RESULT_DENIED, (f"{msg_name(m)} every {s:g} s is faster than the sim step "
-                                             f"({self.dt:g} s); shortest interval {int(self.dt * 1e6)} us")
+                return M.MAV_RESULT_DENIED, f"faster than the sim step ({self.dt:g} s): {msg_name(m)} {s:g} s"
             self.interval[m] = s
         self._next[m] = t_now
         return M.MAV_RESULT_ACCEPTED, ""
@@ -120,8 +119,7 @@ class StreamRates:
             iv = max(1.0 / float(rate_hz), self.dt)
             if 1.0 / float(rate_hz) < self.dt - 1e-9 and int(stream_id) not in self._clamp_told:
                 self._clamp_told.add(int(stream_id))
-                note = (f"stream {int(stream_id)} at {float(rate_hz):g} Hz is above the sim rate; "
-                        f"sent once per {self.dt:g} s step")
+                note = f"stream {int(stream_id)} {float(rate_hz):g} Hz above the sim rate: {1 / self.dt:g} Hz"
         for m in ids:
             self.interval[m] = iv
             self._next[m] = t_now

@@ -211,7 +211,10 @@ def sys_status(agent_enabled: bool) -> "M.MAVLink_message":
     avoid = M.MAV_SYS_STATUS_OBSTACLE_AVOIDANCE
     present = SENSORS | avoid
     enabled = SENSORS | (avoid if agent_enabled else 0)
-    return M.MAVLink_sys_status_message(present, enabled, present, 0, 65535, -1, -1, 0, 0, 0, 0, 0, 0)
+    # no geofence; its health bit set = "not breached", as ArduPilot reports it (MAVProxy says "fence
+    # breach" when a GCS sees the bit clear)
+    health = present | M.MAV_SYS_STATUS_GEOFENCE
+    return M.MAVLink_sys_status_message(present, enabled, health, 0, 65535, -1, -1, 0, 0, 0, 0, 0, 0)
 
 
 def gps_raw_int(t: float, own: Kin, origin) -> "M.MAVLink_message":
