@@ -87,9 +87,9 @@ def test_mavsdk_reads_the_picture_and_sets_a_parameter(tmp_path):
     pos = result["position"]
     assert abs(pos.latitude_deg - sc.origin.lat_deg) < 0.2 and abs(pos.longitude_deg - sc.origin.lon_deg) < 0.2
     assert abs(pos.absolute_altitude_m - (sc.origin.alt_m + 1000.0)) < 1.0
-    # coordinated turn at the 3 deg/s limit and 55 m/s: tan(phi) = 55 * 0.05236 / g -> 16.37 deg
+    # coordinated turn at the 3 deg/s limit and 55 m/s: tan(phi) = 55 * 0.05236 / g = 0.2937 -> 16.365 deg
     expect = math.degrees(math.atan(55.0 * math.radians(3.0) / G0))
-    assert abs(expect - 16.37) < 0.01 and abs(result["turn"].roll_deg - expect) < 0.05, result["turn"]
+    assert abs(expect - 16.365) < 0.001 and abs(result["turn"].roll_deg - expect) < 0.05, result["turn"]
     assert result["mode"] == FlightMode.UNKNOWN  # see the module docstring
     h = result["health"]
     assert h.is_global_position_ok and h.is_local_position_ok and h.is_home_position_ok and h.is_armable
