@@ -320,3 +320,61 @@ def test_settings_are_in_the_step_log(link):
     assert modes[:5] == [("GUIDED", "accepted"), ("AVOID_ADSB", "denied"), ("RTL", "denied"), ("GUIDED", "denied"),
                          ("GUIDED", "denied_tap")]
     assert modes[5][1] in ("temporarily_rejected", "accepted")
+
+
+def test_vehicle_out_udpin_listens_and_answers_the_first_gcs(tmp_path):
+    """``daa-vehicle --out udpin:`` as SITL: a mavutil ``udpout:`` client attaches; a second sender is ignored."""
+    from pymavlink import mavutil
+
+    (port,) = free_ports(1)
+    proc = start(["vehicle", long_scenario(tmp_path), "--out", f"udpin:127.0.0.1:{port}", "--speed", "10",
+                  "--steplog", tmp_path / "steplog.parquet"], tmp_path / "vehicle.log")
+    gcs = other = None
+    try:
+        from interop_helpers import wait_for_text
+
+        ready = wait_for_text(tmp_path / "vehicle.log", "READY", 30.0, proc)
+        assert f"listen=udp:127.0.0.1:{port} out=udpin:127.0.0.1:{port}" in ready
+        gcs = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, source_component=190,
+                                         dialect="common")
+        other = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=200, source_component=190,
+                                           dialect="common")
+        got = []
+        for _ in range(50):  # say hello until the vehicle answers (it streams only once a GCS has spoken)
+            gcs.mav.heartbeat_send(6, 8, 0, 0, 4)
+            got = recv_until(gcs, lambda m: m.get_type() == "HEARTBEAT", 0.2)
+            if got and got[-1].get_type() == "HEARTBEAT":
+                break
+        assert got and got[-1].get_type() == "HEARTBEAT" and got[-1].autopilot == 3
+        other.mav.param_set_send(1, 1, b"DAA_WT", 9.0, mavutil.mavlink.MAV_PARAM_TYPE_REAL32)  # not the GCS
+        recv_until(gcs, lambda m: False, 1.0)
+        gcs.mav.param_request_read_send(1, 1, b"DAA_WT", -1)
+        v, _ = _param(gcs, "DAA_WT")
+        assert v is not None and v.param_value == 4.0
+    finally:
+        stop(proc)
+        for c in (gcs, other):
+            if c is not None:
+                c.close()
+    import json
+
+    from daa_sil.steplog import steplog_metadata
+
+    meta = steplog_metadata(tmp_path / "steplog.parquet")
+    assert json.loads(meta["vehicle"])["other_address_ignored"] >= 1 and json.loads(meta["settings"]) == []
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--out", "udpin:127.0.0.1:14550", "--listen", "udp:127.0.0.1:0"], "already listens"),
+    (["--listen", "udpout:127.0.0.1:5"], "--listen"),
+    (["--tap", "udpin:127.0.0.1:5"], "--tap"),
+    (["--out", "tcp:127.0.0.1:5760"], "only udp"),
+    (["--tap-writable"], "--tap-writable needs --tap"),
+])
+def test_vehicle_connection_string_errors_are_one_line(args, needle):
+    import subprocess
+    import sys
+
+    cp = subprocess.run([sys.executable, "-m", "vehicle", str(SCENARIO), *args], capture_output=True, text=True,
+                        timeout=60, cwd=ROOT)
+    assert cp.returncode == 2 and cp.stderr.count("\n") == 1 and needle in cp.stderr, cp.stderr
