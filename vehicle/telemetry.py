@@ -105,9 +105,16 @@ def system_time(t: float) -> "M.MAVLink_message":
     return M.MAVLink_system_time_message(int((SCENARIO_EPOCH_UNIX + t) * 1e6), time_ms(t))
 
 
-def global_position(t: float, own: Kin, origin) -> "M.MAVLink_message":
+def _geo(k: Kin, origin, geo):
+    """``(lat deg, lon deg, alt m MSL)`` of ``k``: ``geo`` if already converted, else from ``origin``."""
+    if geo is not None:
+        return geo
+    return enu_to_geodetic(k.x, k.y, k.z, origin.lat_deg, origin.lon_deg, origin.alt_m)
+
+
+def global_position(t: float, own: Kin, origin, geo=None) -> "M.MAVLink_message":
     """GLOBAL_POSITION_INT of the ownship (``origin`` has lat_deg, lon_deg, alt_m)."""
-    lat, lon, alt = enu_to_geodetic(own.x, own.y, own.z, origin.lat_deg, origin.lon_deg, origin.alt_m)
+    lat, lon, alt = _geo(own, origin, geo)
     vn, ve = own.gs * math.cos(own.trk), own.gs * math.sin(own.trk)
     return M.MAVLink_global_position_int_message(
         time_ms(t), deg_e7(float(lat)), deg_e7(float(lon)), _clamp_int(float(alt) * 1000.0, -2**31, 2**31 - 1),
@@ -133,9 +140,9 @@ def attitude(t: float, own: Kin) -> "M.MAVLink_message":
     return M.MAVLink_attitude_message(time_ms(t), roll, pitch, yaw, 0.0, w * math.sin(roll), w * math.cos(roll))
 
 
-def adsb_vehicle(icao: int, callsign: str, intr: Kin, origin) -> "M.MAVLink_message":
+def adsb_vehicle(icao: int, callsign: str, intr: Kin, origin, geo=None) -> "M.MAVLink_message":
     """ADSB_VEHICLE for one intruder (geometric altitude, COG heading, vertical speed up)."""
-    lat, lon, alt = enu_to_geodetic(intr.x, intr.y, intr.z, origin.lat_deg, origin.lon_deg, origin.alt_m)
+    lat, lon, alt = _geo(intr, origin, geo)
     return M.MAVLink_adsb_vehicle_message(
         int(icao) & 0xFFFFFFFF, deg_e7(float(lat)), deg_e7(float(lon)), M.ADSB_ALTITUDE_TYPE_GEOMETRIC,
         _clamp_int(float(alt) * 1000.0, -2**31, 2**31 - 1), cdeg_u16(math.degrees(intr.trk)),
@@ -217,20 +224,20 @@ def sys_status(agent_enabled: bool) -> "M.MAVLink_message":
     return M.MAVLink_sys_status_message(present, enabled, health, 0, 65535, -1, -1, 0, 0, 0, 0, 0, 0)
 
 
-def gps_raw_int(t: float, own: Kin, origin) -> "M.MAVLink_message":
+def gps_raw_int(t: float, own: Kin, origin, geo=None) -> "M.MAVLink_message":
     """GPS_RAW_INT: a 3D fix at the true position (MSL altitude); DOPs and satellites unknown."""
-    lat, lon, alt = enu_to_geodetic(own.x, own.y, own.z, origin.lat_deg, origin.lon_deg, origin.alt_m)
+    lat, lon, alt = _geo(own, origin, geo)
     return M.MAVLink_gps_raw_int_message(time_us(t), M.GPS_FIX_TYPE_3D_FIX, deg_e7(float(lat)), deg_e7(float(lon)),
                                          _alt_mm(float(alt)), 65535, 65535, _clamp_int(own.gs * 100.0, 0, 65534),
                                          cdeg_u16(math.degrees(own.trk)), 255)
 
 
-def vfr_hud(own: Kin, origin) -> "M.MAVLink_message":
+def vfr_hud(own: Kin, origin, geo=None) -> "M.MAVLink_message":
     """VFR_HUD: airspeed = ground speed (no wind), heading = track (deg), MSL altitude (m), climb (m/s).
 
     Throttle is not modelled and is sent as 0.
     """
-    _, _, alt = enu_to_geodetic(own.x, own.y, own.z, origin.lat_deg, origin.lon_deg, origin.alt_m)
+    _, _, alt = _geo(own, origin, geo)
     hdg = int(round(math.degrees(own.trk) % 360.0)) % 360 if math.isfinite(own.trk) else 0
     return M.MAVLink_vfr_hud_message(own.gs, own.gs, hdg, 0, float(alt), own.vs)
 
@@ -308,21 +315,27 @@ def step_messages(vc, t: float, out, home: Kin, agent_enabled: bool = True) -> "
     dtrk = (float(own1.trk[0]) - float(own0.trk[0]) + math.pi) % (2 * math.pi) - math.pi
     ko = kin_of(own0, 0, dtrk / vc.dt)
     it = out.intruders
+    m = it.shape[1]
+    # one geodetic conversion for the ownship and every intruder
+    lat, lon, alt = enu_to_geodetic(np.r_[own0.x[0], it.x[0]], np.r_[own0.y[0], it.y[0]], np.r_[own0.z[0], it.z[0]],
+                                    origin.lat_deg, origin.lon_deg, origin.alt_m)
+    lat, lon, alt = lat.tolist(), lon.tolist(), alt.tolist()
+    g0 = (lat[0], lon[0], alt[0])
     adsb = [adsb_vehicle(vc.icao[j], vc.callsigns[j],
                          Kin(float(it.x[0, j]), float(it.y[0, j]), float(it.z[0, j]), float(it.gs[0, j]),
-                             float(it.trk[0, j]), float(it.vs[0, j])), origin)
-            for j in range(it.shape[1])]
+                             float(it.trk[0, j]), float(it.vs[0, j])), origin, (lat[j + 1], lon[j + 1], alt[j + 1]))
+            for j in range(m)]
     seq = vc.last_cmd.seq if vc.last_cmd is not None else 0
     level = int(np.max(out.telemetry.alert_level[0])) if it.shape[1] else 0
     return {
         M.MAVLINK_MSG_ID_HEARTBEAT: [heartbeat(vc.last_authority, agent_enabled)],
         M.MAVLINK_MSG_ID_SYSTEM_TIME: [system_time(t)],
         M.MAVLINK_MSG_ID_SYS_STATUS: [sys_status(agent_enabled)],
-        M.MAVLINK_MSG_ID_GPS_RAW_INT: [gps_raw_int(t, ko, origin)],
-        M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: [global_position(t, ko, origin)],
+        M.MAVLINK_MSG_ID_GPS_RAW_INT: [gps_raw_int(t, ko, origin, g0)],
+        M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: [global_position(t, ko, origin, g0)],
         M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: [local_position(t, ko)],
         M.MAVLINK_MSG_ID_ATTITUDE: [attitude(t, ko)],
-        M.MAVLINK_MSG_ID_VFR_HUD: [vfr_hud(ko, origin)],
+        M.MAVLINK_MSG_ID_VFR_HUD: [vfr_hud(ko, origin, g0)],
         M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: [extended_sys_state()],
         M.MAVLINK_MSG_ID_POSITION_TARGET_GLOBAL_INT: [position_target(t, row["cmd_trk_deg"], row["cmd_gs"],
                                                                       row["cmd_vs"], ko)],
