@@ -3,9 +3,11 @@
 Population: one realtime run (head-on scenario lengthened, 2x, 1 s delay each way through a real
 ``daa-sil shim``) with a stock MAVProxy (the ``interop`` extra) attached to the shim's GCS side as
 ``--master udpout:``. Typed commands and MAVProxy's own console output are the check: it must
-detect the ArduPlane, show GUIDED and later the agent's CRUISE / AVOID_ADSB, list the ADS-B
-intruder, download the parameters, ``param set DAA_WT 6`` (through the delayed link, logged in
-the vehicle's step log) and get ACCEPTED / DENIED for ``mode GUIDED`` / ``mode RTL``.
+detect the ArduPlane, show GUIDED, list the ADS-B intruder, download the parameters, ``param set
+DAA_WT 60`` through the delayed link before the first decision and then show the agent using it
+(AVOID_ADSB and "authority pilot->daa (no_wait)" where the default W_T would have waited in CRUISE),
+``param set DAA_WT 6``, and get ACCEPTED / DENIED for ``mode GUIDED`` / ``mode RTL``; the vehicle's
+step log holds every write.
 
 No network but loopback: MAVProxy runs with its default modules minus ``terrain`` (the only one
 that would fetch elevation tiles), HOME in the test's directory (no ~/.mavinit.scr), and
@@ -23,7 +25,7 @@ from pathlib import Path
 
 import pytest
 
-from interop_helpers import ROOT, free_ports, start, stop, wait_for_text
+from interop_helpers import free_ports, start, stop, wait_for_text
 from test_interop_mavutil import long_scenario
 
 pytestmark = pytest.mark.slow
@@ -69,6 +71,9 @@ def test_mavproxy_attaches_shows_the_picture_and_sets_wt(tmp_path):
         wait_for_text(log, "Detected vehicle 1:1", 30.0, mp)
         wait_for_text(log, "Mode GUIDED", 20.0, mp)  # the pilot's authority, by ArduPlane's name
         wait_for_text(log, "Received 8 parameters", 30.0, mp)  # FTP refused with a NAK, then PARAM_REQUEST_LIST
+        # W_T up to 60 s before the first decision (t = 28 s, where the map says wait 54 s): the agent must
+        # then hand control to the onboard DAA instead of waiting, and MAVProxy shows it
+        cmd("param set DAA_WT 60", "AP: DAA_WT 4 -> 60")
         # the adsb module counts the intruder; its per-vehicle lines then fail inside MAVProxy 1.8.75 itself
         # ("must be real number": the module never computes a distance without its map), so the intruder's
         # own message is read with `status` too
@@ -76,15 +81,13 @@ def test_mavproxy_attaches_shows_the_picture_and_sets_wt(tmp_path):
         out = cmd("status ADSB_VEHICLE", "ADSB_VEHICLE {")
         assert "callsign : HEAD1" in out and "ICAO_address : 1000" in out
         out = cmd("status GLOBAL_POSITION_INT", "GLOBAL_POSITION_INT {")
-        cmd("param set DAA_WT 6", "AP: DAA_WT 4 -> 6")
-        out = cmd("param show DAA_WT", "DAA_WT           6.0")
         cmd("mode GUIDED", "DO_SET_MODE: ACCEPTED")
         cmd("mode RTL", "DO_SET_MODE: DENIED")
-        cmd("param set DAA_WT 500", "out of range")
-        # later the agent takes authority: MAVProxy names the mode it shows
-        out = wait_for_text(log, "Mode ", 60.0, mp)
-        out = _wait_any(log, ("Mode CRUISE", "Mode AVOID_ADSB"), 60.0, mp)
+        out = wait_for_text(log, "authority pilot->daa (no_wait)", 60.0, mp)
+        assert "Mode AVOID_ADSB" in out and "Mode CRUISE" not in out and "(wait)" not in out
+        cmd("param set DAA_WT 6", "AP: DAA_WT 60 -> 6")  # the example, after the fact
         out = cmd("param show DAA_WT", "DAA_WT           6.0")
+        cmd("param set DAA_WT 500", "out of range")
     finally:
         for p in reversed(procs):
             stop(p)
@@ -96,21 +99,17 @@ def test_mavproxy_attaches_shows_the_picture_and_sets_wt(tmp_path):
     wt = [e for e in ev if e["name"] == "DAA_WT"]
     first = wt[0]
     assert (first["status"], first["old"], first["new"], first["link"], first["source"]) == (
-        "accepted", 4.0, 6.0, "gcs", [255, 230])  # MAVProxy's ids
+        "accepted", 4.0, 60.0, "gcs", [255, 230])  # MAVProxy's ids
     assert first["t_applied"] >= first["t_received"] >= 1.0  # came through the 1 s uplink
+    assert [(e["old"], e["new"]) for e in wt if e["status"] == "accepted"] == [(4.0, 60.0), (60.0, 6.0)]
     assert {e["status"] for e in wt} <= {"accepted", "unchanged", "out_of_range"}  # MAVProxy retries its sets
     assert "out_of_range" in {e["status"] for e in wt}
+    from daa_sil.steplog import read_steplog
+
+    rows = read_steplog(tmp_path / "steplog.parquet").to_pydict()
+    i = next(k for k, d in enumerate(rows["decision"]) if d != "none")
+    assert rows["t"][i] > first["t_applied"] and rows["decision"][i] == "no_wait"
+    assert 4.0 <= rows["wait_s"][i] < 60.0 and not rows["projl"][i]  # the default W_T would have waited
     modes = [(e["name"], e["status"]) for e in ev if e["kind"] == "mode"]
     assert ("GUIDED", "accepted") in modes and ("RTL", "denied") in modes
 
-
-def _wait_any(path: Path, texts, timeout: float, proc) -> str:
-    import time
-
-    end = time.monotonic() + timeout
-    while time.monotonic() < end and proc.poll() is None:
-        content = path.read_text()
-        if any(t in content for t in texts):
-            return content
-        time.sleep(0.1)
-    raise AssertionError(f"none of {texts} in {path.name} within {timeout} s:\n{path.read_text()[-3000:]}")

@@ -104,3 +104,37 @@ def test_mavsdk_reads_the_picture_and_sets_a_parameter(tmp_path):
     ev = json.loads(steplog_metadata(tmp_path / "steplog.parquet")["settings"])
     assert ("mode", "GUIDED", "accepted") in [(e["kind"], e["name"], e["status"]) for e in ev]
     assert [e["new"] for e in ev if e["name"] == "DAA_WT" and e["status"] == "accepted"] == [6.0]
+
+
+def test_mavsdk_sees_the_agent_use_a_wt_it_set(tmp_path):
+    """W_T raised to 60 s from MAVSDK before the encounter's first decision (t = 28 s, map wait 54 s):
+    the agent then does not wait but hands control to the onboard DAA, and MAVSDK's status text says so."""
+    from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
+    from mavsdk.asyncio.plugins.param import ParamAsync
+    from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+    from daa_sil.steplog import read_steplog
+
+    (port,) = free_ports(1)
+    veh = start(["vehicle", long_scenario(tmp_path), "--out", f"udp:127.0.0.1:{port}", "--speed", "2",
+                 "--steplog", tmp_path / "steplog.parquet"], tmp_path / "vehicle.log")
+    texts: list = []
+
+    async def session():
+        async with Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION)) as m:
+            await m.add_any_connection(f"udpin://127.0.0.1:{port}")
+            system = await m.first_autopilot(timeout_s=20.0)
+            tel, par = TelemetryAsync(system), ParamAsync(system)
+            await par.set_param_float("DAA_WT", 60.0)
+            st = await _first(tel.subscribe_status_text(), lambda s: "authority" in s.text, 60.0)
+            texts.append(st.text)
+
+    try:
+        asyncio.run(asyncio.wait_for(session(), 90.0))
+    finally:
+        stop(veh)
+    assert "authority pilot->daa (no_wait)" in texts[0], texts
+    rows = read_steplog(tmp_path / "steplog.parquet").to_pydict()
+    first = next(i for i, d in enumerate(rows["decision"]) if d != "none")
+    # the map's wait here would pass the default W_T (4 s) -- it is the raised W_T that says no
+    assert rows["decision"][first] == "no_wait" and 4.0 <= rows["wait_s"][first] < 60.0 and not rows["projl"][first]
