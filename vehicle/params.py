@@ -18,7 +18,7 @@ DAA_STALE_S    REAL32  stale-command limit, s                   (0, 120]     yes
 DAA_LINK_TO    REAL32  link-lost timeout, s                     (0, 120]     yes
                ``link_timeout_s``
 DAA_WAIT_MODE  INT8    wait function: 0 none, 1 constant,       --           read-only
-                       2 MDP map (``wait_mode``)
+                       2 MDP map, 3 always (``wait_mode``)
 DAA_WAIT_CONST REAL32  constant wait, s (``constant_wait_s``)   --           read-only
 DAA_PRESET     INT8    threshold preset: 0 do365, 1 paper       --           read-only
 =============  ======  =====================================  ===========  ==========
@@ -40,7 +40,6 @@ from typing import Callable
 from daa_sil.link.codec import mavlink as M
 
 REAL32, INT8 = M.MAV_PARAM_TYPE_REAL32, M.MAV_PARAM_TYPE_INT8
-WAIT_MODES = ("none", "constant", "map")
 
 
 @dataclass(frozen=True)
@@ -93,6 +92,7 @@ class ParamTable:
     """The parameter list over a policy (``preset``: the scenario's threshold preset, read-only)."""
 
     def __init__(self, preset: str):
+        from daa_sil.agent import WAIT_MODES
         from daa_sil.thresholds import PRESETS
 
         presets = tuple(PRESETS)
@@ -108,8 +108,8 @@ class ParamTable:
                       "stale_command_s", 0.0, 120.0, lo_open=True),
             ParamSpec("DAA_LINK_TO", REAL32, "link-lost timeout (s)", lambda p: float(p.link_timeout_s),
                       "link_timeout_s", 0.0, 120.0, lo_open=True),
-            ParamSpec("DAA_WAIT_MODE", INT8, "wait function: 0 none, 1 constant, 2 map (read-only)",
-                      lambda p: float(WAIT_MODES.index(p.wait_mode))),
+            ParamSpec("DAA_WAIT_MODE", INT8, f"wait function: {', '.join(f'{i} {n}' for i, n in enumerate(WAIT_MODES))}"
+                      " (read-only)", lambda p: float(WAIT_MODES.index(p.wait_mode))),
             ParamSpec("DAA_WAIT_CONST", REAL32, "constant wait (s, read-only)", lambda p: float(p.constant_wait_s)),
             ParamSpec("DAA_PRESET", INT8, f"threshold preset: {', '.join(f'{i} {n}' for i, n in enumerate(presets))}"
                       " (read-only)", lambda p, c=code: float(c)),
