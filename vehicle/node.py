@@ -34,7 +34,7 @@ from daa_sil.errors import DaaSilError
 from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec
 from daa_sil.link.codec import mavlink as M
 from daa_sil.link.connstr import LISTEN, SEND, parse_connection
-from daa_sil.link.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint
+from daa_sil.link.endpoint import MavEndpoint, Received, _norm_host, format_udp_address, open_endpoint
 
 from . import telemetry as T
 from .commands import CommandGate, PilotCommand, reposition_command
@@ -106,8 +106,10 @@ class VehicleNode:
         self.core = core if core is not None else VehicleCore(scenario, waitmap=opts.waitmap)
         self.out = parse_connection(opts.out, "--out", SEND)
         self.listen = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))
-        self.tap = (parse_connection(opts.tap, "--tap", SEND, allow=(SEND,)).addr if opts.tap else None)
-        self._peer = None if self.out.listens else self.out.addr
+        tap = parse_connection(opts.tap, "--tap", SEND, allow=(SEND,)).addr if opts.tap else None
+        # numeric hosts, so they compare equal to the addresses datagrams come from ("localhost" -> 127.0.0.1)
+        self.tap = (_norm_host(tap[0]), tap[1]) if tap is not None else None
+        self._peer = None if self.out.listens else (_norm_host(self.out.addr[0]), self.out.addr[1])
         self.codec = MavCodec(VEHICLE_SYSID, VEHICLE_COMPID, key=opts.key, allow_unsigned=())
         self.ep: "MavEndpoint | None" = None
         self.gate = CommandGate()
