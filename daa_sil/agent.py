@@ -112,6 +112,9 @@ class AllocationPolicy:
     link_timeout_s: float = 20.0
     wait_rule: str = "threshold"  #: :data:`WAIT_RULES`: w(S(k)) >= W_T every step, or a countdown budget
     name: str = "custom"
+    #: False = the agent never takes authority: the pilot's last command is always flown, the
+    #: decision is always ``none`` (alert levels are still computed); the SIL's ``DAA_ENABLE 0``
+    enabled: bool = True
 
     def __post_init__(self):
         if self.wait_mode not in WAIT_MODES:
@@ -251,7 +254,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     if check.any():
         j = np.nonzero(check)[0]
         unsafe_revert[j] = ~(safety_metric(own[j], intr[j], last_pilot[j], cfg, horizon) > 0)
-    active = (max_alert >= 2) | in_progress | unsafe_revert
+    active = ((max_alert >= 2) | in_progress | unsafe_revert) & bool(policy.enabled)
     ia = np.nonzero(active)[0]
     own_a, intr_a = own[ia], intr[ia]
 

@@ -33,6 +33,12 @@ EXAMPLES = """examples:
 
   # 10x real time, undelayed truth copy for QGroundControl on 14550
   daa-vehicle scenarios/crossing_left.yaml --out udp:127.0.0.1:14601 --speed 10 --tap udp:127.0.0.1:14550
+
+  # like SITL: listen on 14550 and stream to whichever GCS (MAVProxy --master udpout:...) speaks first
+  daa-vehicle scenarios/head_on.yaml --out udpin:127.0.0.1:14550
+
+connection strings (as MAVProxy): udpin:HOST:PORT listens, udpout:HOST:PORT sends, a bare udp:HOST:PORT
+listens for --listen and sends for --out / --tap.
 """
 
 
@@ -41,11 +47,15 @@ def build_parser() -> argparse.ArgumentParser:
                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", type=Path, help="scenario YAML file")
     p.add_argument("--out", default="udp:127.0.0.1:14550", metavar="udp:HOST:PORT",
-                   help="GCS (or delay shim) to stream to and take commands from (default udp:127.0.0.1:14550)")
-    p.add_argument("--listen", default="udp:127.0.0.1:0", metavar="udp:HOST:PORT",
-                   help="local socket (default udp:127.0.0.1:0 = OS-chosen port)")
+                   help="GCS (or delay shim) to stream to and take commands from (default udp:127.0.0.1:14550); "
+                        "udpin:HOST:PORT listens there and answers the first GCS that sends")
+    p.add_argument("--listen", default=None, metavar="udp:HOST:PORT",
+                   help="local socket (default udp:127.0.0.1:0 = OS-chosen port; not with --out udpin:)")
     p.add_argument("--tap", default=None, metavar="udp:HOST:PORT|none",
-                   help="undelayed observer copy of the telemetry (QGC/MAVProxy); commands from it are ignored")
+                   help="undelayed observer copy of the telemetry (QGC/MAVProxy); it may read parameters and "
+                        "set its own rates, its pilot commands are ignored")
+    p.add_argument("--tap-writable", action="store_true",
+                   help="also apply parameter and mode writes from the tap (undelayed!); default: refused")
     p.add_argument("--clock", choices=("realtime", "lockstep"), default="realtime",
                    help="realtime (wall clock x --speed, default) or lockstep (SIM_TICK / SIM_TICK_ACK)")
     p.add_argument("--speed", type=float, default=1.0, metavar="X", help="realtime speed factor (default 1)")
@@ -72,17 +82,30 @@ def _options(args):
     if not (math.isfinite(args.tick_timeout) and 0.1 <= args.tick_timeout <= 3600):
         raise UsageError(f"--tick-timeout must be within [0.1, 3600] s, got {args.tick_timeout:g}")
     key = load_key_option(args.key)
+    from daa_sil.link.connstr import LISTEN, SEND, parse_connection
+
     tap = None if args.tap in (None, "", "none") else args.tap
+    out = parse_connection(args.out, "--out", SEND)
+    if args.listen is not None:
+        parse_connection(args.listen, "--listen", LISTEN, allow=(LISTEN,))
+        if out.listens:
+            raise UsageError(f"--out {args.out} already listens; drop --listen {args.listen}")
+    if tap is not None:
+        parse_connection(tap, "--tap", SEND, allow=(SEND,))
+    if args.tap_writable and tap is None:
+        raise UsageError("--tap-writable needs --tap udp:HOST:PORT")
     live = None if args.live in (None, "", "none") else args.live
     if live is not None:
         from daa_sil.live import parse_live_address
 
         parse_live_address(live)
-    return VehicleOptions(out=args.out, listen=args.listen, tap=tap, clock=args.clock, speed=args.speed, key=key,
-                          steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live, waitmap=args.waitmap)
+    return VehicleOptions(out=args.out, listen=args.listen or "udp:127.0.0.1:0", tap=tap, clock=args.clock,
+                          speed=args.speed, key=key, steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live,
+                          waitmap=args.waitmap, tap_writable=args.tap_writable)
 
 
 async def _amain(args) -> int:
+    from daa_sil.link.connstr import describe
     from daa_sil.link.endpoint import format_udp_address
     from daa_sil.scenario import load_scenario
     from vehicle.node import VehicleNode
@@ -101,7 +124,7 @@ async def _amain(args) -> int:
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, on_signal, sig)
-    print(f"READY listen={node.local_address} out={format_udp_address(node.peer)} clock={opts.clock} "
+    print(f"READY listen={node.local_address} out={describe(node.out) if node.out.listens else format_udp_address(node.out.addr)} clock={opts.clock} "
           f"scenario={sc.name} steps={node.core.n_steps}", flush=True)
 
     def progress(nd, out):

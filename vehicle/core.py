@@ -184,27 +184,9 @@ class VehicleCore:
 
     # -- outputs ------------------------------------------------------------------------------------
     def telemetry_messages(self, t: float, out) -> list:
-        """MAVLink messages for step ``t`` (heartbeat, time, position, attitude, ADS-B, bands, decision)."""
-        row = self.rows[-1]
-        own = out.own
-        turn = 0.0
-        if np.isfinite(row["cmd_trk_deg"]):
-            d = (row["cmd_trk_deg"] - row["own_trk_deg"] + 180.0) % 360.0 - 180.0
-            turn = math.radians(max(-3.0, min(3.0, d)))
-        ko = T.Kin(float(own.x[0]), float(own.y[0]), float(own.z[0]), float(own.gs[0]), float(own.trk[0]),
-                   float(own.vs[0]), turn)
-        msgs = [T.heartbeat(self.last_authority), T.system_time(t), T.global_position(t, ko, self.sc.origin),
-                T.local_position(t, ko), T.attitude(t, ko)]
-        it = out.intruders
-        for j in range(it.shape[1]):
-            kj = T.Kin(float(it.x[0, j]), float(it.y[0, j]), float(it.z[0, j]), float(it.gs[0, j]),
-                       float(it.trk[0, j]), float(it.vs[0, j]))
-            msgs.append(T.adsb_vehicle(self.icao[j], self.callsigns[j], kj, self.sc.origin))
-        msgs.append(T.alert_level(t, int(np.max(out.telemetry.alert_level[0])) if it.shape[1] else 0))
-        msgs += T.track_bands(t, row["bands_trk_lo_deg"], row["bands_trk_hi_deg"], row["bands_trk_region"])
-        seq = self.last_cmd.seq if self.last_cmd is not None else 0
-        msgs.append(T.allocation_decision(t, row, seq, row["pilot_cmd_age_s"]))
-        return msgs
+        """Every MAVLink message of step ``t`` as one list (:func:`vehicle.telemetry.step_messages`)."""
+        home = T.kin_of(self.es.own, 0)
+        return [m for ms in T.step_messages(self, t, out, home).values() for m in ms]
 
     def steplog_table(self):
         """The rows so far as a step-log ``pyarrow.Table`` (schema of :mod:`daa_sil.steplog`)."""
