@@ -60,11 +60,13 @@ Schema (``*`` = required; defaults in brackets)::
           until_s: (t_s, duration_s] [next command's t_s, else duration_s]
           track_deg, vs_mps, gs_mps  at least one; omitted = keep current
     allocation:
-      group: B-1 | B-2 | IC-1 | ID-1 | ID-2 [ID-1]  paper group (wait policy + blending)
-      wait: none | constant | map     [from group]
-      wait_constant_s: [0, 120]       [5]
+      group: a group of daa_sil/data/groups.yaml (B-1 ... ID-2, ID-2-projl, ID-2-map) [ID-1]
+                                      its wait function, W_T, ProjL and blending are the defaults below
+      wait: none | constant | map | always  [from group]
+      wait_constant_s: [0, 120]       [from group, else 5]
       blending: bool                  [from group]
-      wait_threshold_s: [0, 120]      [4]     W_T
+      projl: bool                     [from group]  ProjL veto
+      wait_threshold_s: [0, 120]      [from group]  W_T
       link_timeout_s: (0, 120]        [agent default]
       stale_command_s: (0, 120]       [agent default]
     expect:                                   checked by ``daa-sil run`` (exit 1 if violated)
@@ -99,10 +101,6 @@ import yaml
 from .errors import FileFormatError, UsageError
 
 DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
-GROUPS = ("B-1", "B-2", "IC-1", "ID-1", "ID-2")
-#: group -> (wait policy, blending) as in the paper's Table 2 (latency is set in ``link``)
-GROUP_POLICY = {"B-1": ("none", False), "B-2": ("none", False), "IC-1": ("constant", True),
-                "ID-1": ("map", True), "ID-2": ("map", True)}
 PILOT_RESPONSES = ("deterministic", "fixed", "guendel", "no_atc", "nasa_rayleigh5")
 MAX_INTRUDERS = 8
 
@@ -211,6 +209,7 @@ class AllocationSpec:
     wait_constant_s: float = 5.0
     blending: bool = True
     wait_threshold_s: float = 4.0
+    projl: bool = True
     link_timeout_s: "float | None" = None
     stale_command_s: "float | None" = None
 
@@ -510,16 +509,20 @@ def _pilot(v: _V, node, path, dur) -> PilotSpec:
 
 
 def _allocation(v: _V, node, path) -> AllocationSpec:
-    m = v.mapping(node, path, set(), {"group", "wait", "wait_constant_s", "blending", "wait_threshold_s",
+    from .agent import WAIT_MODES
+    from .groups import group_spec, group_table
+
+    m = v.mapping(node, path, set(), {"group", "wait", "wait_constant_s", "blending", "wait_threshold_s", "projl",
                                       "link_timeout_s", "stale_command_s"})
-    group = v.opt(m, "group", path, v.string, "ID-1", choices=GROUPS)
-    wait0, blend0 = GROUP_POLICY[group]
+    group = v.opt(m, "group", path, v.string, "ID-1", choices=tuple(group_table()))
+    g = group_spec(group).policy()
     return AllocationSpec(
         group=group,
-        wait=v.opt(m, "wait", path, v.string, wait0, choices=("none", "constant", "map")),
-        wait_constant_s=v.opt(m, "wait_constant_s", path, v.number, 5.0, lo=0, hi=120),
-        blending=v.opt(m, "blending", path, v.boolean, blend0),
-        wait_threshold_s=v.opt(m, "wait_threshold_s", path, v.number, 4.0, lo=0, hi=120),
+        wait=v.opt(m, "wait", path, v.string, g.wait_mode, choices=WAIT_MODES),
+        wait_constant_s=v.opt(m, "wait_constant_s", path, v.number, g.constant_wait_s, lo=0, hi=120),
+        blending=v.opt(m, "blending", path, v.boolean, g.blending),
+        wait_threshold_s=v.opt(m, "wait_threshold_s", path, v.number, g.wait_threshold_s, lo=0, hi=120),
+        projl=v.opt(m, "projl", path, v.boolean, g.projl),
         link_timeout_s=v.opt(m, "link_timeout_s", path, v.number, None, lo=0, hi=120, lo_open=True),
         stale_command_s=v.opt(m, "stale_command_s", path, v.number, None, lo=0, hi=120, lo_open=True))
 
@@ -740,7 +743,7 @@ def check_expectation(exp: Expectation, result: dict) -> list[str]:
 
 
 __all__ = ["Scenario", "InitialState", "CpaGeometry", "Maneuver", "IntruderSpec", "LinkSpec", "Outage",
-           "PilotSpec", "ScriptedCommand", "AllocationSpec", "Expectation", "Origin", "DECISIONS", "GROUPS",
+           "PilotSpec", "ScriptedCommand", "AllocationSpec", "Expectation", "Origin", "DECISIONS",
            "ProcessFault", "FAULT_PROCESSES",
            "parse_scenario", "load_scenario", "scenario_from_dict", "dump_scenario", "save_scenario",
            "delay_models", "delay_spec_string", "check_expectation", "encounter_set", "ownship_state"]

@@ -38,7 +38,8 @@ from daa_sil.frames import geodetic_to_enu
 from daa_sil.kinematics import AircraftState
 from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec
 from daa_sil.link.codec import mavlink as M
-from daa_sil.link.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint, parse_udp_address
+from daa_sil.link.connstr import LISTEN, SEND, parse_connection
+from daa_sil.link.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint
 
 GCS_SYSID, GCS_COMPID = 255, 190
 VEHICLE_SYSID = 1
@@ -60,6 +61,8 @@ class GcsOptions:
     pilot: "str | None" = None  #: "model" / "scripted" (default: the scenario's)
     log: "Path | None" = None
     display: bool = True
+    #: settings to send: ``(sim time s, NAME, value)``; NAME ``MODE`` sends DO_SET_MODE (value = mode number)
+    settings: tuple = ()
 
 
 @dataclass
@@ -78,6 +81,8 @@ class View:
     rejected: int = 0  #: telemetry messages dropped: non-finite, or older than the newest seen
     acks: int = 0
     statustext: list = field(default_factory=list)
+    mode: str = "?"  #: the vehicle's flight mode name (HEARTBEAT custom_mode, ArduPlane numbering)
+    params: dict = field(default_factory=dict)  #: parameter name -> value, from PARAM_VALUE
 
 
 class GcsNode:
@@ -86,7 +91,10 @@ class GcsNode:
     def __init__(self, scenario, opts: GcsOptions):
         self.sc = scenario
         self.opts = opts
-        self.peer = parse_udp_address(opts.vehicle, "--vehicle", allow_port_zero=False)
+        self.vehicle_conn = parse_connection(opts.vehicle, "--vehicle", SEND)
+        self.listen_conn = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))
+        self._peer = None if self.vehicle_conn.listens else self.vehicle_conn.addr
+        self.pending_settings = sorted(opts.settings, key=lambda s: s[0])
         self.codec = MavCodec(GCS_SYSID, GCS_COMPID, key=opts.key)
         self.ep: "MavEndpoint | None" = None
         self.view = View()
@@ -107,7 +115,7 @@ class GcsNode:
             self.pilot = PilotModel(1, [seed], PilotConfig(mode=scenario.pilot.response if scenario else "guendel"),
                                     plan=ownship_state(scenario) if scenario is not None else None,
                                     daa_cfg=self.daa_cfg)
-            self.display = PilotDisplay(1, self.daa_cfg, self.pilot.cfg.alert_level_min)
+            self.pilot_display = PilotDisplay(1, self.daa_cfg, self.pilot.cfg.alert_level_min)
         self._g_seen = math.nan
         self.seq = 0
         self.sent: list[dict] = []
@@ -129,12 +137,23 @@ class GcsNode:
         Only datagrams from the ``--vehicle`` address (the shim or the vehicle) and only messages from
         the vehicle's system id are accepted; the rest is counted and dropped (no signing state change).
         """
-        self.ep = await open_endpoint(self.codec, self.opts.listen, peer=self.peer, learn_peer=False,
+        if self.vehicle_conn.listens:  # --vehicle udpin:HOST:PORT: listen there, answer who sends first
+            self.ep = await open_endpoint(self.codec, self.vehicle_conn.addr, peer=None, learn_peer=True,
+                                          allow_sysids=[VEHICLE_SYSID], name="daa-gcs")
+            return
+        self.ep = await open_endpoint(self.codec, self.listen_conn.addr, peer=self.peer, learn_peer=False,
                                       allow_peers=[self.peer], allow_sysids=[VEHICLE_SYSID], name="daa-gcs",
                                       peer_label="--vehicle",
                                       drop_hint="if that is the vehicle (or the shim's GCS side), give its address "
                                                 "as --vehicle: the GCS takes telemetry only from there")
         self.ep.send(self._heartbeat())
+
+    @property
+    def peer(self):
+        """The vehicle side (``--vehicle``): fixed, or with ``udpin:`` the first address that sent."""
+        if self._peer is None and self.ep is not None and self.ep.peer is not None:
+            self._peer = tuple(self.ep.peer)
+        return self._peer
 
     @property
     def local_address(self) -> str:
@@ -191,6 +210,12 @@ class GcsNode:
             v.alert = (m.time_boot_ms / 1000.0, int(m.value))
         elif t == "COMMAND_ACK":
             v.acks += 1
+        elif t == "HEARTBEAT" and m.get_srcComponent() == 1:
+            from vehicle.identity import mode_name
+
+            v.mode = mode_name(m.custom_mode)
+        elif t == "PARAM_VALUE":
+            v.params[str(m.param_id)] = float(m.param_value)
         elif t == "STATUSTEXT":
             v.statustext = (v.statustext + [m.text])[-5:]
 
@@ -218,7 +243,7 @@ class GcsNode:
         obs = self.observed()
         if obs is None:  # nothing seen yet: the pilot steps on an unknown (nan) state, as in fast-time
             nan = np.full(1, np.nan)
-            self.pilot.step(t, AircraftState(nan, nan, nan, nan, nan, nan), self.display.guidance())
+            self.pilot.step(t, AircraftState(nan, nan, nan, nan, nan, nan), self.pilot_display.guidance())
             return []
         own, intr = obs
         po = self.pilot.step(t, own, self._guidance(own, intr), intr)
@@ -237,16 +262,16 @@ class GcsNode:
         t_seen = self.view.own[0]
         if t_seen != self._g_seen:
             self._g_seen = t_seen
-            alert = int(self.view.alert[1]) if self.view.alert[0] == t_seen else int(self.display.alert[0])
-            self.display.refresh(np.array([0]), own, intr, np.array([alert]))
-        return self.display.guidance()
+            alert = int(self.view.alert[1]) if self.view.alert[0] == t_seen else int(self.pilot_display.alert[0])
+            self.pilot_display.refresh(np.array([0]), own, intr, np.array([alert]))
+        return self.pilot_display.guidance()
 
     def _heartbeat(self):
         return M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE, 3)
 
     def step(self, t: float) -> int:
         """Run the pilot at ``t`` (s) and send its commands plus a HEARTBEAT; returns messages sent."""
-        msgs = [self._heartbeat()]
+        msgs = [self._heartbeat()] + self._settings_due(t)
         for c in self.pilot_commands(t):
             self.seq += 1
             msgs.append(M.MAVLink_pilot_maneuver_message(int(round(t * 1000)), self.seq, VEHICLE_SYSID, 1,
@@ -257,6 +282,27 @@ class GcsNode:
         if self.opts.display:
             self.display(t, len(msgs) - 1)
         return len(msgs)
+
+    def _settings_due(self, t: float) -> list:
+        """PARAM_SET / DO_SET_MODE for the settings due at ``t``, after a SYSTEM_TIME that stamps their send
+        time (the vehicle logs it with the arrival time)."""
+        out = []
+        while self.pending_settings and self.pending_settings[0][0] <= t + 1e-9:
+            _, name, value = self.pending_settings.pop(0)
+            if name == "MODE":
+                out.append(M.MAVLink_command_long_message(VEHICLE_SYSID, 1, M.MAV_CMD_DO_SET_MODE, 0,
+                                                          M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, float(value),
+                                                          0, 0, 0, 0, 0))
+            else:
+                out.append(M.MAVLink_param_set_message(VEHICLE_SYSID, 1, name.encode("ascii"), float(value),
+                                                       M.MAV_PARAM_TYPE_REAL32))
+            self.sent.append({"t": t, "kind": "mode" if name == "MODE" else "param", "name": name,
+                              "value": float(value), "wall_s": round(time.time(), 3)})
+        if out:
+            from vehicle.telemetry import system_time
+
+            out.insert(0, system_time(t))
+        return out
 
     def display(self, t: float, n_cmd: int) -> None:
         from .display import render_line
@@ -277,7 +323,7 @@ class GcsNode:
         now = asyncio.get_running_loop().time()
         if self._tick_silent:
             self._tick_silent = False
-            self._say(f"ticks from {format_udp_address(self.peer)} are back at t = {t:g} s "
+            self._say(f"ticks from {self._peer_text()} are back at t = {t:g} s "
                       f"(silent for {now - self._last_tick_wall:.1f} s)")
         self.ticks_seen += 1
         self._last_tick_wall = now
@@ -299,8 +345,11 @@ class GcsNode:
         if quiet >= SILENT_AFTER_S:
             self._tick_silent = True
             self.silence_warnings += 1
-            self._say(f"warning: no SIM_TICK from {format_udp_address(self.peer)} for {quiet:.1f} s (last: tick "
+            self._say(f"warning: no SIM_TICK from {self._peer_text()} for {quiet:.1f} s (last: tick "
                       f"{self.done_tick}, t = {self.done_tick:g} s): has the vehicle (or the shim) stopped?")
+
+    def _peer_text(self) -> str:
+        return format_udp_address(self.peer) if self.peer is not None else self.vehicle_conn.text
 
     @staticmethod
     def _say(text: str) -> None:

@@ -37,20 +37,24 @@ from __future__ import annotations
 
 import asyncio
 import math
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from daa_sil.errors import DaaSilError
 from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec
 from daa_sil.link.codec import mavlink as M
-from daa_sil.link.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint, parse_udp_address
+from daa_sil.link.connstr import LISTEN, SEND, parse_connection
+from daa_sil.link.endpoint import MavEndpoint, Received, _norm_host, format_udp_address, open_endpoint
 
 from . import telemetry as T
-from .commands import CommandGate, PilotCommand
+from .commands import CommandGate, PilotCommand, reposition_command
 from .core import VehicleCore
+from .params import ParamTable
+from .services import GcsServices
+from .streams import STREAMED
 
 VEHICLE_SYSID, VEHICLE_COMPID = 1, 1
-AUTOPILOT_VERSION_ID = 148
 PILOT_MANEUVER_ID = M.MAVLINK_MSG_ID_PILOT_MANEUVER
 SET_POS_GLOBAL_ID = M.MAVLINK_MSG_ID_SET_POSITION_TARGET_GLOBAL_INT
 #: SET_POSITION_TARGET_GLOBAL_INT type_mask bits that must be clear for a velocity setpoint
@@ -90,6 +94,10 @@ class VehicleOptions:
     start_timeout_s: "float | None" = None
     #: ``udp:127.0.0.1:PORT``: publish each step's step-log row there (:mod:`daa_sil.live`)
     live: "str | None" = None
+    #: ``--waitmap``: map preset, grid spec or family directory (None = the default map)
+    waitmap: "str | None" = None
+    #: let the (undelayed) tap set parameters and modes; by default it may only read
+    tap_writable: bool = False
     #: realtime: "auto" (start at once, wait for tick answers only from a partner that gives them) or
     #: "wait" (start the clock once tick 0 is acknowledged; error after tick_timeout_s)
     tick_sync: str = "auto"
@@ -105,6 +113,8 @@ class VehicleStats:
     gcs_requests_answered: int = 0
     commands_from_tap_ignored: int = 0
     foreign_messages_ignored: int = 0
+    #: ``--out udpin:``: messages from an address other than the learned GCS (or the tap), dropped
+    other_address_ignored: int = 0
     authority_changes: int = 0
     #: realtime: how late each step's telemetry went out after its due wall time ``W_k``, ms
     late_mean_ms: float = 0.0
@@ -133,9 +143,13 @@ class VehicleNode:
     def __init__(self, scenario, opts: VehicleOptions, core: "VehicleCore | None" = None):
         self.sc = scenario
         self.opts = opts
-        self.core = core if core is not None else VehicleCore(scenario)
-        self.peer = parse_udp_address(opts.out, "--out", allow_port_zero=False)
-        self.tap = parse_udp_address(opts.tap, "--tap", allow_port_zero=False) if opts.tap else None
+        self.core = core if core is not None else VehicleCore(scenario, waitmap=opts.waitmap)
+        self.out = parse_connection(opts.out, "--out", SEND)
+        self.listen = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))
+        tap = parse_connection(opts.tap, "--tap", SEND, allow=(SEND,)).addr if opts.tap else None
+        # numeric hosts, so they compare equal to the addresses datagrams come from ("localhost" -> 127.0.0.1)
+        self.tap = (_norm_host(tap[0]), tap[1]) if tap is not None else None
+        self._peer = None if self.out.listens else (_norm_host(self.out.addr[0]), self.out.addr[1])
         self.codec = MavCodec(VEHICLE_SYSID, VEHICLE_COMPID, key=opts.key, allow_unsigned=())
         self.ep: "MavEndpoint | None" = None
         self.gate = CommandGate()
@@ -156,11 +170,46 @@ class VehicleNode:
         self._late_sum_ms = 0.0
         self._lates: list = []  # realtime: per-step lateness (ms)
         self._ready: list = []  # realtime: when each step's computation was done, ms after its deadline
+        self._step_t, self._step_wall = 0.0, None  # sim and monotonic time of the last publish
+        self._stamp = None  # (addr, datagram time, t_sent) of the GCS's last SYSTEM_TIME
+        self.home: "T.Kin | None" = None
+        self.latest: dict = {}
+        self.services = GcsServices(ParamTable(scenario.thresholds), lambda: self.core.core.policy, self._set_policy,
+                                    lambda: self.latest, self.sim_now, dt=self.core.dt, tap_writable=opts.tap_writable,
+                                    step_t=lambda: self.t, current_mode=self._mode_now)
         self.live = None
         if opts.live:
             from daa_sil.live import LiveSender
 
             self.live = LiveSender(opts.live)
+
+    @property
+    def peer(self):
+        """The GCS side (``--out``): fixed, or with ``--out udpin:`` the first address that sent a good message."""
+        if self._peer is None and self.ep is not None and self.ep.peer is not None:
+            self._peer = tuple(self.ep.peer)
+        return self._peer
+
+    def _mode_now(self) -> int:
+        from .identity import mode_of
+
+        return mode_of(self.core.last_authority, bool(self.core.core.policy.enabled))
+
+    def _set_policy(self, policy) -> None:
+        """Swap the onboard core's AllocationPolicy (called at a step boundary: it holds from this step)."""
+        self.core.core.policy = policy
+        self.core.policy = policy
+
+    def sim_now(self) -> float:
+        """Vehicle sim time now (s): lockstep the current step; realtime the last published step plus the
+        wall time since x speed."""
+        return self._sim_time_of(time.monotonic())
+
+    def _sim_time_of(self, wall: float) -> float:
+        """Sim time (s) of monotonic instant ``wall`` (e.g. a datagram's arrival)."""
+        if self.opts.clock == "lockstep" or self._step_wall is None:
+            return self.t
+        return self._step_t + max(0.0, wall - self._step_wall) * self.opts.speed
 
     # -- lifecycle -------------------------------------------------------------------------------
     async def start(self) -> None:
@@ -170,9 +219,15 @@ class VehicleNode:
         else (another port claiming the GCS's system id, an early copy of a genuine packet, ...)
         is counted and dropped by the endpoint without touching the signing state.
         """
+        on_msg = self._on_message if self.opts.clock != "lockstep" else None
+        if self.out.listens:  # --out udpin:HOST:PORT: listen there, answer the first GCS that sends
+            self.ep = await open_endpoint(self.codec, self.out.addr, peer=None, learn_peer=True, on_message=on_msg,
+                                          name="daa-vehicle")
+            return
         allow = [self.peer] + ([self.tap] if self.tap is not None else [])
-        self.ep = await open_endpoint(self.codec, self.opts.listen, peer=self.peer, learn_peer=False,
-                                      allow_peers=allow, name="daa-vehicle", peer_label="--out / --tap",
+        self.ep = await open_endpoint(self.codec, self.listen.addr, peer=self.peer, learn_peer=False,
+                                      allow_peers=allow, on_message=on_msg, name="daa-vehicle",
+                                      peer_label="--out / --tap",
                                       drop_hint="if that is your GCS or shim, give its address as --out "
                                                 "(commands are taken only from --out)")
 
@@ -195,20 +250,44 @@ class VehicleNode:
             self.live.close()
 
     # -- receiving -------------------------------------------------------------------------------
+    def _link_of(self, addr) -> "str | None":
+        """``"gcs"`` (the --out peer), ``"tap"`` or None (``--out udpin:``: someone else)."""
+        a = tuple(addr)
+        if self.peer is not None and a == tuple(self.peer):
+            return "gcs"
+        if self.tap is not None and a == tuple(self.tap):
+            return "tap"
+        return None
+
     def _is_tap(self, addr) -> bool:
-        return self.tap is not None and tuple(addr) == tuple(self.tap) and tuple(addr) != tuple(self.peer)
+        return self._link_of(addr) == "tap"
+
+    def _on_message(self, r: Received) -> None:
+        """Realtime: answer reads (parameters, requests, TIMESYNC, ...) the moment they arrive."""
+        msg = r.msg
+        if msg.get_srcSystem() == VEHICLE_SYSID or not GcsServices.is_read(msg):
+            return
+        link = self._link_of(r.addr)
+        if link is not None:
+            self._reply(self.services.read(msg, link), r.addr)
+
+    def _reply(self, msgs: list, addr, count: bool = True) -> None:
+        if msgs:
+            self.ep.send_many(msgs, addr)
+            self.stats.gcs_requests_answered += int(count)
 
     def handle(self, r: Received) -> None:
-        """Process one good message (commands, stock-GCS requests, acks); never raises on content."""
+        """Process one good message (commands, settings, stock-GCS requests, acks); never raises on content."""
         msg = r.msg
         mtype = msg.get_type()
+        link = self._link_of(r.addr)
         if mtype == "SIM_TICK_ACK":
-            if not self._is_tap(r.addr) and int(msg.tick) <= self._tick_sent_k:
+            if link == "gcs" and int(msg.tick) <= self._tick_sent_k:
                 if int(msg.tick) > self._acked:
                     self._acked = int(msg.tick)
                     self._answered("gcs")
             return
-        if mtype == "SIM_TICK" and msg.get_srcSystem() == VEHICLE_SYSID and tuple(r.addr) == tuple(self.peer):
+        if mtype == "SIM_TICK" and msg.get_srcSystem() == VEHICLE_SYSID and link == "gcs":
             self.stats.tick_echoes += 1  # our own tick, echoed by the shim (one we never sent changes nothing)
             if int(msg.tick) <= self._tick_sent_k:
                 if int(msg.tick) > self._echoed:
@@ -218,31 +297,73 @@ class VehicleNode:
         if msg.get_srcSystem() == VEHICLE_SYSID:
             self.stats.foreign_messages_ignored += 1  # our own sysid echoed back / spoofed
             return
-        from_tap = self._is_tap(r.addr)
+        if link is None:
+            self.stats.other_address_ignored += 1
+            return
+        from_tap = link == "tap"
         if not from_tap:
             self.core.note_gcs_data(self.t)
-        if mtype in ("PILOT_MANEUVER", "SET_POSITION_TARGET_GLOBAL_INT"):
+        if mtype == "SYSTEM_TIME":  # a GCS's send-time stamp for the settings in the same datagram
+            self._stamp = (tuple(r.addr), r.t, msg.time_boot_ms / 1000.0)
+            return
+        if GcsServices.is_read(msg):
+            if self.opts.clock == "lockstep":  # realtime: answered on arrival (_on_message)
+                self._reply(self.services.read(msg, link), r.addr)
+            return
+        if GcsServices.is_write(msg):
+            stamp = self._stamp
+            t_sent = stamp[2] if stamp is not None and stamp[0] == tuple(r.addr) and stamp[1] == r.t else None
+            n0 = len(self.services.events)
+            self._reply(self.services.write(msg, link, self._sim_time_of(r.t), t_sent), r.addr)
+            for ev in self.services.events[n0:]:
+                self._announce(ev)
+            return
+        if mtype in ("PILOT_MANEUVER", "SET_POSITION_TARGET_GLOBAL_INT") or (
+                mtype in ("COMMAND_INT", "COMMAND_LONG") and int(msg.command) == M.MAV_CMD_DO_REPOSITION):
             if from_tap:
                 self.stats.commands_from_tap_ignored += 1
+                if mtype.startswith("COMMAND"):
+                    self._reply([M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_DENIED, 0, 0,
+                                                               msg.get_srcSystem(), msg.get_srcComponent())], r.addr)
                 return
+            self._pilot_command(msg, r)
+
+    def _pilot_command(self, msg, r: Received) -> None:
+        mtype = msg.get_type()
+        is_cmd = mtype.startswith("COMMAND")
+        if is_cmd:
+            if msg.target_system not in (0, VEHICLE_SYSID):
+                return
+            o = self.core.core.own
+            cmd = reposition_command(msg, (float(o.x[0]), float(o.y[0]), float(o.z[0])), self.sc.origin,
+                                     self._sim_time_of(r.t), msg.get_seq())
+        else:
             cmd = self._command_from(msg)
-            if cmd is None:
-                self.gate.counters.invalid += 1
-                return
-            if self.gate.offer(cmd, self.t):
-                self.core.add_command(cmd)
-                cid = PILOT_MANEUVER_ID if cmd.kind == "PILOT_MANEUVER" else SET_POS_GLOBAL_ID
-                self._send([T.command_ack(cid, M.MAV_RESULT_ACCEPTED, cmd.seq, msg.get_srcSystem(),
-                                          msg.get_srcComponent())], r.addr)
-        elif mtype == "COMMAND_LONG":
-            self._answer_command_long(msg, r.addr)
-        elif mtype == "PARAM_REQUEST_LIST":
-            self._send([M.MAVLink_param_value_message(b"DAA_SIL_VER", 1.0, M.MAV_PARAM_TYPE_REAL32, 1, 0)], r.addr)
-            self.stats.gcs_requests_answered += 1
-        elif mtype == "MISSION_REQUEST_LIST":
-            self._send([M.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), 0,
-                                                        getattr(msg, "mission_type", 0))], r.addr)
-            self.stats.gcs_requests_answered += 1
+        if cmd is None or isinstance(cmd, str):
+            self.gate.counters.invalid += 1
+            if is_cmd:
+                self._reply([M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_DENIED, 0, 0, msg.get_srcSystem(),
+                                                           msg.get_srcComponent()),
+                             T.statustext(str(cmd)[:50] if cmd else "DO_REPOSITION: invalid")], r.addr)
+            return
+        ok = self.gate.offer(cmd, self.t)
+        if ok:
+            self.core.add_command(cmd)
+        if cmd.kind == "PILOT_MANEUVER" and ok:  # our dialect acknowledges with its cmd_seq
+            self._reply([T.command_ack(PILOT_MANEUVER_ID, M.MAV_RESULT_ACCEPTED, cmd.seq, msg.get_srcSystem(),
+                                       msg.get_srcComponent())], r.addr, count=False)
+        elif is_cmd:
+            self._reply([M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_ACCEPTED if ok else M.MAV_RESULT_DENIED,
+                                                       0, 0, msg.get_srcSystem(), msg.get_srcComponent())], r.addr)
+        # SET_POSITION_TARGET_GLOBAL_INT: no COMMAND_ACK (not a command); POSITION_TARGET_GLOBAL_INT is the feedback
+
+    def _announce(self, ev) -> None:
+        """A setting write: one console line, and a STATUSTEXT to the observer too."""
+        sent = f", sent t={ev.t_sent:g}s" if ev.t_sent is not None else ""
+        print(f"t={ev.t_applied:5.0f}s {ev.kind} {ev.name} {ev.status}: {ev.reason} (from {ev.link}, "
+              f"received t={ev.t_received:.1f}s{sent})", flush=True)
+        if ev.status == "accepted" and self.tap is not None and ev.link != "tap":
+            self.ep.send_many([T.statustext(ev.reason[:50])], self.tap)
 
     def _command_from(self, msg) -> "PilotCommand | None":
         src = (msg.get_srcSystem(), msg.get_srcComponent())
@@ -262,21 +383,6 @@ class VehicleNode:
         return PilotCommand(msg.time_boot_ms / 1000.0, 0, trk, -vd, gs if gs > 0.5 else math.nan, src,
                             "SET_POSITION_TARGET_GLOBAL_INT")
 
-    def _answer_command_long(self, msg, addr) -> None:
-        """Minimal answers to a stock GCS (mavlink_spec §6): AUTOPILOT_VERSION, else UNSUPPORTED."""
-        src = (msg.get_srcSystem(), msg.get_srcComponent())
-        if msg.target_system not in (0, VEHICLE_SYSID):
-            return
-        out = []
-        if msg.command == M.MAV_CMD_REQUEST_MESSAGE and int(msg.param1) == AUTOPILOT_VERSION_ID:
-            out.append(M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_ACCEPTED, 0, 0, *src))
-            out.append(M.MAVLink_autopilot_version_message(M.MAV_PROTOCOL_CAPABILITY_MAVLINK2, 0, 0, 0, 0,
-                                                           [0] * 8, [0] * 8, [0] * 8, 0, 0, 0))
-        else:
-            out.append(M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_UNSUPPORTED, 0, 0, *src))
-        self._send(out, addr)
-        self.stats.gcs_requests_answered += 1
-
     def _drain(self) -> None:
         while True:
             try:
@@ -287,9 +393,13 @@ class VehicleNode:
 
     # -- sending ---------------------------------------------------------------------------------
     def _send(self, msgs: list, addr=None) -> None:
-        self.ep.send_many(msgs, addr or self.peer)
+        dest = addr or self.peer
+        if dest is not None:  # --out udpin: nobody to send to before a GCS has spoken
+            self.ep.send_many(msgs, dest)
 
     def _send_tick(self, k: int, t: float) -> None:
+        if self.peer is None:  # --out udpin: no GCS yet; the retry sends it once one has spoken
+            return
         data = self.codec.encode(M.MAVLink_sim_tick_message(k, T.time_ms(t)),
                                  link_id=CONTROL_LINK_ID if self.codec.signed else None)
         self._tick_sent_k = max(self._tick_sent_k, k)
@@ -325,7 +435,7 @@ class VehicleNode:
             if who == "gcs" and self._silent["shim"]:
                 continue  # the shim between us is silent: that is the news, not the GCS behind it
             self.stats.silence_warnings += 1
-            peer = format_udp_address(self.peer)
+            peer = self.out.text
             if who == "shim":
                 why = f"the shim at {peer} has not echoed a tick for {now - last:.1f} s: has it stopped?"
             elif self.stats.sync_partner == "shim":
@@ -345,7 +455,7 @@ class VehicleNode:
         """Why tick ``k`` got no ack: which of shim and GCS is not there (for the one-line error)."""
         import time
 
-        peer = format_udp_address(self.peer)
+        peer = self.out.text
         if self._echoed >= k:
             return (f"the shim at {peer} relays tick {k} but the GCS behind it does not acknowledge it: is daa-gcs "
                     f"running (with --clock lockstep) and pointed at the shim's GCS side?")
@@ -439,17 +549,26 @@ class VehicleNode:
         return due
 
     def publish(self, t: float, out) -> None:
-        """Telemetry for ``t`` (s): one datagram to the peer (and the same to the tap)."""
-        msgs = self.core.telemetry_messages(t, out)
+        """Telemetry for ``t`` (s): per link (peer, tap), one datagram of the messages due on that link."""
+        pol = self.core.core.policy
+        if self.home is None:
+            self.home = T.kin_of(out.own, 0)
+        msgs = T.step_messages(self.core, t, out, self.home, agent_enabled=bool(pol.enabled))
+        self.latest = msgs
+        self._step_t, self._step_wall = t, time.monotonic()
+        extra = []
         new_auth = self.core.last_authority
         if new_auth != self.authority:
             self.stats.authority_changes += 1
-            msgs.append(T.statustext(f"DAA-SIL t={t:.0f}s authority {self.authority}->{new_auth}"
-                                     f" ({self.core.last_decision})"))
+            extra.append(T.statustext(f"DAA-SIL t={t:.0f}s authority {self.authority}->{new_auth}"
+                                      f" ({self.core.last_decision})"))
             self.authority = new_auth
-        self._send(msgs)
-        if self.tap is not None:
-            self.ep.send_many(msgs, self.tap)
+        for link, addr in (("gcs", self.peer), ("tap", self.tap)):
+            if addr is None:
+                continue
+            due = self.services.link_rates(link).due(t)
+            batch = [m for mid in STREAMED if mid in due for m in msgs.get(mid, ())]
+            self.ep.send_many(batch + extra, addr)
 
     # -- main loop -------------------------------------------------------------------------------
     async def run(self, on_step=None) -> None:
@@ -523,4 +642,6 @@ class VehicleNode:
                                                   "late_ms": [round(x, 2) for x in self._lates],
                                                   "ready_ms": [round(x, 2) for x in self._ready],
                                                   **self.stats.extra})
+        # parameter / mode writes: kind, name, old, new, status, link, source, t_received, t_applied, t_sent
+        meta["settings"] = json.dumps([e.as_dict() for e in self.services.events], sort_keys=True)
         return self.core.write_steplog(self.opts.steplog, meta)

@@ -180,6 +180,8 @@ class RunOptions:
     #: --spawn-viewer / --connect), "on" or "off" (log the step log when the vehicle exits)
     viz_live: str = "auto"
     tap: "str | None" = None
+    #: ``--waitmap`` of the vehicle: a map preset, grid spec or family directory (None = the default)
+    waitmap: "str | None" = None
     progress: "Callable[[str], None] | None" = None
 
 
@@ -334,6 +336,8 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
                      "--start-timeout", f"{max(opts.tick_timeout_s, START_TIMEOUT_S):g}"] + clock_args + key_args
             if opts.clock == "realtime":
                 vargs += ["--tick-sync", "wait"]  # start once tick 0 is acked: the GCS plays from step 0
+            if opts.waitmap is not None:
+                vargs += ["--waitmap", str(opts.waitmap)]
             if recorder is not None and recorder.live_address:
                 vargs += ["--live", recorder.live_address]  # each step's row, fire-and-forget
             # GCS and vehicle start in parallel; the vehicle re-sends tick 0 until the GCS answers
@@ -375,6 +379,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
     result = summarize_steplog(table, sc)
     result.update({"scenario": sc.name, "scenario_file": str(opts.scenario_path), "seed": sc.seed,
                    "preset": sc.thresholds, "clock": opts.clock, "wall_s": round(wall, 3),
+                   "waitmap": _waitmap_record(sc, opts.waitmap),
                    "realtime_ratio": round(result["duration_s"] / wall, 2) if wall > 0 else None,
                    "interrupted": interrupted, "failure": failure,
                    "process_died": monitor.death if monitor is not None else None,
@@ -430,6 +435,9 @@ def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
     p.add_argument("--key", type=Path, metavar="FILE", help="MAVLink 2 signing key file (all three processes)")
     p.add_argument("--tap", metavar="udp:HOST:PORT",
                    help="also stream undelayed telemetry to an observer (QGC/MAVProxy), e.g. udp:127.0.0.1:14550")
+    p.add_argument("--waitmap", default=None, metavar="PRESET|GRID|DIR",
+                   help="the vehicle's wait maps, as in 'campaign run': alerting (default), paper, fine, a grid "
+                        "spec or a 'waitmap build' directory")
     p.add_argument("--json", action="store_true", help="print result.json instead of the summary")
     if _viz_available():
         p.add_argument("--rrd", type=Path, metavar="FILE", help="write a Rerun recording")
@@ -496,7 +504,7 @@ def _options(args, scenario: Path) -> RunOptions:
     return RunOptions(scenario_path=scenario, out_dir=Path(args.out), clock=args.clock, speed=args.speed,
                       key=args.key, tap=args.tap, rrd=getattr(args, "rrd", None),
                       spawn_viewer=getattr(args, "spawn_viewer", False), connect=getattr(args, "connect", None),
-                      viz_live=getattr(args, "viz_live", "auto"),
+                      viz_live=getattr(args, "viz_live", "auto"), waitmap=args.waitmap,
                       progress=None if quiet else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
 
 
@@ -516,9 +524,13 @@ def _finish(args, result: dict, sc) -> int:
 
 
 def run(args) -> int:
+    from ..io import ensure_dir
     from ..scenario import load_scenario
 
     _check_args(args)
+    ensure_dir(args.out)  # an unusable --out fails here, before the maps are built or anything starts
+    prepare_waitmap(load_scenario(args.scenario), args.waitmap,
+                    None if args.json else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
     result = run_sil(_options(args, args.scenario))
     return _finish(args, result, load_scenario(args.scenario))
 
@@ -532,6 +544,7 @@ def demo_scenario_path() -> Path:
 
 
 def demo(args) -> int:
+    from ..io import ensure_dir
     from ..scenario import load_scenario
 
     _check_args(args)
@@ -539,23 +552,40 @@ def demo(args) -> int:
     sc = load_scenario(path)
     if not args.json:
         print(f"daa-sil demo: {sc.description.strip().splitlines()[0]}", flush=True)
-        _prepare_waitmap(sc)
+    ensure_dir(args.out)
+    prepare_waitmap(sc, args.waitmap, None if args.json else (lambda m: print(f"daa-sil demo: {m}", flush=True)))
     result = run_sil(_options(args, path))
     if not args.json:
         print(_pilot_story(Path(args.out)))
     return _finish(args, result, sc)
 
 
-def _prepare_waitmap(sc) -> None:
-    """Build (or load) the cached wait maps up front with a visible progress line."""
+def _waitmap_record(sc, source: "str | None") -> "dict | None":
+    """What result.json records about the vehicle's wait maps (None when its policy reads no map)."""
+    if sc.allocation.wait != "map":
+        return None
+    from .. import waitmap
+
+    fam = waitmap.family_for(source, preset="paper")  # cached: loaded, not built
+    return {"source": source or waitmap.DEFAULT_MAP, **waitmap.describe(fam)}
+
+
+def prepare_waitmap(sc, source: "str | None", say: "Callable[[str], None] | None") -> None:
+    """Build (or load) the vehicle's wait maps before any process starts, so the vehicle loads them
+    from the cache; a bad ``--waitmap`` is a one-line usage error here. ``say`` gets progress lines."""
     if sc.allocation.wait != "map":
         return
     from .. import waitmap
 
     t = time.monotonic()
-    print("daa-sil demo: loading the MDP wait maps (the first run builds and caches them) ...", flush=True)
-    waitmap.default_family(preset="paper")
-    print(f"daa-sil demo: wait maps ready ({time.monotonic() - t:.1f} s)", flush=True)
+    if waitmap.is_cached(source, preset="paper"):
+        say = None  # loaded in well under a second: nothing to report
+    if say:
+        say(f"loading the MDP wait maps ({source or waitmap.DEFAULT_MAP}; the first run builds and caches them) ...")
+    progress = (lambda r: say(f"  built the {r:+g} deg/s map ({time.monotonic() - t:.0f} s)")) if say else None
+    waitmap.family_for(source, preset="paper", progress=progress)
+    if say:
+        say(f"wait maps ready ({time.monotonic() - t:.1f} s)")
 
 
 def _pilot_story(out_dir: Path) -> str:
