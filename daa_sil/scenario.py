@@ -76,6 +76,14 @@ Schema (``*`` = required; defaults in brackets)::
       decisions_exclude: [decision names]  none may appear
       min_range_at_least_m: float     minimum horizontal range must be >= this
       link_lost_by_s: float           a link_lost decision must appear at or before this sim time
+    faults: list                              process faults, carried out by ``daa-sil run --clock
+      - kill*: gcs                            realtime`` (lockstep refuses them: there the GCS is part of
+        at_s*: (0, duration_s)                the clock). ``kill`` names the process (only the GCS: the
+        restart_s: (at_s, duration_s)         vehicle and the shim are the run); ``at_s`` / ``restart_s``
+        signal: KILL | TERM | INT  [KILL]     are vehicle sim times; a restart binds the same port and
+                                              writes its own command log. Omit restart_s = stays dead.
+                                              ``result.json`` ``faults`` says when each was carried out;
+                                              a fault that could not be carried out fails the run.
 
 Decision names: none, wait, no_wait, pilot, blend, daa_override, daa, stale, link_lost.
 """
@@ -216,6 +224,25 @@ class Expectation:
     link_lost_by_s: "float | None" = None
 
 
+FAULT_PROCESSES = ("gcs",)
+FAULT_SIGNALS = ("KILL", "TERM", "INT")
+
+
+@dataclass
+class ProcessFault:
+    """Kill ``process`` with SIG``signal`` at vehicle sim time ``at_s``; restart it at ``restart_s`` (None = never)."""
+
+    process: str
+    at_s: float
+    restart_s: "float | None" = None
+    signal: str = "KILL"
+
+    def describe(self) -> str:
+        """``"SIGKILL gcs at 20 s, restart at 40 s"``."""
+        return (f"SIG{self.signal} {self.process} at {self.at_s:g} s"
+                + (f", restart at {self.restart_s:g} s" if self.restart_s is not None else ", no restart"))
+
+
 @dataclass
 class Scenario:
     name: str
@@ -230,6 +257,7 @@ class Scenario:
     pilot: PilotSpec = field(default_factory=PilotSpec)
     allocation: AllocationSpec = field(default_factory=AllocationSpec)
     expect: Expectation = field(default_factory=Expectation)
+    faults: list = field(default_factory=list)
     source: str = field(default="<memory>", compare=False)
 
     @property
@@ -254,6 +282,11 @@ class Scenario:
         d["pilot"]["model"] = {"response": d["pilot"].pop("response")}
         for sect in ("allocation", "expect"):
             d[sect] = {k: v for k, v in d[sect].items() if v is not None and v != []}
+        if d["faults"]:
+            d["faults"] = [{("kill" if k == "process" else k): v for k, v in f.items() if v is not None}
+                           for f in d["faults"]]
+        else:
+            d.pop("faults")
         return d
 
 
@@ -509,8 +542,26 @@ def _expect(v: _V, node, path, dur) -> Expectation:
         link_lost_by_s=v.opt(m, "link_lost_by_s", path, v.number, None, lo=0, hi=dur))
 
 
+def _faults(v: _V, node, path, dur) -> list:
+    out = []
+    for j, fn in enumerate(v.seq(node, path, max_len=16)):
+        p = f"{path}[{j}]"
+        m = v.mapping(fn, p, {"kill", "at_s"}, {"restart_s", "signal"})
+        at = v.opt(m, "at_s", p, v.number, lo=0, hi=dur, lo_open=True, hi_open=True)
+        out.append(ProcessFault(
+            process=v.opt(m, "kill", p, v.string, choices=FAULT_PROCESSES), at_s=at,
+            restart_s=v.opt(m, "restart_s", p, v.number, None, lo=at, hi=dur, lo_open=True, hi_open=True),
+            signal=v.opt(m, "signal", p, v.string, "KILL", choices=FAULT_SIGNALS)))
+    for a, b in zip(out, out[1:]):
+        end = a.restart_s if a.restart_s is not None else math.inf
+        if a.process == b.process and b.at_s <= end:
+            v.fail(node, path, f"faults of the same process must not overlap: {a.describe()} / {b.describe()}")
+    return out
+
+
 TOP_REQUIRED = {"name", "ownship", "intruders"}
-TOP_OPTIONAL = {"description", "seed", "duration_s", "thresholds", "origin", "link", "pilot", "allocation", "expect"}
+TOP_OPTIONAL = {"description", "seed", "duration_s", "thresholds", "origin", "link", "pilot", "allocation", "expect",
+                "faults"}
 
 
 def _scenario(v: _V, root) -> Scenario:
@@ -542,6 +593,8 @@ def _scenario(v: _V, root) -> Scenario:
         sc.allocation = _allocation(v, m["allocation"], "allocation")
     if "expect" in m:
         sc.expect = _expect(v, m["expect"], "expect", dur)
+    if "faults" in m:
+        sc.faults = _faults(v, m["faults"], "faults", dur)
     return sc
 
 
@@ -691,5 +744,6 @@ def check_expectation(exp: Expectation, result: dict) -> list[str]:
 
 __all__ = ["Scenario", "InitialState", "CpaGeometry", "Maneuver", "IntruderSpec", "LinkSpec", "Outage",
            "PilotSpec", "ScriptedCommand", "AllocationSpec", "Expectation", "Origin", "DECISIONS",
+           "ProcessFault", "FAULT_PROCESSES",
            "parse_scenario", "load_scenario", "scenario_from_dict", "dump_scenario", "save_scenario",
            "delay_models", "delay_spec_string", "check_expectation", "encounter_set", "ownship_state"]

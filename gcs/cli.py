@@ -122,9 +122,12 @@ async def _amain(args) -> int:
         st = node.ep.stats()
         node.close()
     print(f"daa-gcs: done, {node.steps} steps, {len(node.sent)} commands sent, packets dropped {st['dropped']}, "
-          f"telemetry rejected {node.view.rejected}"
+          f"telemetry rejected {node.view.rejected}, ticks {node.ticks_seen} (ticks skipped {node.ticks_skipped})"
           + (f"; log {path}" if path else ""), flush=True)
     print("daa-gcs: link stats " + json.dumps(st, sort_keys=True), flush=True)
+    drops = node.ep.drops.summary()
+    if drops:
+        print(f"daa-gcs: {drops}", flush=True)
     return 0
 
 

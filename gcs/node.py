@@ -6,9 +6,15 @@ Per step ``k`` at sim time ``t_k`` (``docs/architecture.md`` step 1):
   at ``t_k``) the node first takes in every message received before the tick, then runs the pilot,
   sends its command(s) and a HEARTBEAT (one datagram), then ``SIM_TICK_ACK(k)`` alone in its
   datagram. A repeated tick is re-acknowledged without stepping again.
-* **realtime**: the node's sim clock is synchronised on the first telemetry message
-  (``t = time_boot_ms + assumed downlink delay``) and advances with the wall clock x ``speed``;
-  it steps at every whole sim second.
+* **realtime**: the same: the vehicle paces its ticks (``SIM_TICK``) by the wall clock and the shim
+  forwards each one at once, so the GCS steps at the vehicle's sim time ``t_k`` with exactly what
+  the lockstep GCS has at that tick, and acknowledges it (nobody waits for that ack). Only with a
+  vehicle that sends no ticks does the node fall back to its own clock, synchronised on the first
+  telemetry message (``t = time_boot_ms + assumed downlink delay``) and advanced with the wall
+  clock x ``speed``, stepping at every whole sim second (that clock is off by the difference
+  between the first packet's delay and the assumed one: no lockstep parity).
+
+Ticks that stop for 3 s after they came are reported (stderr), naming the address they came from.
 
 Pilot: ``model`` = :class:`daa_sil.pilot.PilotModel` (N = 1) on the observed ownship
 (LOCAL_POSITION_NED, float) and intruders (ADSB_VEHICLE), streaming per the allocation semantics;
@@ -38,6 +44,8 @@ from daa_sil.link.endpoint import MavEndpoint, Received, format_udp_address, ope
 GCS_SYSID, GCS_COMPID = 255, 190
 VEHICLE_SYSID = 1
 AUTHORITY_NAMES = ("pilot", "daa", "hold")
+#: wall seconds without a SIM_TICK (after ticks came) before the vehicle side is reported silent
+SILENT_AFTER_S = 3.0
 DECISION_NAMES = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
 
 
@@ -117,6 +125,11 @@ class GcsNode:
         self._fresh = True  # the last position message was accepted (ADSB in its datagram follows it)
         self._wall0: "float | None" = None
         self._t_sync = 0.0
+        self.ticks_skipped = 0  #: ticks never received between two received ones (no step ran for them)
+        self.ticks_seen = 0  #: SIM_TICKs received (realtime: > 0 means steps follow the vehicle's ticks)
+        self._last_tick_wall: "float | None" = None
+        self._tick_silent = False
+        self.silence_warnings = 0
 
     async def start(self) -> None:
         """Bind, then greet the vehicle side with a HEARTBEAT (a shim learns our address from it).
@@ -126,10 +139,13 @@ class GcsNode:
         """
         if self.vehicle_conn.listens:  # --vehicle udpin:HOST:PORT: listen there, answer who sends first
             self.ep = await open_endpoint(self.codec, self.vehicle_conn.addr, peer=None, learn_peer=True,
-                                          allow_sysids=[VEHICLE_SYSID])
+                                          allow_sysids=[VEHICLE_SYSID], name="daa-gcs")
             return
         self.ep = await open_endpoint(self.codec, self.listen_conn.addr, peer=self.peer, learn_peer=False,
-                                      allow_peers=[self.peer], allow_sysids=[VEHICLE_SYSID])
+                                      allow_peers=[self.peer], allow_sysids=[VEHICLE_SYSID], name="daa-gcs",
+                                      peer_label="--vehicle",
+                                      drop_hint="if that is the vehicle (or the shim's GCS side), give its address "
+                                                "as --vehicle: the GCS takes telemetry only from there")
         self.ep.send(self._heartbeat())
 
     @property
@@ -301,6 +317,46 @@ class GcsNode:
         else:
             await self._run_realtime()
 
+    def _on_tick(self, r: Received) -> None:
+        """``SIM_TICK(k, t_k)``: run step ``t_k`` if ``k`` is new (a repeated tick is only re-acked), then ack."""
+        k, t = int(r.msg.tick), r.msg.time_ms / 1000.0
+        now = asyncio.get_running_loop().time()
+        if self._tick_silent:
+            self._tick_silent = False
+            self._say(f"ticks from {self._peer_text()} are back at t = {t:g} s "
+                      f"(silent for {now - self._last_tick_wall:.1f} s)")
+        self.ticks_seen += 1
+        self._last_tick_wall = now
+        n = 0
+        if k > self.done_tick:
+            if self.done_tick >= 0 and k > self.done_tick + 1:
+                self.ticks_skipped += k - self.done_tick - 1  # missed ticks: steps lockstep would have run
+            n = self.step(t)
+            self.done_tick = k
+        ack = self.codec.encode(M.MAVLink_sim_tick_ack_message(k, r.msg.time_ms, min(n, 65535)),
+                                link_id=CONTROL_LINK_ID if self.codec.signed else None)
+        self.ep.transport.sendto(ack, self.peer)
+
+    def _check_silence(self) -> None:
+        """Report (once until they come back) ticks that stopped for SILENT_AFTER_S wall seconds."""
+        if self._last_tick_wall is None or self._tick_silent:
+            return
+        quiet = asyncio.get_running_loop().time() - self._last_tick_wall
+        if quiet >= SILENT_AFTER_S:
+            self._tick_silent = True
+            self.silence_warnings += 1
+            self._say(f"warning: no SIM_TICK from {self._peer_text()} for {quiet:.1f} s (last: tick "
+                      f"{self.done_tick}, t = {self.done_tick:g} s): has the vehicle (or the shim) stopped?")
+
+    def _peer_text(self) -> str:
+        return format_udp_address(self.peer) if self.peer is not None else self.vehicle_conn.text
+
+    @staticmethod
+    def _say(text: str) -> None:
+        import sys
+
+        print(f"daa-gcs: {text}", file=sys.stderr, flush=True)
+
     async def _run_lockstep(self) -> None:
         while not self.stop.is_set():
             try:
@@ -308,18 +364,12 @@ class GcsNode:
             except asyncio.TimeoutError:
                 if self.done_tick < 0:  # nothing yet: greet again (a shim may have started after us)
                     self.ep.send(self._heartbeat())
+                self._check_silence()
                 continue
-            if r.msg.get_type() != "SIM_TICK":
+            if r.msg.get_type() == "SIM_TICK":
+                self._on_tick(r)
+            else:
                 self.handle(r)
-                continue
-            k, t = int(r.msg.tick), r.msg.time_ms / 1000.0
-            n = 0
-            if k > self.done_tick:
-                n = self.step(t)
-                self.done_tick = k
-            ack = self.codec.encode(M.MAVLink_sim_tick_ack_message(k, r.msg.time_ms, min(n, 65535)),
-                                    link_id=CONTROL_LINK_ID if self.codec.signed else None)
-            self.ep.transport.sendto(ack, self.peer)
 
     def sim_now(self, loop) -> "float | None":
         if self._wall0 is None:
@@ -333,18 +383,26 @@ class GcsNode:
         assumed_down = delay_models(self.sc)[1].mean() if self.sc is not None else 0.0
         next_t = None
         while not self.stop.is_set():
-            now = self.sim_now(loop)
+            free = not self.ticks_seen  # no ticks (yet): our own clock, synchronised on telemetry
+            now = self.sim_now(loop) if free else None
             timeout = 0.2 if now is None or next_t is None else max(0.0, (next_t - now) / self.opts.speed)
             try:
-                r = await asyncio.wait_for(self.ep.inbox.get(), timeout)
+                r = await asyncio.wait_for(self.ep.inbox.get(), min(timeout, 0.5))
+                if r.msg.get_type() == "SIM_TICK":
+                    self._on_tick(r)
+                    continue
                 self.handle(r)
                 if self._wall0 is None and math.isfinite(self.view.last_t):
                     self._wall0, self._t_sync = loop.time(), self.view.last_t + assumed_down
-                    next_t = math.ceil(self._t_sync)
+                    # one sim second of grace: a vehicle that sends ticks has sent one by then
+                    next_t = math.ceil(self._t_sync) + 1.0
                 continue
             except asyncio.TimeoutError:
-                if now is None:  # no telemetry yet: greet again (the shim may have started after us,
-                    self.ep.send(self._heartbeat())  # or we were restarted and it must relearn our address)
+                self._check_silence()
+                if self.ticks_seen == 0 and now is None:  # nothing yet: greet again (the shim may have started
+                    self.ep.send(self._heartbeat())  # after us, or we were restarted and it must relearn us)
+            if self.ticks_seen:
+                continue
             now = self.sim_now(loop)
             if now is not None and next_t is not None and now >= next_t - 1e-6:
                 self.step(float(next_t))

@@ -63,12 +63,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steplog", type=Path, metavar="FILE", help="write the step log (Parquet) here")
     p.add_argument("--tick-timeout", type=float, default=10.0, metavar="S",
                    help="lockstep: wall seconds to wait for a SIM_TICK_ACK (default 10)")
+    p.add_argument("--start-timeout", type=float, default=None, metavar="S",
+                   help="wall seconds to wait for the answer to tick 0, while the shim and GCS may still be "
+                        "starting (default: --tick-timeout)")
     p.add_argument("--live", default=None, metavar="udp:127.0.0.1:PORT",
                    help="also send each step's step-log row, as soon as the step is done, to this loopback "
                         "port (the Rerun recorder of `daa-sil run`); fire-and-forget, never slows the loop")
     p.add_argument("--waitmap", default=None, metavar="PRESET|GRID|DIR",
                    help="wait maps: alerting (default), paper, fine, a grid spec or a 'waitmap build' directory "
                         "(built and cached on first use; the same lookup as 'campaign run --waitmap')")
+    p.add_argument("--tick-sync", choices=("auto", "wait"), default="auto",
+                   help="realtime: auto (default) = start at once and pace SIM_TICKs by the wall clock, waiting "
+                        "for the shim's (or a direct GCS's) answer only if it gives them (a stock GCS does not); "
+                        "wait = start the clock only once tick 0 is acknowledged (daa-sil run), so the run makes "
+                        "the same decisions as lockstep")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -81,6 +89,8 @@ def _options(args):
     check_speed(args.speed)
     if not (math.isfinite(args.tick_timeout) and 0.1 <= args.tick_timeout <= 3600):
         raise UsageError(f"--tick-timeout must be within [0.1, 3600] s, got {args.tick_timeout:g}")
+    if args.start_timeout is not None and not (math.isfinite(args.start_timeout) and 0.1 <= args.start_timeout <= 3600):
+        raise UsageError(f"--start-timeout must be within [0.1, 3600] s, got {args.start_timeout:g}")
     key = load_key_option(args.key)
     from daa_sil.link.connstr import LISTEN, SEND, parse_connection
 
@@ -99,9 +109,13 @@ def _options(args):
         from daa_sil.live import parse_live_address
 
         parse_live_address(live)
+    def clock_start(wall0: float) -> None:  # orchestrators time scheduled faults from this line
+        print(f"CLOCK t0_monotonic={wall0:.6f} speed={args.speed:g}", flush=True)
+
     return VehicleOptions(out=args.out, listen=args.listen or "udp:127.0.0.1:0", tap=tap, clock=args.clock,
                           speed=args.speed, key=key, steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live,
-                          waitmap=args.waitmap, tap_writable=args.tap_writable)
+                          waitmap=args.waitmap, tap_writable=args.tap_writable, start_timeout_s=args.start_timeout,
+                          tick_sync=args.tick_sync, on_clock_start=clock_start)
 
 
 async def _amain(args) -> int:
@@ -112,6 +126,11 @@ async def _amain(args) -> int:
 
     sc = load_scenario(args.scenario)
     opts = _options(args)
+    if sc.faults:
+        import sys
+
+        print(f"daa-vehicle: note: the scenario's faults ({'; '.join(f.describe() for f in sc.faults)}) are "
+              f"carried out by `daa-sil run --clock realtime`, not by daa-vehicle", file=sys.stderr, flush=True)
     node = VehicleNode(sc, opts)
     await node.start()
     loop = asyncio.get_running_loop()
@@ -120,6 +139,7 @@ async def _amain(args) -> int:
 
     def on_signal(signum):
         got["sig"] = signum
+        node.request_stop()  # also if the cancellation below is lost in a wait_for race
         task.cancel()
 
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -155,6 +175,14 @@ async def _amain(args) -> int:
           + (f"; live rows sent {node.live.stats.sent}, failed {node.live.stats.errors + node.live.stats.too_big}"
              if node.live is not None else "")
           + (f"; step log {path}" if path else ""), flush=True)
+    if opts.clock == "realtime":
+        v = node.stats
+        print(f"daa-vehicle: realtime: ticks answered by {v.sync_partner}, steps run before their tick was "
+              f"confirmed {v.steps_unconfirmed}, GCS acks late {v.acks_late}; step lateness mean {v.late_mean_ms:.1f} "
+              f"ms, max {v.late_max_ms:.1f} ms", flush=True)
+    drops = node.ep.drops.summary()
+    if drops:
+        print(f"daa-vehicle: {drops}", flush=True)
     return 0
 
 
