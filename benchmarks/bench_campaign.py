@@ -62,6 +62,31 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
 """
 
 
+def _lookup_cost(n: int, waitmap: str) -> None:
+    """One ID-2 chunk with the wait map against the same chunk with the map replaced by 'always wait'
+    (same encounters, same process): what the map lookup (turn-rate map choice + 64-corner
+    interpolation + the most-threatening-intruder selection) costs the campaign."""
+    from dataclasses import replace
+
+    from daa_sil.campaign import CampaignConfig, campaign_family
+    from daa_sil.encounters import sample_encounters
+    from daa_sil.fasttime import simulate
+    from daa_sil.groups import group_spec
+
+    spec = group_spec("ID-2")
+    model = spec.delay_model()
+    fam = campaign_family(CampaignConfig(waitmap=waitmap))
+    es = sample_encounters(n, seed=99, preset="paper")
+    times = {}
+    for name, pol in (("map", spec.policy()), ("always", replace(spec.policy(), wait_mode="always"))):
+        simulate(es.subset(list(range(20))), pol, model, model, wait_family=fam)  # warm-up
+        t0 = time.perf_counter()
+        simulate(es, pol, model, model, wait_family=fam)
+        times[name] = time.perf_counter() - t0
+    print(f"[lookup cost, ID-2, {n} encounters] with the {waitmap} wait map {times['map']:.2f} s, with 'always wait' "
+          f"(no lookup) {times['always']:.2f} s: x{times['map'] / times['always']:.2f}")
+
+
 def _memory(chunk: int, sizes: list[int]) -> None:
     for n in sizes:
         res = subprocess.run([sys.executable, "-c", _MEM_CHILD, str(n), str(chunk)], capture_output=True,
@@ -84,6 +109,7 @@ def main() -> None:
 
     args.chunk_size = args.chunk_size or DEFAULT_CHUNK
     loop_rates = [_loop_ratio(args.loop_n, "B-2"), _loop_ratio(args.loop_n, "ID-2")]
+    _lookup_cost(2000, args.waitmap)
     _memory(200, [200, 800, 1600])
     _memory(args.chunk_size, [args.chunk_size, 3 * args.chunk_size])
     if args.skip_campaign:
