@@ -412,7 +412,7 @@ def paper_setup(group: str) -> "str | None":
 
 
 #: decision-table columns the study reads (provenance needs ``decided_by`` and/or ``in_box``)
-DECISION_COLUMNS = ("group", "encounter_id", "decision", "decided_by", "in_box")
+DECISION_COLUMNS = ("group", "encounter_id", "decision", "decided_by", "in_box", "wait_in_box")
 
 
 def normalise_decisions(dec) -> "dict | None":
@@ -422,6 +422,12 @@ def normalise_decisions(dec) -> "dict | None":
     if dec is None:
         return None
     names = dec.column_names if hasattr(dec, "column_names") else list(dec)
+    if "in_box" not in names and "wait_in_box" in names:  # the simulator's name (daa_sil.fasttime)
+        if hasattr(dec, "rename_columns"):
+            dec = dec.rename_columns(["in_box" if c == "wait_in_box" else c for c in names])
+        else:
+            dec = {("in_box" if k == "wait_in_box" else k): v for k, v in dec.items()}
+        names = dec.column_names if hasattr(dec, "column_names") else list(dec)
     if not any(c in names for c in ("decided_by", "in_box")):
         return None
     out = {}
