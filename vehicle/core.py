@@ -188,16 +188,19 @@ class VehicleCore:
         home = T.kin_of(self.es.own, 0)
         return [m for ms in T.step_messages(self, t, out, home).values() for m in ms]
 
-    def steplog_table(self):
-        """The rows so far as a step-log ``pyarrow.Table`` (schema of :mod:`daa_sil.steplog`)."""
+    def steplog_table(self, n_rows: "int | None" = None):
+        """The first ``n_rows`` rows (all if None) as a step-log ``pyarrow.Table`` (schema of
+        :mod:`daa_sil.steplog`)."""
         import pyarrow as pa
 
         from daa_sil.steplog import STEP_SCHEMA
 
-        cols = {name: [r.get(name, math.nan) for r in self.rows] for name in STEP_SCHEMA.names}
+        rows = self.rows if n_rows is None else self.rows[:n_rows]
+        cols = {name: [r.get(name, math.nan) for r in rows] for name in STEP_SCHEMA.names}
         return pa.Table.from_pydict(cols, schema=STEP_SCHEMA)
 
-    def write_steplog(self, path: "str | Path", meta: dict) -> Path:
+    def write_steplog(self, path: "str | Path", meta: dict, n_rows: "int | None" = None) -> Path:
+        """Write the first ``n_rows`` rows (all if None) atomically to ``path``."""
         from daa_sil.steplog import write_steplog
 
-        return write_steplog(self.steplog_table(), path, metadata=meta)
+        return write_steplog(self.steplog_table(n_rows), path, metadata=meta)

@@ -644,4 +644,5 @@ class VehicleNode:
                                                   **self.stats.extra})
         # parameter / mode writes: kind, name, old, new, status, link, source, t_received, t_applied, t_sent
         meta["settings"] = json.dumps([e.as_dict() for e in self.services.events], sort_keys=True)
-        return self.core.write_steplog(self.opts.steplog, meta)
+        # only the steps flown: a step computed but stopped before it was published is not in the log
+        return self.core.write_steplog(self.opts.steplog, meta, n_rows=self.stats.steps)
