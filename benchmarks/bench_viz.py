@@ -169,12 +169,13 @@ def bench_live(steplog_path: Path, sil_wall: float, tmp: Path) -> None:
 
 
 def bench_fasttime(tmp: Path) -> None:
-    from daa_sil import campaign, viz
+    from daa_sil import viz
+    from daa_sil.groups import group_spec
     from daa_sil.encounters import sample_encounters
     from daa_sil.fasttime import simulate
 
     es = sample_encounters(1, seed=3)
-    spec = campaign.paper_groups()["B-1"]
+    spec = group_spec("B-1")
     model = spec.delay_model()
     simulate(es, spec.policy(), model, model, preset="paper", record_steps=True)  # warm-up (imports, caches)
     t0 = time.perf_counter()
@@ -240,11 +241,12 @@ def _realtime_pairs(scenario: Path, repeat: int, tmp: Path, speed: float, url: s
 
 def _any_steplog(tmp: Path) -> Path:
     """A real step log for [0] without a SIL run: one fast-time encounter."""
-    from daa_sil import campaign, steplog
+    from daa_sil import steplog
+    from daa_sil.groups import group_spec
     from daa_sil.encounters import sample_encounters
     from daa_sil.fasttime import simulate
 
-    spec = campaign.paper_groups()["B-1"]
+    spec = group_spec("B-1")
     model = spec.delay_model()
     _, _, steps = simulate(sample_encounters(1, seed=3), spec.policy(), model, model, preset="paper",
                            record_steps=True)

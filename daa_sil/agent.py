@@ -16,12 +16,23 @@ Semantics follow ``docs/architecture.md`` "Allocation semantics":
     within ``projl_horizon_s``, else ``no_wait`` (DAA resolution). A command older than
     ``stale_command_s`` (by its send time) is never executed nor stored: the step is decided as
     if no command arrived but recorded as ``stale``.
-* Wait function ``w``: ``none`` -> 0 (always DAA); ``constant`` -> ``constant_wait_s``; ``map`` ->
-  ``wait_lookup(own, intr)``. ``w`` is read at the current state every step, literally as in the
-  paper's Eq. 11; a constant wait (IC-1, 5 s >= W_T) therefore waits until ProjL fires, which is
-  what makes IC-1 the group with the most waits in the paper's Table 3. The variant
-  ``wait_countdown=True`` treats ``w`` as a budget counted from the start of the current waiting
-  streak (``w - elapsed``), reset when a fresh pilot command arrives or the active phase ends.
+* Wait function ``w`` (``policy.wait_mode``): ``none`` -> 0 (always DAA); ``constant`` ->
+  ``constant_wait_s``; ``always`` -> +inf (the map ignored: wait unless ProjL, the ``ID-2-projl``
+  ablation); ``map`` -> the wait map at the current state of the most threatening intruder, read
+  from the map of that intruder's estimated turn rate (:func:`make_wait_lookup`). Two readings of
+  Eq. 11 (``policy.wait_rule``): ``threshold`` (default, literal) compares ``w(S(k))`` read afresh
+  every step with W_T, so a constant wait (IC-1, 5 s >= W_T) waits until ProjL fires, which is what
+  makes IC-1 the group with the most waits in the paper's Table 3; ``countdown`` reads the paper's
+  "waits for the optimal wait time extracted from the map until the control is being authorized
+  to the onboard DAA or a delayed pilot command is received": ``w`` is a budget counted from the
+  start of the current waiting streak (``w - elapsed``), reset when a fresh pilot command arrives
+  or the active phase ends.
+* ProjL veto (``policy.projl``, default on): no wait while any intruder has ProjL within
+  ``projl_horizon_s``. Off in the ``ID-2-map`` ablation (the map alone decides).
+* Provenance of every wait / no-wait decision (``decided_by``): ``map`` (the wait function alone
+  said no: w < W_T), ``projl`` (ProjL alone), ``both``, or ``neither`` (a wait). The map
+  "decided" a step exactly when ``decided_by == "map"``: with the map replaced by "always wait"
+  the decision would have been ``wait``.
 * ``projl_horizon_s`` default 25 s = the DO-365 warning alerting time: a LoWC predicted that soon
   leaves no time to wait for a command delayed by up to 10 s plus a 5-10 s maneuver.
 * Authority: ``pilot`` (pilot command or inactive), ``hold`` (wait), ``daa`` (DAA resolution,
@@ -44,61 +55,79 @@ from .frames import to_paper_state
 from .kinematics import AircraftState, Command
 
 DECISION_NAMES = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
+DECIDED_BY_NAMES = ("none", "map", "projl", "both", "neither")
+BY_NONE, BY_MAP, BY_PROJL, BY_BOTH, BY_NEITHER = range(5)
+WAIT_MODES = ("none", "constant", "map", "always")
+WAIT_RULES = ("threshold", "countdown")
 (D_NONE, D_WAIT, D_NO_WAIT, D_PILOT, D_BLEND, D_DAA_OVERRIDE, D_DAA, D_STALE, D_LINK_LOST) = range(9)
 AUTHORITY_NAMES = ("pilot", "daa", "hold")
 A_PILOT, A_DAA, A_HOLD = range(3)
 
 #: keys of the decision record (every value is an array with leading axis N)
 DECISION_FIELDS = (
-    "active", "decision", "rule", "authority", "wait_s", "projl", "link_lost", "max_alert", "alert_level",
-    "pilot_cmd_received", "pilot_cmd_age_s", "sm_pilot", "sm_exec",
+    "active", "decision", "rule", "authority", "wait_s", "projl", "decided_by", "wait_p_lowc", "wait_in_box",
+    "wait_turn_dps", "wait_map_turn_dps", "link_lost", "max_alert", "alert_level",
+    "pilot_cmd_received", "pilot_cmd_fresh", "pilot_cmd_age_s", "sm_pilot", "sm_exec",
     "pilot_axis", "pilot_dir", "exec_axis", "exec_dir", "exact_match",
     "cmd_trk", "cmd_vs", "cmd_gs", "pilot_trk", "pilot_vs", "pilot_gs", "daa_trk", "daa_vs", "daa_gs",
     "bands_trk", "bands_trk_region",
 )
 
 #: name tables for the integer-coded fields
-CODE_NAMES = {"decision": DECISION_NAMES, "rule": RULE_NAMES, "authority": AUTHORITY_NAMES,
+CODE_NAMES = {"decision": DECISION_NAMES, "rule": RULE_NAMES, "authority": AUTHORITY_NAMES, "decided_by": DECIDED_BY_NAMES,
               "pilot_axis": AXIS_NAMES, "exec_axis": AXIS_NAMES, "pilot_dir": DIR_NAMES, "exec_dir": DIR_NAMES}
 
-WaitLookup = Callable[[AircraftState, AircraftState], np.ndarray]
+@dataclass
+class WaitValue:
+    """The wait function's answer for N encounters (arrays ``(N,)``; nan where not applicable)."""
+
+    wait_s: np.ndarray  #: w, s
+    p_lowc: np.ndarray  #: the map's P(LoWC within H while waiting)
+    in_box: np.ndarray  #: bool, the state was inside the map's box (not clamped)
+    turn_dps: np.ndarray  #: estimated turn rate of the intruder read, compass deg/s (+ = right)
+    map_turn_dps: np.ndarray  #: conditioning turn rate of the map read, compass deg/s (+ = right)
+
+    @classmethod
+    def constant(cls, n: int, value: float) -> "WaitValue":
+        nan = np.full(n, np.nan)
+        return cls(np.full(n, float(value)), nan, np.zeros(n, bool), nan.copy(), nan.copy())
+
+
+#: ``lookup(own (N,), intruders (N, M), turn_rate (N, M) compass rad/s) -> WaitValue``
+WaitLookup = Callable[[AircraftState, AircraftState, np.ndarray], WaitValue]
 
 
 @dataclass(frozen=True)
 class AllocationPolicy:
-    """One experimental group's allocation settings (groups are data, not code paths). Times in s."""
+    """One experimental group's allocation settings (groups are data, not code paths: see
+    :mod:`daa_sil.groups`). Times in s."""
 
-    wait_mode: str  #: "none" (w = 0, always DAA), "constant", "map"
+    wait_mode: str  #: :data:`WAIT_MODES`: none (w = 0, always DAA), constant, map, always (w = inf)
     constant_wait_s: float = 5.0
     wait_threshold_s: float = 4.0  #: W_T
+    projl: bool = True  #: ProjL veto on (the paper) or off (the map alone decides)
     projl_horizon_s: float = 25.0  #: the paper's N
     blending: bool = True  #: False = baseline: unsafe pilot command -> DAA override
     stale_command_s: float = 15.0
     link_timeout_s: float = 20.0
-    wait_countdown: bool = False  #: wait is a budget from the start of the waiting streak
-    sm_horizon_s: "float | None" = None  #: SM horizon (None = DaaConfig.sm_horizon_s)
+    wait_rule: str = "threshold"  #: :data:`WAIT_RULES`: w(S(k)) >= W_T every step, or a countdown budget
     name: str = "custom"
+    #: False = the agent never takes authority: the pilot's last command is always flown, the
+    #: decision is always ``none`` (alert levels are still computed); the SIL's ``DAA_ENABLE 0``
+    enabled: bool = True
 
     def __post_init__(self):
-        if self.wait_mode not in ("none", "constant", "map"):
-            raise UsageError(f"wait_mode must be none, constant or map, got {self.wait_mode!r}")
-
-
-POLICIES: dict[str, AllocationPolicy] = {
-    "B-1": AllocationPolicy("none", blending=False, name="B-1"),
-    "B-2": AllocationPolicy("none", blending=False, name="B-2"),
-    "IC-1": AllocationPolicy("constant", constant_wait_s=5.0, name="IC-1"),
-    "ID-1": AllocationPolicy("map", name="ID-1"),
-    "ID-2": AllocationPolicy("map", name="ID-2"),
-}
+        if self.wait_mode not in WAIT_MODES:
+            raise UsageError(f"wait_mode must be one of {', '.join(WAIT_MODES)}, got {self.wait_mode!r}")
+        if self.wait_rule not in WAIT_RULES:
+            raise UsageError(f"wait_rule must be one of {', '.join(WAIT_RULES)}, got {self.wait_rule!r}")
 
 
 def policy_for_group(group: str) -> AllocationPolicy:
-    """The policy of a paper group (B-1, B-2, IC-1, ID-1, ID-2)."""
-    try:
-        return POLICIES[group.upper()]
-    except KeyError:
-        raise UsageError(f"unknown group {group!r}; allowed: {', '.join(POLICIES)}") from None
+    """The policy of a named group of the group table (:mod:`daa_sil.groups`: B-1, ..., ID-2-map)."""
+    from .groups import group_spec
+
+    return group_spec(group).policy()
 
 
 @dataclass
@@ -168,31 +197,36 @@ def _reached(own: AircraftState, cmd: Command) -> np.ndarray:
     return (np.abs(dtrk) < np.radians(0.5)) & (np.abs(dvs) < 0.25) & (np.abs(dgs) < 0.5)
 
 
-def _wait_values(own, intr, policy: AllocationPolicy, lookup: "WaitLookup | None", idx) -> np.ndarray:
+def _wait_values(own, intr, policy: AllocationPolicy, lookup: "WaitLookup | None", turn_rate, idx) -> WaitValue:
     n = len(idx)
     if policy.wait_mode == "none" or n == 0:
-        return np.zeros(n)
+        return WaitValue.constant(n, 0.0)
     if policy.wait_mode == "constant":
-        return np.full(n, float(policy.constant_wait_s))
+        return WaitValue.constant(n, policy.constant_wait_s)
+    if policy.wait_mode == "always":
+        return WaitValue.constant(n, np.inf)
     if lookup is None:
         raise UsageError("policy wait_mode 'map' needs a wait_lookup (daa_sil.agent.make_wait_lookup)")
-    return np.asarray(lookup(own[idx], intr[idx]), float).reshape(n)
+    rate = np.zeros(intr.shape) if turn_rate is None else np.broadcast_to(np.asarray(turn_rate, float), intr.shape)
+    return lookup(own[idx], intr[idx], rate[idx])
 
 
 def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotInput, memory: AgentMemory,
                policy: AllocationPolicy, daa_cfg: "DaaConfig | None" = None,
-               wait_lookup: "WaitLookup | None" = None, bands=None
+               wait_lookup: "WaitLookup | None" = None, bands=None, turn_rate: "np.ndarray | None" = None
                ) -> tuple[Command, dict, AgentMemory]:
     """One allocation step at sim time ``t`` (s) for ownship ``(N,)`` and intruders ``(N, M)``.
 
     Returns ``(command to fly, decision record, new memory)``; the record has the keys
     :data:`DECISION_FIELDS` (codes in :data:`CODE_NAMES`; nan where not applicable). ``bands``
     (a :class:`~daa_sil.daa.Bands` for the whole batch) may be passed to avoid recomputing them.
+    ``turn_rate`` ``(N, M)`` is each intruder's estimated turn rate (compass rad/s, + = right;
+    default 0), which picks the wait map (:class:`daa_sil.onboard.TurnRateEstimator`).
     """
     cfg = daa_cfg if daa_cfg is not None else DaaConfig()
     n = own.shape[0]
     nan = np.full(n, np.nan)
-    horizon = cfg.sm_horizon_s if policy.sm_horizon_s is None else policy.sm_horizon_s
+    horizon = cfg.sm_horizon_s
     # --- DAA alerting: stateless, or with DAIDALUS hysteresis / M-of-N / persistence (cfg.stateful) ----
     daa_state = memory.daa_state
     if cfg.stateful:
@@ -227,7 +261,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     if check.any():
         j = np.nonzero(check)[0]
         unsafe_revert[j] = ~(safety_metric(own[j], intr[j], last_pilot[j], cfg, horizon) > 0)
-    active = (max_alert >= 2) | in_progress | unsafe_revert
+    active = ((max_alert >= 2) | in_progress | unsafe_revert) & bool(policy.enabled)
     ia = np.nonzero(active)[0]
     own_a, intr_a = own[ia], intr[ia]
 
@@ -262,7 +296,8 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     p_dir = np.where(fresh, intent_dir, 0).astype(np.int8)
 
     # --- wait / no wait (no fresh command) ------------------------------------------------------
-    wait_s = nan.copy()
+    wait_s, w_pl, w_turn, w_map = nan.copy(), nan.copy(), nan.copy(), nan.copy()
+    w_box = np.zeros(n, bool)
     projl = np.zeros(n, bool)
     if ia.size:
         projl[ia] = proj_lowc(own_a, intr_a, cfg, policy.projl_horizon_s).any(axis=1) if intr.shape[1] else False
@@ -270,11 +305,16 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     inc = np.nonzero(nc)[0]
     wait_start = np.where(active & ~fresh, memory.wait_start, np.nan)
     if inc.size:
-        w = _wait_values(own, intr, policy, wait_lookup, inc)
-        if policy.wait_countdown:
+        wv = _wait_values(own, intr, policy, wait_lookup, turn_rate, inc)
+        w = wv.wait_s
+        if policy.wait_rule == "countdown":
             w = w - np.where(np.isfinite(wait_start[inc]), t - wait_start[inc], 0.0)
-        wait_s[inc] = w
-    wait = nc & (np.nan_to_num(wait_s, nan=-np.inf) >= policy.wait_threshold_s) & ~projl
+        wait_s[inc], w_pl[inc], w_box[inc], w_turn[inc], w_map[inc] = w, wv.p_lowc, wv.in_box, wv.turn_dps, wv.map_turn_dps
+    veto_map = nc & ~(np.nan_to_num(wait_s, nan=-np.inf) >= policy.wait_threshold_s)
+    veto_projl = nc & projl & policy.projl
+    wait = nc & ~veto_map & ~veto_projl
+    decided_by = np.select([~nc, veto_map & veto_projl, veto_map, veto_projl], [BY_NONE, BY_BOTH, BY_MAP, BY_PROJL],
+                           BY_NEITHER).astype(np.int8)
     wait_start = np.where(wait & np.isnan(wait_start), t, wait_start)
 
     # --- blend for unsafe fresh pilot commands --------------------------------------------------
@@ -328,8 +368,9 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
 
     dec = {
         "active": active, "decision": decision, "rule": rule, "authority": authority, "wait_s": wait_s,
-        "projl": projl, "link_lost": link_lost, "max_alert": max_alert.astype(np.int8), "alert_level": alert,
-        "pilot_cmd_received": received, "pilot_cmd_age_s": age, "sm_pilot": sm_pilot, "sm_exec": sm_exec,
+        "projl": projl, "decided_by": decided_by, "wait_p_lowc": w_pl, "wait_in_box": w_box, "wait_turn_dps": w_turn,
+        "wait_map_turn_dps": w_map, "link_lost": link_lost, "max_alert": max_alert.astype(np.int8), "alert_level": alert,
+        "pilot_cmd_received": received, "pilot_cmd_fresh": fresh, "pilot_cmd_age_s": age, "sm_pilot": sm_pilot, "sm_exec": sm_exec,
         "pilot_axis": p_axis, "pilot_dir": p_dir, "exec_axis": e_axis, "exec_dir": e_dir, "exact_match": exact,
         "cmd_trk": exec_cmd.trk, "cmd_vs": exec_cmd.vs, "cmd_gs": exec_cmd.gs,
         "pilot_trk": p_trk, "pilot_vs": p_vs, "pilot_gs": p_gs,
@@ -354,34 +395,36 @@ def decode(decisions: dict) -> dict:
     return out
 
 
-def make_wait_lookup(family, turn_rate_fn: "Callable[[AircraftState], np.ndarray] | None" = None,
-                     cfg: "DaaConfig | None" = None) -> WaitLookup:
-    """Wrap a wait-map family (``family.lookup(paper_states, turn_rate)``) as ``lookup(own, intr) -> (N,)``.
+def make_wait_lookup(family, cfg: "DaaConfig | None" = None) -> WaitLookup:
+    """Wrap a wait-map family (``family.lookup(paper_states, turn_rate)``) as a :data:`WaitLookup`.
 
-    Each intruder is converted to the paper frame (:func:`daa_sil.frames.to_paper_state`); its turn
-    rate comes from ``turn_rate_fn(intr)`` (compass rad/s, + = right; default 0) and is passed in the
-    paper sense (+ = left, i.e. negated). The wait of the **most threatening** intruder is used: the
-    one with the earliest straight-line LoWC over the lookahead (ties: the smallest range).
+    Each intruder is converted to the paper frame (:func:`daa_sil.frames.to_paper_state`) and read
+    from the map of its estimated turn rate (compass rad/s, + = right, passed to the family in the
+    paper sense, + = left). The wait of the **most threatening** intruder is used: the one with the
+    earliest straight-line LoWC over the DAA lookahead (ties: the smallest range).
     """
     cfg = cfg or DaaConfig()
-    from .daa.alerting import relative_state
     from . import wellclear as wc
+    from .daa.alerting import relative_state
 
-    def lookup(own: AircraftState, intr: AircraftState) -> np.ndarray:
+    def lookup(own: AircraftState, intr: AircraftState, turn_rate: np.ndarray) -> WaitValue:
         n, m = intr.shape
         if m == 0:
-            return np.full(n, np.inf)
+            return WaitValue.constant(n, np.inf)
         paper = to_paper_state(own.position()[:, None], own.velocity()[:, None], intr.position(), intr.velocity())
-        rate = np.zeros((n, m)) if turn_rate_fn is None else np.broadcast_to(turn_rate_fn(intr), (n, m))
-        res = family.lookup(paper, -np.asarray(rate, float))
+        rate = np.broadcast_to(np.asarray(turn_rate, float), (n, m))
+        res = family.lookup(paper, -rate)
         s, v = relative_state(own, intr)
         t_in, _ = wc.violation_interval(s, v, cfg.th, 0.0, cfg.lookahead_s)
         key = np.minimum(t_in, 1e9) * 1e6 + wc.horizontal_range(s)
         k = np.argmin(key, axis=1)
-        return np.asarray(res.wait_s, float)[np.arange(n), k]
+        r = np.arange(n)
+        return WaitValue(np.asarray(res.wait_s, float)[r, k], np.asarray(res.p_lowc, float)[r, k],
+                         np.asarray(res.in_box, bool)[r, k], np.degrees(rate[r, k]),
+                         0.0 - np.asarray(res.map_turn_deg, float)[r, k])  # 0.0 - x: no -0.0 for the 0 map
 
     return lookup
 
 
-__all__ = ["AllocationPolicy", "POLICIES", "policy_for_group", "PilotInput", "AgentMemory", "agent_step",
+__all__ = ["AllocationPolicy", "WaitValue", "WaitLookup", "WAIT_MODES", "WAIT_RULES", "DECIDED_BY_NAMES", "policy_for_group", "PilotInput", "AgentMemory", "agent_step",
            "make_wait_lookup", "decode", "DECISION_FIELDS", "DECISION_NAMES", "AUTHORITY_NAMES", "CODE_NAMES"]

@@ -1,7 +1,7 @@
 """Fast-time Monte Carlo campaigns over the paper's groups (Table 2), chunked over executors.
 
-One code path for every executor (``reference/rerun_dask.md`` §4): chunks of encounters are
-submitted to a :class:`concurrent.futures.Executor` and collected with ``as_completed``:
+One code path for every executor: chunks of encounters are submitted to a
+:class:`concurrent.futures.Executor` and collected with ``as_completed``, whichever executor it is:
 
 * ``workers=1`` -- in-process (one worker thread, so the progress bar stays live);
 * ``workers=K`` -- :class:`~concurrent.futures.ProcessPoolExecutor` (fork; the wait maps are loaded
@@ -40,19 +40,19 @@ import platform
 import sys
 import time
 from dataclasses import asdict, dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
-import yaml
 
 from . import __version__
 from .errors import FileFormatError, OutputError, UsageError
 from .io import atomic_path, atomic_write_json, ensure_dir, remove_stale_temps
+from .groups import GroupSpec, parse_groups
 from .thresholds import PRESETS
+from .waitmap.build import DEFAULT_MAP
 
 #: campaign.json format version
 CAMPAIGN_FORMAT = 1
@@ -64,80 +64,51 @@ DEFAULT_DT_S = 1.0
 DEFAULT_CHUNK = 2000
 
 
-# --- groups (paper Table 2, as data) --------------------------------------------------------------
-@dataclass(frozen=True)
-class GroupSpec:
-    """One experiment group: setup (baseline/integrated), one-way link latency (both directions, the
-    ``paper_results.yaml`` dict form) and the wait function (0, a constant in s, or ``"map"``)."""
-
-    name: str
-    setup: str
-    latency: dict
-    wait: "float | str"
-
-    def delay_model(self):
-        """The :mod:`daa_sil.latency` model used on the uplink and on the downlink."""
-        from .latency import delay_model_from_dict
-
-        return delay_model_from_dict(dict(self.latency), where=f"group {self.name} latency")
-
-    def policy(self):
-        """The agent's :class:`~daa_sil.agent.AllocationPolicy` for this group."""
-        from .agent import policy_for_group
-
-        return policy_for_group(self.name)
-
-    @property
-    def uses_map(self) -> bool:
-        return self.wait == "map"
-
-
-@functools.lru_cache(maxsize=1)
-def paper_groups() -> dict[str, GroupSpec]:
-    """The five groups of the paper's Table 2 from ``daa_sil/data/paper_results.yaml``."""
-    text = resources.files("daa_sil").joinpath("data/paper_results.yaml").read_text(encoding="utf-8")
-    raw = yaml.safe_load(text)["groups"]
-    return {name: GroupSpec(name, g["setup"], dict(g["latency"]), g["wait"]) for name, g in raw.items()}
-
-
-def parse_groups(text: "str | Sequence[str] | None") -> tuple[str, ...]:
-    """``"B-1,ID-2"`` (or a list) -> validated group names in the given order; None = all five."""
-    known = paper_groups()
-    if text is None:
-        return tuple(known)
-    items = [s.strip() for s in (text.split(",") if isinstance(text, str) else text)]
-    items = [s for s in items if s]
-    if not items:
-        raise UsageError(f"--groups is empty; allowed: {','.join(known)}")
-    by_upper = {k.upper(): k for k in known}
-    out = []
-    for s in items:
-        if s.upper() not in by_upper:
-            raise UsageError(f"unknown group {s!r}; allowed: {','.join(known)}")
-        name = by_upper[s.upper()]
-        if name in out:
-            raise UsageError(f"group {name} given twice in --groups")
-        out.append(name)
-    return tuple(out)
-
-
 # --- configuration --------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class CampaignConfig:
-    """Everything that determines a campaign's results (stored in ``campaign.json``)."""
+    """Everything that determines a campaign's results (stored in ``campaign.json``).
 
-    groups: tuple[str, ...] = tuple(("B-1", "B-2", "IC-1", "ID-1", "ID-2"))
+    ``groups`` are the group definitions as given (:mod:`daa_sil.groups`); the overrides ``wt``
+    (W_T of every group with a wait function), ``projl_lookahead`` (ProjL look-ahead N of every
+    group) and ``latency`` (a delay spec such as ``gauss:5,3`` for every group's links) apply on
+    top (:attr:`effective_groups`). ``waitmap`` is a map preset, grid spec or family directory
+    (:func:`daa_sil.waitmap.family_for`), ``gamma`` the MDP discount (None: the map preset's).
+    """
+
+    groups: tuple = field(default_factory=lambda: parse_groups(None))
     n_encounters: int = 10_000
     seed: int = 0
     chunk_size: int = DEFAULT_CHUNK
     preset: str = "paper"
     duration_s: float = DEFAULT_DURATION_S
     dt_s: float = DEFAULT_DT_S
+    waitmap: str = DEFAULT_MAP
+    gamma: "float | None" = None
+    wt: "float | None" = None
+    projl_lookahead: "float | None" = None
+    latency: "str | None" = None
+    n_intruders: int = 1
+    reading: str = "literal"  #: a named reading of :mod:`daa_sil.readings`
+    reading_set: dict = field(default_factory=dict)  #: overrides of the reading's settings
+
+    def __post_init__(self):
+        # groups may be given by name (``("B-2", "ID-2")``) or as a --groups string
+        g = self.groups
+        if isinstance(g, str) or (isinstance(g, (tuple, list)) and any(isinstance(x, str) for x in g)):
+            names = g if isinstance(g, str) else [x if isinstance(x, str) else x.name for x in g]
+            specs = {s.name: s for s in g if isinstance(s, GroupSpec)} if not isinstance(g, str) else {}
+            parsed = parse_groups(names)
+            object.__setattr__(self, "groups", tuple(specs.get(p.name, p) for p in parsed))
+        else:
+            object.__setattr__(self, "groups", tuple(g))
 
     def validate(self) -> "CampaignConfig":
         """Raise UsageError (one line) on a bad value; returns self."""
-        parse_groups(self.groups)
-        for name, val in (("--encounters", self.n_encounters), ("--chunk-size", self.chunk_size)):
+        if not self.groups or not all(isinstance(g, GroupSpec) for g in self.groups):
+            raise UsageError("a campaign needs at least one group definition")
+        for name, val in (("--encounters", self.n_encounters), ("--chunk-size", self.chunk_size),
+                          ("--intruders", self.n_intruders)):
             if not isinstance(val, (int, np.integer)) or isinstance(val, bool) or val <= 0:
                 raise UsageError(f"{name} must be a positive integer, got {val!r}")
         if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool) or self.seed < 0:
@@ -148,7 +119,67 @@ class CampaignConfig:
             raise UsageError(f"duration must be > 0 s, got {self.duration_s!r}")
         if not (math.isfinite(self.dt_s) and self.dt_s > 0):
             raise UsageError(f"dt must be > 0 s, got {self.dt_s!r}")
+        for name, val, lo, hi in (("--wt", self.wt, 0.0, 600.0), ("--projl-lookahead", self.projl_lookahead, 0.0, 600.0),
+                                  ("--gamma", self.gamma, 1e-6, 0.999999)):
+            if val is not None and not (isinstance(val, (int, float)) and math.isfinite(val) and lo <= val <= hi):
+                raise UsageError(f"{name} must be within [{lo:g}, {hi:g}], got {val!r}")
+        if self.latency is not None:
+            from .latency import parse_delay_spec
+
+            parse_delay_spec(self.latency)
+        self.effective_groups  # noqa: B018 -- validates the overridden definitions
+        r = self.effective_reading
+        if r.waitmap is not None and self.waitmap not in (DEFAULT_MAP, r.waitmap):
+            raise UsageError(f"reading {r.name!r} sets the wait maps to {r.waitmap!r}; drop --waitmap {self.waitmap}")
+        if self.uses_map:
+            from .waitmap.build import check_source
+
+            check_source(self.map_source, self.preset, self.gamma)
         return self
+
+    @property
+    def map_source(self) -> str:
+        """The ``--waitmap`` the map groups read: the reading's, else the campaign's."""
+        return self.effective_reading.waitmap or self.waitmap
+
+    @property
+    def effective_reading(self):
+        """The :class:`daa_sil.readings.Reading` flown and counted (named bundle + overrides)."""
+        from .readings import reading_for
+
+        return reading_for(self.reading, **dict(self.reading_set))
+
+    @property
+    def group_names(self) -> tuple[str, ...]:
+        return tuple(g.name for g in self.groups)
+
+    @property
+    def effective_groups(self) -> tuple[GroupSpec, ...]:
+        """The groups with the campaign's overrides applied (what is flown)."""
+        out = []
+        for g in self.groups:
+            ch: dict = {}
+            if self.wt is not None and g.wait_mode != "none":
+                ch["wait_threshold_s"] = float(self.wt)
+            if self.projl_lookahead is not None:
+                ch["projl_horizon_s"] = float(self.projl_lookahead)
+            if self.latency is not None:
+                from .latency import parse_delay_spec
+
+                ch["latency"] = parse_delay_spec(self.latency).to_dict()
+            out.append(g.with_(**ch) if ch else g)
+        return tuple(out)
+
+    def group(self, name: str) -> GroupSpec:
+        """The effective definition of one of the campaign's groups."""
+        for g in self.effective_groups:
+            if g.name == name:
+                return g
+        raise UsageError(f"group {name!r} is not part of this campaign ({', '.join(self.group_names)})")
+
+    @property
+    def uses_map(self) -> bool:
+        return any(g.uses_map for g in self.groups)
 
     @property
     def n_chunks(self) -> int:
@@ -161,15 +192,22 @@ class CampaignConfig:
 
     def to_dict(self) -> dict:
         d = asdict(self)
-        d["groups"] = list(self.groups)
+        d["groups"] = [g.to_dict() for g in self.groups]
+        d["reading_set"] = dict(self.reading_set)
+        d["readings"] = self.effective_reading.to_dict()  # derived: every setting of the reading
         return d
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "campaign.json") -> "CampaignConfig":
         try:
-            return cls(groups=tuple(d["groups"]), n_encounters=int(d["n_encounters"]), seed=int(d["seed"]),
+            groups = tuple(GroupSpec.from_dict(g["name"], {k: v for k, v in g.items() if k != "name"}, where)
+                           for g in d["groups"])
+            opt = {k: d.get(k) for k in ("gamma", "wt", "projl_lookahead", "latency")}
+            return cls(groups=groups, n_encounters=int(d["n_encounters"]), seed=int(d["seed"]),
                        chunk_size=int(d["chunk_size"]), preset=str(d["preset"]),
-                       duration_s=float(d["duration_s"]), dt_s=float(d["dt_s"])).validate()
+                       duration_s=float(d["duration_s"]), dt_s=float(d["dt_s"]), waitmap=str(d["waitmap"]),
+                       n_intruders=int(d.get("n_intruders", 1)), reading=str(d.get("reading", "literal")),
+                       reading_set=dict(d.get("reading_set") or {}), **opt).validate()
         except (KeyError, TypeError, ValueError) as exc:
             raise FileFormatError(f"{where}: bad or missing config field ({exc})") from None
         except UsageError as exc:
@@ -211,11 +249,16 @@ class ChunkResult:
 
 
 @functools.lru_cache(maxsize=4)
-def _wait_family(preset: str):
-    """The wait-map family for a preset, loaded once per process (builds the cache if needed)."""
+def _wait_family(source: str, preset: str, gamma: "float | None" = None):
+    """The wait-map family of a campaign, loaded once per process (builds the cache if needed)."""
     from . import waitmap
 
-    return waitmap.default_family(preset=preset)
+    return waitmap.family_for(source, preset=preset, gamma=gamma)
+
+
+def campaign_family(config: CampaignConfig):
+    """The wait-map family a campaign's map groups read (None if no group uses the map)."""
+    return _wait_family(config.map_source, config.preset, config.gamma) if config.uses_map else None
 
 
 def run_chunk(task: ChunkTask) -> ChunkResult:
@@ -223,11 +266,12 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
     from .fasttime import simulate
 
     t0 = time.perf_counter()
-    spec = paper_groups()[task.group]
     cfg = task.config
+    spec = cfg.group(task.group)
     model = spec.delay_model()
-    fam = _wait_family(cfg.preset) if spec.uses_map else None
-    enc_rows, dec_rows, _ = simulate(task.encounters, spec.policy(), model, model, wait_family=fam,
+    fam = campaign_family(cfg) if spec.uses_map else None
+    pilot_cfg = cfg.effective_reading.pilot_config()
+    enc_rows, dec_rows, _ = simulate(task.encounters, spec.policy(), model, model, pilot_cfg, wait_family=fam,
                                      seeds=task.seeds, preset=cfg.preset, duration_s=cfg.duration_s,
                                      dt=cfg.dt_s, group=task.group, record_steps=False)
     return ChunkResult(task.group, task.chunk, enc_rows, dec_rows, time.perf_counter() - t0, len(task.seeds))
@@ -273,7 +317,7 @@ def read_results(out_dir: "str | os.PathLike", kind: str = "encounters",
     if kind not in ("encounters", "decisions"):
         raise UsageError(f"kind must be 'encounters' or 'decisions', got {kind!r}")
     cfg = load_campaign_json(out)["config"] if (out / "campaign.json").is_file() else None
-    names = list(groups) if groups is not None else (list(cfg["groups"]) if cfg else
+    names = list(groups) if groups is not None else ([g["name"] for g in cfg["groups"]] if cfg else
                                                      sorted(p.name for p in out.iterdir() if p.is_dir()))
     tables = []
     for g in names:
@@ -415,22 +459,40 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
                              f"pass the same options or omit them")
         if not enc_path.is_file():
             raise FileFormatError(f"{enc_path} is missing; cannot resume this campaign")
+        stored_map = load_campaign_json(out).get("waitmap")
+        fam = campaign_family(config)
+        if stored_map and fam is not None and stored_map.get("content_hashes") != _describe_family(fam)["content_hashes"]:
+            raise UsageError(f"--resume: the wait maps of {config.map_source!r} are not the ones this campaign started with "
+                             f"(their content hashes differ: rebuilt with other code or parameters); start a new campaign")
         encs = enc_mod.load_encounters(enc_path)
         if len(encs) != config.n_encounters:
             raise FileFormatError(f"{enc_path} holds {len(encs)} encounters, campaign.json says {config.n_encounters}")
         return out, config, encs
+    fam = campaign_family(config)  # built (or loaded) before anything is written
     ensure_dir(out)
     encs = enc_mod.sample_encounters(config.n_encounters, seed=config.seed, preset=config.preset,
                                      duration_s=config.duration_s, dt_s=config.dt_s,
-                                     t_cpa_s=config.duration_s / 2.0)  # paper: CPA at T/2
+                                     t_cpa_s=config.duration_s / 2.0,  # paper: CPA at T/2
+                                     n_intruders=config.n_intruders,
+                                     **config.effective_reading.encounter_overrides())
     enc_mod.save_encounters(encs, enc_path)  # atomic
     meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "versions": _versions(),
             "preset": config.preset, "seed": config.seed, "status": "running",
-            "groups": {g: asdict(paper_groups()[g]) for g in config.groups},
+            "seeds": {"campaign": config.seed,
+                      "encounters": "encounter i: SeedSequence(campaign, spawn_key=(i,)); its 'seed' column in "
+                                    "encounters.parquet roots the pilot, uplink and downlink streams of every group"},
+            "groups": {g.name: g.to_dict() for g in config.effective_groups},
+            "waitmap": ({"source": config.map_source, **_describe_family(fam)} if fam is not None else None),
             "layout": {"encounters": "<group>/encounters-<chunk>.parquet",
                        "decisions": "<group>/decisions-<chunk>.parquet", "chunk_size": config.chunk_size}}
     atomic_write_json(meta_path, meta)
     return out, config, encs
+
+
+def _describe_family(fam) -> dict:
+    from .waitmap import describe
+
+    return describe(fam)
 
 
 def run_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", *, workers: int = 1,
@@ -456,15 +518,15 @@ def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resum
         remove_stale_temps(out)  # temporaries of a writer killed mid-write
     seeds = np.asarray(encs.seed, dtype=np.int64)
     todo, skipped = [], 0
-    for g in config.groups:
+    for g in config.group_names:
         for c in range(config.n_chunks):
             if chunk_done(out, g, c):
                 skipped += 1
             else:
                 todo.append((g, c))
-    if any(paper_groups()[g].uses_map for g, _ in todo) and scheduler is None:
-        _wait_family(config.preset)  # build/load once here; forked workers inherit it
-    summary = CampaignSummary(out, config, config.n_chunks * len(config.groups), skipped, 0, 0.0, 0.0, 0)
+    if any(config.group(g).uses_map for g, _ in todo) and scheduler is None:
+        campaign_family(config)  # build/load once here; forked workers inherit it
+    summary = CampaignSummary(out, config, config.n_chunks * len(config.group_names), skipped, 0, 0.0, 0.0, 0)
     steps_per_enc = int(round(config.duration_s / config.dt_s))
     futs: dict[cf.Future, tuple[str, int]] = {}
     for g, c in todo:
@@ -474,7 +536,7 @@ def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resum
     todo_set = set(todo)
     with _progress(progress) as prog:
         bars = {}
-        for g in config.groups:
+        for g in config.group_names:
             done = sum(config.chunk_range(c)[1] - config.chunk_range(c)[0]
                        for c in range(config.n_chunks) if (g, c) not in todo_set)
             bars[g] = prog.add_task(f"group {g:5s}", total=config.n_encounters, completed=done)
@@ -494,7 +556,7 @@ def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resum
     return summary
 
 
-__all__ = ["GroupSpec", "paper_groups", "parse_groups", "CampaignConfig", "encounter_seeds", "ChunkTask",
+__all__ = ["GroupSpec", "parse_groups", "campaign_family", "CampaignConfig", "encounter_seeds", "ChunkTask",
            "ChunkResult", "run_chunk", "chunk_paths", "chunk_done", "write_chunk", "read_results",
            "load_campaign_json", "check_out_dir", "make_executor", "prepare_campaign", "run_campaign",
            "CampaignSummary", "DASK_HINT"]

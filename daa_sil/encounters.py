@@ -25,13 +25,13 @@ Interpretations of what the paper leaves open (all configurable in :class:`Encou
 * **CPA time.** Not given in the paper; the CPA is placed at ``t_cpa_s = T/2 = 120 s``. The CPA is
   the time of minimum *horizontal* range of the unmaneuvered ownship and the scripted intruder.
 * **hma.** With the CPA a stationary point of the range, the CPA position is perpendicular to the
-  relative velocity, so its bearing is fixed up to the side (``reference/models.md`` §5.2). We
+  relative velocity, so its bearing is fixed up to the side (``docs/models.md``, "Encounters"). We
   read hma as a bearing hint that picks the side: of the two admissible CPA positions we take the
   one whose bearing is closest to hma. The realised bearing is stored (``cpa_bearing_deg``).
 * **Turn.** One constant-rate turn per intruder from ``a*T`` for ``max_turn_deg / |rate|`` s
   (default 90 deg of heading change), ended at ``T``. Schedules act on the simulator's step grid:
   a segment ``[start, end)`` is active in the step starting at ``t_k`` iff ``start <= t_k < end``.
-* **Placement.** ``reference/models.md`` §5.3 rigid-motion trick, without the rotation because
+* **Placement.** The rigid-motion construction of ``docs/models.md`` ("Encounters"), without the rotation because
   ia fixes the initial track: the intruder template is integrated with :func:`kinematics.advance`
   on the step grid (exactly what the simulator does), then translated so that at ``t_cpa`` the
   intruder is ``HMD`` from the ownship perpendicular to the relative velocity and ``VMD`` above it.

@@ -32,6 +32,12 @@ n_link_lost``; ``n_pilot_received = n_pilot_exec + n_blend + n_daa_override`` (f
 received during the active phase); ``n_blend_intent`` = blends of a pilot command that carries a
 maneuver intent (an (axis, direction) -- not "hold" before the pilot's first maneuver);
 ``n_blend_intent = n_blend_exact + n_blend_axis + (intent blends matching neither) <= n_blend``.
+Over the whole encounter (the ``whole`` counting window of :mod:`daa_sil.readings`):
+``n_pilot_received_whole`` fresh pilot commands that reached the vehicle at any step, and
+``n_pilot_exec_whole`` of them executed as sent (outside the active phase the ownship flies the
+received command; inside, the ``pilot`` decisions). Decision provenance: ``n_by_map``,
+``n_by_projl``, ``n_by_both`` count the no-wait decisions by ``decided_by``; ``n_lookup_in_box``
+the wait/no-wait decisions whose map lookup was inside the map's box.
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ import numpy as np
 import pyarrow as pa
 
 from . import steplog as sl
-from .agent import (CODE_NAMES, D_BLEND, D_DAA_OVERRIDE, D_LINK_LOST, D_NO_WAIT, D_PILOT, D_STALE, D_WAIT,
+from .agent import (BY_BOTH, BY_MAP, BY_PROJL, CODE_NAMES, D_BLEND, D_DAA_OVERRIDE, D_LINK_LOST, D_NO_WAIT, D_PILOT, D_STALE, D_WAIT,
                     AllocationPolicy, PilotInput, make_wait_lookup)
 from .daa.config import DaaConfig
 from .errors import UsageError
@@ -60,20 +66,25 @@ _I = pa.int64()
 ENCOUNTER_SCHEMA = pa.schema(
     [("group", pa.string()), ("encounter_id", _I), ("seed", _I), ("duration_s", pa.float64()),
      ("lowc", pa.bool_()), ("nmac", pa.bool_()), ("lowc_duration_s", pa.float64()), ("pi", pa.float64()),
-     ("min_range_m", pa.float64()), ("vsep_at_min_range_m", pa.float64()), ("dev_h_m", pa.float64()),
+     ("pi_paper", pa.float64()), ("min_range_m", pa.float64()), ("vsep_at_min_range_m", pa.float64()), ("dev_h_m", pa.float64()),
      ("dev_v_m", pa.float64()), ("n_active_steps", _I), ("n_wait", _I), ("n_no_wait", _I),
      ("n_pilot_received", _I), ("n_pilot_exec", _I), ("n_blend", _I), ("n_blend_exact", _I),
      ("n_blend_axis", _I), ("n_blend_intent", _I), ("n_daa_override", _I), ("n_stale", _I), ("n_link_lost", _I),
+     ("n_by_map", _I), ("n_by_projl", _I), ("n_by_both", _I), ("n_lookup_in_box", _I),
+     ("n_pilot_received_whole", _I), ("n_pilot_exec_whole", _I),
      ("intruder_turns", pa.bool_()), ("preset", pa.string())])
 
 DECISION_SCHEMA = pa.schema(
     [("group", pa.string()), ("encounter_id", _I), ("t", pa.float64()), ("decision", pa.string()),
-     ("rule", pa.string()), ("wait_s", pa.float64()), ("projl", pa.bool_()), ("sm_pilot", pa.float64()),
+     ("rule", pa.string()), ("wait_s", pa.float64()), ("projl", pa.bool_()), ("decided_by", pa.string()),
+     ("wait_p_lowc", pa.float64()), ("wait_in_box", pa.bool_()), ("wait_turn_dps", pa.float64()),
+     ("wait_map_turn_dps", pa.float64()), ("sm_pilot", pa.float64()),
      ("sm_exec", pa.float64()), ("pilot_axis", pa.string()), ("pilot_dir", pa.string()),
      ("exec_axis", pa.string()), ("exec_dir", pa.string()), ("exact_match", pa.bool_())])
 
-_DEC_FIELDS = ("decision", "rule", "wait_s", "projl", "sm_pilot", "sm_exec", "pilot_axis", "pilot_dir",
-               "exec_axis", "exec_dir", "exact_match")
+_DEC_FIELDS = ("decision", "rule", "wait_s", "projl", "decided_by", "wait_p_lowc", "wait_in_box", "wait_turn_dps",
+               "wait_map_turn_dps", "sm_pilot", "sm_exec", "pilot_axis", "pilot_dir", "exec_axis", "exec_dir",
+               "exact_match")
 
 
 def encounter_streams(seed: int) -> list[np.random.SeedSequence]:
@@ -115,7 +126,8 @@ class _Accumulators:
         self.lowc = np.zeros(n, bool)
         self.nmac = np.zeros(n, bool)
         self.lowc_time = np.zeros(n)
-        self.pi = np.zeros(n)
+        self.pi = np.zeros(n)  # PI (s), preset constants, integrated on the LoWC segments
+        self.pi_paper = np.zeros(n)  # PI (s), the paper's Eq. constants (4000 ft / 450 ft / 35 s)
         self.min_range = np.full(n, np.inf)
         self.vsep_at_min = np.full(n, np.nan)
         self.dev_h = np.zeros(n)
@@ -125,6 +137,10 @@ class _Accumulators:
         self.n_blend_exact = np.zeros(n, np.int64)
         self.n_blend_axis = np.zeros(n, np.int64)
         self.n_blend_intent = np.zeros(n, np.int64)
+        self.by = np.zeros((n, len(CODE_NAMES["decided_by"])), np.int64)
+        self.n_in_box = np.zeros(n, np.int64)
+        self.n_recv_whole = np.zeros(n, np.int64)
+        self.n_exec_whole = np.zeros(n, np.int64)
         self.p0 = own0.position()
         self.v0 = own0.velocity()
         self.dec_parts: list[tuple[np.ndarray, float, dict]] = []
@@ -140,13 +156,17 @@ class _Accumulators:
         self.lowc |= out.lowc
         self.nmac |= out.nmac
         self.lowc_time += out.lowc_time_s
-        self.pi += out.pen_rate * dt
+        self.pi += out.pi_s
+        self.pi_paper += out.pi_paper_s
         closer = out.seg_min_range_m < self.min_range
         self.min_range = np.where(closer, out.seg_min_range_m, self.min_range)
         self.vsep_at_min = np.where(closer, out.seg_vsep_m, self.vsep_at_min)
         self.deviation(out.own, out.t)
         active = np.asarray(dec["active"], bool)
         code = np.asarray(dec["decision"], np.int64)
+        fresh = np.asarray(dec["pilot_cmd_fresh"], bool)
+        self.n_recv_whole += fresh
+        self.n_exec_whole += fresh & (~active | (code == D_PILOT))  # outside the active phase it is flown as sent
         ia = np.flatnonzero(active)
         if ia.size:
             np.add.at(self.counts, (ia, code[ia]), 1)
@@ -158,6 +178,8 @@ class _Accumulators:
             self.n_blend_exact += exact & active
             self.n_blend_axis += axis_only & active
             self.n_blend_intent += intent & active
+            np.add.at(self.by, (ia, np.asarray(dec["decided_by"], np.int64)[ia]), 1)
+            self.n_in_box += active & np.asarray(dec["wait_in_box"], bool)
             self.dec_parts.append((ia, out.t, {k: np.asarray(dec[k])[ia] for k in _DEC_FIELDS}))
 
 
@@ -177,6 +199,10 @@ def _decision_table(acc: _Accumulators, ids: np.ndarray, group: str) -> pa.Table
     arrays = [pa.array(np.full(rows.size, group), pa.string()), pa.array(ids[rows], _I), pa.array(t),
               _strings(col["decision"], CODE_NAMES["decision"]), _strings(col["rule"], CODE_NAMES["rule"]),
               pa.array(col["wait_s"].astype(float)), pa.array(col["projl"].astype(bool)),
+              _strings(col["decided_by"], CODE_NAMES["decided_by"]), pa.array(col["wait_p_lowc"].astype(float)),
+              pa.array(col["wait_in_box"].astype(bool), mask=np.isnan(col["wait_p_lowc"].astype(float))),
+              pa.array(col["wait_turn_dps"].astype(float)),
+              pa.array(col["wait_map_turn_dps"].astype(float)),
               pa.array(col["sm_pilot"].astype(float)), pa.array(col["sm_exec"].astype(float)),
               _strings(col["pilot_axis"], CODE_NAMES["pilot_axis"]), _strings(col["pilot_dir"], CODE_NAMES["pilot_dir"]),
               _strings(col["exec_axis"], CODE_NAMES["exec_axis"]), _strings(col["exec_dir"], CODE_NAMES["exec_dir"]),
@@ -192,7 +218,7 @@ def _encounter_table(acc: _Accumulators, encounters, group: str, preset: str, du
         "group": pa.array(np.full(n, group), pa.string()), "encounter_id": pa.array(encounters.encounter_id, _I),
         "seed": pa.array(encounters.seed, _I), "duration_s": pa.array(np.full(n, float(duration))),
         "lowc": pa.array(acc.lowc), "nmac": pa.array(acc.nmac), "lowc_duration_s": pa.array(acc.lowc_time),
-        "pi": pa.array(acc.pi), "min_range_m": pa.array(acc.min_range), "vsep_at_min_range_m": pa.array(acc.vsep_at_min),
+        "pi": pa.array(acc.pi), "pi_paper": pa.array(acc.pi_paper), "min_range_m": pa.array(acc.min_range), "vsep_at_min_range_m": pa.array(acc.vsep_at_min),
         "dev_h_m": pa.array(acc.dev_h), "dev_v_m": pa.array(acc.dev_v), "n_active_steps": pa.array(acc.n_active, _I),
         "n_wait": pa.array(c[:, D_WAIT], _I), "n_no_wait": pa.array(c[:, D_NO_WAIT], _I),
         "n_pilot_received": pa.array(received, _I), "n_pilot_exec": pa.array(c[:, D_PILOT], _I),
@@ -200,6 +226,9 @@ def _encounter_table(acc: _Accumulators, encounters, group: str, preset: str, du
         "n_blend_axis": pa.array(acc.n_blend_axis, _I),
         "n_blend_intent": pa.array(acc.n_blend_intent, _I), "n_daa_override": pa.array(c[:, D_DAA_OVERRIDE], _I),
         "n_stale": pa.array(c[:, D_STALE], _I), "n_link_lost": pa.array(c[:, D_LINK_LOST], _I),
+        "n_by_map": pa.array(acc.by[:, BY_MAP], _I), "n_by_projl": pa.array(acc.by[:, BY_PROJL], _I),
+        "n_by_both": pa.array(acc.by[:, BY_BOTH], _I), "n_lookup_in_box": pa.array(acc.n_in_box, _I),
+        "n_pilot_received_whole": pa.array(acc.n_recv_whole, _I), "n_pilot_exec_whole": pa.array(acc.n_exec_whole, _I),
         "intruder_turns": pa.array(np.asarray(encounters.intruder_turns, bool)),
         "preset": pa.array(np.full(n, preset), pa.string()),
     }
@@ -216,9 +245,11 @@ def _step_columns(out: StepOutput, delay_up: np.ndarray, delay_down: np.ndarray)
             "intr_trk_deg": deg(intr.trk), "intr_vs": intr.vs, "range_m": g["range_m"], "hmd_m": g["hmd_m"],
             "dh_m": g["dh_m"], "tau_mod_s": g["tau_mod_s"], "alert_level": out.telemetry.alert_level,
             "wcv": g["wcv"], "delay_up_s": delay_up, "delay_down_s": delay_down, "lowc": out.lowc, "nmac": out.nmac}
-    for k in ("decision", "rule", "authority", "wait_s", "projl", "pilot_cmd_received", "pilot_cmd_age_s",
-              "sm_pilot", "sm_exec", "pilot_axis", "pilot_dir", "exec_axis", "exec_dir"):
+    for k in ("decision", "rule", "authority", "wait_s", "projl", "decided_by", "wait_p_lowc", "wait_in_box",
+              "wait_map_turn_dps", "pilot_cmd_received", "pilot_cmd_age_s", "sm_pilot", "sm_exec", "pilot_axis",
+              "pilot_dir", "exec_axis", "exec_dir"):
         cols[k] = d[k]
+    cols["intr_turn_est_dps"] = deg(out.turn_est)
     for src, dst in (("cmd", "cmd"), ("pilot", "pilot"), ("daa", "daa")):
         cols[f"{dst}_trk_deg"] = deg(d[f"{src}_trk"])
         cols[f"{dst}_vs"] = d[f"{src}_vs"]

@@ -21,7 +21,7 @@ Models (one-way delay distributions, paper range 0.2-10 s, validated):
 **Why a piecewise-constant delay process.** Drawing an independent delay per packet reorders
 about half of adjacent packets of a 10 Hz stream (48 % measured), and forcing FIFO on top of that
 (``release_i = max(t_i + d_i, release_{i-1})``) inflates the effective mean delay from 5.0 s to
-8.3 s -- a different experiment (``reference/mavlink_spec.md`` §5.3). A :class:`DelayProcess`
+8.3 s -- a different experiment (``docs/models.md``, "Link delay"). A :class:`DelayProcess`
 therefore holds one draw per *epoch* of ``epoch_s`` seconds (default 10 s); ``epoch_s = 0``
 gives per-packet draws for those who want them. Draws are indexed by epoch number (or packet
 index with ``epoch_s = 0``) and come from per-block child seeds, so the delay at time ``t`` does

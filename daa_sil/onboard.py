@@ -6,16 +6,19 @@ N = 1, so the two run the same code (parity by construction). It holds the truth
 lookup, the DAA configuration and the allocation policy. :meth:`OnboardCore.step` at sim time
 ``t_k``:
 
-1. runs DAA + wait map + agent (:func:`daa_sil.agent.agent_step`) on the truth state at ``t_k``
-   with the pilot input that arrived at or before ``t_k``;
+1. updates each intruder's turn-rate estimate from the tracks it has seen
+   (:class:`TurnRateEstimator`; it picks the wait map), then runs DAA + wait map + agent
+   (:func:`daa_sil.agent.agent_step`) on the truth state at ``t_k`` with the pilot input that
+   arrived at or before ``t_k``;
 2. returns the command flown, the decision record and the telemetry for ``t_k`` (ownship,
    intruders, alert levels, band summary) -- the caller downlinks it;
 3. advances truth by ``dt`` (ownship :func:`~daa_sil.kinematics.fly_command`, intruders
    :func:`~daa_sil.kinematics.advance` with their scripted turn rate / accelerations);
 4. evaluates LoWC and NMAC on the continuous segment ``[t_k, t_k + dt]``
    (:func:`daa_sil.wellclear.segment_events`; an event strictly between samples is detected),
-   the time spent in LoWC on the segment, the minimum range on it, and the penetration rate at
-   ``t_k`` (for the PI).
+   the time spent in LoWC on the segment, the minimum range on it, the penetration rate at
+   ``t_k``, and the penetration integral over the segment's LoWC interval
+   (:func:`daa_sil.wellclear.segment_penetration`, with the preset's and with the paper's constants).
 
 Sans-IO: no sockets, no clock; the caller supplies ``t`` and the pilot input and moves the bytes.
 """
@@ -28,7 +31,7 @@ from typing import Callable
 import numpy as np
 
 from . import wellclear as wc
-from .frames import to_paper_state
+from .frames import to_paper_state, wrap_pi
 from .kinematics import AircraftState, Command, Performance, advance, fly_command
 from .daa.alerting import relative_state
 from .encounters import INTRUDER_PERFORMANCE
@@ -67,6 +70,42 @@ class StepOutput:
     pen_rate: np.ndarray  #: (N,) penetration rate at t (max over intruders), PI = sum * dt
     seg_min_range_m: np.ndarray  #: (N,) minimum horizontal range on the segment (over intruders)
     seg_vsep_m: np.ndarray  #: (N,) vertical separation at that minimum
+    turn_est: "np.ndarray | None" = None  #: (N, M) estimated intruder turn rates, compass rad/s
+    # -- PI on the continuous segment (issue 14): integrated over the LoWC interval of [t, t + dt] --
+    pi_s: "np.ndarray | None" = None  #: (N,) s, PI on the segment with the preset's constants (max over intruders)
+    pi_paper_s: "np.ndarray | None" = None  #: (N,) s, same with the paper's Eq. constants (4000 ft/450 ft/35 s)
+
+
+class TurnRateEstimator:
+    """Each intruder's turn rate from its observed track history (batched, sans-IO).
+
+    :meth:`update` takes the intruders the core sees at sim time ``t`` (s) and returns ``(N, M)``
+    estimates in compass rad/s (+ = right): the wrapped track change from the oldest of the last
+    ``window`` observations to the newest, over the time between them (0 until two observations).
+    Window 3 (2 s at dt = 1 s) follows a constant-rate turn exactly two steps after it starts and
+    does not mistake a single step's change for a turn rate. The same object runs in fast-time and
+    in the SIL vehicle (inside :class:`OnboardCore`), so both pick the same wait map.
+    """
+
+    def __init__(self, shape: tuple[int, int], window: int = 3):
+        if window < 2:
+            raise ValueError(f"window must be >= 2 observations, got {window}")
+        self.window = int(window)
+        self._trk: list[np.ndarray] = []
+        self._t: list[float] = []
+        self.shape = tuple(shape)
+
+    def update(self, t: float, intruders: AircraftState) -> np.ndarray:
+        """Add the observation at ``t`` and return the current estimates ``(N, M)``, rad/s."""
+        self._trk.append(np.array(intruders.trk, float))
+        self._t.append(float(t))
+        if len(self._t) > self.window:
+            self._trk.pop(0)
+            self._t.pop(0)
+        span = self._t[-1] - self._t[0]
+        if span <= 0:
+            return np.zeros(self.shape)
+        return wrap_pi(self._trk[-1] - self._trk[0]) / span
 
 
 def band_intervals(values_deg: np.ndarray, region: np.ndarray) -> dict:
@@ -133,6 +172,7 @@ class OnboardCore:
         # intruders fly scripts beyond the ownship's limits (paper: up to 5 deg/s), as the sampler does
         self.intruder_perf = intruder_perf if intruder_perf is not None else INTRUDER_PERFORMANCE
         self.memory = memory if memory is not None else agent.AgentMemory.initial(self.n, self.own)
+        self.turn_estimator = TurnRateEstimator((self.n, self.m))
 
     @classmethod
     def from_encounters(cls, encounters, policy, daa_cfg=None, wait_lookup=None, **kw) -> "OnboardCore":
@@ -156,8 +196,9 @@ class OnboardCore:
         if not np.isclose(t, self.t, rtol=0.0, atol=1e-9):
             raise ValueError(f"OnboardCore is at t={self.t:g} s, step() called with t={t:g} s")
         own0, intr0 = self.own, self.intruders
+        turn_est = self.turn_estimator.update(t, intr0)
         cmd, dec, self.memory = self._agent.agent_step(t, own0, intr0, pilot_input, self.memory, self.policy,
-                                                       self.daa_cfg, self.wait_lookup)
+                                                       self.daa_cfg, self.wait_lookup, turn_rate=turn_est)
         s0, v0 = relative_state(own0, intr0)
         geom = self.geometry()
         alert = np.asarray(dec["alert_level"], dtype=np.int8).reshape(self.n, self.m)
@@ -171,13 +212,18 @@ class OnboardCore:
         lowc_m, nmac_m = wc.segment_events(s0, s1, self.dt, self.th)
         t_in, t_out = wc.violation_interval(s0, (s1 - s0) / self.dt, self.th, 0.0, self.dt)
         in_lowc = np.where(np.isfinite(t_in), np.maximum(t_out - t_in, 0.0), 0.0)
+        # PI on the same segment and LoWC interval that detect the LoWC (issue 14)
+        v_seg = (s1 - s0) / self.dt
+        pi_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.pi_constants(self.th)).max(axis=1)
+        pi_paper_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.PAPER_PI_CONSTANTS).max(axis=1)
         rmin, vsep = wc.min_separation_on_segment(s0, s1)
         j = np.argmin(rmin, axis=1)
         rows = np.arange(self.n)
         out = StepOutput(step=self.k, t=float(t), own=own0, intruders=intr0, command=cmd, decisions=dec,
+                         turn_est=turn_est,
                          telemetry=telem, geometry=geom, lowc=lowc_m.any(axis=1), nmac=nmac_m.any(axis=1),
                          lowc_time_s=in_lowc.max(axis=1), pen_rate=pen, seg_min_range_m=rmin[rows, j],
-                         seg_vsep_m=vsep[rows, j])
+                         seg_vsep_m=vsep[rows, j], pi_s=pi_s, pi_paper_s=pi_paper_s)
         self.own, self.intruders = own1, intr1
         self.k += 1
         self.t = float(t) + self.dt

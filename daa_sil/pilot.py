@@ -1,4 +1,4 @@
-"""Remote-pilot model (Guendel et al. 2017, simplified as in ``reference/models.md`` §1.5), batched.
+"""Remote-pilot model (after Guendel et al. 2017, simplified as ``docs/models.md`` describes), batched.
 
 One :class:`PilotModel` steps N pilots (one per encounter) at 1 Hz with the GCS's view: the
 ownship state it sees (downlink-delayed telemetry) and the DAA guidance computed from that view
@@ -8,7 +8,10 @@ what it sends.
 Streaming (``docs/architecture.md``): from the step the pilot sees an alert (DAIDALUS level >=
 ``alert_level_min``, held ``alert_hold_s``) it sends one command per step until the alert clears:
 first "hold" (track/vs/gs of the telemetry seen at alert onset), then its maneuver, replaced at
-each follow-up decision. Timeline of the first engagement: response delay
+each follow-up decision. Two readings of the paper's simulator are options (``daa_sil.readings``):
+``stream_hold=False`` sends no "hold" (only maneuvers and the return to plan), and
+``stream_level_min`` < ``alert_level_min`` streams "hold" of the seen state from a lower alert level
+(0: from the first telemetry) until the pilot first engages. Timeline of the first engagement: response delay
 ``T_p = T_init + T_coord + T_exec`` drawn at the trigger; the maneuver is *decided* at
 ``t_trigger + T_p - T_exec`` from the guidance seen then and *sent* from ``t_trigger + T_p``.
 Follow-ups: ``min[L] + extra[L]`` s after a maneuver is sent (``L`` = pilot alert level =
@@ -85,6 +88,11 @@ class PilotConfig:
     mode: str = "guendel"
     alert_level_min: int = 2  #: DAIDALUS level that starts streaming (2 = corrective, the agent's active phase)
     alert_hold_s: float = 0.0  #: the alert must persist this long before streaming starts
+    #: before the pilot first engages, stream "hold" (the seen track/vs/gs) while the alert level is at
+    #: least this (None = only from ``alert_level_min``; 0 = from the first telemetry: the reading
+    #: "the model captures pilot response from the beginning of an encounter")
+    stream_level_min: "int | None" = None
+    stream_hold: bool = True  #: the GCS sends "hold" as a pilot command (False: only maneuvers)
     init_mean_s: float = 5.0
     coord_k: float = 5.5
     coord_theta_s: float = 2.0
@@ -123,6 +131,9 @@ class PilotConfig:
                 raise UsageError(f"pilot {name} must be within [0, 1], got {v!r}")
         if len(self.update_min_s) != 6 or len(self.update_mean_s) != 6:
             raise UsageError("pilot update_min_s / update_mean_s need 6 values (levels none..WCV)")
+        if self.stream_level_min is not None and not 0 <= self.stream_level_min <= self.alert_level_min:
+            raise UsageError(f"pilot stream_level_min must be within [0, alert_level_min={self.alert_level_min}], "
+                             f"got {self.stream_level_min!r}")
         if self.alert_hold_s < 0 or self.heading_round_deg < 0:
             raise UsageError("pilot alert_hold_s and heading_round_deg must be >= 0")
         for name in ("recover_vs_fpm", "recover_capture_s", "recover_alt_tol_m", "recover_trk_tol_deg"):
@@ -343,6 +354,7 @@ class PilotModel:
         n = self.n
         self.engaged = np.zeros(n, bool)
         self.streaming = np.zeros(n, bool)
+        self.holding = np.zeros(n, bool)  #: streaming "hold" (no maneuver sent since streaming started)
         self.alert_since = np.full(n, np.nan)
         self.t_trigger = np.full(n, np.nan)
         self.t_decide = np.full(n, np.inf)
@@ -447,6 +459,7 @@ class PilotModel:
                 d = self._draws(again)
                 self.exec_next[again] = c.fixed_exec_s if c.mode in ("fixed", "deterministic") else d["exec"]
             self.streaming |= start
+            self.holding[s] = True
             self.recovering[s] = False
             self.t_recover[s] = np.inf
         # decisions due
@@ -468,15 +481,22 @@ class PilotModel:
             i = np.flatnonzero(act)
             self.cmd.trk[i], self.cmd.vs[i], self.cmd.gs[i] = self.pending.trk[i], self.pending.vs[i], self.pending.gs[i]
             self.axis[i], self.direction[i] = self.p_axis[i], self.p_dir[i]
+            self.holding[i] = False
             self.maneuvers[i] += 1
             self.t_activate[i] = np.inf
             self._schedule_next(i, t)
         rec = self._recovery(t, own, valid, observed_intr)
-        send = self.streaming | rec | level_off
+        streamed = self.streaming & (~self.holding | c.stream_hold)
+        # before the first engagement: hold streamed from a lower alert level (stream_level_min)
+        pre = np.zeros(n, bool)
+        if c.stream_level_min is not None and c.stream_level_min < c.alert_level_min and c.stream_hold:
+            pre = valid & ~self.engaged & ~self.streaming & (lvl_daa >= c.stream_level_min)
+        send = streamed | rec | level_off | pre
         self.seq = np.where(send, self.seq + 1, self.seq)
         nan = np.full(n, np.nan)
-        out = Command(np.where(send, self.cmd.trk, nan), np.where(send, self.cmd.vs, nan),
-                      np.where(send, self.cmd.gs, nan))
+        cur = Command(np.where(pre, own.trk, self.cmd.trk), np.where(pre, own.vs, self.cmd.vs),
+                      np.where(pre, own.gs, self.cmd.gs))
+        out = Command(np.where(send, cur.trk, nan), np.where(send, cur.vs, nan), np.where(send, cur.gs, nan))
         return PilotOutput(send=send, cmd=out, seq=np.where(send, self.seq, -1),
                            axis=np.where(send, self.axis, 0), direction=np.where(send, self.direction, 0),
                            maneuver=self.maneuvers.copy(), t_sent=float(t))

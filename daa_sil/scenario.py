@@ -60,11 +60,13 @@ Schema (``*`` = required; defaults in brackets)::
           until_s: (t_s, duration_s] [next command's t_s, else duration_s]
           track_deg, vs_mps, gs_mps  at least one; omitted = keep current
     allocation:
-      group: B-1 | B-2 | IC-1 | ID-1 | ID-2 [ID-1]  paper group (wait policy + blending)
-      wait: none | constant | map     [from group]
-      wait_constant_s: [0, 120]       [5]
+      group: a group of daa_sil/data/groups.yaml (B-1 ... ID-2, ID-2-projl, ID-2-map) [ID-1]
+                                      its wait function, W_T, ProjL and blending are the defaults below
+      wait: none | constant | map | always  [from group]
+      wait_constant_s: [0, 120]       [from group, else 5]
       blending: bool                  [from group]
-      wait_threshold_s: [0, 120]      [4]     W_T
+      projl: bool                     [from group]  ProjL veto
+      wait_threshold_s: [0, 120]      [from group]  W_T
       link_timeout_s: (0, 120]        [agent default]
       stale_command_s: (0, 120]       [agent default]
     expect:                                   checked by ``daa-sil run`` (exit 1 if violated)
@@ -74,6 +76,14 @@ Schema (``*`` = required; defaults in brackets)::
       decisions_exclude: [decision names]  none may appear
       min_range_at_least_m: float     minimum horizontal range must be >= this
       link_lost_by_s: float           a link_lost decision must appear at or before this sim time
+    faults: list                              process faults, carried out by ``daa-sil run --clock
+      - kill*: gcs                            realtime`` (lockstep refuses them: there the GCS is part of
+        at_s*: (0, duration_s)                the clock). ``kill`` names the process (only the GCS: the
+        restart_s: (at_s, duration_s)         vehicle and the shim are the run); ``at_s`` / ``restart_s``
+        signal: KILL | TERM | INT  [KILL]     are vehicle sim times; a restart binds the same port and
+                                              writes its own command log. Omit restart_s = stays dead.
+                                              ``result.json`` ``faults`` says when each was carried out;
+                                              a fault that could not be carried out fails the run.
 
 Decision names: none, wait, no_wait, pilot, blend, daa_override, daa, stale, link_lost.
 """
@@ -91,10 +101,6 @@ import yaml
 from .errors import FileFormatError, UsageError
 
 DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
-GROUPS = ("B-1", "B-2", "IC-1", "ID-1", "ID-2")
-#: group -> (wait policy, blending) as in the paper's Table 2 (latency is set in ``link``)
-GROUP_POLICY = {"B-1": ("none", False), "B-2": ("none", False), "IC-1": ("constant", True),
-                "ID-1": ("map", True), "ID-2": ("map", True)}
 PILOT_RESPONSES = ("deterministic", "fixed", "guendel", "no_atc", "nasa_rayleigh5")
 MAX_INTRUDERS = 8
 
@@ -203,6 +209,7 @@ class AllocationSpec:
     wait_constant_s: float = 5.0
     blending: bool = True
     wait_threshold_s: float = 4.0
+    projl: bool = True
     link_timeout_s: "float | None" = None
     stale_command_s: "float | None" = None
 
@@ -215,6 +222,25 @@ class Expectation:
     decisions_exclude: list = field(default_factory=list)
     min_range_at_least_m: "float | None" = None
     link_lost_by_s: "float | None" = None
+
+
+FAULT_PROCESSES = ("gcs",)
+FAULT_SIGNALS = ("KILL", "TERM", "INT")
+
+
+@dataclass
+class ProcessFault:
+    """Kill ``process`` with SIG``signal`` at vehicle sim time ``at_s``; restart it at ``restart_s`` (None = never)."""
+
+    process: str
+    at_s: float
+    restart_s: "float | None" = None
+    signal: str = "KILL"
+
+    def describe(self) -> str:
+        """``"SIGKILL gcs at 20 s, restart at 40 s"``."""
+        return (f"SIG{self.signal} {self.process} at {self.at_s:g} s"
+                + (f", restart at {self.restart_s:g} s" if self.restart_s is not None else ", no restart"))
 
 
 @dataclass
@@ -231,6 +257,7 @@ class Scenario:
     pilot: PilotSpec = field(default_factory=PilotSpec)
     allocation: AllocationSpec = field(default_factory=AllocationSpec)
     expect: Expectation = field(default_factory=Expectation)
+    faults: list = field(default_factory=list)
     source: str = field(default="<memory>", compare=False)
 
     @property
@@ -255,6 +282,11 @@ class Scenario:
         d["pilot"]["model"] = {"response": d["pilot"].pop("response")}
         for sect in ("allocation", "expect"):
             d[sect] = {k: v for k, v in d[sect].items() if v is not None and v != []}
+        if d["faults"]:
+            d["faults"] = [{("kill" if k == "process" else k): v for k, v in f.items() if v is not None}
+                           for f in d["faults"]]
+        else:
+            d.pop("faults")
         return d
 
 
@@ -477,16 +509,20 @@ def _pilot(v: _V, node, path, dur) -> PilotSpec:
 
 
 def _allocation(v: _V, node, path) -> AllocationSpec:
-    m = v.mapping(node, path, set(), {"group", "wait", "wait_constant_s", "blending", "wait_threshold_s",
+    from .agent import WAIT_MODES
+    from .groups import group_spec, group_table
+
+    m = v.mapping(node, path, set(), {"group", "wait", "wait_constant_s", "blending", "wait_threshold_s", "projl",
                                       "link_timeout_s", "stale_command_s"})
-    group = v.opt(m, "group", path, v.string, "ID-1", choices=GROUPS)
-    wait0, blend0 = GROUP_POLICY[group]
+    group = v.opt(m, "group", path, v.string, "ID-1", choices=tuple(group_table()))
+    g = group_spec(group).policy()
     return AllocationSpec(
         group=group,
-        wait=v.opt(m, "wait", path, v.string, wait0, choices=("none", "constant", "map")),
-        wait_constant_s=v.opt(m, "wait_constant_s", path, v.number, 5.0, lo=0, hi=120),
-        blending=v.opt(m, "blending", path, v.boolean, blend0),
-        wait_threshold_s=v.opt(m, "wait_threshold_s", path, v.number, 4.0, lo=0, hi=120),
+        wait=v.opt(m, "wait", path, v.string, g.wait_mode, choices=WAIT_MODES),
+        wait_constant_s=v.opt(m, "wait_constant_s", path, v.number, g.constant_wait_s, lo=0, hi=120),
+        blending=v.opt(m, "blending", path, v.boolean, g.blending),
+        wait_threshold_s=v.opt(m, "wait_threshold_s", path, v.number, g.wait_threshold_s, lo=0, hi=120),
+        projl=v.opt(m, "projl", path, v.boolean, g.projl),
         link_timeout_s=v.opt(m, "link_timeout_s", path, v.number, None, lo=0, hi=120, lo_open=True),
         stale_command_s=v.opt(m, "stale_command_s", path, v.number, None, lo=0, hi=120, lo_open=True))
 
@@ -506,8 +542,26 @@ def _expect(v: _V, node, path, dur) -> Expectation:
         link_lost_by_s=v.opt(m, "link_lost_by_s", path, v.number, None, lo=0, hi=dur))
 
 
+def _faults(v: _V, node, path, dur) -> list:
+    out = []
+    for j, fn in enumerate(v.seq(node, path, max_len=16)):
+        p = f"{path}[{j}]"
+        m = v.mapping(fn, p, {"kill", "at_s"}, {"restart_s", "signal"})
+        at = v.opt(m, "at_s", p, v.number, lo=0, hi=dur, lo_open=True, hi_open=True)
+        out.append(ProcessFault(
+            process=v.opt(m, "kill", p, v.string, choices=FAULT_PROCESSES), at_s=at,
+            restart_s=v.opt(m, "restart_s", p, v.number, None, lo=at, hi=dur, lo_open=True, hi_open=True),
+            signal=v.opt(m, "signal", p, v.string, "KILL", choices=FAULT_SIGNALS)))
+    for a, b in zip(out, out[1:]):
+        end = a.restart_s if a.restart_s is not None else math.inf
+        if a.process == b.process and b.at_s <= end:
+            v.fail(node, path, f"faults of the same process must not overlap: {a.describe()} / {b.describe()}")
+    return out
+
+
 TOP_REQUIRED = {"name", "ownship", "intruders"}
-TOP_OPTIONAL = {"description", "seed", "duration_s", "thresholds", "origin", "link", "pilot", "allocation", "expect"}
+TOP_OPTIONAL = {"description", "seed", "duration_s", "thresholds", "origin", "link", "pilot", "allocation", "expect",
+                "faults"}
 
 
 def _scenario(v: _V, root) -> Scenario:
@@ -539,6 +593,8 @@ def _scenario(v: _V, root) -> Scenario:
         sc.allocation = _allocation(v, m["allocation"], "allocation")
     if "expect" in m:
         sc.expect = _expect(v, m["expect"], "expect", dur)
+    if "faults" in m:
+        sc.faults = _faults(v, m["faults"], "faults", dur)
     return sc
 
 
@@ -687,6 +743,7 @@ def check_expectation(exp: Expectation, result: dict) -> list[str]:
 
 
 __all__ = ["Scenario", "InitialState", "CpaGeometry", "Maneuver", "IntruderSpec", "LinkSpec", "Outage",
-           "PilotSpec", "ScriptedCommand", "AllocationSpec", "Expectation", "Origin", "DECISIONS", "GROUPS",
+           "PilotSpec", "ScriptedCommand", "AllocationSpec", "Expectation", "Origin", "DECISIONS",
+           "ProcessFault", "FAULT_PROCESSES",
            "parse_scenario", "load_scenario", "scenario_from_dict", "dump_scenario", "save_scenario",
            "delay_models", "delay_spec_string", "check_expectation", "encounter_set", "ownship_state"]

@@ -28,7 +28,7 @@ from .errors import FileFormatError, UsageError
 from .io import atomic_path
 
 #: schema version stored in the file metadata under ``daa_sil.steplog``
-STEPLOG_VERSION = "1"
+STEPLOG_VERSION = "2"
 
 # vocabularies of the string columns (integer codes index these tuples)
 DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
@@ -37,12 +37,13 @@ AUTHORITIES = ("pilot", "daa", "hold")
 AXES = ("none", "horizontal", "vertical", "speed")
 DIRECTIONS = ("none", "left", "right", "up", "down", "faster", "slower")
 REGIONS = ("none", "far", "mid", "near", "recovery")
+DECIDED_BY = ("none", "map", "projl", "both", "neither")
 
 #: vocabulary of every string column (scalar or list)
 VOCAB: dict[str, tuple[str, ...]] = {
     "decision": DECISIONS, "rule": RULES, "authority": AUTHORITIES,
     "pilot_axis": AXES, "exec_axis": AXES, "pilot_dir": DIRECTIONS, "exec_dir": DIRECTIONS,
-    "bands_trk_region": REGIONS,
+    "bands_trk_region": REGIONS, "decided_by": DECIDED_BY,
 }
 
 _F, _B, _S = pa.float64(), pa.bool_(), pa.string()
@@ -51,6 +52,7 @@ _F, _B, _S = pa.float64(), pa.bool_(), pa.string()
 INTRUDER_COLUMNS: dict[str, pa.DataType] = {
     "intr_x": _F, "intr_y": _F, "intr_z": _F, "intr_gs": _F, "intr_trk_deg": _F, "intr_vs": _F,
     "range_m": _F, "hmd_m": _F, "dh_m": _F, "tau_mod_s": _F, "alert_level": pa.int8(), "wcv": _B,
+    "intr_turn_est_dps": _F,
 }
 #: variable-length band list columns (padded ``(N, B)`` + ``bands_count`` in a step dict)
 BAND_COLUMNS: dict[str, pa.DataType] = {"bands_trk_lo_deg": _F, "bands_trk_hi_deg": _F, "bands_trk_region": _S}
@@ -59,7 +61,8 @@ STEP_SCHEMA = pa.schema(
     [("encounter_id", pa.int64()), ("step", pa.int32()), ("t", _F),
      ("own_x", _F), ("own_y", _F), ("own_z", _F), ("own_gs", _F), ("own_trk_deg", _F), ("own_vs", _F)]
     + [(k, pa.list_(v)) for k, v in INTRUDER_COLUMNS.items()]
-    + [("decision", _S), ("rule", _S), ("authority", _S), ("wait_s", _F), ("projl", _B),
+    + [("decision", _S), ("rule", _S), ("authority", _S), ("wait_s", _F), ("projl", _B), ("decided_by", _S),
+       ("wait_p_lowc", _F), ("wait_in_box", _B), ("wait_map_turn_dps", _F),
        ("pilot_cmd_received", _B), ("pilot_cmd_age_s", _F), ("sm_pilot", _F), ("sm_exec", _F),
        ("cmd_trk_deg", _F), ("cmd_vs", _F), ("cmd_gs", _F),
        ("pilot_trk_deg", _F), ("pilot_vs", _F), ("pilot_gs", _F),

@@ -24,16 +24,26 @@ EXAMPLES = """examples:
   # behind the delay shim's GCS side, lockstep, scripted pilot, command log
   daa-gcs --vehicle udp:127.0.0.1:14602 --scenario scenarios/pilot_unsafe_blend.yaml --pilot scripted \\
       --clock lockstep --log gcs.jsonl
+
+  # the pilot raises W_T to 6 s at t = 30 s and switches the onboard agent off at t = 90 s (through the link)
+  daa-gcs --vehicle udp:127.0.0.1:14602 --scenario scenarios/head_on.yaml --set 30:DAA_WT=6 --set 90:MODE=GUIDED
+
+connection strings (as MAVProxy): udpin:HOST:PORT listens, udpout:HOST:PORT sends; a bare udp:HOST:PORT
+listens for --listen and sends for --vehicle.
 """
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="daa-gcs", description=__doc__.splitlines()[0], epilog=EXAMPLES,
                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--listen", default="udp:127.0.0.1:14550", metavar="udp:HOST:PORT",
-                   help="local socket (default udp:127.0.0.1:14550; port 0 = OS-chosen)")
+    p.add_argument("--listen", default=None, metavar="udp:HOST:PORT",
+                   help="local socket (default udp:127.0.0.1:14550; port 0 = OS-chosen; not with --vehicle udpin:)")
     p.add_argument("--vehicle", default="udp:127.0.0.1:14602", metavar="udp:HOST:PORT",
-                   help="vehicle, or the delay shim's GCS side, to send to (default udp:127.0.0.1:14602)")
+                   help="vehicle, or the delay shim's GCS side, to send to (default udp:127.0.0.1:14602); "
+                        "udpin:HOST:PORT listens there instead and answers whoever sends first")
+    p.add_argument("--set", action="append", default=[], metavar="T:NAME=VALUE", dest="settings",
+                   help="at sim time T (s) send PARAM_SET NAME VALUE (e.g. 30:DAA_WT=6), or with NAME MODE a "
+                        "DO_SET_MODE (30:MODE=GUIDED, AVOID_ADSB or a mode number); repeatable")
     p.add_argument("--scenario", type=Path, metavar="FILE",
                    help="scenario file: origin, intruder order, pilot model settings / scripted commands")
     p.add_argument("--pilot", choices=("model", "scripted"), help="override the scenario's pilot mode")
@@ -46,6 +56,37 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def parse_setting(text: str) -> "tuple[float, str, float]":
+    """``"30:DAA_WT=6"`` -> ``(30.0, "DAA_WT", 6.0)``; ``"90:MODE=GUIDED"`` -> ``(90.0, "MODE", 15.0)``."""
+    import math
+    import re
+
+    from vehicle.identity import PLANE_MODES
+
+    m = re.fullmatch(r"\s*([^:]+):([A-Za-z0-9_]{1,16})=(\S+)\s*", str(text))
+    if m is None:
+        raise UsageError(f"--set must look like T:NAME=VALUE (e.g. 30:DAA_WT=6), got {text!r}")
+    try:
+        t = float(m.group(1))
+    except ValueError:
+        t = math.nan
+    if not (math.isfinite(t) and t >= 0):
+        raise UsageError(f"--set {text!r}: T must be a sim time >= 0 s, got {m.group(1)!r}")
+    name, raw = m.group(2).upper(), m.group(3)
+    if name == "MODE":
+        by_name = {v: k for k, v in PLANE_MODES.items()}
+        if raw.upper() in by_name:
+            return t, name, float(by_name[raw.upper()])
+        if raw.isdigit():
+            return t, name, float(int(raw))
+        raise UsageError(f"--set {text!r}: unknown mode {raw!r}; the vehicle takes GUIDED or AVOID_ADSB")
+    try:
+        value = float(raw)
+    except ValueError:
+        raise UsageError(f"--set {text!r}: VALUE must be a number, got {raw!r}") from None
+    return t, name, value
+
+
 async def _amain(args) -> int:
     from daa_sil.scenario import load_scenario
     from gcs.node import GcsNode, GcsOptions
@@ -56,8 +97,17 @@ async def _amain(args) -> int:
         raise UsageError("give --scenario FILE (pilot model settings, origin); without it only --pilot scripted "
                          "with no commands is possible")
     key = load_key_option(args.key)
-    node = GcsNode(sc, GcsOptions(vehicle=args.vehicle, listen=args.listen, clock=args.clock, speed=args.speed,
-                                  key=key, pilot=args.pilot, log=args.log, display=not args.no_display))
+    from daa_sil.link.connstr import LISTEN, SEND, parse_connection
+
+    vconn = parse_connection(args.vehicle, "--vehicle", SEND)
+    if args.listen is not None:
+        parse_connection(args.listen, "--listen", LISTEN, allow=(LISTEN,))
+        if vconn.listens:
+            raise UsageError(f"--vehicle {args.vehicle} already listens; drop --listen {args.listen}")
+    settings = tuple(parse_setting(x) for x in args.settings)
+    node = GcsNode(sc, GcsOptions(vehicle=args.vehicle, listen=args.listen or "udp:127.0.0.1:14550", clock=args.clock,
+                                  speed=args.speed, key=key, pilot=args.pilot, log=args.log,
+                                  display=not args.no_display, settings=settings))
     await node.start()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -72,9 +122,12 @@ async def _amain(args) -> int:
         st = node.ep.stats()
         node.close()
     print(f"daa-gcs: done, {node.steps} steps, {len(node.sent)} commands sent, packets dropped {st['dropped']}, "
-          f"telemetry rejected {node.view.rejected}"
+          f"telemetry rejected {node.view.rejected}, ticks {node.ticks_seen} (ticks skipped {node.ticks_skipped})"
           + (f"; log {path}" if path else ""), flush=True)
     print("daa-gcs: link stats " + json.dumps(st, sort_keys=True), flush=True)
+    drops = node.ep.drops.summary()
+    if drops:
+        print(f"daa-gcs: {drops}", flush=True)
     return 0
 
 

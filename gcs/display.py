@@ -1,4 +1,11 @@
-"""One line per sim second of what the remote pilot sees (rich colours on a TTY, plain otherwise)."""
+"""One line per sim second of what the remote pilot sees (rich colours on a TTY, plain otherwise).
+
+``t=  42s  seen@  38s own trk   0.0 alt   1000m gs   55  nearest 4660 r   6123m dh    +0m  alert 2
+GUIDED pilot/none  sent #3 maneuver2 trk 30``: the GCS's sim time, the (delayed) time of the newest
+ownship state it has, the ownship's track / altitude / ground speed, the nearest intruder's range
+and height difference, the highest band region, the vehicle's flight mode (HEARTBEAT), the
+agent's authority / decision (ALLOCATION_DECISION) and the last command sent (or setting).
+"""
 
 from __future__ import annotations
 
@@ -21,10 +28,13 @@ def format_line(node, t: float, n_cmd: int) -> str:
             parts.append(f"nearest {i} r {rng[i]:6.0f}m dh {v.intruders[i][2] - z:+5.0f}m")
     else:
         parts.append("no telemetry yet")
-    parts.append(f"alert {v.alert_regions}  {v.authority}/{v.decision}")
+    parts.append(f"alert {v.alert_regions}  {v.mode} {v.authority}/{v.decision}")
     if n_cmd and node.sent:
         c = node.sent[-1]
-        parts.append(f"sent #{c['seq']} {c['kind']} trk {c['track_deg']:.0f}")
+        if c.get("kind") in ("param", "mode"):
+            parts.append(f"set {c['name']} {c['value']:g}")
+        else:
+            parts.append(f"sent #{c['seq']} {c['kind']} trk {c['track_deg']:.0f}")
     return "  ".join(parts)
 
 

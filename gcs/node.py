@@ -6,9 +6,15 @@ Per step ``k`` at sim time ``t_k`` (``docs/architecture.md`` step 1):
   at ``t_k``) the node first takes in every message received before the tick, then runs the pilot,
   sends its command(s) and a HEARTBEAT (one datagram), then ``SIM_TICK_ACK(k)`` alone in its
   datagram. A repeated tick is re-acknowledged without stepping again.
-* **realtime**: the node's sim clock is synchronised on the first telemetry message
-  (``t = time_boot_ms + assumed downlink delay``) and advances with the wall clock x ``speed``;
-  it steps at every whole sim second.
+* **realtime**: the same: the vehicle paces its ticks (``SIM_TICK``) by the wall clock and the shim
+  forwards each one at once, so the GCS steps at the vehicle's sim time ``t_k`` with exactly what
+  the lockstep GCS has at that tick, and acknowledges it (nobody waits for that ack). Only with a
+  vehicle that sends no ticks does the node fall back to its own clock, synchronised on the first
+  telemetry message (``t = time_boot_ms + assumed downlink delay``) and advanced with the wall
+  clock x ``speed``, stepping at every whole sim second (that clock is off by the difference
+  between the first packet's delay and the assumed one: no lockstep parity).
+
+Ticks that stop for 3 s after they came are reported (stderr), naming the address they came from.
 
 Pilot: ``model`` = :class:`daa_sil.pilot.PilotModel` (N = 1) on the observed ownship
 (LOCAL_POSITION_NED, float) and intruders (ADSB_VEHICLE), streaming per the allocation semantics;
@@ -32,11 +38,14 @@ from daa_sil.frames import geodetic_to_enu
 from daa_sil.kinematics import AircraftState
 from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec
 from daa_sil.link.codec import mavlink as M
-from daa_sil.link.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint, parse_udp_address
+from daa_sil.link.connstr import LISTEN, SEND, parse_connection
+from daa_sil.link.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint
 
 GCS_SYSID, GCS_COMPID = 255, 190
 VEHICLE_SYSID = 1
 AUTHORITY_NAMES = ("pilot", "daa", "hold")
+#: wall seconds without a SIM_TICK (after ticks came) before the vehicle side is reported silent
+SILENT_AFTER_S = 3.0
 DECISION_NAMES = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
 
 
@@ -52,6 +61,8 @@ class GcsOptions:
     pilot: "str | None" = None  #: "model" / "scripted" (default: the scenario's)
     log: "Path | None" = None
     display: bool = True
+    #: settings to send: ``(sim time s, NAME, value)``; NAME ``MODE`` sends DO_SET_MODE (value = mode number)
+    settings: tuple = ()
 
 
 @dataclass
@@ -70,6 +81,8 @@ class View:
     rejected: int = 0  #: telemetry messages dropped: non-finite, or older than the newest seen
     acks: int = 0
     statustext: list = field(default_factory=list)
+    mode: str = "?"  #: the vehicle's flight mode name (HEARTBEAT custom_mode, ArduPlane numbering)
+    params: dict = field(default_factory=dict)  #: parameter name -> value, from PARAM_VALUE
 
 
 class GcsNode:
@@ -78,7 +91,10 @@ class GcsNode:
     def __init__(self, scenario, opts: GcsOptions):
         self.sc = scenario
         self.opts = opts
-        self.peer = parse_udp_address(opts.vehicle, "--vehicle", allow_port_zero=False)
+        self.vehicle_conn = parse_connection(opts.vehicle, "--vehicle", SEND)
+        self.listen_conn = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))
+        self._peer = None if self.vehicle_conn.listens else self.vehicle_conn.addr
+        self.pending_settings = sorted(opts.settings, key=lambda s: s[0])
         self.codec = MavCodec(GCS_SYSID, GCS_COMPID, key=opts.key)
         self.ep: "MavEndpoint | None" = None
         self.view = View()
@@ -99,7 +115,7 @@ class GcsNode:
             self.pilot = PilotModel(1, [seed], PilotConfig(mode=scenario.pilot.response if scenario else "guendel"),
                                     plan=ownship_state(scenario) if scenario is not None else None,
                                     daa_cfg=self.daa_cfg)
-            self.display = PilotDisplay(1, self.daa_cfg, self.pilot.cfg.alert_level_min)
+            self.pilot_display = PilotDisplay(1, self.daa_cfg, self.pilot.cfg.alert_level_min)
         self._g_seen = math.nan
         self.seq = 0
         self.sent: list[dict] = []
@@ -109,6 +125,11 @@ class GcsNode:
         self._fresh = True  # the last position message was accepted (ADSB in its datagram follows it)
         self._wall0: "float | None" = None
         self._t_sync = 0.0
+        self.ticks_skipped = 0  #: ticks never received between two received ones (no step ran for them)
+        self.ticks_seen = 0  #: SIM_TICKs received (realtime: > 0 means steps follow the vehicle's ticks)
+        self._last_tick_wall: "float | None" = None
+        self._tick_silent = False
+        self.silence_warnings = 0
 
     async def start(self) -> None:
         """Bind, then greet the vehicle side with a HEARTBEAT (a shim learns our address from it).
@@ -116,9 +137,23 @@ class GcsNode:
         Only datagrams from the ``--vehicle`` address (the shim or the vehicle) and only messages from
         the vehicle's system id are accepted; the rest is counted and dropped (no signing state change).
         """
-        self.ep = await open_endpoint(self.codec, self.opts.listen, peer=self.peer, learn_peer=False,
-                                      allow_peers=[self.peer], allow_sysids=[VEHICLE_SYSID])
+        if self.vehicle_conn.listens:  # --vehicle udpin:HOST:PORT: listen there, answer who sends first
+            self.ep = await open_endpoint(self.codec, self.vehicle_conn.addr, peer=None, learn_peer=True,
+                                          allow_sysids=[VEHICLE_SYSID], name="daa-gcs")
+            return
+        self.ep = await open_endpoint(self.codec, self.listen_conn.addr, peer=self.peer, learn_peer=False,
+                                      allow_peers=[self.peer], allow_sysids=[VEHICLE_SYSID], name="daa-gcs",
+                                      peer_label="--vehicle",
+                                      drop_hint="if that is the vehicle (or the shim's GCS side), give its address "
+                                                "as --vehicle: the GCS takes telemetry only from there")
         self.ep.send(self._heartbeat())
+
+    @property
+    def peer(self):
+        """The vehicle side (``--vehicle``): fixed, or with ``udpin:`` the first address that sent."""
+        if self._peer is None and self.ep is not None and self.ep.peer is not None:
+            self._peer = tuple(self.ep.peer)
+        return self._peer
 
     @property
     def local_address(self) -> str:
@@ -175,6 +210,12 @@ class GcsNode:
             v.alert = (m.time_boot_ms / 1000.0, int(m.value))
         elif t == "COMMAND_ACK":
             v.acks += 1
+        elif t == "HEARTBEAT" and m.get_srcComponent() == 1:
+            from vehicle.identity import mode_name
+
+            v.mode = mode_name(m.custom_mode)
+        elif t == "PARAM_VALUE":
+            v.params[str(m.param_id)] = float(m.param_value)
         elif t == "STATUSTEXT":
             v.statustext = (v.statustext + [m.text])[-5:]
 
@@ -202,7 +243,7 @@ class GcsNode:
         obs = self.observed()
         if obs is None:  # nothing seen yet: the pilot steps on an unknown (nan) state, as in fast-time
             nan = np.full(1, np.nan)
-            self.pilot.step(t, AircraftState(nan, nan, nan, nan, nan, nan), self.display.guidance())
+            self.pilot.step(t, AircraftState(nan, nan, nan, nan, nan, nan), self.pilot_display.guidance())
             return []
         own, intr = obs
         po = self.pilot.step(t, own, self._guidance(own, intr), intr)
@@ -221,16 +262,16 @@ class GcsNode:
         t_seen = self.view.own[0]
         if t_seen != self._g_seen:
             self._g_seen = t_seen
-            alert = int(self.view.alert[1]) if self.view.alert[0] == t_seen else int(self.display.alert[0])
-            self.display.refresh(np.array([0]), own, intr, np.array([alert]))
-        return self.display.guidance()
+            alert = int(self.view.alert[1]) if self.view.alert[0] == t_seen else int(self.pilot_display.alert[0])
+            self.pilot_display.refresh(np.array([0]), own, intr, np.array([alert]))
+        return self.pilot_display.guidance()
 
     def _heartbeat(self):
         return M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE, 3)
 
     def step(self, t: float) -> int:
         """Run the pilot at ``t`` (s) and send its commands plus a HEARTBEAT; returns messages sent."""
-        msgs = [self._heartbeat()]
+        msgs = [self._heartbeat()] + self._settings_due(t)
         for c in self.pilot_commands(t):
             self.seq += 1
             msgs.append(M.MAVLink_pilot_maneuver_message(int(round(t * 1000)), self.seq, VEHICLE_SYSID, 1,
@@ -241,6 +282,27 @@ class GcsNode:
         if self.opts.display:
             self.display(t, len(msgs) - 1)
         return len(msgs)
+
+    def _settings_due(self, t: float) -> list:
+        """PARAM_SET / DO_SET_MODE for the settings due at ``t``, after a SYSTEM_TIME that stamps their send
+        time (the vehicle logs it with the arrival time)."""
+        out = []
+        while self.pending_settings and self.pending_settings[0][0] <= t + 1e-9:
+            _, name, value = self.pending_settings.pop(0)
+            if name == "MODE":
+                out.append(M.MAVLink_command_long_message(VEHICLE_SYSID, 1, M.MAV_CMD_DO_SET_MODE, 0,
+                                                          M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, float(value),
+                                                          0, 0, 0, 0, 0))
+            else:
+                out.append(M.MAVLink_param_set_message(VEHICLE_SYSID, 1, name.encode("ascii"), float(value),
+                                                       M.MAV_PARAM_TYPE_REAL32))
+            self.sent.append({"t": t, "kind": "mode" if name == "MODE" else "param", "name": name,
+                              "value": float(value), "wall_s": round(time.time(), 3)})
+        if out:
+            from vehicle.telemetry import system_time
+
+            out.insert(0, system_time(t))
+        return out
 
     def display(self, t: float, n_cmd: int) -> None:
         from .display import render_line
@@ -255,6 +317,46 @@ class GcsNode:
         else:
             await self._run_realtime()
 
+    def _on_tick(self, r: Received) -> None:
+        """``SIM_TICK(k, t_k)``: run step ``t_k`` if ``k`` is new (a repeated tick is only re-acked), then ack."""
+        k, t = int(r.msg.tick), r.msg.time_ms / 1000.0
+        now = asyncio.get_running_loop().time()
+        if self._tick_silent:
+            self._tick_silent = False
+            self._say(f"ticks from {self._peer_text()} are back at t = {t:g} s "
+                      f"(silent for {now - self._last_tick_wall:.1f} s)")
+        self.ticks_seen += 1
+        self._last_tick_wall = now
+        n = 0
+        if k > self.done_tick:
+            if self.done_tick >= 0 and k > self.done_tick + 1:
+                self.ticks_skipped += k - self.done_tick - 1  # missed ticks: steps lockstep would have run
+            n = self.step(t)
+            self.done_tick = k
+        ack = self.codec.encode(M.MAVLink_sim_tick_ack_message(k, r.msg.time_ms, min(n, 65535)),
+                                link_id=CONTROL_LINK_ID if self.codec.signed else None)
+        self.ep.transport.sendto(ack, self.peer)
+
+    def _check_silence(self) -> None:
+        """Report (once until they come back) ticks that stopped for SILENT_AFTER_S wall seconds."""
+        if self._last_tick_wall is None or self._tick_silent:
+            return
+        quiet = asyncio.get_running_loop().time() - self._last_tick_wall
+        if quiet >= SILENT_AFTER_S:
+            self._tick_silent = True
+            self.silence_warnings += 1
+            self._say(f"warning: no SIM_TICK from {self._peer_text()} for {quiet:.1f} s (last: tick "
+                      f"{self.done_tick}, t = {self.done_tick:g} s): has the vehicle (or the shim) stopped?")
+
+    def _peer_text(self) -> str:
+        return format_udp_address(self.peer) if self.peer is not None else self.vehicle_conn.text
+
+    @staticmethod
+    def _say(text: str) -> None:
+        import sys
+
+        print(f"daa-gcs: {text}", file=sys.stderr, flush=True)
+
     async def _run_lockstep(self) -> None:
         while not self.stop.is_set():
             try:
@@ -262,18 +364,12 @@ class GcsNode:
             except asyncio.TimeoutError:
                 if self.done_tick < 0:  # nothing yet: greet again (a shim may have started after us)
                     self.ep.send(self._heartbeat())
+                self._check_silence()
                 continue
-            if r.msg.get_type() != "SIM_TICK":
+            if r.msg.get_type() == "SIM_TICK":
+                self._on_tick(r)
+            else:
                 self.handle(r)
-                continue
-            k, t = int(r.msg.tick), r.msg.time_ms / 1000.0
-            n = 0
-            if k > self.done_tick:
-                n = self.step(t)
-                self.done_tick = k
-            ack = self.codec.encode(M.MAVLink_sim_tick_ack_message(k, r.msg.time_ms, min(n, 65535)),
-                                    link_id=CONTROL_LINK_ID if self.codec.signed else None)
-            self.ep.transport.sendto(ack, self.peer)
 
     def sim_now(self, loop) -> "float | None":
         if self._wall0 is None:
@@ -287,18 +383,26 @@ class GcsNode:
         assumed_down = delay_models(self.sc)[1].mean() if self.sc is not None else 0.0
         next_t = None
         while not self.stop.is_set():
-            now = self.sim_now(loop)
+            free = not self.ticks_seen  # no ticks (yet): our own clock, synchronised on telemetry
+            now = self.sim_now(loop) if free else None
             timeout = 0.2 if now is None or next_t is None else max(0.0, (next_t - now) / self.opts.speed)
             try:
-                r = await asyncio.wait_for(self.ep.inbox.get(), timeout)
+                r = await asyncio.wait_for(self.ep.inbox.get(), min(timeout, 0.5))
+                if r.msg.get_type() == "SIM_TICK":
+                    self._on_tick(r)
+                    continue
                 self.handle(r)
                 if self._wall0 is None and math.isfinite(self.view.last_t):
                     self._wall0, self._t_sync = loop.time(), self.view.last_t + assumed_down
-                    next_t = math.ceil(self._t_sync)
+                    # one sim second of grace: a vehicle that sends ticks has sent one by then
+                    next_t = math.ceil(self._t_sync) + 1.0
                 continue
             except asyncio.TimeoutError:
-                if now is None:  # no telemetry yet: greet again (the shim may have started after us,
-                    self.ep.send(self._heartbeat())  # or we were restarted and it must relearn our address)
+                self._check_silence()
+                if self.ticks_seen == 0 and now is None:  # nothing yet: greet again (the shim may have started
+                    self.ep.send(self._heartbeat())  # after us, or we were restarted and it must relearn us)
+            if self.ticks_seen:
+                continue
             now = self.sim_now(loop)
             if now is not None and next_t is not None and now >= next_t - 1e-6:
                 self.step(float(next_t))

@@ -20,3 +20,25 @@ def wait_for_vehicle_time(out: Path, t_s: int, proc=None, timeout: float = 60.0)
             return
         time.sleep(0.05)
     pytest.fail(f"the vehicle never reached t = {t_s} s")
+
+
+def child_pid(out: Path, name: str) -> int:
+    """PID of the ``daa-sil run`` child ``name`` (``vehicle``, ``shim`` or ``gcs``) writing into ``out``.
+
+    Found by its command line: the module it runs and the output file only that child is given."""
+    import os
+
+    marker = {"vehicle": ("-m vehicle", f"{out}/steplog.parquet"), "shim": ("daa_sil.cli shim", f"{out}/shim_stats.json"),
+              "gcs": ("-m gcs", f"{out}/gcs_commands.jsonl")}[name]
+    found = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit() or int(d.name) == os.getpid():
+            continue
+        try:
+            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if all(m in cmd for m in marker):
+            found.append(int(d.name))
+    assert len(found) == 1, f"expected one {name} process for {out}, found {found}"
+    return found[0]

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from daa_sil.agent import (AgentMemory, DECISION_FIELDS, D_BLEND, D_NO_WAIT, D_NONE, D_PILOT, D_STALE, D_WAIT,
-                           D_LINK_LOST, D_DAA_OVERRIDE, PilotInput, agent_step, decode, policy_for_group)
+                           D_LINK_LOST, D_DAA_OVERRIDE, PilotInput, WaitValue, agent_step, decode, policy_for_group)
 from daa_sil.daa import (AXIS_NONE, AXIS_HORIZONTAL, AXIS_VERTICAL, DIR_DOWN, DIR_LEFT, DIR_UP, RULE_AXIS, RULE_AXIS_DIR,
                          RULE_ANY, DaaConfig, alert_levels, compute_bands)
 from daa_sil.kinematics import Command
@@ -19,7 +19,7 @@ ID2 = policy_for_group("ID-2")
 
 
 def const_lookup(w):
-    return lambda own, intr: np.full(own.shape[0], float(w))
+    return lambda own, intr, turn: WaitValue.constant(own.shape[0], w)
 
 
 def pilot_cmd(n, cmd: Command, t_sent=9.0, t_recv=10.0, received=True):
@@ -164,7 +164,7 @@ def test_ic1_constant_wait_literal_eq11():
 def test_constant_wait_as_budget_variant():
     # 5 s budget and W_T = 4 s: waits while 5 - elapsed >= 4, then hands over to the DAA
     from dataclasses import replace
-    seen = _frozen_decisions(replace(policy_for_group("IC-1"), wait_countdown=True))
+    seen = _frozen_decisions(replace(policy_for_group("IC-1"), wait_rule="countdown"))
     assert seen[:2] == [D_WAIT, D_WAIT] and set(seen[2:]) == {D_NO_WAIT}
 
 
@@ -210,7 +210,10 @@ def test_batch_of_1000_equals_one_at_a_time():
     rng = np.random.default_rng(11)
     n = 1000
     own, intr, pilot = _random_batch(rng, n)
-    lookup = lambda o, i: 2.0 + (np.abs(o.trk) * 10 % 6)  # noqa: E731  state-dependent, element-wise
+    def lookup(o, i, turn):  # state-dependent, element-wise
+        v = WaitValue.constant(o.shape[0], 0.0)
+        v.wait_s = 2.0 + (np.abs(o.trk) * 10 % 6)
+        return v
     cmd, dec, mem = agent_step(10.0, own, intr, pilot, AgentMemory.initial(n, own), ID2, CFG, lookup)
     for i in rng.choice(n, 8, replace=False):
         s = slice(i, i + 1)

@@ -12,8 +12,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from daa_sil.campaign import (CampaignConfig, chunk_paths, paper_groups, parse_groups, read_results,
-                              run_campaign)
+from daa_sil.campaign import CampaignConfig, chunk_paths, read_results, run_campaign
 from daa_sil.cli import main
 from daa_sil.errors import UsageError
 
@@ -33,23 +32,20 @@ def _assert_same(a: dict, b: dict) -> None:
             np.testing.assert_array_equal(x, y, err_msg=f"{kind}.{name}")
 
 
-def test_groups_are_the_papers_table_2():
-    g = paper_groups()
-    assert list(g) == ["B-1", "B-2", "IC-1", "ID-1", "ID-2"]
-    assert g["B-2"].delay_model().kind == "gaussian" and g["IC-1"].delay_model().mean() == 5.0
-    assert g["ID-1"].uses_map and not g["IC-1"].uses_map
-    assert not g["B-1"].policy().blending and g["ID-2"].policy().wait_mode == "map"
-    assert parse_groups("id-2, B-1") == ("ID-2", "B-1")
-    with pytest.raises(UsageError, match="unknown group 'X'"):
-        parse_groups("B-1,X")
-
-
 @pytest.mark.parametrize("argv, message", [
     (["--groups", "B-1,B-9"], "unknown group 'B-9'"),
     (["--encounters", "0"], "--encounters must be a positive integer"),
     (["--encounters", "-3"], "--encounters must be a positive integer"),
     (["--chunk-size", "x"], "--chunk-size must be a positive integer"),
     (["--preset", "nope"], "unknown --preset"),
+    (["--waitmap", "nosuchgrid"], "--waitmap 'nosuchgrid'"),
+    (["--wt", "-1"], "--wt must be within"),
+    (["--projl-lookahead", "nan"], "--projl-lookahead"),
+    (["--gamma", "1.5"], "--gamma must be within"),
+    (["--latency", "gauss:5"], "bad delay spec 'gauss:5'"),
+    (["--intruders", "0"], "--intruders must be"),
+    (["--reading", "yards"], "unknown reading 'yards'"),
+    (["--reading-set", "units=yards"], "units must be one of metres, feet"),
 ])
 def test_bad_config_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, argv, message):
     out = tmp_path / "camp"
@@ -86,7 +82,7 @@ def test_same_tables_for_one_and_two_workers(tmp_path):
     assert enc.num_rows == 2 * cfg.n_encounters
     assert set(enc["group"].to_pylist()) == {"B-2", "IC-1"}
     # the same encounter set (ids and seeds) in every group
-    by_group = {g: enc.filter(enc["group"].to_numpy(zero_copy_only=False) == g) for g in cfg.groups}
+    by_group = {g: enc.filter(enc["group"].to_numpy(zero_copy_only=False) == g) for g in cfg.group_names}
     assert by_group["B-2"]["seed"].equals(by_group["IC-1"]["seed"])
 
 
@@ -155,7 +151,6 @@ def _same_values(a: Path, b: Path) -> bool:
 
 
 def test_report_from_a_campaign(tmp_path, capsys):
-    pytest.importorskip("daa_sil.report")
     cfg = CampaignConfig(**{**SMALL, "groups": ("B-2", "ID-2"), "n_encounters": 6})
     run_campaign(cfg, tmp_path / "c", progress=False)
     rc = main(["campaign", "report", str(tmp_path / "c"), "--out", str(tmp_path / "rep")])
@@ -164,3 +159,21 @@ def test_report_from_a_campaign(tmp_path, capsys):
     assert "ID-2" in text and "B-2" in text
     rc = main(["campaign", "report", str(tmp_path / "nothing")])
     assert rc == 2 and "not a campaign directory" in capsys.readouterr().err
+
+
+def test_every_knob_is_recorded_and_checked_on_resume(tmp_path, capsys):
+    out = tmp_path / "knobs"
+    argv = ["campaign", "run", "--groups", "B-2,ID-2-projl", "--encounters", "4", "--chunk-size", "4",
+            "--duration", "60", "--wt", "7", "--projl-lookahead", "12", "--latency", "const:0.5",
+            "--waitmap", "paper", "--out", str(out), "--no-progress"]
+    assert main(argv) == 0
+    meta = json.loads((out / "campaign.json").read_text())
+    c = meta["config"]
+    assert (c["wt"], c["projl_lookahead"], c["latency"], c["waitmap"]) == (7.0, 12.0, "const:0.5", "paper")
+    assert meta["groups"]["ID-2-projl"]["wait_threshold_s"] == 7.0 and meta["groups"]["B-2"]["wait_threshold_s"] == 4.0
+    assert meta["groups"]["B-2"]["latency"] == {"type": "constant", "seconds": 0.5}
+    assert meta["seeds"]["campaign"] == 0 and meta["waitmap"] is None  # neither group reads the map
+    capsys.readouterr()
+    assert main(argv[:-3] + ["--wt", "8", "--out", str(out), "--resume", "--no-progress"]) == 2
+    assert "different settings (wt)" in capsys.readouterr().err
+    assert main(["campaign", "run", "--out", str(out), "--resume", "--no-progress"]) == 0  # stored knobs reused

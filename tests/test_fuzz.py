@@ -75,6 +75,8 @@ class Plan:
                 self.accepted[dest]["rejected_sysid" if src != 1 else "telemetry:" + typ] += 1
             elif typ == "SIM_TICK_ACK":
                 self.accepted[dest]["ack"] += 1
+            elif typ == "SIM_TICK" and src == 1:
+                self.accepted[dest]["tick_echo"] += 1  # looks like the shim's echo of our tick
             elif src == 1:
                 self.accepted[dest]["own_sysid"] += 1
             elif typ in COMMAND_TYPES:
@@ -210,6 +212,7 @@ def run_and_check(total: int, seed: int = 9) -> dict:
             rejected = sum(getattr(g_f, k) - getattr(g_c, k) for k in ("duplicate", "older", "future", "invalid"))
             assert rejected == acc["command"], (acc, g_f, g_c)
             assert vf.stats.foreign_messages_ignored - vc.stats.foreign_messages_ignored == acc["own_sysid"]
+            assert vf.stats.tick_echoes - vc.stats.tick_echoes == acc["tick_echo"]
             assert vf.stats.gcs_requests_answered - vc.stats.gcs_requests_answered == acc["request"]
         figures[name] = {"datagrams": delta["datagrams_received"], "dropped_packets": delta["dropped"],
                          **{k: delta[k] for k in CODEC_FIELDS[1:] + ("rejected_peer", "datagrams_rejected_peer",

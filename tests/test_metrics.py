@@ -129,3 +129,126 @@ def test_exact_match_is_over_blends_of_a_pilot_maneuver():
     del cnt["n_blend_intent"]
     m = M.group_metrics(table(n=n, lowc_idx=(), **cnt))
     assert m["exact_match"].value == pytest.approx(0.30) and "all blends" in m["exact_match"].method
+
+
+# --- the encounter-level study ----------------------------------------------------------------------
+def _study(*ts, **kw):
+    return M.Study(merge(*ts), replicates=500, seed=2, **kw)
+
+
+def test_study_pairs_groups_by_encounter_id_not_row_order():
+    """B-2 and ID-2 count the same per encounter, ID-2's rows shuffled: a paired change is exactly
+    0 on every resample. Rows matched by position instead would give a spread."""
+    n = 200
+    rng = np.random.default_rng(0)
+    k = rng.poisson(3.0, n) * (rng.random(n) < 0.3)
+    b2 = table("B-2", n, lowc_idx=(), n_no_wait=k)
+    perm = rng.permutation(n)
+    id2 = {c: np.asarray(v)[perm] for c, v in table("ID-2", n, lowc_idx=(), n_no_wait=k).items()}
+    st = _study(b2, id2)
+    ch = st.change_sample("ID-2", "no_wait", "B-2", "ratio")
+    assert ch.value == 0 and np.all(ch.reps == 0)
+    # the same data positionally mismatched is not degenerate (the oracle can fail)
+    id2_bad = dict(id2, encounter_id=np.arange(n))
+    assert np.ptp(_study(b2, id2_bad).change_sample("ID-2", "no_wait", "B-2").reps) > 0
+
+
+def test_study_means_use_each_groups_own_encounters():
+    b2 = table("B-2", 100, lowc_idx=(), n_no_wait=np.full(100, 4))
+    part = {c: np.asarray(v)[:60] for c, v in table("ID-2", 100, lowc_idx=(), n_no_wait=np.full(100, 1)).items()}
+    st = _study(b2, part)
+    assert st.n == 100 and st.n_encounters("ID-2") == 60
+    assert st.estimate("ID-2", "no_wait").value == pytest.approx(1.0)
+    assert st.change("ID-2", "no_wait", kind="reduction").value == pytest.approx(75.0)
+    assert st.mcnemar("ID-2", "B-2").n == 60  # paired tests only over encounters both flew
+
+
+def test_counting_readings_pick_columns():
+    n = 10
+    t = table("ID-2", n, lowc_idx=(), n_pilot_received=np.full(n, 10), n_pilot_exec=np.full(n, 1),
+              n_blend=np.full(n, 6), n_daa_override=np.full(n, 3))
+    got = {r: _study(t, reading=M.Reading("x", {"received": r})).estimate("ID-2", "received").value
+           for r in ("arrived", "pilot+blend", "executed")}
+    assert got == {"arrived": 10.0, "pilot+blend": 7.0, "executed": 1.0}
+    direct = M.Reading("y", {"columns": {"received": ["n_blend", "n_daa_override"]}})
+    assert _study(t, reading=direct).estimate("ID-2", "received").value == 9.0
+    with pytest.raises(UsageError, match="allowed: window=active"):
+        _study(t, reading=M.Reading("z", {"received": "arrived", "window": "season"}))
+    with pytest.raises(FileFormatError, match="n_pilot_received_whole"):  # whole-encounter columns missing
+        _study(t, reading=M.Reading("w", {"received": "arrived", "window": "whole"}))
+    whole = table("ID-2", n, lowc_idx=(), n_pilot_received=np.full(n, 10), n_pilot_exec=np.full(n, 1),
+                  n_blend=np.full(n, 6), n_daa_override=np.full(n, 3), n_pilot_received_whole=np.full(n, 25),
+                  n_pilot_exec_whole=np.full(n, 14))
+    got = {r: _study(whole, reading=M.Reading("v", {"received": r, "window": "whole"})).estimate("ID-2", "received").value
+           for r in ("arrived", "pilot+blend", "executed")}
+    assert got == {"arrived": 25.0, "pilot+blend": 20.0, "executed": 14.0}
+
+
+def test_zero_counts_get_an_exact_bound_on_the_mean():
+    """0 overrides in 500 encounters of 240 steps: share of encounters <= 1 - 0.025^(1/500), and no
+    encounter can count more than 240, so the mean per encounter is at most 240 times that."""
+    st = _study(table("ID-2", 500, lowc_idx=()))
+    e = st.estimate("ID-2", "daa_override")
+    assert e.value == 0 and e.lo == 0
+    assert e.hi == pytest.approx(240 * (1 - 0.025 ** (1 / 500)))
+    e = st.estimate("ID-2", "n_nmac")
+    assert e.value == 0 and e.hi == pytest.approx(500 * stats.beta.ppf(0.975, 1, 500))
+
+
+def test_lowc_per_hour_three_ways():
+    """3 LoWC encounters of 2 s among 10,000 x 240 s: P(LoWC) = 6 / 2.4e6 = 2.5e-6; the paper's Eq.
+    at 666.67 h = 3.75e-9; the rate 3 / 666.67 h = 4.5e-3 per hour with Clopper-Pearson x 15/h."""
+    st = _study(table())
+    assert st.estimate("ID-2", "p_lowc_step").value == pytest.approx(2.5e-6)
+    assert st.estimate("ID-2", "p_lowc_per_hr").value == pytest.approx(3.75e-9)
+    assert st.estimate("ID-2", "p_lowc_per_hr_paper_h").value == pytest.approx(3.75e-9)
+    r = st.estimate("ID-2", "lowc_rate_per_hr")
+    assert r.value == pytest.approx(4.5e-3)
+    assert r.hi == pytest.approx(stats.beta.ppf(0.975, 4, 9997) * 15)
+    # with half the encounters the per-step risk is the same, the paper's Eq. doubles
+    half = _study(table(n=5000, lowc_dur=1.0))
+    assert half.estimate("ID-2", "p_lowc_step").value == pytest.approx(2.5e-6)
+    assert half.estimate("ID-2", "p_lowc_per_hr").value == pytest.approx(7.5e-9)
+    assert half.estimate("ID-2", "p_lowc_per_hr_paper_h").value == pytest.approx(3.75e-9)
+
+
+def test_decision_provenance_by_hand():
+    t = table("ID-2", 3, lowc_idx=())
+    dec = {"group": np.array(["ID-2"] * 7), "encounter_id": np.array([0, 0, 0, 1, 1, 2, 2]),
+           "decision": np.array(["wait", "no_wait", "blend", "wait", "no_wait", "wait", "wait"]),
+           "decided_by": np.array(["map", "both", "map", "projl", None, "neither", "map"], dtype=object),
+           "in_box": np.array([True, False, None, True, True, None, False], dtype=object)}
+    st = _study(t, dec=dec)
+    # wait/no-wait rows with a decided_by: 5 (the blend row and the None are not decisions of the map)
+    assert st.sum("ID-2", "n_dec").value == 5 and st.sum("ID-2", "n_dec_map").value == 2
+    assert st.estimate("ID-2", "map_decided_share").value == pytest.approx(2 / 5)
+    assert st.estimate("ID-2", "map_or_both_share").value == pytest.approx(3 / 5)
+    assert st.estimate("ID-2", "in_box_share").value == pytest.approx(3 / 5)
+    assert not _study(t).provenance["ID-2"]
+
+
+@pytest.mark.parametrize("in_box", [[True, None, False, True], [1.0, float("nan"), 0.0, 1.0]])
+def test_decision_tables_from_parquet_types(in_box):
+    """Dictionary-encoded decided_by with nulls, in_box as nullable bool or as 0/1 floats with nan."""
+    import pyarrow as pa
+
+    t = pa.table({"group": ["ID-2"] * 4, "encounter_id": [0, 0, 1, 5], "decision": ["wait", "no_wait", "wait", "wait"],
+                  "decided_by": pa.array(["map", None, "projl", "map"]).dictionary_encode(), "in_box": in_box})
+    d = M.normalise_decisions(t)
+    assert d["decided_by"].tolist() == ["map", "", "projl", "map"] and d["in_box"].tolist() == [1, -1, 0, 1]
+    st = _study(table("ID-2", 3, lowc_idx=()), dec=t)  # encounter 5 is not in the results: ignored
+    assert st.sum("ID-2", "n_dec").value == 2 and st.sum("ID-2", "n_lookup").value == 2
+
+
+def test_a_new_counting_is_one_table_entry(monkeypatch):
+    """A simulator column for a new way of counting plus one COUNT_SOURCES entry is all a reading
+    needs: the study, the allowed values and --recount pick it up."""
+    from daa_sil.report import parse_recount
+
+    keys, tab = M.COUNT_SOURCES["received"]
+    monkeypatch.setitem(M.COUNT_SOURCES, "received", (keys, {**tab, ("overridden", "active"): ("n_daa_override",)}))
+    assert "overridden" in M.counting_options()["received"]
+    assert parse_recount("ov:received=overridden") == ("ov", {"received": "overridden"})
+    t = table("B-2", 4, lowc_idx=(), n_daa_override=np.array([1, 2, 3, 6]))
+    st = _study(t, reading=M.Reading("ov", {"received": "overridden"}))
+    assert st.estimate("B-2", "received").value == 3.0

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from daa_sil import wellclear as wc
-from daa_sil.agent import D_NO_WAIT, PilotInput, policy_for_group
+from daa_sil.agent import D_NO_WAIT, PilotInput, WaitValue, policy_for_group
 from daa_sil.daa import DaaConfig
 from daa_sil.encounters import IntruderGeometry, encounter_from_geometry
 from daa_sil.kinematics import AircraftState
@@ -62,7 +62,7 @@ def test_nmac_strictly_between_samples_is_detected():
 def test_step_advances_time_and_rejects_wrong_time():
     es = encounter_from_geometry(IntruderGeometry(angle_deg=90, hmd_m=500.0, t_cpa_s=120, gs_mps=80.0))
     core = OnboardCore.from_encounters(es, policy_for_group("ID-1"), DaaConfig(thresholds="paper"),
-                                       wait_lookup=lambda own, intr: np.full(own.shape[0], 10.0))
+                                       wait_lookup=lambda own, intr, turn: WaitValue.constant(own.shape[0], 10.0))
     out = core.step(0.0, PilotInput.nothing(1, 0.0))
     assert out.step == 0 and core.t == 1.0 and core.k == 1
     assert out.telemetry.t == 0.0 and out.telemetry.alert_level.shape == (1, 1)

@@ -171,3 +171,27 @@ def test_return_waits_until_the_way_back_is_clear():
     assert not any(o.send[0] for o in outs)  # recovery due at 54 s, but the way back is not clear
     out = m.step(60.0, seen, none, behind)
     assert out.send[0] and out.cmd.trk[0] == pytest.approx(0.0) and out.cmd.vs[0] == 0.0
+
+
+def test_reading_without_hold_commands_sends_only_the_maneuver():
+    """stream_hold=False: the same timeline as the default, minus the 19 hold commands before the
+    first maneuver (sent at t = 3 + 19 = 22)."""
+    m = PilotModel(1, cfg=PilotConfig(mode="deterministic", stream_hold=False))
+    own, g, none = _own(), _guid(), _guid(alert=0)
+    outs = [m.step(float(t), own, none if t < 3 else g) for t in range(0, 30)]
+    assert not any(o.send[0] for o in outs[:22])
+    assert outs[22].send[0] and outs[22].cmd.trk[0] == pytest.approx(310 * DEG) and outs[22].seq[0] == 0
+    assert all(o.send[0] for o in outs[22:])
+
+
+def test_reading_streaming_from_first_detection_holds_until_the_corrective_alert():
+    """stream_level_min=0: hold of the seen state from the first telemetry; the maneuver still
+    follows the corrective alert (t = 3) by the response delay (19 s)."""
+    m = PilotModel(1, cfg=PilotConfig(mode="deterministic", stream_level_min=0))
+    g, none = _guid(), _guid(alert=0)
+    outs = [m.step(float(t), _own(trk=t * 0.01), none if t < 3 else g) for t in range(0, 30)]
+    assert all(o.send[0] and o.axis[0] == 0 for o in outs[:22])
+    assert outs[1].cmd.trk[0] == pytest.approx(0.01)  # the state seen at that step
+    assert outs[22].axis_names()[0] == "horizontal" and outs[22].seq[0] == 22
+    with pytest.raises(UsageError, match="stream_level_min"):
+        PilotConfig(stream_level_min=3).validate()

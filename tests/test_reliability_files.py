@@ -211,7 +211,7 @@ def _make_map(kind: str, maps: Path, d: Path) -> Path:
         _rewrite(good, d / "m.npz", _set("p_lowc", 9, 1.5), rehash=True)
     elif kind == "shape-mismatch":
         def cut(meta, a):
-            for k in ("wait_s", "p_lowc", "p_act", "q_wait", "q_evade", "lowc"):
+            for k in ("wait_s", "p_lowc", "t_lowc", "q_wait", "lowc"):
                 a[k] = a[k][:2]
         _rewrite(good, d / "m.npz", cut, rehash=True)
     elif kind == "no-metadata":
@@ -246,7 +246,7 @@ MAP_CASES = {
     "truncated": (2, ["not a readable wait-map .npz"]),
     "empty": (2, ["not a daa-sil wait map", "empty file"]),
     "garbage": (2, ["not a daa-sil wait map", "not a zip archive"]),
-    "wrong-version": (2, ["unsupported wait-map format 'daa-sil-waitmap/0'", "reads 'daa-sil-waitmap/1'"]),
+    "wrong-version": (2, ["unsupported wait-map format 'daa-sil-waitmap/0'", "reads 'daa-sil-waitmap/2'"]),
     "checksum-mismatch": (2, ["content hash mismatch"]),
     "nan-values": (2, ["values of wait_s outside [0, 60]"]),
     "probability-above-1": (2, ["values of p_lowc outside [0, 1]"]),
@@ -412,9 +412,9 @@ def test_campaign_report_and_replay_bad_inputs(camp, tmp_path, blocker):
          ["encounters-00000.parquet is not a readable Parquet file"]),
         (["campaign", "report", camp, "--out", blocker / "rep"], 1, ["cannot create output directory"]),
         (["viz", "replay", tmp_path / "nothere", "--group", "B-1", "--encounter", "0", "--rrd", tmp_path / "x.rrd"],
-         2, ["holds no encounters-*.parquet results"]),
+         2, ["not a campaign directory"]),
         (["viz", "replay", camp, "--group", "B-9", "--encounter", "0", "--rrd", tmp_path / "x.rrd"], 2,
-         ["unknown group 'B-9'"]),
+         ["group B-9 is not in the campaign", "(it ran B-1)"]),
         (["viz", "replay", camp, "--group", "B-1", "--encounter", "99", "--rrd", tmp_path / "x.rrd"], 2,
          ["encounter 99 has no result"]),
         (["viz", "replay", camp, "--group", "B-1", "--encounter", "0"], 2, ["choose an output"]),

@@ -11,6 +11,9 @@ command crosses the link as ``PILOT_MANEUVER`` with **float32** setpoints (track
 the SIL flies ``float32(cmd)``: a relative rounding of at most 2^-24 ~ 6e-8 (e.g. vs -2.4516625 m/s
 arrives as -2.45166254 m/s, 4e-8 m/s off). Integrated over at most 240 s that moves positions by
 < 2e-5 m. The check therefore allows ``|sil - fast| <= 1e-5 + 1e-6 |fast|`` on float columns.
+The wait map is interpolated at the continuous relative state, so ``wait_s`` and ``wait_p_lowc``
+inherit that rounding too (about 1e-8 s); the wait / no-wait decision they feed, ``decided_by`` and
+the map read are discrete and must be identical.
 (The GCS also observes float32 LOCAL_POSITION_NED and integer ADSB_VEHICLE fields, but the pilot's
 guidance and decisions are discrete, so that quantisation does not show up in the log.)
 """
@@ -34,7 +37,8 @@ ATOL, RTOL = 1e-5, 1e-6
 #: columns whose values are discrete (strings, bools, ints, step/time): must match exactly
 EXACT = {"encounter_id", "step", "t", "alert_level", "wcv", "decision", "rule", "authority", "projl",
          "pilot_cmd_received", "pilot_axis", "pilot_dir", "exec_axis", "exec_dir", "lowc", "nmac",
-         "bands_trk_region", "delay_up_s", "delay_down_s", "pilot_cmd_age_s", "wait_s"}
+         "bands_trk_region", "delay_up_s", "delay_down_s", "pilot_cmd_age_s", "decided_by", "wait_in_box",
+         "wait_map_turn_dps"}
 
 SCENARIO = """\
 name: head-on-gauss-{group}
@@ -46,7 +50,7 @@ ownship: {{alt_m: 1000, gs_mps: 55, track_deg: 0}}
 intruders:
   - callsign: HEAD1
     cpa: {{angle_deg: 180, hmd_m: 150, t_cpa_s: 120, gs_mps: 60}}
-link: {{up: "gauss:5,3", down: "gauss:5,3", epoch_s: 10}}
+{maneuvers}link: {{up: "gauss:5,3", down: "gauss:5,3", epoch_s: 10}}
 pilot: {{mode: model, model: {{response: deterministic}}}}
 allocation: {{group: {group}}}
 """
@@ -61,7 +65,7 @@ def _fast_time(sc, seed: int):
 
     up, down = delay_models(sc)
     pol = build_policy(sc)
-    fam = waitmap.default_family(preset="paper") if pol.wait_mode == "map" else None
+    fam = waitmap.family_for(None, preset="paper") if pol.wait_mode == "map" else None
     return simulate(encounter_set(sc), pol, up, down, PilotConfig(mode=sc.pilot.response),
                     DaaConfig(thresholds=sc.thresholds), fam, seeds=np.array([seed]), preset=sc.thresholds,
                     duration_s=sc.duration_s, epoch_s=sc.link.epoch_s, record_steps=True)
@@ -91,10 +95,15 @@ def column_differences(sil, fast) -> dict:
     return out
 
 
-@pytest.mark.parametrize("group,seed", [("ID-2", 11), pytest.param("B-2", 4, marks=pytest.mark.slow)])
-def test_lockstep_sil_with_gaussian_delays_equals_fast_time(group, seed, tmp_path):
+#: the intruder turns right at 4 deg/s for 25 s from t = 70 s (it then reads the turning wait maps)
+TURN = "    maneuvers: [{start_s: 70, end_s: 95, turn_rate_dps: 4}]\n"
+
+
+@pytest.mark.parametrize("group,seed,maneuvers", [("ID-2", 11, ""), ("ID-2", 11, TURN),
+                                                  pytest.param("B-2", 4, "", marks=pytest.mark.slow)])
+def test_lockstep_sil_with_gaussian_delays_equals_fast_time(group, seed, maneuvers, tmp_path):
     path = tmp_path / "gauss.yaml"
-    path.write_text(SCENARIO.format(group=group, seed=seed))
+    path.write_text(SCENARIO.format(group=group, seed=seed, maneuvers=maneuvers))
     sc = load_scenario(path)
     out = tmp_path / "run"
     cp = subprocess.run([sys.executable, "-m", "daa_sil.cli", "run", str(path), "--out", str(out), "--json"],
@@ -114,6 +123,11 @@ def test_lockstep_sil_with_gaussian_delays_equals_fast_time(group, seed, tmp_pat
 
     diffs = column_differences(sil, fast)
     assert diffs == {}, diffs
+    if maneuvers:  # the turn is estimated the same way in both and picks the +2.5 / +5 deg/s maps
+        maps = {m for m in fast.column("wait_map_turn_dps").to_pylist() if m == m}
+        assert maps & {2.5, 5.0} and 0.0 in maps, maps
+        est = [r[0] for r in sil.column("intr_turn_est_dps").to_pylist()]
+        assert max(est) == pytest.approx(4.0, abs=1e-6)
     # the outcome fast-time reports for the encounter is the SIL's
     assert res["lowc"] == bool(enc.column("lowc")[0].as_py())
     assert res["nmac"] == bool(enc.column("nmac")[0].as_py())

@@ -17,7 +17,8 @@ def _step_cols(k: int, n: int, m: int) -> dict:
     cols.update(step=np.full(n, k, np.int32), t=np.full(n, float(k)), own_x=100.0 * enc + k,
                 decision=np.full(n, sl.DECISIONS.index("wait") if k == 1 else 0),
                 rule=np.zeros(n, int), authority=np.array(["pilot"] * n),
-                projl=np.zeros(n, bool), pilot_cmd_received=enc % 2 == 0,
+                projl=np.zeros(n, bool), decided_by=np.zeros(n, int), wait_in_box=np.zeros(n, bool),
+                pilot_cmd_received=enc % 2 == 0,
                 pilot_axis=np.zeros(n, int), pilot_dir=np.zeros(n, int), exec_axis=np.full(n, 1),
                 exec_dir=np.full(n, 2), lowc=np.full(n, k == 2), nmac=np.zeros(n, bool))
     for name, typ in sl.INTRUDER_COLUMNS.items():

@@ -116,7 +116,8 @@ def test_replay_worst_encounter(tmp_path, capsys):
 
 def test_log_waitmap_point_cloud(tmp_path):
     """A real (tiny) wait map solved by daa_sil.waitmap, shown as a coloured point cloud."""
-    waitmap = pytest.importorskip("daa_sil.waitmap")
+    from daa_sil import waitmap
+
     grid = waitmap.resolve_grid("paper,dx=4,dy=4,dh=2,vi=2,vh=2,theta=4")
     params = waitmap.MdpParams(preset="paper", gamma=0.9, horizon=20.0)
     fam = waitmap.build_family(grid, params, [0.0])

@@ -88,3 +88,24 @@ def test_help_has_examples():
     for verb in ("build", "show", "plot"):
         r = run(verb, "--help")
         assert r.returncode == 0 and "examples:" in r.stdout
+
+
+def test_check_prints_the_papers_properties(built):
+    out, _ = built
+    r = run("check", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "head-on waits < overtaking at equal range: holds" in r.stdout
+    assert "the paper's Fig. 3 shape (min <= 2, max <= 45, mode within 0-10 s): yes" in r.stdout
+    j = run("check", str(out), "--json")
+    rep = json.loads(j.stdout)
+    assert rep["ok"] and rep["head_on_vs_overtaking"]["n"] > 0 and rep["paper_shape"]
+
+
+def test_build_options_reach_the_map_metadata(tmp_path):
+    r = run("build", "--grid", "paper,dx=4,dy=4,dh=2,vi=2,vh=2,theta=4", "--turn-rates", "0",
+            "--definition", "until_evade", "--p-min", "0.01", "--out", str(tmp_path / "m"), "--json")
+    assert r.returncode == 0, r.stderr
+    from daa_sil import waitmap
+
+    fam = waitmap.load_family(tmp_path / "m")
+    assert fam.params.wait_definition == "until_evade" and fam.params.p_min == 0.01 and fam.params.horizon == 60.0

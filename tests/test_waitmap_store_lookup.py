@@ -86,34 +86,74 @@ def test_wrong_version_fails(wm, tmp_path):
 def test_lookup_at_nodes_and_periodic_heading(wm):
     nodes = wm.grid.nodes().reshape(-1, 6)
     r = wm.lookup(nodes)
-    assert np.allclose(r.wait_s, wm.wait_s.ravel(), atol=1e-9)
+    assert np.allclose(r.wait_s, wm.wait_s.ravel(), atol=1e-4)
     assert np.array_equal(r.evade, wm.evade.ravel())
-    assert r.in_grid.all()
+    assert r.in_grid.all() and r.in_box.all()
     shifted = nodes.copy()
     shifted[:, 5] += 2 * np.pi
-    assert np.allclose(wm.lookup(shifted).wait_s, r.wait_s, atol=1e-9)
-    # between two nodes the value is the multilinear blend (away from evade/LoWC states)
+    assert np.allclose(wm.lookup(shifted).wait_s, r.wait_s, atol=1e-4)
+
+
+def _neighbours(wm, pred):
+    """A node i and its +dx neighbour j, both wait-optimal, with pred(i, j) true."""
     g = wm.grid
-    w = wm.wait_s
-    ok = np.argwhere(~wm.evade[:-1] & ~wm.evade[1:] & (np.abs(w[:-1] - w[1:]) > 1))
-    i = tuple(ok[0])
-    a, b = nodes.reshape(*g.shape, 6)[i], nodes.reshape(*g.shape, 6)[(i[0] + 1,) + i[1:]]
+    ok = ~wm.evade[:-1] & ~wm.evade[1:] & pred(wm, slice(None, -1), slice(1, None))
+    i = tuple(np.argwhere(ok)[0])
+    j = (i[0] + 1,) + i[1:]
+    nodes = g.nodes()
+    return i, j, nodes[i], nodes[j]
+
+
+def test_paper_wait_interpolates_p_and_t_separately(wm):
+    """Between two threatening nodes W = (sum w_k t_k) / (sum w_k p_k), the p-weighted mean of the
+    corner waits, not the plain blend of W (hand formula from the node arrays)."""
+    pm = wm.params.p_min
+    i, j, a, b = _neighbours(wm, lambda m, x, y: (m.p_lowc[x] > pm) & (m.p_lowc[y] > pm)
+                             & (np.abs(m.wait_s[x] - m.wait_s[y]) > 1) & (np.abs(m.p_lowc[x] - m.p_lowc[y]) > 0.05))
     mid = wm.lookup(0.25 * a + 0.75 * b)
-    assert not mid.evade  # both neighbours have Q_wait >= 0 = Q_evade
-    assert mid.wait_s == pytest.approx(0.25 * w[i] + 0.75 * w[(i[0] + 1,) + i[1:]])
+    p = 0.25 * float(wm.p_lowc[i]) + 0.75 * float(wm.p_lowc[j])
+    t = 0.25 * float(wm.t_lowc[i]) + 0.75 * float(wm.t_lowc[j])
+    assert not mid.evade
+    assert float(mid.wait_s) == pytest.approx(t / p, rel=1e-5)
+    plain = 0.25 * float(wm.wait_s[i]) + 0.75 * float(wm.wait_s[j])
+    assert abs(float(mid.wait_s) - plain) > 1e-3  # the two rules differ here
+    assert float(mid.p_lowc) == pytest.approx(p, rel=1e-5)
 
 
-def test_out_of_grid_edges(wm):
-    H = wm.params.horizon
-    # far: 5 km behind, flying away from the ownship -> no constraint
-    far = wm.lookup(np.array([-5000.0, 0.0, 0.0, 100.0, 0.0, np.pi]))
-    assert far.wait_s == H and not far.evade and not far.in_grid and far.p_lowc == 0.0
-    # inside: just outside the box but already in LoWC (head-on, 300 m/s, co-altitude) -> 0
-    inside = wm.lookup(np.array([1600.0, 0.0, 0.0, 300.0, 0.0, np.pi]))
-    assert inside.wait_s == 0.0 and inside.evade and not inside.in_grid and inside.p_lowc == 1.0
-    # speeds outside the grid are clamped and flagged
+def test_p_min_floor_at_the_edge_of_the_threat_region(wm):
+    """Next to a node with p = 0 (W = H) the lookup is the threatening node's wait (its t/p), not a
+    blend with H; where the interpolated p falls below p_min the wait is H."""
+    pm, H = wm.params.p_min, wm.params.horizon
+    i, j, a, b = _neighbours(wm, lambda m, x, y: (m.p_lowc[x] > 10 * pm) & (m.p_lowc[y] == 0))
+    assert wm.wait_s[j] == H and 1.0 <= wm.wait_s[i] < H
+    near = wm.lookup(0.5 * a + 0.5 * b)
+    assert float(near.wait_s) == pytest.approx(float(wm.wait_s[i]), rel=1e-5)
+    frac = 1.0 - 0.5 * pm / float(wm.p_lowc[i])  # interpolated p = 0.5 p_min
+    far = wm.lookup((1 - frac) * a + frac * b)
+    assert float(far.p_lowc) < pm and float(far.wait_s) == H
+
+
+def test_until_evade_definition_interpolates_w():
+    wmb = build_map(resolve_grid(SMALL), MdpParams(wait_definition="until_evade"), 5.0)
+    i, j, a, b = _neighbours(wmb, lambda m, x, y: np.abs(m.wait_s[x] - m.wait_s[y]) > 1)
+    mid = wmb.lookup(0.25 * a + 0.75 * b)
+    assert float(mid.wait_s) == pytest.approx(0.25 * float(wmb.wait_s[i]) + 0.75 * float(wmb.wait_s[j]), rel=1e-5)
+
+
+def test_outside_the_box_reads_the_nearest_point_of_the_box(wm):
+    g = wm.grid
+    lo, hi = g.axis("dx").lo, g.axis("dx").hi
+    # 5 km behind, flying away: the map at the box's rear edge
+    far = wm.lookup(np.array([-5000.0, 300.0, 150.0, 100.0, 0.0, np.pi]))
+    edge = wm.lookup(np.array([lo, 300.0, 150.0, 100.0, 0.0, np.pi]))
+    assert not far.in_box and not far.in_grid and edge.in_box
+    assert far.wait_s == edge.wait_s and far.p_lowc == edge.p_lowc and far.evade == edge.evade
+    # in LoWC now (head-on, 300 m/s, co-altitude, just outside the box): 0 whatever the map says
+    inside = wm.lookup(np.array([hi + 100.0, 0.0, 0.0, 300.0, 0.0, np.pi]))
+    assert inside.wait_s == 0.0 and inside.evade and not inside.in_box and inside.p_lowc == 1.0
+    # speeds outside the grid are clamped and flagged, positions still in the box
     fast = wm.lookup(np.array([-1400.0, 1400.0, 200.0, 400.0, 0.0, np.pi]))
-    assert not fast.in_grid and 0 <= fast.wait_s <= H
+    assert fast.in_box and not fast.in_grid and 0 <= fast.wait_s <= wm.params.horizon
 
 
 def test_family_picks_nearest_condition_and_batches():

@@ -28,8 +28,17 @@ EXAMPLES = """examples:
   # each step's row to a local Rerun recorder as it happens (daa-sil run does this for live viewers)
   daa-vehicle scenarios/head_on.yaml --live udp:127.0.0.1:9870
 
+  # the paper's own 72,000-state wait map instead of the default alerting-region map
+  daa-vehicle scenarios/head_on.yaml --waitmap paper
+
   # 10x real time, undelayed truth copy for QGroundControl on 14550
   daa-vehicle scenarios/crossing_left.yaml --out udp:127.0.0.1:14601 --speed 10 --tap udp:127.0.0.1:14550
+
+  # like SITL: listen on 14550 and stream to whichever GCS (MAVProxy --master udpout:...) speaks first
+  daa-vehicle scenarios/head_on.yaml --out udpin:127.0.0.1:14550
+
+connection strings (as MAVProxy): udpin:HOST:PORT listens, udpout:HOST:PORT sends, a bare udp:HOST:PORT
+listens for --listen and sends for --out / --tap.
 """
 
 
@@ -38,11 +47,15 @@ def build_parser() -> argparse.ArgumentParser:
                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", type=Path, help="scenario YAML file")
     p.add_argument("--out", default="udp:127.0.0.1:14550", metavar="udp:HOST:PORT",
-                   help="GCS (or delay shim) to stream to and take commands from (default udp:127.0.0.1:14550)")
-    p.add_argument("--listen", default="udp:127.0.0.1:0", metavar="udp:HOST:PORT",
-                   help="local socket (default udp:127.0.0.1:0 = OS-chosen port)")
+                   help="GCS (or delay shim) to stream to and take commands from (default udp:127.0.0.1:14550); "
+                        "udpin:HOST:PORT listens there and answers the first GCS that sends")
+    p.add_argument("--listen", default=None, metavar="udp:HOST:PORT",
+                   help="local socket (default udp:127.0.0.1:0 = OS-chosen port; not with --out udpin:)")
     p.add_argument("--tap", default=None, metavar="udp:HOST:PORT|none",
-                   help="undelayed observer copy of the telemetry (QGC/MAVProxy); commands from it are ignored")
+                   help="undelayed observer copy of the telemetry (QGC/MAVProxy); it may read parameters and "
+                        "set its own rates, its pilot commands are ignored")
+    p.add_argument("--tap-writable", action="store_true",
+                   help="also apply parameter and mode writes from the tap (undelayed!); default: refused")
     p.add_argument("--clock", choices=("realtime", "lockstep"), default="realtime",
                    help="realtime (wall clock x --speed, default) or lockstep (SIM_TICK / SIM_TICK_ACK)")
     p.add_argument("--speed", type=float, default=1.0, metavar="X", help="realtime speed factor (default 1)")
@@ -50,9 +63,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steplog", type=Path, metavar="FILE", help="write the step log (Parquet) here")
     p.add_argument("--tick-timeout", type=float, default=10.0, metavar="S",
                    help="lockstep: wall seconds to wait for a SIM_TICK_ACK (default 10)")
+    p.add_argument("--start-timeout", type=float, default=None, metavar="S",
+                   help="wall seconds to wait for the answer to tick 0, while the shim and GCS may still be "
+                        "starting (default: --tick-timeout)")
     p.add_argument("--live", default=None, metavar="udp:127.0.0.1:PORT",
                    help="also send each step's step-log row, as soon as the step is done, to this loopback "
                         "port (the Rerun recorder of `daa-sil run`); fire-and-forget, never slows the loop")
+    p.add_argument("--waitmap", default=None, metavar="PRESET|GRID|DIR",
+                   help="wait maps: alerting (default), paper, fine, a grid spec or a 'waitmap build' directory "
+                        "(built and cached on first use; the same lookup as 'campaign run --waitmap')")
+    p.add_argument("--tick-sync", choices=("auto", "wait"), default="auto",
+                   help="realtime: auto (default) = start at once and pace SIM_TICKs by the wall clock, waiting "
+                        "for the shim's (or a direct GCS's) answer only if it gives them (a stock GCS does not); "
+                        "wait = start the clock only once tick 0 is acknowledged (daa-sil run), so the run makes "
+                        "the same decisions as lockstep")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -65,24 +89,48 @@ def _options(args):
     check_speed(args.speed)
     if not (math.isfinite(args.tick_timeout) and 0.1 <= args.tick_timeout <= 3600):
         raise UsageError(f"--tick-timeout must be within [0.1, 3600] s, got {args.tick_timeout:g}")
+    if args.start_timeout is not None and not (math.isfinite(args.start_timeout) and 0.1 <= args.start_timeout <= 3600):
+        raise UsageError(f"--start-timeout must be within [0.1, 3600] s, got {args.start_timeout:g}")
     key = load_key_option(args.key)
+    from daa_sil.link.connstr import LISTEN, SEND, parse_connection
+
     tap = None if args.tap in (None, "", "none") else args.tap
+    out = parse_connection(args.out, "--out", SEND)
+    if args.listen is not None:
+        parse_connection(args.listen, "--listen", LISTEN, allow=(LISTEN,))
+        if out.listens:
+            raise UsageError(f"--out {args.out} already listens; drop --listen {args.listen}")
+    if tap is not None:
+        parse_connection(tap, "--tap", SEND, allow=(SEND,))
+    if args.tap_writable and tap is None:
+        raise UsageError("--tap-writable needs --tap udp:HOST:PORT")
     live = None if args.live in (None, "", "none") else args.live
     if live is not None:
         from daa_sil.live import parse_live_address
 
         parse_live_address(live)
-    return VehicleOptions(out=args.out, listen=args.listen, tap=tap, clock=args.clock, speed=args.speed, key=key,
-                          steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live)
+    def clock_start(wall0: float) -> None:  # orchestrators time scheduled faults from this line
+        print(f"CLOCK t0_monotonic={wall0:.6f} speed={args.speed:g}", flush=True)
+
+    return VehicleOptions(out=args.out, listen=args.listen or "udp:127.0.0.1:0", tap=tap, clock=args.clock,
+                          speed=args.speed, key=key, steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live,
+                          waitmap=args.waitmap, tap_writable=args.tap_writable, start_timeout_s=args.start_timeout,
+                          tick_sync=args.tick_sync, on_clock_start=clock_start)
 
 
 async def _amain(args) -> int:
+    from daa_sil.link.connstr import describe
     from daa_sil.link.endpoint import format_udp_address
     from daa_sil.scenario import load_scenario
     from vehicle.node import VehicleNode
 
     sc = load_scenario(args.scenario)
     opts = _options(args)
+    if sc.faults:
+        import sys
+
+        print(f"daa-vehicle: note: the scenario's faults ({'; '.join(f.describe() for f in sc.faults)}) are "
+              f"carried out by `daa-sil run --clock realtime`, not by daa-vehicle", file=sys.stderr, flush=True)
     node = VehicleNode(sc, opts)
     await node.start()
     loop = asyncio.get_running_loop()
@@ -91,11 +139,12 @@ async def _amain(args) -> int:
 
     def on_signal(signum):
         got["sig"] = signum
+        node.request_stop()  # also if the cancellation below is lost in a wait_for race
         task.cancel()
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, on_signal, sig)
-    print(f"READY listen={node.local_address} out={format_udp_address(node.peer)} clock={opts.clock} "
+    print(f"READY listen={node.local_address} out={describe(node.out) if node.out.listens else format_udp_address(node.out.addr)} clock={opts.clock} "
           f"scenario={sc.name} steps={node.core.n_steps}", flush=True)
 
     def progress(nd, out):
@@ -126,6 +175,14 @@ async def _amain(args) -> int:
           + (f"; live rows sent {node.live.stats.sent}, failed {node.live.stats.errors + node.live.stats.too_big}"
              if node.live is not None else "")
           + (f"; step log {path}" if path else ""), flush=True)
+    if opts.clock == "realtime":
+        v = node.stats
+        print(f"daa-vehicle: realtime: ticks answered by {v.sync_partner}, steps run before their tick was "
+              f"confirmed {v.steps_unconfirmed}, GCS acks late {v.acks_late}; step lateness mean {v.late_mean_ms:.1f} "
+              f"ms, max {v.late_max_ms:.1f} ms", flush=True)
+    drops = node.ep.drops.summary()
+    if drops:
+        print(f"daa-vehicle: {drops}", flush=True)
     return 0
 
 

@@ -71,3 +71,30 @@ class CommandGate:
         self._last[cmd.source] = key
         c.accepted += 1
         return True
+
+
+def reposition_command(msg, own_xyz: tuple, origin, t_sent: float, seq: int) -> "PilotCommand | str":
+    """A ``MAV_CMD_DO_REPOSITION`` (COMMAND_INT: x/y degE7; COMMAND_LONG: param5/6 deg) as a pilot command.
+
+    The vehicle flies absolute setpoints, so "go to this point" becomes "fly the initial bearing from
+    the current position ``own_xyz`` (ENU m) to the point"; ground speed = ``param1`` if > 0 (else
+    keep); the vertical speed is kept (the altitude ``z`` / ``param7`` is not flown: there is no
+    altitude-hold setpoint). Returns the command, or a one-line reason it is invalid.
+    """
+    from daa_sil.frames import geodetic_to_enu
+
+    if msg.get_type() == "COMMAND_INT":
+        lat, lon = msg.x / 1e7, msg.y / 1e7
+    else:
+        lat, lon = float(msg.param5), float(msg.param6)
+    if not (math.isfinite(lat) and math.isfinite(lon) and -90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+        return f"DO_REPOSITION: bad position {lat!r}, {lon!r}"
+    x, y, _ = geodetic_to_enu(lat, lon, origin.alt_m, origin.lat_deg, origin.lon_deg, origin.alt_m)
+    de, dn = float(x) - own_xyz[0], float(y) - own_xyz[1]
+    if math.hypot(de, dn) < 1.0:
+        return "DO_REPOSITION: the point is where the aircraft is"
+    gs = float(msg.param1)
+    gs = gs if math.isfinite(gs) and gs > 0 else math.nan
+    trk = math.degrees(math.atan2(de, dn)) % 360.0
+    return PilotCommand(t_sent, int(seq), trk, math.nan, gs, (msg.get_srcSystem(), msg.get_srcComponent()),
+                        "DO_REPOSITION")

@@ -28,7 +28,7 @@ def build_policy(sc: Scenario) -> "A.AllocationPolicy":
     al = sc.allocation
     pol = A.policy_for_group(al.group)
     changes = {"wait_mode": al.wait, "blending": al.blending, "wait_threshold_s": al.wait_threshold_s,
-               "constant_wait_s": al.wait_constant_s}
+               "constant_wait_s": al.wait_constant_s, "projl": al.projl}
     if al.link_timeout_s is not None:
         changes["link_timeout_s"] = al.link_timeout_s
     if al.stale_command_s is not None:
@@ -36,8 +36,10 @@ def build_policy(sc: Scenario) -> "A.AllocationPolicy":
     return replace(pol, **changes)
 
 
-def build_onboard(sc: Scenario, policy=None):
-    """``(OnboardCore, EncounterSet, policy)`` for scenario ``sc`` (N = 1)."""
+def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None):
+    """``(OnboardCore, EncounterSet, policy)`` for scenario ``sc`` (N = 1). ``waitmap`` is a
+    ``--waitmap`` value (map preset, grid spec or family directory; None = the default map), read
+    exactly as fast-time reads it (:func:`daa_sil.waitmap.family_for`, LoWC preset ``paper``)."""
     from daa_sil.daa.config import DaaConfig
     from daa_sil.onboard import OnboardCore
 
@@ -46,9 +48,9 @@ def build_onboard(sc: Scenario, policy=None):
     daa_cfg = DaaConfig.for_preset(sc.thresholds)
     lookup = None
     if policy.wait_mode == "map":
-        from daa_sil import waitmap
+        from daa_sil import waitmap as wm
 
-        lookup = A.make_wait_lookup(waitmap.default_family(preset="paper"), cfg=daa_cfg)
+        lookup = A.make_wait_lookup(wm.family_for(waitmap, preset="paper"), cfg=daa_cfg)
     core = OnboardCore(es.own, es.intr, es.intruder_controls, policy, daa_cfg, lookup, thresholds=sc.thresholds)
     return core, es, policy
 
@@ -96,9 +98,9 @@ def track_intervals(values_deg: np.ndarray, regions: np.ndarray) -> tuple[list, 
 class VehicleCore:
     """Scenario + OnboardCore (N = 1) + pilot-command intake + step-log rows + telemetry encoding."""
 
-    def __init__(self, sc: Scenario, policy=None):
+    def __init__(self, sc: Scenario, policy=None, waitmap: "str | None" = None):
         self.sc = sc
-        self.core, self.es, self.policy = build_onboard(sc, policy)
+        self.core, self.es, self.policy = build_onboard(sc, policy, waitmap)
         self.dt = 1.0
         self.n_steps = sc.n_steps
         self._new: list[PilotCommand] = []
@@ -164,14 +166,16 @@ class VehicleCore:
                "dh_m": g["dh_m"][0].tolist(), "tau_mod_s": g["tau_mod_s"][0].tolist(),
                "alert_level": np.asarray(out.telemetry.alert_level[0]).astype(int).tolist(),
                "wcv": np.asarray(g["wcv"][0]).astype(bool).tolist(),
+               "intr_turn_est_dps": np.degrees(np.asarray(out.turn_est[0], float)).tolist(),
                "lowc": bool(out.lowc[0]), "nmac": bool(out.nmac[0]),
                "delay_up_s": self.delay_up_s, "delay_down_s": self.delay_down_s,
                "bands_trk_lo_deg": lo, "bands_trk_hi_deg": hi, "bands_trk_region": rg}
-        for k in ("decision", "rule", "authority", "pilot_axis", "pilot_dir", "exec_axis", "exec_dir"):
+        for k in ("decision", "rule", "authority", "decided_by", "pilot_axis", "pilot_dir", "exec_axis", "exec_dir"):
             row[k] = str(dec[k][0])
-        for k in ("wait_s", "pilot_cmd_age_s", "sm_pilot", "sm_exec", "cmd_vs", "cmd_gs", "pilot_vs", "pilot_gs",
-                  "daa_vs", "daa_gs"):
+        for k in ("wait_s", "wait_p_lowc", "wait_map_turn_dps", "pilot_cmd_age_s", "sm_pilot", "sm_exec", "cmd_vs",
+                  "cmd_gs", "pilot_vs", "pilot_gs", "daa_vs", "daa_gs"):
             row[k] = float(dec[k][0])
+        row["wait_in_box"] = bool(dec["wait_in_box"][0])
         for k in ("cmd_trk", "pilot_trk", "daa_trk"):
             row[f"{k}_deg"] = deg(float(dec[k][0]))
         row["projl"] = bool(dec["projl"][0])
@@ -180,38 +184,23 @@ class VehicleCore:
 
     # -- outputs ------------------------------------------------------------------------------------
     def telemetry_messages(self, t: float, out) -> list:
-        """MAVLink messages for step ``t`` (heartbeat, time, position, attitude, ADS-B, bands, decision)."""
-        row = self.rows[-1]
-        own = out.own
-        turn = 0.0
-        if np.isfinite(row["cmd_trk_deg"]):
-            d = (row["cmd_trk_deg"] - row["own_trk_deg"] + 180.0) % 360.0 - 180.0
-            turn = math.radians(max(-3.0, min(3.0, d)))
-        ko = T.Kin(float(own.x[0]), float(own.y[0]), float(own.z[0]), float(own.gs[0]), float(own.trk[0]),
-                   float(own.vs[0]), turn)
-        msgs = [T.heartbeat(self.last_authority), T.system_time(t), T.global_position(t, ko, self.sc.origin),
-                T.local_position(t, ko), T.attitude(t, ko)]
-        it = out.intruders
-        for j in range(it.shape[1]):
-            kj = T.Kin(float(it.x[0, j]), float(it.y[0, j]), float(it.z[0, j]), float(it.gs[0, j]),
-                       float(it.trk[0, j]), float(it.vs[0, j]))
-            msgs.append(T.adsb_vehicle(self.icao[j], self.callsigns[j], kj, self.sc.origin))
-        msgs.append(T.alert_level(t, int(np.max(out.telemetry.alert_level[0])) if it.shape[1] else 0))
-        msgs += T.track_bands(t, row["bands_trk_lo_deg"], row["bands_trk_hi_deg"], row["bands_trk_region"])
-        seq = self.last_cmd.seq if self.last_cmd is not None else 0
-        msgs.append(T.allocation_decision(t, row, seq, row["pilot_cmd_age_s"]))
-        return msgs
+        """Every MAVLink message of step ``t`` as one list (:func:`vehicle.telemetry.step_messages`)."""
+        home = T.kin_of(self.es.own, 0)
+        return [m for ms in T.step_messages(self, t, out, home).values() for m in ms]
 
-    def steplog_table(self):
-        """The rows so far as a step-log ``pyarrow.Table`` (schema of :mod:`daa_sil.steplog`)."""
+    def steplog_table(self, n_rows: "int | None" = None):
+        """The first ``n_rows`` rows (all if None) as a step-log ``pyarrow.Table`` (schema of
+        :mod:`daa_sil.steplog`)."""
         import pyarrow as pa
 
         from daa_sil.steplog import STEP_SCHEMA
 
-        cols = {name: [r.get(name, math.nan) for r in self.rows] for name in STEP_SCHEMA.names}
+        rows = self.rows if n_rows is None else self.rows[:n_rows]
+        cols = {name: [r.get(name, math.nan) for r in rows] for name in STEP_SCHEMA.names}
         return pa.Table.from_pydict(cols, schema=STEP_SCHEMA)
 
-    def write_steplog(self, path: "str | Path", meta: dict) -> Path:
+    def write_steplog(self, path: "str | Path", meta: dict, n_rows: "int | None" = None) -> Path:
+        """Write the first ``n_rows`` rows (all if None) atomically to ``path``."""
         from daa_sil.steplog import write_steplog
 
-        return write_steplog(self.steplog_table(), path, metadata=meta)
+        return write_steplog(self.steplog_table(n_rows), path, metadata=meta)

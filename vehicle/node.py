@@ -7,7 +7,18 @@ Per step ``k`` (``t_k = k`` s, ``docs/architecture.md`` "The step order"):
   at ``t_k`` and queueing the GCS's step-k commands). No ack within ``tick_timeout_s`` wall
   seconds -> :class:`TickTimeout` (one clear line). The tick is re-sent every ``tick_retry_s``
   in case a datagram was lost (the GCS re-acks a tick it already did).
-* **realtime**: sleep until wall ``t0 + t_k / speed``; whatever arrived by then is used.
+* **realtime**: the same ticks, paced by the wall clock instead of waiting for the GCS (see
+  ``docs/sil.md``, "Realtime and lockstep"). ``SIM_TICK(k)`` goes out a lead of half a step
+  (at most 0.25 s) before the step's deadline ``W_k = t0 + t_k / speed``; the shim releases
+  everything due at ``t_k``, forwards the tick to the GCS (which steps on it) and echoes it back.
+  Once the echo is in, every input of step ``k`` is there (uplink is released only at ticks), so
+  the vehicle computes the step then and publishes it at ``W_k``; it waits at most half a step
+  past ``W_k`` for a late echo, so every step sees exactly what the lockstep step sees. Partner = the shim (it echoes) or, wired straight to a GCS, the GCS (it acks); a
+  peer that answers no tick (a stock GCS) gives free-running realtime with no waiting.
+  ``tick_sync="wait"`` (what ``daa-sil run`` uses) starts the clock only once tick 0 is
+  acknowledged, so the GCS plays from step 0 as in lockstep. A partner silent for 3 s is
+  reported (stderr) and no longer waited for until it answers again; steps that ran without
+  their confirmation are counted (``steps_unconfirmed``: 0 means lockstep-equivalent input).
 
 Then ``OnboardCore.step(t_k, pilot input)`` decides, the telemetry for ``t_k`` is published (one
 datagram to the peer, and the same undelayed to the observer ``tap`` if set), a step-log row is
@@ -26,25 +37,40 @@ from __future__ import annotations
 
 import asyncio
 import math
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from daa_sil.errors import DaaSilError
 from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec
 from daa_sil.link.codec import mavlink as M
-from daa_sil.link.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint, parse_udp_address
+from daa_sil.link.connstr import LISTEN, SEND, parse_connection
+from daa_sil.link.endpoint import MavEndpoint, Received, _norm_host, format_udp_address, open_endpoint
 
 from . import telemetry as T
-from .commands import CommandGate, PilotCommand
+from .commands import CommandGate, PilotCommand, reposition_command
 from .core import VehicleCore
+from .params import ParamTable
+from .services import GcsServices
+from .streams import STREAMED
 
 VEHICLE_SYSID, VEHICLE_COMPID = 1, 1
-AUTOPILOT_VERSION_ID = 148
 PILOT_MANEUVER_ID = M.MAVLINK_MSG_ID_PILOT_MANEUVER
 SET_POS_GLOBAL_ID = M.MAVLINK_MSG_ID_SET_POSITION_TARGET_GLOBAL_INT
 #: SET_POSITION_TARGET_GLOBAL_INT type_mask bits that must be clear for a velocity setpoint
 _VEL_IGNORE = (M.POSITION_TARGET_TYPEMASK_VX_IGNORE | M.POSITION_TARGET_TYPEMASK_VY_IGNORE
                | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE)
+
+
+#: realtime: SIM_TICK(k) is sent this fraction of a step before step k's deadline (at most TICK_LEAD_MAX_S)
+TICK_LEAD_FRACTION = 0.5
+TICK_LEAD_MAX_S = 0.25
+#: realtime: wait at most this fraction of a step past the deadline for the partner's answer to the tick
+CONFIRM_GRACE_FRACTION = 0.5
+#: wall seconds without an answer to ticks before the partner is reported silent (and not waited for)
+SILENT_AFTER_S = 3.0
+SILENT_AFTER_STEPS = 10
+TICK_SYNC_MODES = ("auto", "wait")
 
 
 class TickTimeout(DaaSilError):
@@ -64,8 +90,19 @@ class VehicleOptions:
     steplog: "Path | None" = None
     tick_timeout_s: float = 10.0
     tick_retry_s: float = 2.0
+    #: wall seconds to wait for the answer to tick 0 (the partner may still be starting); None = tick_timeout_s
+    start_timeout_s: "float | None" = None
     #: ``udp:127.0.0.1:PORT``: publish each step's step-log row there (:mod:`daa_sil.live`)
     live: "str | None" = None
+    #: ``--waitmap``: map preset, grid spec or family directory (None = the default map)
+    waitmap: "str | None" = None
+    #: let the (undelayed) tap set parameters and modes; by default it may only read
+    tap_writable: bool = False
+    #: realtime: "auto" (start at once, wait for tick answers only from a partner that gives them) or
+    #: "wait" (start the clock once tick 0 is acknowledged; error after tick_timeout_s)
+    tick_sync: str = "auto"
+    #: called once with the wall (``time.monotonic``) instant of step 0's deadline when the clock starts
+    on_clock_start: "object | None" = None
 
 
 @dataclass
@@ -76,10 +113,23 @@ class VehicleStats:
     gcs_requests_answered: int = 0
     commands_from_tap_ignored: int = 0
     foreign_messages_ignored: int = 0
+    #: ``--out udpin:``: messages from an address other than the learned GCS (or the tap), dropped
+    other_address_ignored: int = 0
     authority_changes: int = 0
-    #: realtime: how late each step was done (telemetry and live row sent) after its due wall time, ms
+    #: realtime: how late each step's telemetry went out after its due wall time ``W_k``, ms
     late_mean_ms: float = 0.0
     late_max_ms: float = 0.0
+    late_p99_ms: float = 0.0
+    #: ticks the shim echoed back (it is alive, and the uplink due at that tick was sent)
+    tick_echoes: int = 0
+    #: realtime: who confirms ticks: "shim" (echoes), "gcs" (acks, no shim between) or "none"
+    sync_partner: str = "none"
+    #: realtime: steps that ran before their tick was confirmed (0 = each step saw what lockstep sees)
+    steps_unconfirmed: int = 0
+    #: realtime: ticks the GCS acknowledged only after the next tick had gone out
+    acks_late: int = 0
+    #: warnings printed because the shim or the GCS stopped answering ticks
+    silence_warnings: int = 0
     extra: dict = field(default_factory=dict)
 
 
@@ -93,9 +143,13 @@ class VehicleNode:
     def __init__(self, scenario, opts: VehicleOptions, core: "VehicleCore | None" = None):
         self.sc = scenario
         self.opts = opts
-        self.core = core if core is not None else VehicleCore(scenario)
-        self.peer = parse_udp_address(opts.out, "--out", allow_port_zero=False)
-        self.tap = parse_udp_address(opts.tap, "--tap", allow_port_zero=False) if opts.tap else None
+        self.core = core if core is not None else VehicleCore(scenario, waitmap=opts.waitmap)
+        self.out = parse_connection(opts.out, "--out", SEND)
+        self.listen = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))
+        tap = parse_connection(opts.tap, "--tap", SEND, allow=(SEND,)).addr if opts.tap else None
+        # numeric hosts, so they compare equal to the addresses datagrams come from ("localhost" -> 127.0.0.1)
+        self.tap = (_norm_host(tap[0]), tap[1]) if tap is not None else None
+        self._peer = None if self.out.listens else (_norm_host(self.out.addr[0]), self.out.addr[1])
         self.codec = MavCodec(VEHICLE_SYSID, VEHICLE_COMPID, key=opts.key, allow_unsigned=())
         self.ep: "MavEndpoint | None" = None
         self.gate = CommandGate()
@@ -104,13 +158,58 @@ class VehicleNode:
         self.t = 0.0
         self.authority = "pilot"
         self._acked = -1
+        self._echoed = -1  # highest tick the shim echoed back
+        self._tick_sent_k = -1
+        self._last_answer = {"shim": None, "gcs": None}  # wall time (loop clock) of the last echo / ack
+        self._silent = {"shim": False, "gcs": False}
         self._steplog_written = False
+        #: set by :meth:`request_stop` (SIGINT / SIGTERM): the loop stops at the next step or wait even if
+        #: the task's cancellation was lost (Python 3.11's ``asyncio.wait_for`` can swallow a cancel that
+        #: arrives together with the awaited message)
+        self.stop_requested = False
         self._late_sum_ms = 0.0
+        self._lates: list = []  # realtime: per-step lateness (ms)
+        self._ready: list = []  # realtime: when each step's computation was done, ms after its deadline
+        self._step_t, self._step_wall = 0.0, None  # sim and monotonic time of the last publish
+        self._stamp = None  # (addr, datagram time, t_sent) of the GCS's last SYSTEM_TIME
+        self.home: "T.Kin | None" = None
+        self.latest: dict = {}
+        self.services = GcsServices(ParamTable(scenario.thresholds), lambda: self.core.core.policy, self._set_policy,
+                                    lambda: self.latest, self.sim_now, dt=self.core.dt, tap_writable=opts.tap_writable,
+                                    step_t=lambda: self.t, current_mode=self._mode_now)
         self.live = None
         if opts.live:
             from daa_sil.live import LiveSender
 
             self.live = LiveSender(opts.live)
+
+    @property
+    def peer(self):
+        """The GCS side (``--out``): fixed, or with ``--out udpin:`` the first address that sent a good message."""
+        if self._peer is None and self.ep is not None and self.ep.peer is not None:
+            self._peer = tuple(self.ep.peer)
+        return self._peer
+
+    def _mode_now(self) -> int:
+        from .identity import mode_of
+
+        return mode_of(self.core.last_authority, bool(self.core.core.policy.enabled))
+
+    def _set_policy(self, policy) -> None:
+        """Swap the onboard core's AllocationPolicy (called at a step boundary: it holds from this step)."""
+        self.core.core.policy = policy
+        self.core.policy = policy
+
+    def sim_now(self) -> float:
+        """Vehicle sim time now (s): lockstep the current step; realtime the last published step plus the
+        wall time since x speed."""
+        return self._sim_time_of(time.monotonic())
+
+    def _sim_time_of(self, wall: float) -> float:
+        """Sim time (s) of monotonic instant ``wall`` (e.g. a datagram's arrival)."""
+        if self.opts.clock == "lockstep" or self._step_wall is None:
+            return self.t
+        return self._step_t + max(0.0, wall - self._step_wall) * self.opts.speed
 
     # -- lifecycle -------------------------------------------------------------------------------
     async def start(self) -> None:
@@ -120,9 +219,25 @@ class VehicleNode:
         else (another port claiming the GCS's system id, an early copy of a genuine packet, ...)
         is counted and dropped by the endpoint without touching the signing state.
         """
+        on_msg = self._on_message if self.opts.clock != "lockstep" else None
+        if self.out.listens:  # --out udpin:HOST:PORT: listen there, answer the first GCS that sends
+            self.ep = await open_endpoint(self.codec, self.out.addr, peer=None, learn_peer=True, on_message=on_msg,
+                                          name="daa-vehicle")
+            return
         allow = [self.peer] + ([self.tap] if self.tap is not None else [])
-        self.ep = await open_endpoint(self.codec, self.opts.listen, peer=self.peer, learn_peer=False,
-                                      allow_peers=allow)
+        self.ep = await open_endpoint(self.codec, self.listen.addr, peer=self.peer, learn_peer=False,
+                                      allow_peers=allow, on_message=on_msg, name="daa-vehicle",
+                                      peer_label="--out / --tap",
+                                      drop_hint="if that is your GCS or shim, give its address as --out "
+                                                "(commands are taken only from --out)")
+
+    def request_stop(self) -> None:
+        """Stop playing: :meth:`run` raises ``asyncio.CancelledError`` at its next step or wait."""
+        self.stop_requested = True
+
+    def _check_stop(self) -> None:
+        if self.stop_requested:
+            raise asyncio.CancelledError("stop requested")
 
     @property
     def local_address(self) -> str:
@@ -135,45 +250,120 @@ class VehicleNode:
             self.live.close()
 
     # -- receiving -------------------------------------------------------------------------------
+    def _link_of(self, addr) -> "str | None":
+        """``"gcs"`` (the --out peer), ``"tap"`` or None (``--out udpin:``: someone else)."""
+        a = tuple(addr)
+        if self.peer is not None and a == tuple(self.peer):
+            return "gcs"
+        if self.tap is not None and a == tuple(self.tap):
+            return "tap"
+        return None
+
     def _is_tap(self, addr) -> bool:
-        return self.tap is not None and tuple(addr) == tuple(self.tap) and tuple(addr) != tuple(self.peer)
+        return self._link_of(addr) == "tap"
+
+    def _on_message(self, r: Received) -> None:
+        """Realtime: answer reads (parameters, requests, TIMESYNC, ...) the moment they arrive."""
+        msg = r.msg
+        if msg.get_srcSystem() == VEHICLE_SYSID or not GcsServices.is_read(msg):
+            return
+        link = self._link_of(r.addr)
+        if link is not None:
+            self._reply(self.services.read(msg, link), r.addr)
+
+    def _reply(self, msgs: list, addr, count: bool = True) -> None:
+        if msgs:
+            self.ep.send_many(msgs, addr)
+            self.stats.gcs_requests_answered += int(count)
 
     def handle(self, r: Received) -> None:
-        """Process one good message (commands, stock-GCS requests, acks); never raises on content."""
+        """Process one good message (commands, settings, stock-GCS requests, acks); never raises on content."""
         msg = r.msg
         mtype = msg.get_type()
+        link = self._link_of(r.addr)
         if mtype == "SIM_TICK_ACK":
-            if not self._is_tap(r.addr):
-                self._acked = max(self._acked, int(msg.tick)) if int(msg.tick) <= self.k else self._acked
+            if link == "gcs" and int(msg.tick) <= self._tick_sent_k:
+                if int(msg.tick) > self._acked:
+                    self._acked = int(msg.tick)
+                    self._answered("gcs")
+            return
+        if mtype == "SIM_TICK" and msg.get_srcSystem() == VEHICLE_SYSID and link == "gcs":
+            self.stats.tick_echoes += 1  # our own tick, echoed by the shim (one we never sent changes nothing)
+            if int(msg.tick) <= self._tick_sent_k:
+                if int(msg.tick) > self._echoed:
+                    self._echoed = int(msg.tick)
+                    self._answered("shim")
             return
         if msg.get_srcSystem() == VEHICLE_SYSID:
             self.stats.foreign_messages_ignored += 1  # our own sysid echoed back / spoofed
             return
-        from_tap = self._is_tap(r.addr)
+        if link is None:
+            self.stats.other_address_ignored += 1
+            return
+        from_tap = link == "tap"
         if not from_tap:
             self.core.note_gcs_data(self.t)
-        if mtype in ("PILOT_MANEUVER", "SET_POSITION_TARGET_GLOBAL_INT"):
+        if mtype == "SYSTEM_TIME":  # a GCS's send-time stamp for the settings in the same datagram
+            self._stamp = (tuple(r.addr), r.t, msg.time_boot_ms / 1000.0)
+            return
+        if GcsServices.is_read(msg):
+            if self.opts.clock == "lockstep":  # realtime: answered on arrival (_on_message)
+                self._reply(self.services.read(msg, link), r.addr)
+            return
+        if GcsServices.is_write(msg):
+            stamp = self._stamp
+            t_sent = stamp[2] if stamp is not None and stamp[0] == tuple(r.addr) and stamp[1] == r.t else None
+            n0 = len(self.services.events)
+            self._reply(self.services.write(msg, link, self._sim_time_of(r.t), t_sent), r.addr)
+            for ev in self.services.events[n0:]:
+                self._announce(ev)
+            return
+        if mtype in ("PILOT_MANEUVER", "SET_POSITION_TARGET_GLOBAL_INT") or (
+                mtype in ("COMMAND_INT", "COMMAND_LONG") and int(msg.command) == M.MAV_CMD_DO_REPOSITION):
             if from_tap:
                 self.stats.commands_from_tap_ignored += 1
+                if mtype.startswith("COMMAND"):
+                    self._reply([M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_DENIED, 0, 0,
+                                                               msg.get_srcSystem(), msg.get_srcComponent())], r.addr)
                 return
+            self._pilot_command(msg, r)
+
+    def _pilot_command(self, msg, r: Received) -> None:
+        mtype = msg.get_type()
+        is_cmd = mtype.startswith("COMMAND")
+        if is_cmd:
+            if msg.target_system not in (0, VEHICLE_SYSID):
+                return
+            o = self.core.core.own
+            cmd = reposition_command(msg, (float(o.x[0]), float(o.y[0]), float(o.z[0])), self.sc.origin,
+                                     self._sim_time_of(r.t), msg.get_seq())
+        else:
             cmd = self._command_from(msg)
-            if cmd is None:
-                self.gate.counters.invalid += 1
-                return
-            if self.gate.offer(cmd, self.t):
-                self.core.add_command(cmd)
-                cid = PILOT_MANEUVER_ID if cmd.kind == "PILOT_MANEUVER" else SET_POS_GLOBAL_ID
-                self._send([T.command_ack(cid, M.MAV_RESULT_ACCEPTED, cmd.seq, msg.get_srcSystem(),
-                                          msg.get_srcComponent())], r.addr)
-        elif mtype == "COMMAND_LONG":
-            self._answer_command_long(msg, r.addr)
-        elif mtype == "PARAM_REQUEST_LIST":
-            self._send([M.MAVLink_param_value_message(b"DAA_SIL_VER", 1.0, M.MAV_PARAM_TYPE_REAL32, 1, 0)], r.addr)
-            self.stats.gcs_requests_answered += 1
-        elif mtype == "MISSION_REQUEST_LIST":
-            self._send([M.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), 0,
-                                                        getattr(msg, "mission_type", 0))], r.addr)
-            self.stats.gcs_requests_answered += 1
+        if cmd is None or isinstance(cmd, str):
+            self.gate.counters.invalid += 1
+            if is_cmd:
+                self._reply([M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_DENIED, 0, 0, msg.get_srcSystem(),
+                                                           msg.get_srcComponent()),
+                             T.statustext(str(cmd)[:50] if cmd else "DO_REPOSITION: invalid")], r.addr)
+            return
+        ok = self.gate.offer(cmd, self.t)
+        if ok:
+            self.core.add_command(cmd)
+        if cmd.kind == "PILOT_MANEUVER" and ok:  # our dialect acknowledges with its cmd_seq
+            self._reply([T.command_ack(PILOT_MANEUVER_ID, M.MAV_RESULT_ACCEPTED, cmd.seq, msg.get_srcSystem(),
+                                       msg.get_srcComponent())], r.addr, count=False)
+        elif is_cmd:
+            self._reply([M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_ACCEPTED if ok else M.MAV_RESULT_DENIED,
+                                                       0, 0, msg.get_srcSystem(), msg.get_srcComponent())], r.addr)
+        # SET_POSITION_TARGET_GLOBAL_INT: no COMMAND_ACK (not a command); POSITION_TARGET_GLOBAL_INT is the feedback
+
+    def _announce(self, ev) -> None:
+        """A setting write: one console line, and a STATUSTEXT to the observer too."""
+        sent = f", sent t={ev.t_sent:g}s" if ev.t_sent is not None else ""
+        print(f"t={ev.t_applied:5.0f}s {ev.kind} {ev.name} {ev.status}: {ev.reason} (from {ev.link}, "
+              f"received t={ev.t_received:.1f}s{sent})", flush=True)
+        if ev.status == "accepted" and self.tap is not None and ev.link != "tap":
+            self.ep.send_many([T.statustext(ev.reason[:50])], self.tap)
 
     def _command_from(self, msg) -> "PilotCommand | None":
         src = (msg.get_srcSystem(), msg.get_srcComponent())
@@ -193,21 +383,6 @@ class VehicleNode:
         return PilotCommand(msg.time_boot_ms / 1000.0, 0, trk, -vd, gs if gs > 0.5 else math.nan, src,
                             "SET_POSITION_TARGET_GLOBAL_INT")
 
-    def _answer_command_long(self, msg, addr) -> None:
-        """Minimal answers to a stock GCS (mavlink_spec §6): AUTOPILOT_VERSION, else UNSUPPORTED."""
-        src = (msg.get_srcSystem(), msg.get_srcComponent())
-        if msg.target_system not in (0, VEHICLE_SYSID):
-            return
-        out = []
-        if msg.command == M.MAV_CMD_REQUEST_MESSAGE and int(msg.param1) == AUTOPILOT_VERSION_ID:
-            out.append(M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_ACCEPTED, 0, 0, *src))
-            out.append(M.MAVLink_autopilot_version_message(M.MAV_PROTOCOL_CAPABILITY_MAVLINK2, 0, 0, 0, 0,
-                                                           [0] * 8, [0] * 8, [0] * 8, 0, 0, 0))
-        else:
-            out.append(M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_UNSUPPORTED, 0, 0, *src))
-        self._send(out, addr)
-        self.stats.gcs_requests_answered += 1
-
     def _drain(self) -> None:
         while True:
             try:
@@ -218,26 +393,94 @@ class VehicleNode:
 
     # -- sending ---------------------------------------------------------------------------------
     def _send(self, msgs: list, addr=None) -> None:
-        self.ep.send_many(msgs, addr or self.peer)
+        dest = addr or self.peer
+        if dest is not None:  # --out udpin: nobody to send to before a GCS has spoken
+            self.ep.send_many(msgs, dest)
 
     def _send_tick(self, k: int, t: float) -> None:
+        if self.peer is None:  # --out udpin: no GCS yet; the retry sends it once one has spoken
+            return
         data = self.codec.encode(M.MAVLink_sim_tick_message(k, T.time_ms(t)),
                                  link_id=CONTROL_LINK_ID if self.codec.signed else None)
+        self._tick_sent_k = max(self._tick_sent_k, k)
         self.ep.transport.sendto(data, self.peer)
         self.stats.ticks_sent += 1
 
+    # -- tick answers: who is alive ----------------------------------------------------------------
+    def _answered(self, who: str) -> None:
+        """An echo (``who="shim"``) or an ack (``"gcs"``) of one of our ticks arrived."""
+        now = asyncio.get_running_loop().time()
+        if self._silent[who]:
+            self._silent[who] = False
+            self._say(f"the {'shim' if who == 'shim' else 'GCS'} answers ticks again at t = {self.t:g} s "
+                      f"(silent for {now - self._last_answer[who]:.1f} s)")
+        self._last_answer[who] = now
+        if who == "shim":
+            self.stats.sync_partner = "shim"
+        elif self.stats.sync_partner == "none":
+            self.stats.sync_partner = "gcs"
+
+    def _check_silence(self) -> None:
+        """Report (once, until it answers again) a shim or GCS that answered ticks and then stopped.
+
+        Silent = no answer for SILENT_AFTER_S wall seconds, or for SILENT_AFTER_STEPS steps if that is
+        shorter (fast runs), but never less than 1 s."""
+        now = asyncio.get_running_loop().time()
+        limit = max(1.0, min(SILENT_AFTER_S, SILENT_AFTER_STEPS * self.core.dt / self.opts.speed))
+        for who in ("shim", "gcs"):
+            last = self._last_answer[who]
+            if last is None or self._silent[who] or now - last < limit:
+                continue
+            self._silent[who] = True
+            if who == "gcs" and self._silent["shim"]:
+                continue  # the shim between us is silent: that is the news, not the GCS behind it
+            self.stats.silence_warnings += 1
+            peer = self.out.text
+            if who == "shim":
+                why = f"the shim at {peer} has not echoed a tick for {now - last:.1f} s: has it stopped?"
+            elif self.stats.sync_partner == "shim":
+                why = (f"the GCS behind the shim at {peer} has not acknowledged a tick for {now - last:.1f} s "
+                       f"(last tick acked: {self._acked}): has it stopped?")
+            else:
+                why = f"the GCS at {peer} has not acknowledged a tick for {now - last:.1f} s: has it stopped?"
+            self._say(f"warning: {why} Flying on; the agent hands over to the onboard DAA when the link "
+                      f"times out")
+
+    def _say(self, text: str) -> None:
+        import sys
+
+        print(f"daa-vehicle: {text}", file=sys.stderr, flush=True)
+
+    def _who_is_silent(self, k: int) -> str:
+        """Why tick ``k`` got no ack: which of shim and GCS is not there (for the one-line error)."""
+        import time
+
+        peer = self.out.text
+        if self._echoed >= k:
+            return (f"the shim at {peer} relays tick {k} but the GCS behind it does not acknowledge it: is daa-gcs "
+                    f"running (with --clock lockstep) and pointed at the shim's GCS side?")
+        refused = self.ep.last_refused is not None and time.monotonic() - self.ep.last_refused < 5.0
+        if refused:
+            return (f"nothing is listening at {peer} (ICMP port unreachable): is the shim (or the GCS) running "
+                    f"there?")
+        return (f"no answer at all from {peer} (no tick echo, no ack): is a lockstep shim or GCS running there "
+                f"with --clock lockstep?")
+
     async def _await_ack(self, k: int, t: float) -> None:
         loop = asyncio.get_running_loop()
-        deadline = loop.time() + self.opts.tick_timeout_s
+        limit = self.opts.tick_timeout_s
+        if k == 0 and self.opts.start_timeout_s is not None:
+            limit = self.opts.start_timeout_s
+        deadline = loop.time() + limit
         retry = self.opts.tick_retry_s if k > 0 else min(0.2, self.opts.tick_retry_s)  # GCS may still start
         next_retry = loop.time() + retry
         self._send_tick(k, t)
         while self._acked < k:
+            self._check_stop()
             now = loop.time()
             if now >= deadline:
-                raise TickTimeout(
-                    f"no SIM_TICK_ACK for tick {k} (t = {t:g} s) within {self.opts.tick_timeout_s:g} s: is the GCS "
-                    f"running with --clock lockstep and is {format_udp_address(self.peer)} a lockstep shim or the GCS?")
+                raise TickTimeout(f"no SIM_TICK_ACK for tick {k} (t = {t:g} s) within {limit:g} s: "
+                                  + self._who_is_silent(k))
             try:
                 r = await asyncio.wait_for(self.ep.inbox.get(), min(deadline, next_retry) - now)
             except asyncio.TimeoutError:
@@ -248,18 +491,84 @@ class VehicleNode:
                 continue
             self.handle(r)
 
+    def _confirmed(self, k: int) -> bool:
+        """Realtime: has the partner answered tick ``k`` (shim: echo; GCS wired directly: ack)?"""
+        if self.stats.sync_partner == "shim":
+            return self._echoed >= k
+        if self.stats.sync_partner == "gcs":
+            return self._acked >= k
+        return True  # a partner that answers no tick (stock GCS): free-running
+
+    async def _receive_until(self, when: float, until=None) -> None:
+        """Handle messages until loop time ``when`` (or until ``until()`` is true)."""
+        loop = asyncio.get_running_loop()
+        while until is None or not until():
+            self._check_stop()
+            left = when - loop.time()
+            if left <= 0:
+                return
+            try:
+                r = await asyncio.wait_for(self.ep.inbox.get(), left)
+            except asyncio.TimeoutError:
+                return
+            self.handle(r)
+
+    async def _realtime_tick(self, k: int, t: float, period: float) -> float:
+        """Realtime step ``k``: send its tick a lead before the deadline, then wait for the partner's
+        answer (at most a grace past the deadline; without a partner, until the deadline). Once the
+        shim has echoed tick ``k`` every input of step ``k`` is in (uplink is released only at ticks),
+        so the step may be computed before its deadline; :meth:`run` publishes it at the deadline.
+        Returns the step's deadline (loop time)."""
+        loop = asyncio.get_running_loop()
+        lead = min(TICK_LEAD_FRACTION * period, TICK_LEAD_MAX_S)
+        if k == 0:
+            if self.opts.tick_sync == "wait":
+                await self._await_ack(0, t)  # (re-)sends tick 0 until the GCS (behind the shim) answers
+            else:
+                self._send_tick(0, t)
+            self._wall0 = loop.time() + lead
+            if callable(self.opts.on_clock_start):
+                self.opts.on_clock_start(self._wall0)
+        else:
+            if (self._acked < k - 1 and self._last_answer["gcs"] is not None and not self._silent["gcs"]
+                    and not self._silent["shim"]):
+                self.stats.acks_late += 1
+            await self._receive_until(self._wall0 + t / self.opts.speed - lead)
+            self._drain()
+            self._send_tick(k, t)
+        due = self._wall0 + t / self.opts.speed
+        self._check_silence()
+        partner = self.stats.sync_partner
+        if partner == "none" or self._silent["shim" if partner == "shim" else "gcs"]:
+            await self._receive_until(due)  # nobody to wait for: take what arrived by the deadline
+        else:
+            await self._receive_until(due + CONFIRM_GRACE_FRACTION * period, until=lambda: self._confirmed(k))
+        if not self._confirmed(k):
+            self.stats.steps_unconfirmed += 1
+        self._check_silence()
+        return due
+
     def publish(self, t: float, out) -> None:
-        """Telemetry for ``t`` (s): one datagram to the peer (and the same to the tap)."""
-        msgs = self.core.telemetry_messages(t, out)
+        """Telemetry for ``t`` (s): per link (peer, tap), one datagram of the messages due on that link."""
+        pol = self.core.core.policy
+        if self.home is None:
+            self.home = T.kin_of(out.own, 0)
+        msgs = T.step_messages(self.core, t, out, self.home, agent_enabled=bool(pol.enabled))
+        self.latest = msgs
+        self._step_t, self._step_wall = t, time.monotonic()
+        extra = []
         new_auth = self.core.last_authority
         if new_auth != self.authority:
             self.stats.authority_changes += 1
-            msgs.append(T.statustext(f"DAA-SIL t={t:.0f}s authority {self.authority}->{new_auth}"
-                                     f" ({self.core.last_decision})"))
+            extra.append(T.statustext(f"DAA-SIL t={t:.0f}s authority {self.authority}->{new_auth}"
+                                      f" ({self.core.last_decision})"))
             self.authority = new_auth
-        self._send(msgs)
-        if self.tap is not None:
-            self.ep.send_many(msgs, self.tap)
+        for link, addr in (("gcs", self.peer), ("tap", self.tap)):
+            if addr is None:
+                continue
+            due = self.services.link_rates(link).due(t)
+            batch = [m for mid in STREAMED if mid in due for m in msgs.get(mid, ())]
+            self.ep.send_many(batch + extra, addr)
 
     # -- main loop -------------------------------------------------------------------------------
     async def run(self, on_step=None) -> None:
@@ -267,29 +576,45 @@ class VehicleNode:
         loop = asyncio.get_running_loop()
         n = self.core.n_steps
         lockstep = self.opts.clock == "lockstep"
-        if not lockstep:  # say hello so a direct GCS learns our address before the first step
-            self._send([T.heartbeat("pilot")])
-        wall0 = loop.time()
+        period = self.core.dt / self.opts.speed
+        self._wall0 = loop.time()
+        if not lockstep:
+            # like the shim: wake at the deadline without timer coalescing, and ask for a short EEVDF
+            # slice so a woken vehicle preempts sooner on a busy machine (unprivileged; no-op elsewhere)
+            import os
+
+            from daa_sil.link.rtclock import request_short_slice, set_timer_slack
+
+            self.stats.extra["timer_slack_1us"] = set_timer_slack(1000)
+            # DAA_SIL_VEHICLE_SLICE_US: the slice asked for (0 = keep the default; benchmarks compare both)
+            slice_us = float(os.environ.get("DAA_SIL_VEHICLE_SLICE_US", "100") or 0)
+            self.stats.extra["short_slice"] = request_short_slice(slice_us * 1e-6) if slice_us > 0 else False
         for k in range(n):
+            self._check_stop()
             self.k, self.t = k, float(k) * self.core.dt
             if lockstep:
                 self._drain()
                 await self._await_ack(k, self.t)
             else:
-                delay = wall0 + self.t / self.opts.speed - loop.time()
-                if delay > 0:
-                    await asyncio.sleep(delay)
+                due = await self._realtime_tick(k, self.t, period)
             self._drain()
             out = self.core.step(self.t)
+            if not lockstep:  # computed ahead (inputs complete once the tick is echoed): out at the deadline
+                self._ready.append(1000.0 * (loop.time() - due))
+                wait = due - loop.time()
+                if wait > 0:
+                    await asyncio.sleep(wait)
+                self._check_stop()
             self.publish(self.t, out)
             if self.live is not None:
                 self.live.send(self.core.rows[-1])  # non-blocking; failures are counted, never raised
             self.stats.steps = k + 1
             if not lockstep:
-                late = 1000.0 * (loop.time() - (wall0 + self.t / self.opts.speed))
+                late = 1000.0 * (loop.time() - due)
                 self.stats.late_max_ms = round(max(self.stats.late_max_ms, late), 3)
                 self._late_sum_ms += late
                 self.stats.late_mean_ms = round(self._late_sum_ms / (k + 1), 3)
+                self._lates.append(late)
             if on_step is not None:
                 on_step(self, out)
             await asyncio.sleep(0)
@@ -300,6 +625,10 @@ class VehicleNode:
             return None
         import json
 
+        if self._lates:
+            import numpy as np
+
+            self.stats.late_p99_ms = round(float(np.percentile(self._lates, 99)), 3)
         meta = {"scenario": self.sc.name, "seed": str(self.sc.seed), "preset": self.sc.thresholds,
                 "clock": self.opts.clock, "complete": str(self.stats.steps >= self.core.n_steps).lower(),
                 "signed": str(self.codec.signed).lower(),
@@ -308,4 +637,12 @@ class VehicleNode:
                 "vehicle": json.dumps({k: v for k, v in self.stats.__dict__.items() if k != "extra"}, sort_keys=True)}
         if self.live is not None:
             meta["live"] = json.dumps(self.live.stats.__dict__, sort_keys=True)
-        return self.core.write_steplog(self.opts.steplog, meta)
+        if self._lates:  # realtime: per-step lateness (ms) and the wall origin, for timing analyses
+            meta["realtime_timing"] = json.dumps({"t0_monotonic": round(self._wall0, 6), "speed": self.opts.speed,
+                                                  "late_ms": [round(x, 2) for x in self._lates],
+                                                  "ready_ms": [round(x, 2) for x in self._ready],
+                                                  **self.stats.extra})
+        # parameter / mode writes: kind, name, old, new, status, link, source, t_received, t_applied, t_sent
+        meta["settings"] = json.dumps([e.as_dict() for e in self.services.events], sort_keys=True)
+        # only the steps flown: a step computed but stopped before it was published is not in the log
+        return self.core.write_steplog(self.opts.steplog, meta, n_rows=self.stats.steps)

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from ..errors import UsageError
 from ..io import to_jsonable
+from ..readings import READINGS, parse_reading_settings
 from ..thresholds import PRESETS
 from ._args import finite_float, int_at_least
 
@@ -23,19 +24,70 @@ RUN_EXAMPLES = """examples:
   # continue a campaign that was interrupted (complete chunks are skipped; same final tables)
   daa-sil campaign run --out runs/paper --resume
 
+  # the wait-map ablation: what the map adds to ProjL alone, on the paper's own grid
+  daa-sil campaign run --groups ID-2,ID-2-projl,ID-2-map --waitmap paper --out runs/ablation
+
+  # every knob of the agent from the command line (recorded in campaign.json, checked on --resume)
+  daa-sil campaign run --groups B-2,ID-2 --wt 8 --projl-lookahead 15 --latency gauss:5,3 --out runs/knobs
+
+  # your own groups (YAML: name -> fields, 'base: ID-2' to start from a built-in group)
+  daa-sil campaign run --groups mygroups.yaml --out runs/mine
+
   # on a Dask cluster (pip install 'daa-sil[dist]'), or a local Dask cluster with 2 workers
   daa-sil campaign run --out runs/paper --scheduler tcp://head:8786
   daa-sil campaign run --out runs/paper --scheduler local-dask --workers 2
 
-Groups (paper Table 2): B-1 baseline, const 4 s | B-2 baseline, Gaussian(5,3) s | IC-1 integrated,
-const 5 s, wait 5 s | ID-1 integrated, const 4 s, wait map | ID-2 integrated, Gaussian(5,3) s, wait map.
+Groups (daa_sil/data/groups.yaml; paper Table 2 plus ablations): B-1 baseline, const 4 s |
+B-2 baseline, Gaussian(5,3) s | IC-1 integrated, const 5 s, wait 5 s | ID-1 integrated, const 4 s,
+wait map | ID-2 integrated, Gaussian(5,3) s, wait map | ID-2-projl: ID-2 with the map ignored
+(wait unless ProjL) | ID-2-map: ID-2 with the map alone (no ProjL).
+Wait maps (--waitmap): alerting (default; the DO-365 alerting region, 120 s horizon), paper (the
+paper's +-1,500 m grid, 60 s; states outside read the nearest point of the box), fine, a grid spec,
+or a directory from 'daa-sil waitmap build'. Built once and cached in ~/.cache/daa-sil.
 Results: DIR/<group>/encounters-<chunk>.parquet, DIR/<group>/decisions-<chunk>.parquet,
 DIR/encounters.parquet (the shared encounter set) and DIR/campaign.json.
+
+Readings (--reading; what the paper leaves open about its simulator, daa_sil/readings.py):
+""" + "\n".join(f"  {r.name:13s} {r.description}" for r in READINGS.values()) + """
+"""
+
+SWEEP_EXAMPLES = """examples:
+  # W_T from 2 to 16 s for the baseline and ID-2 (one campaign per value, same encounters)
+  daa-sil campaign sweep --vary wt=2,4,8,16 --groups B-2,ID-2 --out runs/sweep-wt --workers 2
+
+  # link latency, constant and Gaussian (values containing commas are separated by ';')
+  daa-sil campaign sweep --vary 'latency=const:0.2;const:1;const:5;gauss:5,3' --groups B-2,ID-2,ID-2-projl --out runs/sweep-lat
+
+  # discount, map grid, two intruders against one; continue an interrupted sweep
+  daa-sil campaign sweep --vary gamma=0.9,0.95,0.99 --groups ID-2 --out runs/sweep-gamma
+  daa-sil campaign sweep --vary grid=paper,alerting --groups ID-2,ID-2-projl --out runs/sweep-grid
+  daa-sil campaign sweep --vary intruders=1,2 --groups B-2,ID-2 --out runs/sweep-m --resume
+
+  # one page from several sweeps (docs/results/sensitivity.md is made this way)
+  daa-sil campaign sweep --collate runs/sweep-wt runs/sweep-lat --out docs/results
+
+Writes DIR/sweep.json, DIR/points/NAME=VALUE/ (campaign directories), DIR/sweep.csv, DIR/sweep.md and
+DIR/sensitivity_<metric>.png: DAA allocations and pilot commands received per encounter, exact
+(axis, direction) match, LoWC rate and mean PI against the varied value, with 95 % CIs.
 """
 
 REPORT_EXAMPLES = """examples:
   daa-sil campaign report runs/paper                 # writes runs/paper/report/
   daa-sil campaign report runs/paper --out reports/paper
+
+  # several readings side by side (one campaign directory per reading; the name comes from
+  # campaign.json config.reading, "default" when absent)
+  daa-sil campaign report runs/literal runs/paper-counts --out reports/readings
+
+  # the same simulation counted another way as an extra reading (received = pilot + blend,
+  # the paper's Table 5 arithmetic)
+  daa-sil campaign report runs/literal --recount paper-arith:received=pilot+blend
+
+  # more bootstrap replicates, another bootstrap seed (both recorded in the report)
+  daa-sil campaign report runs/paper --replicates 5000 --bootstrap-seed 3
+
+Writes report.md (findings table with verdicts, per-group tables, ablation, provenance, methods),
+findings.json and PNG figures with 95 % CIs.
 """
 
 
@@ -48,8 +100,68 @@ def register(sub) -> None:
     verbs.required = True
     r = verbs.add_parser("run", help="run or resume a campaign", description="Run or resume a campaign.",
                          epilog=RUN_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
-    r.add_argument("--groups", metavar="G1,G2,...", default=None,
-                   help="comma-separated groups (default: B-1,B-2,IC-1,ID-1,ID-2)")
+    _add_run_options(r)
+    r.set_defaults(func=run_cmd)
+
+    sw = verbs.add_parser("sweep", help="the study at several values of one setting (sensitivity)",
+                          description="Run the study once per value of one setting into one directory "
+                                      "(resumable), then write a table and sensitivity plots with "
+                                      "encounter-level 95 % CIs.", epilog=SWEEP_EXAMPLES,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
+    sw.add_argument("--vary", default=None, metavar="NAME=V1,V2,...",
+                    help="wt, gamma, grid, intruders, latency (values separated by ';'), projl or reading")
+    sw.add_argument("--collate", nargs="+", default=None, metavar="SWEEP_DIR",
+                    help="instead of running: one sensitivity.md page from these sweep directories into --out")
+    _add_run_options(sw)
+    sw.set_defaults(func=sweep_cmd)
+
+    rep = verbs.add_parser("report", help="Markdown + PNG report of one or more campaign directories",
+                           description="Write every finding of the paper with our value, its encounter-level "
+                                       "95 % CI and a verdict under each reading (one campaign directory per "
+                                       "reading), plus the paper's tables and figures.", epilog=REPORT_EXAMPLES,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+    rep.add_argument("dirs", nargs="+", metavar="DIR",
+                     help="campaign directories (from 'campaign run'), one per reading")
+    rep.add_argument("--out", default=None, metavar="DIR2", help="report directory (default: FIRST_DIR/report)")
+    rep.add_argument("--replicates", type=int_at_least("--replicates", 100), default=None, metavar="B",
+                     help="bootstrap replicates (default 2000)")
+    rep.add_argument("--bootstrap-seed", type=int_at_least("--bootstrap-seed", 0), default=None, metavar="S",
+                     help="bootstrap seed (default 14)")
+    rep.add_argument("--recount", action="append", default=[], metavar="NAME:key=value[,...]",
+                     help="add a reading counted differently from the same results (keys: received, window); "
+                          "repeatable")
+    rep.add_argument("--note", action="append", default=[], metavar="TEXT",
+                     help="a paragraph printed under the report's introduction (e.g. the seeds used while "
+                          "developing); repeatable")
+    rep.add_argument("--json", action="store_true", help="print a JSON summary (paths, verdict counts) on stdout")
+    rep.set_defaults(func=report_cmd)
+
+
+def _add_run_options(r) -> None:
+    """The options of ``campaign run`` (also taken by ``campaign sweep``)."""
+    r.add_argument("--groups", metavar="G1,G2,...|FILE.yaml", default=None,
+                   help="comma-separated groups of the group table, or a YAML file of group definitions "
+                        "(default: B-1,B-2,IC-1,ID-1,ID-2)")
+    r.add_argument("--waitmap", default=None, metavar="PRESET|GRID|DIR",
+                   help="wait maps of the map groups: alerting (default), paper, fine, a grid spec or a "
+                        "'waitmap build' directory")
+    r.add_argument("--gamma", type=finite_float("--gamma", 1e-6, 0.999999), default=None,
+                   help="MDP discount of the wait maps (default: the map preset's, 0.95)")
+    r.add_argument("--wt", type=finite_float("--wt", 0.0, 600.0), default=None, metavar="S",
+                   help="wait threshold W_T of every group with a wait function (default: each group's, 4 s)")
+    r.add_argument("--projl-lookahead", type=finite_float("--projl-lookahead", 0.0, 600.0), default=None,
+                   metavar="S", help="ProjL look-ahead N of every group (default: each group's, 25 s)")
+    r.add_argument("--latency", default=None, metavar="SPEC",
+                   help="one-way delay of every group's links: const:4, gauss:5,3, uniform:1,8 "
+                        "(default: each group's)")
+    r.add_argument("--intruders", type=int_at_least("--intruders", 1), default=None, metavar="M",
+                   help="intruders per encounter (default 1)")
+    r.add_argument("--reading", default=None, metavar="NAME",
+                   help=f"a named reading of the paper's simulator: {', '.join(READINGS)} (default literal; "
+                        f"see 'Readings' below)")
+    r.add_argument("--reading-set", default=None, metavar="KEY=VALUE,...",
+                   help="override settings of the reading: units=metres|feet, pilot_start=corrective|preventive|"
+                        "detection, hold_commands=true|false, window=active|whole, received=arrived|pilot+blend|executed")
     r.add_argument("--encounters", type=int_at_least("--encounters", 1), default=None, metavar="N",
                    help="encounters per group (default 10000)")
     r.add_argument("--seed", type=int_at_least("--seed", 0), default=None, metavar="S", help="campaign seed (default 0)")
@@ -66,15 +178,6 @@ def register(sub) -> None:
     r.add_argument("--preset", default=None, help=f"threshold preset: {', '.join(PRESETS)} (default paper)")
     r.add_argument("--no-progress", action="store_true", help="no progress bars")
     r.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    r.set_defaults(func=run_cmd)
-
-    rep = verbs.add_parser("report", help="Markdown + PNG report of a campaign directory",
-                           description="Write the paper's tables and figures with 95 % CIs next to the "
-                                       "published values.", epilog=REPORT_EXAMPLES,
-                           formatter_class=argparse.RawDescriptionHelpFormatter)
-    rep.add_argument("dir", metavar="DIR", help="campaign directory (from 'campaign run')")
-    rep.add_argument("--out", default=None, metavar="DIR2", help="report directory (default DIR/report)")
-    rep.set_defaults(func=report_cmd)
 
 
 def _config_from_args(args):
@@ -82,7 +185,10 @@ def _config_from_args(args):
 
     given = {"groups": parse_groups(args.groups) if args.groups is not None else None,
              "n_encounters": args.encounters, "seed": args.seed, "chunk_size": args.chunk_size,
-             "preset": args.preset.lower() if args.preset else None, "duration_s": args.duration}
+             "preset": args.preset.lower() if args.preset else None, "duration_s": args.duration,
+             "waitmap": args.waitmap, "gamma": args.gamma, "wt": args.wt, "projl_lookahead": args.projl_lookahead,
+             "latency": args.latency, "n_intruders": args.intruders, "reading": args.reading,
+             "reading_set": parse_reading_settings(args.reading_set) if args.reading_set else None}
     if args.preset and args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
     base = CampaignConfig()
@@ -90,9 +196,7 @@ def _config_from_args(args):
     if args.resume and (out / "campaign.json").is_file():
         base = CampaignConfig.from_dict(load_campaign_json(out)["config"], str(out / "campaign.json"))
     fields = {k: (v if v is not None else getattr(base, k)) for k, v in given.items()}
-    return CampaignConfig(groups=tuple(fields["groups"]), n_encounters=fields["n_encounters"],
-                          seed=fields["seed"], chunk_size=fields["chunk_size"], preset=fields["preset"],
-                          duration_s=fields["duration_s"], dt_s=base.dt_s).validate()
+    return CampaignConfig(dt_s=base.dt_s, **fields).validate()
 
 
 _SCHEDULER = re.compile(r"^([a-z][a-z0-9+]*://)?[^\s:/]+:\d{1,5}$")
@@ -118,7 +222,7 @@ def run_cmd(args) -> int:
     summary = run_campaign(cfg, args.out, workers=args.workers or 1, scheduler=args.scheduler, resume=args.resume,
                            progress=not args.no_progress and not args.json)
     rate = summary.encounter_steps / summary.wall_s if summary.wall_s > 0 else float("nan")
-    info = {"out": str(summary.out_dir), "groups": list(cfg.groups), "encounters": cfg.n_encounters,
+    info = {"out": str(summary.out_dir), "groups": list(cfg.group_names), "encounters": cfg.n_encounters,
             "seed": cfg.seed, "preset": cfg.preset, "chunks_total": summary.chunks_total,
             "chunks_skipped": summary.chunks_skipped, "chunks_run": summary.chunks_run,
             "wall_s": round(summary.wall_s, 3), "encounter_steps_per_s": rate}
@@ -126,20 +230,66 @@ def run_cmd(args) -> int:
         print(json.dumps(to_jsonable(info), indent=2, sort_keys=True))
     else:
         print(f"campaign {summary.out_dir}: {summary.chunks_run} chunks run, {summary.chunks_skipped} skipped "
-              f"({len(cfg.groups)} groups x {cfg.n_encounters} encounters, preset {cfg.preset}) in "
+              f"({len(cfg.groups)} groups x {cfg.n_encounters} encounters, preset {cfg.preset}, wait maps "
+              f"{cfg.waitmap}) in "
               f"{summary.wall_s:.1f} s ({rate:,.0f} encounter-steps/s)", file=sys.stderr)
+    return 0
+
+
+def sweep_cmd(args) -> int:
+    from .. import sweep
+
+    if args.collate:
+        if args.vary:
+            raise UsageError("--collate and --vary do not go together: collate existing sweeps or run one")
+        path = sweep.collate(args.collate, args.out)
+        print(str(path))
+        return 0
+    if not args.vary:
+        raise UsageError("campaign sweep needs --vary NAME=V1,V2,... (or --collate SWEEP_DIR ...)")
+    vary = sweep.parse_vary(args.vary)
+    given = getattr(args, vary.field if vary.field != "n_intruders" else "intruders", None)
+    if vary.field in ("waitmap", "gamma", "wt", "latency", "reading") and given is not None:
+        raise UsageError(f"--vary {vary.name} sets the {vary.field.replace('_', '-')} of every point; drop --{vary.field}")
+    base = _config_from_args(args)  # the sweep directory has no campaign.json: defaults + the options given
+    check_scheduler(args.scheduler, args.workers)
+    quiet = args.no_progress or args.json
+    meta = sweep.run_sweep(base, vary, args.out, workers=args.workers or 1, scheduler=args.scheduler,
+                           resume=args.resume, progress=not quiet,
+                           say=None if args.json else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
+    if args.json:
+        print(json.dumps(to_jsonable({"out": args.out, "vary": meta["vary"], "values": meta["values"]}), sort_keys=True))
+    else:
+        print(f"sweep {args.out}: {len(meta['values'])} points of {meta['vary']}; table {Path(args.out) / 'sweep.md'}",
+              file=sys.stderr)
     return 0
 
 
 def report_cmd(args) -> int:
     from .. import report
+    from ..findings import VERDICTS
+    from ..stats import DEFAULT_REPLICATES, DEFAULT_SEED
 
-    src = Path(args.dir)
-    if not (src / "campaign.json").is_file():
-        raise UsageError(f"{src} is not a campaign directory (no campaign.json)")
-    out = Path(args.out) if args.out else src / "report"
-    result = report.write_report(src, out)
-    print(f"report written to {out}", file=sys.stderr)
-    if isinstance(result, (str, Path)):
-        print(str(result))
+    dirs = [Path(d) for d in args.dirs]
+    for d in dirs:
+        if not (d / "campaign.json").is_file():
+            raise UsageError(f"{d} is not a campaign directory (no campaign.json)")
+    if len(set(map(str, (d.resolve() for d in dirs)))) != len(dirs):
+        raise UsageError("a campaign directory is given twice")
+    for spec in args.recount:
+        report.parse_recount(spec)  # one-line error before anything is read or written
+    out = Path(args.out) if args.out else dirs[0] / "report"
+    reps = args.replicates or DEFAULT_REPLICATES
+    seed = DEFAULT_SEED if args.bootstrap_seed is None else args.bootstrap_seed
+    path = report.write_report(dirs if len(dirs) > 1 else dirs[0], out, replicates=reps, seed=seed,
+                               recount=args.recount, notes=args.note)
+    if args.json:
+        data = json.loads((out / "findings.json").read_text(encoding="utf-8"))
+        counts = {r["label"]: {v: sum(1 for f in data["findings"] if f["outcomes"][r["label"]]["verdict"] == v)
+                               for v in VERDICTS} for r in data["readings"]}
+        print(json.dumps({"report": str(path), "findings": str(out / "findings.json"), "bootstrap": data["bootstrap"],
+                          "verdicts": counts}, indent=2, sort_keys=True))
+    else:
+        print(f"report written to {out}", file=sys.stderr)
+        print(str(path))
     return 0

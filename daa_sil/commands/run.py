@@ -14,19 +14,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
-import signal
-import subprocess
 import sys
-import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable
 
 from ..errors import DaaSilError, OutputError, UsageError
 from ._args import check_speed
+from .supervise import (READY_TIMEOUT_S, STOP_GRACE_S, STOP_TERM_S, Child, ProcessGroup, RunMonitor,  # noqa: F401
+                        free_udp_ports, last_error_line, parse_ready_line, parse_shim_ready, python_module_argv)
+
+#: wall s the vehicle waits for the answer to tick 0 under ``daa-sil run`` (start-up on a busy machine)
+START_TIMEOUT_S = 120.0
 
 EXAMPLES = """examples:
   # the main job: a head-on encounter, 4 s link delay, through the real link (lockstep)
@@ -50,175 +51,6 @@ Exit status: 0 = the run matched the scenario's `expect:` block, 1 = an expectat
 or a process failed, 2 = bad input, 130 = interrupted (the step log is still written).
 """
 
-#: wall-clock limits (s)
-READY_TIMEOUT_S = 30.0
-STOP_GRACE_S = 5.0
-STOP_TERM_S = 3.0
-
-
-# --------------------------------------------------------------------------------------------
-# process management
-
-@dataclass
-class Child:
-    """One child process with its own process group and a log file."""
-
-    name: str
-    proc: subprocess.Popen
-    log_path: Path
-    ready: dict = field(default_factory=dict)
-    ready_event: threading.Event = field(default_factory=threading.Event)
-    reader: "threading.Thread | None" = None
-    tail: list = field(default_factory=list)
-    parser: "Callable[[str], dict | None]" = lambda line: None
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-
-class ProcessGroup:
-    """Start children in their own process groups; :meth:`stop_all` leaves none behind.
-
-    Use as a context manager: leaving the block (normally, by exception or by Ctrl-C) stops every
-    child that is still running: SIGINT (lets the vehicle flush its step log), then SIGTERM, then
-    SIGKILL, each after a timeout.
-    """
-
-    def __init__(self, log_dir: Path):
-        self.log_dir = Path(log_dir)
-        self.children: list[Child] = []
-
-    def __enter__(self) -> "ProcessGroup":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.stop_all()
-
-    def start(self, name: str, argv: Sequence[str], env: "dict | None" = None,
-              ready_parser: "Callable[[str], dict | None] | None" = None) -> Child:
-        """Start ``argv`` (stdin closed, stdout+stderr to ``logs/<name>.log``).
-
-        Readiness: the first output line for which ``ready_parser(line)`` returns a dict (default:
-        a ``READY key=value ...`` line).
-        """
-        self.log_dir.mkdir(parents=True, exist_ok=True)
-        log_path = self.log_dir / f"{name}.log"
-        full_env = dict(os.environ)
-        full_env["PYTHONUNBUFFERED"] = "1"
-        full_env.update(env or {})
-        proc = subprocess.Popen(list(argv), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, start_new_session=True, env=full_env,
-                                text=True, errors="replace", bufsize=1)
-        child = Child(name, proc, log_path, parser=ready_parser or parse_ready_line)
-        child.reader = threading.Thread(target=self._pump, args=(child,), daemon=True, name=f"log-{name}")
-        child.reader.start()
-        self.children.append(child)
-        return child
-
-    @staticmethod
-    def _pump(child: Child) -> None:
-        with open(child.log_path, "w", encoding="utf-8") as log:
-            for line in child.proc.stdout:  # type: ignore[union-attr]
-                log.write(line)
-                log.flush()
-                child.tail = (child.tail + [line.rstrip()])[-20:]
-                if not child.ready_event.is_set():
-                    info = child.parser(line)
-                    if info is not None:
-                        child.ready = info
-                        child.ready_event.set()
-        child.ready_event.set()  # EOF: unblock waiters (the process died)
-
-    def wait_ready(self, child: Child, timeout: float = READY_TIMEOUT_S) -> dict:
-        """Block until ``child`` printed READY; raise DaaSilError if it died or timed out."""
-        if not child.ready_event.wait(timeout):
-            raise DaaSilError(f"{child.name} did not become ready within {timeout:g} s (log: {child.log_path})")
-        if not child.ready:
-            child.proc.wait(timeout=5)
-            raise DaaSilError(f"{child.name} exited with status {child.proc.returncode} before it was ready: "
-                              f"{last_error_line(child)} (log: {child.log_path})")
-        return child.ready
-
-    @staticmethod
-    def _signal_group(child: Child, sig: int) -> None:
-        try:
-            os.killpg(child.proc.pid, sig)
-        except (ProcessLookupError, PermissionError):
-            pass
-
-    def stop(self, child: Child, grace: float = STOP_GRACE_S, term: float = STOP_TERM_S) -> int:
-        """Stop one child: SIGINT, wait ``grace``; SIGTERM, wait ``term``; SIGKILL. Returns its status."""
-        for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, term), (signal.SIGKILL, 5.0)):
-            if child.proc.poll() is not None:
-                break
-            self._signal_group(child, sig)
-            try:
-                child.proc.wait(timeout=wait)
-            except subprocess.TimeoutExpired:
-                continue
-        # the group may still hold grandchildren: make sure nothing survives
-        self._signal_group(child, signal.SIGKILL)
-        if child.reader is not None:
-            child.reader.join(timeout=2.0)
-        return child.proc.returncode if child.proc.returncode is not None else -9
-
-    def stop_all(self) -> None:
-        """Stop every child (last started first); Ctrl-C during this is ignored until done."""
-        old = signal.signal(signal.SIGINT, signal.SIG_IGN) if threading.current_thread() is threading.main_thread() else None
-        try:
-            # escalate for all children together (SIGINT, SIGTERM, SIGKILL), so stopping takes one
-            # grace period, not one per child
-            for sig, wait in ((signal.SIGINT, STOP_GRACE_S), (signal.SIGTERM, STOP_TERM_S), (signal.SIGKILL, 5.0)):
-                alive = [c for c in self.children if c.proc.poll() is None]
-                if not alive:
-                    break
-                for c in alive:
-                    self._signal_group(c, sig)
-                end = time.monotonic() + wait
-                for c in alive:
-                    try:
-                        c.proc.wait(timeout=max(0.0, end - time.monotonic()))
-                    except subprocess.TimeoutExpired:
-                        pass
-            for child in self.children:
-                self.stop(child)  # reaps, kills any leftover group member, joins the log reader
-        finally:
-            if old is not None:
-                signal.signal(signal.SIGINT, old)
-
-
-def parse_ready_line(line: str) -> "dict | None":
-    """``READY key=value ...`` -> ``{key: value}``; None for any other line."""
-    if not line.startswith("READY"):
-        return None
-    return dict(kv.split("=", 1) for kv in line.split()[1:] if "=" in kv) or {"ready": "1"}
-
-
-_SHIM_READY = re.compile(r"vehicle side (udp:\S+?),? gcs side (udp:\S+?),")
-
-
-def parse_shim_ready(line: str) -> "dict | None":
-    """The ``daa-sil shim`` ready line (``... vehicle side udp:H:P, gcs side udp:H:P, ...``)."""
-    m = _SHIM_READY.search(line)
-    return {"vehicle_side": m.group(1), "gcs_side": m.group(2)} if m else None
-
-
-def free_udp_ports(n: int) -> list[int]:
-    """``n`` distinct UDP ports on 127.0.0.1 that were free a moment ago (bound together, then released)."""
-    import socket
-
-    socks = []
-    try:
-        for _ in range(n):
-            sk = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            sk.bind(("127.0.0.1", 0))
-            socks.append(sk)
-        return [sk.getsockname()[1] for sk in socks]
-    finally:
-        for sk in socks:
-            sk.close()
-
-
 def shim_argv(sc, clock_args: list, key_args: list, stats_json: Path, vehicle_port: int = 0,
               gcs_port: int = 0) -> list[str]:
     """``daa-sil shim`` arguments for scenario ``sc`` (link delays, loss, outages, seed)."""
@@ -235,19 +67,6 @@ def shim_argv(sc, clock_args: list, key_args: list, stats_json: Path, vehicle_po
     for o in link.outages:
         argv += ["--outage", f"{o.start_s:g}:{o.end_s:g}"]
     return argv + clock_args + key_args
-
-
-def last_error_line(child: Child) -> str:
-    """The most informative line of a child's output tail (an ``error:`` line if there is one)."""
-    for line in reversed(child.tail):
-        if "error" in line.lower():
-            return line.strip()
-    return child.tail[-1].strip() if child.tail else "(no output)"
-
-
-def python_module_argv(module: str) -> list[str]:
-    """``[python, -m, module]`` with the running interpreter (works before console scripts exist)."""
-    return [sys.executable, "-m", module]
 
 
 # --------------------------------------------------------------------------------------------
@@ -361,6 +180,8 @@ class RunOptions:
     #: --spawn-viewer / --connect), "on" or "off" (log the step log when the vehicle exits)
     viz_live: str = "auto"
     tap: "str | None" = None
+    #: ``--waitmap`` of the vehicle: a map preset, grid spec or family directory (None = the default)
+    waitmap: "str | None" = None
     progress: "Callable[[str], None] | None" = None
 
 
@@ -380,6 +201,7 @@ def run_sil(opts: RunOptions) -> dict:
     from ..scenario import load_scenario
 
     sc = load_scenario(opts.scenario_path)
+    check_faults_allowed(sc, opts.clock, opts.scenario_path)
     out = ensure_dir(opts.out_dir)
     steplog = out / "steplog.parquet"
     for stale in (steplog, out / "result.json"):
@@ -433,29 +255,89 @@ def _finish_recorder(recorder, steplog: Path) -> "Path | None":
         return recorder.finish(steplog)
 
 
+def check_faults_allowed(sc, clock: str, path=None) -> None:
+    """A scenario with process faults needs ``--clock realtime``: one-line UsageError otherwise."""
+    if sc.faults and clock != "realtime":
+        what = "; ".join(f.describe() for f in sc.faults)
+        raise UsageError(f"{path or sc.source}: faults ({what}) need --clock realtime: in lockstep the GCS is part of "
+                         f"the clock (the vehicle waits for each tick's ack), so killing it would stop the simulation, "
+                         f"not just the link; run it with --clock realtime (e.g. --speed 10)")
+
+
+def _gcs_argv(opts: RunOptions, out: Path, listen: str, gcs_side: str, clock_args: list, key_args: list,
+              log_name: str = "gcs_commands.jsonl") -> list:
+    return python_module_argv("gcs") + [
+        "--scenario", str(opts.scenario_path), "--listen", listen, "--vehicle", gcs_side,
+        "--log", str(out / log_name), "--no-display"] + clock_args + key_args
+
+
+def realtime_report(steplog_meta: dict, shim_stats: "dict | None", gcs_skipped: "int | None") -> dict:
+    """Whether a realtime run kept lockstep semantics, from the vehicle's and the shim's counters.
+
+    ``lockstep_equivalent`` is true when every tick was answered by the shim before its step ran
+    (``steps_unconfirmed`` 0), no GCS datagram missed the tick that lockstep releases it at
+    (``released_late`` 0), the GCS never fell ``MAX_GCS_LAG_TICKS`` behind (``gcs_unresponsive``
+    0) and it stepped on every tick (``gcs_ticks_skipped`` 0): then each step of the vehicle and of
+    the GCS had the same input as in lockstep.
+    """
+    try:
+        veh = json.loads(steplog_meta.get("vehicle") or "{}")
+    except ValueError:
+        veh = {}
+    c = (shim_stats or {}).get("counters", {})
+    rep = {"sync_partner": veh.get("sync_partner"), "steps_unconfirmed": veh.get("steps_unconfirmed"),
+           "gcs_acks_late": veh.get("acks_late"), "late_mean_ms": veh.get("late_mean_ms"),
+           "late_max_ms": veh.get("late_max_ms"), "late_p99_ms": veh.get("late_p99_ms"), "shim_release": (shim_stats or {}).get("release"),
+           "released_late": c.get("released_late"), "gcs_lagged": c.get("gcs_lagged"),
+           "gcs_unresponsive": c.get("gcs_unresponsive"), "gcs_ticks_skipped": gcs_skipped,
+           "shim_release_lateness_ms": (shim_stats or {}).get("release_lateness_ms"),
+           "tick_schedule": (shim_stats or {}).get("tick_schedule")}
+    rep["lockstep_equivalent"] = bool(
+        rep["sync_partner"] == "shim" and rep["shim_release"] == "ticks" and rep["steps_unconfirmed"] == 0
+        and rep["released_late"] == 0 and rep["gcs_unresponsive"] == 0 and gcs_skipped == 0)
+    return rep
+
+
+_SKIPPED = re.compile(r"ticks skipped (\d+)")
+
+
+def _gcs_ticks_skipped(log_path: Path) -> "int | None":
+    try:
+        m = _SKIPPED.findall(log_path.read_text(errors="replace"))
+    except OSError:
+        return None
+    return int(m[-1]) if m else None
+
+
 def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, recorder) -> dict:
     from ..io import atomic_write_json
     from ..steplog import read_steplog
 
-
     t0 = time.monotonic()
     interrupted = False
     failure: "str | None" = None
+    monitor: "RunMonitor | None" = None
+    gcs_logs = [out / "gcs_commands.jsonl"]
     with ProcessGroup(out / "logs") as pg:
         try:
             # all three start at once: the shim's ports are picked here (the shim binds them; if one was
-            # taken in between, its READY never comes and the run fails with a clear message)
-            v_side, g_side = free_udp_ports(2)
+            # taken in between, its READY never comes and the run fails with a clear message). A GCS that
+            # a fault restarts must come back on the same port, so it gets a fixed one too.
+            v_side, g_side, g_port = free_udp_ports(3)
             sready = {"vehicle_side": f"udp:127.0.0.1:{v_side}", "gcs_side": f"udp:127.0.0.1:{g_side}"}
+            gcs_listen = f"udp:127.0.0.1:{g_port}" if sc.faults else "udp:127.0.0.1:0"
             shim = pg.start("shim", shim_argv(sc, clock_args, key_args, out / "shim_stats.json", v_side, g_side),
                             ready_parser=parse_shim_ready)
-            gcs = pg.start("gcs", python_module_argv("gcs") + [
-                "--scenario", str(opts.scenario_path), "--listen", "udp:127.0.0.1:0",
-                "--vehicle", sready["gcs_side"], "--log", str(out / "gcs_commands.jsonl"),
-                "--no-display"] + clock_args + key_args)
+            gcs = pg.start("gcs", _gcs_argv(opts, out, gcs_listen, sready["gcs_side"], clock_args, key_args))
             vargs = [str(opts.scenario_path), "--listen", "udp:127.0.0.1:0", "--out", sready["vehicle_side"],
                      "--steplog", str(steplog), "--tap", opts.tap or "none",
-                     "--tick-timeout", f"{opts.tick_timeout_s:g}"] + clock_args + key_args
+                     "--tick-timeout", f"{opts.tick_timeout_s:g}",
+                     # tick 0: the GCS may still be starting (the monitor below notices a dead one at once)
+                     "--start-timeout", f"{max(opts.tick_timeout_s, START_TIMEOUT_S):g}"] + clock_args + key_args
+            if opts.clock == "realtime":
+                vargs += ["--tick-sync", "wait"]  # start once tick 0 is acked: the GCS plays from step 0
+            if opts.waitmap is not None:
+                vargs += ["--waitmap", str(opts.waitmap)]
             if recorder is not None and recorder.live_address:
                 vargs += ["--live", recorder.live_address]  # each step's row, fire-and-forget
             # GCS and vehicle start in parallel; the vehicle re-sends tick 0 until the GCS answers
@@ -467,18 +349,25 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
                 # now, not at launch: the three processes' start-up is CPU-bound (a helper importing
                 # Rerun then slowed it measurably), the lockstep play leaves a core idle
                 recorder.prepare()
-            _say(opts, f"playing {sc.duration_s:g} s of {sc.name} ({opts.clock})")
-            rc = vehicle.proc.wait()
+            _say(opts, f"playing {sc.duration_s:g} s of {sc.name} ({opts.clock})"
+                 + (f"; faults: {'; '.join(f.describe() for f in sc.faults)}" if sc.faults else ""))
+
+            def restart(fault, n):
+                name = f"{fault.process}{n + 1}"
+                log = f"gcs_commands_{name}.jsonl"
+                gcs_logs.append(out / log)
+                return pg.start(name, _gcs_argv(opts, out, gcs_listen, sready["gcs_side"], clock_args, key_args,
+                                                log_name=log))
+
+            monitor = RunMonitor(vehicle, {"shim": shim, "gcs": gcs}, faults=sc.faults, restart=restart)
+            failure = monitor.wait()
             exited = time.monotonic()
+            if failure is not None:
+                _say(opts, f"stopping the run: {failure}")
+            rc = vehicle.proc.poll()
             if recorder is not None and rc == 0 and steplog.exists():
                 # logs (deferred) or completes (live) while the shim and GCS are stopped and the result is made
                 recorder.submit(steplog, vehicle_exit=exited)
-            if rc != 0:
-                failure = f"vehicle exited with status {rc}: {last_error_line(vehicle)} (log: {vehicle.log_path})"
-            for other in (gcs, shim):
-                if not other.alive() and other.proc.returncode not in (0, None) and failure is None:
-                    failure = (f"{other.name} exited with status {other.proc.returncode}: "
-                               f"{last_error_line(other)} (log: {other.log_path})")
         except KeyboardInterrupt:
             interrupted = True
     wall = time.monotonic() - t0
@@ -490,10 +379,24 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
     result = summarize_steplog(table, sc)
     result.update({"scenario": sc.name, "scenario_file": str(opts.scenario_path), "seed": sc.seed,
                    "preset": sc.thresholds, "clock": opts.clock, "wall_s": round(wall, 3),
+                   "waitmap": _waitmap_record(sc, opts.waitmap),
                    "realtime_ratio": round(result["duration_s"] / wall, 2) if wall > 0 else None,
                    "interrupted": interrupted, "failure": failure,
+                   "process_died": monitor.death if monitor is not None else None,
                    "files": {"steplog": str(steplog), "gcs_log": str(out / "gcs_commands.jsonl"),
-                             "logs": str(out / "logs")}})
+                             "gcs_logs": [str(x) for x in gcs_logs if x.is_file()], "logs": str(out / "logs")}})
+    if sc.faults:
+        result["faults"] = monitor.fault_report() if monitor is not None else []
+    if opts.clock == "realtime":
+        from ..steplog import steplog_metadata
+
+        shim_stats = None
+        try:
+            shim_stats = json.loads((out / "shim_stats.json").read_text())
+        except (OSError, ValueError):
+            pass
+        result["realtime"] = realtime_report(steplog_metadata(steplog), shim_stats,
+                                             _gcs_ticks_skipped(out / "logs" / "gcs.log"))
     if recorder is not None:
         # also after Ctrl-C: the partial step log becomes a complete, readable recording (a second
         # Ctrl-C aborts it and no .rrd is written)
@@ -532,6 +435,9 @@ def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
     p.add_argument("--key", type=Path, metavar="FILE", help="MAVLink 2 signing key file (all three processes)")
     p.add_argument("--tap", metavar="udp:HOST:PORT",
                    help="also stream undelayed telemetry to an observer (QGC/MAVProxy), e.g. udp:127.0.0.1:14550")
+    p.add_argument("--waitmap", default=None, metavar="PRESET|GRID|DIR",
+                   help="the vehicle's wait maps, as in 'campaign run': alerting (default), paper, fine, a grid "
+                        "spec or a 'waitmap build' directory")
     p.add_argument("--json", action="store_true", help="print result.json instead of the summary")
     if _viz_available():
         p.add_argument("--rrd", type=Path, metavar="FILE", help="write a Rerun recording")
@@ -589,7 +495,8 @@ def _check_args(args) -> None:
     if args.scenario is not None:
         from ..scenario import load_scenario
 
-        load_scenario(args.scenario)  # fail fast, one line, before any process starts
+        sc = load_scenario(args.scenario)  # fail fast, one line, before any process starts
+        check_faults_allowed(sc, args.clock, args.scenario)
 
 
 def _options(args, scenario: Path) -> RunOptions:
@@ -597,7 +504,7 @@ def _options(args, scenario: Path) -> RunOptions:
     return RunOptions(scenario_path=scenario, out_dir=Path(args.out), clock=args.clock, speed=args.speed,
                       key=args.key, tap=args.tap, rrd=getattr(args, "rrd", None),
                       spawn_viewer=getattr(args, "spawn_viewer", False), connect=getattr(args, "connect", None),
-                      viz_live=getattr(args, "viz_live", "auto"),
+                      viz_live=getattr(args, "viz_live", "auto"), waitmap=args.waitmap,
                       progress=None if quiet else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
 
 
@@ -617,9 +524,13 @@ def _finish(args, result: dict, sc) -> int:
 
 
 def run(args) -> int:
+    from ..io import ensure_dir
     from ..scenario import load_scenario
 
     _check_args(args)
+    ensure_dir(args.out)  # an unusable --out fails here, before the maps are built or anything starts
+    prepare_waitmap(load_scenario(args.scenario), args.waitmap,
+                    None if args.json else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
     result = run_sil(_options(args, args.scenario))
     return _finish(args, result, load_scenario(args.scenario))
 
@@ -633,6 +544,7 @@ def demo_scenario_path() -> Path:
 
 
 def demo(args) -> int:
+    from ..io import ensure_dir
     from ..scenario import load_scenario
 
     _check_args(args)
@@ -640,23 +552,40 @@ def demo(args) -> int:
     sc = load_scenario(path)
     if not args.json:
         print(f"daa-sil demo: {sc.description.strip().splitlines()[0]}", flush=True)
-        _prepare_waitmap(sc)
+    ensure_dir(args.out)
+    prepare_waitmap(sc, args.waitmap, None if args.json else (lambda m: print(f"daa-sil demo: {m}", flush=True)))
     result = run_sil(_options(args, path))
     if not args.json:
         print(_pilot_story(Path(args.out)))
     return _finish(args, result, sc)
 
 
-def _prepare_waitmap(sc) -> None:
-    """Build (or load) the cached wait maps up front with a visible progress line."""
+def _waitmap_record(sc, source: "str | None") -> "dict | None":
+    """What result.json records about the vehicle's wait maps (None when its policy reads no map)."""
+    if sc.allocation.wait != "map":
+        return None
+    from .. import waitmap
+
+    fam = waitmap.family_for(source, preset="paper")  # cached: loaded, not built
+    return {"source": source or waitmap.DEFAULT_MAP, **waitmap.describe(fam)}
+
+
+def prepare_waitmap(sc, source: "str | None", say: "Callable[[str], None] | None") -> None:
+    """Build (or load) the vehicle's wait maps before any process starts, so the vehicle loads them
+    from the cache; a bad ``--waitmap`` is a one-line usage error here. ``say`` gets progress lines."""
     if sc.allocation.wait != "map":
         return
     from .. import waitmap
 
     t = time.monotonic()
-    print("daa-sil demo: loading the MDP wait maps (the first run builds and caches them) ...", flush=True)
-    waitmap.default_family(preset="paper")
-    print(f"daa-sil demo: wait maps ready ({time.monotonic() - t:.1f} s)", flush=True)
+    if waitmap.is_cached(source, preset="paper"):
+        say = None  # loaded in well under a second: nothing to report
+    if say:
+        say(f"loading the MDP wait maps ({source or waitmap.DEFAULT_MAP}; the first run builds and caches them) ...")
+    progress = (lambda r: say(f"  built the {r:+g} deg/s map ({time.monotonic() - t:.0f} s)")) if say else None
+    waitmap.family_for(source, preset="paper", progress=progress)
+    if say:
+        say(f"wait maps ready ({time.monotonic() - t:.1f} s)")
 
 
 def _pilot_story(out_dir: Path) -> str:

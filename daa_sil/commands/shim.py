@@ -30,6 +30,11 @@ EXAMPLES = """examples:
 Delay specs: """ + SPEC_HELP + """. The delay process is piecewise constant per --epoch
 seconds of sim time (0 = a new draw per datagram; that reorders traffic, so FIFO then inflates
 the delay). "up" = GCS -> vehicle (pilot commands), "down" = vehicle -> GCS (telemetry).
+
+Realtime: if the vehicle's first datagram is a SIM_TICK (daa-vehicle sends them), releases follow
+the ticks exactly as in lockstep (same steps as a lockstep run; docs/sil.md "Realtime and
+lockstep"); otherwise packets are released on the wall clock (kernel arrival stamps + timerfd).
+Datagrams from an address that is not the learned peer are dropped with a warning on stderr.
 Stops on Ctrl-C / SIGTERM (or after --duration) and prints its stats as JSON on stdout.
 """
 

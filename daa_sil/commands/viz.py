@@ -174,27 +174,34 @@ def pick_encounter(results, group: str, encounter: "int | None", worst: bool) ->
     return int(ids[k]), rows.slice(k, 1).to_pylist()[0]
 
 
+def campaign_group(results, name: str) -> str:
+    """The campaign's group named ``name`` (case-insensitive), or a one-line error listing its groups."""
+    from .. import campaign
+
+    out = Path(results)
+    cfg = campaign.CampaignConfig.from_dict(campaign.load_campaign_json(out)["config"], str(out / "campaign.json"))
+    for g in cfg.group_names:
+        if g.upper() == str(name).strip().upper():
+            return g
+    raise UsageError(f"group {name} is not in the campaign {out} (it ran {', '.join(cfg.group_names)})")
+
+
 def replay_steplog(results, group: str, encounter_id: int):
     """Re-simulate one encounter of a campaign with step logging; returns (steplog, encounter row, config)."""
     from .. import campaign, encounters, fasttime
 
     out = Path(results)
     cfg = campaign.CampaignConfig.from_dict(campaign.load_campaign_json(out)["config"], str(out / "campaign.json"))
-    group = campaign.parse_groups(group)[0]
-    if group not in cfg.groups:
-        raise UsageError(f"group {group} is not in the campaign {out} (it ran {', '.join(cfg.groups)})")
+    if group not in cfg.group_names:
+        raise UsageError(f"group {group} is not in the campaign {out} (it ran {', '.join(cfg.group_names)})")
     encs = encounters.load_encounters(out / "encounters.parquet")
     pos = np.flatnonzero(np.asarray(encs.encounter_id) == encounter_id)
     if pos.size == 0:
         raise UsageError(f"encounter {encounter_id} is not in {out / 'encounters.parquet'}")
     one = encs.subset(pos[:1])
-    spec = campaign.paper_groups()[group]
+    spec = cfg.group(group)
     model = spec.delay_model()
-    fam = None
-    if spec.uses_map:
-        from .. import waitmap
-
-        fam = waitmap.default_family(preset=cfg.preset)
+    fam = campaign.campaign_family(cfg) if spec.uses_map else None
     seeds = campaign.encounter_seeds(cfg.seed, np.array([encounter_id]))
     enc_rows, _, steps = fasttime.simulate(one, spec.policy(), model, model, wait_family=fam, seeds=seeds,
                                            preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s, group=group,
@@ -206,7 +213,7 @@ def run_replay(args) -> int:
     from .. import campaign, steplog, viz
 
     opts = sink_options(args)
-    group = campaign.parse_groups(args.group)[0]
+    group = campaign_group(args.results, args.group)
     enc_id, stored = pick_encounter(args.results, group, args.encounter, args.worst)
     steps, row, cfg = replay_steplog(args.results, group, enc_id)
     for key in ("lowc", "nmac"):

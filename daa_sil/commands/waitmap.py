@@ -12,17 +12,34 @@ import numpy as np
 from ..errors import UsageError
 from ..io import to_jsonable
 from ..thresholds import PRESETS
+from ..waitmap.model import WAIT_DEFINITIONS
 from ._args import finite_float
 
 BUILD_EX = """examples:
   daa-sil waitmap build --out maps/paper                      # the paper grid, 5 turn-rate maps
+  daa-sil waitmap build --grid alerting --out maps/alerting   # the study's default (about 1 min)
   daa-sil waitmap build --grid fine --preset do365 --out maps/fine
+  daa-sil waitmap build --definition until_evade --out maps/until-evade
   daa-sil waitmap build --grid paper,dx=24,dy=24,theta=8 --out maps/custom --force
   daa-sil waitmap build --grid mygrid.yaml --turn-rates -5,0,5 --gamma 0.9 --out maps/mine
+  daa-sil waitmap check maps/paper                            # the paper's map properties on it
 
---grid takes a preset (paper, fine), a YAML file ({base: paper, dx: {min: -1500, max: 1500, n: 24},
-theta: {n: 8}}) or an inline spec "base,axis=N,axis=lo:hi:N". Existing maps are never overwritten
-without --force.
+--grid takes a map preset (paper: the paper's +-1,500 m box, H = 60 s; alerting: the DO-365
+alerting region, H = 120 s; fine), a YAML file ({base: paper, dx: {min: -1500, max: 1500, n: 24},
+theta: {n: 8}}) or an inline spec "base,axis=N,axis=lo:hi:N" (H = 60 s). --definition paper (the
+default) stores E[time to LoWC | LoWC within H]; until_evade the expected time until LoWC or an
+evade-optimal state. Existing maps are never overwritten without --force. A directory built here is
+used by 'campaign run --waitmap DIR' and 'daa-sil run --waitmap DIR'.
+"""
+
+CHECK_EX = """examples:
+  daa-sil waitmap check maps/paper
+  daa-sil waitmap check maps/alerting --json
+
+Checks the paper's stated properties on the map's non-trivial states (0 < W < H): head-on waits
+shorter than overtaking, waits shrinking as an intruder closes, the +-omega maps mirror images and
+the 0 map symmetric, how waits change with intruder speed, and the histogram of the threatening
+states against the paper's Fig. 3. Exit 1 if a property the paper states does not hold.
 """
 
 SHOW_EX = """examples:
@@ -78,15 +95,19 @@ def register(sub) -> None:
     b.add_argument("--turn-rates", default="-5,-2.5,0,2.5,5", metavar="LIST",
                    help="conditioning initial turn rates, deg/s, + = left (default -5,-2.5,0,2.5,5)")
     b.add_argument("--gamma", type=finite_float("--gamma", 1e-6, 0.999999), default=0.95, help="discount (default 0.95)")
-    b.add_argument("--horizon", type=finite_float("--horizon", 1.0, 600.0), default=60.0, metavar="S",
-                   help="wait-time horizon H, s (default 60)")
+    b.add_argument("--horizon", type=finite_float("--horizon", 1.0, 600.0), default=None, metavar="S",
+                   help="wait-time horizon H, s (default: the map preset's, 60 or 120 for alerting)")
+    b.add_argument("--definition", choices=WAIT_DEFINITIONS, default="paper",
+                   help="wait time stored: paper (default) or until_evade")
+    b.add_argument("--p-min", type=finite_float("--p-min", 1e-9, 0.5), default=1e-3, metavar="P",
+                   help="LoWC-probability floor: states below it are no threat, W = H (default 0.001)")
     b.add_argument("--force", action="store_true", help="overwrite existing maps in DIR")
     b.add_argument("--json", action="store_true", help="print a JSON summary instead of paths")
     b.set_defaults(func=run_build)
 
     s = vs.add_parser("show", help="query a map at one state", epilog=SHOW_EX,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    s.add_argument("map", metavar="MAP", help="a map .npz or a family directory")
+    s.add_argument("map", metavar="MAP", help="a map .npz, a family directory or a map preset (paper, alerting, fine)")
     for name, unit, lo, hi in (("dx", "m", -1e6, 1e6), ("dy", "m", -1e6, 1e6), ("dh", "m", -1e5, 1e5),
                                ("vi", "m/s", 0.0, 1000.0), ("vh", "m/s", -200.0, 200.0), ("theta", "deg", -720.0, 720.0)):
         s.add_argument(f"--{name}", required=True, type=finite_float(f"--{name}", lo, hi), metavar=unit.upper())
@@ -95,9 +116,15 @@ def register(sub) -> None:
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.set_defaults(func=run_show)
 
+    c = vs.add_parser("check", help="the paper's map properties on a map family", epilog=CHECK_EX,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    c.add_argument("map", metavar="MAP", help="a family directory (or a map preset: paper, alerting, fine)")
+    c.add_argument("--json", action="store_true", help="print one JSON object")
+    c.set_defaults(func=run_check)
+
     pl = vs.add_parser("plot", help="write PNG figures of a map or family", epilog=PLOT_EX,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    pl.add_argument("map", metavar="MAP", help="a map .npz or a family directory")
+    pl.add_argument("map", metavar="MAP", help="a map .npz, a family directory or a map preset (paper, alerting, fine)")
     pl.add_argument("--out", required=True, metavar="DIR", help="directory for the PNGs")
     pl.add_argument("--vi", type=finite_float("--vi", 1.0, 1000.0), default=155.0, help="intruder speed of the slices, m/s (default 155)")
     pl.add_argument("--dh", type=finite_float("--dh", -1e4, 1e4), default=200.0, help="relative altitude of the slices, m (default 200)")
@@ -111,11 +138,14 @@ def register(sub) -> None:
 
 
 def _load_any(path: str):
+    """A family directory, one map file, or a map preset (built and cached like a campaign's)."""
     from .. import waitmap
 
     p = Path(path)
     if p.is_dir():
         return waitmap.load_family(p)
+    if not p.exists() and str(path) in waitmap.MAP_PRESETS:
+        return waitmap.family_for(str(path))
     return waitmap.WaitMapFamily([waitmap.load(p)])
 
 
@@ -130,8 +160,10 @@ def run_build(args) -> int:
     if args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
     rates = _turn_rates(args.turn_rates)
-    grid = waitmap.resolve_grid(args.grid)
-    params = waitmap.MdpParams(preset=args.preset.lower(), gamma=args.gamma, horizon=args.horizon)
+    grid, params = waitmap.map_params(args.grid, args.preset.lower(), gamma=args.gamma,
+                                      wait_definition=args.definition, p_min=args.p_min)
+    if args.horizon is not None:
+        params = params.with_(horizon=args.horizon)
     out = Path(args.out)
     if not args.force:
         clash = [out / map_filename(r) for r in rates] + [out / FAMILY_INDEX]
@@ -172,6 +204,40 @@ def run_show(args) -> int:
           f"P(LoWC within H if waiting) {rep['p_lowc']:.3f}, {'in' if rep['in_grid'] else 'outside'} the grid "
           f"(map turn {wm.turn_rate_deg:+.1f} deg/s, preset {wm.params.preset})")
     return 0
+
+
+def run_check(args) -> int:
+    from .. import waitmap
+    from ..waitmap.oracles import check_family
+
+    fam = _load_any(args.map)
+    rep = check_family(fam)
+    ok = rep["head_on_vs_overtaking"]["holds"] and rep["converging_lines"]["holds"]
+    mir = rep["mirror"]
+    ok = ok and (mir["zero_map"] is None or mir["zero_map"] < 1e-3) and all(
+        d["mirror_error_s"] < 1e-3 for d in mir["pairs"].values())
+    rep["ok"] = bool(ok)
+    if args.json:
+        print(json.dumps(to_jsonable(rep), sort_keys=True))
+        return 0 if ok else 1
+    h, yes = rep["histogram"], lambda b: "holds" if b else "DOES NOT HOLD"  # noqa: E731
+    ho, cl = rep["head_on_vs_overtaking"], rep["converging_lines"]
+    print(f"wait maps: {fam.grid.name} grid ({fam.grid.size:,} states), H = {fam.params.horizon:g} s, "
+          f"wait = {fam.params.wait_definition}, p_min = {fam.params.p_min:g}, turn rates {[float(r) for r in fam.turn_rates_deg]} deg/s")
+    print(f"  head-on waits < overtaking at equal range: {yes(ho['holds'])} ({ho['held']}/{ho['n']} non-trivial pairs)")
+    print(f"  waits shrink as |dx| shrinks:             {yes(cl['holds'])} ({cl['held']}/{cl['n']} converging lines)")
+    pairs = ", ".join(f"{k} deg/s {d['mirror_error_s']:.1e} s" for k, d in mir["pairs"].items()) or "no +-pair"
+    z = "no 0 map" if mir["zero_map"] is None else f"{mir['zero_map']:.1e} s"
+    print(f"  +-omega maps mirror images: {pairs}; 0 map asymmetry {z}")
+    for t in rep["speed_trend"]:
+        print(f"  turn {t['turn_rate_deg']:+5.1f} deg/s: waits fall with intruder speed on {100 * t['decreasing']:.0f} %, "
+              f"grow on {100 * t['increasing']:.0f} % of {t['lines']:,} non-trivial speed lines")
+    if h["n"]:
+        q = h["quartiles_s"]
+        print(f"  threatening states: {h['n']:,}, min {h['min_s']:.1f} s, quartiles {q[0]:.1f} / {q[1]:.1f} / {q[2]:.1f} s, "
+              f"max {h['max_s']:.1f} s, most in {h['mode_bin_s'][0]:g}-{h['mode_bin_s'][1]:g} s; the paper's Fig. 3 "
+              f"shape (min <= 2, max <= 45, mode within 0-10 s): {'yes' if rep['paper_shape'] else 'no'}")
+    return 0 if ok else 1
 
 
 def run_plot(args) -> int:

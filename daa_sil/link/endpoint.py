@@ -15,6 +15,13 @@ as :class:`Received` tuples. Everything hostile is counted and dropped:
   replayed, stale);
 * messages arriving while the inbox is full (``inbox_overflow``; the inbox is bounded).
 
+Dropping a peer is never silent: a :class:`DropReporter` prints one warning line (stderr) the first
+time datagrams from an address outside ``allow_peers`` are dropped, naming that address, what it
+sent and the expected peer, and then at most every ``drop_warn_every_s`` seconds while drops go on,
+with counts (``daa-gcs: warning: dropping datagrams from udp:127.0.0.1:40112 (HEARTBEAT from
+system 1): not the expected peer udp:127.0.0.1:14600 (--vehicle) ...``). ICMP "port unreachable"
+errors on the socket (nothing listening at the address we send to) are counted as ``refused``.
+
 Peer: a fixed ``peer`` address, or (``learn_peer=True``, default when no peer is given) the
 sender of the first datagram that contained a good message -- garbage cannot claim the link.
 Binds 127.0.0.1 by default and asks for a 4 MB receive buffer (the default 212 KB overflows on
@@ -26,7 +33,9 @@ from __future__ import annotations
 import asyncio
 import ipaddress
 import socket
+import sys
 import time
+from collections import Counter
 from dataclasses import dataclass
 from typing import Callable, Iterable, NamedTuple
 
@@ -96,6 +105,68 @@ def set_rcvbuf(transport: asyncio.BaseTransport, size: int = RCVBUF_BYTES) -> No
             pass
 
 
+def _stderr_line(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+class DropReporter:
+    """Warn once per unexpected sender, then periodically with counts, while its datagrams are dropped.
+
+    ``note(addr, what)`` counts one dropped datagram from ``addr`` (``what``: e.g. ``"HEARTBEAT from
+    system 1"``, or ""). The first drop from each of up to ``max_named`` distinct addresses is
+    reported at once; after that one summary line at most every ``every_s`` seconds (``clock``
+    seconds) while drops continue: how many in the interval and in all, per address (top 3).
+    Lines go to ``emit`` (default: stderr) as ``"{who}: warning: ..."``. ``expected()`` names the
+    peer that is accepted (called when a line is made, so a learned peer shows up).
+    """
+
+    def __init__(self, who: str, expected: "Callable[[], str]", *, hint: str = "",
+                 emit: "Callable[[str], None] | None" = None, every_s: float = 10.0,
+                 clock: "Callable[[], float]" = time.monotonic, max_named: int = 8):
+        self.who, self.expected, self.hint = who, expected, hint
+        self.emit = emit or _stderr_line
+        self.every_s, self.clock, self.max_named = float(every_s), clock, int(max_named)
+        self.by_addr: Counter = Counter()
+        self.total = 0
+        self.lines = 0
+        self._since = 0
+        self._next: "float | None" = None
+
+    def note(self, addr: "Address", what: str = "") -> None:
+        """Count one dropped datagram from ``addr``; maybe emit a line."""
+        addr = (addr[0], addr[1])
+        new = addr not in self.by_addr
+        self.by_addr[addr] += 1
+        self.total += 1
+        self._since += 1
+        now = self.clock()
+        if new and len(self.by_addr) <= self.max_named:
+            self._say(f"dropping datagrams from {format_udp_address(addr)}"
+                      f"{f' ({what})' if what else ''}: not the expected peer {self.expected()}"
+                      f"{'; ' + self.hint if self.hint else ''}")
+            self._since = 0
+            if self._next is None:
+                self._next = now + self.every_s
+        elif self._next is None or now >= self._next:
+            top = ", ".join(f"{format_udp_address(a)}: {n}" for a, n in self.by_addr.most_common(3))
+            more = f" and {len(self.by_addr) - 3} more" if len(self.by_addr) > 3 else ""
+            self._say(f"still dropping datagrams from unexpected peers: {self._since} in the last "
+                      f"{self.every_s:g} s, {self.total} in all ({top}{more}); expected {self.expected()}")
+            self._since = 0
+            self._next = now + self.every_s
+
+    def _say(self, text: str) -> None:
+        self.lines += 1
+        self.emit(f"{self.who}: warning: {text}")
+
+    def summary(self) -> "str | None":
+        """One line with the totals (None if nothing was dropped), e.g. for a process's last words."""
+        if not self.total:
+            return None
+        top = ", ".join(f"{format_udp_address(a)}: {n}" for a, n in self.by_addr.most_common(3))
+        return f"dropped {self.total} datagrams from unexpected peers ({top}); expected {self.expected()}"
+
+
 class Received(NamedTuple):
     """One good message: monotonic arrival time (s), sender address, the message."""
 
@@ -118,6 +189,7 @@ class EndpointCounters:
     rejected_sysid: int = 0
     inbox_overflow: int = 0
     socket_errors: int = 0
+    refused: int = 0  # ICMP port unreachable: nothing listens where we send (part of socket_errors)
 
 
 class MavEndpoint(asyncio.DatagramProtocol):
@@ -125,7 +197,9 @@ class MavEndpoint(asyncio.DatagramProtocol):
 
     def __init__(self, codec: MavCodec, *, peer: "Address | None" = None, learn_peer: "bool | None" = None,
                  allow_peers: "Iterable[Address | str] | None" = None, allow_sysids: "Iterable[int] | None" = None,
-                 inbox_size: int = 10_000, on_message: "Callable[[Received], None] | None" = None):
+                 inbox_size: int = 10_000, on_message: "Callable[[Received], None] | None" = None,
+                 name: str = "daa-sil", peer_label: str = "", drop_hint: str = "",
+                 drop_warn_every_s: float = 10.0, warn: "Callable[[str], None] | None" = None):
         self.codec = codec
         self.peer = peer
         self.learn_peer = (peer is None) if learn_peer is None else bool(learn_peer)
@@ -144,6 +218,18 @@ class MavEndpoint(asyncio.DatagramProtocol):
         self.counters = EndpointCounters()
         self.transport: "asyncio.DatagramTransport | None" = None
         self._closed: "asyncio.Future | None" = None
+        self.last_refused: "float | None" = None  #: time.monotonic() of the last ICMP port unreachable
+        self.peer_label = peer_label
+        self.drops = DropReporter(name, self._expected_text, hint=drop_hint, emit=warn, every_s=drop_warn_every_s)
+
+    def _expected_text(self) -> str:
+        if self._allow_addrs:
+            who = ", ".join(format_udp_address(a) for a in sorted(self._allow_addrs))
+        elif self.peer is not None:
+            who = format_udp_address(self.peer)
+        else:
+            who = "(none yet)"
+        return who + (f" ({self.peer_label})" if self.peer_label else "")
 
     # -- asyncio protocol ----------------------------------------------------------------------
     def connection_made(self, transport) -> None:
@@ -157,6 +243,9 @@ class MavEndpoint(asyncio.DatagramProtocol):
 
     def error_received(self, exc) -> None:  # e.g. ICMP port unreachable on loopback
         self.counters.socket_errors += 1
+        if isinstance(exc, ConnectionRefusedError):
+            self.counters.refused += 1
+            self.last_refused = time.monotonic()
 
     def _peer_allowed(self, addr: Address) -> bool:
         if self._allow_hosts is None:
@@ -169,7 +258,10 @@ class MavEndpoint(asyncio.DatagramProtocol):
         addr = (addr[0], addr[1])
         if not self._peer_allowed(addr):
             c.datagrams_rejected_peer += 1
-            c.rejected_peer += len(self.codec.decode(data, commit=False))
+            good = self.codec.decode(data, commit=False)
+            c.rejected_peer += len(good)
+            what = f"{good[0].get_type()} from system {good[0].get_srcSystem()}" if good else "no valid MAVLink"
+            self.drops.note(addr, what)
             return
         msgs = self.codec.decode(data)
         if not msgs:

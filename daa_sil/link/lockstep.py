@@ -13,7 +13,12 @@ Per step ``k`` (sim time ``t_k``)::
 are re-sent after ``timeout`` s (``retries`` times); the GCS re-acks a repeated tick without
 running the step again. With signing, control messages go on their own signing stream
 (:data:`~daa_sil.link.codec.CONTROL_LINK_ID`) because they overtake delayed data in the shim.
-Control datagrams bypass the shim's delay, loss and outages.
+Control datagrams bypass the shim's delay, loss and outages. The shim echoes every tick back to
+the vehicle (it is alive, and the uplink due at that tick has been sent); :class:`LockstepVehicle`
+counts the echoes (``echoes``) and does not hand them on.
+
+Realtime runs use the same messages, paced by the vehicle's wall clock (``vehicle/node.py``,
+``docs/sil.md`` "Realtime and lockstep").
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ class LockstepVehicle:
         self.ep, self.timeout, self.retries = ep, float(timeout), int(retries)
         self.link_id = CONTROL_LINK_ID if ep.codec.signed else None
         self.resent = 0
+        self.echoes = 0
 
     async def step(self, k: int, t_s: float) -> list[Received]:
         """Run the tick handshake of step ``k`` at sim time ``t_s`` (s)."""
@@ -62,6 +68,9 @@ class LockstepVehicle:
                     if r.msg.tick == k:
                         return got
                     continue  # an ack of an earlier (re-sent) tick
+                if r.msg.get_type() == "SIM_TICK" and r.msg.get_srcSystem() == self.ep.codec.mav.srcSystem:
+                    self.echoes += 1  # the shim echoes our tick: it is alive (not a message for the step)
+                    continue
                 got.append(r)
         raise LockstepTimeout(f"lockstep: no SIM_TICK_ACK for tick {k} after {self.retries + 1} tries "
                               f"of {self.timeout:g} s (is the GCS running?)")

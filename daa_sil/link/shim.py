@@ -30,21 +30,43 @@ which fast-time does not model.
 
 Clocks
 ------
-``realtime``: sim time = (loop monotonic time - start) x ``speed``. A datagram enters its line at
-its *kernel arrival time* (``SO_TIMESTAMPNS``), not when the loop got round to reading it; each line
-keeps a heap and one timer (a Linux ``timerfd``, nanosecond absolute expiry, no polling) armed for
-its earliest pending release (:mod:`daa_sil.link.rtclock`; ``timing="poll"`` or non-Linux: the
-``call_at`` + poll fallback). Sockets are read with ``recvmsg`` in bursts from a loop reader.
-
 ``lockstep`` (``docs/architecture.md``, "The step order"): the shim's clock only moves on ticks.
 
 1. A datagram from the vehicle containing a valid ``SIM_TICK(k, t_k)`` sets the clock to ``t_k``
    (never backwards), releases every packet due at or before ``t_k`` in both directions (each line
-   in release order), then forwards the tick datagram to the GCS at once (not delayed).
-2. Other datagrams enter their line stamped with the current clock (the time of the last tick).
-3. A datagram from the GCS containing a valid ``SIM_TICK_ACK(k)`` is forwarded to the vehicle
-   at once. The GCS's commands sent before the ack were already queued when they arrived
-   (datagrams on one loopback socket arrive in order), so they are stamped ``t_k``.
+   in release order), then forwards the tick datagram to the GCS at once (not delayed) and echoes
+   it back to the vehicle (``tick_echoes``): the echo tells the vehicle that the shim is alive and
+   that every uplink packet due at ``t_k`` has been sent to it.
+2. Other datagrams from the vehicle enter their line stamped with the current clock (the time of
+   the last tick). Datagrams from the GCS are stamped with the time of the **oldest tick forwarded
+   to the GCS that it has not acknowledged yet** (the tick it is working on; the last tick if it
+   never acknowledges ticks, or after it ignored ``MAX_GCS_LAG_TICKS`` of them:
+   ``gcs_unresponsive``). In lockstep that is always the last tick; in realtime it keeps a GCS that
+   answers late from stamping its step-k commands with a later step (``gcs_lagged`` counts them).
+3. A datagram from the GCS containing a valid ``SIM_TICK_ACK(k)`` (cumulative: every tick <= k)
+   is forwarded to the vehicle at once.
+
+``realtime`` with a vehicle that sends ticks (what ``daa-vehicle`` does): **the same tick-driven
+rules as lockstep**, only the ticks are paced by the vehicle's wall clock instead of by the GCS's
+acks. So a realtime run releases every packet at the same step as the lockstep run of the same
+scenario and seed: delays are quantised to the step exactly as lockstep does (a packet released at
+sim ``r`` is delivered at the first tick ``t_k >= r``), never by racing a wall-clock release
+against a step deadline. Packets that could not keep to that (stamped with an older tick but due at
+a tick already processed: a GCS more than the link delay late) are counted as ``released_late``.
+``release_lateness_ms`` is then measured against the tick schedule: how long after its ideal wall
+instant (the earliest-arriving tick defines the schedule's origin) each packet was released.
+
+The mode is decided by the first datagram from the vehicle side: a ``SIM_TICK`` selects ticks,
+anything else the free-running timer mode below. Until then datagrams from the GCS are held
+(``held_for_vehicle``, bounded) and then stamped as the mode says, so nothing is lost because the
+GCS started first.
+
+``realtime`` with a vehicle that sends no ticks (free-running): sim time = (loop monotonic time -
+start) x ``speed``. A datagram enters its line at its *kernel arrival time* (``SO_TIMESTAMPNS``),
+not when the loop got round to reading it; each line keeps a heap and one timer (a Linux
+``timerfd``, nanosecond absolute expiry, no polling) armed for its earliest pending release
+(:mod:`daa_sil.link.rtclock`; ``timing="poll"`` or non-Linux: the ``call_at`` + poll fallback).
+Sockets are read with ``recvmsg`` in bursts from a loop reader.
 
 Send ticks and acks *alone* in their datagram (a mixed datagram is treated as control and its
 other messages skip the delay; counted as ``mixed_control``). Control messages are recognised by
@@ -53,6 +75,11 @@ corrupt tick cannot move the clock (``bad_control``). With signing, send control
 their own signing stream (``MavCodec.encode(msg, link_id=CONTROL_LINK_ID)``) because they
 overtake delayed data. In lockstep the GCS must be known before the first tick: give ``gcs`` or
 let the GCS send any datagram (e.g. a HEARTBEAT) to the shim first.
+
+Never silent: datagrams from an address that is not the learned peer are dropped with a warning
+(first one per address at once, then with counts at most every 10 s), datagrams due for a side
+nobody has claimed yet likewise, and a side that has talked and then falls silent for
+``SILENCE_WARN_S`` is reported (stderr, ``daa-sil shim: warning: ...``).
 """
 
 from __future__ import annotations
@@ -61,6 +88,8 @@ import asyncio
 import inspect
 import math
 import socket
+import sys
+from collections import deque
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -71,7 +100,7 @@ from ..io import atomic_write_json, to_jsonable
 from ..latency import DEFAULT_EPOCH_S, DelayModel, DelayProcess, as_seed_sequence, child_seed
 from .codec import MavCodec, mavlink
 from .delayline import DelayLine, check_outages
-from .endpoint import RCVBUF_BYTES, Address, format_udp_address, parse_udp_address
+from .endpoint import RCVBUF_BYTES, Address, DropReporter, format_udp_address, parse_udp_address
 from .rtclock import (PreciseTimer, enable_rx_timestamps, request_short_slice, rx_buffer_size, rx_time,
                       set_timer_slack)
 
@@ -79,6 +108,12 @@ CLOCKS = ("realtime", "lockstep")
 TIMINGS = ("precise", "poll")
 _TICK_ID = mavlink.MAVLINK_MSG_ID_SIM_TICK
 _ACK_ID = mavlink.MAVLINK_MSG_ID_SIM_TICK_ACK
+#: a GCS that has not acknowledged this many forwarded ticks is taken as gone (stamps fall back to the last tick)
+MAX_GCS_LAG_TICKS = 8
+#: realtime: datagrams from the GCS held until the vehicle side's first datagram decides the mode
+MAX_HELD = 10_000
+#: wall seconds of silence from a side that has talked before it is reported
+SILENCE_WARN_S = 5.0
 
 
 def direction_seeds(seed: "int | np.random.SeedSequence | None") -> dict:
@@ -281,7 +316,8 @@ class DelayShim:
         self.counters = {k: 0 for k in (
             "datagrams_from_vehicle", "datagrams_from_gcs", "forwarded_to_vehicle", "forwarded_to_gcs",
             "rejected_peer", "rejected_claim", "no_peer", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards",
-            "socket_errors", "send_would_block")}
+            "socket_errors", "send_would_block", "tick_echoes", "held_for_vehicle", "held_dropped", "gcs_lagged",
+            "gcs_unresponsive", "released_late")}
         self.codec = MavCodec(0, 0, key=config.key, sign_outgoing=False)  # verifies control messages only
         self.sim_time = 0.0  # lockstep clock (s)
         self.last_tick: "int | None" = None
@@ -293,6 +329,27 @@ class DelayShim:
         self._tick_waiters: list[tuple[int, asyncio.Future]] = []
         self._timing_info: dict = {}
         self.closed = False
+        #: releases driven by ticks (lockstep always; realtime once the vehicle's first datagram is a tick)
+        self.tick_mode: "bool | None" = True if config.clock == "lockstep" else None
+        self._held: list[tuple["float | None", bytes]] = []  # realtime, mode undecided: GCS datagrams
+        self._unacked: "deque[tuple[int, float]]" = deque()  # ticks forwarded to the GCS, not yet acked
+        self._gcs_acks = False  # the GCS acknowledges ticks (so its data can be stamped by them)
+        self._tick_log: list[tuple[float, float, float, int]] = []  # realtime ticks: (t_k, rx, done, released)
+        self._seen_ticks: set[int] = set()
+        self.warn = _stderr_warn
+        labels = {"vehicle": "vehicle", "gcs": "GCS"}
+        self.drops = {side: DropReporter("daa-sil shim", lambda side=side: self._peer_text(side),
+                                         hint=f"the shim keeps the first {labels[side]} it heard from",
+                                         emit=lambda text: self.warn(text))
+                      for side in ("vehicle", "gcs")}
+        self._last_rx: dict[str, "float | None"] = {"vehicle": None, "gcs": None}
+        self._silent: dict[str, "float | None"] = {"vehicle": None, "gcs": None}
+        self._no_peer_warned: set[str] = set()
+        self._watch: "asyncio.TimerHandle | None" = None
+
+    def _peer_text(self, side: str) -> str:
+        p = self.peers[side]
+        return f"{format_udp_address(p) if p else '(none yet)'} ({'vehicle' if side == 'vehicle' else 'GCS'} side)"
 
     # -- lifecycle -----------------------------------------------------------------------------
     async def start(self) -> None:
@@ -320,6 +377,23 @@ class DelayShim:
                                                        spin_s=self.config.spin_s, use_timerfd=precise)
             info["timer"] = self._timers["down"].kind
             self._timing_info = info
+        self._watch = self._loop.call_later(1.0, self._watch_silence)
+
+    def _watch_silence(self) -> None:
+        """Once a second: report a side that talked and has been silent for SILENCE_WARN_S (and its return)."""
+        if self.closed:
+            return
+        now = self._loop.time()
+        for side, what in (("vehicle", "the vehicle"), ("gcs", "the GCS")):
+            last = self._last_rx[side]
+            if last is None or self._silent[side] is not None:
+                continue
+            if now - last >= SILENCE_WARN_S:
+                self._silent[side] = last
+                self.warn(f"no datagram from {what} ({self._peer_text(side)}) for {now - last:.0f} s"
+                          f"{f' (last tick {self.last_tick}, t = {self.sim_time:g} s)' if self.last_tick is not None else ''}"
+                          f": has it stopped?")
+        self._watch = self._loop.call_later(1.0, self._watch_silence)
 
     def timing_info(self) -> dict:
         """Realtime only: how releases are timed (timer kind, kernel arrival stamps, slack, short slice)."""
@@ -338,6 +412,8 @@ class DelayShim:
     async def close(self) -> None:
         """Cancel timers, close sockets; in-flight datagrams are dropped (reported in stats)."""
         self.closed = True
+        if self._watch is not None:
+            self._watch.cancel()
         for d, tm in self._timers.items():
             if tm is not None:
                 tm.close()
@@ -349,7 +425,7 @@ class DelayShim:
     # -- clock ---------------------------------------------------------------------------------
     def now(self) -> float:
         """Current sim time (s) of the shim's clock."""
-        if self.config.clock == "lockstep":
+        if self.config.clock == "lockstep" or self.tick_mode:
             return self.sim_time
         return (self._loop.time() - self._t0) * self.config.speed
 
@@ -372,29 +448,83 @@ class DelayShim:
             self.peers[side] = addr
         elif peer != addr:
             c["rejected_peer"] += 1
+            self.drops[side].note(addr)
             return
-        direction = "down" if side == "vehicle" else "up"
-        if self.config.clock == "lockstep":
-            ids = control_ids(data)
-            want = _TICK_ID if side == "vehicle" else _ACK_ID
-            if want in ids:
-                msg = self._decode_control(data, want)
-                if msg is not None:
-                    if -1 in ids:
-                        c["mixed_control"] += 1
-                    if side == "vehicle":
-                        self._on_tick(msg, data)
-                    else:
-                        c["acks"] += 1
-                        self._send("vehicle", data)
-                    return
-                c["bad_control"] += 1
-        if self.config.clock == "realtime":
-            t_in = self.now() if t_rx is None else min(self.now(), (t_rx - self._t0) * self.config.speed)
-            self.lines[direction].push(t_in, data)
-            self._arm(direction)
+        self._heard(side)
+        if self.tick_mode is None:  # realtime: the vehicle side's first datagram decides the mode
+            if side == "gcs":
+                if len(self._held) < MAX_HELD:
+                    self._held.append((t_rx, data))
+                    c["held_for_vehicle"] += 1
+                else:
+                    c["held_dropped"] += 1
+                return
+            self._decide_mode(data)
+        if self.tick_mode:
+            self._tick_datapath(side, data, t_rx)
         else:
-            self.lines[direction].push(self.sim_time, data)
+            self._timer_datapath(side, data, t_rx)
+
+    def _heard(self, side: str) -> None:
+        now = self._loop.time() if self._loop is not None else 0.0
+        quiet_since = self._silent[side]
+        if quiet_since is not None:
+            self._silent[side] = None
+            self.warn(f"{'the vehicle' if side == 'vehicle' else 'the GCS'} is back after {now - quiet_since:.0f} s "
+                      f"of silence ({self._peer_text(side)})")
+        self._last_rx[side] = now
+
+    def _decide_mode(self, first_vehicle_datagram: bytes) -> None:
+        """Realtime: tick-driven if the vehicle's first datagram is a valid SIM_TICK; then replay held GCS data."""
+        tick = False
+        if _TICK_ID in control_ids(first_vehicle_datagram):
+            tick = any(m.get_msgId() == _TICK_ID for m in self.codec.decode(first_vehicle_datagram, commit=False))
+        self.tick_mode = tick
+        if self._timing_info:
+            self._timing_info["release"] = "ticks" if tick else "timer"
+        held, self._held = self._held, []
+        for t_rx, data in held:
+            (self._tick_datapath if tick else self._timer_datapath)("gcs", data, t_rx)
+
+    def _tick_datapath(self, side: str, data: bytes, t_rx: "float | None") -> None:
+        """Lockstep rules (module docstring): control messages move the clock, data is stamped by ticks."""
+        c = self.counters
+        ids = control_ids(data)
+        want = _TICK_ID if side == "vehicle" else _ACK_ID
+        if want in ids:
+            msg = self._decode_control(data, want)
+            if msg is not None:
+                if -1 in ids:
+                    c["mixed_control"] += 1
+                if side == "vehicle":
+                    self._on_tick(msg, data, t_rx)
+                else:
+                    self._on_ack(msg, data)
+                return
+            c["bad_control"] += 1
+        if side == "vehicle":
+            self.lines["down"].push(self.sim_time, data)
+            return
+        stamp = self._gcs_stamp()
+        recs = self.lines["up"].push(stamp, data)
+        if stamp < self.sim_time and any(not r.dropped and r.t_out <= self.sim_time for r in recs):
+            c["released_late"] += 1  # lockstep would have released it at a tick already processed
+
+    def _gcs_stamp(self) -> float:
+        """Sim time a GCS datagram is sent at: the oldest tick it has not acknowledged (module docstring)."""
+        if self._gcs_acks and self._unacked:
+            t = self._unacked[0][1]
+            if t < self.sim_time:
+                self.counters["gcs_lagged"] += 1
+            return t
+        return self.sim_time
+
+    def _timer_datapath(self, side: str, data: bytes, t_rx: "float | None") -> None:
+        """Free-running realtime: stamp with the kernel arrival time, release by the line's timer."""
+        direction = "down" if side == "vehicle" else "up"
+        t_in = self.now() if t_rx is None else min(self.now(), (t_rx - self._t0) * self.config.speed)
+        self.lines[direction].push(t_in, data)
+        self._arm(direction)
 
     def _decode_control(self, data: bytes, want: int):
         msgs = self.codec.decode(data)
@@ -403,36 +533,66 @@ class DelayShim:
                 return m
         return None
 
-    def _on_tick(self, msg, data: bytes) -> None:
+    def _on_tick(self, msg, data: bytes, t_rx: "float | None" = None) -> None:
         c = self.counters
         c["ticks"] += 1
+        rx = (t_rx if t_rx is not None else self._loop.time()) if self.config.clock == "realtime" else 0.0
         t_k = msg.time_ms / 1000.0
+        k = int(msg.tick)
         if t_k < self.sim_time:
             c["clock_backwards"] += 1
         else:
             self.sim_time = t_k
-        self.last_tick = int(msg.tick)
-        self._release("down", self.sim_time)
-        self._release("up", self.sim_time)
-        self._send("gcs", data)
+        self.last_tick = k
+        n = self._release("down", self.sim_time) + self._release("up", self.sim_time)
+        if self._send("gcs", data) and (not self._unacked or self._unacked[-1][0] < k):
+            self._unacked.append((k, t_k))
+            if len(self._unacked) > MAX_GCS_LAG_TICKS:  # the GCS ignores ticks: gone, or not ack-capable
+                self._unacked.clear()
+                if self._gcs_acks:
+                    c["gcs_unresponsive"] += 1
+                self._gcs_acks = False
+        side = self.sides.get("vehicle")
+        if side is not None and not side.closed and side.sendto(data, self.peers["vehicle"]):
+            c["tick_echoes"] += 1  # "shim alive, uplink due at t_k sent"
+        if self.config.clock == "realtime" and k not in self._seen_ticks and len(self._tick_log) < 1_000_000:
+            self._seen_ticks.add(k)
+            self._tick_log.append((t_k, rx, self._loop.time(), n))
         for item in list(self._tick_waiters):
             if item[0] <= self.last_tick and not item[1].done():
                 item[1].set_result(self.last_tick)
         self._tick_waiters = [w for w in self._tick_waiters if not w[1].done()]
 
-    def _send(self, dest: str, data: bytes) -> None:
+    def _on_ack(self, msg, data: bytes) -> None:
+        self.counters["acks"] += 1
+        self._gcs_acks = True
+        k = int(msg.tick)
+        while self._unacked and self._unacked[0][0] <= k:
+            self._unacked.popleft()
+        self._send("vehicle", data)
+
+    def _send(self, dest: str, data: bytes) -> bool:
         peer = self.peers[dest]
         side = self.sides.get("gcs" if dest == "gcs" else "vehicle")
         if peer is None or side is None or side.closed:
             self.counters["no_peer"] += 1
-            return
+            if dest not in self._no_peer_warned and not self.closed:
+                self._no_peer_warned.add(dest)
+                self.warn(f"dropping datagrams due for the {'GCS' if dest == 'gcs' else 'vehicle'}: nothing has sent "
+                          f"to the shim's {dest} side yet, so it does not know where to (the shim learns each side "
+                          f"from its first datagram; counted as no_peer)")
+            return False
         if side.sendto(data, peer):
             self.counters["forwarded_to_" + dest] += 1
+            return True
+        return False
 
-    def _release(self, direction: str, t_now: float) -> None:
+    def _release(self, direction: str, t_now: float) -> int:
         dest = "gcs" if direction == "down" else "vehicle"
-        for data in self.lines[direction].pop_due(t_now):
+        items = self.lines[direction].pop_due(t_now)
+        for data in items:
             self._send(dest, data)
+        return len(items)
 
     # -- realtime scheduling ---------------------------------------------------------------------
     def _arm(self, direction: str) -> None:
@@ -476,11 +636,51 @@ class DelayShim:
                "down": self.lines["down"].stats(), "up": self.lines["up"].stats()}
         if self._timing_info:
             out["realtime_timing"] = self.timing_info()
-        if self._lateness:
-            lat = np.array(self._lateness) * 1000.0
+        if self.config.clock == "realtime":
+            out["release"] = {None: "undecided", True: "ticks", False: "timer"}[self.tick_mode]
+        lat = self._tick_lateness() if self.tick_mode and self.config.clock == "realtime" else (
+            np.array(self._lateness) if self._lateness else None)
+        if lat is not None and lat.size:
+            lat = lat * 1000.0
             out["release_lateness_ms"] = {"n": int(lat.size), "p50": float(np.percentile(lat, 50)),
-                                          "p99": float(np.percentile(lat, 99)), "max": float(lat.max())}
+                                          "p99": float(np.percentile(lat, 99)), "max": float(lat.max()),
+                                          "reference": "tick schedule" if self.tick_mode else "release time"}
+        if self.config.clock == "realtime" and self.tick_mode:
+            out["tick_schedule"] = self._tick_schedule_stats()
+        for side in ("vehicle", "gcs"):
+            if self.drops[side].total:
+                out.setdefault("unexpected_peers", {})[side] = {
+                    format_udp_address(a): n for a, n in self.drops[side].by_addr.most_common(10)}
         return to_jsonable(out)
+
+    def _tick_origin(self) -> "float | None":
+        """Wall origin of the tick schedule: min over ticks k >= 1 of (arrival - t_k / speed) (s)."""
+        rows = [(t, rx) for t, rx, _, _ in self._tick_log if t > 0]
+        if not rows:
+            return None
+        return min(rx - t / self.config.speed for t, rx in rows)
+
+    def _tick_lateness(self) -> "np.ndarray | None":
+        """Per released packet: wall s from its tick's ideal instant to the end of that tick's releases."""
+        w0 = self._tick_origin()
+        if w0 is None:
+            return None
+        out = [done - (w0 + t / self.config.speed) for t, _, done, n in self._tick_log if t > 0 for _ in range(n)]
+        return np.array(out, float)
+
+    def _tick_schedule_stats(self) -> dict:
+        """How late ticks arrived against their schedule (ms): the vehicle's pacing plus the transit."""
+        w0 = self._tick_origin()
+        if w0 is None:
+            return {"ticks": len(self._tick_log)}
+        late = np.array([rx - (w0 + t / self.config.speed) for t, rx, _, _ in self._tick_log if t > 0]) * 1000.0
+        return {"ticks": int(late.size), "arrival_late_p50_ms": float(np.percentile(late, 50)),
+                "arrival_late_p99_ms": float(np.percentile(late, 99)), "arrival_late_max_ms": float(late.max())}
+
+
+def _stderr_warn(text: str) -> None:
+    print(f"daa-sil shim: warning: {text}" if not text.startswith("daa-sil shim:") else text,
+          file=sys.stderr, flush=True)
 
 
 async def run_shim(config: ShimConfig, *, stop: "asyncio.Event | None" = None,

@@ -7,10 +7,12 @@ from typing import Any, Mapping
 import numpy as np
 import pyarrow as pa
 
-PER_INTRUDER = ("intr_x", "intr_y", "intr_z", "intr_gs", "intr_trk_deg", "intr_vs", "range_m", "hmd_m",
-                "dh_m", "tau_mod_s", "alert_level", "wcv")
-BANDS = ("bands_trk_lo_deg", "bands_trk_hi_deg", "bands_trk_region")
-STRINGS = ("decision", "rule", "authority", "pilot_axis", "pilot_dir", "exec_axis", "exec_dir")
+from ..steplog import BAND_COLUMNS, INTRUDER_COLUMNS, VOCAB
+
+#: the step log's per-intruder, band and scalar string columns (:mod:`daa_sil.steplog`)
+PER_INTRUDER = tuple(INTRUDER_COLUMNS)
+BANDS = tuple(BAND_COLUMNS)
+STRINGS = tuple(k for k in VOCAB if k not in INTRUDER_COLUMNS and k not in BAND_COLUMNS)
 
 
 class StepColumns:

@@ -9,7 +9,14 @@ Presets (``GRID_PRESETS``):
 
 ``paper``   12 x 12 x 4 x 5 x 5 x 5 = 72,000 states: dx, dy in [-1500, 1500] m, dh in [-200, 200] m,
             vi in [70, 300] m/s, vh in [-5, 5] m/s, theta 5 nodes (0, 72, ... deg) (paper Sec. IV).
-``fine``    24 x 24 x 6 x 5 x 5 x 12 = 1,036,800 states on the same box (theta every 30 deg, so
+``alerting`` 23 x 23 x 11 x 5 x 5 x 8 = 1,163,800 states sized to the DO-365 alerting region, where
+            the agent decides: a corrective alert comes 55 s before the predicted loss of well
+            clear, i.e. 5-17 km out at the paper's Table 6 speeds (99 % of the decisions of a
+            study). dx, dy in [-17, 17] km on nodes 0, +-0.5, 1, 1.5, 2.2, 3, 4, 5.5, 7.5, 10,
+            13, 17 km (fine near the well-clear volume, coarse far out); dh in [-750, 750] m on
+            0, +-100, 150, 300, 500, 750 m; vi 70, 100, 130, 170, 250 m/s; vh -12, -5, 0, 5, 12
+            m/s; theta every 45 deg. Used with a 120 s horizon (``waitmap.MAP_PRESETS``).
+``fine``    24 x 24 x 6 x 5 x 5 x 12 = 1,036,800 states on the paper's box (theta every 30 deg, so
             head-on 180 deg and crossing 90/270 deg are nodes).
 
 Custom grids: a YAML file ``{base: paper, dx: {min: -1500, max: 1500, n: 24}, theta: {n: 8},
@@ -162,6 +169,27 @@ class Grid:
         return np.ravel_multi_index(tuple(idx), self.shape).ravel()
 
 
+def _symmetric_axis(name: str, positive: "tuple[float, ...]", zero: bool = True) -> Axis:
+    """An axis with nodes ``-positive[::-1], (0,) positive`` (exactly antisymmetric)."""
+    pos = [float(v) for v in positive]
+    return Axis(name, tuple([-v for v in pos[::-1]] + ([0.0] if zero else []) + pos))
+
+
+#: alerting-region position nodes (m, one side): 500 m spacing near the well-clear volume
+#: (DMOD 1220 m), growing to 4 km at the edge of the DO-365 alerting region
+ALERTING_POSITIONS = (500, 1000, 1500, 2200, 3000, 4000, 5500, 7500, 10000, 13000, 17000)
+#: alerting-region altitude nodes (m, one side): 100 and 150 m bracket the LoWC thresholds
+#: d_h* = 122 m (paper) and ZTHR = 137 m (DO-365)
+ALERTING_ALTITUDES = (100, 150, 300, 500, 750)
+
+
+def alerting_grid() -> Grid:
+    """A grid sized to the DO-365 alerting region (see the module docstring)."""
+    return Grid((_symmetric_axis("dx", ALERTING_POSITIONS), _symmetric_axis("dy", ALERTING_POSITIONS),
+                 _symmetric_axis("dh", ALERTING_ALTITUDES), Axis("vi", (70.0, 100.0, 130.0, 170.0, 250.0)),
+                 _symmetric_axis("vh", (5.0, 12.0)), _theta_axis(8)), name="alerting")
+
+
 def paper_grid() -> Grid:
     """The paper's 12 x 12 x 4 x 5 x 5 x 5 grid (72,000 states)."""
     return Grid((_linear_axis("dx", -1500, 1500, 12), _linear_axis("dy", -1500, 1500, 12),
@@ -176,7 +204,7 @@ def fine_grid() -> Grid:
                  _linear_axis("vh", -5, 5, 5), _theta_axis(12)), name="fine")
 
 
-GRID_PRESETS = {"paper": paper_grid, "fine": fine_grid}
+GRID_PRESETS = {"paper": paper_grid, "alerting": alerting_grid, "fine": fine_grid}
 
 
 def _axis_from_spec(name: str, spec, base: Axis) -> Axis:

@@ -2,15 +2,19 @@
 
 **Lookup rule** (``WaitMap.lookup``; states ``(..., 6)`` = (dx, dy, dh, vi, vh, theta[rad])):
 
-* Inside the box (dx, dy, dh within the grid's range): W, p_lowc, Q_wait and Q_evade are
-  interpolated multilinearly over the 64 surrounding nodes (theta periodic; vi and vh outside
-  their range are clamped to the nearest node and reported ``in_grid = False``). ``evade`` is
-  ``Q_evade > Q_wait`` (ties wait), and ``W = 0`` where evade holds.
-* Anywhere, a state that is in LoWC now (paper Eq. 9, continuous predicate) gets
-  ``W = 0, evade = True, p_lowc = 1`` ("inside": no waiting at all).
-* Outside the box and not in LoWC ("far"): ``W = min(H, straight-line time to LoWC)`` (so a
-  diverging or passing intruder gives ``W = H``, no constraint), ``p_lowc`` = 1 if that straight-line
-  LoWC happens within H else 0, ``evade`` only if ``W == 0``, ``in_grid = False``.
+* The state is **clamped** onto the grid's box (every non-periodic axis) and the node fields are
+  interpolated multilinearly over the 64 surrounding nodes (theta periodic). Inside the box this is
+  plain interpolation; outside it is the paper's "the agent matches the current state with a state
+  in the wait map" read as the nearest point of the map. ``in_box`` says whether (dx, dy, dh) was
+  inside the box, ``in_grid`` whether every axis was.
+* ``evade`` is ``Q_wait < 0`` (``Q_evade = 0``: R_e = 0 and OUT is terminal), interpolated.
+* Wait time by the map's ``wait_definition``: ``paper`` interpolates ``p_lowc`` and ``t_lowc``
+  **separately** and divides (``W = t_lowc / p_lowc``, a p-weighted mean of the corner waits), then
+  applies the map's floor ``p_min`` (``W = H`` below it); interpolating W itself across the edge of
+  the ``p = 0`` region would give meaningless midpoints. ``until_evade`` interpolates W. Either way
+  ``W = 0`` where ``evade``.
+* A state that is in LoWC now (paper Eq. 9, continuous predicate) gets ``W = 0, evade = True,
+  p_lowc = 1``.
 """
 
 from __future__ import annotations
@@ -19,10 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import wellclear as wc
 from .grid import Grid
 from .model import DEG, MdpParams
-from .transitions import lowc_states, relative_sv
+from .transitions import lowc_states
 
 
 @dataclass
@@ -33,42 +36,53 @@ class LookupResult:
     p_lowc: np.ndarray  #: P(LoWC within H if the UAS keeps waiting)
     evade: np.ndarray  #: bool, the MDP prefers evade (or LoWC now)
     in_grid: np.ndarray  #: bool, the state was inside every axis range
+    in_box: np.ndarray  #: bool, (dx, dy, dh) was inside the map's box (no clamping of positions)
+    map_turn_deg: "np.ndarray | None" = None  #: conditioning turn rate of the map read (deg/s, + = left)
 
 
 def interpolate(grid: Grid, fields: np.ndarray, states: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Multilinear interpolation of ``fields`` (``(*grid.shape, m)``) at ``states`` (``(N, 6)``).
 
     Returns ``(values (N, m), inside_box (N,), inside_all (N,))``; axes are clamped at their ends.
+    All 64 corners at once: an ``(N, 64)`` index matrix (the non-periodic axes' upper node is always
+    the lower one + 1, so their corner offsets are constants; theta wraps) and the outer product of
+    the per-axis weights.
     """
     w = [grid.axes[a].weights(states[:, a]) for a in range(6)]
     inside_box = w[0][3] & w[1][3] & w[2][3]
     inside_all = inside_box & w[3][3] & w[4][3]
     flat = fields.reshape(-1, fields.shape[-1])
     strides = np.cumprod((1,) + grid.shape[::-1][:-1])[::-1]
-    out = np.zeros((states.shape[0], fields.shape[-1]))
-    for c in range(64):
-        idx = np.zeros(states.shape[0], np.int64)
-        wt = np.ones(states.shape[0])
-        for a in range(6):
-            hi = (c >> a) & 1
-            idx += (w[a][1] if hi else w[a][0]) * strides[a]
-            wt *= w[a][2] if hi else 1.0 - w[a][2]
-        out += wt[:, None] * flat[idx]
+    n = states.shape[0]
+    base = sum(w[a][0] * strides[a] for a in range(5))
+    bits = (np.arange(32)[:, None] >> np.arange(5)[None, :]) & 1  # corner c -> upper node on axis a?
+    # an axis with one node (or clamped to one) has i1 == i0: the offset follows the actual indices
+    step = np.stack([(w[a][1] - w[a][0]) * strides[a] for a in range(5)], axis=1)  # (N, 5)
+    idx5 = base[:, None] + step @ bits.T  # (N, 32)
+    idx = (idx5[:, None, :] + np.stack([w[5][0], w[5][1]], axis=1)[:, :, None] * strides[5]).reshape(n, 64)
+    wt = np.ones((n, 32))
+    for a in range(5):
+        wt *= np.where(bits[:, a][None, :] == 1, w[a][2][:, None], 1.0 - w[a][2][:, None])
+    wt = (np.stack([1.0 - w[5][2], w[5][2]], axis=1)[:, :, None] * wt[:, None, :]).reshape(n, 64)
+    out = np.einsum("nc,ncm->nm", wt, flat[idx].astype(float))
     return out, inside_box, inside_all
+
+
+#: the node fields a lookup interpolates (stored float32)
+FIELDS = ("p_lowc", "t_lowc", "q_wait", "wait_s")
 
 
 @dataclass
 class WaitMap:
-    """One solved wait map on a grid (arrays shaped ``grid.shape``)."""
+    """One solved wait map on a grid (arrays shaped ``grid.shape``; times in s)."""
 
     grid: Grid
     params: MdpParams
     turn_rate_deg: float  #: the conditioning initial turn rate, deg/s (+ = left)
-    wait_s: np.ndarray
-    p_lowc: np.ndarray
-    p_act: np.ndarray  #: P(LoWC or an evade-optimal state within H while waiting)
-    q_wait: np.ndarray
-    q_evade: np.ndarray
+    wait_s: np.ndarray  #: node wait time of ``params.wait_definition``
+    p_lowc: np.ndarray  #: P(LoWC within H while waiting)
+    t_lowc: np.ndarray  #: E[T_LoWC 1{T_LoWC <= H}] while waiting, s
+    q_wait: np.ndarray  #: Q(s, wait); Q(s, evade) = 0
     lowc: np.ndarray  #: bool, LoWC nodes
     stats: dict  #: solver statistics and timings
     content_hash: str = ""
@@ -76,33 +90,41 @@ class WaitMap:
     @property
     def evade(self) -> np.ndarray:
         """Evade-optimal or LoWC nodes (bool)."""
-        return (self.q_evade > self.q_wait) | self.lowc
+        return (self.q_wait < 0.0) | self.lowc
+
+    def __post_init__(self):
+        # The interpolated fields side by side in float32, so one gather per corner reads all four;
+        # the public arrays are views into it (a family of large maps is held once, also in forked
+        # campaign workers). Single precision holds them to ~1e-7 relative.
+        f = np.stack([np.asarray(getattr(self, n), np.float32) for n in FIELDS], axis=-1)
+        self._fields = f
+        for i, n in enumerate(FIELDS):
+            setattr(self, n, f[..., i])
+        self.lowc = np.asarray(self.lowc, bool)
 
     def lookup(self, paper_states) -> LookupResult:
         """Wait time etc. at continuous paper states ``(..., 6)`` (theta in rad). See module docstring."""
+        from .solve import paper_wait
+
         st = np.asarray(paper_states, dtype=float)
         if st.shape[-1:] != (6,):
             raise ValueError(f"paper_states must have shape (..., 6), got {st.shape}")
         batch = st.shape[:-1]
         st = st.reshape(-1, 6)
-        fields = np.stack([self.wait_s, self.p_lowc, self.q_wait, self.q_evade], axis=-1)
-        vals, in_box, in_all = interpolate(self.grid, fields, st)
+        vals, in_box, in_all = interpolate(self.grid, self._fields, st)
         H = self.params.horizon
-        ev = vals[:, 3] > vals[:, 2]
-        w = np.where(ev, 0.0, np.clip(vals[:, 0], 0.0, H))
-        pl = np.clip(vals[:, 1], 0.0, 1.0)
-        if not np.all(in_box):
-            s, v = relative_sv(*(st[:, i] for i in range(6)), self.params.v_own)
-            t_in = wc.time_to_violation(s, v, self.params.thresholds, lookahead=H)
-            far_w = np.where(np.isfinite(t_in), np.minimum(t_in, H), H)
-            w = np.where(in_box, w, far_w)
-            pl = np.where(in_box, pl, np.isfinite(t_in).astype(float))
-            ev = np.where(in_box, ev, far_w <= 0.0)
+        pl, tl, q = np.clip(vals[:, 0], 0.0, 1.0), vals[:, 1], vals[:, 2]
+        ev = q < 0.0
+        if self.params.wait_definition == "paper":
+            w = paper_wait(tl, pl, ev, self.params)
+        else:
+            w = np.where(ev, 0.0, np.clip(vals[:, 3], 0.0, H))
         now = lowc_states(st, self.params)
         w = np.where(now, 0.0, w)
         pl = np.where(now, 1.0, pl)
         ev = ev | now
-        return LookupResult(w.reshape(batch), pl.reshape(batch), ev.reshape(batch), in_all.reshape(batch))
+        return LookupResult(w.reshape(batch), pl.reshape(batch), ev.reshape(batch), in_all.reshape(batch),
+                            in_box.reshape(batch), np.full(batch, float(self.turn_rate_deg)))
 
 
 @dataclass
@@ -115,28 +137,41 @@ class WaitMapFamily:
     def turn_rates_deg(self) -> np.ndarray:
         return np.array([m.turn_rate_deg for m in self.maps])
 
+    @property
+    def grid(self) -> Grid:
+        return self.maps[0].grid
+
+    @property
+    def params(self) -> MdpParams:
+        return self.maps[0].params
+
     def nearest(self, turn_rate) -> np.ndarray:
-        """Index of the map whose condition is nearest to ``turn_rate`` (rad/s, + = left)."""
+        """Index of the map whose condition is nearest to ``turn_rate`` (rad/s, + = left); ties go
+        to the map nearer to 0 deg/s (the less extreme assumption)."""
         tr = np.asarray(turn_rate, dtype=float) / DEG
-        return np.argmin(np.abs(tr[..., None] - self.turn_rates_deg), axis=-1)
+        rates = self.turn_rates_deg
+        dist = np.abs(tr[..., None] - rates) + 1e-9 * np.abs(rates)
+        return np.argmin(dist, axis=-1)
 
     def map_for(self, turn_rate_deg: float) -> WaitMap:
         """The map of the nearest condition to a turn rate in deg/s."""
         return self.maps[int(self.nearest(turn_rate_deg * DEG))]
 
     def lookup(self, paper_states, turn_rate) -> LookupResult:
-        """Lookup with per-state turn rates ``(...)`` in rad/s (paper sense, + = left)."""
+        """Lookup with per-state turn rates ``(...)`` in rad/s (paper sense, + = left): each state
+        reads the map of the nearest conditioning turn rate."""
         st = np.asarray(paper_states, dtype=float)
         batch = st.shape[:-1]
         idx = np.broadcast_to(self.nearest(turn_rate), batch).ravel()
         st = st.reshape(-1, 6)
-        w = np.zeros(st.shape[0])
-        pl = np.zeros(st.shape[0])
-        ev = np.zeros(st.shape[0], bool)
-        ig = np.zeros(st.shape[0], bool)
+        n = st.shape[0]
+        w, pl, mt = np.zeros(n), np.zeros(n), np.zeros(n)
+        ev, ig, ib = np.zeros(n, bool), np.zeros(n, bool), np.zeros(n, bool)
         for i, m in enumerate(self.maps):
             sel = idx == i
             if np.any(sel):
                 r = m.lookup(st[sel])
-                w[sel], pl[sel], ev[sel], ig[sel] = r.wait_s, r.p_lowc, r.evade, r.in_grid
-        return LookupResult(w.reshape(batch), pl.reshape(batch), ev.reshape(batch), ig.reshape(batch))
+                w[sel], pl[sel], ev[sel], ig[sel], ib[sel] = r.wait_s, r.p_lowc, r.evade, r.in_grid, r.in_box
+                mt[sel] = m.turn_rate_deg
+        return LookupResult(w.reshape(batch), pl.reshape(batch), ev.reshape(batch), ig.reshape(batch),
+                            ib.reshape(batch), mt.reshape(batch))

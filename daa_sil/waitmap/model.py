@@ -35,6 +35,9 @@ TABLE1_DVH = ((-5.0, 0.15), (-3.0, 0.20), (0.0, 0.30), (3.0, 0.20), (5.0, 0.15))
 TABLE1_DV = ((-10.0, 0.10), (-5.0, 0.15), (-2.5, 0.15), (0.0, 0.20), (2.5, 0.15), (5.0, 0.15), (10.0, 0.10))
 TABLE1_TURN = ((-5.0, 0.20), (-2.5, 0.20), (0.0, 0.20), (2.5, 0.20), (5.0, 0.20))
 
+#: the wait-time definitions a map can store (see :mod:`.solve`)
+WAIT_DEFINITIONS = ("paper", "until_evade")
+
 #: the initial turn rates (deg/s, + = left) the paper's figures vary
 PAPER_TURN_RATES = (-5.0, -2.5, 0.0, 2.5, 5.0)
 
@@ -57,6 +60,11 @@ class MdpParams:
     lowc_value: "float | None" = None  #: terminal value of LoWC; None = -c3 dt / (1 - gamma)
     exit_value: float = 0.0  #: terminal value of EXIT (intruder left the box)
     horizon: float = 60.0  #: wait-time truncation H, s
+    #: which wait time the map stores (:data:`WAIT_DEFINITIONS`): ``paper`` = E[T_LoWC | LoWC within H]
+    #: under the waiting chain (paper Sec. II), ``until_evade`` = E[min(T_LoWC or evade-optimal, H)]
+    wait_definition: str = "paper"
+    #: LoWC-probability floor: a state with P(LoWC within H) < p_min is no threat and gets W = H
+    p_min: float = 1e-3
     p_horizontal: float = 0.5  #: probability that a step is a horizontal (vs vertical) maneuver
     turn_persistence: float = 0.8  #: probability of keeping the conditioned turn rate each step
     dvh: tuple = TABLE1_DVH
@@ -64,6 +72,8 @@ class MdpParams:
     turn: tuple = TABLE1_TURN
 
     def __post_init__(self):
+        if self.wait_definition not in WAIT_DEFINITIONS:
+            raise UsageError(f"unknown wait definition {self.wait_definition!r}; allowed: {', '.join(WAIT_DEFINITIONS)}")
         if self.preset not in PRESETS:
             raise UsageError(f"unknown threshold preset {self.preset!r}; allowed: {', '.join(PRESETS)}")
         checks = [("gamma", 0.0 < self.gamma < 1.0, "in (0, 1)"), ("dt", self.dt > 0, "> 0"),
@@ -71,6 +81,7 @@ class MdpParams:
                   ("horizon", self.horizon >= self.dt, ">= dt"), ("sep_floor", self.sep_floor > 0, "> 0"),
                   ("p_horizontal", 0.0 <= self.p_horizontal <= 1.0, "in [0, 1]"),
                   ("turn_persistence", 0.0 <= self.turn_persistence <= 1.0, "in [0, 1]"),
+                  ("p_min", 0.0 < self.p_min < 1.0, "in (0, 1)"),
                   ("c1", self.c1 >= 0, ">= 0"), ("c2", self.c2 >= 0, ">= 0"), ("max_iter", self.max_iter >= 1, ">= 1")]
         for name, ok, allowed in checks:
             if not ok:

@@ -1,7 +1,8 @@
 """Wait-map files: one ``.npz`` per map holding the arrays plus a ``meta.json`` entry.
 
 ``meta.json`` (UTF-8 JSON inside the archive) records ``format`` (:data:`FORMAT_VERSION`), the grid
-(``Grid.to_dict``), every MDP parameter (``MdpParams.to_dict``, including the threshold preset),
+(``Grid.to_dict``), every MDP parameter (``MdpParams.to_dict``, including the threshold preset, the
+wait definition and the LoWC-probability floor ``p_min``),
 the conditioning turn rate, solver statistics, and ``content_hash`` = SHA-256 over the metadata
 (without the hash) and every array's dtype, shape and bytes. :func:`load` re-computes the hash, so
 a corrupt, truncated or edited file fails with one-line :class:`~daa_sil.errors.FileFormatError`;
@@ -27,8 +28,8 @@ from .grid import grid_from_dict
 from .lookup import WaitMap, WaitMapFamily
 from .model import MdpParams
 
-FORMAT_VERSION = "daa-sil-waitmap/1"
-ARRAYS = ("wait_s", "p_lowc", "p_act", "q_wait", "q_evade", "lowc")
+FORMAT_VERSION = "daa-sil-waitmap/2"
+ARRAYS = ("wait_s", "p_lowc", "t_lowc", "q_wait", "lowc")
 FAMILY_INDEX = "family.json"
 #: first bytes of a zip archive (an .npz is one); anything else is not a wait map
 _ZIP_MAGIC = b"PK\x03\x04"
@@ -47,9 +48,10 @@ def _content_hash(meta: dict, arrays: dict) -> str:
 
 def _meta(wm: WaitMap) -> dict:
     return {"format": FORMAT_VERSION, "grid": wm.grid.to_dict(), "params": wm.params.to_dict(),
-            "preset": wm.params.preset, "turn_rate_deg": float(wm.turn_rate_deg), "stats": wm.stats,
-            "arrays": list(ARRAYS), "units": {"wait_s": "s", "p_lowc": "1", "p_act": "1",
-                                               "q_wait": "reward", "q_evade": "reward", "lowc": "bool"}}
+            "preset": wm.params.preset, "wait_definition": wm.params.wait_definition, "p_min": wm.params.p_min,
+            "turn_rate_deg": float(wm.turn_rate_deg), "stats": wm.stats,
+            "arrays": list(ARRAYS), "units": {"wait_s": "s", "p_lowc": "1", "t_lowc": "s",
+                                               "q_wait": "reward", "lowc": "bool"}}
 
 
 def map_filename(turn_rate_deg: float) -> str:
@@ -98,7 +100,8 @@ def load(path: "str | os.PathLike") -> WaitMap:
         raise FileFormatError(f"{path}: metadata is not valid JSON") from None
     fmt = meta.get("format") if isinstance(meta, dict) else None
     if fmt != FORMAT_VERSION:
-        raise FileFormatError(f"{path}: unsupported wait-map format {fmt!r}; this version reads {FORMAT_VERSION!r}")
+        hint = " (rebuild it with 'daa-sil waitmap build')" if str(fmt).startswith("daa-sil-waitmap/") else ""
+        raise FileFormatError(f"{path}: unsupported wait-map format {fmt!r}; this version reads {FORMAT_VERSION!r}{hint}")
     missing = [n for n in ARRAYS if n not in data]
     if missing:
         raise FileFormatError(f"{path}: missing arrays {missing}")
@@ -119,7 +122,7 @@ def load(path: "str | os.PathLike") -> WaitMap:
 
 def _check_values(path: Path, data: dict, horizon: float) -> None:
     """Refuse maps whose values cannot be right (NaN, negative waits, probabilities outside [0, 1])."""
-    for name, lo, hi in (("wait_s", 0.0, horizon), ("p_lowc", 0.0, 1.0), ("p_act", 0.0, 1.0)):
+    for name, lo, hi in (("wait_s", 0.0, horizon), ("p_lowc", 0.0, 1.0), ("t_lowc", 0.0, horizon)):
         a = np.asarray(data[name])
         if a.dtype.kind != "f":
             raise FileFormatError(f"{path}: array {name} has dtype {a.dtype}, expected floating point")
@@ -128,9 +131,8 @@ def _check_values(path: Path, data: dict, horizon: float) -> None:
             v = a[bad].flat[0]
             raise FileFormatError(f"{path}: {int(bad.sum())} values of {name} outside [{lo:g}, {hi:g}] "
                                   f"(e.g. {float(v)!r}); the map is invalid")
-    for name in ("q_wait", "q_evade"):
-        if not np.isfinite(data[name]).all():
-            raise FileFormatError(f"{path}: array {name} has non-finite values; the map is invalid")
+    if not np.isfinite(data["q_wait"]).all():
+        raise FileFormatError(f"{path}: array q_wait has non-finite values; the map is invalid")
     if data["lowc"].dtype != np.bool_:
         raise FileFormatError(f"{path}: array lowc has dtype {data['lowc'].dtype}, expected bool")
 

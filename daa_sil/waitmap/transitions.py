@@ -138,7 +138,9 @@ def expected_reward(grid: Grid, params: MdpParams, turn_rate_deg: float) -> np.n
     """Expected wait reward ``E[R_w(S') | S]`` per grid state (shape ``grid.shape``).
 
     Evaluated at the *continuous* next states of every maneuver outcome (including those that
-    leave the box), with vi saturated at its axis limits like the transitions.
+    leave the box), with vi saturated at its axis limits like the transitions. The HMD term of an
+    outcome depends on (dx, dy, vi, theta) only and the vertical term on ``dh' = dh + vh dt`` only,
+    so ``C1/HMD`` is computed once per outcome and combined with each distinct ``dh'``.
     """
     out: Outcome = outcomes(params, turn_rate_deg)
     g = grid
@@ -150,12 +152,14 @@ def expected_reward(grid: Grid, params: MdpParams, turn_rate_deg: float) -> np.n
     dyn = dy + vi * np.sin(th) * params.dt
     vin = np.clip(vi + out.dvi, g.axis("vi").lo, g.axis("vi").hi)
     thn = th + out.dtheta
-    dhn = (g.axis("dh").values[:, None] + g.axis("vh").values[None, :] * params.dt)  # (ndh, nvh)
+    s, v = relative_sv(dxn, dyn, 0.0, vin, 0.0, thn, params.v_own)
+    a_h = params.c1 / np.maximum(wc.hmd(s, v, params.hmd_horizon), params.sep_floor)  # (ndx, ndy, nvi, nth, M)
+    dhn = g.axis("dh").values[:, None] + g.axis("vh").values[None, :] * params.dt  # (ndh, nvh)
+    a_v = params.c2 / np.maximum(np.abs(dhn), params.sep_floor)
     R = np.empty(g.shape)
     for ih in range(g.shape[2]):
         for iv in range(g.shape[4]):
-            r = reward_of(dxn, dyn, dhn[ih, iv], vin, thn, params)  # (ndx, ndy, nvi, nth, M)
-            R[:, :, ih, :, iv, :] = r @ out.prob
+            R[:, :, ih, :, iv, :] = params.c3 * params.dt - np.minimum(a_h, a_v[ih, iv]) @ out.prob
     return R
 
 
@@ -174,15 +178,29 @@ class Transitions:
     def nk(self) -> int:
         return self.kin.shape[0]
 
-    def apply(self, V: np.ndarray) -> np.ndarray:
-        """``P_in @ V`` over grid states (EXIT mass excluded); ``V`` is ``(S,)`` or ``(S, m)``."""
+    def _kin_T(self) -> sp.csr_matrix:
+        # K^T as CSR: ``V (nx, nk) @ K^T`` is a dense-times-sparse product with no transposed copies
+        # (and no BLAS threads, which under load were 3-10x slower than this for small nk)
+        if getattr(self, "_kt", None) is None:
+            self._kt = self.kin.T.tocsr()
+        return self._kt
+
+    def apply(self, V: np.ndarray, dtype=np.float64) -> np.ndarray:
+        """``P_in @ V`` over grid states (EXIT mass excluded); ``V`` is ``(S,)`` or ``(S, m)``.
+
+        Columns are applied one at a time (a 1-D sparse product is faster than scipy's multi-vector
+        one). ``dtype=np.float32`` runs the products in single precision (used for the wait-time
+        probabilities, which need ~1e-6, not for value iteration)."""
+        if V.ndim == 2:
+            return np.stack([self.apply(V[:, j], dtype) for j in range(V.shape[1])], axis=1)
         S, nk = self.grid.size, self.nk
-        tail = V.shape[1:]
-        m = int(np.prod(tail)) if tail else 1
-        V3 = V.reshape(S // nk, nk, m)
-        U = (self.kin @ V3.transpose(1, 0, 2).reshape(nk, -1)).reshape(nk, S // nk, m).transpose(1, 0, 2)
-        out = self.spatial @ U.reshape(S, m)
-        return out.reshape((S,) + tail)
+        kt, spm = self._kin_T(), self.spatial
+        if dtype == np.float32:
+            if getattr(self, "_f32", None) is None:
+                self._f32 = (kt.astype(np.float32), spm.astype(np.float32))
+            kt, spm = self._f32
+        U = np.asarray(np.ascontiguousarray(V, dtype=dtype).reshape(S // nk, nk) @ kt)
+        return spm @ U.reshape(S)
 
 
 def build_transitions(grid: Grid, params: MdpParams, turn_rate_deg: float) -> Transitions:

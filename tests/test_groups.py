@@ -1,0 +1,74 @@
+"""The group table (paper Table 2 + ablations) as data, group files and campaign overrides."""
+
+import pytest
+
+from daa_sil.campaign import CampaignConfig
+from daa_sil.errors import UsageError
+from daa_sil.groups import PAPER_GROUPS, group_spec, group_table, load_group_file, parse_groups
+
+
+def test_table_holds_the_papers_groups_and_the_ablations():
+    t = group_table()
+    assert list(t)[:5] == list(PAPER_GROUPS) == ["B-1", "B-2", "IC-1", "ID-1", "ID-2"]
+    assert {"ID-2-projl", "ID-2-map"} <= set(t)
+    # paper Table 2: latency type / value and wait
+    assert t["B-1"].delay_model().mean() == 4.0 and t["ID-1"].delay_model().mean() == 4.0
+    assert t["IC-1"].delay_model().mean() == 5.0
+    assert t["B-2"].delay_model().kind == t["ID-2"].delay_model().kind == "gaussian"
+    assert [t[g].wait_mode for g in PAPER_GROUPS] == ["none", "none", "constant", "map", "map"]
+    assert t["IC-1"].policy().constant_wait_s == 5.0
+    assert not t["B-1"].policy().blending and not t["B-2"].policy().blending and t["ID-2"].policy().blending
+    # the ablations fly ID-2's link and differ only in the wait function / ProjL veto
+    for name, mode, projl in (("ID-2-projl", "always", True), ("ID-2-map", "map", False)):
+        pol = t[name].policy()
+        assert (pol.wait_mode, pol.projl, pol.name) == (mode, projl, name)
+        assert t[name].latency == t["ID-2"].latency
+    assert all(t[g].policy().projl for g in PAPER_GROUPS)
+
+
+def test_parse_names_and_errors():
+    assert [g.name for g in parse_groups("id-2, B-1")] == ["ID-2", "B-1"]
+    assert [g.name for g in parse_groups(None)] == list(PAPER_GROUPS)
+    with pytest.raises(UsageError, match="unknown group 'X'"):
+        parse_groups("B-1,X")
+    with pytest.raises(UsageError, match="given twice"):
+        parse_groups("B-1,b-1")
+
+
+def test_group_file_with_base_and_overrides(tmp_path):
+    f = tmp_path / "g.yaml"
+    f.write_text("slow-wt:\n  base: ID-2\n  wait_threshold_s: 8\n  latency: {type: constant, seconds: 2}\n"
+                 "mine:\n  setup: integrated\n  latency: {type: constant, seconds: 1}\n  wait: 3\n")
+    a, b = parse_groups(str(f))
+    assert (a.name, a.wait_mode, a.wait_threshold_s, a.delay_model().mean()) == ("slow-wt", "map", 8.0, 2.0)
+    assert a.blending and a.projl  # inherited from ID-2
+    assert (b.wait_mode, b.policy().constant_wait_s) == ("constant", 3.0)
+
+
+@pytest.mark.parametrize("body, message", [
+    ("g:\n  base: ID-2\n  wiat: map\n", "unknown field 'wiat'"),
+    ("g:\n  base: ID-2\n  wait: sometimes\n", "wait must be none, map, always or a number"),
+    ("g:\n  base: ID-2\n  projl: 3\n", "projl must be true or false"),
+    ("g:\n  base: ID-2\n  latency: {type: constant}\n", "missing seconds"),
+    ("g:\n  base: ID-9\n", "unknown group 'ID-9'"),
+    ("'a b':\n  base: ID-2\n", "bad group name 'a b'"),
+    ("[1, 2]\n", "expected a mapping"),
+])
+def test_bad_group_file_is_one_line(tmp_path, body, message):
+    f = tmp_path / "bad.yaml"
+    f.write_text(body)
+    with pytest.raises(UsageError, match=message) as ei:
+        load_group_file(f)
+    assert "\n" not in str(ei.value)
+
+
+def test_campaign_overrides_apply_to_the_right_groups():
+    cfg = CampaignConfig(groups=("B-2", "IC-1", "ID-2", "ID-2-projl"), wt=7.0, projl_lookahead=12.0,
+                         latency="const:0.5").validate()
+    eff = {g.name: g for g in cfg.effective_groups}
+    assert eff["B-2"].wait_threshold_s == 4.0  # no wait function: W_T does not apply
+    assert all(eff[g].wait_threshold_s == 7.0 for g in ("IC-1", "ID-2", "ID-2-projl"))
+    assert all(g.projl_horizon_s == 12.0 and g.delay_model().mean() == 0.5 for g in eff.values())
+    # the definitions as given stay as they were (campaign.json records both)
+    assert {g.name: g.wait_threshold_s for g in cfg.groups}["ID-2"] == 4.0
+    assert CampaignConfig.from_dict(cfg.to_dict()) == cfg

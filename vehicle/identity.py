@@ -1,0 +1,90 @@
+"""The vehicle's MAVLink identity: an ArduPlane-compatible fixed wing, and its flight modes.
+
+Why ArduPlane: ground stations decode ``custom_mode`` by the HEARTBEAT's autopilot field. With
+``MAV_AUTOPILOT_GENERIC`` MAVProxy falls back to ArduPlane's table anyway (our old codes 0/1/2 read
+as MANUAL / CIRCLE / STABILIZE) and MAVSDK decodes modes only for PX4 and ArduPilot. Presenting as
+ArduPilot (``MAV_AUTOPILOT_ARDUPILOTMEGA``, ``MAV_TYPE_FIXED_WING``) and mapping each authority to
+the ArduPlane mode that does the same thing makes every stock client show a true name:
+
+======================  ==============  =====================================================
+authority (agent)       ArduPlane mode  why this mode
+======================  ==============  =====================================================
+pilot                   GUIDED (15)     the aircraft flies setpoints sent from the ground
+daa (DAA, blend,        AVOID_ADSB (14) ArduPilot's mode while its ADS-B avoidance flies
+override, link lost)
+hold (agent waits)      CRUISE (7)      holds the last course, climb rate and speed: what the
+                                        agent does while it waits for the delayed pilot
+======================  ==============  =====================================================
+
+(LOITER would read "Hold" in MAVSDK, but an ArduPlane in LOITER circles; ours flies straight on.)
+
+Mode requests (``MAV_CMD_DO_SET_MODE``, the ``SET_MODE`` message): the agent decides authority
+every step (the paper's Algorithm 1), and a ground station cannot override it, so
+
+* ``GUIDED`` (the pilot's own mode) is ``ACCEPTED`` while the pilot has authority (nothing to
+  change; clients such as MAVSDK ask for it before a DO_REPOSITION) and ``TEMPORARILY_REJECTED``
+  while the agent holds it (AVOID_ADSB / CRUISE: it hands back when the conflict is resolved);
+* ``AVOID_ADSB`` and ``CRUISE`` are ``DENIED``: only the agent enters them;
+* any other mode, or a request without ``MAV_MODE_FLAG_CUSTOM_MODE_ENABLED``: ``DENIED``.
+
+The agent itself is switched on and off with the ``DAA_ENABLE`` parameter (as ArduPilot's ADS-B
+avoidance with ``AVD_ENABLE``), never by a mode. Every request is logged like a parameter write.
+
+``base_mode`` follows ArduPlane: CUSTOM_MODE_ENABLED | STABILIZE | SAFETY_ARMED, plus GUIDED in
+GUIDED and AVOID_ADSB. The aircraft is always airborne and armed: ARM is accepted (it already is),
+DISARM fails.
+"""
+
+from __future__ import annotations
+
+from daa_sil.link.codec import mavlink as M
+
+AUTOPILOT = M.MAV_AUTOPILOT_ARDUPILOTMEGA
+VEHICLE_TYPE = M.MAV_TYPE_FIXED_WING
+
+#: ArduPlane mode numbers (ArduPlane's ``Mode::Number``) -> names, as MAVProxy / pymavlink spell them
+PLANE_MODES = {0: "MANUAL", 1: "CIRCLE", 2: "STABILIZE", 3: "TRAINING", 4: "ACRO", 5: "FBWA", 6: "FBWB",
+               7: "CRUISE", 8: "AUTOTUNE", 10: "AUTO", 11: "RTL", 12: "LOITER", 13: "TAKEOFF", 14: "AVOID_ADSB",
+               15: "GUIDED", 16: "INITIALISING"}
+GUIDED, AVOID_ADSB, CRUISE = 15, 14, 7
+#: authority -> ArduPlane mode number
+AUTHORITY_MODE = {"pilot": GUIDED, "daa": AVOID_ADSB, "hold": CRUISE}
+#: capabilities actually served (AUTOPILOT_VERSION): MAVLink 2, COMMAND_INT (DO_REPOSITION, modes),
+#: SET_POSITION_TARGET_GLOBAL_INT velocity setpoints, and the C-cast parameter encoding (integer
+#: parameters travel as their float value, as ArduPilot does). No missions, no FTP.
+CAPABILITIES = (M.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+                | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
+
+
+def mode_of(authority: str, agent_enabled: bool = True) -> int:
+    """ArduPlane mode number shown for ``authority`` (GUIDED whenever the agent is off)."""
+    if not agent_enabled:
+        return GUIDED
+    return AUTHORITY_MODE.get(authority, GUIDED)
+
+
+def base_mode(mode: int) -> int:
+    """HEARTBEAT ``base_mode`` for ArduPlane mode ``mode`` (airborne, armed)."""
+    b = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED | M.MAV_MODE_FLAG_SAFETY_ARMED
+    if mode in (GUIDED, AVOID_ADSB):
+        b |= M.MAV_MODE_FLAG_GUIDED_ENABLED
+    return b
+
+
+def mode_name(mode: int) -> str:
+    return PLANE_MODES.get(int(mode), f"MODE{int(mode)}")
+
+
+def mode_request(base: int, custom: int, current: int) -> "tuple[int, str]":
+    """Decide a mode request while the vehicle shows mode ``current``: ``(MAV_RESULT, one-line reason)``."""
+    if not int(base) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        return M.MAV_RESULT_DENIED, "mode: CUSTOM_MODE_ENABLED flag missing"
+    custom = int(custom)
+    if custom == GUIDED:
+        if int(current) == GUIDED:
+            return M.MAV_RESULT_ACCEPTED, "mode GUIDED: the pilot has authority"
+        return M.MAV_RESULT_TEMPORARILY_REJECTED, f"GUIDED refused: DAA agent flies ({mode_name(current)})"
+    if custom in (AVOID_ADSB, CRUISE):
+        return M.MAV_RESULT_DENIED, f"mode {mode_name(custom)}: set by the DAA agent only"
+    return M.MAV_RESULT_DENIED, f"mode {mode_name(custom)} not available; use GUIDED"

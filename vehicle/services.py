@@ -1,0 +1,288 @@
+"""What the vehicle answers to a ground station, as an ArduPlane would (no sockets, no clock).
+
+:class:`GcsServices` takes one received message and returns the messages to send back. It is
+split the way the timing needs it:
+
+* **reads** (:meth:`GcsServices.is_read`, :meth:`GcsServices.read`): PARAM_REQUEST_LIST / _READ,
+  TIMESYNC, PING, REQUEST_DATA_STREAM, MISSION_REQUEST_LIST, FILE_TRANSFER_PROTOCOL, and the
+  COMMAND_LONG / COMMAND_INT that change nothing the simulation uses (REQUEST_MESSAGE,
+  GET_HOME_POSITION, SET_ / GET_MESSAGE_INTERVAL, REQUEST_AUTOPILOT_CAPABILITIES, ARM / DISARM,
+  unknown commands). Rates are per link, so a tap asking for rates changes only its own stream.
+  In realtime the node answers reads as they arrive; in lockstep at the step boundary.
+* **writes** (:meth:`GcsServices.write`): PARAM_SET, SET_MODE and DO_SET_MODE. A PARAM_SET changes
+  the agent's policy, so the node applies writes only at a step boundary (the change holds from
+  the step after arrival) and only from the GCS link (through the shim, delayed like pilot
+  commands); from the tap only with ``tap_writable``. Mode requests change nothing the agent
+  decides (:mod:`vehicle.identity`) but are answered and logged the same way. Each write is kept
+  as a :class:`SettingEvent` for the step log.
+
+Pilot commands (PILOT_MANEUVER, SET_POSITION_TARGET_GLOBAL_INT, COMMAND_INT DO_REPOSITION) are
+the node's (they go through :class:`vehicle.commands.CommandGate`).
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass, field
+
+from daa_sil.link.codec import mavlink as M
+
+from . import identity as ident
+from . import telemetry as T
+from .params import ParamTable
+from .streams import StreamRates, msg_name
+
+SYSID, COMPID = 1, 1
+CMD_ACK_FOR_SET_MODE = M.MAVLINK_MSG_ID_SET_MODE  #: ArduPilot acks the SET_MODE message with command = 11
+FORCE_DISARM_MAGIC = 21196
+FTP_OP_NACK, FTP_ERR_UNKNOWN_COMMAND = 129, 7
+
+_READ_COMMANDS = {M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_GET_HOME_POSITION, M.MAV_CMD_SET_MESSAGE_INTERVAL,
+                  M.MAV_CMD_GET_MESSAGE_INTERVAL, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+                  M.MAV_CMD_COMPONENT_ARM_DISARM}
+_WRITE_COMMANDS = {M.MAV_CMD_DO_SET_MODE}
+#: pilot commands that come as COMMAND_INT / COMMAND_LONG (handled by the node with the gate)
+PILOT_COMMANDS = {M.MAV_CMD_DO_REPOSITION}
+_READ_TYPES = {"PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "TIMESYNC", "PING", "REQUEST_DATA_STREAM",
+               "MISSION_REQUEST_LIST", "FILE_TRANSFER_PROTOCOL"}
+_WRITE_TYPES = {"PARAM_SET", "SET_MODE"}
+
+
+@dataclass
+class SettingEvent:
+    """One parameter or mode write as the step log keeps it (times are vehicle sim time, s)."""
+
+    kind: str  #: "param" or "mode"
+    name: str
+    old: float
+    new: float
+    status: str  #: accepted / unchanged / read_only / out_of_range / not_integer / unknown / denied_tap / denied
+    link: str  #: "gcs" or "tap"
+    source: tuple
+    t_received: float
+    t_applied: float
+    t_sent: "float | None" = None  #: the sender's SYSTEM_TIME stamp in the same datagram, if any
+    reason: str = ""
+
+    def as_dict(self) -> dict:
+        d = dict(self.__dict__)
+        d["source"] = list(self.source)
+        for k in ("old", "new"):
+            d[k] = None if not math.isfinite(d[k]) else d[k]
+        return d
+
+
+def _targets_us(msg) -> bool:
+    ts = getattr(msg, "target_system", 0)
+    tc = getattr(msg, "target_component", 0)
+    return ts in (0, SYSID) and tc in (0, COMPID)
+
+
+def _text(s: str, severity: int = M.MAV_SEVERITY_INFO):
+    return T.statustext(s[:50], severity)
+
+
+def _ack(msg, command: int, result: int):
+    return M.MAVLink_command_ack_message(int(command) & 0xFFFF, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
+
+
+@dataclass
+class GcsServices:
+    """Parameter, mode, rate and request handling for one vehicle (see the module docstring).
+
+    ``get_policy`` / ``set_policy`` read and replace the onboard core's AllocationPolicy;
+    ``latest`` returns the newest step's telemetry ``{msg_id: [messages]}`` (REQUEST_MESSAGE
+    answers with the latest state); ``now`` the vehicle's sim time (s); ``step_t`` the step a write
+    applied now holds from (s).
+    """
+
+    params: ParamTable
+    get_policy: object
+    set_policy: object
+    latest: object
+    now: object
+    dt: float = 1.0
+    tap_writable: bool = False
+    step_t: object = None  #: () -> the step a write takes effect at (s); default ``now``
+    current_mode: object = None  #: () -> the ArduPlane mode the vehicle shows now
+    rates: dict = field(default_factory=dict)
+    events: list = field(default_factory=list)
+    answered: int = 0
+
+    def link_rates(self, link: str) -> StreamRates:
+        if link not in self.rates:
+            self.rates[link] = StreamRates(self.dt)
+        return self.rates[link]
+
+    # -- classification ------------------------------------------------------------------------------
+    @staticmethod
+    def is_read(msg) -> bool:
+        t = msg.get_type()
+        if t in ("COMMAND_LONG", "COMMAND_INT"):
+            return int(msg.command) not in _WRITE_COMMANDS and int(msg.command) not in PILOT_COMMANDS
+        return t in _READ_TYPES
+
+    @staticmethod
+    def is_write(msg) -> bool:
+        t = msg.get_type()
+        if t in ("COMMAND_LONG", "COMMAND_INT"):
+            return int(msg.command) in _WRITE_COMMANDS
+        return t in _WRITE_TYPES
+
+    # -- reads ---------------------------------------------------------------------------------------
+    def read(self, msg, link: str) -> list:
+        """Answer a read request (see :meth:`is_read`); never raises on content."""
+        t = msg.get_type()
+        out: list = []
+        if t == "PARAM_REQUEST_LIST":
+            if _targets_us(msg):
+                pol = self.get_policy()
+                out = [T.param_value(s.name, self.params.value(s, pol), s.ptype, len(self.params), i)
+                       for i, s in enumerate(self.params.specs)]
+        elif t == "PARAM_REQUEST_READ":
+            if _targets_us(msg):
+                found = self.params.find(msg.param_id, int(msg.param_index))
+                if found is None:
+                    out = [_text(f"PARAM_REQUEST_READ: unknown parameter {str(msg.param_id)!r}", M.MAV_SEVERITY_WARNING)]
+                else:
+                    i, s = found
+                    out = [T.param_value(s.name, self.params.value(s, self.get_policy()), s.ptype, len(self.params), i)]
+        elif t == "TIMESYNC":
+            if int(msg.tc1) == 0:  # a request; tc1 != 0 is someone's reply
+                out = [M.MAVLink_timesync_message(int(self.now() * 1e9), int(msg.ts1))]
+        elif t == "PING":
+            if int(msg.target_system) == 0 and int(msg.target_component) == 0:  # a request
+                out = [M.MAVLink_ping_message(int(msg.time_usec), int(msg.seq), msg.get_srcSystem(), msg.get_srcComponent())]
+        elif t == "REQUEST_DATA_STREAM":
+            if _targets_us(msg):
+                note = self.link_rates(link).request_data_stream(msg.req_stream_id, float(msg.req_message_rate),
+                                                                 bool(msg.start_stop), self.now())
+                out = [_text(note)] if note else []
+        elif t == "MISSION_REQUEST_LIST":
+            if _targets_us(msg):
+                out = [M.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), 0,
+                                                       getattr(msg, "mission_type", 0))]
+        elif t == "FILE_TRANSFER_PROTOCOL":
+            out = self._ftp_nak(msg)
+        elif t in ("COMMAND_LONG", "COMMAND_INT"):
+            out = self._command_read(msg, link)
+        if out:
+            self.answered += 1
+        return out
+
+    def _ftp_nak(self, msg) -> list:
+        """No FTP here: NAK every request (UnknownCommand) so clients fall back to the parameter protocol."""
+        if int(msg.target_system) not in (0, SYSID) or int(msg.target_component) not in (0, COMPID):
+            return []
+        p = bytes(msg.payload)
+        if len(p) < 12:
+            return []
+        seq, session, opcode = struct.unpack_from("<HBB", p, 0)
+        reply = struct.pack("<HBBBBBBI", (seq + 1) & 0xFFFF, session, FTP_OP_NACK, 1, opcode, 0, 0, 0)
+        reply += bytes([FTP_ERR_UNKNOWN_COMMAND])
+        reply += bytes(251 - len(reply))
+        return [M.MAVLink_file_transfer_protocol_message(0, msg.get_srcSystem(), msg.get_srcComponent(), list(reply))]
+
+    def _command_read(self, msg, link: str) -> list:
+        if not _targets_us(msg):
+            return []
+        c = int(msg.command)
+        p1, p2 = float(msg.param1), float(msg.param2)
+        if c == M.MAV_CMD_REQUEST_MESSAGE or c == M.MAV_CMD_GET_HOME_POSITION \
+                or c == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+            mid = (M.MAVLINK_MSG_ID_HOME_POSITION if c == M.MAV_CMD_GET_HOME_POSITION else
+                   M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if c == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES else
+                   int(p1) if math.isfinite(p1) else -1)
+            msgs = self._one_shot(mid, link)
+            if msgs is None:
+                return [_ack(msg, c, M.MAV_RESULT_UNSUPPORTED),
+                        _text(f"REQUEST_MESSAGE: {msg_name(mid)} is not produced here", M.MAV_SEVERITY_WARNING)]
+            return [_ack(msg, c, M.MAV_RESULT_ACCEPTED)] + msgs
+        if c == M.MAV_CMD_SET_MESSAGE_INTERVAL:
+            result, reason = self.link_rates(link).set_interval(int(p1) if math.isfinite(p1) else -2, p2, self.now())
+            out = [_ack(msg, c, result)]
+            return out + ([_text(reason, M.MAV_SEVERITY_WARNING)] if reason else [])
+        if c == M.MAV_CMD_GET_MESSAGE_INTERVAL:
+            mid = int(p1) if math.isfinite(p1) else -1
+            return [_ack(msg, c, M.MAV_RESULT_ACCEPTED), T.message_interval(mid, self.link_rates(link).interval_us(mid))]
+        if c == M.MAV_CMD_COMPONENT_ARM_DISARM:
+            if p1 == 1.0:
+                return [_ack(msg, c, M.MAV_RESULT_ACCEPTED), _text("Arm: already armed (airborne)")]
+            forced = int(p2) == FORCE_DISARM_MAGIC
+            return [_ack(msg, c, M.MAV_RESULT_FAILED),
+                    _text("Disarm refused: airborne" + (" (forced too)" if forced else ""), M.MAV_SEVERITY_WARNING)]
+        return [_ack(msg, c, M.MAV_RESULT_UNSUPPORTED)]
+
+    def _one_shot(self, mid: int, link: str) -> "list | None":
+        if mid == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            return [T.autopilot_version()]
+        latest = self.latest() or {}
+        if mid in latest and latest[mid]:
+            return list(latest[mid])
+        if self.link_rates(link).request_once(mid):
+            return []  # streamed, but no step yet: it goes out with the first step
+        return None
+
+    # -- writes --------------------------------------------------------------------------------------
+    def write(self, msg, link: str, t_received: float, t_sent: "float | None" = None) -> list:
+        """Apply a PARAM_SET / SET_MODE / DO_SET_MODE now (call at a step boundary); returns replies."""
+        t = msg.get_type()
+        if t == "PARAM_SET":
+            return self._param_set(msg, link, t_received, t_sent)
+        if t == "SET_MODE":
+            if int(msg.target_system) not in (0, SYSID):
+                return []
+            return self._mode(msg, CMD_ACK_FOR_SET_MODE, int(msg.base_mode), int(msg.custom_mode), link,
+                              t_received, t_sent)
+        if t in ("COMMAND_LONG", "COMMAND_INT") and int(msg.command) == M.MAV_CMD_DO_SET_MODE and _targets_us(msg):
+            p1, p2 = float(msg.param1), float(msg.param2)
+            if not (math.isfinite(p1) and math.isfinite(p2)):
+                return [_ack(msg, M.MAV_CMD_DO_SET_MODE, M.MAV_RESULT_DENIED)]
+            return self._mode(msg, M.MAV_CMD_DO_SET_MODE, int(p1), int(p2), link, t_received, t_sent)
+        return []
+
+    def _log(self, **kw) -> SettingEvent:
+        ev = SettingEvent(t_applied=(self.step_t or self.now)(), **kw)
+        self.events.append(ev)
+        return ev
+
+    def _param_set(self, msg, link, t_received, t_sent) -> list:
+        if not _targets_us(msg):
+            return []
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        pol = self.get_policy()
+        res = self.params.set(msg.param_id, float(msg.param_value), pol)
+        name = res.spec.name if res.spec is not None else str(msg.param_id).split("\0", 1)[0]
+        status, reason = res.status, res.reason
+        if link == "tap" and not self.tap_writable and res.spec is not None:
+            status, reason = "denied_tap", f"{name}: tap is read-only (--tap-writable)"
+        elif res.status == "accepted":
+            self.set_policy(res.policy)
+        value = res.value if status in ("accepted", "unchanged") else res.old
+        self._log(kind="param", name=name, old=res.old, new=value, status=status, link="tap" if link == "tap" else "gcs",
+                  source=src, t_received=t_received, t_sent=t_sent, reason=reason)
+        out = []
+        if res.spec is not None:
+            i, _ = self.params.find(name)
+            out.append(T.param_value(res.spec.name, value, res.spec.ptype, len(self.params), i))
+        if status != "unchanged":
+            sev = M.MAV_SEVERITY_INFO if status == "accepted" else M.MAV_SEVERITY_WARNING
+            out.append(_text(reason, sev))
+        self.answered += 1
+        return out
+
+    def _mode(self, msg, ack_cmd, base, custom, link, t_received, t_sent) -> list:
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        current = int(self.current_mode()) if self.current_mode is not None else ident.GUIDED
+        result, reason = ident.mode_request(base, custom, current)
+        status = {M.MAV_RESULT_ACCEPTED: "accepted", M.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily_rejected"}.get(
+            result, "denied")
+        if link == "tap" and not self.tap_writable:
+            result, status, reason = M.MAV_RESULT_DENIED, "denied_tap", "mode: tap is read-only (--tap-writable)"
+        self._log(kind="mode", name=ident.mode_name(custom), old=float(current), new=float(current), status=status,
+                  link="tap" if link == "tap" else "gcs", source=src, t_received=t_received, t_sent=t_sent,
+                  reason=reason)
+        self.answered += 1
+        sev = M.MAV_SEVERITY_INFO if result == M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_WARNING
+        return [_ack(msg, ack_cmd, result), _text(reason, sev)]
