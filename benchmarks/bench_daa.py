@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from daa_sil.agent import AgentMemory, PilotInput, agent_step, policy_for_group
+from daa_sil.agent import AgentMemory, PilotInput, WaitValue, agent_step, policy_for_group
 from daa_sil.daa import DaaConfig, compute_bands
 from daa_sil.kinematics import AircraftState, Command
 
@@ -58,7 +58,7 @@ def main() -> None:
     args = ap.parse_args()
     cfg = DaaConfig.for_preset(args.preset)
     policy = policy_for_group("ID-2")
-    lookup = lambda o, i: np.full(o.shape[0], 6.0)  # noqa: E731
+    lookup = lambda o, i, rate: WaitValue.constant(o.shape[0], 6.0)  # noqa: E731  (a 6 s wait everywhere)
     own, intr, pilot = make_batch(args.n)
     # warm-up at full size: the first call pays the first-touch page faults of its working arrays;
     # the fast-time loop calls this every step, so the steady state is the relevant figure
