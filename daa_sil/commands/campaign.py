@@ -231,7 +231,7 @@ def run_cmd(args) -> int:
     else:
         print(f"campaign {summary.out_dir}: {summary.chunks_run} chunks run, {summary.chunks_skipped} skipped "
               f"({len(cfg.groups)} groups x {cfg.n_encounters} encounters, preset {cfg.preset}, wait maps "
-              f"{cfg.waitmap}) in "
+              f"{cfg.map_source}, reading {cfg.effective_reading.name}) in "
               f"{summary.wall_s:.1f} s ({rate:,.0f} encounter-steps/s)", file=sys.stderr)
     return 0
 
