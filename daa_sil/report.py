@@ -480,7 +480,10 @@ def _provenance_section(studies: dict) -> list[str]:
     L = ["## Decision provenance", "",
          "Share of wait/no-wait decisions the map decided (`decided_by = map`: the decision would differ with "
          "the map replaced by \"always wait\"), the share where map and ProjL both said no-wait, and the share of "
-         "wait-map lookups inside the map's box; encounter-level 95 % CIs (ratio estimators).", ""]
+         "wait-map lookups inside the map's box; encounter-level 95 % CIs (ratio estimators). In groups without a "
+         "map the same test applies to the group's wait function: B-1/B-2 wait w = 0 s (below W_T, so every decision "
+         "they take as no-wait without ProjL counts as decided by it), IC-1 waits a constant 5 s (at or above W_T: "
+         "never differs from \"always wait\"), ID-2-projl always waits. Only the ID groups read a map.", ""]
     for lab, st in studies.items():
         have = [g for g in st.groups if st.provenance.get(g)]
         if not have:
@@ -492,7 +495,7 @@ def _provenance_section(studies: dict) -> list[str]:
                          _cell(st, g, "map_or_both_share", "pct", False), _cell(st, g, "in_box_share", "pct", False),
                          fmt(st.sum(g, "n_dec").value, "int") if st.has(g, "n_dec") else "–",
                          fmt(st.sum(g, "n_lookup").value, "int") if st.has(g, "n_lookup") else "–"])
-        L += [f"*{lab}*", "", _table(["group", "decided by the map", "map or both", "lookups inside the box",
+        L += [f"*{lab}*", "", _table(["group", "decided by the wait function (map)", "map or both", "lookups inside the box",
                                       "decisions", "lookups"], rows), ""]
     return L
 

@@ -133,7 +133,7 @@ def test_ablation_and_provenance_sections(tmp_path):
     assert e.lo < 0.2 < e.hi and e.hi - e.lo < 0.05
     e = st.estimate("ID-2", "in_box_share")
     assert e.lo < 0.25 < e.hi
-    assert "decided by the map" in text
+    assert "decided by the wait function (map)" in text and "Only the ID groups read a map" in text
 
 
 def test_identical_ablation_says_the_map_adds_nothing(tmp_path):
