@@ -183,6 +183,10 @@ def build_blocks(sources, recount: Sequence[str] = ()) -> list[Block]:
         name, settings = parse_recount(spec)
         for b in blocks:
             st = {**b.reading.settings, **settings}
+            if st == b.reading.settings:  # the source already counts this way: nothing to add
+                continue
+            how = ", ".join(f"{k}={v}" for k, v in settings.items())
+            st["description"] = f"{b.reading.settings.get('description', b.reading.name)}; recounted with {how}"
             derived.append(replace(b, label=f"{b.label}+{name}", reading=Reading(f"{b.reading.name}+{name}", st,
                                                                               b.reading.source)))
     blocks += derived

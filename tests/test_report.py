@@ -93,6 +93,10 @@ def test_two_readings_side_by_side_and_a_recount(tmp_path):
     assert rec["literal"]["value"] > rec["literal+exec"]["value"]
     assert rec["feet"]["value"] > rec["feet+exec"]["value"]
     assert (tmp_path / "rep" / "fig9_allocation-feet.png").is_file()
+    # a recount the source already counts by adds no column; another keeps its own description
+    labels = [blk.label for blk in build_blocks([a, b], ["pb:received=pilot+blend"])]
+    assert labels == ["literal", "feet", "literal+pb"]
+    assert "recounted with received=pilot+blend" in build_blocks([a], ["pb:received=pilot+blend"])[1].reading.settings["description"]
 
 
 def test_seeds_of_one_reading_are_compared(tmp_path):
