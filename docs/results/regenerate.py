@@ -1,7 +1,7 @@
 """Rebuild the committed results pages from the study runs, in one command (resumable).
 
     python docs/results/regenerate.py --runs runs/results [--encounters 10000] [--seed 20261201]
-                                      [--sweep-encounters 5000] [--workers 2] [--skip-sweeps]
+                                      [--sweep-encounters 2000] [--workers 2] [--skip-sweeps] [--skip-readings]
 
 Runs, each resumable (an interrupted call picks up where it stopped):
 
@@ -58,31 +58,34 @@ def main() -> int:
     ap.add_argument("--runs", type=Path, default=Path("runs/results"), help="where the campaigns go")
     ap.add_argument("--encounters", type=int, default=10000)
     ap.add_argument("--seed", type=int, default=20261201, help="the report seed (fresh: nothing was tuned on it)")
-    ap.add_argument("--sweep-encounters", type=int, default=5000)
+    ap.add_argument("--sweep-encounters", type=int, default=2000,
+                    help="encounters per sweep point (3 groups each; 18 points)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--skip-sweeps", action="store_true")
+    ap.add_argument("--skip-readings", action="store_true", help="only the sweeps and the wait-map figures")
     ap.add_argument("--docs", type=Path, default=ROOT / "docs" / "results")
     args = ap.parse_args()
     if args.seed in DEV_SEEDS:
         ap.error(f"--seed {args.seed} was used while developing; the report needs a fresh seed")
     runs = args.runs
     dirs = []
-    for r in READINGS:
-        d = runs / r
-        _campaign(d, ["--reading", r, "--seed", str(args.seed)], args)
-        dirs.append(d)
-    seed0 = runs / "literal-seed0"
-    _campaign(seed0, ["--reading", "literal", "--seed", "0"], args)
-    dirs.append(seed0)
-    note = (f"Report seed {args.seed} (nothing was tuned on it). Seeds used while developing the models and "
-            f"this analysis: {', '.join(map(str, DEV_SEEDS))}; the literal reading on seed 0 is shown as a second "
-            f"column so that the seed-agreement section can test whether the two seeds agree.")
-    _run(["campaign", "report", *map(str, dirs), "--recount", "paper-counts:window=whole,received=pilot+blend",
-          "--out", str(args.docs / "paper-10k"), "--note", note], "report")
+    if not args.skip_readings:
+        for r in READINGS:
+            d = runs / r
+            _campaign(d, ["--reading", r, "--seed", str(args.seed)], args)
+            dirs.append(d)
+        seed0 = runs / "literal-seed0"
+        _campaign(seed0, ["--reading", "literal", "--seed", "0"], args)
+        dirs.append(seed0)
+        note = (f"Report seed {args.seed} (nothing was tuned on it). Seeds used while developing the models and "
+                f"this analysis: {', '.join(map(str, DEV_SEEDS))}; the literal reading on seed 0 is shown as a second "
+                f"column so that the seed-agreement section can test whether the two seeds agree.")
+        _run(["campaign", "report", *map(str, dirs), "--recount", "paper-counts:window=whole,received=pilot+blend",
+              "--out", str(args.docs / "paper-10k"), "--note", note], "report")
     if not args.skip_sweeps:
         sweep_dirs = []
         for name, vary in SWEEPS:
-            d = runs / f"sweep-{name}"
+            d = runs / f"sweep-{name}-{args.sweep_encounters}"  # one directory per size: --resume checks it
             argv = ["campaign", "sweep", "--vary", vary, "--groups", SWEEP_GROUPS, "--encounters",
                     str(args.sweep_encounters), "--seed", str(args.seed), "--out", str(d), "--workers",
                     str(args.workers), "--no-progress"]
