@@ -40,7 +40,7 @@ def synth_campaign(d: Path, n: int, seed: int = 0) -> Path:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from daa_sil.fasttime import ENCOUNTER_SCHEMA
+    from daa_sil.study.fasttime import ENCOUNTER_SCHEMA
 
     rng = np.random.default_rng(seed)
     active = rng.random(n) < 0.15
@@ -97,7 +97,17 @@ def old_report_module():
     spec = importlib.util.spec_from_loader("daa_sil._report_baseline", loader=None)
     mod = importlib.util.module_from_spec(spec)
     mod.__package__ = "daa_sil"
-    exec(compile(src, f"{BASELINE_COMMIT}:daa_sil/report.py", "exec"), mod.__dict__)  # noqa: S102
+    # the baseline's relative imports name the modules by their paths of that commit
+    import daa_sil.files
+    import daa_sil.study.metrics
+    aliases = {"daa_sil.io": daa_sil.files, "daa_sil.metrics": daa_sil.study.metrics}
+    added = [k for k in aliases if k not in sys.modules]
+    sys.modules.update({k: aliases[k] for k in added})
+    try:
+        exec(compile(src, f"{BASELINE_COMMIT}:daa_sil/report.py", "exec"), mod.__dict__)  # noqa: S102
+    finally:
+        for k in added:
+            del sys.modules[k]
     return mod
 
 
@@ -118,10 +128,10 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=2, help="runs per figure (best is printed)")
     args = ap.parse_args()
 
-    from daa_sil import report
-    from daa_sil.findings import evaluate_all
-    from daa_sil.metrics import Study
-    from daa_sil.stats import DEFAULT_REPLICATES
+    from daa_sil.study import report
+    from daa_sil.study.findings import evaluate_all
+    from daa_sil.study.metrics import Study
+    from daa_sil.study.stats import DEFAULT_REPLICATES
 
     reps = args.replicates or DEFAULT_REPLICATES
     with tempfile.TemporaryDirectory(prefix="bench-report-") as tmp:

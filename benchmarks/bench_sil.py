@@ -55,7 +55,7 @@ def main() -> None:
         return bench_realtime(args)
 
     from daa_sil.commands.run import RunOptions, run_sil
-    from daa_sil.scenario import load_scenario, scenario_from_dict
+    from daa_sil.sil.scenario import load_scenario, scenario_from_dict
 
     sc = load_scenario(args.scenario)
     d = sc.to_dict()
@@ -224,7 +224,7 @@ def bench_realtime(args) -> None:
     import yaml
 
     from daa_sil.commands.run import RunOptions, run_sil
-    from daa_sil.scenario import load_scenario, scenario_from_dict
+    from daa_sil.sil.scenario import load_scenario, scenario_from_dict
     from daa_sil.steplog import read_steplog
 
     speeds = [float(x) for x in args.speeds.split(",") if x.strip()]

@@ -88,7 +88,7 @@ def parse_setting(text: str) -> "tuple[float, str, float]":
 
 
 async def _amain(args) -> int:
-    from daa_sil.scenario import load_scenario
+    from daa_sil.sil.scenario import load_scenario
     from gcs.node import GcsNode, GcsOptions
 
     check_speed(args.speed)
@@ -97,7 +97,7 @@ async def _amain(args) -> int:
         raise UsageError("give --scenario FILE (pilot model settings, origin); without it only --pilot scripted "
                          "with no commands is possible")
     key = load_key_option(args.key)
-    from daa_sil.link.connstr import LISTEN, SEND, parse_connection
+    from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
 
     vconn = parse_connection(args.vehicle, "--vehicle", SEND)
     if args.listen is not None:

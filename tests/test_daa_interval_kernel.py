@@ -5,9 +5,9 @@ vertical window, zero relative velocity, zero length)."""
 import numpy as np
 import pytest
 
-from daa_sil import wellclear as wc
+from daa_sil.geometry import wellclear as wc
 from daa_sil.daa import trajectory as T
-from daa_sil.thresholds import get_thresholds
+from daa_sil.geometry.thresholds import get_thresholds
 
 
 def _edge_cases(th):

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from daa_sil import encounters as E
+from daa_sil.models import encounters as E
 from daa_sil.errors import FileFormatError, UsageError
-from daa_sil.kinematics import advance
-from daa_sil.units import DEG
-from daa_sil.wellclear import t_cpa
+from daa_sil.geometry.kinematics import advance
+from daa_sil.geometry.units import DEG
+from daa_sil.geometry.wellclear import t_cpa
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +88,7 @@ def test_turning_intruders_pass_cpa_check_with_simulator_dynamics(sample):
 
 
 def test_no_start_inside_warning_volume(sample):
-    from daa_sil.wellclear import time_to_violation
+    from daa_sil.geometry.wellclear import time_to_violation
 
     s = sample.own.position() - sample.intr[:, 0].position()
     v = sample.own.velocity() - sample.intr[:, 0].velocity()

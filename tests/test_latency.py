@@ -1,4 +1,4 @@
-"""Delay models, spec parsing and the seeded delay process (daa_sil.latency)."""
+"""Delay models, spec parsing and the seeded delay process (daa_sil.models.latency)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 from scipy import stats
 
 from daa_sil.errors import FileFormatError, UsageError
-from daa_sil.latency import (BatchedDelay, Constant, DelayProcess, Trace, TruncatedGaussian, Uniform,
+from daa_sil.models.latency import (BatchedDelay, Constant, DelayProcess, Trace, TruncatedGaussian, Uniform,
                              delay_model_from_dict, parse_delay_spec)
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from daa_sil import metrics as M
+from daa_sil.study import metrics as M
 from daa_sil.errors import FileFormatError, UsageError
 
 
@@ -243,7 +243,7 @@ def test_decision_tables_from_parquet_types(in_box):
 def test_a_new_counting_is_one_table_entry(monkeypatch):
     """A simulator column for a new way of counting plus one COUNT_SOURCES entry is all a reading
     needs: the study, the allowed values and --recount pick it up."""
-    from daa_sil.report import parse_recount
+    from daa_sil.study.report import parse_recount
 
     keys, tab = M.COUNT_SOURCES["received"]
     monkeypatch.setitem(M.COUNT_SOURCES, "received", (keys, {**tab, ("overridden", "active"): ("n_daa_override",)}))

@@ -32,9 +32,9 @@ from pathlib import Path
 import pytest
 
 from daa_sil.link.codec import MavCodec, generate_key_file, load_key, mavlink as d, signing_timestamp_now
-from daa_sil.link.endpoint import open_endpoint
-from daa_sil.link.shim import DelayShim, ShimConfig
-from daa_sil.latency import Constant
+from daa_sil.sil.endpoint import open_endpoint
+from daa_sil.sil.shim import DelayShim, ShimConfig
+from daa_sil.models.latency import Constant
 
 ROOT = Path(__file__).resolve().parents[1]
 KEY = hashlib.sha256(b"daa-sil security test").digest()

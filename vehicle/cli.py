@@ -92,7 +92,7 @@ def _options(args):
     if args.start_timeout is not None and not (math.isfinite(args.start_timeout) and 0.1 <= args.start_timeout <= 3600):
         raise UsageError(f"--start-timeout must be within [0.1, 3600] s, got {args.start_timeout:g}")
     key = load_key_option(args.key)
-    from daa_sil.link.connstr import LISTEN, SEND, parse_connection
+    from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
 
     tap = None if args.tap in (None, "", "none") else args.tap
     out = parse_connection(args.out, "--out", SEND)
@@ -106,7 +106,7 @@ def _options(args):
         raise UsageError("--tap-writable needs --tap udp:HOST:PORT")
     live = None if args.live in (None, "", "none") else args.live
     if live is not None:
-        from daa_sil.live import parse_live_address
+        from daa_sil.sil.live import parse_live_address
 
         parse_live_address(live)
     def clock_start(wall0: float) -> None:  # orchestrators time scheduled faults from this line
@@ -119,9 +119,9 @@ def _options(args):
 
 
 async def _amain(args) -> int:
-    from daa_sil.link.connstr import describe
-    from daa_sil.link.endpoint import format_udp_address
-    from daa_sil.scenario import load_scenario
+    from daa_sil.sil.connstr import describe
+    from daa_sil.sil.endpoint import format_udp_address
+    from daa_sil.sil.scenario import load_scenario
     from vehicle.node import VehicleNode
 
     sc = load_scenario(args.scenario)

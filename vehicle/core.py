@@ -1,7 +1,7 @@
 """Glue between a scenario and :class:`daa_sil.onboard.OnboardCore` with N = 1 (no I/O).
 
 :class:`VehicleCore` builds the onboard core from a scenario exactly as fast-time does
-(:func:`daa_sil.scenario.encounter_set` for truth and scripts, the group's
+(:func:`daa_sil.sil.scenario.encounter_set` for truth and scripts, the group's
 :class:`~daa_sil.agent.AllocationPolicy` with the scenario's overrides, the cached wait-map
 family), turns accepted pilot commands into the agent's :class:`~daa_sil.agent.PilotInput`, keeps
 one step-log row per step and encodes the telemetry of a step as MAVLink messages.
@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from daa_sil import agent as A
-from daa_sil.kinematics import Command
-from daa_sil.scenario import Scenario, encounter_set
+from daa_sil.geometry.kinematics import Command
+from daa_sil.sil.scenario import Scenario, encounter_set
 
 from . import telemetry as T
 from .commands import PilotCommand
@@ -63,9 +63,9 @@ def link_delay_processes(sc: Scenario) -> "dict | None":
     (s), i.e. the *configured* one-way delay of a packet sent at ``t`` before the FIFO rule, not a
     measurement. With ``link.epoch_s = 0`` (a draw per datagram) there is no per-step value: None.
     """
-    from daa_sil.latency import DelayProcess
-    from daa_sil.link.shim import delay_stream_seeds
-    from daa_sil.scenario import delay_models
+    from daa_sil.models.latency import DelayProcess
+    from daa_sil.sil.shim import delay_stream_seeds
+    from daa_sil.sil.scenario import delay_models
 
     if sc.link.epoch_s <= 0:
         return None

@@ -23,7 +23,7 @@ Per step ``k`` (``t_k = k`` s, ``docs/architecture.md`` "The step order"):
 Then ``OnboardCore.step(t_k, pilot input)`` decides, the telemetry for ``t_k`` is published (one
 datagram to the peer, and the same undelayed to the observer ``tap`` if set), a step-log row is
 kept (and, with ``live``, sent at once to the Rerun recorder's loopback feed, fire-and-forget:
-:class:`daa_sil.live.LiveSender`), and truth advances. The step log is written atomically at the end, on Ctrl-C and on
+:class:`daa_sil.sil.live.LiveSender`), and truth advances. The step log is written atomically at the end, on Ctrl-C and on
 SIGTERM (:meth:`VehicleNode.write_steplog`).
 
 Hostile input: the endpoint/codec count and drop malformed, forged and replayed packets; the
@@ -44,8 +44,8 @@ from pathlib import Path
 from daa_sil.errors import DaaSilError
 from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec
 from daa_sil.link.codec import mavlink as M
-from daa_sil.link.connstr import LISTEN, SEND, parse_connection
-from daa_sil.link.endpoint import MavEndpoint, Received, _norm_host, format_udp_address, open_endpoint
+from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
+from daa_sil.sil.endpoint import MavEndpoint, Received, _norm_host, format_udp_address, open_endpoint
 
 from . import telemetry as T
 from .commands import CommandGate, PilotCommand, reposition_command
@@ -92,7 +92,7 @@ class VehicleOptions:
     tick_retry_s: float = 2.0
     #: wall seconds to wait for the answer to tick 0 (the partner may still be starting); None = tick_timeout_s
     start_timeout_s: "float | None" = None
-    #: ``udp:127.0.0.1:PORT``: publish each step's step-log row there (:mod:`daa_sil.live`)
+    #: ``udp:127.0.0.1:PORT``: publish each step's step-log row there (:mod:`daa_sil.sil.live`)
     live: "str | None" = None
     #: ``--waitmap``: map preset, grid spec or family directory (None = the default map)
     waitmap: "str | None" = None
@@ -179,7 +179,7 @@ class VehicleNode:
                                     step_t=lambda: self.t, current_mode=self._mode_now)
         self.live = None
         if opts.live:
-            from daa_sil.live import LiveSender
+            from daa_sil.sil.live import LiveSender
 
             self.live = LiveSender(opts.live)
 
@@ -583,7 +583,7 @@ class VehicleNode:
             # slice so a woken vehicle preempts sooner on a busy machine (unprivileged; no-op elsewhere)
             import os
 
-            from daa_sil.link.rtclock import request_short_slice, set_timer_slack
+            from daa_sil.sil.rtclock import request_short_slice, set_timer_slack
 
             self.stats.extra["timer_slack_1us"] = set_timer_slack(1000)
             # DAA_SIL_VEHICLE_SLICE_US: the slice asked for (0 = keep the default; benchmarks compare both)

@@ -9,9 +9,9 @@ import sys
 from pathlib import Path
 
 from ..errors import UsageError
-from ..io import to_jsonable
-from ..readings import READINGS, parse_reading_settings
-from ..thresholds import PRESETS
+from daa_sil.files import to_jsonable
+from daa_sil.config.readings import READINGS, parse_reading_settings
+from daa_sil.geometry.thresholds import PRESETS
 from ._args import finite_float, int_at_least
 
 RUN_EXAMPLES = """examples:
@@ -47,7 +47,7 @@ or a directory from 'daa-sil waitmap build'. Built once and cached in ~/.cache/d
 Results: DIR/<group>/encounters-<chunk>.parquet, DIR/<group>/decisions-<chunk>.parquet,
 DIR/encounters.parquet (the shared encounter set) and DIR/campaign.json.
 
-Readings (--reading; what the paper leaves open about its simulator, daa_sil/readings.py):
+Readings (--reading; what the paper leaves open about its simulator, daa_sil/config/readings.py):
 """ + "\n".join(f"  {r.name:13s} {r.description}" for r in READINGS.values()) + """
 """
 
@@ -181,7 +181,7 @@ def _add_run_options(r) -> None:
 
 
 def _config_from_args(args):
-    from ..campaign import CampaignConfig, load_campaign_json, parse_groups
+    from daa_sil.study.campaign import CampaignConfig, load_campaign_json, parse_groups
 
     given = {"groups": parse_groups(args.groups) if args.groups is not None else None,
              "n_encounters": args.encounters, "seed": args.seed, "chunk_size": args.chunk_size,
@@ -215,7 +215,7 @@ def check_scheduler(scheduler: "str | None", workers: "int | None") -> None:
 
 
 def run_cmd(args) -> int:
-    from ..campaign import run_campaign
+    from daa_sil.study.campaign import run_campaign
 
     cfg = _config_from_args(args)
     check_scheduler(args.scheduler, args.workers)
@@ -237,7 +237,7 @@ def run_cmd(args) -> int:
 
 
 def sweep_cmd(args) -> int:
-    from .. import sweep
+    from daa_sil.study import sweep
 
     if args.collate:
         if args.vary:
@@ -266,9 +266,9 @@ def sweep_cmd(args) -> int:
 
 
 def report_cmd(args) -> int:
-    from .. import report
-    from ..findings import VERDICTS
-    from ..stats import DEFAULT_REPLICATES, DEFAULT_SEED
+    from daa_sil.study import report
+    from daa_sil.study.findings import VERDICTS
+    from daa_sil.study.stats import DEFAULT_REPLICATES, DEFAULT_SEED
 
     dirs = [Path(d) for d in args.dirs]
     for d in dirs:

@@ -9,8 +9,8 @@ import sys
 from ..daa import DaaConfig
 from ..daa import conformance as conf
 from ..errors import UsageError
-from ..io import to_jsonable
-from ..thresholds import PRESETS
+from daa_sil.files import to_jsonable
+from daa_sil.geometry.thresholds import PRESETS
 from ._args import int_at_least
 
 EXAMPLES = """examples:

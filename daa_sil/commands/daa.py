@@ -9,10 +9,10 @@ import numpy as np
 
 from ..daa import ALERT_NAMES, AXIS_NAMES, DIR_NAMES, DaaConfig, compute_bands, resolve
 from ..errors import UsageError
-from ..io import to_jsonable
-from ..kinematics import AircraftState
-from ..thresholds import PRESETS
-from ..units import FPM, KT
+from daa_sil.files import to_jsonable
+from daa_sil.geometry.kinematics import AircraftState
+from daa_sil.geometry.thresholds import PRESETS
+from daa_sil.geometry.units import FPM, KT
 from .geometry import parse_state
 
 EXAMPLES = """examples:

@@ -23,8 +23,8 @@ from typing import Callable
 
 from ..errors import DaaSilError, OutputError, UsageError
 from ._args import check_speed
-from .supervise import (READY_TIMEOUT_S, STOP_GRACE_S, STOP_TERM_S, Child, ProcessGroup, RunMonitor,  # noqa: F401
-                        free_udp_ports, last_error_line, parse_ready_line, parse_shim_ready, python_module_argv)
+from daa_sil.sil.supervise import (READY_TIMEOUT_S, STOP_GRACE_S, STOP_TERM_S, Child, ProcessGroup,
+    RunMonitor, free_udp_ports, last_error_line, parse_ready_line, parse_shim_ready, python_module_argv)
 
 #: wall s the vehicle waits for the answer to tick 0 under ``daa-sil run`` (start-up on a busy machine)
 START_TIMEOUT_S = 120.0
@@ -54,7 +54,7 @@ or a process failed, 2 = bad input, 130 = interrupted (the step log is still wri
 def shim_argv(sc, clock_args: list, key_args: list, stats_json: Path, vehicle_port: int = 0,
               gcs_port: int = 0) -> list[str]:
     """``daa-sil shim`` arguments for scenario ``sc`` (link delays, loss, outages, seed)."""
-    from ..scenario import delay_spec_string
+    from daa_sil.sil.scenario import delay_spec_string
 
     link = sc.link
     argv = python_module_argv("daa_sil.cli") + [
@@ -80,7 +80,7 @@ def summarize_steplog(table, scenario=None) -> dict:
     """
     import numpy as np
 
-    from ..scenario import DECISIONS, check_expectation
+    from daa_sil.sil.scenario import DECISIONS, check_expectation
 
     n = table.num_rows
     col = {name: table.column(name).to_pylist() for name in
@@ -197,8 +197,8 @@ def run_sil(opts: RunOptions) -> dict:
     and ``out_dir/logs/``. Raises DaaSilError if a process fails; KeyboardInterrupt propagates
     after every child is stopped and whatever step log exists is summarised.
     """
-    from ..io import ensure_dir
-    from ..scenario import load_scenario
+    from daa_sil.files import ensure_dir
+    from daa_sil.sil.scenario import load_scenario
 
     sc = load_scenario(opts.scenario_path)
     check_faults_allowed(sc, opts.clock, opts.scenario_path)
@@ -225,7 +225,7 @@ def live_viz(opts: RunOptions) -> bool:
 
 
 def _start_recorder(opts: RunOptions, sc):
-    """A :class:`daa_sil.viz_recorder.BackgroundRecorder` for ``--rrd`` / ``--spawn-viewer`` /
+    """A :class:`daa_sil.viz.recorder.BackgroundRecorder` for ``--rrd`` / ``--spawn-viewer`` /
     ``--connect`` (None without them): an idle helper process now; :func:`_play` lets it prepare once
     the SIL processes are ready and hands it the step log when the vehicle exits. In live mode
     (:func:`live_viz`) it also logs the rows the vehicle sends to ``recorder.live_address`` during the
@@ -234,7 +234,7 @@ def _start_recorder(opts: RunOptions, sc):
     if not (opts.rrd or opts.spawn_viewer or opts.connect):
         return None
     from ..viz import SinkOptions
-    from ..viz_recorder import BackgroundRecorder
+    from daa_sil.viz.recorder import BackgroundRecorder
 
     try:
         return BackgroundRecorder(SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, connect=opts.connect,
@@ -310,7 +310,7 @@ def _gcs_ticks_skipped(log_path: Path) -> "int | None":
 
 
 def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, recorder) -> dict:
-    from ..io import atomic_write_json
+    from daa_sil.files import atomic_write_json
     from ..steplog import read_steplog
 
     t0 = time.monotonic()
@@ -475,7 +475,7 @@ def _check_args(args) -> None:
     if args.key is not None and not args.key.is_file():
         raise UsageError(f"--key: key file {args.key} does not exist")
     if args.tap:
-        from ..link.endpoint import parse_udp_address
+        from daa_sil.sil.endpoint import parse_udp_address
 
         parse_udp_address(args.tap, "--tap")
     if getattr(args, "connect", None):
@@ -493,7 +493,7 @@ def _check_args(args) -> None:
         if rrd.resolve().parent != Path(args.out).resolve():  # --out is created by the run
             check_rrd_path(rrd, overwrite=True)  # a missing/unwritable directory fails before any process starts
     if args.scenario is not None:
-        from ..scenario import load_scenario
+        from daa_sil.sil.scenario import load_scenario
 
         sc = load_scenario(args.scenario)  # fail fast, one line, before any process starts
         check_faults_allowed(sc, args.clock, args.scenario)
@@ -510,7 +510,7 @@ def _options(args, scenario: Path) -> RunOptions:
 
 def _finish(args, result: dict, sc) -> int:
     if args.json:
-        from ..io import to_jsonable
+        from daa_sil.files import to_jsonable
 
         print(json.dumps(to_jsonable(result), indent=2, sort_keys=True))
     else:
@@ -524,8 +524,8 @@ def _finish(args, result: dict, sc) -> int:
 
 
 def run(args) -> int:
-    from ..io import ensure_dir
-    from ..scenario import load_scenario
+    from daa_sil.files import ensure_dir
+    from daa_sil.sil.scenario import load_scenario
 
     _check_args(args)
     ensure_dir(args.out)  # an unusable --out fails here, before the maps are built or anything starts
@@ -544,8 +544,8 @@ def demo_scenario_path() -> Path:
 
 
 def demo(args) -> int:
-    from ..io import ensure_dir
-    from ..scenario import load_scenario
+    from daa_sil.files import ensure_dir
+    from daa_sil.sil.scenario import load_scenario
 
     _check_args(args)
     path = demo_scenario_path()

@@ -13,7 +13,7 @@ from typing import Iterator
 import numpy as np
 
 from ..errors import FileFormatError, UsageError
-from ..thresholds import PRESETS
+from daa_sil.geometry.thresholds import PRESETS
 from ._args import finite_float
 
 STEPLOG_EX = """examples:
@@ -153,7 +153,7 @@ def run_steplog(args) -> int:
 
 def pick_encounter(results, group: str, encounter: "int | None", worst: bool) -> tuple[int, dict]:
     """The encounter id to replay and its result row (``--worst``: max PI among LoWC, else min range)."""
-    from .. import campaign
+    from daa_sil.study import campaign
 
     rows = campaign.read_results(results, "encounters", groups=[group])
     ids = np.asarray(rows.column("encounter_id").to_numpy(zero_copy_only=False))
@@ -176,7 +176,7 @@ def pick_encounter(results, group: str, encounter: "int | None", worst: bool) ->
 
 def campaign_group(results, name: str) -> str:
     """The campaign's group named ``name`` (case-insensitive), or a one-line error listing its groups."""
-    from .. import campaign
+    from daa_sil.study import campaign
 
     out = Path(results)
     cfg = campaign.CampaignConfig.from_dict(campaign.load_campaign_json(out)["config"], str(out / "campaign.json"))
@@ -188,7 +188,8 @@ def campaign_group(results, name: str) -> str:
 
 def replay_steplog(results, group: str, encounter_id: int):
     """Re-simulate one encounter of a campaign with step logging; returns (steplog, encounter row, config)."""
-    from .. import campaign, encounters, fasttime
+    from daa_sil.study import campaign, fasttime
+    from daa_sil.models import encounters
 
     out = Path(results)
     cfg = campaign.CampaignConfig.from_dict(campaign.load_campaign_json(out)["config"], str(out / "campaign.json"))
@@ -210,7 +211,8 @@ def replay_steplog(results, group: str, encounter_id: int):
 
 
 def run_replay(args) -> int:
-    from .. import campaign, steplog, viz
+    from daa_sil.study import campaign
+    from daa_sil import steplog, viz
 
     opts = sink_options(args)
     group = campaign_group(args.results, args.group)

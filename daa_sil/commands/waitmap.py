@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UsageError
-from ..io import to_jsonable
-from ..thresholds import PRESETS
+from daa_sil.files import to_jsonable
+from daa_sil.geometry.thresholds import PRESETS
 from ..waitmap.model import WAIT_DEFINITIONS
 from ._args import finite_float
 
@@ -153,7 +153,7 @@ def run_build(args) -> int:
     from rich.progress import Progress
 
     from .. import waitmap
-    from ..io import ensure_dir
+    from daa_sil.files import ensure_dir
     from ..waitmap.model import params_hash
     from ..waitmap.store import FAMILY_INDEX, map_filename
 

@@ -1,6 +1,6 @@
 """Onboard DAA, DAIDALUS-style (batched over N encounters and M intruders); rules in ``docs/daa.md``.
 
-Contract (ownship :class:`~daa_sil.kinematics.AircraftState` shape ``(N,)``, intruders ``(N, M)``;
+Contract (ownship :class:`~daa_sil.geometry.kinematics.AircraftState` shape ``(N,)``, intruders ``(N, M)``;
 SI units, compass radians):
 
 * :class:`DaaConfig` -- ``DaaConfig.for_preset(name)``: ``do365`` (default) and ``paper`` (project grids

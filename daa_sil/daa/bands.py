@@ -55,8 +55,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..kinematics import TWO_PI, AircraftState
-from ..thresholds import Thresholds
+from daa_sil.geometry.kinematics import TWO_PI, AircraftState
+from daa_sil.geometry.thresholds import Thresholds
 from .alerting import alert_levels, conflict_lists
 from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_SPEED, AXIS_VERTICAL, REGION_MID, REGION_NAMES, REGION_NEAR,
                      REGION_NONE, REGION_RECOVERY, DaaConfig)
@@ -218,7 +218,7 @@ def _path_sizes(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[int, int
 def _axis_state_soa(axis: int, cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, sgn, t, with_value: bool = False) -> tuple:
     """Ownship position and velocity (six component arrays, arguments broadcast) on the maneuver of
     ``axis`` toward side ``sgn`` (+-1) after ``t`` s; ``st``/``ct`` are the sine and cosine of the
-    initial track. Closed forms of :func:`daa_sil.kinematics.advance` for a constant-rate turn and for
+    initial track. Closed forms of :func:`daa_sil.geometry.kinematics.advance` for a constant-rate turn and for
     an acceleration that saturates at the axis limit (with ``cfg.daidalus_grid`` it runs past the limit
     by up to one step, as DAIDALUS evaluates its last candidate, but never below zero speed).
     ``with_value``: ``(components, value)`` with the axis value (track change, vs or gs)."""

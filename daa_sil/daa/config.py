@@ -22,10 +22,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from ..kinematics import Performance
+from daa_sil.geometry.kinematics import Performance
 from ..errors import UsageError
-from ..thresholds import DEFAULT_PRESET, PRESETS, Thresholds, get_thresholds
-from ..units import DEG, FPM, FT, G0, KT, NMI
+from daa_sil.geometry.thresholds import DEFAULT_PRESET, PRESETS, Thresholds, get_thresholds
+from daa_sil.geometry.units import DEG, FPM, FT, G0, KT, NMI
 
 # --- codes -----------------------------------------------------------------------------------
 ALERT_NAMES = ("none", "preventive", "corrective", "warning")
@@ -170,7 +170,7 @@ class DaaConfig:
         return th.with_(name=th.name + "-preventive", zthr=max(th.zthr, self.preventive_zthr))
 
     def performance(self) -> Performance:
-        """The ownship :class:`~daa_sil.kinematics.Performance` these bands assume."""
+        """The ownship :class:`~daa_sil.geometry.kinematics.Performance` these bands assume."""
         return Performance(max_turn_rate=self.turn_rate, horizontal_accel=self.horizontal_accel,
                            vertical_accel=self.vertical_accel, max_vs=self.max_vs,
                            min_gs=self.min_gs, max_gs=self.max_gs)

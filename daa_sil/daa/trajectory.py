@@ -6,7 +6,7 @@ horizontal or vertical limit, or a multi-axis command), sampled at knot times
 continues straight with the knot-``k`` velocity. Two parts are evaluated:
 
 * **tails** (straight after knot ``k``): the exact closed form of
-  :func:`daa_sil.wellclear.violation_interval` (re-stated on contiguous component arrays in
+  :func:`daa_sil.geometry.wellclear.violation_interval` (re-stated on contiguous component arrays in
   :func:`interval_soa`, identical numbers, about 2x faster);
 * **the maneuver between knots** on the true trajectory (arc, parabola), not on its chords. A piece of
   duration ``h`` is within ``A h^2 / 8`` of its chord in position and ``A h / 2`` in velocity (``A`` the
@@ -37,10 +37,11 @@ from typing import Callable
 
 import numpy as np
 
-from .. import wellclear as wc
-from ..frames import wrap_2pi, wrap_pi
-from ..kinematics import _W_EPS, AircraftState, Command, _horizontal_segment, _vertical, fly_command
-from ..thresholds import Thresholds
+from daa_sil.geometry import wellclear as wc
+from daa_sil.geometry.frames import wrap_2pi, wrap_pi
+from daa_sil.geometry.kinematics import (_W_EPS, AircraftState, Command, _horizontal_segment, _vertical,
+    fly_command)
+from daa_sil.geometry.thresholds import Thresholds
 from .config import DaaConfig
 
 #: m/s, the largest velocity error |v - v_chord| left where a chord is used: at a boundary it moves the tau_mod
@@ -102,10 +103,10 @@ def _row_blocks(n: int, per_row: int):
 
 @_in_blocks
 def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`daa_sil.wellclear.violation_interval` over ``[0, length]`` for 1-D component arrays.
+    """:func:`daa_sil.geometry.wellclear.violation_interval` over ``[0, length]`` for 1-D component arrays.
 
-    The same window functions (:func:`~daa_sil.wellclear.vertical_window`,
-    :func:`~daa_sil.wellclear.horizontal_window`), so the results are identical; it is faster because (1) the components are contiguous arrays instead of strided views of ``(..., 3)`` arrays
+    The same window functions (:func:`~daa_sil.geometry.wellclear.vertical_window`,
+    :func:`~daa_sil.geometry.wellclear.horizontal_window`), so the results are identical; it is faster because (1) the components are contiguous arrays instead of strided views of ``(..., 3)`` arrays
     and (2) the horizontal part, which is most of the work, runs only where the vertical window is
     not empty (elsewhere the answer is ``(inf, -inf)`` in both). ``window`` = the vertical window
     ``(lo, hi)`` when the caller has it.
@@ -153,7 +154,7 @@ def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) ->
 
 
 def filtered_interval(s, v, th: Thresholds, length) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`daa_sil.wellclear.violation_interval` over ``[0, length]`` for relative positions ``s``
+    """:func:`daa_sil.geometry.wellclear.violation_interval` over ``[0, length]`` for relative positions ``s``
     and velocities ``v`` (``(..., 3)``, broadcast together), via :func:`interval_soa`."""
     shape = np.broadcast_shapes(s.shape[:-1], v.shape[:-1], np.shape(length))
     comp = [np.ascontiguousarray(np.broadcast_to(a[..., i], shape)).ravel() for a in (s, v) for i in range(3)]
@@ -403,7 +404,7 @@ class PathEvaluator:
     """Relative geometry of maneuver paths against straight-line intruders, evaluated for any volume.
 
     Built once per (paths, intruders); :meth:`evaluate` then gives :class:`PathConflicts` for a
-    well-clear volume or a cylinder (a :class:`~daa_sil.thresholds.Thresholds` with TTHR = 0).
+    well-clear volume or a cylinder (a :class:`~daa_sil.geometry.thresholds.Thresholds` with TTHR = 0).
     ``tails``: True (every knot), ``"last"`` (only the last knot's) or False. ``exits=False``: the last
     exits are not searched (a segment that starts violating ends its violation at its end; use it when
     only first entries matter, as for SM).
@@ -762,7 +763,7 @@ def _update(seg_in, seg_out, sid, t_in, t_out) -> None:
 
 @_in_blocks
 def _wcv_soa(sx, sy, sz, vx, vy, vz, th: Thresholds) -> np.ndarray:
-    """:func:`daa_sil.wellclear.wcv` on component arrays (relative position and velocity)."""
+    """:func:`daa_sil.geometry.wellclear.wcv` on component arrays (relative position and velocity)."""
     D, TT = th.dthr, th.tthr
     r2 = sx * sx + sy * sy
     sv = sx * vx + sy * vy
@@ -797,7 +798,7 @@ def maneuver_times(own: AircraftState, cmd: Command, cfg: DaaConfig) -> tuple[np
 
 
 class _CommandMotion:
-    """:func:`daa_sil.kinematics.fly_command` from one state, with the start of each of its three phases
+    """:func:`daa_sil.geometry.kinematics.fly_command` from one state, with the start of each of its three phases
     (turn and speed change together, then the longer one alone, then straight) computed once. The state
     at a time is then one piece of one phase: the same operations as ``fly_command`` (so the same
     numbers), with the sines and cosines of each phase's initial track reused (4 instead of 20 per state)."""
@@ -860,7 +861,7 @@ class _CommandMotion:
 
 def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverPaths:
     """The single path (P = 1) of each ownship flying ``cmd`` kinematically (as
-    :func:`daa_sil.kinematics.fly_command`), with knots at the spacing of the axes the command changes
+    :func:`daa_sil.geometry.kinematics.fly_command`), with knots at the spacing of the axes the command changes
     (the finest one if several), so a single-axis command has the knots of its band candidate."""
     cmd = cmd.resolved(own)
     perf = cfg.performance()
@@ -896,7 +897,7 @@ def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverP
 def command_conflicts(own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
                       t_end: float, exits: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """``(t_in, t_out)`` per intruder ``(N, M)`` when the ownship flies ``cmd`` (kinematically, as
-    :func:`daa_sil.kinematics.fly_command`, evaluated on the true trajectory) and the intruders fly
+    :func:`daa_sil.geometry.kinematics.fly_command`, evaluated on the true trajectory) and the intruders fly
     straight, over ``[0, t_end]`` s. With ``exits=False`` only ``t_in`` is exact (``t_out`` may be
     late by up to one knot interval during the maneuver)."""
     paths = command_paths(own, cmd, cfg)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_path
+from daa_sil.files import atomic_path
 from .lookup import WaitMap, WaitMapFamily
 from .model import DEG
 

@@ -45,7 +45,7 @@ from typing import Iterator, Mapping
 import numpy as np
 from scipy import stats as sps
 
-from .errors import UsageError
+from daa_sil.errors import UsageError
 
 CONF = 0.95
 #: bootstrap replicates per report unless told otherwise

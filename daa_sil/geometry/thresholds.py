@@ -1,6 +1,6 @@
 """Well-clear and NMAC threshold presets.
 
-Three presets (``daa_sil.thresholds.PRESETS``):
+Three presets (``daa_sil.geometry.thresholds.PRESETS``):
 
 ``do365`` (default)
     RTCA DO-365 Phase I cooperative DAA well clear as the standard's text states it: DMOD = HMD* =
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
 
-from .errors import UsageError
+from daa_sil.errors import UsageError
 from .units import FT, NMI
 
 

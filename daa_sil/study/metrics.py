@@ -4,7 +4,7 @@ per decision; a pyarrow Table or a dict of numpy arrays).
 
 **The study** (:class:`Study`, what the report uses). Encounters are the independent units; every
 group of a campaign flies the same encounters, so the per-encounter columns of all groups are
-aligned by ``encounter_id`` into one panel and resampled together (:mod:`daa_sil.stats`: one
+aligned by ``encounter_id`` into one panel and resampled together (:mod:`daa_sil.study.stats`: one
 cluster-bootstrap weight matrix for all groups, so every comparison between groups is paired).
 Every metric is a function of per-encounter sums (:data:`METRICS`):
 
@@ -29,7 +29,7 @@ Every metric is a function of per-encounter sums (:data:`METRICS`):
   differ with the map replaced by "always wait"), ``in_box_share`` (lookups inside the map's box).
 
 Changes vs the baseline group (B-2) and between any two groups are ratios/differences of the same
-resampled sums (paired). Zeros get exact upper bounds (:func:`daa_sil.stats.zero_upper_bounds`).
+resampled sums (paired). Zeros get exact upper bounds (:func:`daa_sil.study.stats.zero_upper_bounds`).
 
 **Readings** (:class:`Reading`): a campaign directory is one named reading of the paper
 (``campaign.json`` ``config.reading`` / ``config.readings``, missing = ``default``). What a reading
@@ -57,9 +57,9 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 from scipy import stats
 
-from .errors import FileFormatError, UsageError
-from .stats import (DEFAULT_REPLICATES, DEFAULT_SEED, ClusterBootstrap, Sample, clopper_pearson, mcnemar_exact,
-                    zero_upper_bounds)
+from daa_sil.errors import FileFormatError, UsageError
+from .stats import (DEFAULT_REPLICATES, DEFAULT_SEED, ClusterBootstrap, Sample, clopper_pearson,
+    mcnemar_exact, zero_upper_bounds)
 
 CONF = 0.95
 BASELINE_GROUP = "B-2"
@@ -316,7 +316,7 @@ COUNTING_HELP = {
 }
 #: counted quantity -> (the counting settings it depends on, {their values: per-encounter columns summed})
 #: decisions happen only in the active phase, so their whole-encounter count is the active one;
-#: commands also arrive outside it (``n_*_whole`` columns of :mod:`daa_sil.fasttime`)
+#: commands also arrive outside it (``n_*_whole`` columns of :mod:`daa_sil.study.fasttime`)
 def _decisions(col: str) -> tuple:
     return (("window",), {("active",): (col,), ("whole",): (col,)})
 
@@ -422,7 +422,7 @@ def normalise_decisions(dec) -> "dict | None":
     if dec is None:
         return None
     names = dec.column_names if hasattr(dec, "column_names") else list(dec)
-    if "in_box" not in names and "wait_in_box" in names:  # the simulator's name (daa_sil.fasttime)
+    if "in_box" not in names and "wait_in_box" in names:  # the simulator's name (daa_sil.study.fasttime)
         if hasattr(dec, "rename_columns"):
             dec = dec.rename_columns(["in_box" if c == "wait_in_box" else c for c in names])
         else:

@@ -39,8 +39,8 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Callable, Iterable, NamedTuple
 
-from ..errors import UsageError
-from .codec import MavCodec, MAVLinkMessage
+from daa_sil.errors import UsageError
+from daa_sil.link.codec import MavCodec, MAVLinkMessage
 
 Address = tuple[str, int]
 DEFAULT_HOST = "127.0.0.1"

@@ -4,10 +4,10 @@ At step ``k`` (``t_k = k dt``, ``dt = 1 s``, ``T = 240 s``; ``docs/architecture.
 
 1. **GCS / pilot** -- the pilot observes the newest telemetry whose downlink release time is
    ``<= t_k`` (per-encounter telemetry history + FIFO release rule of
-   :func:`daa_sil.link.delayline.fifo_release`), its display (:class:`daa_sil.pilot.PilotDisplay`,
+   :func:`daa_sil.link.delayline.fifo_release`), its display (:class:`daa_sil.models.pilot.PilotDisplay`,
    the same one the SIL GCS uses) is refreshed from that view where it changed (DAA bands only
    where the observed alert reaches ``PilotConfig.alert_level_min``), and
-   :meth:`daa_sil.pilot.PilotModel.step` decides. The GCS sends a packet every step (a heartbeat,
+   :meth:`daa_sil.models.pilot.PilotModel.step` decides. The GCS sends a packet every step (a heartbeat,
    plus the streamed command when the pilot has one) stamped ``t_k``; packets are released on the
    vehicle side at ``max(t_k + d_up(t_k), previous release)``.
 2. **Vehicle** -- :meth:`daa_sil.onboard.OnboardCore.step` with the newest command released at or
@@ -20,7 +20,7 @@ Everything is vectorised over encounters; the only Python loops are over steps (
 "release everything due" loop). Random streams per encounter ``i`` come from its seed
 ``encounters.seed[i]`` (:func:`encounter_streams`): the pilot, uplink and downlink delay
 processes, identical for every group. Delay processes are piecewise constant per ``epoch_s``
-(:class:`daa_sil.latency.BatchedDelay`), as in the SIL shim.
+(:class:`daa_sil.models.latency.BatchedDelay`), as in the SIL shim.
 
 Results: :func:`simulate` returns the per-encounter and per-decision tables of the architecture
 contract ("Campaign result tables") and, with ``record_steps=True``, the step log
@@ -32,7 +32,7 @@ n_link_lost``; ``n_pilot_received = n_pilot_exec + n_blend + n_daa_override`` (f
 received during the active phase); ``n_blend_intent`` = blends of a pilot command that carries a
 maneuver intent (an (axis, direction) -- not "hold" before the pilot's first maneuver);
 ``n_blend_intent = n_blend_exact + n_blend_axis + (intent blends matching neither) <= n_blend``.
-Over the whole encounter (the ``whole`` counting window of :mod:`daa_sil.readings`):
+Over the whole encounter (the ``whole`` counting window of :mod:`daa_sil.config.readings`):
 ``n_pilot_received_whole`` fresh pilot commands that reached the vehicle at any step, and
 ``n_pilot_exec_whole`` of them executed as sent (outside the active phase the ownship flies the
 received command; inside, the ``pilot`` decisions). Decision provenance: ``n_by_map``,
@@ -47,17 +47,17 @@ from typing import Sequence
 import numpy as np
 import pyarrow as pa
 
-from . import steplog as sl
-from .agent import (BY_BOTH, BY_MAP, BY_PROJL, CODE_NAMES, D_BLEND, D_DAA_OVERRIDE, D_LINK_LOST, D_NO_WAIT, D_PILOT, D_STALE, D_WAIT,
-                    AllocationPolicy, PilotInput, make_wait_lookup)
-from .daa.config import DaaConfig
-from .errors import UsageError
-from .kinematics import AircraftState, Command
-from .latency import DEFAULT_EPOCH_S, BatchedDelay, DelayModel
-from .link.delayline import fifo_release
-from .onboard import OnboardCore, StepOutput
-from .pilot import PilotConfig, PilotDisplay, PilotModel
-from .thresholds import get_thresholds
+from daa_sil import steplog as sl
+from daa_sil.agent import (BY_BOTH, BY_MAP, BY_PROJL, CODE_NAMES, D_BLEND, D_DAA_OVERRIDE, D_LINK_LOST,
+    D_NO_WAIT, D_PILOT, D_STALE, D_WAIT, AllocationPolicy, PilotInput, make_wait_lookup)
+from daa_sil.daa.config import DaaConfig
+from daa_sil.errors import UsageError
+from daa_sil.geometry.kinematics import AircraftState, Command
+from daa_sil.models.latency import DEFAULT_EPOCH_S, BatchedDelay, DelayModel
+from daa_sil.link.delayline import fifo_release
+from daa_sil.onboard import OnboardCore, StepOutput
+from daa_sil.models.pilot import PilotConfig, PilotDisplay, PilotModel
+from daa_sil.geometry.thresholds import get_thresholds
 
 #: stream indices under an encounter's seed
 STREAM_PILOT, STREAM_UP, STREAM_DOWN = 0, 1, 2
@@ -263,7 +263,7 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
              seeds: "np.ndarray | None" = None, preset: "str | None" = None, duration_s: "float | None" = None,
              dt: "float | None" = None, epoch_s: float = DEFAULT_EPOCH_S, group: str = "",
              record_steps: bool = False, wait_lookup=None) -> tuple[pa.Table, pa.Table, "pa.Table | None"]:
-    """Simulate every encounter of ``encounters`` (an :class:`~daa_sil.encounters.EncounterSet`).
+    """Simulate every encounter of ``encounters`` (an :class:`~daa_sil.models.encounters.EncounterSet`).
 
     ``policy`` the group's allocation policy; ``latency_up``/``latency_down`` one-way delay models
     (s); ``pilot_cfg`` (default :class:`PilotConfig`); ``daa_cfg`` (default: DO-365B with the

@@ -31,8 +31,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields, replace
 
-from .errors import UsageError
-from .units import FT
+from daa_sil.errors import UsageError
+from daa_sil.geometry.units import FT
 
 UNITS = ("metres", "feet")
 PILOT_STARTS = ("corrective", "preventive", "detection")
@@ -64,14 +64,14 @@ class Reading:
 
     # --- what the reading changes in the simulation ---------------------------------------------
     def encounter_overrides(self) -> dict:
-        """:class:`daa_sil.encounters.EncounterConfig` fields (Table 6 HMD / VMD ranges, m)."""
+        """:class:`daa_sil.models.encounters.EncounterConfig` fields (Table 6 HMD / VMD ranges, m)."""
         if self.units == "feet":
             return {"hmd_max_m": 2750.0 * FT, "vmd_max_m": 915.0 * FT}
         return {}
 
     def pilot_config(self, base=None):
-        """The :class:`daa_sil.pilot.PilotConfig` of this reading (from ``base``, default PilotConfig())."""
-        from .pilot import PilotConfig
+        """The :class:`daa_sil.models.pilot.PilotConfig` of this reading (from ``base``, default PilotConfig())."""
+        from daa_sil.models.pilot import PilotConfig
 
         base = base if base is not None else PilotConfig()
         level = 1 if self.pilot_start == "preventive" else 2

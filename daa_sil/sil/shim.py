@@ -15,14 +15,14 @@ datagram that is due while its destination is still unknown is counted as ``no_p
 
 Seeds (:func:`shim_seeds`): the *delays* of a shim seeded ``seed`` are the encounter's fast-time
 delay streams, ``DelayProcess(model, encounter_streams(seed)[STREAM_UP], epoch_s)`` for the up line
-and ``[STREAM_DOWN]`` for the down line (:func:`daa_sil.fasttime.encounter_streams`), so a SIL run
+and ``[STREAM_DOWN]`` for the down line (:func:`daa_sil.study.fasttime.encounter_streams`), so a SIL run
 of a scenario sees draw for draw the delays fast-time gives the same encounter. The *impairment*
 draws (loss, duplication, reordering) come from ``child_seed(SeedSequence(seed), 0)`` (down) /
 ``1`` (up) (:func:`direction_seeds`); fast-time has no impairments.
 
 Parity with fast-time: a packet sent at sim time ``t`` on direction ``dir`` is released at
 ``fifo_release(t, d)`` with ``d = DelayProcess(model, encounter_streams(seed)[STREAM_<DIR>],
-epoch_s).delay(t)`` -- what :func:`daa_sil.fasttime.simulate` computes with
+epoch_s).delay(t)`` -- what :func:`daa_sil.study.fasttime.simulate` computes with
 ``BatchedDelay(model, [streams[STREAM_<DIR>]], epoch_s, duration_s)``; in lockstep it is delivered
 at the first tick ``t_k >= release`` (fast-time: the first step with ``release <= t_k``). This
 needs ``epoch_s > 0``: with per-datagram draws the index counts every datagram (heartbeats too),
@@ -65,7 +65,7 @@ GCS started first.
 start) x ``speed``. A datagram enters its line at its *kernel arrival time* (``SO_TIMESTAMPNS``),
 not when the loop got round to reading it; each line keeps a heap and one timer (a Linux
 ``timerfd``, nanosecond absolute expiry, no polling) armed for its earliest pending release
-(:mod:`daa_sil.link.rtclock`; ``timing="poll"`` or non-Linux: the ``call_at`` + poll fallback).
+(:mod:`daa_sil.sil.rtclock`; ``timing="poll"`` or non-Linux: the ``call_at`` + poll fallback).
 Sockets are read with ``recvmsg`` in bursts from a loop reader.
 
 Send ticks and acks *alone* in their datagram (a mixed datagram is treated as control and its
@@ -95,14 +95,14 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..errors import UsageError
-from ..io import atomic_write_json, to_jsonable
-from ..latency import DEFAULT_EPOCH_S, DelayModel, DelayProcess, as_seed_sequence, child_seed
-from .codec import MavCodec, mavlink
-from .delayline import DelayLine, check_outages
+from daa_sil.errors import UsageError
+from daa_sil.files import atomic_write_json, to_jsonable
+from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel, DelayProcess, as_seed_sequence, child_seed
+from daa_sil.link.codec import MavCodec, mavlink
+from daa_sil.link.delayline import DelayLine, check_outages
 from .endpoint import RCVBUF_BYTES, Address, DropReporter, format_udp_address, parse_udp_address
 from .rtclock import (PreciseTimer, enable_rx_timestamps, request_short_slice, rx_buffer_size, rx_time,
-                      set_timer_slack)
+    set_timer_slack)
 
 CLOCKS = ("realtime", "lockstep")
 TIMINGS = ("precise", "poll")
@@ -128,7 +128,7 @@ def delay_stream_seeds(seed: "int | np.random.SeedSequence | None") -> dict:
     Equal to ``encounter_streams(seed)[STREAM_DOWN]`` / ``[STREAM_UP]`` for an int seed (the
     children ``(2,)`` / ``(1,)`` of ``SeedSequence(seed)``; for a SeedSequence, its children).
     """
-    from ..fasttime import STREAM_DOWN, STREAM_UP
+    from daa_sil.study.fasttime import STREAM_DOWN, STREAM_UP
 
     ss = as_seed_sequence(seed)
     return {"down": child_seed(ss, STREAM_DOWN), "up": child_seed(ss, STREAM_UP)}
@@ -180,7 +180,7 @@ class ShimConfig:
     (``[(t_start, t_end), ...]`` sim s) apply to both directions. ``speed``: sim seconds per wall
     second in realtime mode. ``key``: signing key used to verify control messages in lockstep and the first datagram of a peer.
     ``timing`` (realtime only): ``"precise"`` (default) stamps every datagram with its kernel
-    arrival time and wakes for each release with a timerfd (:mod:`daa_sil.link.rtclock`);
+    arrival time and wakes for each release with a timerfd (:mod:`daa_sil.sil.rtclock`);
     ``"poll"`` stamps on read and uses ``loop.call_at`` ``spin_s`` early, then polls the loop
     (still serving I/O) until the release instant (the selector's millisecond timeout rounding
     otherwise makes releases up to ~1 ms late; ``spin_s`` 0 = no polling). ``"precise"`` falls
@@ -220,7 +220,7 @@ class ShimConfig:
             raise UsageError(f"spin_s must be within [0, 0.05] s, got {self.spin_s!r}")
         for name in ("delay_down", "delay_up"):
             if not isinstance(getattr(self, name), DelayModel):
-                raise UsageError(f"{name} must be a delay model (see daa_sil.latency), got {getattr(self, name)!r}")
+                raise UsageError(f"{name} must be a delay model (see daa_sil.models.latency), got {getattr(self, name)!r}")
         parse_udp_address(self.listen_vehicle, "--listen-vehicle")
         parse_udp_address(self.listen_gcs, "--listen-gcs")
         for name in ("vehicle", "gcs"):

@@ -8,8 +8,8 @@ from typing import Any, Callable, Mapping
 import numpy as np
 import pyarrow as pa
 
-from ..errors import UsageError
-from ..thresholds import Thresholds
+from daa_sil.errors import UsageError
+from daa_sil.geometry.thresholds import Thresholds
 from .draw import _unit_enu
 from .logger import EncounterLogger
 from .records import StepColumns, _normalise

@@ -2,12 +2,12 @@
 directories, each one named *reading* of the paper (``campaign.json`` ``config.reading`` and
 ``config.readings``; missing = ``default``), side by side: every finding of the paper
 (``daa_sil/data/paper_findings.yaml``) with our value, its encounter-level 95 % CI and a verdict
-under each reading (:mod:`daa_sil.findings`), then the per-group tables, the paired comparisons,
+under each reading (:mod:`daa_sil.study.findings`), then the per-group tables, the paired comparisons,
 the ablation of the wait map, decision provenance, PI and P(LoWC), and the methods.
 
 Input of :func:`write_report`: a campaign directory or a list of them (``DIR/<group>/encounters-*.parquet``
 + ``decisions-*.parquet`` + ``campaign.json``), a list of per-encounter Parquet files, a pyarrow
-Table or a dict of arrays. Statistics: :mod:`daa_sil.metrics` / :mod:`daa_sil.stats`. Every file
+Table or a dict of arrays. Statistics: :mod:`daa_sil.study.metrics` / :mod:`daa_sil.study.stats`. Every file
 is written atomically.
 """
 
@@ -22,12 +22,12 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import FileFormatError, UsageError
-from .findings import (NOT_TESTABLE, RULES, VERDICTS, evaluate_all, fmt, untestable_statements)
-from .io import atomic_path, atomic_write_text, ensure_dir
-from .metrics import (BASELINE_GROUP, CONF, COUNTING_DEFAULTS, COUNTING_HELP, DECISION_COLUMNS, PAPER_FLIGHT_HOURS,
-                      Estimate, Reading, Study, as_columns, compute_metrics, counting_options, paper_results,
-                      paper_setup)
+from daa_sil.errors import FileFormatError, UsageError
+from .findings import NOT_TESTABLE, RULES, VERDICTS, evaluate_all, fmt, untestable_statements
+from daa_sil.files import atomic_path, atomic_write_text, ensure_dir
+from .metrics import (BASELINE_GROUP, CONF, COUNTING_DEFAULTS, COUNTING_HELP, DECISION_COLUMNS,
+    PAPER_FLIGHT_HOURS, Estimate, Reading, Study, as_columns, compute_metrics, counting_options,
+    paper_results, paper_setup)
 from .stats import DEFAULT_REPLICATES, DEFAULT_SEED, independent_difference
 
 FIGURES = ("fig9_allocation.png", "fig10_safety.png", "fig_exact_match.png")
@@ -326,7 +326,7 @@ def _sources(blocks: Sequence[Block], studies: dict) -> list[str]:
     for k, opts in counting_options().items():
         helps = COUNTING_HELP.get(k, {})
         L.append(f"- `{k}` (default `{COUNTING_DEFAULTS.get(k, '–')}`): "
-                 + "; ".join(f"`{o}` = {helps.get(o, 'see daa_sil/metrics.py COUNT_SOURCES')}" for o in opts))
+                 + "; ".join(f"`{o}` = {helps.get(o, 'see daa_sil/study/metrics.py COUNT_SOURCES')}" for o in opts))
     L.append("")
     return L
 
@@ -582,17 +582,17 @@ def _methods(blocks, studies, replicates: int, seed: int, conf: float) -> list[s
          "The same resampling weights are applied to every group of a campaign (the groups fly the same "
          "encounter ids), so changes and differences between groups are paired. Encounter proportions (LoWC, NMAC, "
          "turning share) use Clopper-Pearson; zeros get the exact upper bounds 1 − α^(1/n) (one-sided) and "
-         "1 − (α/2)^(1/n) (upper limit of the two-sided interval). Code: `daa_sil/stats.py`, `daa_sil/metrics.py`.",
+         "1 − (α/2)^(1/n) (upper limit of the two-sided interval). Code: `daa_sil/study/stats.py`, `daa_sil/study/metrics.py`.",
          "- **P(LoWC) per flight hour**: the paper's Eq. P(LoWC)/(total flight hours) divides a per-step "
          "probability by the campaign's size, so the same per-step risk gives a 10× smaller value with 10× more "
          "encounters; it is not a rate. It is compared with the paper's Table 7 at the paper's 666.67 flight hours. "
          "The rate is the number of LoWC encounters per flight hour (Clopper-Pearson on the encounters, scaled).",
          "- **PI**: integrated on the continuous segment between two steps over the exact LoWC interval the LoWC "
-         "detector finds (`daa_sil/wellclear.py: segment_penetration`, midpoint rule with 16 nodes on the "
+         "detector finds (`daa_sil/geometry/wellclear.py: segment_penetration`, midpoint rule with 16 nodes on the "
          "interval), with the paper's Eq. constants (4000 ft / 450 ft / 35 s; column `pi_paper`) and with the "
          "preset's (column `pi`). A LoWC of positive duration cannot get PI = 0 (the per-group table counts any).",
          "- **Counts**: per encounter over the counting window of the reading; a reading's counting settings select "
-         "the per-encounter columns (`daa_sil/metrics.py: COUNT_SOURCES`).", ""]
+         "the per-encounter columns (`daa_sil/study/metrics.py: COUNT_SOURCES`).", ""]
     notes = [f"- {lab}: {n}" for lab, s in studies.items() for n in s.notes]
     if notes:
         L += ["Notes:", ""] + notes + [""]
@@ -770,7 +770,7 @@ def write_report(src, out_dir: "str | os.PathLike", baseline: str = BASELINE_GRO
         figures[b.label] = _figures(studies[b.label], out, "" if i == 0 else f"-{_slug(b.label)}")
     text = render_markdown(blocks, studies, rows, replicates=replicates, seed=seed, conf=conf, figures=figures,
                            notes=notes)
-    from .io import atomic_write_json
+    from daa_sil.files import atomic_write_json
 
     atomic_write_json(out / "findings.json", findings_json(blocks, rows, replicates, seed, conf))
     return atomic_write_text(out / "report.md", text)

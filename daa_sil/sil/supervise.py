@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
-from ..errors import DaaSilError
+from daa_sil.errors import DaaSilError
 
 #: wall-clock limits (s)
 READY_TIMEOUT_S = 60.0  # start-up guard: 20 runs starting together on 2 cores take a while

@@ -27,7 +27,7 @@ raises (:class:`~daa_sil.errors.OutputError`), in the constructor.
 sink, ``--spawn-viewer`` / ``--connect``, or with ``--viz-live on``): the constructor also binds a UDP
 socket on 127.0.0.1 (:attr:`BackgroundRecorder.live_address`, passed to ``daa-vehicle --live``),
 which the helper inherits. Once prepared, the helper logs every step row the vehicle sends there
-(:mod:`daa_sil.live`) to the viewer sinks as it arrives, with
+(:mod:`daa_sil.sil.live`) to the viewer sinks as it arrives, with
 :meth:`~daa_sil.viz.EncounterLogger.log_step`: the same entities, timelines and values as the
 deferred path; the blueprint goes out with the first row (camera on the predicted closest
 approach). Garbage and out-of-order datagrams are counted and ignored. When the step log comes, the
@@ -62,9 +62,9 @@ from dataclasses import replace
 from pathlib import Path
 from typing import IO
 
-from .thresholds import PRESETS, Thresholds, get_thresholds
-from .viz import (EncounterLogger, SinkOptions, VizWarning, _url_host_port, _warn, check_rrd_path, focus,
-                  log_steplog, predicted_focus, select_encounter)
+from daa_sil.geometry.thresholds import PRESETS, Thresholds, get_thresholds
+from . import (EncounterLogger, SinkOptions, VizWarning, _url_host_port, _warn, check_rrd_path, focus,
+    log_steplog, predicted_focus, select_encounter)
 
 #: fallback priority (nice) where SCHED_IDLE is not available
 RECORDER_NICE = 10
@@ -172,7 +172,7 @@ class BackgroundRecorder:
     # starting the helper --------------------------------------------------------------------
     def _exec(self) -> subprocess.Popen:
         proc = subprocess.Popen(
-            [sys.executable, "-c", "from daa_sil.viz_recorder import main; raise SystemExit(main())",
+            [sys.executable, "-c", "from daa_sil.viz.recorder import main; raise SystemExit(main())",
              json.dumps(self._args)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=None, text=True, bufsize=1,
             start_new_session=True,  # own group: a terminal Ctrl-C reaches the caller, which decides
@@ -365,10 +365,10 @@ class _Lines:
 
 
 class _LiveIn:
-    """The helper's end of the live feed: datagrams -> :class:`~daa_sil.live.LiveFeed` -> ``log_step``."""
+    """The helper's end of the live feed: datagrams -> :class:`~daa_sil.sil.live.LiveFeed` -> ``log_step``."""
 
     def __init__(self, fd: int):
-        from .live import LiveFeed
+        from daa_sil.sil.live import LiveFeed
 
         self.sock = socket.socket(fileno=fd)
         self.sock.setblocking(False)
@@ -442,7 +442,7 @@ def _serve(args: dict, requests: IO[str], replies: IO[str]) -> int:
     lines = _Lines(requests)
     status = 1
     try:
-        from .steplog import read_steplog
+        from daa_sil.steplog import read_steplog
 
         while True:
             if live is not None and logger is not None and not lines.ready():

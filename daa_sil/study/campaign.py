@@ -20,7 +20,7 @@ ends with exactly the tables of an uninterrupted run.
 Layout of ``DIR``::
 
     campaign.json                      config, versions, preset, seed, status
-    encounters.parquet                 the encounter set (daa_sil.encounters format)
+    encounters.parquet                 the encounter set (daa_sil.models.encounters format)
     <group>/decisions-<chunk>.parquet  per-decision rows of one chunk (written first)
     <group>/encounters-<chunk>.parquet per-encounter rows of one chunk (its presence = chunk done)
 
@@ -47,12 +47,12 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from . import __version__
-from .errors import FileFormatError, OutputError, UsageError
-from .io import atomic_path, atomic_write_json, ensure_dir, remove_stale_temps
-from .groups import GroupSpec, parse_groups
-from .thresholds import PRESETS
-from .waitmap.build import DEFAULT_MAP
+from daa_sil import __version__
+from daa_sil.errors import FileFormatError, OutputError, UsageError
+from daa_sil.files import atomic_path, atomic_write_json, ensure_dir, remove_stale_temps
+from daa_sil.config.groups import GroupSpec, parse_groups
+from daa_sil.geometry.thresholds import PRESETS
+from daa_sil.waitmap.build import DEFAULT_MAP
 
 #: campaign.json format version
 CAMPAIGN_FORMAT = 1
@@ -69,7 +69,7 @@ DEFAULT_CHUNK = 2000
 class CampaignConfig:
     """Everything that determines a campaign's results (stored in ``campaign.json``).
 
-    ``groups`` are the group definitions as given (:mod:`daa_sil.groups`); the overrides ``wt``
+    ``groups`` are the group definitions as given (:mod:`daa_sil.config.groups`); the overrides ``wt``
     (W_T of every group with a wait function), ``projl_lookahead`` (ProjL look-ahead N of every
     group) and ``latency`` (a delay spec such as ``gauss:5,3`` for every group's links) apply on
     top (:attr:`effective_groups`). ``waitmap`` is a map preset, grid spec or family directory
@@ -89,7 +89,7 @@ class CampaignConfig:
     projl_lookahead: "float | None" = None
     latency: "str | None" = None
     n_intruders: int = 1
-    reading: str = "literal"  #: a named reading of :mod:`daa_sil.readings`
+    reading: str = "literal"  #: a named reading of :mod:`daa_sil.config.readings`
     reading_set: dict = field(default_factory=dict)  #: overrides of the reading's settings
 
     def __post_init__(self):
@@ -124,7 +124,7 @@ class CampaignConfig:
             if val is not None and not (isinstance(val, (int, float)) and math.isfinite(val) and lo <= val <= hi):
                 raise UsageError(f"{name} must be within [{lo:g}, {hi:g}], got {val!r}")
         if self.latency is not None:
-            from .latency import parse_delay_spec
+            from daa_sil.models.latency import parse_delay_spec
 
             parse_delay_spec(self.latency)
         self.effective_groups  # noqa: B018 -- validates the overridden definitions
@@ -132,7 +132,7 @@ class CampaignConfig:
         if r.waitmap is not None and self.waitmap not in (DEFAULT_MAP, r.waitmap):
             raise UsageError(f"reading {r.name!r} sets the wait maps to {r.waitmap!r}; drop --waitmap {self.waitmap}")
         if self.uses_map:
-            from .waitmap.build import check_source
+            from daa_sil.waitmap.build import check_source
 
             check_source(self.map_source, self.preset, self.gamma)
         return self
@@ -144,8 +144,8 @@ class CampaignConfig:
 
     @property
     def effective_reading(self):
-        """The :class:`daa_sil.readings.Reading` flown and counted (named bundle + overrides)."""
-        from .readings import reading_for
+        """The :class:`daa_sil.config.readings.Reading` flown and counted (named bundle + overrides)."""
+        from daa_sil.config.readings import reading_for
 
         return reading_for(self.reading, **dict(self.reading_set))
 
@@ -164,7 +164,7 @@ class CampaignConfig:
             if self.projl_lookahead is not None:
                 ch["projl_horizon_s"] = float(self.projl_lookahead)
             if self.latency is not None:
-                from .latency import parse_delay_spec
+                from daa_sil.models.latency import parse_delay_spec
 
                 ch["latency"] = parse_delay_spec(self.latency).to_dict()
             out.append(g.with_(**ch) if ch else g)
@@ -216,10 +216,10 @@ class CampaignConfig:
 
 def encounter_seeds(campaign_seed: int, encounter_ids: np.ndarray) -> np.ndarray:
     """Per-encounter seeds (int64 >= 0): ``SeedSequence(campaign_seed, spawn_key=(i,))`` hashed to 63 bits
-    (:func:`daa_sil.encounters.encounter_seed`). ``SeedSequence(seed_i)`` is the root of every random
-    stream of encounter ``i`` in every group (:func:`daa_sil.fasttime.encounter_streams`), so one
+    (:func:`daa_sil.models.encounters.encounter_seed`). ``SeedSequence(seed_i)`` is the root of every random
+    stream of encounter ``i`` in every group (:func:`daa_sil.study.fasttime.encounter_streams`), so one
     encounter can be replayed (e.g. in the SIL) from its ``seed`` column alone."""
-    from .encounters import encounter_seed
+    from daa_sil.models.encounters import encounter_seed
 
     return encounter_seed(int(campaign_seed), encounter_ids)
 
@@ -251,7 +251,7 @@ class ChunkResult:
 @functools.lru_cache(maxsize=4)
 def _wait_family(source: str, preset: str, gamma: "float | None" = None):
     """The wait-map family of a campaign, loaded once per process (builds the cache if needed)."""
-    from . import waitmap
+    from daa_sil import waitmap
 
     return waitmap.family_for(source, preset=preset, gamma=gamma)
 
@@ -445,7 +445,7 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
 
     Returns ``(out_dir, config, encounter_set)``. On resume the stored config must equal ``config``.
     """
-    from . import encounters as enc_mod
+    from daa_sil.models import encounters as enc_mod
 
     config.validate()
     out = check_out_dir(out_dir, resume)
@@ -490,7 +490,7 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
 
 
 def _describe_family(fam) -> dict:
-    from .waitmap import describe
+    from daa_sil.waitmap import describe
 
     return describe(fam)
 

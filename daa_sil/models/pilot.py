@@ -8,7 +8,7 @@ what it sends.
 Streaming (``docs/architecture.md``): from the step the pilot sees an alert (DAIDALUS level >=
 ``alert_level_min``, held ``alert_hold_s``) it sends one command per step until the alert clears:
 first "hold" (track/vs/gs of the telemetry seen at alert onset), then its maneuver, replaced at
-each follow-up decision. Two readings of the paper's simulator are options (``daa_sil.readings``):
+each follow-up decision. Two readings of the paper's simulator are options (``daa_sil.config.readings``):
 ``stream_hold=False`` sends no "hold" (only maneuvers and the return to plan), and
 ``stream_level_min`` < ``alert_level_min`` streams "hold" of the seen state from a lower alert level
 (0: from the first telemetry) until the pilot first engages. Timeline of the first engagement: response delay
@@ -70,10 +70,10 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import UsageError
-from .frames import wrap_2pi, wrap_pi
-from .kinematics import AircraftState, Command
-from .units import DEG, FPM
+from daa_sil.errors import UsageError
+from daa_sil.geometry.frames import wrap_2pi, wrap_pi
+from daa_sil.geometry.kinematics import AircraftState, Command
+from daa_sil.geometry.units import DEG, FPM
 
 MODES = ("guendel", "no_atc", "nasa_rayleigh5", "fixed", "deterministic")
 AXIS_NAMES = ("none", "horizontal", "vertical")
@@ -529,7 +529,7 @@ class PilotModel:
         done = (np.abs(dz) <= c.recover_alt_tol_m) & (np.abs(wrap_pi(own.trk[i] - p_trk)) <= c.recover_trk_tol_deg * DEG)
         vs = np.where(done, 0.0, np.clip(dz / c.recover_capture_s, -rate, rate))
         if intr is not None and intr.shape[1]:
-            from .daa import DaaConfig, safety_metric
+            from daa_sil.daa import DaaConfig, safety_metric
 
             clear = safety_metric(own[i], intr[i], Command(p_trk, vs, p_gs), self.daa_cfg or DaaConfig()) > 0
             if not clear.all():
@@ -593,9 +593,9 @@ class PilotDisplay:
     def refresh(self, rows: np.ndarray, own: AircraftState, intr: AircraftState, alert: np.ndarray) -> None:
         """Pilots ``rows`` (indices) now see ownship ``own`` (R,), intruders ``intr`` (R, M) and the
         vehicle's alert level ``alert`` (R,) sent with them."""
-        from .daa.alerting import relative_state
-        from .daa.bands import compute_bands
-        from .wellclear import wcv
+        from daa_sil.daa.alerting import relative_state
+        from daa_sil.daa.bands import compute_bands
+        from daa_sil.geometry.wellclear import wcv
 
         rows = np.asarray(rows, np.int64)
         if not rows.size:
@@ -617,10 +617,10 @@ class PilotDisplay:
 def guidance_from_daa(own: AircraftState, intr: AircraftState, cfg=None) -> Guidance:
     """Compute :class:`Guidance` with :mod:`daa_sil.daa` for ownship (N,) and intruders (N, M)
     (``cfg``: a :class:`daa_sil.daa.config.DaaConfig`, default DO-365B); ``wcv`` from the preset."""
-    from .daa.bands import compute_bands
-    from .daa.alerting import relative_state
-    from .daa.config import DaaConfig
-    from .wellclear import wcv
+    from daa_sil.daa.bands import compute_bands
+    from daa_sil.daa.alerting import relative_state
+    from daa_sil.daa.config import DaaConfig
+    from daa_sil.geometry.wellclear import wcv
 
     cfg = cfg or DaaConfig()
     g = guidance_from_bands(compute_bands(own, intr, cfg))

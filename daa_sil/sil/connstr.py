@@ -8,14 +8,14 @@
 
 Anything else (``tcp:``, ``serial:``, a missing port, ...) is a one-line :class:`UsageError` naming
 the option, the text and what is allowed. :func:`parse_connection` returns a :class:`Connection`;
-the address parsing itself is :func:`daa_sil.link.endpoint.parse_udp_address`.
+the address parsing itself is :func:`daa_sil.sil.endpoint.parse_udp_address`.
 """
 
 from __future__ import annotations
 
 from typing import NamedTuple
 
-from ..errors import UsageError
+from daa_sil.errors import UsageError
 from .endpoint import Address, parse_udp_address
 
 LISTEN, SEND = "listen", "send"

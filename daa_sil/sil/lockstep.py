@@ -25,10 +25,10 @@ from __future__ import annotations
 
 import asyncio
 
-from ..errors import DaaSilError
-from .codec import CONTROL_LINK_ID
+from daa_sil.errors import DaaSilError
+from daa_sil.link.codec import CONTROL_LINK_ID
 from .endpoint import MavEndpoint, Received
-from .messages import sim_tick, sim_tick_ack
+from daa_sil.link.messages import sim_tick, sim_tick_ack
 
 
 class LockstepTimeout(DaaSilError):

@@ -59,13 +59,13 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import FileFormatError, UsageError
-from .frames import wrap_2pi, wrap_pi
-from .io import atomic_path
-from .kinematics import AircraftState, Performance, advance
-from .thresholds import get_thresholds
-from .units import DEG
-from .wellclear import time_to_violation, wcv
+from daa_sil.errors import FileFormatError, UsageError
+from daa_sil.geometry.frames import wrap_2pi, wrap_pi
+from daa_sil.files import atomic_path
+from daa_sil.geometry.kinematics import AircraftState, Performance, advance
+from daa_sil.geometry.thresholds import get_thresholds
+from daa_sil.geometry.units import DEG
+from daa_sil.geometry.wellclear import time_to_violation, wcv
 
 FORMAT_NAME = "daa-sil-encounters"
 FORMAT_VERSION = 1
@@ -125,7 +125,7 @@ class EncounterConfig:
 
 def encounter_seed(root_seed: int, encounter_ids) -> np.ndarray:
     """Per-encounter int64 seeds: ``SeedSequence(root_seed, spawn_key=(i,))`` hashed to 63 bits
-    (the same definition as :func:`daa_sil.campaign.encounter_seeds`)."""
+    (the same definition as :func:`daa_sil.study.campaign.encounter_seeds`)."""
     ids = np.asarray(encounter_ids, dtype=np.int64).ravel()
     out = np.empty(ids.size, dtype=np.int64)
     for k, i in enumerate(ids):

@@ -2,7 +2,7 @@
 
 ``daa-vehicle --live udp:127.0.0.1:PORT`` publishes each step's step-log row (the row the step log
 gets, ``docs/architecture.md`` "Step log schema") the moment the step is done, fire-and-forget;
-the :class:`~daa_sil.viz_recorder.BackgroundRecorder` of ``daa-sil run`` reads them and logs each
+the :class:`~daa_sil.viz.recorder.BackgroundRecorder` of ``daa-sil run`` reads them and logs each
 row with :meth:`daa_sil.viz.EncounterLogger.log_step`, so a person watching sees the encounter as
 it plays. Nothing here can block or stop the vehicle: sending is non-blocking, every failure is
 counted and ignored, and a lost datagram is backfilled from the step log at the end.
@@ -25,8 +25,8 @@ import socket
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from .errors import UsageError
-from .steplog import BAND_COLUMNS, INTRUDER_COLUMNS, STEP_COLUMNS, VOCAB
+from daa_sil.errors import UsageError
+from daa_sil.steplog import BAND_COLUMNS, INTRUDER_COLUMNS, STEP_COLUMNS, VOCAB
 
 #: first bytes of every datagram (format version 1)
 MAGIC = b"DAASIL-STEP1 "

@@ -1,5 +1,5 @@
 """The paper's findings (``daa_sil/data/paper_findings.yaml``) and the verdict rules that test them
-on a :class:`daa_sil.metrics.Study`. Every rule can come out "no"; none has a hand-set threshold
+on a :class:`daa_sil.study.metrics.Study`. Every rule can come out "no"; none has a hand-set threshold
 (the only level is the report's confidence level, 95 %, used for every interval and test).
 
 Rules, one per kind of finding (the report prints them):
@@ -35,7 +35,7 @@ from importlib import resources
 
 import numpy as np
 
-from .errors import FileFormatError
+from daa_sil.errors import FileFormatError
 from .metrics import COUNT_SOURCES, METRICS, Estimate, Study, faa_category, paper_results
 from .stats import Sample, clopper_pearson, zero_upper_bounds
 

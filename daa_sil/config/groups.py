@@ -26,7 +26,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Sequence
 
-from .errors import FileFormatError, UsageError
+from daa_sil.errors import FileFormatError, UsageError
 
 #: the paper's groups (Table 2), in the paper's order
 PAPER_GROUPS = ("B-1", "B-2", "IC-1", "ID-1", "ID-2")
@@ -40,7 +40,7 @@ class GroupSpec:
 
     name: str
     setup: str
-    latency: dict  #: the YAML form of a :mod:`daa_sil.latency` model, used on uplink and downlink
+    latency: dict  #: the YAML form of a :mod:`daa_sil.models.latency` model, used on uplink and downlink
     wait: "str | float"  #: ``none`` | ``map`` | ``always`` | a constant wait in s
     wait_threshold_s: float = 4.0
     projl: bool = True
@@ -62,14 +62,14 @@ class GroupSpec:
         return self.wait == "map"
 
     def delay_model(self):
-        """The :mod:`daa_sil.latency` model used on the uplink and on the downlink."""
-        from .latency import delay_model_from_dict
+        """The :mod:`daa_sil.models.latency` model used on the uplink and on the downlink."""
+        from daa_sil.models.latency import delay_model_from_dict
 
         return delay_model_from_dict(dict(self.latency), where=f"group {self.name} latency")
 
     def policy(self):
         """The agent's :class:`~daa_sil.agent.AllocationPolicy` for this group."""
-        from .agent import AllocationPolicy
+        from daa_sil.agent import AllocationPolicy
 
         return AllocationPolicy(self.wait_mode, constant_wait_s=float(self.wait) if self.wait_mode == "constant" else 5.0,
                                 wait_threshold_s=self.wait_threshold_s, projl=self.projl,

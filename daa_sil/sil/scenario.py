@@ -53,7 +53,7 @@ Schema (``*`` = required; defaults in brackets)::
         - start_s*, end_s*                      sent in [start_s, end_s) is lost
     pilot:
       mode: model | scripted        [model]
-      model:                                    options of daa_sil.pilot.PilotModel
+      model:                                    options of daa_sil.models.pilot.PilotModel
         response: deterministic | fixed | guendel | no_atc | nasa_rayleigh5  [deterministic]
       commands: list (scripted mode; required there, forbidden in model mode)
         - t_s*: [0, duration_s]      first send time; the command is streamed once per step
@@ -98,7 +98,7 @@ from typing import Any, Callable
 
 import yaml
 
-from .errors import FileFormatError, UsageError
+from daa_sil.errors import FileFormatError, UsageError
 
 DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
 PILOT_RESPONSES = ("deterministic", "fixed", "guendel", "no_atc", "nasa_rayleigh5")
@@ -434,8 +434,8 @@ def _intruder(v: _V, node, path, idx: int, dur: float) -> IntruderSpec:
 
 
 def _delay(v: _V, node, path):
-    """A latency spec string or dict, checked by building the model (daa_sil.latency)."""
-    from . import latency
+    """A latency spec string or dict, checked by building the model (daa_sil.models.latency)."""
+    from daa_sil.models import latency
 
     try:
         if isinstance(node, yaml.ScalarNode):
@@ -509,8 +509,8 @@ def _pilot(v: _V, node, path, dur) -> PilotSpec:
 
 
 def _allocation(v: _V, node, path) -> AllocationSpec:
-    from .agent import WAIT_MODES
-    from .groups import group_spec, group_table
+    from daa_sil.agent import WAIT_MODES
+    from daa_sil.config.groups import group_spec, group_table
 
     m = v.mapping(node, path, set(), {"group", "wait", "wait_constant_s", "blending", "wait_threshold_s", "projl",
                                       "link_timeout_s", "stale_command_s"})
@@ -638,21 +638,21 @@ def dump_scenario(sc: Scenario) -> str:
 
 def save_scenario(sc: Scenario, path: "str | os.PathLike", overwrite: bool = False) -> Path:
     """Write ``sc`` as YAML atomically."""
-    from .io import atomic_write_text
+    from daa_sil.files import atomic_write_text
 
     return atomic_write_text(path, dump_scenario(sc), overwrite=overwrite)
 
 
 def delay_spec_string(spec) -> str:
     """A scenario delay spec (str or dict) as the ``--delay`` string of ``daa-sil shim``."""
-    from . import latency
+    from daa_sil.models import latency
 
     return spec if isinstance(spec, str) else latency.delay_model_from_dict(spec).spec()
 
 
 def delay_models(sc: Scenario):
-    """``(up, down)`` :class:`daa_sil.latency.DelayModel` objects of the scenario's link."""
-    from . import latency
+    """``(up, down)`` :class:`daa_sil.models.latency.DelayModel` objects of the scenario's link."""
+    from daa_sil.models import latency
 
     def build(spec):
         return latency.parse_delay_spec(spec) if isinstance(spec, str) else latency.delay_model_from_dict(spec)
@@ -662,10 +662,10 @@ def delay_models(sc: Scenario):
 
 
 def ownship_state(sc: Scenario):
-    """The ownship at t = 0 as an ``(1,)`` :class:`daa_sil.kinematics.AircraftState`."""
+    """The ownship at t = 0 as an ``(1,)`` :class:`daa_sil.geometry.kinematics.AircraftState`."""
     import numpy as np
 
-    from .kinematics import AircraftState
+    from daa_sil.geometry.kinematics import AircraftState
 
     o = sc.ownship
     return AircraftState(np.array([o.x_m]), np.array([o.y_m]), np.array([o.alt_m]), np.array([o.gs_mps]),
@@ -673,16 +673,16 @@ def ownship_state(sc: Scenario):
 
 
 def encounter_set(sc: Scenario, encounter_id: int = 0):
-    """The scenario as a one-encounter :class:`daa_sil.encounters.EncounterSet` (N = 1, M intruders).
+    """The scenario as a one-encounter :class:`daa_sil.models.encounters.EncounterSet` (N = 1, M intruders).
 
-    ``cpa`` intruders are placed by :func:`daa_sil.encounters.encounter_from_geometry` against the
+    ``cpa`` intruders are placed by :func:`daa_sil.models.encounters.encounter_from_geometry` against the
     scenario's (unmaneuvered) ownship; ``initial`` intruders start as given. Scripts become the
     set's segments. This is the one conversion the SIL vehicle and fast-time parity runs share.
     """
     import numpy as np
 
-    from . import encounters as enc
-    from .kinematics import AircraftState
+    from daa_sil.models import encounters as enc
+    from daa_sil.geometry.kinematics import AircraftState
 
     own = ownship_state(sc)
     m = len(sc.intruders)

@@ -39,7 +39,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import FileFormatError, UsageError
+from daa_sil.errors import FileFormatError, UsageError
 
 #: paper delay range (s); every model must stay within it
 DELAY_MIN_S = 0.2

@@ -1,0 +1,1 @@
+"""The configuration of a run: the group table and the study's named readings."""
