@@ -97,7 +97,7 @@ async def test_endpoint_names_the_dropped_sender_and_the_expected_peer():
 
 
 def _free_ports(n):
-    from daa_sil.commands.run import free_udp_ports
+    from daa_sil.sil.supervise import free_udp_ports
 
     return free_udp_ports(n)
 

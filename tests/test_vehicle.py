@@ -42,7 +42,7 @@ def test_gate_drops_future_and_invalid_commands():
 
 
 def _free_port() -> int:
-    from daa_sil.commands.run import free_udp_ports
+    from daa_sil.sil.supervise import free_udp_ports
 
     return free_udp_ports(1)[0]
 

@@ -3,18 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import sys
-import warnings
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
 from ..errors import FileFormatError, UsageError
 from daa_sil.geometry.thresholds import PRESETS
 from ._args import finite_float
+from daa_sil.viz.warning import one_line_warnings
 
 STEPLOG_EX = """examples:
   daa-sil viz steplog runs/headon/steps.parquet --rrd headon.rrd
@@ -92,27 +90,6 @@ def sink_options(args):
         raise UsageError(f"--rrd {args.rrd!r} should end in .rrd")
     return SinkOptions(rrd=args.rrd, spawn=args.spawn_viewer, connect=args.connect, serve_web=args.serve_web,
                        bind=args.bind, web_port=args.web_port, grpc_port=args.grpc_port, overwrite=args.force)
-
-
-@contextlib.contextmanager
-def one_line_warnings() -> Iterator[None]:
-    """Print VizWarnings as ``daa-sil: warning: ...`` (one line, no source location)."""
-    from ..viz import VizWarning
-
-    def show(message, category, filename, lineno, file=None, line=None):
-        if issubclass(category, VizWarning):
-            print(f"daa-sil: warning: {message}", file=sys.stderr)
-        else:
-            previous(message, category, filename, lineno, file, line)
-
-    previous = warnings.showwarning
-    with warnings.catch_warnings():
-        warnings.simplefilter("always", VizWarning)
-        warnings.showwarning = show
-        try:
-            yield
-        finally:
-            warnings.showwarning = previous
 
 
 def _finish(args, path, logger, summary: dict) -> int:
@@ -211,7 +188,6 @@ def replay_steplog(results, group: str, encounter_id: int):
 
 
 def run_replay(args) -> int:
-    from daa_sil.study import campaign
     from daa_sil import steplog, viz
 
     opts = sink_options(args)

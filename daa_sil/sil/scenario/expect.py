@@ -28,3 +28,4 @@ def check_expectation(exp: Expectation, result: dict) -> list[str]:
         t = result.get("first_link_lost_s")
         if t is None or t > exp.link_lost_by_s:
             bad.append(f"expected link_lost by t = {exp.link_lost_by_s:g} s, got {t}")
+    return bad
