@@ -1,4 +1,4 @@
-"""The bands' fast kernel (``trajectory.interval_soa``) equals ``wellclear.violation_interval``
+"""The bands' fast kernel (``intervals.interval_soa``) equals ``wellclear.violation_interval``
 element for element, edge cases included (level flight, inside DMOD / ZTHR now, a single-instant
 vertical window, zero relative velocity, zero length)."""
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from daa_sil.geometry import wellclear as wc
-from daa_sil.daa import trajectory as T
+from daa_sil.daa import intervals as T
 from daa_sil.geometry.thresholds import get_thresholds
 
 
