@@ -130,7 +130,7 @@ def main() -> int:
 
     from daa_sil.study import report
     from daa_sil.study.findings import evaluate_all
-    from daa_sil.study.metrics import Study
+    from daa_sil.study.analysis import Study
     from daa_sil.study.stats import DEFAULT_REPLICATES
 
     reps = args.replicates or DEFAULT_REPLICATES

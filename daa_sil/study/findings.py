@@ -36,7 +36,9 @@ from importlib import resources
 import numpy as np
 
 from daa_sil.errors import FileFormatError
-from .metrics import COUNT_SOURCES, METRICS, Estimate, Study, faa_category, paper_results
+from .metrics import Estimate, faa_category, paper_results
+from daa_sil.study.analysis import METRICS, Study
+from daa_sil.study.counting import COUNT_SOURCES
 from .stats import Sample, clopper_pearson, zero_upper_bounds
 
 REPRODUCED = "reproduced"

@@ -25,9 +25,9 @@ import numpy as np
 from daa_sil.errors import FileFormatError, UsageError
 from .findings import NOT_TESTABLE, RULES, VERDICTS, evaluate_all, fmt, untestable_statements
 from daa_sil.files import atomic_path, atomic_write_text, ensure_dir
-from .metrics import (BASELINE_GROUP, CONF, COUNTING_DEFAULTS, COUNTING_HELP, DECISION_COLUMNS,
-    PAPER_FLIGHT_HOURS, Estimate, Reading, Study, as_columns, compute_metrics, counting_options,
-    paper_results, paper_setup)
+from .metrics import BASELINE_GROUP, CONF, PAPER_FLIGHT_HOURS, Estimate, as_columns, compute_metrics, paper_results
+from daa_sil.study.analysis import Study
+from daa_sil.study.counting import COUNTING_DEFAULTS, COUNTING_HELP, DECISION_COLUMNS, Reading, counting_options, paper_setup
 from .stats import DEFAULT_REPLICATES, DEFAULT_SEED, independent_difference
 
 FIGURES = ("fig9_allocation.png", "fig10_safety.png", "fig_exact_match.png")
