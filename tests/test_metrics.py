@@ -238,7 +238,7 @@ def test_decision_tables_from_parquet_types(in_box):
 def test_a_new_counting_is_one_table_entry(monkeypatch):
     """A simulator column for a new way of counting plus one COUNT_SOURCES entry is all a reading
     needs: the study, the allowed values and --recount pick it up."""
-    from daa_sil.study.report import parse_recount
+    from daa_sil.study.report_input import parse_recount
 
     keys, tab = C.COUNT_SOURCES["received"]
     monkeypatch.setitem(C.COUNT_SOURCES, "received", (keys, {**tab, ("overridden", "active"): ("n_daa_override",)}))

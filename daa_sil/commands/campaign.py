@@ -267,6 +267,7 @@ def sweep_cmd(args) -> int:
 
 def report_cmd(args) -> int:
     from daa_sil.study import report
+    from daa_sil.study.report_input import parse_recount
     from daa_sil.study.findings import VERDICTS
     from daa_sil.study.stats import DEFAULT_REPLICATES, DEFAULT_SEED
 
@@ -277,7 +278,7 @@ def report_cmd(args) -> int:
     if len(set(map(str, (d.resolve() for d in dirs)))) != len(dirs):
         raise UsageError("a campaign directory is given twice")
     for spec in args.recount:
-        report.parse_recount(spec)  # one-line error before anything is read or written
+        parse_recount(spec)  # one-line error before anything is read or written
     out = Path(args.out) if args.out else dirs[0] / "report"
     reps = args.replicates or DEFAULT_REPLICATES
     seed = DEFAULT_SEED if args.bootstrap_seed is None else args.bootstrap_seed

@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -24,292 +23,22 @@ import numpy as np
 
 from daa_sil.errors import FileFormatError, UsageError
 from .findings import NOT_TESTABLE, RULES, VERDICTS, evaluate_all, fmt, untestable_statements
-from daa_sil.files import atomic_path, atomic_write_text, ensure_dir
-from .metrics import BASELINE_GROUP, CONF, PAPER_FLIGHT_HOURS, Estimate, as_columns, compute_metrics, paper_results
+from daa_sil.files import atomic_write_text, ensure_dir
+from .metrics import BASELINE_GROUP, CONF, compute_metrics
 from daa_sil.study.analysis import Study
-from daa_sil.study.counting import COUNTING_DEFAULTS, COUNTING_HELP, DECISION_COLUMNS, Reading, counting_options, paper_setup
+from daa_sil.study.counting import COUNTING_DEFAULTS, COUNTING_HELP, counting_options
 from .stats import DEFAULT_REPLICATES, DEFAULT_SEED, independent_difference
+from daa_sil.study.report_input import Block, build_blocks
+from daa_sil.study.report_figures import _figures, _slug
+from daa_sil.study.report_format import GROUP_TABLES, _all_groups, _cell, _ci, _table
 
-FIGURES = ("fig9_allocation.png", "fig10_safety.png", "fig_exact_match.png")
 #: the wait-map ablation: (group with the map and ProjL, ablation group, what the difference measures)
 ABLATIONS = (("ID-2", "ID-2-projl", "what the map adds to ProjL (ID-2 minus ID-2-projl)"),
              ("ID-2", "ID-2-map", "what ProjL adds to the map (ID-2 minus ID-2-map)"))
 
 
-# --- input ----------------------------------------------------------------------------------------
-def _read_parquet(path: Path, columns=None):
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    try:
-        return pq.read_table(path, columns=columns)
-    except (OSError, pa.ArrowException, ValueError) as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise FileFormatError(f"{path} is not a readable Parquet file: {msg}") from None
 
 
-def _concat(tables, what):
-    import pyarrow as pa
-
-    try:
-        return pa.concat_tables(tables, promote_options="default")
-    except (pa.ArrowException, TypeError) as exc:
-        raise FileFormatError(f"{what} have incompatible schemas: {str(exc).splitlines()[0]}") from None
-
-
-def load_results(src) -> dict:
-    """The per-encounter table of ``src`` (directory, Parquet file list, Table or dict) as columns."""
-    if isinstance(src, (str, os.PathLike)):
-        d = Path(src)
-        if not d.exists():
-            raise FileFormatError(f"{d}: no such results directory")
-        if d.is_file():
-            files = [d]
-        else:
-            files = sorted(d.glob("*/encounters-*.parquet"))
-            if not files:
-                raise FileFormatError(f"{d} holds no <group>/encounters-*.parquet results")
-    elif isinstance(src, (list, tuple)) and src and all(isinstance(s, (str, os.PathLike)) for s in src):
-        files = [Path(s) for s in src]
-        for f in files:
-            if not f.is_file():
-                raise FileFormatError(f"{f}: no such results file")
-    else:
-        return as_columns(src)
-    table = _concat([_read_parquet(f) for f in files], "result files")
-    if table.num_rows == 0:
-        raise FileFormatError(f"{src}: the result files hold no encounters")
-    return as_columns(table)
-
-
-def load_decisions(d: Path):
-    """The decision tables of directory ``d`` restricted to the provenance columns, or None when
-    there are none or they carry neither ``decided_by`` nor ``in_box``."""
-    import pyarrow.parquet as pq
-
-    files = sorted(Path(d).glob("*/decisions-*.parquet"))
-    if not files:
-        return None
-    try:
-        names = pq.read_schema(files[0]).names
-    except Exception as exc:  # noqa: BLE001 -- pyarrow raises several types for a bad footer
-        raise FileFormatError(f"{files[0]} is not a readable Parquet file: {str(exc).splitlines()[0]}") from None
-    if not any(c in names for c in ("decided_by", "in_box")):
-        return None
-    cols = [c for c in DECISION_COLUMNS if c in names]
-    return _concat([_read_parquet(f, cols) for f in files], "decision files")
-
-
-@dataclass(frozen=True)
-class Block:
-    """One column block of the report: a reading and its results."""
-
-    label: str
-    reading: Reading
-    enc: dict
-    dec: object = None
-    meta: "dict | None" = None
-
-    @property
-    def seed(self):
-        return (self.meta or {}).get("seed")
-
-    @property
-    def n_config(self):
-        return (self.meta or {}).get("n_encounters")
-
-
-def load_block(src) -> Block:
-    """A reading from a campaign directory (or, for old callers, any :func:`load_results` source)."""
-    meta = {}
-    dec = None
-    name, settings, source = "default", {}, ""
-    if isinstance(src, (str, os.PathLike)) and Path(src).is_dir():
-        d = Path(src)
-        source = str(d)
-        if (d / "campaign.json").is_file():
-            from .campaign import load_campaign_json
-
-            cj = load_campaign_json(d)
-            cfg = cj.get("config", {})
-            name = str(cfg.get("reading") or "default")
-            settings = cfg.get("readings") or {}
-            if not isinstance(settings, dict):
-                raise FileFormatError(f"{d / 'campaign.json'}: config.readings must be a mapping, got "
-                                      f"{type(settings).__name__}")
-            meta = {"seed": cfg.get("seed", cj.get("seed")), "n_encounters": cfg.get("n_encounters"),
-                    "preset": cfg.get("preset", cj.get("preset")), "groups": cfg.get("groups"),
-                    "status": cj.get("status"), "seeds": cfg.get("seeds"), "dt_s": cfg.get("dt_s")}
-        dec = load_decisions(d)
-    enc = load_results(src)
-    if not enc or len(next(iter(enc.values()))) == 0:
-        raise FileFormatError(f"{src if isinstance(src, (str, os.PathLike)) else 'results'}: no encounters")
-    return Block(name, Reading(name, dict(settings), source), enc, dec, meta)
-
-
-def parse_recount(text: str) -> tuple[str, dict]:
-    """``NAME:key=value[,key=value]`` -> (name, counting settings); UsageError naming what is allowed."""
-    if ":" not in text:
-        raise UsageError(f"--recount expects NAME:key=value[,key=value], got {text!r}")
-    name, _, body = text.partition(":")
-    name = name.strip()
-    if not name:
-        raise UsageError(f"--recount {text!r}: the name before ':' is empty")
-    out = {}
-    options = counting_options()
-    for item in filter(None, (p.strip() for p in body.split(","))):
-        k, eq, v = item.partition("=")
-        k, v = k.strip(), v.strip()
-        if not eq or k not in options:
-            raise UsageError(f"--recount {text!r}: {item!r} is not a counting setting; allowed keys: "
-                             f"{', '.join(options)}")
-        if v not in options[k]:
-            raise UsageError(f"--recount {text!r}: {k}={v!r} is not allowed; {k} is one of "
-                             f"{', '.join(options[k])}")
-        out[k] = v
-    if not out:
-        raise UsageError(f"--recount {text!r}: no setting given")
-    return name, out
-
-
-def build_blocks(sources, recount: Sequence[str] = ()) -> list[Block]:
-    """One block per source, labelled by reading name (``(seed S)`` and ``#k`` added on clashes), plus
-    one derived block per source and ``--recount`` entry (same results, other counting)."""
-    srcs = list(sources) if isinstance(sources, (list, tuple)) and sources and all(
-        isinstance(s, (str, os.PathLike)) and Path(s).is_dir() for s in sources) else [sources]
-    blocks = [load_block(s) for s in srcs]
-    derived = []
-    for spec in recount:
-        name, settings = parse_recount(spec)
-        for b in blocks:
-            st = {**b.reading.settings, **settings}
-            derived.append(replace(b, label=f"{b.label}+{name}", reading=Reading(f"{b.reading.name}+{name}", st,
-                                                                              b.reading.source)))
-    blocks += derived
-    labels = [b.label for b in blocks]
-    out = []
-    for b in blocks:
-        lab = b.label
-        if labels.count(lab) > 1 and b.seed is not None:
-            lab = f"{lab} (seed {b.seed})"
-        k = 2
-        base = lab
-        while lab in [o.label for o in out]:
-            lab = f"{base} #{k}"
-            k += 1
-        out.append(replace(b, label=lab))
-    return out
-
-
-# --- formatting -------------------------------------------------------------------------------------
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    out += ["| " + " | ".join(str(c).replace("|", "/") for c in r) + " |" for r in rows]
-    return "\n".join(out)
-
-
-def _ci(e: Estimate, kind: str = "g3") -> str:
-    if e is None or not math.isfinite(e.value):
-        return "–" if e is None or e.note in ("", "undefined on these results") else f"– ({e.note})"
-    if math.isfinite(e.lo) and math.isfinite(e.hi):
-        txt = f"{fmt(e.value, kind)} [{fmt(e.lo, kind)}, {fmt(e.hi, kind)}]"
-        return f"{txt} ({e.note})" if e.method == "exact binomial bound" else txt
-    if e.note:
-        return f"{fmt(e.value, kind)} ({e.note})"
-    return fmt(e.value, kind)
-
-
-def _paper_group(section: str, key: str, per_enc: bool = False):
-    def f(g):
-        v = paper_results().get(section, {}).get(g, {})
-        v = v.get(key) if isinstance(v, dict) else None
-        if v is None:
-            return None
-        return float(v) / (float(paper_results().get("encounters_per_group", 10000)) if per_enc else 1.0)
-    return f
-
-
-def _paper_if(text: str):
-    """The paper's statement (text) for its five groups."""
-    return lambda g: text if paper_setup(g) else None
-
-
-# (label, metric or ("change", metric, kind), value format, paper value fn(group) -> number | text | None,
-#  show the total)
-GROUP_TABLES = (
-    ("Table 3 — waiting status (per encounter; paper: its total / 10,000)", (
-        ("wait decisions", "wait", "g3", _paper_group("waiting_status", "wait", True), True),
-        ("no-wait decisions (allocate to DAA)", "no_wait", "g3", _paper_group("waiting_status", "no_wait", True), True),
-        ("no-wait reduction vs B-2", ("change", "no_wait", "reduction"), "pctv",
-         _paper_group("waiting_status", "reduction_pct"), False))),
-    ("Table 4 — pilot-command reception", (
-        ("pilot commands received", "received", "g3", _paper_group("pilot_command_reception", "received", True), True),
-        ("reception change vs B-2", ("change", "received", "ratio"), "pctv",
-         _paper_group("pilot_command_reception", "increase_pct"), False),
-        ("share of received executed as sent", "executed_share", "pct",
-         lambda g: (_paper_group("command_execution", "pilot")(g) or math.nan)
-         / (_paper_group("pilot_command_reception", "received")(g) or math.nan), False))),
-    ("Table 5 — command execution", (
-        ("DAA overrides", "daa_override", "g3", _paper_group("command_execution", "daa_override", True), True),
-        ("pilot commands executed as sent", "pilot_exec", "g3", _paper_group("command_execution", "pilot", True), True),
-        ("blended commands", "blend", "g3", _paper_group("command_execution", "blending", True), True))),
-    ("Blending — (axis, direction) match among blends of a pilot maneuver", (
-        ("exact (axis, direction)", "exact_match", "pct", lambda g: 0.84 if paper_setup(g) == "integrated" else None,
-         False),
-        ("axis only", "axis_match", "pct", lambda g: 0.16 if paper_setup(g) == "integrated" else None, False),
-        ("neither", "neither_match", "pct", lambda g: 0.0 if paper_setup(g) == "integrated" else None, False),
-        ("blends of a pilot maneuver among all blends", "blend_intent_share", "pct", None, False))),
-    ("Safety — LoWC and NMAC encounters", (
-        ("LoWC encounters", "n_lowc", "int", None, False),
-        ("P(LoWC) per encounter", "p_lowc", "pct", None, False),
-        ("NMAC encounters", "n_nmac", "int", lambda g: 0.0 if paper_setup(g) else None, False),
-        ("LoWC encounters with a turning intruder", "lowc_turning_share", "pct", _paper_if("98 % on average"), False))),
-    ("Table 7 — P(LoWC) per flight hour", (
-        ("P(LoWC) = time in LoWC / flight time", "p_lowc_step", "sci",
-         lambda g: (_paper_group("lowc_per_flight_hour", "p")(g) or math.nan) * PAPER_FLIGHT_HOURS, False),
-        ("paper Eq. at this campaign's flight hours (shrinks as 1/N)", "p_lowc_per_hr", "sci",
-         _paper_group("lowc_per_flight_hour", "p"), False),
-        ("paper Eq. at the paper's 666.67 flight hours", "p_lowc_per_hr_paper_h", "sci",
-         _paper_group("lowc_per_flight_hour", "p"), False),
-        ("LoWC encounters per flight hour (a rate)", "lowc_rate_per_hr", "sci", None, False))),
-    ("Penetration integral of LoWC encounters (s)", (
-        ("mean PI, paper's Eq. constants (4000 ft / 450 ft / 35 s)", "pi_paper_mean", "f2", _paper_if("< 1"), False),
-        ("mean PI, the preset's constants", "pi_mean", "f2", None, False),
-        ("LoWC encounters with PI > 3.79 (the paper's maximum)", "n_lowc_pi_gt_max", "int", _paper_if("0"), False),
-        ("LoWC encounters with PI > 10 (significant)", "n_lowc_pi_significant", "int", _paper_if("0"), False),
-        ("LoWC encounters of positive duration with PI = 0", "n_lowc_pi_zero", "int", None, False))),
-    ("Table 8 — mean trajectory deviation (m)", (
-        ("horizontal", "dev_h_mean", "f0", _paper_group("trajectory_deviation_m", "horizontal"), False),
-        ("vertical", "dev_v_mean", "f1", _paper_group("trajectory_deviation_m", "vertical"), False))),
-)
-
-
-def _cell(st: Study, g: str, metric, kind: str, total: bool) -> str:
-    if g not in st.groups:
-        return "–"
-    if isinstance(metric, tuple):
-        _, m, ck = metric
-        if g == st.baseline or st.baseline not in st.groups:
-            return "–"
-        return _ci(st.change(g, m, kind=ck), kind)
-    if not st.available(g, metric):
-        return "– (not in these results)"
-    e = st.estimate(g, metric)
-    txt = _ci(e, kind)
-    if total and math.isfinite(e.value) and e.value != 0:
-        txt += f" (total {fmt(st.sum(g, metric).value, 'int')})"
-    return txt
-
-
-def _all_groups(studies: dict) -> list[str]:
-    seen = []
-    for st in studies.values():
-        for g in st.groups:
-            if g not in seen:
-                seen.append(g)
-    from .metrics import GROUP_ORDER
-
-    return [g for g in GROUP_ORDER if g in seen] + [g for g in seen if g not in GROUP_ORDER]
 
 
 # --- sections --------------------------------------------------------------------------------------
@@ -326,7 +55,7 @@ def _sources(blocks: Sequence[Block], studies: dict) -> list[str]:
     for k, opts in counting_options().items():
         helps = COUNTING_HELP.get(k, {})
         L.append(f"- `{k}` (default `{COUNTING_DEFAULTS.get(k, '–')}`): "
-                 + "; ".join(f"`{o}` = {helps.get(o, 'see daa_sil/study/metrics.py COUNT_SOURCES')}" for o in opts))
+                 + "; ".join(f"`{o}` = {helps.get(o, 'see daa_sil/study/counting.py COUNT_SOURCES')}" for o in opts))
     L.append("")
     return L
 
@@ -582,7 +311,7 @@ def _methods(blocks, studies, replicates: int, seed: int, conf: float) -> list[s
          "The same resampling weights are applied to every group of a campaign (the groups fly the same "
          "encounter ids), so changes and differences between groups are paired. Encounter proportions (LoWC, NMAC, "
          "turning share) use Clopper-Pearson; zeros get the exact upper bounds 1 − α^(1/n) (one-sided) and "
-         "1 − (α/2)^(1/n) (upper limit of the two-sided interval). Code: `daa_sil/study/stats.py`, `daa_sil/study/metrics.py`.",
+         "1 − (α/2)^(1/n) (upper limit of the two-sided interval). Code: `daa_sil/study/stats.py`, `daa_sil/study/metrics.py`, `daa_sil/study/analysis.py`.",
          "- **P(LoWC) per flight hour**: the paper's Eq. P(LoWC)/(total flight hours) divides a per-step "
          "probability by the campaign's size, so the same per-step risk gives a 10× smaller value with 10× more "
          "encounters; it is not a rate. It is compared with the paper's Table 7 at the paper's 666.67 flight hours. "
@@ -592,7 +321,7 @@ def _methods(blocks, studies, replicates: int, seed: int, conf: float) -> list[s
          "interval), with the paper's Eq. constants (4000 ft / 450 ft / 35 s; column `pi_paper`) and with the "
          "preset's (column `pi`). A LoWC of positive duration cannot get PI = 0 (the per-group table counts any).",
          "- **Counts**: per encounter over the counting window of the reading; a reading's counting settings select "
-         "the per-encounter columns (`daa_sil/study/metrics.py: COUNT_SOURCES`).", ""]
+         "the per-encounter columns (`daa_sil/study/counting.py: COUNT_SOURCES`).", ""]
     notes = [f"- {lab}: {n}" for lab, s in studies.items() for n in s.notes]
     if notes:
         L += ["Notes:", ""] + notes + [""]
@@ -600,118 +329,6 @@ def _methods(blocks, studies, replicates: int, seed: int, conf: float) -> list[s
     return L
 
 
-# --- figures --------------------------------------------------------------------------------------
-def _save(fig, path: Path) -> None:
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
-
-
-def _figures(st: Study, out: Path, suffix: str = "") -> list[Path]:
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    pr = paper_results()
-    groups = list(st.groups)
-    x = np.arange(len(groups))
-    w = 0.38
-    paper_n = float(pr.get("encounters_per_group", 10000))
-
-    def err(metric):
-        es = [st.estimate(g, metric) if st.available(g, metric) else None for g in groups]
-        v = np.array([e.value if e else np.nan for e in es], float)
-        lo = np.array([e.lo if e else np.nan for e in es], float)
-        hi = np.array([e.hi if e else np.nan for e in es], float)
-        lo = np.where(np.isfinite(lo), lo, v)
-        hi = np.where(np.isfinite(hi), hi, v)
-        return np.nan_to_num(v), np.nan_to_num(np.vstack([np.clip(v - lo, 0, None), np.clip(hi - v, 0, None)]))
-
-    def paper_vals(section, key, per_enc=False):
-        v = np.array([float(pr.get(section, {}).get(g, {}).get(key, np.nan)) if g in pr.get(section, {}) else np.nan
-                      for g in groups])
-        return v / paper_n if per_enc else v
-
-    name = lambda i: out / (FIGURES[i].replace(".png", f"{suffix}.png"))  # noqa: E731
-    paths = []
-    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
-    for k, (key, col) in enumerate((("wait", "tab:orange"), ("no_wait", "tab:red"))):
-        v, e = err(key)
-        ax[0].bar(x + (k - 0.5) * w, v, w, yerr=e, color=col, label=f"ours: {key.replace('_', '-')}", capsize=3)
-        ax[0].scatter(x + (k - 0.5) * w, paper_vals("waiting_status", key, True), marker="x",
-                      color="k", zorder=3, label="paper" if k == 0 else None)
-    ax[0].set_title("(a) wait / no-wait (allocate to DAA)")
-    v, e = err("received")
-    ax[1].bar(x, v, 0.6, yerr=e, color="tab:blue", capsize=3, label="ours")
-    ax[1].scatter(x, paper_vals("pilot_command_reception", "received", True), marker="x", color="k", zorder=3,
-                  label="paper")
-    ax[1].set_title("(b) pilot commands received")
-    bottom = np.zeros(len(groups))
-    pbottom = np.zeros(len(groups))
-    for key, col, pk in (("pilot_exec", "tab:green", "pilot"), ("blend", "tab:purple", "blending"),
-                         ("daa_override", "tab:red", "daa_override")):
-        v, _ = err(key)
-        ax[2].bar(x - w / 2, v, w, bottom=bottom, color=col, label=f"ours: {pk}")
-        pv = np.nan_to_num(paper_vals("command_execution", pk, True))
-        ax[2].bar(x + w / 2, pv, w, bottom=pbottom, color=col, alpha=0.45, hatch="//", label=f"paper: {pk}")
-        bottom = bottom + v
-        pbottom = pbottom + pv
-    ax[2].set_title("(c) command execution")
-    for a in ax:
-        a.set_xticks(x, groups)
-        a.legend(fontsize=7)
-        a.set_ylabel("instances (steps) per encounter, 95 % CI")
-    p = name(0)
-    _save(fig, p)
-    plt.close(fig)
-    paths.append(p)
-
-    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
-    v, e = err("p_lowc")
-    ax[0].bar(x, 100 * v, 0.6, yerr=100 * e, color="tab:red", capsize=3)
-    ax[0].set_title("(a) LoWC encounters (% of encounters)")
-    ax[0].set_ylabel("% of encounters")
-    v, e = err("p_lowc_per_hr_paper_h")
-    ax[1].bar(x, np.where(v > 0, v, np.nan), 0.6, yerr=e, color="tab:red", capsize=3,
-              label="ours (paper Eq. at 666.67 h)")
-    ax[1].scatter(x, paper_vals("lowc_per_flight_hour", "p"), marker="x", color="k", zorder=3, label="paper")
-    for _, (lo, _hi) in pr["faa_likelihood"].items():
-        if lo > 0:
-            ax[1].axhline(lo, color="0.6", lw=0.6, ls="--")
-    ax[1].set_yscale("log")
-    ax[1].set_ylim(1e-10, 1e-3)
-    ax[1].set_title("(b) P(LoWC) per flight hour (dashed: FAA bands)")
-    ax[1].legend(fontsize=7)
-    v, e = err("pi_paper_mean" if st.has_pi_paper else "pi_mean")
-    ax[2].bar(x - w / 2, v, w, yerr=e, color="tab:gray", capsize=3, label="mean PI")
-    ax[2].bar(x + w / 2, np.nan_to_num([st.pi_max(g) for g in groups]), w, color="k", label="max PI")
-    ax[2].axhline(1.0, color="tab:blue", ls="--", lw=0.8, label="paper: mean < 1")
-    ax[2].set_title("(c) penetration integral of LoWC encounters (s)")
-    ax[2].legend(fontsize=7)
-    for a in ax:
-        a.set_xticks(x, groups)
-    p = name(1)
-    _save(fig, p)
-    plt.close(fig)
-    paths.append(p)
-
-    fig, ax = plt.subplots(figsize=(6, 4))
-    v, e = err("exact_match")
-    ax.bar(x, 100 * v, 0.6, yerr=100 * e, color="tab:purple", capsize=3, label="ours")
-    ax.axhline(pr.get("blending_exact_match_pct", 84), color="k", ls="--", label="paper (84 %)")
-    ax.set_xticks(x, groups)
-    ax.set_ylim(0, 105)
-    ax.set_ylabel("% of blends with the pilot's (axis, direction)")
-    ax.legend(fontsize=7)
-    p = name(2)
-    _save(fig, p)
-    plt.close(fig)
-    paths.append(p)
-    return paths
-
-
-def _slug(label: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_" else "_" for c in label)
 
 
 # --- report ---------------------------------------------------------------------------------------

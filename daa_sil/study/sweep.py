@@ -147,7 +147,7 @@ def _load(out: Path) -> dict:
 def summarize(out: "str | Path", replicates: "int | None" = None, seed: "int | None" = None) -> list[dict]:
     """Rows ``{value, group, metric, estimate, lo, hi, method}`` for every point, group and metric."""
     from daa_sil.study.analysis import Study
-    from .report import load_block
+    from daa_sil.study.report_input import load_block
     from .stats import DEFAULT_REPLICATES, DEFAULT_SEED
 
     out = Path(out)
