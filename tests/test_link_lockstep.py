@@ -12,7 +12,8 @@ from daa_sil.link.codec import MavCodec, mavlink as d
 from daa_sil.sil.endpoint import open_endpoint
 from daa_sil.sil.lockstep import LockstepGcs, LockstepTimeout, LockstepVehicle
 from daa_sil.link.messages import pilot_command_from, pilot_maneuver
-from daa_sil.sil.shim import DelayShim, ShimConfig
+from daa_sil.sil.shim import DelayShim
+from daa_sil.sil.shim_config import ShimConfig
 
 
 @pytest.mark.asyncio

@@ -33,7 +33,8 @@ import pytest
 
 from daa_sil.link.codec import MavCodec, generate_key_file, load_key, mavlink as d, signing_timestamp_now
 from daa_sil.sil.endpoint import open_endpoint
-from daa_sil.sil.shim import DelayShim, ShimConfig
+from daa_sil.sil.shim import DelayShim
+from daa_sil.sil.shim_config import ShimConfig
 from daa_sil.models.latency import Constant
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -20,7 +20,8 @@ from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec, mavlink as d
 from daa_sil.study.fasttime import STREAM_DOWN, STREAM_UP, encounter_streams
 from daa_sil.link.delayline import fifo_release
 from daa_sil.sil.endpoint import open_endpoint
-from daa_sil.sil.shim import DelayShim, ShimConfig, control_ids, run_shim
+from daa_sil.sil.shim import DelayShim, run_shim
+from daa_sil.sil.shim_config import ShimConfig, control_ids
 
 LOCAL = "udp:127.0.0.1:0"
 

@@ -187,7 +187,8 @@ async def test_standalone_vehicle_and_gcs_report_a_shim_that_stops(monkeypatch, 
     says the shim stopped echoing ticks (naming its address) and the GCS that ticks stopped."""
     import gcs.node as gnode
     import vehicle.node as vnode
-    from daa_sil.sil.shim import DelayShim, ShimConfig
+    from daa_sil.sil.shim import DelayShim
+    from daa_sil.sil.shim_config import ShimConfig
     from daa_sil.sil.scenario import delay_models
     from gcs.node import GcsNode, GcsOptions
     from vehicle.node import VehicleNode, VehicleOptions

@@ -13,7 +13,8 @@ from ..errors import UsageError
 from daa_sil.models.latency import SPEC_HELP, parse_delay_spec
 from ..link.codec import load_key
 from daa_sil.sil.endpoint import format_udp_address
-from daa_sil.sil.shim import CLOCKS, ShimConfig, run_shim
+from daa_sil.sil.shim import run_shim
+from daa_sil.sil.shim_config import CLOCKS, ShimConfig
 from ._args import finite_float
 
 EXAMPLES = """examples:
