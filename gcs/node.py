@@ -107,7 +107,9 @@ class GcsNode:
         self.pilot = None
         if self.mode == "model":
             from daa_sil.study.fasttime import STREAM_PILOT, encounter_streams
-            from daa_sil.models.pilot import PilotConfig, PilotDisplay, PilotModel
+            from daa_sil.models.pilot import PilotModel
+            from daa_sil.models.pilot_display import PilotDisplay
+            from daa_sil.models.pilot_config import PilotConfig
             from daa_sil.sil.scenario import ownship_state
 
             seed = encounter_streams(scenario.seed if scenario is not None else 0)[STREAM_PILOT]
@@ -257,7 +259,7 @@ class GcsNode:
 
     def _guidance(self, own: AircraftState, intr: AircraftState):
         """The pilot's display guidance, refreshed only when newer telemetry is seen (as fast-time,
-        with the same :class:`daa_sil.models.pilot.PilotDisplay`): the vehicle's alert level (DAA_ALERT) sent
+        with the same :class:`daa_sil.models.pilot_display.PilotDisplay`): the vehicle's alert level (DAA_ALERT) sent
         with that telemetry, well clear on the observed states and the DAA bands of the observed states."""
         t_seen = self.view.own[0]
         if t_seen != self._g_seen:

@@ -6,7 +6,7 @@ import pytest
 from daa_sil.geometry import wellclear as wc
 from daa_sil.agent import D_NO_WAIT, PilotInput, WaitValue, policy_for_group
 from daa_sil.daa import DaaConfig
-from daa_sil.models.encounters import IntruderGeometry, encounter_from_geometry
+from daa_sil.models.encounter_geometry import IntruderGeometry, encounter_from_geometry
 from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.onboard import OnboardCore, band_intervals
 from daa_sil.geometry.thresholds import PAPER

@@ -39,7 +39,7 @@ def test_feet_reading_draws_cpas_inside_dmod_and_is_recorded(tmp_path):
     run_campaign(cfg, tmp_path / "c", progress=False)
     meta = json.loads((tmp_path / "c" / "campaign.json").read_text())
     assert meta["config"]["reading"] == "feet" and meta["config"]["readings"]["units"] == "feet"
-    from daa_sil.models.encounters import load_encounters
+    from daa_sil.models.encounter_files import load_encounters
 
     es = load_encounters(tmp_path / "c" / "encounters.parquet")
     hmd, vmd = es.params["hmd_m"], es.params["vmd_m"]

@@ -60,7 +60,7 @@ def _fast_time(sc, seed: int):
     from daa_sil import waitmap
     from daa_sil.daa.config import DaaConfig
     from daa_sil.study.fasttime import simulate
-    from daa_sil.models.pilot import PilotConfig
+    from daa_sil.models.pilot_config import PilotConfig
     from vehicle.core import build_policy
 
     up, down = delay_models(sc)

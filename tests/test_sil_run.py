@@ -79,7 +79,7 @@ def test_lockstep_is_deterministic_and_matches_fast_time(tmp_path):
     from daa_sil import waitmap
     from daa_sil.daa.config import DaaConfig
     from daa_sil.study.fasttime import simulate
-    from daa_sil.models.pilot import PilotConfig
+    from daa_sil.models.pilot_config import PilotConfig
     from vehicle.core import build_policy
 
     path = ROOT / "scenarios" / "head_on.yaml"

@@ -166,13 +166,13 @@ def campaign_group(results, name: str) -> str:
 def replay_steplog(results, group: str, encounter_id: int):
     """Re-simulate one encounter of a campaign with step logging; returns (steplog, encounter row, config)."""
     from daa_sil.study import campaign, fasttime
-    from daa_sil.models import encounters
+    from daa_sil.models.encounter_files import load_encounters
 
     out = Path(results)
     cfg = campaign.CampaignConfig.from_dict(campaign.load_campaign_json(out)["config"], str(out / "campaign.json"))
     if group not in cfg.group_names:
         raise UsageError(f"group {group} is not in the campaign {out} (it ran {', '.join(cfg.group_names)})")
-    encs = encounters.load_encounters(out / "encounters.parquet")
+    encs = load_encounters(out / "encounters.parquet")
     pos = np.flatnonzero(np.asarray(encs.encounter_id) == encounter_id)
     if pos.size == 0:
         raise UsageError(f"encounter {encounter_id} is not in {out / 'encounters.parquet'}")

@@ -70,8 +70,8 @@ class Reading:
         return {}
 
     def pilot_config(self, base=None):
-        """The :class:`daa_sil.models.pilot.PilotConfig` of this reading (from ``base``, default PilotConfig())."""
-        from daa_sil.models.pilot import PilotConfig
+        """The :class:`daa_sil.models.pilot_config.PilotConfig` of this reading (from ``base``, default PilotConfig())."""
+        from daa_sil.models.pilot_config import PilotConfig
 
         base = base if base is not None else PilotConfig()
         level = 1 if self.pilot_start == "preventive" else 2

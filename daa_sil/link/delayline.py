@@ -63,7 +63,7 @@ def delay_seed(seed: "int | np.random.SeedSequence") -> np.random.SeedSequence:
 
     ``BatchedDelay(model, [delay_seed(s) for s in seeds], epoch_s, duration_s)`` reproduces such
     lines. (The shim does not use this: it passes each line the encounter's fast-time delay stream
-    as a ready :class:`DelayProcess`; see :func:`daa_sil.sil.shim.shim_delay_processes`.)
+    as a ready :class:`DelayProcess`; see :func:`daa_sil.sil.shim_config.shim_delay_processes`.)
     """
     return child_seed(seed, 0)
 

@@ -50,8 +50,6 @@ Randomness: encounter ``i`` uses ``Generator(PCG64(SeedSequence(seed).spawn(n)[i
 
 from __future__ import annotations
 
-import json
-import math
 import os
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -59,9 +57,8 @@ from typing import Sequence
 
 import numpy as np
 
-from daa_sil.errors import FileFormatError, UsageError
+from daa_sil.errors import UsageError
 from daa_sil.geometry.frames import wrap_2pi, wrap_pi
-from daa_sil.files import atomic_path
 from daa_sil.geometry.kinematics import AircraftState, Performance, advance
 from daa_sil.geometry.thresholds import get_thresholds
 from daa_sil.geometry.units import DEG
@@ -199,10 +196,14 @@ class EncounterSet:
 
     def save(self, path: "str | os.PathLike") -> Path:
         """Write atomically as Parquet (see :func:`save_encounters`)."""
+        from .encounter_files import save_encounters
+
         return save_encounters(self, path)
 
     @classmethod
     def load(cls, path: "str | os.PathLike") -> "EncounterSet":
+        from .encounter_files import load_encounters
+
         return load_encounters(path)
 
 
@@ -426,190 +427,5 @@ def _cfg_dict(cfg: EncounterConfig) -> dict:
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}
 
 
-# --------------------------------------------------------------------------------------------------
-@dataclass
-class IntruderGeometry:
-    """One intruder defined by its CPA geometry (the scenario-file ``cpa`` block), SI + degrees.
-
-    ``angle_deg``: intruder track minus ownship track (compass, 180 = head-on) at ``angle_at``
-    (``"cpa"`` or ``"start"``); ``hmd_m`` signed, + = the intruder passes on the ownship's right
-    (CPA bearing closest to +90 deg clockwise); ``maneuvers``: list of
-    ``(start_s, end_s, turn_rate_dps, accel_mps2, vertical_accel_mps2)``.
-    """
-
-    angle_deg: float
-    hmd_m: float
-    t_cpa_s: float
-    gs_mps: float
-    vmd_m: float = 0.0
-    vs_mps: float = 0.0
-    maneuvers: Sequence = ()
-    angle_at: str = "cpa"
-
-
-def encounter_from_geometry(intruders: "Sequence[IntruderGeometry] | IntruderGeometry", *,
-                            own: "AircraftState | None" = None, duration_s: float = 240.0, dt_s: float = 1.0,
-                            check_dt_s: float = 0.1, encounter_id: int = 0, seed: int = 0) -> EncounterSet:
-    """A one-encounter set (N = 1, M = len(intruders)) placed deterministically from CPA geometry.
-
-    ``own``: the ownship at t = 0 (flies straight; default north at 55 m/s, 1500 m). Realised
-    HMD/VMD/t_cpa over ``[0, duration_s]`` are stored in ``params`` (a turn may move the CPA; check
-    ``t_cpa_real_s``). Raises UsageError for a bad value.
-    """
-    geoms = [intruders] if isinstance(intruders, IntruderGeometry) else list(intruders)
-    if not geoms:
-        raise UsageError("encounter_from_geometry needs at least one intruder")
-    own0 = own if own is not None else _own_initial(1, EncounterConfig())
-    own0 = AircraftState(*(np.atleast_1d(getattr(own0, f)).astype(float) for f in "x y z gs trk vs".split()))
-    m = len(geoms)
-    s_max = max(1, max(len(g.maneuvers) for g in geoms))
-    seg = [np.full((1, m, s_max), np.nan) for _ in range(5)]
-    for f in seg[2:]:
-        f[:] = 0.0
-    for j, g in enumerate(geoms):
-        if g.angle_at not in ("cpa", "start"):
-            raise UsageError(f"intruders[{j}].angle_at must be 'cpa' or 'start', got {g.angle_at!r}")
-        if not (0 < g.t_cpa_s <= duration_s):
-            raise UsageError(f"intruders[{j}].t_cpa_s must be within (0, {duration_s:g}], got {g.t_cpa_s!r}")
-        if not g.gs_mps > 0:
-            raise UsageError(f"intruders[{j}].gs_mps must be > 0, got {g.gs_mps!r}")
-        for k, mv in enumerate(g.maneuvers):
-            st, en, w, a, av = (list(mv) + [0.0] * 5)[:5]
-            if not st < en:
-                raise UsageError(f"intruders[{j}].maneuvers[{k}]: start_s must be < end_s, got {st!r}, {en!r}")
-            seg[0][0, j, k], seg[1][0, j, k] = st, en
-            seg[2][0, j, k], seg[3][0, j, k], seg[4][0, j, k] = w * DEG, a, av
-    segt = tuple(seg)
-    ang = np.array([[g.angle_deg * DEG for g in geoms]])
-    tc = np.array([[g.t_cpa_s for g in geoms]])
-    gs = np.array([[g.gs_mps for g in geoms]])
-    vs = np.array([[g.vs_mps for g in geoms]])
-    # initial track: for angle_at="cpa" subtract the scripted heading change up to t_cpa
-    trk0 = own0.trk[:, None] + ang
-    inits = []
-    bearings = []
-    for j, g in enumerate(geoms):
-        sj = tuple(a[:, j:j + 1] for a in segt)
-        t0j = trk0[:, j:j + 1]
-        if g.angle_at == "cpa":
-            z = np.zeros((1, 1))
-            probe = _integrate(AircraftState(z, z, z, gs[:, j:j + 1], z, vs[:, j:j + 1]), sj, g.t_cpa_s, dt_s, dt_s)
-            t0j = wrap_2pi(t0j - wrap_pi(probe.trk))
-        hint = np.full((1, 1), 90.0 * DEG if g.hmd_m >= 0 else -90.0 * DEG)
-        init, b = _place(own0, gs[:, j:j + 1], vs[:, j:j + 1], t0j, sj, g.t_cpa_s, abs(g.hmd_m),
-                         g.vmd_m, hint, dt_s)
-        inits.append(init)
-        bearings.append(b)
-    intr = AircraftState(*(np.concatenate([getattr(s, f) for s in inits], axis=1) for f in "x y z gs trk vs".split()))
-    r_h, r_v, r_t = _realised_cpa(own0, intr, segt, duration_s, dt_s, check_dt_s)
-    params = {k: np.full((1, m), np.nan) for k in PARAM_NAMES}
-    params.update(speed_mps=gs, vs_mps=vs, hmd_m=np.abs([[g.hmd_m for g in geoms]]).astype(float),
-                  vmd_m=np.array([[g.vmd_m for g in geoms]], float), t_cpa_s=tc, hmd_real_m=r_h, vmd_real_m=r_v,
-                  t_cpa_real_s=r_t, cpa_bearing_deg=np.concatenate(bearings, axis=1) / DEG,
-                  ia_deg=np.abs(wrap_pi(intr.trk - own0.trk[:, None])) / DEG,
-                  ia_sign=-np.sign(wrap_pi(intr.trk - own0.trk[:, None])), n_rejected=np.zeros((1, m)))
-    ids = np.array([encounter_id], dtype=np.int64)
-    return EncounterSet(own=own0, intr=intr, seg_start_s=seg[0], seg_end_s=seg[1], seg_turn_rate=seg[2],
-                        seg_accel=seg[3], seg_vaccel=seg[4], encounter_id=ids, seed=np.array([seed], np.int64),
-                        params=params, root_seed=None, duration_s=float(duration_s), dt_s=float(dt_s),
-                        config={"source": "geometry"})
-
-
-# --------------------------------------------------------------------------------------------------
-_STATE = ("x", "y", "z", "gs", "trk", "vs")
-
-
-def save_encounters(es: EncounterSet, path: "str | os.PathLike") -> Path:
-    """Write ``es`` as one Parquet file (one row per encounter; intruder values as list columns)
-    atomically. The schema carries ``format``/``version``/``m``/``s`` metadata checked on load."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    n, m = len(es), es.m
-    s = es.seg_start_s.shape[-1]
-
-    def lst(a, width):
-        flat = np.ascontiguousarray(a, dtype=np.float64).reshape(n * width)
-        return pa.ListArray.from_arrays(pa.array(np.arange(0, n * width + 1, width, dtype=np.int32)),
-                                        pa.array(flat, type=pa.float64()))
-
-    cols = {"encounter_id": pa.array(es.encounter_id.astype(np.int64)), "seed": pa.array(es.seed.astype(np.int64))}
-    for f in _STATE:
-        cols[f"own_{f}"] = pa.array(getattr(es.own, f).astype(np.float64))
-    for f in _STATE:
-        cols[f"intr_{f}"] = lst(getattr(es.intr, f), m)
-    for k in _SEG_NAMES:
-        cols[k] = lst(getattr(es, k), m * s)
-    for k in PARAM_NAMES:
-        cols[f"p_{k}"] = lst(es.params.get(k, np.full((n, m), np.nan)), m)
-    meta = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "m": m, "s": s, "root_seed": es.root_seed,
-            "duration_s": es.duration_s, "dt_s": es.dt_s, "config": es.config}
-    table = pa.table(cols).replace_schema_metadata({"daa_sil": json.dumps(meta)})
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp)
-    return Path(path)
-
-
-def load_encounters(path: "str | os.PathLike") -> EncounterSet:
-    """Read a file written by :func:`save_encounters`; FileFormatError (one line) if it is missing,
-    not Parquet, not an encounter set, of another version, or has missing/ill-shaped columns."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    p = Path(path)
-    if not p.is_file():
-        raise FileFormatError(f"{p}: no such encounter file")
-    try:
-        table = pq.read_table(p)
-    except (OSError, pa.ArrowException, ValueError) as exc:
-        raise FileFormatError(f"{p} is not a readable Parquet file: {str(exc).splitlines()[0] if str(exc) else exc}") from None
-    raw = (table.schema.metadata or {}).get(b"daa_sil")
-    try:
-        meta = json.loads(raw) if raw else None
-    except ValueError:
-        meta = None
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
-        raise FileFormatError(f"{p} is not a daa-sil encounter set (no '{FORMAT_NAME}' metadata)")
-    if meta.get("version") != FORMAT_VERSION:
-        raise FileFormatError(f"{p}: encounter format version {meta.get('version')!r}, this daa-sil reads {FORMAT_VERSION}")
-    n = table.num_rows
-    try:
-        m, s = int(meta["m"]), int(meta["s"])
-    except (KeyError, TypeError, ValueError):
-        raise FileFormatError(f"{p}: metadata lacks intruder/segment counts 'm'/'s'") from None
-    names = set(table.column_names)
-
-    def col(name):
-        if name not in names:
-            raise FileFormatError(f"{p}: missing column {name!r}")
-        return table.column(name)
-
-    def scalar(name, dtype):
-        c = col(name)
-        try:
-            return np.asarray(c.to_numpy(zero_copy_only=False), dtype=dtype)
-        except (TypeError, ValueError, pa.ArrowException):
-            raise FileFormatError(f"{p}: column {name!r} is not {np.dtype(dtype).name}") from None
-
-    def lst(name, width):
-        c = col(name).combine_chunks()
-        if not pa.types.is_list(c.type) or not pa.types.is_floating(c.type.value_type):
-            raise FileFormatError(f"{p}: column {name!r} must be list<double>, got {c.type}")
-        lens = np.asarray(c.value_lengths().to_numpy(zero_copy_only=False))
-        if c.null_count or (lens != width).any():
-            raise FileFormatError(f"{p}: column {name!r} must hold {width} values per row")
-        return np.asarray(c.flatten().to_numpy(zero_copy_only=False), float).reshape((n, m, -1) if width != m else (n, m))
-
-    own = AircraftState(*(scalar(f"own_{f}", float) for f in _STATE))
-    intr = AircraftState(*(lst(f"intr_{f}", m) for f in _STATE))
-    segs = {k: lst(k, m * s).reshape(n, m, s) for k in _SEG_NAMES}
-    params = {k: lst(f"p_{k}", m) for k in PARAM_NAMES}
-    return EncounterSet(own=own, intr=intr, **segs, encounter_id=scalar("encounter_id", np.int64),
-                        seed=scalar("seed", np.int64), params=params, root_seed=meta.get("root_seed"),
-                        duration_s=float(meta.get("duration_s", 240.0)), dt_s=float(meta.get("dt_s", 1.0)),
-                        config=meta.get("config", {}))
-
-
-__all__ = ["EncounterConfig", "EncounterSet", "IntruderGeometry", "INTRUDER_PERFORMANCE", "PARAM_NAMES",
-           "sample_encounters", "encounter_from_geometry", "save_encounters", "load_encounters",
+__all__ = ["EncounterConfig", "EncounterSet", "INTRUDER_PERFORMANCE", "PARAM_NAMES", "sample_encounters",
            "concat_encounters", "encounter_seed"]

@@ -446,6 +446,7 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
     Returns ``(out_dir, config, encounter_set)``. On resume the stored config must equal ``config``.
     """
     from daa_sil.models import encounters as enc_mod
+    from daa_sil.models.encounter_files import load_encounters, save_encounters
 
     config.validate()
     out = check_out_dir(out_dir, resume)
@@ -464,7 +465,7 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
         if stored_map and fam is not None and stored_map.get("content_hashes") != _describe_family(fam)["content_hashes"]:
             raise UsageError(f"--resume: the wait maps of {config.map_source!r} are not the ones this campaign started with "
                              f"(their content hashes differ: rebuilt with other code or parameters); start a new campaign")
-        encs = enc_mod.load_encounters(enc_path)
+        encs = load_encounters(enc_path)
         if len(encs) != config.n_encounters:
             raise FileFormatError(f"{enc_path} holds {len(encs)} encounters, campaign.json says {config.n_encounters}")
         return out, config, encs
@@ -475,7 +476,7 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
                                      t_cpa_s=config.duration_s / 2.0,  # paper: CPA at T/2
                                      n_intruders=config.n_intruders,
                                      **config.effective_reading.encounter_overrides())
-    enc_mod.save_encounters(encs, enc_path)  # atomic
+    save_encounters(encs, enc_path)  # atomic
     meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "versions": _versions(),
             "preset": config.preset, "seed": config.seed, "status": "running",
             "seeds": {"campaign": config.seed,

@@ -4,7 +4,7 @@ At step ``k`` (``t_k = k dt``, ``dt = 1 s``, ``T = 240 s``; ``docs/architecture.
 
 1. **GCS / pilot** -- the pilot observes the newest telemetry whose downlink release time is
    ``<= t_k`` (per-encounter telemetry history + FIFO release rule of
-   :func:`daa_sil.link.delayline.fifo_release`), its display (:class:`daa_sil.models.pilot.PilotDisplay`,
+   :func:`daa_sil.link.delayline.fifo_release`), its display (:class:`daa_sil.models.pilot_display.PilotDisplay`,
    the same one the SIL GCS uses) is refreshed from that view where it changed (DAA bands only
    where the observed alert reaches ``PilotConfig.alert_level_min``), and
    :meth:`daa_sil.models.pilot.PilotModel.step` decides. The GCS sends a packet every step (a heartbeat,
@@ -56,7 +56,9 @@ from daa_sil.geometry.kinematics import AircraftState, Command
 from daa_sil.models.latency import DEFAULT_EPOCH_S, BatchedDelay, DelayModel
 from daa_sil.link.delayline import fifo_release
 from daa_sil.onboard import OnboardCore, StepOutput
-from daa_sil.models.pilot import PilotConfig, PilotDisplay, PilotModel
+from daa_sil.models.pilot import PilotModel
+from daa_sil.models.pilot_display import PilotDisplay
+from daa_sil.models.pilot_config import PilotConfig
 from daa_sil.geometry.thresholds import get_thresholds
 
 #: stream indices under an encounter's seed

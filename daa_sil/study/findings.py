@@ -1,5 +1,5 @@
 """The paper's findings (``daa_sil/data/paper_findings.yaml``) and the verdict rules that test them
-on a :class:`daa_sil.study.metrics.Study`. Every rule can come out "no"; none has a hand-set threshold
+on a :class:`daa_sil.study.analysis.Study`. Every rule can come out "no"; none has a hand-set threshold
 (the only level is the report's confidence level, 95 %, used for every interval and test).
 
 Rules, one per kind of finding (the report prints them):

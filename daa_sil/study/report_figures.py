@@ -1,4 +1,5 @@
-"""The report's PNG figures (matplotlib, Agg): allocation counts (paper Fig. 9), safety (Fig. 10) and the exact-match share, one set per reading."""
+"""The report's PNG figures (matplotlib, Agg): allocation counts (paper Fig. 9), safety (Fig. 10)
+and the exact-match share, one set per reading."""
 
 from __future__ import annotations
 

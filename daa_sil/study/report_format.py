@@ -1,4 +1,5 @@
-"""Markdown formatting of the report: tables, an estimate with its interval, the paper's published value beside ours, and the per-group table layout (:data:`GROUP_TABLES`)."""
+"""Markdown formatting of the report: tables, an estimate with its interval, the paper's published
+value beside ours, and the per-group table layout (:data:`GROUP_TABLES`)."""
 
 from __future__ import annotations
 

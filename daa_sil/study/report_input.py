@@ -1,4 +1,5 @@
-"""The report's input: campaign directories (or tables) read into blocks, one block per named reading, with the optional recounts of a directory under another counting (``--recount``)."""
+"""The report's input: campaign directories (or tables) read into blocks, one block per named
+reading, with the optional recounts of a directory under another counting (``--recount``)."""
 
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ campaign seed, so every point flies the same encounters, and writes
 * ``DIR/sweep.csv`` and ``DIR/sweep.md``: per value and group, DAA allocations and pilot commands
   received per encounter, the exact (axis, direction) match share of blends, the LoWC rate (share
   of encounters) and the mean PI of LoWC encounters, each with its encounter-level 95 % CI
-  (:class:`daa_sil.study.metrics.Study`: cluster bootstrap, Clopper-Pearson for the LoWC share);
+  (:class:`daa_sil.study.analysis.Study`: cluster bootstrap, Clopper-Pearson for the LoWC share);
 * ``DIR/sensitivity_<metric>.png``: each metric against the varied value, one line per group.
 
 Variables (:data:`VARIABLES`): ``wt`` (W_T, s), ``gamma`` (MDP discount), ``grid`` (a map preset or

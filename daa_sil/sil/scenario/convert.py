@@ -43,13 +43,14 @@ def ownship_state(sc: Scenario):
 def encounter_set(sc: Scenario, encounter_id: int = 0):
     """The scenario as a one-encounter :class:`daa_sil.models.encounters.EncounterSet` (N = 1, M intruders).
 
-    ``cpa`` intruders are placed by :func:`daa_sil.models.encounters.encounter_from_geometry` against the
+    ``cpa`` intruders are placed by :func:`daa_sil.models.encounter_geometry.encounter_from_geometry` against the
     scenario's (unmaneuvered) ownship; ``initial`` intruders start as given. Scripts become the
     set's segments. This is the one conversion the SIL vehicle and fast-time parity runs share.
     """
     import numpy as np
 
     from daa_sil.models import encounters as enc
+    from daa_sil.models.encounter_geometry import IntruderGeometry, encounter_from_geometry
     from daa_sil.geometry.kinematics import AircraftState
 
     own = ownship_state(sc)
@@ -66,8 +67,8 @@ def encounter_set(sc: Scenario, encounter_id: int = 0):
                 seg[2][0, j, k], seg[3][0, j, k], seg[4][0, j, k] = math.radians(w), a, av
             if spec.cpa is not None:
                 c = spec.cpa
-                one = enc.encounter_from_geometry(
-                    [enc.IntruderGeometry(c.angle_deg, c.hmd_m, c.t_cpa_s, c.gs_mps, c.vmd_m, c.vs_mps, mv)],
+                one = encounter_from_geometry(
+                    [IntruderGeometry(c.angle_deg, c.hmd_m, c.t_cpa_s, c.gs_mps, c.vmd_m, c.vs_mps, mv)],
                     own=own, duration_s=sc.duration_s, dt_s=1.0, encounter_id=encounter_id, seed=sc.seed)
                 states.append(one.intr[:, 0])
             else:
