@@ -23,7 +23,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from daa_sil.study.campaign import read_results
+from daa_sil.study.campaign_files import read_results
 from daa_sil.cli import main
 
 #: wraps ``daa-sil``; argv[1] names the point at which the process SIGKILLs itself

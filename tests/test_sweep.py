@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from daa_sil.study.campaign import read_results
+from daa_sil.study.campaign_files import read_results
 from daa_sil.cli import main
 from daa_sil.errors import UsageError
 from daa_sil.study.sweep import parse_vary

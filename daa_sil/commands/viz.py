@@ -130,9 +130,9 @@ def run_steplog(args) -> int:
 
 def pick_encounter(results, group: str, encounter: "int | None", worst: bool) -> tuple[int, dict]:
     """The encounter id to replay and its result row (``--worst``: max PI among LoWC, else min range)."""
-    from daa_sil.study import campaign
+    from daa_sil.study import campaign_files
 
-    rows = campaign.read_results(results, "encounters", groups=[group])
+    rows = campaign_files.read_results(results, "encounters", groups=[group])
     ids = np.asarray(rows.column("encounter_id").to_numpy(zero_copy_only=False))
     if worst:
         lowc = np.asarray(rows.column("lowc").to_numpy(zero_copy_only=False), bool)
@@ -153,10 +153,10 @@ def pick_encounter(results, group: str, encounter: "int | None", worst: bool) ->
 
 def campaign_group(results, name: str) -> str:
     """The campaign's group named ``name`` (case-insensitive), or a one-line error listing its groups."""
-    from daa_sil.study import campaign
+    from daa_sil.study import campaign, campaign_files
 
     out = Path(results)
-    cfg = campaign.CampaignConfig.from_dict(campaign.load_campaign_json(out)["config"], str(out / "campaign.json"))
+    cfg = campaign.CampaignConfig.from_dict(campaign_files.load_campaign_json(out)["config"], str(out / "campaign.json"))
     for g in cfg.group_names:
         if g.upper() == str(name).strip().upper():
             return g
@@ -165,11 +165,11 @@ def campaign_group(results, name: str) -> str:
 
 def replay_steplog(results, group: str, encounter_id: int):
     """Re-simulate one encounter of a campaign with step logging; returns (steplog, encounter row, config)."""
-    from daa_sil.study import campaign, fasttime
+    from daa_sil.study import campaign, campaign_files, fasttime
     from daa_sil.models.encounter_files import load_encounters
 
     out = Path(results)
-    cfg = campaign.CampaignConfig.from_dict(campaign.load_campaign_json(out)["config"], str(out / "campaign.json"))
+    cfg = campaign.CampaignConfig.from_dict(campaign_files.load_campaign_json(out)["config"], str(out / "campaign.json"))
     if group not in cfg.group_names:
         raise UsageError(f"group {group} is not in the campaign {out} (it ran {', '.join(cfg.group_names)})")
     encs = load_encounters(out / "encounters.parquet")

@@ -31,31 +31,26 @@ remote Dask cluster needs no shared file system).
 from __future__ import annotations
 
 import concurrent.futures as cf
-import contextlib
 import functools
-import json
 import math
 import os
-import platform
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
+from typing import Callable
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 
-from daa_sil import __version__
-from daa_sil.errors import FileFormatError, OutputError, UsageError
-from daa_sil.files import atomic_path, atomic_write_json, ensure_dir, remove_stale_temps
+from daa_sil.errors import FileFormatError, UsageError
+from daa_sil.files import atomic_write_json, ensure_dir, remove_stale_temps
 from daa_sil.config.groups import GroupSpec, parse_groups
 from daa_sil.geometry.thresholds import PRESETS
 from daa_sil.waitmap.build import DEFAULT_MAP
+from daa_sil.study.campaign_files import _versions, check_out_dir, chunk_done, load_campaign_json, write_chunk
+from daa_sil.study.executors import make_executor
+from daa_sil.study.campaign_files import CAMPAIGN_FORMAT
 
-#: campaign.json format version
-CAMPAIGN_FORMAT = 1
 #: default encounter duration T (s) and step dt (s), paper §IV
 DEFAULT_DURATION_S = 240.0
 DEFAULT_DT_S = 1.0
@@ -278,140 +273,9 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
 
 
 # --- files ----------------------------------------------------------------------------------------
-def chunk_paths(out_dir: Path, group: str, chunk: int) -> tuple[Path, Path]:
-    """``(encounters, decisions)`` Parquet paths of a chunk."""
-    return (out_dir / group / f"encounters-{chunk:05d}.parquet", out_dir / group / f"decisions-{chunk:05d}.parquet")
-
-
-def chunk_done(out_dir: Path, group: str, chunk: int) -> bool:
-    """A chunk is complete when both files exist (decisions is written first, encounters last) and
-    both have a readable Parquet footer (a damaged chunk is computed again on resume)."""
-    enc, dec = chunk_paths(out_dir, group, chunk)
-    if not (enc.is_file() and dec.is_file()):
-        return False
-    try:
-        pq.read_metadata(enc)
-        pq.read_metadata(dec)
-    except (OSError, pa.ArrowException):
-        return False
-    return True
-
-
-def _write_table(table: pa.Table, path: Path) -> None:
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp, compression="zstd")
-
-
-def write_chunk(out_dir: Path, res: ChunkResult) -> None:
-    """Write a chunk's two tables atomically, decisions first (so encounters marks completion)."""
-    enc, dec = chunk_paths(out_dir, res.group, res.chunk)
-    _write_table(res.decisions, dec)
-    _write_table(res.encounters, enc)
-
-
-def read_results(out_dir: "str | os.PathLike", kind: str = "encounters",
-                 groups: "Sequence[str] | None" = None) -> pa.Table:
-    """Concatenate the per-chunk tables of ``kind`` (``encounters`` or ``decisions``) in
-    (group, chunk) order."""
-    out = Path(out_dir)
-    if kind not in ("encounters", "decisions"):
-        raise UsageError(f"kind must be 'encounters' or 'decisions', got {kind!r}")
-    cfg = load_campaign_json(out)["config"] if (out / "campaign.json").is_file() else None
-    names = list(groups) if groups is not None else ([g["name"] for g in cfg["groups"]] if cfg else
-                                                     sorted(p.name for p in out.iterdir() if p.is_dir()))
-    tables = []
-    for g in names:
-        for f in sorted((out / g).glob(f"{kind}-*.parquet")):
-            try:
-                tables.append(pq.read_table(f))
-            except (OSError, pa.ArrowException) as exc:
-                raise FileFormatError(f"{f} is not a readable Parquet file: {str(exc).splitlines()[0]}") from None
-    if not tables:
-        raise FileFormatError(f"{out} holds no {kind}-*.parquet results")
-    return pa.concat_tables(tables)
-
-
-def load_campaign_json(out_dir: Path) -> dict:
-    """Read ``DIR/campaign.json`` (FileFormatError if unreadable)."""
-    path = Path(out_dir) / "campaign.json"
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise FileFormatError(f"{path} does not exist; not a campaign directory") from None
-    except (OSError, ValueError) as exc:
-        raise FileFormatError(f"{path} is not readable JSON: {exc}") from None
-    if not isinstance(meta, dict) or meta.get("format") != CAMPAIGN_FORMAT or "config" not in meta:
-        raise FileFormatError(f"{path}: not a daa-sil campaign file (format {CAMPAIGN_FORMAT} expected)")
-    return meta
-
-
-def _versions() -> dict:
-    out = {"daa_sil": __version__, "python": platform.python_version(), "numpy": np.__version__,
-           "pyarrow": pa.__version__}
-    return out
-
-
-def check_out_dir(out_dir: "str | os.PathLike", resume: bool) -> Path:
-    """Validate ``DIR`` before anything is written: writable, and empty unless resuming."""
-    p = Path(out_dir)
-    if p.exists() and not p.is_dir():
-        raise UsageError(f"--out {p} exists and is not a directory")
-    if p.is_dir():
-        if not os.access(p, os.W_OK | os.X_OK):
-            raise UsageError(f"--out {p} is not writable")
-        if any(p.iterdir()) and not resume:
-            raise UsageError(f"--out {p} is not empty; pass --resume to continue the campaign there "
-                             f"or choose a new directory")
-        return p
-    anc = p.absolute().parent
-    while not anc.exists():
-        anc = anc.parent
-    if not anc.is_dir() or not os.access(anc, os.W_OK | os.X_OK):
-        raise UsageError(f"--out {p} cannot be created: {anc} is not a writable directory")
-    return p
 
 
 # --- executors ------------------------------------------------------------------------------------
-DASK_HINT = "pip install 'daa-sil[dist]'"
-
-
-@contextlib.contextmanager
-def make_executor(workers: int = 1, scheduler: "str | None" = None) -> Iterator[cf.Executor]:
-    """The executor for ``workers``/``scheduler`` (see the module docstring); shut down on exit."""
-    if scheduler:
-        try:
-            from dask.distributed import Client, LocalCluster
-        except ImportError:
-            raise UsageError(f"--scheduler needs dask.distributed, which is not installed: {DASK_HINT}") from None
-        with contextlib.ExitStack() as stack:
-            if scheduler == "local-dask":
-                cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                                           host="127.0.0.1", dashboard_address=None))
-                client = stack.enter_context(Client(cluster))
-            else:
-                try:
-                    client = stack.enter_context(Client(scheduler, timeout="10s"))
-                except (OSError, TimeoutError, ValueError) as exc:
-                    raise UsageError(f"cannot connect to Dask scheduler {scheduler!r}: {exc}") from None
-            ex = client.get_executor(pure=False)
-            try:
-                yield ex
-            finally:
-                ex.shutdown(wait=False)
-        return
-    if workers <= 1:
-        ex: cf.Executor = cf.ThreadPoolExecutor(max_workers=1, thread_name_prefix="daa-sil-campaign")
-    else:
-        import multiprocessing as mp
-
-        ex = cf.ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"))
-    try:
-        yield ex
-    except BaseException:
-        ex.shutdown(wait=False, cancel_futures=True)
-        raise
-    else:
-        ex.shutdown(wait=True)
 
 
 # --- the runner -----------------------------------------------------------------------------------

@@ -110,7 +110,7 @@ def load_block(src) -> Block:
         d = Path(src)
         source = str(d)
         if (d / "campaign.json").is_file():
-            from .campaign import load_campaign_json
+            from daa_sil.study.campaign_files import load_campaign_json
 
             cj = load_campaign_json(d)
             cfg = cj.get("config", {})

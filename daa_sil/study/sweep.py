@@ -103,7 +103,8 @@ def point_configs(base, vary: Vary) -> list:
 def run_sweep(base, vary: Vary, out_dir: "str | Path", *, workers: int = 1, scheduler: "str | None" = None,
               resume: bool = False, progress: bool = True, say: "Callable[[str], None] | None" = None) -> dict:
     """Run (or resume) every point of a sweep, then write its table and figures. Returns sweep.json."""
-    from .campaign import check_out_dir, run_campaign
+    from .campaign import run_campaign
+    from daa_sil.study.campaign_files import check_out_dir
     from daa_sil.files import atomic_write_json, ensure_dir, to_jsonable
 
     configs = point_configs(base, vary)
