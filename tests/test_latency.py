@@ -7,8 +7,8 @@ import pytest
 from scipy import stats
 
 from daa_sil.errors import FileFormatError, UsageError
-from daa_sil.models.latency import (BatchedDelay, Constant, DelayProcess, Trace, TruncatedGaussian, Uniform,
-                             delay_model_from_dict, parse_delay_spec)
+from daa_sil.models.latency import Constant, Trace, TruncatedGaussian, Uniform, delay_model_from_dict, parse_delay_spec
+from daa_sil.models.delay_process import BatchedDelay, DelayProcess
 
 
 def test_truncated_gaussian_statistics_match_truncnorm():

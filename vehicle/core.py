@@ -63,7 +63,7 @@ def link_delay_processes(sc: Scenario) -> "dict | None":
     (s), i.e. the *configured* one-way delay of a packet sent at ``t`` before the FIFO rule, not a
     measurement. With ``link.epoch_s = 0`` (a draw per datagram) there is no per-step value: None.
     """
-    from daa_sil.models.latency import DelayProcess
+    from daa_sil.models.delay_process import DelayProcess
     from daa_sil.sil.shim_config import delay_stream_seeds
     from daa_sil.sil.scenario import delay_models
 

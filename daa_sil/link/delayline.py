@@ -34,7 +34,8 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from ..errors import UsageError
-from daa_sil.models.latency import DelayModel, DelayProcess, as_seed_sequence, child_seed
+from daa_sil.models.latency import DelayModel
+from daa_sil.models.delay_process import DelayProcess, as_seed_sequence, child_seed
 
 
 def fifo_release(t_in: np.ndarray, delay: np.ndarray, keep: "np.ndarray | None" = None,

@@ -95,7 +95,7 @@ import numpy as np
 
 from daa_sil.errors import UsageError
 from daa_sil.files import atomic_write_json, to_jsonable
-from daa_sil.models.latency import as_seed_sequence
+from daa_sil.models.delay_process import as_seed_sequence
 from daa_sil.link.codec import MavCodec
 from daa_sil.link.delayline import DelayLine
 from .endpoint import RCVBUF_BYTES, Address, DropReporter, format_udp_address, parse_udp_address

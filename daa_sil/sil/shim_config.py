@@ -15,7 +15,8 @@ import numpy as np
 from daa_sil.errors import UsageError
 from daa_sil.link.codec import mavlink
 from daa_sil.link.delayline import check_outages
-from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel, DelayProcess, as_seed_sequence, child_seed
+from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel
+from daa_sil.models.delay_process import DelayProcess, as_seed_sequence, child_seed
 from daa_sil.sil.endpoint import parse_udp_address
 
 CLOCKS = ("realtime", "lockstep")

@@ -20,7 +20,7 @@ Everything is vectorised over encounters; the only Python loops are over steps (
 "release everything due" loop). Random streams per encounter ``i`` come from its seed
 ``encounters.seed[i]`` (:func:`encounter_streams`): the pilot, uplink and downlink delay
 processes, identical for every group. Delay processes are piecewise constant per ``epoch_s``
-(:class:`daa_sil.models.latency.BatchedDelay`), as in the SIL shim.
+(:class:`daa_sil.models.delay_process.BatchedDelay`), as in the SIL shim.
 
 Results: :func:`simulate` returns the per-encounter and per-decision tables of the architecture
 contract ("Campaign result tables") and, with ``record_steps=True``, the step log
@@ -53,7 +53,8 @@ from daa_sil.agent import (BY_BOTH, BY_MAP, BY_PROJL, CODE_NAMES, D_BLEND, D_DAA
 from daa_sil.daa.config import DaaConfig
 from daa_sil.errors import UsageError
 from daa_sil.geometry.kinematics import AircraftState, Command
-from daa_sil.models.latency import DEFAULT_EPOCH_S, BatchedDelay, DelayModel
+from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel
+from daa_sil.models.delay_process import BatchedDelay
 from daa_sil.link.delayline import fifo_release
 from daa_sil.onboard import OnboardCore, StepOutput
 from daa_sil.models.pilot import PilotModel
