@@ -188,9 +188,6 @@ class AgentMemory:
     def __getitem__(self, idx) -> "AgentMemory":
         return AgentMemory(*(None if getattr(self, f.name) is None else getattr(self, f.name)[idx] for f in fields(self)))
 
-    def pilot_command(self) -> Command:
-        return Command(self.pilot_trk, self.pilot_vs, self.pilot_gs)
-
 
 def _reached(own: AircraftState, cmd: Command) -> np.ndarray:
     dtrk, dvs, dgs = command_deltas(own, cmd)

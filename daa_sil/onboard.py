@@ -31,7 +31,7 @@ from typing import Callable
 import numpy as np
 
 from .geometry import wellclear as wc
-from daa_sil.geometry.frames import to_paper_state, wrap_pi
+from daa_sil.geometry.frames import wrap_pi
 from daa_sil.geometry.kinematics import AircraftState, Command, Performance, advance, fly_command
 from .daa.alerting import relative_state
 from daa_sil.models.encounters import INTRUDER_PERFORMANCE
@@ -180,10 +180,6 @@ class OnboardCore:
         return cls(encounters.own, encounters.intr, encounters.intruder_controls, policy, daa_cfg, wait_lookup,
                    dt=encounters.dt_s, **kw)
 
-    def paper_state(self) -> np.ndarray:
-        """The paper's relative state (N, M, 6) of every intruder at the current time."""
-        return to_paper_state(self.own.position()[:, None, :], self.own.velocity()[:, None, :],
-                              self.intruders.position(), self.intruders.velocity())
 
     def geometry(self) -> dict:
         """Per-intruder well-clear quantities at the current time, (N, M) each."""

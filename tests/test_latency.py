@@ -133,7 +133,8 @@ def test_batched_delay_equals_per_encounter_process():
 
 
 def test_iid_fifo_inflation_vs_piecewise_constant():
-    """Why the default is piecewise constant: mavlink_spec §5.3 (10 Hz, 600 s)."""
+    """Why the default is piecewise constant (docs/models.md, "Link delay"): an i.i.d. draw per packet of a
+    10 Hz stream over 600 s, kept FIFO, inflates a 5 s Gaussian delay to about 8 s."""
     from daa_sil.link.delayline import fifo_release
 
     g = TruncatedGaussian(5, 3)

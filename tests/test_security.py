@@ -1,6 +1,6 @@
 """Issue 9 §2: signing and spoofing. Forged, replayed, stale and spoofed packets are rejected 100 %
 and counted; a forged command never changes the flown command; a forged future timestamp does not
-lock out the real GCS (the pymavlink pitfall, ``reference/mavlink_spec.md`` §3).
+lock out the real GCS (the pymavlink pitfall described in docs/sil.md, "Signing and spoofing").
 
 Two layers are tested:
 

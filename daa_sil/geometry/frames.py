@@ -55,16 +55,6 @@ def velocity_from_track(gs, trk, vs=0.0) -> np.ndarray:
     return np.stack([gs * np.sin(trk), gs * np.cos(trk), vs], axis=-1)
 
 
-def compass_to_math(trk):
-    """Compass angle (CW from north) to math angle (CCW from east), rad."""
-    return wrap_2pi(np.pi / 2 - np.asarray(trk, dtype=float))
-
-
-def math_to_compass(ang):
-    """Math angle (CCW from east) to compass angle (CW from north), rad."""
-    return wrap_2pi(np.pi / 2 - np.asarray(ang, dtype=float))
-
-
 def to_paper_state(own_pos, own_vel, intr_pos, intr_vel) -> np.ndarray:
     """Paper relative state ``(..., 6)`` = (dx, dy, dh, vi, vh, theta) from ENU positions/velocities.
 

@@ -1,7 +1,7 @@
 """DO-365 well clear, tau_mod, HMD, the exact time interval of violation, NMAC and the
 penetration integral, vectorised over any leading batch shape.
 
-Conventions (see ``daa_spec.md`` §1, §5):
+Conventions (the definitions are stated in docs/daa.md, "Well clear and alert levels"):
 
 * ``s`` and ``v`` are *relative* position and velocity, **ownship minus intruder**, arrays of
   shape ``(..., 3)`` in ENU metres and m/s (x east, y north, z up). Every quantity here is
@@ -38,11 +38,6 @@ def horizontal_range(s) -> np.ndarray:
     """Horizontal range ``r = |s_xy|``, m."""
     s = _f(s)
     return np.hypot(s[..., 0], s[..., 1])
-
-
-def vertical_separation(s) -> np.ndarray:
-    """Absolute vertical separation ``|s_z|``, m."""
-    return np.abs(_f(s)[..., 2])
 
 
 def _sv(s, v):
@@ -378,15 +373,4 @@ def segment_penetration(s0, v, t_in, t_out, constants: "tuple[float, float, floa
     dep = penetration_depth(pts, np.broadcast_to(v_i[:, None, :], pts.shape), *constants)
     out[ok] = dep.mean(axis=1) * length
     out = out.reshape(shape)
-    return out
-    idx = np.nonzero(ok)
-    s0_i = np.broadcast_to(s0, shape + (3,))[idx]
-    v_i = np.broadcast_to(v, shape + (3,))[idx]
-    a = np.broadcast_to(t_in, shape)[idx]
-    length = np.broadcast_to(t_out, shape)[idx] - a
-    frac = (np.arange(nodes) + 0.5) / nodes  # (K,)
-    tau = a[:, None] + length[:, None] * frac[None, :]  # (n, K)
-    pts = s0_i[:, None, :] + tau[..., None] * v_i[:, None, :]
-    dep = penetration_depth(pts, np.broadcast_to(v_i[:, None, :], pts.shape), *constants)
-    out[idx] = dep.mean(axis=1) * length
     return out

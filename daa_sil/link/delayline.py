@@ -21,14 +21,15 @@ whatever is enabled, so switching one knob does not shift the others' draws):
 * ``fifo=False``: no clamp at all, ``release_i = t_i + d_i`` (reorders if the delay decreases).
 
 Do not combine reordering with MAVLink signing: a signed packet older than one already received
-on its stream is rejected as a replay (``reference/mavlink_spec.md`` §3).
+on its stream is rejected as a replay (MAVLink 2 signing keeps a per-stream timestamp window;
+docs/sil.md, "Signing and spoofing").
 """
 
 from __future__ import annotations
 
 import heapq
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
@@ -229,15 +230,6 @@ class DelayLine:
         self.counters.released += len(out)
         return out
 
-    def pop_due_timed(self, t_now: float) -> list[tuple[float, Any]]:
-        """Like :meth:`pop_due` but returns ``(release_time_s, item)`` pairs."""
-        out = []
-        heap = self._heap
-        while heap and heap[0][0] <= t_now:
-            r, _, item = heapq.heappop(heap)
-            out.append((r, item))
-        self.counters.released += len(out)
-        return out
 
     def next_release(self) -> "float | None":
         """Earliest pending release time (s), or None if nothing is in flight."""

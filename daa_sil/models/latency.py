@@ -49,8 +49,6 @@ DEFAULT_EPOCH_S = 10.0
 #: epochs (or packets) drawn per child seed; part of the reproducibility contract
 BLOCK = 256
 
-SeedLike = "int | np.random.SeedSequence | None"
-
 
 def _check_delay(name: str, val: float) -> float:
     try:

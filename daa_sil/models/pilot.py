@@ -42,7 +42,7 @@ Response modes (``PilotConfig.mode``):
   minimum-deviation direction (ties: left / climb), prefers turns, magnitudes +30 deg (primary),
   +15 deg (opposite), +500 ft (vertical). For regression tests.
 
-Maneuver choice (models.md §1.3), per plane: the two candidate directions (closest band-free
+Maneuver choice (docs/models.md, "Remote pilot"), per plane: the two candidate directions (closest band-free
 track to the left/right, closest vertical speed up/down) carry the band level they reach (lower
 is better, 0 = clear, 1 = recovery; 0 and 1 count as equal). A strictly better level wins;
 otherwise the smaller deviation with probability 0.8 (always if the deviations differ by more than

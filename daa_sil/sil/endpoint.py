@@ -25,7 +25,8 @@ errors on the socket (nothing listening at the address we send to) are counted a
 Peer: a fixed ``peer`` address, or (``learn_peer=True``, default when no peer is given) the
 sender of the first datagram that contained a good message -- garbage cannot claim the link.
 Binds 127.0.0.1 by default and asks for a 4 MB receive buffer (the default 212 KB overflows on
-bursts, ``reference/mavlink_spec.md`` §4).
+bursts: a lockstep step delivers every delayed packet of both
+directions at once).
 """
 
 from __future__ import annotations

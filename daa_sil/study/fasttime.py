@@ -319,7 +319,6 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
     up_cmd = np.full((n_steps, n, 3), np.nan)
     last_cmd_slot = np.full(n, -1, np.int64)  # newest command slot delivered to the vehicle
     last_down, last_up = np.full(n, -np.inf), np.full(n, -np.inf)
-    nan_n = np.full(n, np.nan)
     display = PilotDisplay(n, cfg, pcfg.alert_level_min)
 
     for k in range(n_steps):

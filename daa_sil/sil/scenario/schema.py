@@ -29,7 +29,7 @@ Schema (``*`` = required; defaults in brackets)::
       callsign: str, <= 8 chars     ["INTR<index+1>"]
       initial:                      exactly one of initial / cpa
         x_m*, y_m*, alt_m*, gs_mps*, track_deg*, vs_mps [0]
-      cpa:                          geometry at the closest point of approach (models.md §5)
+      cpa:                          geometry at the closest point of approach (docs/models.md, "Encounters")
         angle_deg*: [0, 360)        encounter angle, intruder track minus ownship track (180 = head-on)
         hmd_m*: [-5000, 5000]       signed horizontal miss distance (+ = passes on the right)
         vmd_m: [-1000, 1000]  [0]   intruder minus ownship altitude at CPA
