@@ -63,6 +63,9 @@ class GcsOptions:
     display: bool = True
     #: settings to send: ``(sim time s, NAME, value)``; NAME ``MODE`` sends DO_SET_MODE (value = mode number)
     settings: tuple = ()
+    #: ``--config``: a :class:`daa_sil.config.run_config.RunConfig` whose ``daa`` changes shape the
+    #: pilot's display and whose ``pilot`` changes the pilot model (None = the scenario alone)
+    config: "object | None" = None
 
 
 @dataclass
@@ -103,7 +106,11 @@ class GcsNode:
         self.order = [i.id for i in scenario.intruders] if scenario is not None else []
         from daa_sil.daa.config import DaaConfig
 
-        self.daa_cfg = DaaConfig.for_preset(scenario.thresholds) if scenario is not None else DaaConfig()
+        rc = opts.config
+        if scenario is not None:
+            self.daa_cfg = rc.daa_config(scenario.thresholds) if rc is not None else DaaConfig.for_preset(scenario.thresholds)
+        else:
+            self.daa_cfg = rc.daa_config() if rc is not None else DaaConfig()
         self.pilot = None
         if self.mode == "model":
             from daa_sil.study.fasttime import STREAM_PILOT, encounter_streams
@@ -114,7 +121,9 @@ class GcsNode:
 
             seed = encounter_streams(scenario.seed if scenario is not None else 0)[STREAM_PILOT]
             # the plan the pilot returns to after the conflict: the scenario ownship's initial course
-            self.pilot = PilotModel(1, [seed], PilotConfig(mode=scenario.pilot.response if scenario else "guendel"),
+            mode = scenario.pilot.response if scenario else "guendel"
+            pcfg = rc.pilot_config(mode=mode) if rc is not None else PilotConfig(mode=mode)
+            self.pilot = PilotModel(1, [seed], pcfg,
                                     plan=ownship_state(scenario) if scenario is not None else None,
                                     daa_cfg=self.daa_cfg)
             self.pilot_display = PilotDisplay(1, self.daa_cfg, self.pilot.cfg.alert_level_min)

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from daa_sil.cli import run_guarded
 from daa_sil.commands._args import OneLineParser as _Parser, check_speed, load_key_option
+from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.errors import UsageError
 
 EXAMPLES = """examples:
@@ -78,6 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "wait = start the clock only once tick 0 is acknowledged (daa-sil run), so the run makes "
                         "the same decisions as lockstep")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    add_config_argument(p)
     return p
 
 
@@ -114,7 +116,8 @@ def _options(args):
 
     return VehicleOptions(out=args.out, listen=args.listen or "udp:127.0.0.1:0", tap=tap, clock=args.clock,
                           speed=args.speed, key=key, steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live,
-                          waitmap=args.waitmap, tap_writable=args.tap_writable, start_timeout_s=args.start_timeout,
+                          waitmap=args.waitmap, config=load_config(args.config) if args.config else None,
+                          tap_writable=args.tap_writable, start_timeout_s=args.start_timeout,
                           tick_sync=args.tick_sync, on_clock_start=clock_start)
 
 

@@ -56,7 +56,6 @@ from .streams import STREAMED
 
 VEHICLE_SYSID, VEHICLE_COMPID = 1, 1
 PILOT_MANEUVER_ID = M.MAVLINK_MSG_ID_PILOT_MANEUVER
-SET_POS_GLOBAL_ID = M.MAVLINK_MSG_ID_SET_POSITION_TARGET_GLOBAL_INT
 #: SET_POSITION_TARGET_GLOBAL_INT type_mask bits that must be clear for a velocity setpoint
 _VEL_IGNORE = (M.POSITION_TARGET_TYPEMASK_VX_IGNORE | M.POSITION_TARGET_TYPEMASK_VY_IGNORE
                | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE)
@@ -70,7 +69,6 @@ CONFIRM_GRACE_FRACTION = 0.5
 #: wall seconds without an answer to ticks before the partner is reported silent (and not waited for)
 SILENT_AFTER_S = 3.0
 SILENT_AFTER_STEPS = 10
-TICK_SYNC_MODES = ("auto", "wait")
 
 
 class TickTimeout(DaaSilError):
@@ -96,6 +94,8 @@ class VehicleOptions:
     live: "str | None" = None
     #: ``--waitmap``: map preset, grid spec or family directory (None = the default map)
     waitmap: "str | None" = None
+    #: ``--config``: a :class:`daa_sil.config.run_config.RunConfig` (None = the scenario alone)
+    config: "object | None" = None
     #: let the (undelayed) tap set parameters and modes; by default it may only read
     tap_writable: bool = False
     #: realtime: "auto" (start at once, wait for tick answers only from a partner that gives them) or
@@ -143,7 +143,7 @@ class VehicleNode:
     def __init__(self, scenario, opts: VehicleOptions, core: "VehicleCore | None" = None):
         self.sc = scenario
         self.opts = opts
-        self.core = core if core is not None else VehicleCore(scenario, waitmap=opts.waitmap)
+        self.core = core if core is not None else VehicleCore(scenario, waitmap=opts.waitmap, config=opts.config)
         self.out = parse_connection(opts.out, "--out", SEND)
         self.listen = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))
         tap = parse_connection(opts.tap, "--tap", SEND, allow=(SEND,)).addr if opts.tap else None
@@ -259,8 +259,6 @@ class VehicleNode:
             return "tap"
         return None
 
-    def _is_tap(self, addr) -> bool:
-        return self._link_of(addr) == "tap"
 
     def _on_message(self, r: Received) -> None:
         """Realtime: answer reads (parameters, requests, TIMESYNC, ...) the moment they arrive."""
@@ -619,6 +617,21 @@ class VehicleNode:
                 on_step(self, out)
             await asyncio.sleep(0)
 
+    def _config_record(self) -> dict:
+        """The full configuration the vehicle flew: the run configuration (if any) with the scenario's
+        threshold preset, the DAA configuration and the agent's policy actually used."""
+        from dataclasses import asdict
+
+        from daa_sil.config.run_config import preset
+
+        rc = self.opts.config if self.opts.config is not None else preset("paper")
+        rec = rc.with_(thresholds=self.sc.thresholds).to_dict(full=True)
+        rec["given"] = self.opts.config is not None
+        rec["resolved"]["policy"] = asdict(self.core.core.policy)
+        rec["resolved"]["daa"] = {k: v for k, v in asdict(self.core.core.daa_cfg).items() if k != "thresholds"}
+        rec["waitmap"]["source"] = self.opts.waitmap or rc.waitmap["source"]
+        return rec
+
     def write_steplog(self) -> "Path | None":
         """Write the step log so far (atomic Parquet); returns its path or None."""
         if self.opts.steplog is None or self.stats.steps == 0:
@@ -644,5 +657,6 @@ class VehicleNode:
                                                   **self.stats.extra})
         # parameter / mode writes: kind, name, old, new, status, link, source, t_received, t_applied, t_sent
         meta["settings"] = json.dumps([e.as_dict() for e in self.services.events], sort_keys=True)
+        meta["config"] = json.dumps(self._config_record(), sort_keys=True, default=str)
         # only the steps flown: a step computed but stopped before it was published is not in the log
         return self.core.write_steplog(self.opts.steplog, meta, n_rows=self.stats.steps)

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from ..errors import UsageError
+from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.files import to_jsonable
 from daa_sil.config.readings import READINGS, parse_reading_settings
 from daa_sil.geometry.thresholds import PRESETS
@@ -176,6 +177,7 @@ def _add_run_options(r) -> None:
                    help="run on a Dask cluster at ADDRESS (tcp://host:8786) or a local one (local-dask)")
     r.add_argument("--resume", action="store_true", help="continue the campaign in DIR (skips complete chunks)")
     r.add_argument("--preset", default=None, help=f"threshold preset: {', '.join(PRESETS)} (default paper)")
+    add_config_argument(r)
     r.add_argument("--no-progress", action="store_true", help="no progress bars")
     r.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
 
@@ -192,12 +194,15 @@ def _config_from_args(args):
              "reading_set": parse_reading_settings(args.reading_set) if args.reading_set else None}
     if args.preset and args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
-    base = CampaignConfig()
+    base = load_config(args.config).campaign_config() if args.config else CampaignConfig()
     out = Path(args.out)
     if args.resume and (out / "campaign.json").is_file():
+        if args.config:
+            raise UsageError("--config does not go with --resume: the campaign's configuration is in "
+                             f"{out / 'campaign.json'} (drop --config)")
         base = CampaignConfig.from_dict(load_campaign_json(out)["config"], str(out / "campaign.json"))
     fields = {k: (v if v is not None else getattr(base, k)) for k, v in given.items()}
-    return CampaignConfig(dt_s=base.dt_s, **fields).validate()
+    return CampaignConfig(dt_s=base.dt_s, daa=base.daa, pilot=base.pilot, link=base.link, **fields).validate()
 
 
 _SCHEDULER = re.compile(r"^([a-z][a-z0-9+]*://)?[^\s:/]+:\d{1,5}$")
@@ -226,7 +231,8 @@ def run_cmd(args) -> int:
     info = {"out": str(summary.out_dir), "groups": list(cfg.group_names), "encounters": cfg.n_encounters,
             "seed": cfg.seed, "preset": cfg.preset, "chunks_total": summary.chunks_total,
             "chunks_skipped": summary.chunks_skipped, "chunks_run": summary.chunks_run,
-            "wall_s": round(summary.wall_s, 3), "encounter_steps_per_s": rate}
+            "wall_s": round(summary.wall_s, 3), "encounter_steps_per_s": rate,
+            "config": cfg.to_dict(), "resolved_config": cfg.resolved()}
     if args.json:
         print(json.dumps(to_jsonable(info), indent=2, sort_keys=True))
     else:

@@ -16,7 +16,8 @@ import json
 import sys
 from pathlib import Path
 
-from ..errors import UsageError
+from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.errors import UsageError
 from ._args import check_speed
 from daa_sil.sil.summary import pilot_story, human_summary
 from daa_sil.sil.play import RunOptions, check_faults_allowed, prepare_waitmap, run_sil
@@ -74,6 +75,7 @@ def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
                    help="the vehicle's wait maps, as in 'campaign run': alerting (default), paper, fine, a grid "
                         "spec or a 'waitmap build' directory")
     p.add_argument("--json", action="store_true", help="print result.json instead of the summary")
+    add_config_argument(p)
     if _viz_available():
         p.add_argument("--rrd", type=Path, metavar="FILE", help="write a Rerun recording")
         p.add_argument("--spawn-viewer", action="store_true", help="stream to a Rerun viewer it spawns")
@@ -107,6 +109,8 @@ def register(sub) -> None:
 
 def _check_args(args) -> None:
     check_speed(args.speed)
+    if args.config:
+        load_config(args.config)  # a bad file fails here, one line, before any process starts
     if args.key is not None and not args.key.is_file():
         raise UsageError(f"--key: key file {args.key} does not exist")
     if args.tap:
@@ -134,12 +138,20 @@ def _check_args(args) -> None:
         check_faults_allowed(sc, args.clock, args.scenario)
 
 
+def _waitmap_source(args) -> "str | None":
+    """``--waitmap``, else the ``--config``'s wait-map source, else None (the default map)."""
+    if args.waitmap is not None:
+        return args.waitmap
+    return load_config(args.config).waitmap["source"] if args.config else None
+
+
 def _options(args, scenario: Path) -> RunOptions:
     quiet = args.json
     return RunOptions(scenario_path=scenario, out_dir=Path(args.out), clock=args.clock, speed=args.speed,
                       key=args.key, tap=args.tap, rrd=getattr(args, "rrd", None),
                       spawn_viewer=getattr(args, "spawn_viewer", False), connect=getattr(args, "connect", None),
-                      viz_live=getattr(args, "viz_live", "auto"), waitmap=args.waitmap,
+                      viz_live=getattr(args, "viz_live", "auto"), waitmap=_waitmap_source(args),
+                      config=args.config,
                       progress=None if quiet else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
 
 
@@ -164,7 +176,7 @@ def run(args) -> int:
 
     _check_args(args)
     ensure_dir(args.out)  # an unusable --out fails here, before the maps are built or anything starts
-    prepare_waitmap(load_scenario(args.scenario), args.waitmap,
+    prepare_waitmap(load_scenario(args.scenario), _waitmap_source(args),
                     None if args.json else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
     result = run_sil(_options(args, args.scenario))
     return _finish(args, result, load_scenario(args.scenario))
@@ -188,7 +200,7 @@ def demo(args) -> int:
     if not args.json:
         print(f"daa-sil demo: {sc.description.strip().splitlines()[0]}", flush=True)
     ensure_dir(args.out)
-    prepare_waitmap(sc, args.waitmap, None if args.json else (lambda m: print(f"daa-sil demo: {m}", flush=True)))
+    prepare_waitmap(sc, _waitmap_source(args), None if args.json else (lambda m: print(f"daa-sil demo: {m}", flush=True)))
     result = run_sil(_options(args, path))
     if not args.json:
         print(pilot_story(Path(args.out)))

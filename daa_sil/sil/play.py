@@ -68,6 +68,8 @@ class RunOptions:
     tap: "str | None" = None
     #: ``--waitmap`` of the vehicle: a map preset, grid spec or family directory (None = the default)
     waitmap: "str | None" = None
+    #: ``--config`` of the vehicle and the GCS: a preset name or a YAML file (None = the scenario alone)
+    config: "str | None" = None
     progress: "Callable[[str], None] | None" = None
 
 
@@ -155,7 +157,8 @@ def _gcs_argv(opts: RunOptions, out: Path, listen: str, gcs_side: str, clock_arg
               log_name: str = "gcs_commands.jsonl") -> list:
     return python_module_argv("gcs") + [
         "--scenario", str(opts.scenario_path), "--listen", listen, "--vehicle", gcs_side,
-        "--log", str(out / log_name), "--no-display"] + clock_args + key_args
+        "--log", str(out / log_name), "--no-display"] + clock_args + key_args + (
+        ["--config", str(opts.config)] if opts.config is not None else [])
 
 
 def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, recorder) -> dict:
@@ -188,6 +191,8 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
                 vargs += ["--tick-sync", "wait"]  # start once tick 0 is acked: the GCS plays from step 0
             if opts.waitmap is not None:
                 vargs += ["--waitmap", str(opts.waitmap)]
+            if opts.config is not None:
+                vargs += ["--config", str(opts.config)]
             if recorder is not None and recorder.live_address:
                 vargs += ["--live", recorder.live_address]  # each step's row, fire-and-forget
             # GCS and vehicle start in parallel; the vehicle re-sends tick 0 until the GCS answers
@@ -235,6 +240,12 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
                    "process_died": monitor.death if monitor is not None else None,
                    "files": {"steplog": str(steplog), "gcs_log": str(out / "gcs_commands.jsonl"),
                              "gcs_logs": [str(x) for x in gcs_logs if x.is_file()], "logs": str(out / "logs")}})
+    from daa_sil.steplog import steplog_metadata
+
+    try:  # the full configuration the vehicle flew (its step-log metadata)
+        result["config"] = json.loads(steplog_metadata(steplog).get("config") or "null")
+    except ValueError:
+        result["config"] = None
     if sc.faults:
         result["faults"] = monitor.fault_report() if monitor is not None else []
     if opts.clock == "realtime":

@@ -35,7 +35,7 @@ import functools
 import math
 import os
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -86,6 +86,9 @@ class CampaignConfig:
     n_intruders: int = 1
     reading: str = "literal"  #: a named reading of :mod:`daa_sil.config.readings`
     reading_set: dict = field(default_factory=dict)  #: overrides of the reading's settings
+    daa: dict = field(default_factory=dict)  #: DaaConfig field changes on top of the preset's
+    pilot: dict = field(default_factory=dict)  #: PilotConfig field changes (the reading's then apply)
+    link: dict = field(default_factory=dict)  #: agent ``stale_command_s`` / ``link_timeout_s`` (empty = policy's)
 
     def __post_init__(self):
         # groups may be given by name (``("B-2", "ID-2")``) or as a --groups string
@@ -123,6 +126,14 @@ class CampaignConfig:
 
             parse_delay_spec(self.latency)
         self.effective_groups  # noqa: B018 -- validates the overridden definitions
+        bad = sorted(set(self.link) - {"stale_command_s", "link_timeout_s"})
+        if bad:
+            raise UsageError(f"unknown link setting {bad[0]!r}; allowed: stale_command_s, link_timeout_s")
+        for what, build in (("daa", self.daa_config), ("pilot", self.pilot_config)):
+            try:
+                build()
+            except TypeError as exc:
+                raise UsageError(f"{what}: {exc}") from None
         r = self.effective_reading
         if r.waitmap is not None and self.waitmap not in (DEFAULT_MAP, r.waitmap):
             raise UsageError(f"reading {r.name!r} sets the wait maps to {r.waitmap!r}; drop --waitmap {self.waitmap}")
@@ -185,12 +196,46 @@ class CampaignConfig:
         lo = chunk * self.chunk_size
         return lo, min(lo + self.chunk_size, self.n_encounters)
 
+    def daa_config(self):
+        """The :class:`~daa_sil.daa.config.DaaConfig` flown: the preset's with :attr:`daa` applied."""
+        from daa_sil.daa.config import DaaConfig
+
+        return DaaConfig.for_preset(self.preset, **self.daa)
+
+    def pilot_config(self):
+        """The :class:`~daa_sil.models.pilot_config.PilotConfig` flown: :attr:`pilot`, then the reading's."""
+        from daa_sil.models.pilot_config import PilotConfig
+
+        return self.effective_reading.pilot_config(PilotConfig(**self.pilot))
+
+    def policy(self, name: str):
+        """The agent's :class:`~daa_sil.agent.AllocationPolicy` of group ``name`` (with :attr:`link`)."""
+        pol = self.group(name).policy()
+        return replace(pol, **self.link) if self.link else pol
+
     def to_dict(self) -> dict:
         d = asdict(self)
         d["groups"] = [g.to_dict() for g in self.groups]
         d["reading_set"] = dict(self.reading_set)
+        d["daa"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.daa.items()}
+        d["pilot"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.pilot.items()}
+        d["link"] = dict(self.link)
         d["readings"] = self.effective_reading.to_dict()  # derived: every setting of the reading
         return d
+
+    def resolved(self) -> dict:
+        """Every value the campaign flies with, resolved: thresholds, the full DAA and pilot
+        configurations, the agent policy of each group (recorded in ``campaign.json``)."""
+        from daa_sil.geometry.thresholds import get_thresholds
+
+        def plain(obj):
+            return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(obj).items()}
+
+        daa = plain(self.daa_config())
+        daa.pop("thresholds", None)
+        return {"thresholds": asdict(get_thresholds(self.preset)), "daa": daa, "pilot": plain(self.pilot_config()),
+                "policies": {g.name: plain(self.policy(g.name)) for g in self.groups},
+                "reading": self.effective_reading.to_dict()}
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "campaign.json") -> "CampaignConfig":
@@ -202,7 +247,10 @@ class CampaignConfig:
                        chunk_size=int(d["chunk_size"]), preset=str(d["preset"]),
                        duration_s=float(d["duration_s"]), dt_s=float(d["dt_s"]), waitmap=str(d["waitmap"]),
                        n_intruders=int(d.get("n_intruders", 1)), reading=str(d.get("reading", "literal")),
-                       reading_set=dict(d.get("reading_set") or {}), **opt).validate()
+                       reading_set=dict(d.get("reading_set") or {}),
+                       daa={k: (tuple(v) if isinstance(v, list) else v) for k, v in (d.get("daa") or {}).items()},
+                       pilot={k: (tuple(v) if isinstance(v, list) else v) for k, v in (d.get("pilot") or {}).items()},
+                       link=dict(d.get("link") or {}), **opt).validate()
         except (KeyError, TypeError, ValueError) as exc:
             raise FileFormatError(f"{where}: bad or missing config field ({exc})") from None
         except UsageError as exc:
@@ -265,8 +313,8 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
     spec = cfg.group(task.group)
     model = spec.delay_model()
     fam = campaign_family(cfg) if spec.uses_map else None
-    pilot_cfg = cfg.effective_reading.pilot_config()
-    enc_rows, dec_rows, _ = simulate(task.encounters, spec.policy(), model, model, pilot_cfg, wait_family=fam,
+    enc_rows, dec_rows, _ = simulate(task.encounters, cfg.policy(task.group), model, model, cfg.pilot_config(),
+                                     daa_cfg=cfg.daa_config(), wait_family=fam,
                                      seeds=task.seeds, preset=cfg.preset, duration_s=cfg.duration_s,
                                      dt=cfg.dt_s, group=task.group, record_steps=False)
     return ChunkResult(task.group, task.chunk, enc_rows, dec_rows, time.perf_counter() - t0, len(task.seeds))
@@ -341,7 +389,8 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
                                      n_intruders=config.n_intruders,
                                      **config.effective_reading.encounter_overrides())
     save_encounters(encs, enc_path)  # atomic
-    meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "versions": _versions(),
+    meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "resolved_config": config.resolved(),
+            "versions": _versions(),
             "preset": config.preset, "seed": config.seed, "status": "running",
             "seeds": {"campaign": config.seed,
                       "encounters": "encounter i: SeedSequence(campaign, spawn_key=(i,)); its 'seed' column in "
