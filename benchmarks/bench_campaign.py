@@ -79,7 +79,7 @@ def _lookup_cost(n: int, waitmap: str) -> None:
     es = sample_encounters(n, seed=99, preset="paper")
     times = {}
     for name, pol in (("map", spec.policy()), ("always", replace(spec.policy(), wait_mode="always"))):
-        simulate(es.subset(list(range(20))), pol, model, model, wait_family=fam)  # warm-up
+        simulate(es.subset(list(range(min(20, n)))), pol, model, model, wait_family=fam)  # warm-up
         t0 = time.perf_counter()
         simulate(es, pol, model, model, wait_family=fam)
         times[name] = time.perf_counter() - t0
@@ -103,14 +103,18 @@ def main() -> None:
     ap.add_argument("--loop-n", type=int, default=40, help="subsample size for the per-encounter loop ratio")
     ap.add_argument("--skip-campaign", action="store_true")
     ap.add_argument("--waitmap", default="alerting", help="wait maps of the map groups (default alerting, the study's)")
+    ap.add_argument("--lookup-n", type=int, default=2000, help="encounters of the wait-map lookup cost check")
+    ap.add_argument("--memory-sizes", default="200,800,1600",
+                    help="N of the memory check, in chunks of the first (comma-separated)")
     args = ap.parse_args()
 
     from daa_sil.study.campaign import DEFAULT_CHUNK, CampaignConfig, parse_groups, run_campaign
 
     args.chunk_size = args.chunk_size or DEFAULT_CHUNK
     loop_rates = [_loop_ratio(args.loop_n, "B-2"), _loop_ratio(args.loop_n, "ID-2")]
-    _lookup_cost(2000, args.waitmap)
-    _memory(200, [200, 800, 1600])
+    _lookup_cost(args.lookup_n, args.waitmap)
+    sizes = [int(x) for x in args.memory_sizes.split(",")]
+    _memory(sizes[0], sizes)
     _memory(args.chunk_size, [args.chunk_size, 3 * args.chunk_size])
     if args.skip_campaign:
         return

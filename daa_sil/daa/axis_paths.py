@@ -16,6 +16,16 @@ from daa_sil.daa.trajectory import ManeuverPaths
 from daa_sil.geometry.kinematics import TWO_PI, AircraftState
 
 
+def speed_limits(vertical: bool, cfg: DaaConfig, sgn) -> tuple:
+    """``(acceleration m/s^2, limit m/s per side)`` of the vertical-speed or ground-speed axis: the
+    side ``sgn < 0`` slows/descends to the lower limit, ``sgn > 0`` to the upper one (DAIDALUS grid:
+    no vertical limits, ground speed down to 0)."""
+    acc = cfg.vertical_accel if vertical else cfg.horizontal_accel
+    if cfg.daidalus_grid:
+        return acc, np.where(sgn < 0, -np.inf if vertical else 0.0, np.inf)
+    return acc, np.where(sgn < 0, -cfg.max_vs if vertical else cfg.min_gs, cfg.max_vs if vertical else cfg.max_gs)
+
+
 def _path_sizes(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[int, int]:
     """Number of candidates on the low and high side of an axis for this batch (>= 0)."""
     if axis == AXIS_HORIZONTAL:
@@ -47,11 +57,7 @@ def _axis_state_soa(axis: int, cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, sgn
                gs0 * (st * cth + ct * ssth), gs0 * (ct * cth - st * ssth), vs0 + 0.0 * t)
         return (out, sgn * th) if with_value else out
     vertical = axis == AXIS_VERTICAL
-    acc = cfg.vertical_accel if vertical else cfg.horizontal_accel
-    if cfg.daidalus_grid:
-        lim = np.where(sgn < 0, -np.inf if vertical else 0.0, np.inf)
-    else:
-        lim = np.where(sgn < 0, -cfg.max_vs if vertical else cfg.min_gs, cfg.max_vs if vertical else cfg.max_gs)
+    acc, lim = speed_limits(vertical, cfg, sgn)
     v0 = vs0 if vertical else gs0
     tc = np.minimum(t, np.maximum((lim - v0) * sgn / acc, 0.0))
     dist = v0 * t + sgn * acc * tc * (t - 0.5 * tc)

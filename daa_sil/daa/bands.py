@@ -61,7 +61,7 @@ from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_SPEED, AXIS_VERTICAL, REG
                      REGION_NONE, REGION_RECOVERY, DaaConfig)
 from .trajectory import PathConflicts, PathEvaluator
 from daa_sil.daa.recovery import _Recovery, _runs2
-from daa_sil.daa.axis_paths import _maneuver_paths, _path_sizes
+from daa_sil.daa.axis_paths import _maneuver_paths, _path_sizes, speed_limits
 
 
 @dataclass
@@ -218,11 +218,7 @@ def _candidate_values(own: AircraftState, axis: int, cfg: DaaConfig, sgn: np.nda
         value = np.where(value < 0.0, value + TWO_PI, np.where(value >= TWO_PI, value - TWO_PI, value))
         return value, np.repeat(th[None, :], n, axis=0), cfg.turn_rate
     vertical = axis == AXIS_VERTICAL
-    acc = cfg.vertical_accel if vertical else cfg.horizontal_accel
-    if cfg.daidalus_grid:
-        lim = np.where(sgn < 0, -np.inf if vertical else 0.0, np.inf)
-    else:
-        lim = np.where(sgn < 0, -cfg.max_vs if vertical else cfg.min_gs, cfg.max_vs if vertical else cfg.max_gs)
+    acc, lim = speed_limits(vertical, cfg, sgn)
     v0 = (own.vs if vertical else own.gs)[:, None]
     tc = np.minimum(t, np.maximum((lim - v0) * sgn / acc, 0.0))
     value = v0 + sgn * acc * tc

@@ -30,6 +30,9 @@ from daa_sil.geometry.units import DEG, FPM, FT, G0, KT, NMI
 # --- codes -----------------------------------------------------------------------------------
 ALERT_NAMES = ("none", "preventive", "corrective", "warning")
 
+#: region codes (step log, MAVLink DAA_SIL_BAND_REGION). FAR is DAIDALUS's preventive-level band; our
+#: bands paint MID, NEAR and RECOVERY only, so FAR is a reserved code of the wire format and the
+#: vocabulary (painting it would change what the pilot model sees: a model change, docs/architecture.md)
 REGION_NONE, REGION_FAR, REGION_MID, REGION_NEAR, REGION_RECOVERY = range(5)
 REGION_NAMES = ("none", "far", "mid", "near", "recovery")
 
