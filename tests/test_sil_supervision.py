@@ -186,14 +186,14 @@ async def test_standalone_vehicle_and_gcs_report_a_shim_that_stops(monkeypatch, 
     """Vehicle, shim and GCS in one loop, realtime at 20x; the shim is closed at t = 6 s. The vehicle
     says the shim stopped echoing ticks (naming its address) and the GCS that ticks stopped."""
     import gcs.node as gnode
-    import vehicle.node as vnode
+    import vehicle.ticks as vticks
     from daa_sil.sil.shim import DelayShim
     from daa_sil.sil.shim_config import ShimConfig
     from daa_sil.sil.scenario import delay_models
     from gcs.node import GcsNode, GcsOptions
     from vehicle.node import VehicleNode, VehicleOptions
 
-    monkeypatch.setattr(vnode, "SILENT_AFTER_S", 0.5)
+    monkeypatch.setattr(vticks, "SILENT_AFTER_S", 0.5)
     monkeypatch.setattr(gnode, "SILENT_AFTER_S", 0.5)
     sc = load_scenario(HEAD_ON)
     up, down = delay_models(sc)
