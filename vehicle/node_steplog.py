@@ -7,7 +7,7 @@ from pathlib import Path
 
 
 class StepLogWriter:
-    """Part of :class:`vehicle.node.VehicleNode` (a mixin: it uses the node\'s attributes)."""
+    """Part of :class:`vehicle.node.VehicleNode` (a mixin: it uses the node's attributes)."""
 
     def _config_record(self) -> dict:
         """The full configuration the vehicle flew: the run configuration (if any) with the scenario's

@@ -26,7 +26,7 @@ class TickTimeout(DaaSilError):
 
 
 class TickClock:
-    """Part of :class:`vehicle.node.VehicleNode` (a mixin: it uses the node\'s attributes)."""
+    """Part of :class:`vehicle.node.VehicleNode` (a mixin: it uses the node's attributes)."""
 
     def _send_tick(self, k: int, t: float) -> None:
         if self.peer is None:  # --out udpin: no GCS yet; the retry sends it once one has spoken
