@@ -40,7 +40,7 @@ Clocks
 2. Other datagrams from the vehicle enter their line stamped with the current clock (the time of
    the last tick). Datagrams from the GCS are stamped with the time of the **oldest tick forwarded
    to the GCS that it has not acknowledged yet** (the tick it is working on; the last tick if it
-   never acknowledges ticks, or after it ignored ``MAX_GCS_LAG_TICKS`` of them:
+   never acknowledges ticks, or after it ignored ``MAX_GCS_LAG_TICKS`` (:mod:`daa_sil.sil.shim_ticks`) of them:
    ``gcs_unresponsive``). In lockstep that is always the last tick; in realtime it keeps a GCS that
    answers late from stamping its step-k commands with a later step (``gcs_lagged`` counts them).
 3. A datagram from the GCS containing a valid ``SIM_TICK_ACK(k)`` (cumulative: every tick <= k)
@@ -86,7 +86,6 @@ from __future__ import annotations
 
 import asyncio
 import inspect
-import socket
 import sys
 from collections import deque
 from typing import Callable
@@ -98,87 +97,19 @@ from daa_sil.files import atomic_write_json, to_jsonable
 from daa_sil.models.delay_process import as_seed_sequence
 from daa_sil.link.codec import MavCodec
 from daa_sil.link.delayline import DelayLine
-from .endpoint import RCVBUF_BYTES, Address, DropReporter, format_udp_address, parse_udp_address
-from .rtclock import (PreciseTimer, enable_rx_timestamps, request_short_slice, rx_buffer_size, rx_time,
-    set_timer_slack)
-from .shim_config import _ACK_ID, _TICK_ID, ShimConfig, control_ids, direction_seeds, shim_delay_processes
+from .endpoint import Address, DropReporter, format_udp_address, parse_udp_address
+from .rtclock import (PreciseTimer, request_short_slice, set_timer_slack)
+from .shim_config import _TICK_ID, ShimConfig, control_ids, direction_seeds, shim_delay_processes
+from daa_sil.sil.shim_socket import _Side, _bind_udp
+from daa_sil.sil.shim_ticks import ShimTicks
 
-#: a GCS that has not acknowledged this many forwarded ticks is taken as gone (stamps fall back to the last tick)
-MAX_GCS_LAG_TICKS = 8
 #: realtime: datagrams from the GCS held until the vehicle side's first datagram decides the mode
 MAX_HELD = 10_000
 #: wall seconds of silence from a side that has talked before it is reported
 SILENCE_WARN_S = 5.0
 
 
-class _Side:
-    """One shim socket, read with ``recvmsg`` from a loop reader (kernel arrival stamps if enabled)."""
-
-    #: datagrams read per reader callback before timers get their turn
-    BURST = 64
-
-    def __init__(self, shim: "DelayShim", name: str, sock: socket.socket, stamped: bool):
-        self.shim, self.name, self.sock = shim, name, sock
-        self.stamped = stamped and enable_rx_timestamps(sock)
-        self._anc = rx_buffer_size() if self.stamped else 0
-        self.closed = False
-        shim._loop.add_reader(sock.fileno(), self._readable)
-
-    @property
-    def sockname(self) -> Address:
-        a = self.sock.getsockname()
-        return a[0], a[1]
-
-    def _readable(self) -> None:
-        shim, counters = self.shim, self.shim.counters
-        for _ in range(self.BURST):
-            try:
-                data, anc, _flags, addr = self.sock.recvmsg(65535, self._anc)
-            except (BlockingIOError, InterruptedError):
-                return
-            except OSError:  # e.g. ICMP port unreachable reported on this socket
-                counters["socket_errors"] += 1
-                continue
-            shim._on_datagram(self.name, data, (addr[0], addr[1]), rx_time(anc) if self.stamped else None)
-
-    def sendto(self, data: bytes, addr: Address) -> bool:
-        try:
-            self.sock.sendto(data, addr)
-            return True
-        except (BlockingIOError, InterruptedError):
-            self.shim.counters["send_would_block"] += 1
-        except OSError:
-            self.shim.counters["socket_errors"] += 1
-        return False
-
-    def close(self) -> None:
-        if not self.closed:
-            self.closed = True
-            try:
-                self.shim._loop.remove_reader(self.sock.fileno())
-            except (RuntimeError, ValueError):
-                pass
-            self.sock.close()
-
-
-def _bind_udp(addr: Address) -> socket.socket:
-    """A non-blocking UDP socket bound to ``addr`` with a large receive buffer."""
-    family, _, _, _, sockaddr = socket.getaddrinfo(addr[0], addr[1], type=socket.SOCK_DGRAM)[0]
-    sock = socket.socket(family, socket.SOCK_DGRAM)
-    try:
-        sock.setblocking(False)
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
-        except OSError:
-            pass
-        sock.bind(sockaddr)
-    except OSError:
-        sock.close()
-        raise
-    return sock
-
-
-class DelayShim:
+class DelayShim(ShimTicks):
     """The relay. ``await start()``, then ``vehicle_side`` / ``gcs_side`` addresses; ``await close()``."""
 
     def __init__(self, config: ShimConfig):
@@ -368,90 +299,12 @@ class DelayShim:
         for t_rx, data in held:
             (self._tick_datapath if tick else self._timer_datapath)("gcs", data, t_rx)
 
-    def _tick_datapath(self, side: str, data: bytes, t_rx: "float | None") -> None:
-        """Lockstep rules (module docstring): control messages move the clock, data is stamped by ticks."""
-        c = self.counters
-        ids = control_ids(data)
-        want = _TICK_ID if side == "vehicle" else _ACK_ID
-        if want in ids:
-            msg = self._decode_control(data, want)
-            if msg is not None:
-                if -1 in ids:
-                    c["mixed_control"] += 1
-                if side == "vehicle":
-                    self._on_tick(msg, data, t_rx)
-                else:
-                    self._on_ack(msg, data)
-                return
-            c["bad_control"] += 1
-        if side == "vehicle":
-            self.lines["down"].push(self.sim_time, data)
-            return
-        stamp = self._gcs_stamp()
-        recs = self.lines["up"].push(stamp, data)
-        if stamp < self.sim_time and any(not r.dropped and r.t_out <= self.sim_time for r in recs):
-            c["released_late"] += 1  # lockstep would have released it at a tick already processed
-
-    def _gcs_stamp(self) -> float:
-        """Sim time a GCS datagram is sent at: the oldest tick it has not acknowledged (module docstring)."""
-        if self._gcs_acks and self._unacked:
-            t = self._unacked[0][1]
-            if t < self.sim_time:
-                self.counters["gcs_lagged"] += 1
-            return t
-        return self.sim_time
-
     def _timer_datapath(self, side: str, data: bytes, t_rx: "float | None") -> None:
         """Free-running realtime: stamp with the kernel arrival time, release by the line's timer."""
         direction = "down" if side == "vehicle" else "up"
         t_in = self.now() if t_rx is None else min(self.now(), (t_rx - self._t0) * self.config.speed)
         self.lines[direction].push(t_in, data)
         self._arm(direction)
-
-    def _decode_control(self, data: bytes, want: int):
-        msgs = self.codec.decode(data)
-        for m in msgs:
-            if m.get_msgId() == want:
-                return m
-        return None
-
-    def _on_tick(self, msg, data: bytes, t_rx: "float | None" = None) -> None:
-        c = self.counters
-        c["ticks"] += 1
-        rx = (t_rx if t_rx is not None else self._loop.time()) if self.config.clock == "realtime" else 0.0
-        t_k = msg.time_ms / 1000.0
-        k = int(msg.tick)
-        if t_k < self.sim_time:
-            c["clock_backwards"] += 1
-        else:
-            self.sim_time = t_k
-        self.last_tick = k
-        n = self._release("down", self.sim_time) + self._release("up", self.sim_time)
-        if self._send("gcs", data) and (not self._unacked or self._unacked[-1][0] < k):
-            self._unacked.append((k, t_k))
-            if len(self._unacked) > MAX_GCS_LAG_TICKS:  # the GCS ignores ticks: gone, or not ack-capable
-                self._unacked.clear()
-                if self._gcs_acks:
-                    c["gcs_unresponsive"] += 1
-                self._gcs_acks = False
-        side = self.sides.get("vehicle")
-        if side is not None and not side.closed and side.sendto(data, self.peers["vehicle"]):
-            c["tick_echoes"] += 1  # "shim alive, uplink due at t_k sent"
-        if self.config.clock == "realtime" and k not in self._seen_ticks and len(self._tick_log) < 1_000_000:
-            self._seen_ticks.add(k)
-            self._tick_log.append((t_k, rx, self._loop.time(), n))
-        for item in list(self._tick_waiters):
-            if item[0] <= self.last_tick and not item[1].done():
-                item[1].set_result(self.last_tick)
-        self._tick_waiters = [w for w in self._tick_waiters if not w[1].done()]
-
-    def _on_ack(self, msg, data: bytes) -> None:
-        self.counters["acks"] += 1
-        self._gcs_acks = True
-        k = int(msg.tick)
-        while self._unacked and self._unacked[0][0] <= k:
-            self._unacked.popleft()
-        self._send("vehicle", data)
 
     def _send(self, dest: str, data: bytes) -> bool:
         peer = self.peers[dest]
@@ -499,15 +352,6 @@ class DelayShim:
         self._release(direction, max(self.now(), scheduled))
         self._arm(direction)
 
-    # -- observability -----------------------------------------------------------------------------
-    async def wait_tick(self, tick: int, timeout: float) -> int:
-        """Wait (lockstep) until a tick >= ``tick`` has been processed; returns the last tick."""
-        if self.last_tick is not None and self.last_tick >= tick:
-            return self.last_tick
-        fut = asyncio.get_running_loop().create_future()
-        self._tick_waiters.append((tick, fut))
-        return await asyncio.wait_for(fut, timeout)
-
     def stats(self) -> dict:
         """Counters, per-direction line stats (delays in sim s) and realtime release lateness (ms)."""
         out = {"clock": self.config.clock, "speed": self.config.speed, "sim_time_s": self.now() if self._loop else 0.0,
@@ -535,29 +379,8 @@ class DelayShim:
                     format_udp_address(a): n for a, n in self.drops[side].by_addr.most_common(10)}
         return to_jsonable(out)
 
-    def _tick_origin(self) -> "float | None":
-        """Wall origin of the tick schedule: min over ticks k >= 1 of (arrival - t_k / speed) (s)."""
-        rows = [(t, rx) for t, rx, _, _ in self._tick_log if t > 0]
-        if not rows:
-            return None
-        return min(rx - t / self.config.speed for t, rx in rows)
 
-    def _tick_lateness(self) -> "np.ndarray | None":
-        """Per released packet: wall s from its tick's ideal instant to the end of that tick's releases."""
-        w0 = self._tick_origin()
-        if w0 is None:
-            return None
-        out = [done - (w0 + t / self.config.speed) for t, _, done, n in self._tick_log if t > 0 for _ in range(n)]
-        return np.array(out, float)
 
-    def _tick_schedule_stats(self) -> dict:
-        """How late ticks arrived against their schedule (ms): the vehicle's pacing plus the transit."""
-        w0 = self._tick_origin()
-        if w0 is None:
-            return {"ticks": len(self._tick_log)}
-        late = np.array([rx - (w0 + t / self.config.speed) for t, rx, _, _ in self._tick_log if t > 0]) * 1000.0
-        return {"ticks": int(late.size), "arrival_late_p50_ms": float(np.percentile(late, 50)),
-                "arrival_late_p99_ms": float(np.percentile(late, 99)), "arrival_late_max_ms": float(late.max())}
 
 
 def _stderr_warn(text: str) -> None:
