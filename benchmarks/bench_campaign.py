@@ -24,7 +24,8 @@ from pathlib import Path
 
 
 def _loop_ratio(n: int, group: str) -> float:
-    from daa_sil.study.campaign import CampaignConfig, campaign_family
+    from daa_sil.study.campaign import campaign_family
+    from daa_sil.study.campaign_config import CampaignConfig
     from daa_sil.models.encounters import sample_encounters
     from daa_sil.study.fasttime import simulate
     from daa_sil.config.groups import group_spec
@@ -68,7 +69,8 @@ def _lookup_cost(n: int, waitmap: str) -> None:
     interpolation + the most-threatening-intruder selection) costs the campaign."""
     from dataclasses import replace
 
-    from daa_sil.study.campaign import CampaignConfig, campaign_family
+    from daa_sil.study.campaign import campaign_family
+    from daa_sil.study.campaign_config import CampaignConfig
     from daa_sil.models.encounters import sample_encounters
     from daa_sil.study.fasttime import simulate
     from daa_sil.config.groups import group_spec
@@ -108,7 +110,8 @@ def main() -> None:
                     help="N of the memory check, in chunks of the first (comma-separated)")
     args = ap.parse_args()
 
-    from daa_sil.study.campaign import DEFAULT_CHUNK, CampaignConfig, parse_groups, run_campaign
+    from daa_sil.study.campaign import parse_groups, run_campaign
+    from daa_sil.study.campaign_config import DEFAULT_CHUNK, CampaignConfig
 
     args.chunk_size = args.chunk_size or DEFAULT_CHUNK
     loop_rates = [_loop_ratio(args.loop_n, "B-2"), _loop_ratio(args.loop_n, "ID-2")]

@@ -137,7 +137,7 @@ def test_campaign_records_the_file_and_flags_override_it(tmp_path, capsys):
 
 def test_no_config_keeps_the_campaign_defaults():
     """The default campaign (no --config) is the paper preset: same groups, thresholds, maps."""
-    from daa_sil.study.campaign import CampaignConfig
+    from daa_sil.study.campaign_config import CampaignConfig
 
     assert preset("paper").campaign_config().to_dict() == CampaignConfig().to_dict()
 

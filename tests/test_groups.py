@@ -2,7 +2,7 @@
 
 import pytest
 
-from daa_sil.study.campaign import CampaignConfig
+from daa_sil.study.campaign_config import CampaignConfig
 from daa_sil.errors import UsageError
 from daa_sil.config.groups import PAPER_GROUPS, group_spec, group_table, load_group_file, parse_groups
 

@@ -183,7 +183,8 @@ def _add_run_options(r) -> None:
 
 
 def _config_from_args(args):
-    from daa_sil.study.campaign import CampaignConfig, parse_groups
+    from daa_sil.study.campaign import parse_groups
+    from daa_sil.study.campaign_config import CampaignConfig
     from daa_sil.study.campaign_files import load_campaign_json
 
     given = {"groups": parse_groups(args.groups) if args.groups is not None else None,

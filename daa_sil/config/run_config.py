@@ -102,9 +102,9 @@ class RunConfig:
         return PilotConfig(**{**self.pilot, **changes})
 
     def campaign_config(self):
-        """The :class:`~daa_sil.study.campaign.CampaignConfig` of this configuration."""
+        """The :class:`~daa_sil.study.campaign_config.CampaignConfig` of this configuration."""
         from daa_sil.config.groups import parse_groups
-        from daa_sil.study.campaign import CampaignConfig
+        from daa_sil.study.campaign_config import CampaignConfig
 
         s = self.study
         return CampaignConfig(groups=parse_groups(list(self.groups)), n_encounters=int(s["encounters"]),

@@ -90,7 +90,7 @@ def parse_vary(text: str) -> Vary:
 
 
 def point_configs(base, vary: Vary) -> list:
-    """One validated :class:`~daa_sil.study.campaign.CampaignConfig` per value (errors name the value)."""
+    """One validated :class:`~daa_sil.study.campaign_config.CampaignConfig` per value (errors name the value)."""
     out = []
     for v in vary.values:
         try:
