@@ -24,10 +24,11 @@ from pathlib import Path
 
 
 def _loop_ratio(n: int, group: str) -> float:
-    from daa_sil.campaign import CampaignConfig, campaign_family
-    from daa_sil.encounters import sample_encounters
-    from daa_sil.fasttime import simulate
-    from daa_sil.groups import group_spec
+    from daa_sil.study.campaign import campaign_family
+    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.models.encounters import sample_encounters
+    from daa_sil.study.fasttime import simulate
+    from daa_sil.config.groups import group_spec
 
     spec = group_spec(group)
     model = spec.delay_model()
@@ -49,11 +50,11 @@ def _loop_ratio(n: int, group: str) -> float:
 
 _MEM_CHILD = """
 import resource, sys
-from daa_sil.campaign import CampaignConfig, ChunkTask, run_chunk
-from daa_sil.encounters import sample_encounters
+from daa_sil.study.campaign import CampaignConfig, ChunkTask, run_chunk
+from daa_sil.models.encounters import sample_encounters
 n = int(sys.argv[1]); chunk = int(sys.argv[2])
 es = sample_encounters(n, seed=1, preset="paper")
-from daa_sil.groups import parse_groups
+from daa_sil.config.groups import parse_groups
 cfg = CampaignConfig(groups=parse_groups("B-2"), n_encounters=n, chunk_size=chunk)
 for c in range(cfg.n_chunks):
     lo, hi = cfg.chunk_range(c)
@@ -68,10 +69,11 @@ def _lookup_cost(n: int, waitmap: str) -> None:
     interpolation + the most-threatening-intruder selection) costs the campaign."""
     from dataclasses import replace
 
-    from daa_sil.campaign import CampaignConfig, campaign_family
-    from daa_sil.encounters import sample_encounters
-    from daa_sil.fasttime import simulate
-    from daa_sil.groups import group_spec
+    from daa_sil.study.campaign import campaign_family
+    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.models.encounters import sample_encounters
+    from daa_sil.study.fasttime import simulate
+    from daa_sil.config.groups import group_spec
 
     spec = group_spec("ID-2")
     model = spec.delay_model()
@@ -79,7 +81,7 @@ def _lookup_cost(n: int, waitmap: str) -> None:
     es = sample_encounters(n, seed=99, preset="paper")
     times = {}
     for name, pol in (("map", spec.policy()), ("always", replace(spec.policy(), wait_mode="always"))):
-        simulate(es.subset(list(range(20))), pol, model, model, wait_family=fam)  # warm-up
+        simulate(es.subset(list(range(min(20, n)))), pol, model, model, wait_family=fam)  # warm-up
         t0 = time.perf_counter()
         simulate(es, pol, model, model, wait_family=fam)
         times[name] = time.perf_counter() - t0
@@ -103,21 +105,26 @@ def main() -> None:
     ap.add_argument("--loop-n", type=int, default=40, help="subsample size for the per-encounter loop ratio")
     ap.add_argument("--skip-campaign", action="store_true")
     ap.add_argument("--waitmap", default="alerting", help="wait maps of the map groups (default alerting, the study's)")
+    ap.add_argument("--lookup-n", type=int, default=2000, help="encounters of the wait-map lookup cost check")
+    ap.add_argument("--memory-sizes", default="200,800,1600",
+                    help="N of the memory check, in chunks of the first (comma-separated)")
     args = ap.parse_args()
 
-    from daa_sil.campaign import DEFAULT_CHUNK, CampaignConfig, parse_groups, run_campaign
+    from daa_sil.study.campaign import parse_groups, run_campaign
+    from daa_sil.study.campaign_config import DEFAULT_CHUNK, CampaignConfig
 
     args.chunk_size = args.chunk_size or DEFAULT_CHUNK
     loop_rates = [_loop_ratio(args.loop_n, "B-2"), _loop_ratio(args.loop_n, "ID-2")]
-    _lookup_cost(2000, args.waitmap)
-    _memory(200, [200, 800, 1600])
+    _lookup_cost(args.lookup_n, args.waitmap)
+    sizes = [int(x) for x in args.memory_sizes.split(",")]
+    _memory(sizes[0], sizes)
     _memory(args.chunk_size, [args.chunk_size, 3 * args.chunk_size])
     if args.skip_campaign:
         return
     groups = parse_groups(args.groups)
     cfg = CampaignConfig(groups=groups, n_encounters=args.encounters, seed=0, chunk_size=args.chunk_size,
                          waitmap=args.waitmap)
-    from daa_sil.campaign import campaign_family
+    from daa_sil.study.campaign import campaign_family
 
     campaign_family(cfg)  # built/loaded before the clock starts (cached after the first run)
     with tempfile.TemporaryDirectory(prefix="bench-campaign-") as tmp:

@@ -19,7 +19,7 @@ import numpy as np
 
 from daa_sil.agent import AgentMemory, PilotInput, WaitValue, agent_step, policy_for_group
 from daa_sil.daa import DaaConfig, compute_bands
-from daa_sil.kinematics import AircraftState, Command
+from daa_sil.geometry.kinematics import AircraftState, Command
 
 
 def make_batch(n: int, seed: int = 0):

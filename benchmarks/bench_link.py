@@ -154,7 +154,7 @@ async def _start_relay(variant: str, delay: float, seconds: float, sink_port: in
 
 async def _one_run(variant: str, seconds: float, rate: float, delay: float, rt: int = 0) -> dict:
     """Send SYSTEM_TIME at ``rate`` Hz through one relay; errors (ms) at the sink's kernel arrival stamp."""
-    from daa_sil.link.rtclock import enable_rx_timestamps, rx_buffer_size, rx_time
+    from daa_sil.sil.rtclock import enable_rx_timestamps, rx_buffer_size, rx_time
 
     loop = asyncio.get_running_loop()
     sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

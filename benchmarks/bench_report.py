@@ -40,7 +40,7 @@ def synth_campaign(d: Path, n: int, seed: int = 0) -> Path:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from daa_sil.fasttime import ENCOUNTER_SCHEMA
+    from daa_sil.study.fasttime import ENCOUNTER_SCHEMA
 
     rng = np.random.default_rng(seed)
     active = rng.random(n) < 0.15
@@ -71,6 +71,15 @@ def synth_campaign(d: Path, n: int, seed: int = 0) -> Path:
                 "n_blend_exact": exact, "n_blend_axis": axis, "n_blend_intent": intent, "n_daa_override": override,
                 "n_stale": np.zeros(n, np.int64), "n_link_lost": np.zeros(n, np.int64), "intruder_turns": turns,
                 "preset": ["paper"] * n}
+        # the wait-map bookkeeping and whole-encounter counts (present in every real campaign)
+        by_map = rng.binomial(wait + no_wait, 0.5)
+        cols.update({"n_by_map": by_map, "n_by_projl": rng.binomial(wait + no_wait - by_map, 0.5),
+                     "n_by_both": np.zeros(n, np.int64), "n_lookup_in_box": rng.binomial(steps, 0.1),
+                     "n_pilot_received_whole": cols["n_pilot_received"] + rng.poisson(5, n),
+                     "n_pilot_exec_whole": pexec + rng.poisson(2, n)})
+        missing = [f.name for f in ENCOUNTER_SCHEMA if f.name not in cols]
+        if missing:
+            raise SystemExit(f"bench_report: the synthetic table lacks {missing} (ENCOUNTER_SCHEMA changed)")
         (d / g).mkdir(parents=True)
         pq.write_table(pa.table(cols, schema=ENCOUNTER_SCHEMA), d / g / "encounters-00000.parquet")
         rows = np.repeat(np.arange(n), steps)
@@ -97,7 +106,17 @@ def old_report_module():
     spec = importlib.util.spec_from_loader("daa_sil._report_baseline", loader=None)
     mod = importlib.util.module_from_spec(spec)
     mod.__package__ = "daa_sil"
-    exec(compile(src, f"{BASELINE_COMMIT}:daa_sil/report.py", "exec"), mod.__dict__)  # noqa: S102
+    # the baseline's relative imports name the modules by their paths of that commit
+    import daa_sil.files
+    import daa_sil.study.metrics
+    aliases = {"daa_sil.io": daa_sil.files, "daa_sil.metrics": daa_sil.study.metrics}
+    added = [k for k in aliases if k not in sys.modules]
+    sys.modules.update({k: aliases[k] for k in added})
+    try:
+        exec(compile(src, f"{BASELINE_COMMIT}:daa_sil/report.py", "exec"), mod.__dict__)  # noqa: S102
+    finally:
+        for k in added:
+            del sys.modules[k]
     return mod
 
 
@@ -118,16 +137,16 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=2, help="runs per figure (best is printed)")
     args = ap.parse_args()
 
-    from daa_sil import report
-    from daa_sil.findings import evaluate_all
-    from daa_sil.metrics import Study
-    from daa_sil.stats import DEFAULT_REPLICATES
+    from daa_sil.study import report, report_input
+    from daa_sil.study.findings import evaluate_all
+    from daa_sil.study.analysis import Study
+    from daa_sil.study.stats import DEFAULT_REPLICATES
 
     reps = args.replicates or DEFAULT_REPLICATES
     with tempfile.TemporaryDirectory(prefix="bench-report-") as tmp:
         tmp = Path(tmp)
         d = args.dir or synth_campaign(tmp / "camp", args.encounters)
-        blocks = report.build_blocks(d)
+        blocks = report_input.build_blocks(d)
         n = Study(blocks[0].enc, replicates=10).n
         groups = len(set(np.asarray(blocks[0].enc["group"]).astype(str)))
         print(f"results: {d} ({n:,} encounters x {groups} groups), {reps:,} bootstrap replicates")
@@ -142,7 +161,7 @@ def main() -> int:
         print(f"new report (bootstrap, findings, figures): {t_new:.2f} s")
 
         def stats_only():
-            b = report.build_blocks(d)[0]
+            b = report_input.build_blocks(d)[0]
             evaluate_all({b.label: Study(b.enc, b.reading, dec=b.dec, replicates=reps)})
 
         t_stats = best(stats_only, args.repeat)

@@ -54,8 +54,8 @@ def main() -> None:
     if args.part == "realtime":
         return bench_realtime(args)
 
-    from daa_sil.commands.run import RunOptions, run_sil
-    from daa_sil.scenario import load_scenario, scenario_from_dict
+    from daa_sil.sil.play import RunOptions, run_sil
+    from daa_sil.sil.scenario import load_scenario, scenario_from_dict
 
     sc = load_scenario(args.scenario)
     d = sc.to_dict()
@@ -223,8 +223,8 @@ def _fmt(x, nd=1):
 def bench_realtime(args) -> None:
     import yaml
 
-    from daa_sil.commands.run import RunOptions, run_sil
-    from daa_sil.scenario import load_scenario, scenario_from_dict
+    from daa_sil.sil.play import RunOptions, run_sil
+    from daa_sil.sil.scenario import load_scenario, scenario_from_dict
     from daa_sil.steplog import read_steplog
 
     speeds = [float(x) for x in args.speeds.split(",") if x.strip()]

@@ -21,8 +21,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from daa_sil import wellclear as wc  # noqa: E402
-from daa_sil.thresholds import DO365  # noqa: E402
+from daa_sil.geometry import wellclear as wc  # noqa: E402
+from daa_sil.geometry.thresholds import DO365  # noqa: E402
 
 
 def interval_loop(s, v, D, H, TT, TC, B, T):

@@ -51,8 +51,8 @@ from .daa import (AXIS_NONE, DaaConfig, DaaState, alert_levels, classify_command
 from .daa.config import AXIS_NAMES, DIR_NAMES, RULE_NAMES
 from .daa.resolution import command_deltas
 from .errors import UsageError
-from .frames import to_paper_state
-from .kinematics import AircraftState, Command
+from daa_sil.geometry.frames import to_paper_state
+from daa_sil.geometry.kinematics import AircraftState, Command
 
 DECISION_NAMES = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
 DECIDED_BY_NAMES = ("none", "map", "projl", "both", "neither")
@@ -100,7 +100,7 @@ WaitLookup = Callable[[AircraftState, AircraftState, np.ndarray], WaitValue]
 @dataclass(frozen=True)
 class AllocationPolicy:
     """One experimental group's allocation settings (groups are data, not code paths: see
-    :mod:`daa_sil.groups`). Times in s."""
+    :mod:`daa_sil.config.groups`). Times in s."""
 
     wait_mode: str  #: :data:`WAIT_MODES`: none (w = 0, always DAA), constant, map, always (w = inf)
     constant_wait_s: float = 5.0
@@ -124,8 +124,8 @@ class AllocationPolicy:
 
 
 def policy_for_group(group: str) -> AllocationPolicy:
-    """The policy of a named group of the group table (:mod:`daa_sil.groups`: B-1, ..., ID-2-map)."""
-    from .groups import group_spec
+    """The policy of a named group of the group table (:mod:`daa_sil.config.groups`: B-1, ..., ID-2-map)."""
+    from daa_sil.config.groups import group_spec
 
     return group_spec(group).policy()
 
@@ -187,9 +187,6 @@ class AgentMemory:
 
     def __getitem__(self, idx) -> "AgentMemory":
         return AgentMemory(*(None if getattr(self, f.name) is None else getattr(self, f.name)[idx] for f in fields(self)))
-
-    def pilot_command(self) -> Command:
-        return Command(self.pilot_trk, self.pilot_vs, self.pilot_gs)
 
 
 def _reached(own: AircraftState, cmd: Command) -> np.ndarray:
@@ -398,13 +395,13 @@ def decode(decisions: dict) -> dict:
 def make_wait_lookup(family, cfg: "DaaConfig | None" = None) -> WaitLookup:
     """Wrap a wait-map family (``family.lookup(paper_states, turn_rate)``) as a :data:`WaitLookup`.
 
-    Each intruder is converted to the paper frame (:func:`daa_sil.frames.to_paper_state`) and read
+    Each intruder is converted to the paper frame (:func:`daa_sil.geometry.frames.to_paper_state`) and read
     from the map of its estimated turn rate (compass rad/s, + = right, passed to the family in the
     paper sense, + = left). The wait of the **most threatening** intruder is used: the one with the
     earliest straight-line LoWC over the DAA lookahead (ties: the smallest range).
     """
     cfg = cfg or DaaConfig()
-    from . import wellclear as wc
+    from .geometry import wellclear as wc
     from .daa.alerting import relative_state
 
     def lookup(own: AircraftState, intr: AircraftState, turn_rate: np.ndarray) -> WaitValue:

@@ -18,6 +18,7 @@ from .errors import DaaSilError
 
 #: modules providing ``register(subparsers)``; order = order in ``--help``
 COMMAND_MODULES = [
+    "daa_sil.commands.config",
     "daa_sil.commands.geometry",
     "daa_sil.commands.daa",
     "daa_sil.commands.conformance",

@@ -12,13 +12,13 @@ lookup, the DAA configuration and the allocation policy. :meth:`OnboardCore.step
    arrived at or before ``t_k``;
 2. returns the command flown, the decision record and the telemetry for ``t_k`` (ownship,
    intruders, alert levels, band summary) -- the caller downlinks it;
-3. advances truth by ``dt`` (ownship :func:`~daa_sil.kinematics.fly_command`, intruders
-   :func:`~daa_sil.kinematics.advance` with their scripted turn rate / accelerations);
+3. advances truth by ``dt`` (ownship :func:`~daa_sil.geometry.kinematics.fly_command`, intruders
+   :func:`~daa_sil.geometry.kinematics.advance` with their scripted turn rate / accelerations);
 4. evaluates LoWC and NMAC on the continuous segment ``[t_k, t_k + dt]``
-   (:func:`daa_sil.wellclear.segment_events`; an event strictly between samples is detected),
+   (:func:`daa_sil.geometry.wellclear.segment_events`; an event strictly between samples is detected),
    the time spent in LoWC on the segment, the minimum range on it, the penetration rate at
    ``t_k``, and the penetration integral over the segment's LoWC interval
-   (:func:`daa_sil.wellclear.segment_penetration`, with the preset's and with the paper's constants).
+   (:func:`daa_sil.geometry.wellclear.segment_penetration`, with the preset's and with the paper's constants).
 
 Sans-IO: no sockets, no clock; the caller supplies ``t`` and the pilot input and moves the bytes.
 """
@@ -30,12 +30,12 @@ from typing import Callable
 
 import numpy as np
 
-from . import wellclear as wc
-from .frames import to_paper_state, wrap_pi
-from .kinematics import AircraftState, Command, Performance, advance, fly_command
+from .geometry import wellclear as wc
+from daa_sil.geometry.frames import wrap_pi
+from daa_sil.geometry.kinematics import AircraftState, Command, Performance, advance, fly_command
 from .daa.alerting import relative_state
-from .encounters import INTRUDER_PERFORMANCE
-from .thresholds import Thresholds, get_thresholds
+from daa_sil.models.encounters import INTRUDER_PERFORMANCE
+from daa_sil.geometry.thresholds import Thresholds, get_thresholds
 
 #: ``controls(t) -> (turn_rate rad/s compass +right, accel m/s^2, vertical_accel m/s^2)``, each (N, M)
 IntruderControls = Callable[[float], "tuple[np.ndarray, np.ndarray, np.ndarray]"]
@@ -176,14 +176,10 @@ class OnboardCore:
 
     @classmethod
     def from_encounters(cls, encounters, policy, daa_cfg=None, wait_lookup=None, **kw) -> "OnboardCore":
-        """Core for an :class:`~daa_sil.encounters.EncounterSet` (initial states at t = 0, its scripts)."""
+        """Core for an :class:`~daa_sil.models.encounters.EncounterSet` (initial states at t = 0, its scripts)."""
         return cls(encounters.own, encounters.intr, encounters.intruder_controls, policy, daa_cfg, wait_lookup,
                    dt=encounters.dt_s, **kw)
 
-    def paper_state(self) -> np.ndarray:
-        """The paper's relative state (N, M, 6) of every intruder at the current time."""
-        return to_paper_state(self.own.position()[:, None, :], self.own.velocity()[:, None, :],
-                              self.intruders.position(), self.intruders.velocity())
 
     def geometry(self) -> dict:
         """Per-intruder well-clear quantities at the current time, (N, M) each."""

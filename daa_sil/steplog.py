@@ -25,7 +25,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .errors import FileFormatError, UsageError
-from .io import atomic_path
+from .files import atomic_path
 
 #: schema version stored in the file metadata under ``daa_sil.steplog``
 STEPLOG_VERSION = "2"

@@ -19,7 +19,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from daa_sil.io import atomic_path
+from daa_sil.files import atomic_path
 from daa_sil.viz import WebServer
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from daa_sil.cli import run_guarded
 from daa_sil.commands._args import OneLineParser as _Parser, check_speed, load_key_option
+from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.errors import UsageError
 
 EXAMPLES = """examples:
@@ -53,6 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--log", type=Path, metavar="FILE", help="write the commands sent as JSONL here")
     p.add_argument("--no-display", action="store_true", help="no per-second console line")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S wall seconds")
+    add_config_argument(p)
     return p
 
 
@@ -88,7 +90,7 @@ def parse_setting(text: str) -> "tuple[float, str, float]":
 
 
 async def _amain(args) -> int:
-    from daa_sil.scenario import load_scenario
+    from daa_sil.sil.scenario import load_scenario
     from gcs.node import GcsNode, GcsOptions
 
     check_speed(args.speed)
@@ -97,7 +99,7 @@ async def _amain(args) -> int:
         raise UsageError("give --scenario FILE (pilot model settings, origin); without it only --pilot scripted "
                          "with no commands is possible")
     key = load_key_option(args.key)
-    from daa_sil.link.connstr import LISTEN, SEND, parse_connection
+    from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
 
     vconn = parse_connection(args.vehicle, "--vehicle", SEND)
     if args.listen is not None:
@@ -107,7 +109,8 @@ async def _amain(args) -> int:
     settings = tuple(parse_setting(x) for x in args.settings)
     node = GcsNode(sc, GcsOptions(vehicle=args.vehicle, listen=args.listen or "udp:127.0.0.1:14550", clock=args.clock,
                                   speed=args.speed, key=key, pilot=args.pilot, log=args.log,
-                                  display=not args.no_display, settings=settings))
+                                  display=not args.no_display, settings=settings,
+                                  config=load_config(args.config) if args.config else None))
     await node.start()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -16,7 +16,7 @@ Per step ``k`` at sim time ``t_k`` (``docs/architecture.md`` step 1):
 
 Ticks that stop for 3 s after they came are reported (stderr), naming the address they came from.
 
-Pilot: ``model`` = :class:`daa_sil.pilot.PilotModel` (N = 1) on the observed ownship
+Pilot: ``model`` = :class:`daa_sil.models.pilot.PilotModel` (N = 1) on the observed ownship
 (LOCAL_POSITION_NED, float) and intruders (ADSB_VEHICLE), streaming per the allocation semantics;
 ``scripted`` = the scenario's ``pilot.commands`` (each sent once per step over ``[t_s, until_s)``).
 Commands go out as ``PILOT_MANEUVER`` (absolute setpoint, send time in ``time_boot_ms``, ``cmd_seq``
@@ -34,12 +34,12 @@ from pathlib import Path
 
 import numpy as np
 
-from daa_sil.frames import geodetic_to_enu
-from daa_sil.kinematics import AircraftState
+from daa_sil.geometry.frames import geodetic_to_enu
+from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec
 from daa_sil.link.codec import mavlink as M
-from daa_sil.link.connstr import LISTEN, SEND, parse_connection
-from daa_sil.link.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint
+from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
+from daa_sil.sil.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint
 
 GCS_SYSID, GCS_COMPID = 255, 190
 VEHICLE_SYSID = 1
@@ -63,6 +63,9 @@ class GcsOptions:
     display: bool = True
     #: settings to send: ``(sim time s, NAME, value)``; NAME ``MODE`` sends DO_SET_MODE (value = mode number)
     settings: tuple = ()
+    #: ``--config``: a :class:`daa_sil.config.run_config.RunConfig` whose ``daa`` changes shape the
+    #: pilot's display and whose ``pilot`` changes the pilot model (None = the scenario alone)
+    config: "object | None" = None
 
 
 @dataclass
@@ -103,16 +106,24 @@ class GcsNode:
         self.order = [i.id for i in scenario.intruders] if scenario is not None else []
         from daa_sil.daa.config import DaaConfig
 
-        self.daa_cfg = DaaConfig.for_preset(scenario.thresholds) if scenario is not None else DaaConfig()
+        rc = opts.config
+        if scenario is not None:
+            self.daa_cfg = rc.daa_config(scenario.thresholds) if rc is not None else DaaConfig.for_preset(scenario.thresholds)
+        else:
+            self.daa_cfg = rc.daa_config() if rc is not None else DaaConfig()
         self.pilot = None
         if self.mode == "model":
-            from daa_sil.fasttime import STREAM_PILOT, encounter_streams
-            from daa_sil.pilot import PilotConfig, PilotDisplay, PilotModel
-            from daa_sil.scenario import ownship_state
+            from daa_sil.study.fasttime import STREAM_PILOT, encounter_streams
+            from daa_sil.models.pilot import PilotModel
+            from daa_sil.models.pilot_display import PilotDisplay
+            from daa_sil.models.pilot_config import PilotConfig
+            from daa_sil.sil.scenario import ownship_state
 
             seed = encounter_streams(scenario.seed if scenario is not None else 0)[STREAM_PILOT]
             # the plan the pilot returns to after the conflict: the scenario ownship's initial course
-            self.pilot = PilotModel(1, [seed], PilotConfig(mode=scenario.pilot.response if scenario else "guendel"),
+            mode = scenario.pilot.response if scenario else "guendel"
+            pcfg = rc.pilot_config(mode=mode) if rc is not None else PilotConfig(mode=mode)
+            self.pilot = PilotModel(1, [seed], pcfg,
                                     plan=ownship_state(scenario) if scenario is not None else None,
                                     daa_cfg=self.daa_cfg)
             self.pilot_display = PilotDisplay(1, self.daa_cfg, self.pilot.cfg.alert_level_min)
@@ -257,7 +268,7 @@ class GcsNode:
 
     def _guidance(self, own: AircraftState, intr: AircraftState):
         """The pilot's display guidance, refreshed only when newer telemetry is seen (as fast-time,
-        with the same :class:`daa_sil.pilot.PilotDisplay`): the vehicle's alert level (DAA_ALERT) sent
+        with the same :class:`daa_sil.models.pilot_display.PilotDisplay`): the vehicle's alert level (DAA_ALERT) sent
         with that telemetry, well clear on the observed states and the DAA bands of the observed states."""
         t_seen = self.view.own[0]
         if t_seen != self._g_seen:
@@ -377,7 +388,7 @@ class GcsNode:
         return self._t_sync + (loop.time() - self._wall0) * self.opts.speed
 
     async def _run_realtime(self) -> None:
-        from daa_sil.scenario import delay_models
+        from daa_sil.sil.scenario import delay_models
 
         loop = asyncio.get_running_loop()
         assumed_down = delay_models(self.sc)[1].mean() if self.sc is not None else 0.0
@@ -412,7 +423,7 @@ class GcsNode:
         """Write the commands sent (JSONL) atomically."""
         if self.opts.log is None:
             return None
-        from daa_sil.io import atomic_write_text, to_jsonable
+        from daa_sil.files import atomic_write_text, to_jsonable
 
         text = "".join(json.dumps(to_jsonable(r), sort_keys=True) + "\n" for r in self.sent)
         return atomic_write_text(self.opts.log, text)

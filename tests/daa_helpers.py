@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from daa_sil import wellclear as wc
-from daa_sil.kinematics import AircraftState, Command, fly_command
+from daa_sil.geometry import wellclear as wc
+from daa_sil.geometry.kinematics import AircraftState, Command, fly_command
 
 
 def own_state(n=1, x=0.0, y=0.0, z=1000.0, gs=55.0, trk=0.0, vs=0.0) -> AircraftState:

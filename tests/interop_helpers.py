@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def free_ports(n: int) -> list[int]:
     """``n`` distinct OS-chosen free UDP ports on 127.0.0.1."""
-    from daa_sil.commands.run import free_udp_ports
+    from daa_sil.sil.supervise import free_udp_ports
 
     return free_udp_ports(n)
 

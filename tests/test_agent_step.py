@@ -8,8 +8,8 @@ from daa_sil.agent import (AgentMemory, DECISION_FIELDS, D_BLEND, D_NO_WAIT, D_N
                            D_LINK_LOST, D_DAA_OVERRIDE, PilotInput, WaitValue, agent_step, decode, policy_for_group)
 from daa_sil.daa import (AXIS_NONE, AXIS_HORIZONTAL, AXIS_VERTICAL, DIR_DOWN, DIR_LEFT, DIR_UP, RULE_AXIS, RULE_AXIS_DIR,
                          RULE_ANY, DaaConfig, alert_levels, compute_bands)
-from daa_sil.kinematics import Command
-from daa_sil.units import DEG
+from daa_sil.geometry.kinematics import Command
+from daa_sil.geometry.units import DEG
 
 from daa_helpers import brute_first_lowc, intruders, own_state
 

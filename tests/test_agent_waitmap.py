@@ -9,7 +9,7 @@ from daa_sil import waitmap
 from daa_sil.agent import (BY_BOTH, BY_MAP, BY_NEITHER, BY_NONE, BY_PROJL, D_NO_WAIT, D_WAIT, AgentMemory,
                            PilotInput, WaitValue, agent_step, make_wait_lookup, policy_for_group)
 from daa_sil.daa import DaaConfig
-from daa_sil.frames import to_paper_state
+from daa_sil.geometry.frames import to_paper_state
 
 from daa_helpers import intruders, own_state
 

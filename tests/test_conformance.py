@@ -13,12 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daa_sil import wellclear as wc
+from daa_sil.geometry import wellclear as wc
 from daa_sil.cli import main
 from daa_sil.daa import DaaConfig, relative_state
 from daa_sil.daa import conformance as conf
 from daa_sil.errors import FileFormatError
-from daa_sil.units import NMI
+from daa_sil.geometry.units import NMI
 
 DATA = Path(__file__).parent / "data" / "daidalus_do365b.jsonl.xz"
 #: sha256 of the uncompressed reference set (tests/data/README.md)

@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from daa_sil import wellclear as wc
+from daa_sil.geometry import wellclear as wc
 from daa_sil.daa import (AXIS_HORIZONTAL, REGION_MID, REGION_NEAR, REGION_NONE, DaaConfig, alert_levels,
                          compute_bands, proj_lowc, safety_metric)
-from daa_sil.daa.bands import _axis_paths, _path_sizes
-from daa_sil.kinematics import Command, advance
-from daa_sil.units import DEG, FT
+from daa_sil.daa.axis_paths import _axis_paths, _path_sizes
+from daa_sil.geometry.kinematics import Command, advance
+from daa_sil.geometry.units import DEG, FT
 
 from daa_helpers import brute_first_lowc, intruders, own_state
 

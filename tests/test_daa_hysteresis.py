@@ -12,7 +12,7 @@ from daa_sil.daa import DaaConfig, DaaState, alert_levels
 from daa_sil.daa.bands import AxisBands, Bands, compute_bands
 from daa_sil.daa.config import AXIS_HORIZONTAL, REGION_MID, REGION_NEAR, REGION_NONE
 from daa_sil.daa.hysteresis import mofn_output, push, seeded_queue
-from daa_sil.units import DEG
+from daa_sil.geometry.units import DEG
 
 from daa_helpers import intruders, own_state
 

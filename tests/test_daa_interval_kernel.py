@@ -1,13 +1,13 @@
-"""The bands' fast kernel (``trajectory.interval_soa``) equals ``wellclear.violation_interval``
+"""The bands' fast kernel (``intervals.interval_soa``) equals ``wellclear.violation_interval``
 element for element, edge cases included (level flight, inside DMOD / ZTHR now, a single-instant
 vertical window, zero relative velocity, zero length)."""
 
 import numpy as np
 import pytest
 
-from daa_sil import wellclear as wc
-from daa_sil.daa import trajectory as T
-from daa_sil.thresholds import get_thresholds
+from daa_sil.geometry import wellclear as wc
+from daa_sil.daa import intervals as T
+from daa_sil.geometry.thresholds import get_thresholds
 
 
 def _edge_cases(th):

@@ -2,7 +2,7 @@
 instantaneous DO-365 test along the true arc (or acceleration parabola), and the issue's examples.
 
 The oracle (:func:`daa_helpers.brute_first_lowc`) flies each candidate with
-:func:`daa_sil.kinematics.fly_command` and samples :func:`daa_sil.wellclear.wcv` every 5 ms; it shares
+:func:`daa_sil.geometry.kinematics.fly_command` and samples :func:`daa_sil.geometry.wellclear.wcv` every 5 ms; it shares
 no code with :mod:`daa_sil.daa.trajectory`. Agreement is judged with a slightly shrunk and a slightly
 inflated volume (DTHR +-1 m, ZTHR +-0.2 m, TTHR +-0.02 s) so that a sample grid cannot decide it:
 a violation of the shrunk volume must be found by us no later than 30 ms after the oracle's first
@@ -12,12 +12,12 @@ sample in it; a violation we report must be one of the inflated volume within 30
 import numpy as np
 import pytest
 
-from daa_sil import wellclear as wc
+from daa_sil.geometry import wellclear as wc
 from daa_sil.daa import DaaConfig, compute_bands
 from daa_sil.daa import conformance as conf
 from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_SPEED, AXIS_VERTICAL, REGION_MID, REGION_NEAR, REGION_NONE
-from daa_sil.kinematics import AircraftState, Command, fly_command
-from daa_sil.units import DEG, KT
+from daa_sil.geometry.kinematics import AircraftState, Command, fly_command
+from daa_sil.geometry.units import DEG, KT
 
 from daa_helpers import brute_first_lowc, intruders, own_state
 from test_conformance import DATA

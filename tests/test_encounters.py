@@ -4,11 +4,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from daa_sil import encounters as E
+from daa_sil.models import encounter_files as EF
+from daa_sil.models import encounter_geometry as EG
+from daa_sil.models import encounters as E
 from daa_sil.errors import FileFormatError, UsageError
-from daa_sil.kinematics import advance
-from daa_sil.units import DEG
-from daa_sil.wellclear import t_cpa
+from daa_sil.geometry.kinematics import advance
+from daa_sil.geometry.units import DEG
+from daa_sil.geometry.wellclear import t_cpa
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +90,7 @@ def test_turning_intruders_pass_cpa_check_with_simulator_dynamics(sample):
 
 
 def test_no_start_inside_warning_volume(sample):
-    from daa_sil.wellclear import time_to_violation
+    from daa_sil.geometry.wellclear import time_to_violation
 
     s = sample.own.position() - sample.intr[:, 0].position()
     v = sample.own.velocity() - sample.intr[:, 0].velocity()
@@ -116,7 +118,7 @@ def test_multi_intruder_and_controls():
 def test_parquet_round_trip_bit_exact(tmp_path):
     es = E.sample_encounters(7, seed=3, n_intruders=2)
     path = es.save(tmp_path / "e.parquet")
-    back = E.load_encounters(path)
+    back = EF.load_encounters(path)
     for f in ("x", "y", "z", "gs", "trk", "vs"):
         assert np.array_equal(getattr(es.intr, f), getattr(back.intr, f))
         assert np.array_equal(getattr(es.own, f), getattr(back.own, f))
@@ -143,18 +145,18 @@ def test_bad_files_give_one_line_errors(tmp_path):
     for path, word in ((tmp_path / "missing.parquet", "no such"), (bad, "not a readable"),
                        (other, "not a daa-sil encounter"), (broken, "intr_x")):
         with pytest.raises(FileFormatError) as ei:
-            E.load_encounters(path)
+            EF.load_encounters(path)
         assert word in str(ei.value) and "\n" not in str(ei.value)
     with pytest.raises(UsageError):
         E.sample_encounters(3, seed=-1)
 
 
 def test_geometry_constructor_head_on_by_hand():
-    es = E.encounter_from_geometry(E.IntruderGeometry(angle_deg=180, hmd_m=500, t_cpa_s=60, gs_mps=100, vmd_m=50))
+    es = EG.encounter_from_geometry(EG.IntruderGeometry(angle_deg=180, hmd_m=500, t_cpa_s=60, gs_mps=100, vmd_m=50))
     # head-on, closing 155 m/s: start 60*155 = 9300 m ahead, 500 m to the right (east), 50 m above
     assert es.intr.x[0, 0] == pytest.approx(500.0)
     assert es.intr.y[0, 0] == pytest.approx(9300.0)
     assert es.intr.z[0, 0] - es.own.z[0] == pytest.approx(50.0)
     assert es.intr.trk[0, 0] == pytest.approx(np.pi)
-    left = E.encounter_from_geometry(E.IntruderGeometry(angle_deg=180, hmd_m=-500, t_cpa_s=60, gs_mps=100))
+    left = EG.encounter_from_geometry(EG.IntruderGeometry(angle_deg=180, hmd_m=-500, t_cpa_s=60, gs_mps=100))
     assert left.intr.x[0, 0] == pytest.approx(-500.0)

@@ -5,9 +5,9 @@ import pyarrow.compute as pc
 import pytest
 
 from daa_sil.agent import policy_for_group
-from daa_sil.encounters import concat_encounters, sample_encounters
-from daa_sil.fasttime import DECISION_SCHEMA, ENCOUNTER_SCHEMA, simulate
-from daa_sil.latency import Constant, TruncatedGaussian
+from daa_sil.models.encounters import concat_encounters, sample_encounters
+from daa_sil.study.fasttime import DECISION_SCHEMA, ENCOUNTER_SCHEMA, simulate
+from daa_sil.models.latency import Constant, TruncatedGaussian
 
 N = 40
 

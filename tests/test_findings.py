@@ -6,9 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from daa_sil import findings as F
-from daa_sil import metrics as M
-from daa_sil.stats import zero_upper_bounds
+from daa_sil.study import findings as F
+from daa_sil.study import metrics as M
+from daa_sil.study import analysis as A
+from daa_sil.study.stats import zero_upper_bounds
 
 COUNTS = ("n_wait", "n_no_wait", "n_pilot_received", "n_pilot_exec", "n_blend", "n_blend_exact", "n_blend_axis",
           "n_blend_intent", "n_daa_override", "n_stale", "n_link_lost")
@@ -28,7 +29,7 @@ def group(name, n=400, **cols):
 
 def study(*groups, **kw):
     cols = {k: np.concatenate([g[k] for g in groups]) for k in groups[0]}
-    return M.Study(cols, replicates=1000, seed=3, **kw)
+    return A.Study(cols, replicates=1000, seed=3, **kw)
 
 
 def one(fid, group=None):

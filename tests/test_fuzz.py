@@ -30,10 +30,11 @@ from pathlib import Path
 import pytest
 
 from daa_sil.link.codec import MavCodec
-from daa_sil.link.endpoint import format_udp_address
+from daa_sil.sil.endpoint import format_udp_address
 from daa_sil.link.fuzz import CRAFTED, Fuzzer
-from daa_sil.link.shim import DelayShim, ShimConfig
-from daa_sil.scenario import delay_models, load_scenario
+from daa_sil.sil.shim import DelayShim
+from daa_sil.sil.shim_config import ShimConfig
+from daa_sil.sil.scenario import delay_models, load_scenario
 from gcs.node import GcsNode, GcsOptions
 from vehicle.node import VehicleNode, VehicleOptions
 

@@ -10,8 +10,8 @@ import pytest
 
 from daa_sil.link.codec import MavCodec
 from daa_sil.link.codec import mavlink as M
-from daa_sil.link.endpoint import open_endpoint
-from daa_sil.scenario import parse_scenario
+from daa_sil.sil.endpoint import open_endpoint
+from daa_sil.sil.scenario import parse_scenario
 from gcs.node import GcsNode, GcsOptions
 
 SCENARIO = """\

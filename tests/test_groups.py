@@ -2,9 +2,9 @@
 
 import pytest
 
-from daa_sil.campaign import CampaignConfig
+from daa_sil.study.campaign_config import CampaignConfig
 from daa_sil.errors import UsageError
-from daa_sil.groups import PAPER_GROUPS, group_spec, group_table, load_group_file, parse_groups
+from daa_sil.config.groups import PAPER_GROUPS, group_spec, group_table, load_group_file, parse_groups
 
 
 def test_table_holds_the_papers_groups_and_the_ablations():

@@ -40,9 +40,9 @@ def test_mavsdk_reads_the_picture_and_sets_a_parameter(tmp_path):
     from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
     from mavsdk.plugins.param import ParamError
 
-    from daa_sil.frames import enu_to_geodetic
-    from daa_sil.scenario import load_scenario
-    from daa_sil.units import G0
+    from daa_sil.geometry.frames import enu_to_geodetic
+    from daa_sil.sil.scenario import load_scenario
+    from daa_sil.geometry.units import G0
 
     sc = load_scenario(ROOT / "scenarios" / "head_on.yaml")
     (port,) = free_ports(1)

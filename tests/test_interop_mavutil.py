@@ -21,7 +21,7 @@ def long_scenario(tmp, duration_s: float = 600.0):
     """The head-on scenario lengthened so the vehicle outlives every test of a module."""
     import yaml
 
-    from daa_sil.scenario import load_scenario
+    from daa_sil.sil.scenario import load_scenario
 
     d = load_scenario(SCENARIO).to_dict()
     d["duration_s"] = duration_s
@@ -129,7 +129,7 @@ def test_home_position_on_request_and_get_home(link):
     homes = [m for m in got + recv_until(conn, lambda m: m.get_type() == "HOME_POSITION", 3.0)
              if m.get_type() == "HOME_POSITION"]
     assert homes
-    from daa_sil.scenario import load_scenario
+    from daa_sil.sil.scenario import load_scenario
 
     sc = load_scenario(SCENARIO)
     h = homes[-1]
@@ -265,8 +265,8 @@ def test_parameter_protocol_list_read_set_and_refusals(link):
 def test_do_reposition_is_a_pilot_command(link):
     from pymavlink import mavutil
 
-    from daa_sil.frames import enu_to_geodetic
-    from daa_sil.scenario import load_scenario
+    from daa_sil.geometry.frames import enu_to_geodetic
+    from daa_sil.sil.scenario import load_scenario
 
     conn, *_ = link
     m = mavutil.mavlink

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from daa_sil import frames
-from daa_sil.kinematics import AircraftState, Command, Performance, advance, fly_command
-from daa_sil.units import DEG, FPM, G0
+from daa_sil.geometry import frames
+from daa_sil.geometry.kinematics import AircraftState, Command, Performance, advance, fly_command
+from daa_sil.geometry.units import DEG, FPM, G0
 
 PERF = Performance()
 

@@ -1,4 +1,4 @@
-"""Delay models, spec parsing and the seeded delay process (daa_sil.latency)."""
+"""Delay models, spec parsing and the seeded delay process (daa_sil.models.latency)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import pytest
 from scipy import stats
 
 from daa_sil.errors import FileFormatError, UsageError
-from daa_sil.latency import (BatchedDelay, Constant, DelayProcess, Trace, TruncatedGaussian, Uniform,
-                             delay_model_from_dict, parse_delay_spec)
+from daa_sil.models.latency import Constant, Trace, TruncatedGaussian, Uniform, delay_model_from_dict, parse_delay_spec
+from daa_sil.models.delay_process import BatchedDelay, DelayProcess
 
 
 def test_truncated_gaussian_statistics_match_truncnorm():
@@ -133,7 +133,8 @@ def test_batched_delay_equals_per_encounter_process():
 
 
 def test_iid_fifo_inflation_vs_piecewise_constant():
-    """Why the default is piecewise constant: mavlink_spec §5.3 (10 Hz, 600 s)."""
+    """Why the default is piecewise constant (docs/models.md, "Link delay"): an i.i.d. draw per packet of a
+    10 Hz stream over 600 s, kept FIFO, inflates a 5 s Gaussian delay to about 8 s."""
     from daa_sil.link.delayline import fifo_release
 
     g = TruncatedGaussian(5, 3)

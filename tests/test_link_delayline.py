@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from daa_sil.errors import UsageError
-from daa_sil.latency import Constant, DelayProcess, TruncatedGaussian, Uniform
+from daa_sil.models.latency import Constant, TruncatedGaussian, Uniform
+from daa_sil.models.delay_process import DelayProcess
 from daa_sil.link.delayline import DelayLine, delay_seed, fifo_release
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from daa_sil.errors import UsageError
 from daa_sil.link.codec import MavCodec, mavlink as d
-from daa_sil.link.endpoint import format_udp_address, open_endpoint, parse_udp_address
+from daa_sil.sil.endpoint import format_udp_address, open_endpoint, parse_udp_address
 
 KEY = hashlib.sha256(b"endpoint test").digest()
 

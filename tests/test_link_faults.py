@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daa_sil.latency import DelayProcess
+from daa_sil.models.delay_process import DelayProcess
 from daa_sil.link.delayline import fifo_release
-from daa_sil.scenario import delay_models, load_scenario
+from daa_sil.sil.scenario import delay_models, load_scenario
 from daa_sil.steplog import read_steplog
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -7,12 +7,13 @@ import hashlib
 
 import pytest
 
-from daa_sil.latency import Constant
+from daa_sil.models.latency import Constant
 from daa_sil.link.codec import MavCodec, mavlink as d
-from daa_sil.link.endpoint import open_endpoint
-from daa_sil.link.lockstep import LockstepGcs, LockstepTimeout, LockstepVehicle
+from daa_sil.sil.endpoint import open_endpoint
+from daa_sil.sil.lockstep import LockstepGcs, LockstepTimeout, LockstepVehicle
 from daa_sil.link.messages import pilot_command_from, pilot_maneuver
-from daa_sil.link.shim import DelayShim, ShimConfig
+from daa_sil.sil.shim import DelayShim
+from daa_sil.sil.shim_config import ShimConfig
 
 
 @pytest.mark.asyncio

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from daa_sil.link import rtclock
+from daa_sil.sil import rtclock
 
 LINUX = sys.platform.startswith("linux")
 

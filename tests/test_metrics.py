@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from daa_sil import metrics as M
+from daa_sil.study import metrics as M
+from daa_sil.study import analysis as A
+from daa_sil.study import counting as C
 from daa_sil.errors import FileFormatError, UsageError
 
 
@@ -93,13 +95,6 @@ def test_means_use_student_t():
     assert m["pi_mean"].value == 1.0 and m["pi_max"].value == 1.5
 
 
-def test_wilson_matches_formula():
-    lo, hi = M.wilson(3, 10)
-    z = stats.norm.ppf(0.975)
-    c = (0.3 + z * z / 20) / (1 + z * z / 10)
-    assert (lo + hi) / 2 == pytest.approx(c)
-
-
 def test_errors_are_clear():
     t = table(n=3, lowc_idx=())
     with pytest.raises(UsageError, match="no encounters"):
@@ -133,7 +128,7 @@ def test_exact_match_is_over_blends_of_a_pilot_maneuver():
 
 # --- the encounter-level study ----------------------------------------------------------------------
 def _study(*ts, **kw):
-    return M.Study(merge(*ts), replicates=500, seed=2, **kw)
+    return A.Study(merge(*ts), replicates=500, seed=2, **kw)
 
 
 def test_study_pairs_groups_by_encounter_id_not_row_order():
@@ -167,19 +162,19 @@ def test_counting_readings_pick_columns():
     n = 10
     t = table("ID-2", n, lowc_idx=(), n_pilot_received=np.full(n, 10), n_pilot_exec=np.full(n, 1),
               n_blend=np.full(n, 6), n_daa_override=np.full(n, 3))
-    got = {r: _study(t, reading=M.Reading("x", {"received": r})).estimate("ID-2", "received").value
+    got = {r: _study(t, reading=C.Reading("x", {"received": r})).estimate("ID-2", "received").value
            for r in ("arrived", "pilot+blend", "executed")}
     assert got == {"arrived": 10.0, "pilot+blend": 7.0, "executed": 1.0}
-    direct = M.Reading("y", {"columns": {"received": ["n_blend", "n_daa_override"]}})
+    direct = C.Reading("y", {"columns": {"received": ["n_blend", "n_daa_override"]}})
     assert _study(t, reading=direct).estimate("ID-2", "received").value == 9.0
     with pytest.raises(UsageError, match="allowed: window=active"):
-        _study(t, reading=M.Reading("z", {"received": "arrived", "window": "season"}))
+        _study(t, reading=C.Reading("z", {"received": "arrived", "window": "season"}))
     with pytest.raises(FileFormatError, match="n_pilot_received_whole"):  # whole-encounter columns missing
-        _study(t, reading=M.Reading("w", {"received": "arrived", "window": "whole"}))
+        _study(t, reading=C.Reading("w", {"received": "arrived", "window": "whole"}))
     whole = table("ID-2", n, lowc_idx=(), n_pilot_received=np.full(n, 10), n_pilot_exec=np.full(n, 1),
                   n_blend=np.full(n, 6), n_daa_override=np.full(n, 3), n_pilot_received_whole=np.full(n, 25),
                   n_pilot_exec_whole=np.full(n, 14))
-    got = {r: _study(whole, reading=M.Reading("v", {"received": r, "window": "whole"})).estimate("ID-2", "received").value
+    got = {r: _study(whole, reading=C.Reading("v", {"received": r, "window": "whole"})).estimate("ID-2", "received").value
            for r in ("arrived", "pilot+blend", "executed")}
     assert got == {"arrived": 25.0, "pilot+blend": 20.0, "executed": 14.0}
 
@@ -234,7 +229,7 @@ def test_decision_tables_from_parquet_types(in_box):
 
     t = pa.table({"group": ["ID-2"] * 4, "encounter_id": [0, 0, 1, 5], "decision": ["wait", "no_wait", "wait", "wait"],
                   "decided_by": pa.array(["map", None, "projl", "map"]).dictionary_encode(), "in_box": in_box})
-    d = M.normalise_decisions(t)
+    d = C.normalise_decisions(t)
     assert d["decided_by"].tolist() == ["map", "", "projl", "map"] and d["in_box"].tolist() == [1, -1, 0, 1]
     st = _study(table("ID-2", 3, lowc_idx=()), dec=t)  # encounter 5 is not in the results: ignored
     assert st.sum("ID-2", "n_dec").value == 2 and st.sum("ID-2", "n_lookup").value == 2
@@ -243,12 +238,12 @@ def test_decision_tables_from_parquet_types(in_box):
 def test_a_new_counting_is_one_table_entry(monkeypatch):
     """A simulator column for a new way of counting plus one COUNT_SOURCES entry is all a reading
     needs: the study, the allowed values and --recount pick it up."""
-    from daa_sil.report import parse_recount
+    from daa_sil.study.report_input import parse_recount
 
-    keys, tab = M.COUNT_SOURCES["received"]
-    monkeypatch.setitem(M.COUNT_SOURCES, "received", (keys, {**tab, ("overridden", "active"): ("n_daa_override",)}))
-    assert "overridden" in M.counting_options()["received"]
+    keys, tab = C.COUNT_SOURCES["received"]
+    monkeypatch.setitem(C.COUNT_SOURCES, "received", (keys, {**tab, ("overridden", "active"): ("n_daa_override",)}))
+    assert "overridden" in C.counting_options()["received"]
     assert parse_recount("ov:received=overridden") == ("ov", {"received": "overridden"})
     t = table("B-2", 4, lowc_idx=(), n_daa_override=np.array([1, 2, 3, 6]))
-    st = _study(t, reading=M.Reading("ov", {"received": "overridden"}))
+    st = _study(t, reading=C.Reading("ov", {"received": "overridden"}))
     assert st.estimate("B-2", "received").value == 3.0

@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from daa_sil import wellclear as wc
+from daa_sil.geometry import wellclear as wc
 from daa_sil.agent import D_NO_WAIT, PilotInput, WaitValue, policy_for_group
 from daa_sil.daa import DaaConfig
-from daa_sil.encounters import IntruderGeometry, encounter_from_geometry
-from daa_sil.kinematics import AircraftState
+from daa_sil.models.encounter_geometry import IntruderGeometry, encounter_from_geometry
+from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.onboard import OnboardCore, band_intervals
-from daa_sil.thresholds import PAPER
+from daa_sil.geometry.thresholds import PAPER
 
 
 def _run(core: OnboardCore, steps: int):

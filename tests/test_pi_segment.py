@@ -4,13 +4,13 @@ independent quadrature, the paper's constants, and a LoWC strictly between two s
 import numpy as np
 import pytest
 
-from daa_sil import wellclear as wc
+from daa_sil.geometry import wellclear as wc
 from daa_sil.agent import PilotInput, policy_for_group
 from daa_sil.daa import DaaConfig
-from daa_sil.kinematics import AircraftState, Performance
+from daa_sil.geometry.kinematics import AircraftState, Performance
 from daa_sil.onboard import OnboardCore
-from daa_sil.thresholds import PAPER
-from daa_sil.units import FT
+from daa_sil.geometry.thresholds import PAPER
+from daa_sil.geometry.units import FT
 
 PRESET = wc.pi_constants(PAPER)
 

@@ -3,9 +3,11 @@
 import numpy as np
 import pytest
 
-from daa_sil.kinematics import AircraftState
-from daa_sil.pilot import Guidance, PilotConfig, PilotModel, choose_maneuver, sample_response_components
-from daa_sil.units import DEG, FPM
+from daa_sil.geometry.kinematics import AircraftState
+from daa_sil.models.pilot import PilotModel
+from daa_sil.models.pilot_choice import choose_maneuver, sample_response_components
+from daa_sil.models.pilot_config import Guidance, PilotConfig
+from daa_sil.geometry.units import DEG, FPM
 from daa_sil.errors import UsageError
 
 
@@ -66,7 +68,7 @@ def test_turn_direction_never_reverses_minimum_suggestion(seed):
     g = Guidance(alert_level=np.full(n, 2), left_trk=cur - dl, left_level=rng.integers(0, 4, n),
                  right_trk=cur + dr, right_level=rng.integers(0, 4, n), up_vs=np.full(n, np.nan),
                  up_level=np.full(n, np.inf), down_vs=np.full(n, np.nan), down_level=np.full(n, np.inf))
-    from daa_sil.pilot import _draw_block
+    from daa_sil.models.pilot_choice import _draw_block
 
     cfg = PilotConfig()
     draws = {k: v for k, v in _draw_block(rng, cfg, n).items()}

@@ -5,11 +5,13 @@ import json
 import numpy as np
 import pytest
 
-from daa_sil.campaign import CampaignConfig, read_results, run_campaign
+from daa_sil.study.campaign import run_campaign
+from daa_sil.study.campaign_config import CampaignConfig
+from daa_sil.study.campaign_files import read_results
 from daa_sil.cli import main
 from daa_sil.errors import UsageError
-from daa_sil.readings import READINGS, parse_reading_settings, reading_for
-from daa_sil.units import FT
+from daa_sil.config.readings import READINGS, parse_reading_settings, reading_for
+from daa_sil.geometry.units import FT
 
 
 def test_bundles_and_what_they_change():
@@ -39,7 +41,7 @@ def test_feet_reading_draws_cpas_inside_dmod_and_is_recorded(tmp_path):
     run_campaign(cfg, tmp_path / "c", progress=False)
     meta = json.loads((tmp_path / "c" / "campaign.json").read_text())
     assert meta["config"]["reading"] == "feet" and meta["config"]["readings"]["units"] == "feet"
-    from daa_sil.encounters import load_encounters
+    from daa_sil.models.encounter_files import load_encounters
 
     es = load_encounters(tmp_path / "c" / "encounters.parquet")
     hmd, vmd = es.params["hmd_m"], es.params["vmd_m"]

@@ -29,7 +29,7 @@ import numpy as np
 import pytest
 
 from daa_sil.cli import main
-from daa_sil.io import is_temp_file
+from daa_sil.files import is_temp_file
 
 ROOT = Path(__file__).resolve().parents[1]
 HEAD_ON = ROOT / "scenarios" / "head_on.yaml"
@@ -110,7 +110,8 @@ def maps(work) -> Path:
 @pytest.fixture(scope="module")
 def camp(work) -> Path:
     """A finished one-group campaign (3 encounters, 60 s)."""
-    from daa_sil.campaign import CampaignConfig, run_campaign
+    from daa_sil.study.campaign import run_campaign
+    from daa_sil.study.campaign_config import CampaignConfig
 
     d = work / "camp"
     run_campaign(CampaignConfig(groups=("B-1",), n_encounters=3, chunk_size=3, seed=5, duration_s=60.0), d,

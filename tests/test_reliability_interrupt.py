@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from daa_sil.io import is_temp_file
+from daa_sil.files import is_temp_file
 from daa_sil.steplog import read_steplog, steplog_metadata
 from sil_helpers import wait_for_vehicle_time
 

@@ -9,8 +9,10 @@ import pyarrow.parquet as pq
 import pytest
 
 from daa_sil.errors import FileFormatError, UsageError
-from daa_sil.report import FIGURES, ablation_rows, build_blocks, parse_recount, write_report
-from daa_sil.metrics import Study
+from daa_sil.study.report import ablation_rows, write_report
+from daa_sil.study.report_figures import FIGURES
+from daa_sil.study.report_input import build_blocks, parse_recount
+from daa_sil.study.analysis import Study
 
 COLS = ("n_wait", "n_no_wait", "n_pilot_received", "n_pilot_exec", "n_blend", "n_blend_exact", "n_blend_axis",
         "n_daa_override")

@@ -13,7 +13,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from daa_sil.cli import main
-from daa_sil.findings import NOT_TESTABLE, VERDICTS, load_findings
+from daa_sil.study.findings import NOT_TESTABLE, VERDICTS, load_findings
 
 N = 80
 GROUPS = ("B-2", "IC-1", "ID-2")

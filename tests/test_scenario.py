@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from daa_sil.errors import FileFormatError
-from daa_sil.scenario import (dump_scenario, encounter_set, load_scenario, parse_scenario, save_scenario,
+from daa_sil.sil.scenario import (dump_scenario, encounter_set, load_scenario, parse_scenario, save_scenario,
                               scenario_from_dict)
 
 ROOT = Path(__file__).resolve().parents[1]

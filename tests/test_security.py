@@ -1,6 +1,6 @@
 """Issue 9 §2: signing and spoofing. Forged, replayed, stale and spoofed packets are rejected 100 %
 and counted; a forged command never changes the flown command; a forged future timestamp does not
-lock out the real GCS (the pymavlink pitfall, ``reference/mavlink_spec.md`` §3).
+lock out the real GCS (the pymavlink pitfall described in docs/sil.md, "Signing and spoofing").
 
 Two layers are tested:
 
@@ -32,9 +32,10 @@ from pathlib import Path
 import pytest
 
 from daa_sil.link.codec import MavCodec, generate_key_file, load_key, mavlink as d, signing_timestamp_now
-from daa_sil.link.endpoint import open_endpoint
-from daa_sil.link.shim import DelayShim, ShimConfig
-from daa_sil.latency import Constant
+from daa_sil.sil.endpoint import open_endpoint
+from daa_sil.sil.shim import DelayShim
+from daa_sil.sil.shim_config import ShimConfig
+from daa_sil.models.latency import Constant
 
 ROOT = Path(__file__).resolve().parents[1]
 KEY = hashlib.sha256(b"daa-sil security test").digest()

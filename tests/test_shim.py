@@ -15,12 +15,14 @@ import numpy as np
 import pytest
 
 from daa_sil.errors import UsageError
-from daa_sil.latency import Constant, DelayProcess, TruncatedGaussian
+from daa_sil.models.latency import Constant, TruncatedGaussian
+from daa_sil.models.delay_process import DelayProcess
 from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec, mavlink as d
-from daa_sil.fasttime import STREAM_DOWN, STREAM_UP, encounter_streams
+from daa_sil.study.fasttime import STREAM_DOWN, STREAM_UP, encounter_streams
 from daa_sil.link.delayline import fifo_release
-from daa_sil.link.endpoint import open_endpoint
-from daa_sil.link.shim import DelayShim, ShimConfig, control_ids, run_shim
+from daa_sil.sil.endpoint import open_endpoint
+from daa_sil.sil.shim import DelayShim, run_shim
+from daa_sil.sil.shim_config import ShimConfig, control_ids
 
 LOCAL = "udp:127.0.0.1:0"
 

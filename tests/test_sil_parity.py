@@ -4,7 +4,7 @@ The shim draws its per-direction delays from the encounter's fast-time streams
 (``encounter_streams(seed)[STREAM_UP / STREAM_DOWN]``), so with the paper's Gaussian delay
 (groups B-2/ID-2: N(5 s, 3 s) truncated to [0.2, 10] s, a new draw every 10 s epoch) the SIL
 vehicle receives every pilot command, and the GCS every telemetry frame, at the step fast-time
-says it does. What the vehicle logs must then equal ``daa_sil.fasttime.simulate``'s step log.
+says it does. What the vehicle logs must then equal ``daa_sil.study.fasttime.simulate``'s step log.
 
 Tolerance (only on continuous columns; every discrete column must be identical): the pilot's
 command crosses the link as ``PILOT_MANEUVER`` with **float32** setpoints (track deg, vs, gs), so
@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daa_sil.scenario import delay_models, encounter_set, load_scenario
+from daa_sil.sil.scenario import delay_models, encounter_set, load_scenario
 from daa_sil.steplog import read_steplog
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,8 +59,8 @@ allocation: {{group: {group}}}
 def _fast_time(sc, seed: int):
     from daa_sil import waitmap
     from daa_sil.daa.config import DaaConfig
-    from daa_sil.fasttime import simulate
-    from daa_sil.pilot import PilotConfig
+    from daa_sil.study.fasttime import simulate
+    from daa_sil.models.pilot_config import PilotConfig
     from vehicle.core import build_policy
 
     up, down = delay_models(sc)

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daa_sil.scenario import delay_models, encounter_set, load_scenario
+from daa_sil.sil.scenario import delay_models, encounter_set, load_scenario
 from daa_sil.steplog import read_steplog
 from sil_helpers import wait_for_vehicle_time
 
@@ -78,8 +78,8 @@ def test_link_loss_hands_control_to_daa_within_timeout(tmp_path):
 def test_lockstep_is_deterministic_and_matches_fast_time(tmp_path):
     from daa_sil import waitmap
     from daa_sil.daa.config import DaaConfig
-    from daa_sil.fasttime import simulate
-    from daa_sil.pilot import PilotConfig
+    from daa_sil.study.fasttime import simulate
+    from daa_sil.models.pilot_config import PilotConfig
     from vehicle.core import build_policy
 
     path = ROOT / "scenarios" / "head_on.yaml"

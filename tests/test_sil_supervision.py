@@ -1,6 +1,6 @@
 """No silent failures (issue 16 §6): dropped peers, dead processes and scheduled faults are reported.
 
-* :class:`daa_sil.link.endpoint.DropReporter`: one warning per unexpected sender (naming it and the
+* :class:`daa_sil.sil.endpoint.DropReporter`: one warning per unexpected sender (naming it and the
   expected peer), then one line with counts per interval while drops go on (hand-worked clock);
 * the ``daa-gcs --help`` example against a default vehicle: the GCS says at once which address it
   drops and which one it expects, instead of dropping every datagram silently;
@@ -30,9 +30,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from daa_sil.link.endpoint import DropReporter, format_udp_address, open_endpoint
+from daa_sil.sil.endpoint import DropReporter, format_udp_address, open_endpoint
 from daa_sil.link.codec import MavCodec, mavlink as d
-from daa_sil.scenario import load_scenario
+from daa_sil.sil.scenario import load_scenario
 from daa_sil.steplog import read_steplog
 from sil_helpers import child_pid, wait_for_vehicle_time
 
@@ -97,7 +97,7 @@ async def test_endpoint_names_the_dropped_sender_and_the_expected_peer():
 
 
 def _free_ports(n):
-    from daa_sil.commands.run import free_udp_ports
+    from daa_sil.sil.supervise import free_udp_ports
 
     return free_udp_ports(n)
 
@@ -186,13 +186,14 @@ async def test_standalone_vehicle_and_gcs_report_a_shim_that_stops(monkeypatch, 
     """Vehicle, shim and GCS in one loop, realtime at 20x; the shim is closed at t = 6 s. The vehicle
     says the shim stopped echoing ticks (naming its address) and the GCS that ticks stopped."""
     import gcs.node as gnode
-    import vehicle.node as vnode
-    from daa_sil.link.shim import DelayShim, ShimConfig
-    from daa_sil.scenario import delay_models
+    import vehicle.ticks as vticks
+    from daa_sil.sil.shim import DelayShim
+    from daa_sil.sil.shim_config import ShimConfig
+    from daa_sil.sil.scenario import delay_models
     from gcs.node import GcsNode, GcsOptions
     from vehicle.node import VehicleNode, VehicleOptions
 
-    monkeypatch.setattr(vnode, "SILENT_AFTER_S", 0.5)
+    monkeypatch.setattr(vticks, "SILENT_AFTER_S", 0.5)
     monkeypatch.setattr(gnode, "SILENT_AFTER_S", 0.5)
     sc = load_scenario(HEAD_ON)
     up, down = delay_models(sc)

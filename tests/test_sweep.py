@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from daa_sil.campaign import read_results
+from daa_sil.study.campaign_files import read_results
 from daa_sil.cli import main
 from daa_sil.errors import UsageError
-from daa_sil.sweep import parse_vary
+from daa_sil.study.sweep import parse_vary
 
 
 def test_parse_vary():

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from daa_sil.kinematics import AircraftState
+from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.onboard import TurnRateEstimator
 
 
@@ -36,9 +36,9 @@ def test_every_map_of_the_family_is_read_in_a_campaign_with_turning_intruders():
     """Fast-time over sampled Table 6 encounters (58 % of intruders turn, U(-5, 5) deg/s): the
     decisions read all five conditioning maps."""
     from daa_sil import waitmap
-    from daa_sil.encounters import sample_encounters
-    from daa_sil.fasttime import simulate
-    from daa_sil.groups import group_spec
+    from daa_sil.models.encounters import sample_encounters
+    from daa_sil.study.fasttime import simulate
+    from daa_sil.config.groups import group_spec
 
     es = sample_encounters(300, seed=2024, preset="paper")
     spec = group_spec("ID-2")

@@ -42,7 +42,7 @@ def test_gate_drops_future_and_invalid_commands():
 
 
 def _free_port() -> int:
-    from daa_sil.commands.run import free_udp_ports
+    from daa_sil.sil.supervise import free_udp_ports
 
     return free_udp_ports(1)[0]
 
@@ -85,7 +85,7 @@ def _collect(conn, seconds: float, want=None) -> list:
 
 def test_stock_mavutil_client_sees_ownship_and_intruders_and_can_command(vehicle_and_client):
     from daa_sil.link.dialect import daa_sil as dialect
-    from daa_sil.scenario import load_scenario
+    from daa_sil.sil.scenario import load_scenario
 
     conn, proc = vehicle_and_client
     sc = load_scenario(ROOT / "scenarios" / "two_intruders.yaml")

@@ -9,7 +9,7 @@ import pytest
 
 from daa_sil.errors import UsageError
 from daa_sil.link.codec import mavlink as M
-from daa_sil.link.connstr import LISTEN, SEND, describe, parse_connection
+from daa_sil.sil.connstr import LISTEN, SEND, describe, parse_connection
 from vehicle import identity as ident
 from vehicle import telemetry as T
 from vehicle.streams import StreamRates

@@ -20,8 +20,8 @@ rr = pytest.importorskip("rerun")
 
 from daa_sil import viz  # noqa: E402
 from daa_sil.errors import OutputError  # noqa: E402
-from daa_sil.thresholds import get_thresholds  # noqa: E402
-from daa_sil.viz_recorder import BackgroundRecorder  # noqa: E402
+from daa_sil.geometry.thresholds import get_thresholds  # noqa: E402
+from daa_sil.viz.recorder import BackgroundRecorder  # noqa: E402
 from viz_encounter import make_steplog, records  # noqa: E402
 
 NS = 1_000_000_000
@@ -400,7 +400,7 @@ def test_forked_helper_cleans_up_when_its_owner_dies(tmp_path):
     script = (
         "import os, sys\n"
         "from daa_sil.viz import SinkOptions\n"
-        "from daa_sil.viz_recorder import BackgroundRecorder\n"
+        "from daa_sil.viz.recorder import BackgroundRecorder\n"
         "r = BackgroundRecorder(SinkOptions(rrd=sys.argv[1]), prepare_now=True)\n"
         "assert r.mode == 'fork', r.mode\n"
         "assert r.ready.wait(60)\n"

@@ -1,4 +1,4 @@
-"""Live Rerun streaming of a SIL run: the step feed (daa_sil.live), the recorder's live mode, the
+"""Live Rerun streaming of a SIL run: the step feed (daa_sil.sil.live), the recorder's live mode, the
 vehicle's --live option and ``daa-sil run --clock realtime`` with live logging."""
 
 from __future__ import annotations
@@ -16,7 +16,8 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from daa_sil import live, steplog
+from daa_sil.sil import live
+from daa_sil import steplog
 from daa_sil.errors import UsageError
 from viz_encounter import make_steplog, records, rerun_env  # noqa: F401 (fixture)
 
@@ -127,7 +128,7 @@ def test_sender_never_raises_without_a_receiver():
 rr = pytest.importorskip("rerun")
 
 from daa_sil import viz  # noqa: E402
-from daa_sil.viz_recorder import BackgroundRecorder  # noqa: E402
+from daa_sil.viz.recorder import BackgroundRecorder  # noqa: E402
 from test_viz import read_rrd, static_entities  # noqa: E402
 from test_viz_cli import _procs_mentioning  # noqa: E402
 

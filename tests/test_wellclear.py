@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from daa_sil import wellclear as wc
-from daa_sil.thresholds import DO365, PAPER, get_thresholds
+from daa_sil.geometry import wellclear as wc
+from daa_sil.geometry.thresholds import DO365, PAPER, get_thresholds
 from daa_sil.errors import UsageError
 
 D = 4000 * 0.3048  # 1219.2 m

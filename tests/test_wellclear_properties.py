@@ -3,8 +3,8 @@
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from daa_sil import wellclear as wc
-from daa_sil.thresholds import DO365, PAPER
+from daa_sil.geometry import wellclear as wc
+from daa_sil.geometry.thresholds import DO365, PAPER
 
 coord = st.floats(-6000, 6000, allow_nan=False)
 alt = st.floats(-400, 400, allow_nan=False)

@@ -1,4 +1,4 @@
-"""A step log of one encounter built from real geometry (daa_sil.kinematics / wellclear), for viz tests.
+"""A step log of one encounter built from real geometry (daa_sil.geometry.kinematics / wellclear), for viz tests.
 
 Ownship 55 m/s north at 1000 m; one intruder head-on from 20 km, 80 m/s south, 30 m above, 300 m
 east. From t = 110 s the ownship turns right toward 060 deg (a DAA resolution). Range, HMD, d_h,
@@ -13,10 +13,10 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from daa_sil import wellclear as wc
-from daa_sil.kinematics import AircraftState, Command, advance, fly_command
-from daa_sil.thresholds import get_thresholds
-from daa_sil.units import DEG
+from daa_sil.geometry import wellclear as wc
+from daa_sil.geometry.kinematics import AircraftState, Command, advance, fly_command
+from daa_sil.geometry.thresholds import get_thresholds
+from daa_sil.geometry.units import DEG
 
 TRACKS = np.arange(0.0, 360.0, 5.0)
 

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from daa_sil.cli import run_guarded
 from daa_sil.commands._args import OneLineParser as _Parser, check_speed, load_key_option
+from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.errors import UsageError
 
 EXAMPLES = """examples:
@@ -78,6 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "wait = start the clock only once tick 0 is acknowledged (daa-sil run), so the run makes "
                         "the same decisions as lockstep")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    add_config_argument(p)
     return p
 
 
@@ -92,7 +94,7 @@ def _options(args):
     if args.start_timeout is not None and not (math.isfinite(args.start_timeout) and 0.1 <= args.start_timeout <= 3600):
         raise UsageError(f"--start-timeout must be within [0.1, 3600] s, got {args.start_timeout:g}")
     key = load_key_option(args.key)
-    from daa_sil.link.connstr import LISTEN, SEND, parse_connection
+    from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
 
     tap = None if args.tap in (None, "", "none") else args.tap
     out = parse_connection(args.out, "--out", SEND)
@@ -106,7 +108,7 @@ def _options(args):
         raise UsageError("--tap-writable needs --tap udp:HOST:PORT")
     live = None if args.live in (None, "", "none") else args.live
     if live is not None:
-        from daa_sil.live import parse_live_address
+        from daa_sil.sil.live import parse_live_address
 
         parse_live_address(live)
     def clock_start(wall0: float) -> None:  # orchestrators time scheduled faults from this line
@@ -114,14 +116,15 @@ def _options(args):
 
     return VehicleOptions(out=args.out, listen=args.listen or "udp:127.0.0.1:0", tap=tap, clock=args.clock,
                           speed=args.speed, key=key, steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live,
-                          waitmap=args.waitmap, tap_writable=args.tap_writable, start_timeout_s=args.start_timeout,
+                          waitmap=args.waitmap, config=load_config(args.config) if args.config else None,
+                          tap_writable=args.tap_writable, start_timeout_s=args.start_timeout,
                           tick_sync=args.tick_sync, on_clock_start=clock_start)
 
 
 async def _amain(args) -> int:
-    from daa_sil.link.connstr import describe
-    from daa_sil.link.endpoint import format_udp_address
-    from daa_sil.scenario import load_scenario
+    from daa_sil.sil.connstr import describe
+    from daa_sil.sil.endpoint import format_udp_address
+    from daa_sil.sil.scenario import load_scenario
     from vehicle.node import VehicleNode
 
     sc = load_scenario(args.scenario)

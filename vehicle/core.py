@@ -1,7 +1,7 @@
 """Glue between a scenario and :class:`daa_sil.onboard.OnboardCore` with N = 1 (no I/O).
 
 :class:`VehicleCore` builds the onboard core from a scenario exactly as fast-time does
-(:func:`daa_sil.scenario.encounter_set` for truth and scripts, the group's
+(:func:`daa_sil.sil.scenario.encounter_set` for truth and scripts, the group's
 :class:`~daa_sil.agent.AllocationPolicy` with the scenario's overrides, the cached wait-map
 family), turns accepted pilot commands into the agent's :class:`~daa_sil.agent.PilotInput`, keeps
 one step-log row per step and encodes the telemetry of a step as MAVLink messages.
@@ -16,10 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from daa_sil import agent as A
-from daa_sil.kinematics import Command
-from daa_sil.scenario import Scenario, encounter_set
+from daa_sil.geometry.kinematics import Command
+from daa_sil.sil.scenario import Scenario, encounter_set
 
-from . import telemetry as T
 from .commands import PilotCommand
 
 
@@ -36,16 +35,32 @@ def build_policy(sc: Scenario) -> "A.AllocationPolicy":
     return replace(pol, **changes)
 
 
-def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None):
+def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, config=None):
     """``(OnboardCore, EncounterSet, policy)`` for scenario ``sc`` (N = 1). ``waitmap`` is a
-    ``--waitmap`` value (map preset, grid spec or family directory; None = the default map), read
-    exactly as fast-time reads it (:func:`daa_sil.waitmap.family_for`, LoWC preset ``paper``)."""
-    from daa_sil.daa.config import DaaConfig
+    ``--waitmap`` value (map preset, grid spec or family directory; None = the configuration's, else
+    the default map), read exactly as fast-time reads it (:func:`daa_sil.waitmap.family_for`, LoWC
+    preset ``paper``). ``config`` (a :class:`daa_sil.config.run_config.RunConfig`) contributes its
+    ``daa`` changes on top of the scenario's threshold preset, its ``allocation`` (W_T of a group
+    that waits, ProjL N: as ``--wt`` / ``--projl-lookahead`` of a campaign, over the scenario's), its
+    ``link`` timeouts where the scenario sets none, and its wait-map source."""
     from daa_sil.onboard import OnboardCore
 
     es = encounter_set(sc)
     policy = policy or build_policy(sc)
-    daa_cfg = DaaConfig.for_preset(sc.thresholds)
+    if config is not None:
+        link = {k: v for k, v in config.link.items() if v is not None}
+        if sc.allocation.link_timeout_s is not None:
+            link.pop("link_timeout_s", None)
+        if sc.allocation.stale_command_s is not None:
+            link.pop("stale_command_s", None)
+        al = config.allocation
+        if al["wt"] is not None and policy.wait_mode != "none":
+            link["wait_threshold_s"] = float(al["wt"])
+        if al["projl_lookahead"] is not None:
+            link["projl_horizon_s"] = float(al["projl_lookahead"])
+        policy = replace(policy, **link) if link else policy
+        waitmap = waitmap if waitmap is not None else config.waitmap["source"]
+    daa_cfg = config.daa_config(sc.thresholds) if config is not None else _preset_daa(sc.thresholds)
     lookup = None
     if policy.wait_mode == "map":
         from daa_sil import waitmap as wm
@@ -53,6 +68,12 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None):
         lookup = A.make_wait_lookup(wm.family_for(waitmap, preset="paper"), cfg=daa_cfg)
     core = OnboardCore(es.own, es.intr, es.intruder_controls, policy, daa_cfg, lookup, thresholds=sc.thresholds)
     return core, es, policy
+
+
+def _preset_daa(name: str):
+    from daa_sil.daa.config import DaaConfig
+
+    return DaaConfig.for_preset(name)
 
 
 def link_delay_processes(sc: Scenario) -> "dict | None":
@@ -63,9 +84,9 @@ def link_delay_processes(sc: Scenario) -> "dict | None":
     (s), i.e. the *configured* one-way delay of a packet sent at ``t`` before the FIFO rule, not a
     measurement. With ``link.epoch_s = 0`` (a draw per datagram) there is no per-step value: None.
     """
-    from daa_sil.latency import DelayProcess
-    from daa_sil.link.shim import delay_stream_seeds
-    from daa_sil.scenario import delay_models
+    from daa_sil.models.delay_process import DelayProcess
+    from daa_sil.sil.shim_config import delay_stream_seeds
+    from daa_sil.sil.scenario import delay_models
 
     if sc.link.epoch_s <= 0:
         return None
@@ -98,9 +119,10 @@ def track_intervals(values_deg: np.ndarray, regions: np.ndarray) -> tuple[list, 
 class VehicleCore:
     """Scenario + OnboardCore (N = 1) + pilot-command intake + step-log rows + telemetry encoding."""
 
-    def __init__(self, sc: Scenario, policy=None, waitmap: "str | None" = None):
+    def __init__(self, sc: Scenario, policy=None, waitmap: "str | None" = None, config=None):
         self.sc = sc
-        self.core, self.es, self.policy = build_onboard(sc, policy, waitmap)
+        self.config = config
+        self.core, self.es, self.policy = build_onboard(sc, policy, waitmap, config)
         self.dt = 1.0
         self.n_steps = sc.n_steps
         self._new: list[PilotCommand] = []
@@ -183,10 +205,6 @@ class VehicleCore:
         return row
 
     # -- outputs ------------------------------------------------------------------------------------
-    def telemetry_messages(self, t: float, out) -> list:
-        """Every MAVLink message of step ``t`` as one list (:func:`vehicle.telemetry.step_messages`)."""
-        home = T.kin_of(self.es.own, 0)
-        return [m for ms in T.step_messages(self, t, out, home).values() for m in ms]
 
     def steplog_table(self, n_rows: "int | None" = None):
         """The first ``n_rows`` rows (all if None) as a step-log ``pyarrow.Table`` (schema of

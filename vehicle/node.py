@@ -5,7 +5,7 @@ Per step ``k`` (``t_k = k`` s, ``docs/architecture.md`` "The step order"):
 * **lockstep**: send ``SIM_TICK(k, t_k)`` alone in its datagram to the peer (the shim), then
   receive until ``SIM_TICK_ACK(k)`` arrives (the shim forwards it after releasing every packet due
   at ``t_k`` and queueing the GCS's step-k commands). No ack within ``tick_timeout_s`` wall
-  seconds -> :class:`TickTimeout` (one clear line). The tick is re-sent every ``tick_retry_s``
+  seconds -> :class:`vehicle.ticks.TickTimeout` (one clear line). The tick is re-sent every ``tick_retry_s``
   in case a datagram was lost (the GCS re-acks a tick it already did).
 * **realtime**: the same ticks, paced by the wall clock instead of waiting for the GCS (see
   ``docs/sil.md``, "Realtime and lockstep"). ``SIM_TICK(k)`` goes out a lead of half a step
@@ -23,7 +23,7 @@ Per step ``k`` (``t_k = k`` s, ``docs/architecture.md`` "The step order"):
 Then ``OnboardCore.step(t_k, pilot input)`` decides, the telemetry for ``t_k`` is published (one
 datagram to the peer, and the same undelayed to the observer ``tap`` if set), a step-log row is
 kept (and, with ``live``, sent at once to the Rerun recorder's loopback feed, fire-and-forget:
-:class:`daa_sil.live.LiveSender`), and truth advances. The step log is written atomically at the end, on Ctrl-C and on
+:class:`daa_sil.sil.live.LiveSender`), and truth advances. The step log is written atomically at the end, on Ctrl-C and on
 SIGTERM (:meth:`VehicleNode.write_steplog`).
 
 Hostile input: the endpoint/codec count and drop malformed, forged and replayed packets; the
@@ -41,11 +41,10 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from daa_sil.errors import DaaSilError
-from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec
+from daa_sil.link.codec import MavCodec
 from daa_sil.link.codec import mavlink as M
-from daa_sil.link.connstr import LISTEN, SEND, parse_connection
-from daa_sil.link.endpoint import MavEndpoint, Received, _norm_host, format_udp_address, open_endpoint
+from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
+from daa_sil.sil.endpoint import MavEndpoint, Received, _norm_host, format_udp_address, open_endpoint
 
 from . import telemetry as T
 from .commands import CommandGate, PilotCommand, reposition_command
@@ -53,28 +52,14 @@ from .core import VehicleCore
 from .params import ParamTable
 from .services import GcsServices
 from .streams import STREAMED
+from vehicle.ticks import TickClock
+from vehicle.node_steplog import StepLogWriter
 
 VEHICLE_SYSID, VEHICLE_COMPID = 1, 1
 PILOT_MANEUVER_ID = M.MAVLINK_MSG_ID_PILOT_MANEUVER
-SET_POS_GLOBAL_ID = M.MAVLINK_MSG_ID_SET_POSITION_TARGET_GLOBAL_INT
 #: SET_POSITION_TARGET_GLOBAL_INT type_mask bits that must be clear for a velocity setpoint
 _VEL_IGNORE = (M.POSITION_TARGET_TYPEMASK_VX_IGNORE | M.POSITION_TARGET_TYPEMASK_VY_IGNORE
                | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE)
-
-
-#: realtime: SIM_TICK(k) is sent this fraction of a step before step k's deadline (at most TICK_LEAD_MAX_S)
-TICK_LEAD_FRACTION = 0.5
-TICK_LEAD_MAX_S = 0.25
-#: realtime: wait at most this fraction of a step past the deadline for the partner's answer to the tick
-CONFIRM_GRACE_FRACTION = 0.5
-#: wall seconds without an answer to ticks before the partner is reported silent (and not waited for)
-SILENT_AFTER_S = 3.0
-SILENT_AFTER_STEPS = 10
-TICK_SYNC_MODES = ("auto", "wait")
-
-
-class TickTimeout(DaaSilError):
-    """The lockstep partner did not acknowledge a tick in time."""
 
 
 @dataclass
@@ -92,10 +77,12 @@ class VehicleOptions:
     tick_retry_s: float = 2.0
     #: wall seconds to wait for the answer to tick 0 (the partner may still be starting); None = tick_timeout_s
     start_timeout_s: "float | None" = None
-    #: ``udp:127.0.0.1:PORT``: publish each step's step-log row there (:mod:`daa_sil.live`)
+    #: ``udp:127.0.0.1:PORT``: publish each step's step-log row there (:mod:`daa_sil.sil.live`)
     live: "str | None" = None
     #: ``--waitmap``: map preset, grid spec or family directory (None = the default map)
     waitmap: "str | None" = None
+    #: ``--config``: a :class:`daa_sil.config.run_config.RunConfig` (None = the scenario alone)
+    config: "object | None" = None
     #: let the (undelayed) tap set parameters and modes; by default it may only read
     tap_writable: bool = False
     #: realtime: "auto" (start at once, wait for tick answers only from a partner that gives them) or
@@ -133,7 +120,7 @@ class VehicleStats:
     extra: dict = field(default_factory=dict)
 
 
-class VehicleNode:
+class VehicleNode(StepLogWriter, TickClock):
     """The vehicle process logic around a :class:`vehicle.core.VehicleCore`.
 
     ``await node.start()`` binds the socket; ``await node.run()`` plays every step;
@@ -143,7 +130,7 @@ class VehicleNode:
     def __init__(self, scenario, opts: VehicleOptions, core: "VehicleCore | None" = None):
         self.sc = scenario
         self.opts = opts
-        self.core = core if core is not None else VehicleCore(scenario, waitmap=opts.waitmap)
+        self.core = core if core is not None else VehicleCore(scenario, waitmap=opts.waitmap, config=opts.config)
         self.out = parse_connection(opts.out, "--out", SEND)
         self.listen = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))
         tap = parse_connection(opts.tap, "--tap", SEND, allow=(SEND,)).addr if opts.tap else None
@@ -179,7 +166,7 @@ class VehicleNode:
                                     step_t=lambda: self.t, current_mode=self._mode_now)
         self.live = None
         if opts.live:
-            from daa_sil.live import LiveSender
+            from daa_sil.sil.live import LiveSender
 
             self.live = LiveSender(opts.live)
 
@@ -258,9 +245,6 @@ class VehicleNode:
         if self.tap is not None and a == tuple(self.tap):
             return "tap"
         return None
-
-    def _is_tap(self, addr) -> bool:
-        return self._link_of(addr) == "tap"
 
     def _on_message(self, r: Received) -> None:
         """Realtime: answer reads (parameters, requests, TIMESYNC, ...) the moment they arrive."""
@@ -397,157 +381,6 @@ class VehicleNode:
         if dest is not None:  # --out udpin: nobody to send to before a GCS has spoken
             self.ep.send_many(msgs, dest)
 
-    def _send_tick(self, k: int, t: float) -> None:
-        if self.peer is None:  # --out udpin: no GCS yet; the retry sends it once one has spoken
-            return
-        data = self.codec.encode(M.MAVLink_sim_tick_message(k, T.time_ms(t)),
-                                 link_id=CONTROL_LINK_ID if self.codec.signed else None)
-        self._tick_sent_k = max(self._tick_sent_k, k)
-        self.ep.transport.sendto(data, self.peer)
-        self.stats.ticks_sent += 1
-
-    # -- tick answers: who is alive ----------------------------------------------------------------
-    def _answered(self, who: str) -> None:
-        """An echo (``who="shim"``) or an ack (``"gcs"``) of one of our ticks arrived."""
-        now = asyncio.get_running_loop().time()
-        if self._silent[who]:
-            self._silent[who] = False
-            self._say(f"the {'shim' if who == 'shim' else 'GCS'} answers ticks again at t = {self.t:g} s "
-                      f"(silent for {now - self._last_answer[who]:.1f} s)")
-        self._last_answer[who] = now
-        if who == "shim":
-            self.stats.sync_partner = "shim"
-        elif self.stats.sync_partner == "none":
-            self.stats.sync_partner = "gcs"
-
-    def _check_silence(self) -> None:
-        """Report (once, until it answers again) a shim or GCS that answered ticks and then stopped.
-
-        Silent = no answer for SILENT_AFTER_S wall seconds, or for SILENT_AFTER_STEPS steps if that is
-        shorter (fast runs), but never less than 1 s."""
-        now = asyncio.get_running_loop().time()
-        limit = max(1.0, min(SILENT_AFTER_S, SILENT_AFTER_STEPS * self.core.dt / self.opts.speed))
-        for who in ("shim", "gcs"):
-            last = self._last_answer[who]
-            if last is None or self._silent[who] or now - last < limit:
-                continue
-            self._silent[who] = True
-            if who == "gcs" and self._silent["shim"]:
-                continue  # the shim between us is silent: that is the news, not the GCS behind it
-            self.stats.silence_warnings += 1
-            peer = self.out.text
-            if who == "shim":
-                why = f"the shim at {peer} has not echoed a tick for {now - last:.1f} s: has it stopped?"
-            elif self.stats.sync_partner == "shim":
-                why = (f"the GCS behind the shim at {peer} has not acknowledged a tick for {now - last:.1f} s "
-                       f"(last tick acked: {self._acked}): has it stopped?")
-            else:
-                why = f"the GCS at {peer} has not acknowledged a tick for {now - last:.1f} s: has it stopped?"
-            self._say(f"warning: {why} Flying on; the agent hands over to the onboard DAA when the link "
-                      f"times out")
-
-    def _say(self, text: str) -> None:
-        import sys
-
-        print(f"daa-vehicle: {text}", file=sys.stderr, flush=True)
-
-    def _who_is_silent(self, k: int) -> str:
-        """Why tick ``k`` got no ack: which of shim and GCS is not there (for the one-line error)."""
-        import time
-
-        peer = self.out.text
-        if self._echoed >= k:
-            return (f"the shim at {peer} relays tick {k} but the GCS behind it does not acknowledge it: is daa-gcs "
-                    f"running (with --clock lockstep) and pointed at the shim's GCS side?")
-        refused = self.ep.last_refused is not None and time.monotonic() - self.ep.last_refused < 5.0
-        if refused:
-            return (f"nothing is listening at {peer} (ICMP port unreachable): is the shim (or the GCS) running "
-                    f"there?")
-        return (f"no answer at all from {peer} (no tick echo, no ack): is a lockstep shim or GCS running there "
-                f"with --clock lockstep?")
-
-    async def _await_ack(self, k: int, t: float) -> None:
-        loop = asyncio.get_running_loop()
-        limit = self.opts.tick_timeout_s
-        if k == 0 and self.opts.start_timeout_s is not None:
-            limit = self.opts.start_timeout_s
-        deadline = loop.time() + limit
-        retry = self.opts.tick_retry_s if k > 0 else min(0.2, self.opts.tick_retry_s)  # GCS may still start
-        next_retry = loop.time() + retry
-        self._send_tick(k, t)
-        while self._acked < k:
-            self._check_stop()
-            now = loop.time()
-            if now >= deadline:
-                raise TickTimeout(f"no SIM_TICK_ACK for tick {k} (t = {t:g} s) within {limit:g} s: "
-                                  + self._who_is_silent(k))
-            try:
-                r = await asyncio.wait_for(self.ep.inbox.get(), min(deadline, next_retry) - now)
-            except asyncio.TimeoutError:
-                if loop.time() >= next_retry and loop.time() < deadline:
-                    self._send_tick(k, t)
-                    self.stats.tick_retries += 1
-                    next_retry = loop.time() + retry
-                continue
-            self.handle(r)
-
-    def _confirmed(self, k: int) -> bool:
-        """Realtime: has the partner answered tick ``k`` (shim: echo; GCS wired directly: ack)?"""
-        if self.stats.sync_partner == "shim":
-            return self._echoed >= k
-        if self.stats.sync_partner == "gcs":
-            return self._acked >= k
-        return True  # a partner that answers no tick (stock GCS): free-running
-
-    async def _receive_until(self, when: float, until=None) -> None:
-        """Handle messages until loop time ``when`` (or until ``until()`` is true)."""
-        loop = asyncio.get_running_loop()
-        while until is None or not until():
-            self._check_stop()
-            left = when - loop.time()
-            if left <= 0:
-                return
-            try:
-                r = await asyncio.wait_for(self.ep.inbox.get(), left)
-            except asyncio.TimeoutError:
-                return
-            self.handle(r)
-
-    async def _realtime_tick(self, k: int, t: float, period: float) -> float:
-        """Realtime step ``k``: send its tick a lead before the deadline, then wait for the partner's
-        answer (at most a grace past the deadline; without a partner, until the deadline). Once the
-        shim has echoed tick ``k`` every input of step ``k`` is in (uplink is released only at ticks),
-        so the step may be computed before its deadline; :meth:`run` publishes it at the deadline.
-        Returns the step's deadline (loop time)."""
-        loop = asyncio.get_running_loop()
-        lead = min(TICK_LEAD_FRACTION * period, TICK_LEAD_MAX_S)
-        if k == 0:
-            if self.opts.tick_sync == "wait":
-                await self._await_ack(0, t)  # (re-)sends tick 0 until the GCS (behind the shim) answers
-            else:
-                self._send_tick(0, t)
-            self._wall0 = loop.time() + lead
-            if callable(self.opts.on_clock_start):
-                self.opts.on_clock_start(self._wall0)
-        else:
-            if (self._acked < k - 1 and self._last_answer["gcs"] is not None and not self._silent["gcs"]
-                    and not self._silent["shim"]):
-                self.stats.acks_late += 1
-            await self._receive_until(self._wall0 + t / self.opts.speed - lead)
-            self._drain()
-            self._send_tick(k, t)
-        due = self._wall0 + t / self.opts.speed
-        self._check_silence()
-        partner = self.stats.sync_partner
-        if partner == "none" or self._silent["shim" if partner == "shim" else "gcs"]:
-            await self._receive_until(due)  # nobody to wait for: take what arrived by the deadline
-        else:
-            await self._receive_until(due + CONFIRM_GRACE_FRACTION * period, until=lambda: self._confirmed(k))
-        if not self._confirmed(k):
-            self.stats.steps_unconfirmed += 1
-        self._check_silence()
-        return due
-
     def publish(self, t: float, out) -> None:
         """Telemetry for ``t`` (s): per link (peer, tap), one datagram of the messages due on that link."""
         pol = self.core.core.policy
@@ -583,7 +416,7 @@ class VehicleNode:
             # slice so a woken vehicle preempts sooner on a busy machine (unprivileged; no-op elsewhere)
             import os
 
-            from daa_sil.link.rtclock import request_short_slice, set_timer_slack
+            from daa_sil.sil.rtclock import request_short_slice, set_timer_slack
 
             self.stats.extra["timer_slack_1us"] = set_timer_slack(1000)
             # DAA_SIL_VEHICLE_SLICE_US: the slice asked for (0 = keep the default; benchmarks compare both)
@@ -619,30 +452,4 @@ class VehicleNode:
                 on_step(self, out)
             await asyncio.sleep(0)
 
-    def write_steplog(self) -> "Path | None":
-        """Write the step log so far (atomic Parquet); returns its path or None."""
-        if self.opts.steplog is None or self.stats.steps == 0:
-            return None
-        import json
 
-        if self._lates:
-            import numpy as np
-
-            self.stats.late_p99_ms = round(float(np.percentile(self._lates, 99)), 3)
-        meta = {"scenario": self.sc.name, "seed": str(self.sc.seed), "preset": self.sc.thresholds,
-                "clock": self.opts.clock, "complete": str(self.stats.steps >= self.core.n_steps).lower(),
-                "signed": str(self.codec.signed).lower(),
-                "gate": json.dumps(self.gate.counters.__dict__, sort_keys=True),
-                "link": json.dumps(self.ep.stats() if self.ep else {}, sort_keys=True),
-                "vehicle": json.dumps({k: v for k, v in self.stats.__dict__.items() if k != "extra"}, sort_keys=True)}
-        if self.live is not None:
-            meta["live"] = json.dumps(self.live.stats.__dict__, sort_keys=True)
-        if self._lates:  # realtime: per-step lateness (ms) and the wall origin, for timing analyses
-            meta["realtime_timing"] = json.dumps({"t0_monotonic": round(self._wall0, 6), "speed": self.opts.speed,
-                                                  "late_ms": [round(x, 2) for x in self._lates],
-                                                  "ready_ms": [round(x, 2) for x in self._ready],
-                                                  **self.stats.extra})
-        # parameter / mode writes: kind, name, old, new, status, link, source, t_received, t_applied, t_sent
-        meta["settings"] = json.dumps([e.as_dict() for e in self.services.events], sort_keys=True)
-        # only the steps flown: a step computed but stopped before it was published is not in the log
-        return self.core.write_steplog(self.opts.steplog, meta, n_rows=self.stats.steps)

@@ -23,7 +23,7 @@ DAA_WAIT_CONST REAL32  constant wait, s (``constant_wait_s``)   --           rea
 DAA_PRESET     INT8    threshold preset: 0 do365, 1 paper       --           read-only
 =============  ======  =====================================  ===========  ==========
 
-Ranges are the scenario file's (``daa_sil/scenario.py``). Integer parameters travel C-cast (the
+Ranges are the scenario file's (``daa_sil/sil/scenario/schema.py``). Integer parameters travel C-cast (the
 float value of the integer, ``MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST``), as ArduPilot's do.
 Per the parameter protocol a rejected PARAM_SET (read-only, out of range, not a number, not an
 integer for an integer parameter) is answered with a PARAM_VALUE holding the **current** value;
@@ -93,7 +93,7 @@ class ParamTable:
 
     def __init__(self, preset: str):
         from daa_sil.agent import WAIT_MODES
-        from daa_sil.thresholds import PRESETS
+        from daa_sil.geometry.thresholds import PRESETS
 
         presets = tuple(PRESETS)
         code = presets.index(preset) if preset in presets else -1

@@ -27,9 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from daa_sil.frames import enu_to_geodetic
+from daa_sil.geometry.frames import enu_to_geodetic
 from daa_sil.link.codec import mavlink as M
-from daa_sil.units import G0
+from daa_sil.geometry.units import G0
 
 from . import identity as ident
 
@@ -297,7 +297,7 @@ def param_value(name: str, value: float, ptype: int, count: int, index: int) -> 
 
 # --- one step's telemetry ------------------------------------------------------------------------------
 def kin_of(state, i: int = 0, turn_rate: float = 0.0) -> Kin:
-    """:class:`Kin` of row ``i`` of a batched ownship :class:`~daa_sil.kinematics.AircraftState`."""
+    """:class:`Kin` of row ``i`` of a batched ownship :class:`~daa_sil.geometry.kinematics.AircraftState`."""
     return Kin(float(state.x[i]), float(state.y[i]), float(state.z[i]), float(state.gs[i]), float(state.trk[i]),
                float(state.vs[i]), turn_rate)
 

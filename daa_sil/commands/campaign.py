@@ -9,9 +9,10 @@ import sys
 from pathlib import Path
 
 from ..errors import UsageError
-from ..io import to_jsonable
-from ..readings import READINGS, parse_reading_settings
-from ..thresholds import PRESETS
+from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.files import to_jsonable
+from daa_sil.config.readings import READINGS, parse_reading_settings
+from daa_sil.geometry.thresholds import PRESETS
 from ._args import finite_float, int_at_least
 
 RUN_EXAMPLES = """examples:
@@ -47,7 +48,7 @@ or a directory from 'daa-sil waitmap build'. Built once and cached in ~/.cache/d
 Results: DIR/<group>/encounters-<chunk>.parquet, DIR/<group>/decisions-<chunk>.parquet,
 DIR/encounters.parquet (the shared encounter set) and DIR/campaign.json.
 
-Readings (--reading; what the paper leaves open about its simulator, daa_sil/readings.py):
+Readings (--reading; what the paper leaves open about its simulator, daa_sil/config/readings.py):
 """ + "\n".join(f"  {r.name:13s} {r.description}" for r in READINGS.values()) + """
 """
 
@@ -176,12 +177,15 @@ def _add_run_options(r) -> None:
                    help="run on a Dask cluster at ADDRESS (tcp://host:8786) or a local one (local-dask)")
     r.add_argument("--resume", action="store_true", help="continue the campaign in DIR (skips complete chunks)")
     r.add_argument("--preset", default=None, help=f"threshold preset: {', '.join(PRESETS)} (default paper)")
+    add_config_argument(r)
     r.add_argument("--no-progress", action="store_true", help="no progress bars")
     r.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
 
 
 def _config_from_args(args):
-    from ..campaign import CampaignConfig, load_campaign_json, parse_groups
+    from daa_sil.study.campaign import parse_groups
+    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign_files import load_campaign_json
 
     given = {"groups": parse_groups(args.groups) if args.groups is not None else None,
              "n_encounters": args.encounters, "seed": args.seed, "chunk_size": args.chunk_size,
@@ -191,12 +195,15 @@ def _config_from_args(args):
              "reading_set": parse_reading_settings(args.reading_set) if args.reading_set else None}
     if args.preset and args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
-    base = CampaignConfig()
+    base = load_config(args.config).campaign_config() if args.config else CampaignConfig()
     out = Path(args.out)
     if args.resume and (out / "campaign.json").is_file():
+        if args.config:
+            raise UsageError("--config does not go with --resume: the campaign's configuration is in "
+                             f"{out / 'campaign.json'} (drop --config)")
         base = CampaignConfig.from_dict(load_campaign_json(out)["config"], str(out / "campaign.json"))
     fields = {k: (v if v is not None else getattr(base, k)) for k, v in given.items()}
-    return CampaignConfig(dt_s=base.dt_s, **fields).validate()
+    return CampaignConfig(dt_s=base.dt_s, daa=base.daa, pilot=base.pilot, link=base.link, **fields).validate()
 
 
 _SCHEDULER = re.compile(r"^([a-z][a-z0-9+]*://)?[^\s:/]+:\d{1,5}$")
@@ -215,7 +222,7 @@ def check_scheduler(scheduler: "str | None", workers: "int | None") -> None:
 
 
 def run_cmd(args) -> int:
-    from ..campaign import run_campaign
+    from daa_sil.study.campaign import run_campaign
 
     cfg = _config_from_args(args)
     check_scheduler(args.scheduler, args.workers)
@@ -225,7 +232,8 @@ def run_cmd(args) -> int:
     info = {"out": str(summary.out_dir), "groups": list(cfg.group_names), "encounters": cfg.n_encounters,
             "seed": cfg.seed, "preset": cfg.preset, "chunks_total": summary.chunks_total,
             "chunks_skipped": summary.chunks_skipped, "chunks_run": summary.chunks_run,
-            "wall_s": round(summary.wall_s, 3), "encounter_steps_per_s": rate}
+            "wall_s": round(summary.wall_s, 3), "encounter_steps_per_s": rate,
+            "config": cfg.to_dict(), "resolved_config": cfg.resolved()}
     if args.json:
         print(json.dumps(to_jsonable(info), indent=2, sort_keys=True))
     else:
@@ -237,7 +245,7 @@ def run_cmd(args) -> int:
 
 
 def sweep_cmd(args) -> int:
-    from .. import sweep
+    from daa_sil.study import sweep
 
     if args.collate:
         if args.vary:
@@ -266,9 +274,10 @@ def sweep_cmd(args) -> int:
 
 
 def report_cmd(args) -> int:
-    from .. import report
-    from ..findings import VERDICTS
-    from ..stats import DEFAULT_REPLICATES, DEFAULT_SEED
+    from daa_sil.study import report
+    from daa_sil.study.report_input import parse_recount
+    from daa_sil.study.findings import VERDICTS
+    from daa_sil.study.stats import DEFAULT_REPLICATES, DEFAULT_SEED
 
     dirs = [Path(d) for d in args.dirs]
     for d in dirs:
@@ -277,7 +286,7 @@ def report_cmd(args) -> int:
     if len(set(map(str, (d.resolve() for d in dirs)))) != len(dirs):
         raise UsageError("a campaign directory is given twice")
     for spec in args.recount:
-        report.parse_recount(spec)  # one-line error before anything is read or written
+        parse_recount(spec)  # one-line error before anything is read or written
     out = Path(args.out) if args.out else dirs[0] / "report"
     reps = args.replicates or DEFAULT_REPLICATES
     seed = DEFAULT_SEED if args.bootstrap_seed is None else args.bootstrap_seed

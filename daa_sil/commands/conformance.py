@@ -9,8 +9,9 @@ import sys
 from ..daa import DaaConfig
 from ..daa import conformance as conf
 from ..errors import UsageError
-from ..io import to_jsonable
-from ..thresholds import PRESETS
+from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.files import to_jsonable
+from daa_sil.geometry.thresholds import PRESETS
 from ._args import int_at_least
 
 EXAMPLES = """examples:
@@ -39,7 +40,9 @@ def register(sub) -> None:
                                    "region names, resolutions, preferred directions).",
                        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("file", metavar="FILE.jsonl", help="reference records, one JSON object per line (.gz/.xz ok)")
-    p.add_argument("--preset", default="daidalus", help=f"DAA preset: {', '.join(PRESETS)} (default daidalus)")
+    p.add_argument("--preset", default=None, help=f"DAA preset: {', '.join(PRESETS)} (default: the --config's "
+                                                  "thresholds, else daidalus)")
+    add_config_argument(p, "daidalus")
     p.add_argument("--json", action="store_true", help="print one JSON object (table, floors, worst records)")
     p.add_argument("--worst", type=int_at_least("--worst", 0), default=0, metavar="K",
                    help="also list the K records with the lowest band agreement (default 0)")
@@ -49,18 +52,20 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    preset = args.preset.lower()
+    rc = load_config(args.config) if args.config else None
+    preset = (args.preset or (rc.thresholds if rc else "daidalus")).lower()
     if preset not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
     records = conf.read_records(args.file)
     if not args.json:
         print(f"daa-sil: {len(records)} records from {args.file}; evaluating with preset {preset} ...",
               file=sys.stderr, flush=True)
-    table, scores = conf.run(records, DaaConfig.for_preset(preset))
+    table, scores = conf.run(records, DaaConfig.for_preset(preset, **(rc.daa if rc else {})))
     below = conf.failures(table)
     if args.json:
         worst = sorted(scores, key=lambda s: (s.worst(), s.id))[:args.worst]
-        out = {"file": str(args.file), "preset": preset, "table": table, "floors": conf.FLOORS, "below_floor": below,
+        out = {"file": str(args.file), "preset": preset,
+               "config": (rc.with_(thresholds=preset).to_dict(full=True) if rc else None), "table": table, "floors": conf.FLOORS, "below_floor": below,
                "worst": [{"id": s.id, "classified": s.classified, "region_ok": s.region_ok, "res_ok": s.res_ok,
                           "pref_ok": s.pref_ok, "alert_ok": s.alert_ok, "dwc_err_s": s.dwc_err_s, "detail": s.detail}
                          for s in worst]}

@@ -9,10 +9,11 @@ import numpy as np
 
 from ..daa import ALERT_NAMES, AXIS_NAMES, DIR_NAMES, DaaConfig, compute_bands, resolve
 from ..errors import UsageError
-from ..io import to_jsonable
-from ..kinematics import AircraftState
-from ..thresholds import PRESETS
-from ..units import FPM, KT
+from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.files import to_jsonable
+from daa_sil.geometry.kinematics import AircraftState
+from daa_sil.geometry.thresholds import PRESETS
+from daa_sil.geometry.units import FPM, KT
 from .geometry import parse_state
 
 EXAMPLES = """examples:
@@ -47,14 +48,17 @@ def register(sub) -> None:
     p.add_argument("--own", required=True, metavar="X,Y,Z,VX,VY,VZ", help="ownship ENU state (m, m/s)")
     p.add_argument("--intruder", required=True, action="append", metavar="X,Y,Z,VX,VY,VZ",
                    help="intruder ENU state (m, m/s); repeat for several intruders")
-    p.add_argument("--preset", default="do365", help=f"DAA preset: {', '.join(PRESETS)} (default do365)")
+    p.add_argument("--preset", default=None, help=f"DAA preset: {', '.join(PRESETS)} (default: the --config's "
+                                                  "thresholds, else do365)")
+    add_config_argument(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
 
-def daa_report(own: np.ndarray, intr: np.ndarray, preset: str = "do365") -> dict:
-    """Alert levels, bands (intervals per axis) and resolutions as a JSON-ready dict."""
-    cfg = DaaConfig.for_preset(preset)
+def daa_report(own: np.ndarray, intr: np.ndarray, preset: str = "do365", changes: "dict | None" = None) -> dict:
+    """Alert levels, bands (intervals per axis) and resolutions as a JSON-ready dict (``changes``:
+    DaaConfig fields set on top of the preset, as a configuration's ``daa`` section)."""
+    cfg = DaaConfig.for_preset(preset, **(changes or {}))
     o = AircraftState.from_pos_vel(own[None, :3], own[None, 3:])
     i = AircraftState.from_pos_vel(intr[None, :, :3], intr[None, :, 3:])
     b = compute_bands(o, i, cfg)
@@ -80,11 +84,15 @@ def _res(v) -> "float | str | None":
 def run(args) -> int:
     own = parse_state(args.own, "--own")
     intr = np.array([parse_state(s, "--intruder") for s in args.intruder])
-    if args.preset.lower() not in PRESETS:
-        raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
+    rc = load_config(args.config) if args.config else None
+    preset = args.preset or (rc.thresholds if rc else "do365")
+    if preset.lower() not in PRESETS:
+        raise UsageError(f"unknown --preset {preset!r}; allowed: {', '.join(PRESETS)}")
     if np.hypot(own[3], own[4]) <= 0:
         raise UsageError("--own needs a non-zero horizontal velocity (the track is undefined otherwise)")
-    rep = daa_report(own, intr, args.preset.lower())
+    rep = daa_report(own, intr, preset.lower(), rc.daa if rc else None)
+    if rc is not None:
+        rep["config"] = to_jsonable(rc.with_(thresholds=preset.lower()).to_dict(full=True))
     if args.json:
         print(json.dumps(rep, sort_keys=True))
         return 0

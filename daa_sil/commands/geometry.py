@@ -7,10 +7,10 @@ import json
 
 import numpy as np
 
-from .. import wellclear as wc
+from daa_sil.geometry import wellclear as wc
 from ..errors import UsageError
-from ..io import to_jsonable
-from ..thresholds import PRESETS, get_thresholds
+from daa_sil.files import to_jsonable
+from daa_sil.geometry.thresholds import PRESETS, get_thresholds
 from ._args import finite_float, parse_vector
 
 EXAMPLES = """examples:

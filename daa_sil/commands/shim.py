@@ -10,10 +10,11 @@ import signal
 import sys
 
 from ..errors import UsageError
-from ..latency import SPEC_HELP, parse_delay_spec
+from daa_sil.models.latency import SPEC_HELP, parse_delay_spec
 from ..link.codec import load_key
-from ..link.endpoint import format_udp_address
-from ..link.shim import CLOCKS, ShimConfig, run_shim
+from daa_sil.sil.endpoint import format_udp_address
+from daa_sil.sil.shim import run_shim
+from daa_sil.sil.shim_config import CLOCKS, ShimConfig
 from ._args import finite_float
 
 EXAMPLES = """examples:

@@ -3,18 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import sys
-import warnings
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
 from ..errors import FileFormatError, UsageError
-from ..thresholds import PRESETS
+from daa_sil.geometry.thresholds import PRESETS
 from ._args import finite_float
+from daa_sil.viz.warning import one_line_warnings
 
 STEPLOG_EX = """examples:
   daa-sil viz steplog runs/headon/steps.parquet --rrd headon.rrd
@@ -94,27 +92,6 @@ def sink_options(args):
                        bind=args.bind, web_port=args.web_port, grpc_port=args.grpc_port, overwrite=args.force)
 
 
-@contextlib.contextmanager
-def one_line_warnings() -> Iterator[None]:
-    """Print VizWarnings as ``daa-sil: warning: ...`` (one line, no source location)."""
-    from ..viz import VizWarning
-
-    def show(message, category, filename, lineno, file=None, line=None):
-        if issubclass(category, VizWarning):
-            print(f"daa-sil: warning: {message}", file=sys.stderr)
-        else:
-            previous(message, category, filename, lineno, file, line)
-
-    previous = warnings.showwarning
-    with warnings.catch_warnings():
-        warnings.simplefilter("always", VizWarning)
-        warnings.showwarning = show
-        try:
-            yield
-        finally:
-            warnings.showwarning = previous
-
-
 def _finish(args, path, logger, summary: dict) -> int:
     summary.update({"rrd": str(path) if path else None, "steps": logger.steps_logged,
                     "web_url": logger.web.url if logger.web is not None and logger.web.alive() else None})
@@ -153,9 +130,9 @@ def run_steplog(args) -> int:
 
 def pick_encounter(results, group: str, encounter: "int | None", worst: bool) -> tuple[int, dict]:
     """The encounter id to replay and its result row (``--worst``: max PI among LoWC, else min range)."""
-    from .. import campaign
+    from daa_sil.study import campaign_files
 
-    rows = campaign.read_results(results, "encounters", groups=[group])
+    rows = campaign_files.read_results(results, "encounters", groups=[group])
     ids = np.asarray(rows.column("encounter_id").to_numpy(zero_copy_only=False))
     if worst:
         lowc = np.asarray(rows.column("lowc").to_numpy(zero_copy_only=False), bool)
@@ -176,10 +153,10 @@ def pick_encounter(results, group: str, encounter: "int | None", worst: bool) ->
 
 def campaign_group(results, name: str) -> str:
     """The campaign's group named ``name`` (case-insensitive), or a one-line error listing its groups."""
-    from .. import campaign
+    from daa_sil.study import campaign, campaign_files
 
     out = Path(results)
-    cfg = campaign.CampaignConfig.from_dict(campaign.load_campaign_json(out)["config"], str(out / "campaign.json"))
+    cfg = campaign.CampaignConfig.from_dict(campaign_files.load_campaign_json(out)["config"], str(out / "campaign.json"))
     for g in cfg.group_names:
         if g.upper() == str(name).strip().upper():
             return g
@@ -188,13 +165,14 @@ def campaign_group(results, name: str) -> str:
 
 def replay_steplog(results, group: str, encounter_id: int):
     """Re-simulate one encounter of a campaign with step logging; returns (steplog, encounter row, config)."""
-    from .. import campaign, encounters, fasttime
+    from daa_sil.study import campaign, campaign_files, fasttime
+    from daa_sil.models.encounter_files import load_encounters
 
     out = Path(results)
-    cfg = campaign.CampaignConfig.from_dict(campaign.load_campaign_json(out)["config"], str(out / "campaign.json"))
+    cfg = campaign.CampaignConfig.from_dict(campaign_files.load_campaign_json(out)["config"], str(out / "campaign.json"))
     if group not in cfg.group_names:
         raise UsageError(f"group {group} is not in the campaign {out} (it ran {', '.join(cfg.group_names)})")
-    encs = encounters.load_encounters(out / "encounters.parquet")
+    encs = load_encounters(out / "encounters.parquet")
     pos = np.flatnonzero(np.asarray(encs.encounter_id) == encounter_id)
     if pos.size == 0:
         raise UsageError(f"encounter {encounter_id} is not in {out / 'encounters.parquet'}")
@@ -210,7 +188,7 @@ def replay_steplog(results, group: str, encounter_id: int):
 
 
 def run_replay(args) -> int:
-    from .. import campaign, steplog, viz
+    from daa_sil import steplog, viz
 
     opts = sink_options(args)
     group = campaign_group(args.results, args.group)

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UsageError
-from ..io import to_jsonable
-from ..thresholds import PRESETS
+from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.files import to_jsonable
+from daa_sil.geometry.thresholds import PRESETS
 from ..waitmap.model import WAIT_DEFINITIONS
 from ._args import finite_float
 
@@ -90,11 +91,14 @@ def register(sub) -> None:
     b = vs.add_parser("build", help="build one map per turn-rate condition", epilog=BUILD_EX,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
     b.add_argument("--grid", default="paper", help="paper | fine | FILE.yaml | inline spec (default paper)")
-    b.add_argument("--preset", default="paper", help=f"LoWC threshold preset: {', '.join(PRESETS)} (default paper)")
+    b.add_argument("--preset", default=None, help=f"LoWC threshold preset: {', '.join(PRESETS)} (default: the "
+                                                  "--config's thresholds, else paper)")
+    add_config_argument(b)
     b.add_argument("--out", default="waitmaps", metavar="DIR", help="output directory (default ./waitmaps)")
     b.add_argument("--turn-rates", default="-5,-2.5,0,2.5,5", metavar="LIST",
                    help="conditioning initial turn rates, deg/s, + = left (default -5,-2.5,0,2.5,5)")
-    b.add_argument("--gamma", type=finite_float("--gamma", 1e-6, 0.999999), default=0.95, help="discount (default 0.95)")
+    b.add_argument("--gamma", type=finite_float("--gamma", 1e-6, 0.999999), default=None,
+                   help="discount (default: the --config's waitmap.gamma, else 0.95)")
     b.add_argument("--horizon", type=finite_float("--horizon", 1.0, 600.0), default=None, metavar="S",
                    help="wait-time horizon H, s (default: the map preset's, 60 or 120 for alerting)")
     b.add_argument("--definition", choices=WAIT_DEFINITIONS, default="paper",
@@ -153,10 +157,14 @@ def run_build(args) -> int:
     from rich.progress import Progress
 
     from .. import waitmap
-    from ..io import ensure_dir
+    from daa_sil.files import ensure_dir
     from ..waitmap.model import params_hash
     from ..waitmap.store import FAMILY_INDEX, map_filename
 
+    rc = load_config(args.config) if args.config else None
+    args.preset = args.preset or (rc.thresholds if rc else "paper")
+    if args.gamma is None:
+        args.gamma = (rc.waitmap["gamma"] if rc else None) or 0.95
     if args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
     rates = _turn_rates(args.turn_rates)

@@ -1,6 +1,6 @@
 """Onboard DAA, DAIDALUS-style (batched over N encounters and M intruders); rules in ``docs/daa.md``.
 
-Contract (ownship :class:`~daa_sil.kinematics.AircraftState` shape ``(N,)``, intruders ``(N, M)``;
+Contract (ownship :class:`~daa_sil.geometry.kinematics.AircraftState` shape ``(N,)``, intruders ``(N, M)``;
 SI units, compass radians):
 
 * :class:`DaaConfig` -- ``DaaConfig.for_preset(name)``: ``do365`` (default) and ``paper`` (project grids
@@ -29,7 +29,7 @@ from .config import (ALERT_NAMES, AXIS_HORIZONTAL, AXIS_NAMES, AXIS_NONE, AXIS_S
                      RULE_AXIS, RULE_AXIS_DIR, RULE_BEST_EFFORT, RULE_NAMES, RULE_NONE, DaaConfig)
 from .hysteresis import DaaState
 from .resolution import classify_command, daa_resolution, resolve, search_maneuver
-from .trajectory import command_conflicts, safety_metric, sm_from_tin
+from daa_sil.daa.safety import command_conflicts, safety_metric, sm_from_tin
 
 __all__ = [
     "DaaConfig", "DEFAULT_CONFIG", "DaaState", "alert_levels", "conflict_lists", "proj_lowc", "relative_state", "compute_bands", "Bands",

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import wellclear as wc
-from ..kinematics import AircraftState
+from daa_sil.geometry import wellclear as wc
+from daa_sil.geometry.kinematics import AircraftState
 from .config import DaaConfig
 
 
@@ -73,7 +73,7 @@ def proj_lowc(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" =
               horizon_s: float = 25.0) -> np.ndarray:
     """ProjL (paper Eq. 10), bool ``(N, M)``: a loss of well clear (``cfg.th``) is predicted within the
     next ``horizon_s`` seconds (including now) on the current straight-line trajectories (exact
-    :func:`daa_sil.wellclear.violation_interval`, no sampling)."""
+    :func:`daa_sil.geometry.wellclear.violation_interval`, no sampling)."""
     cfg = cfg or DaaConfig()
     s, v = relative_state(own, intr)
     t_in, _ = wc.violation_interval(s, v, cfg.th, 0.0, float(horizon_s))

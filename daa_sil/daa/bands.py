@@ -55,12 +55,13 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..kinematics import TWO_PI, AircraftState
-from ..thresholds import Thresholds
+from daa_sil.geometry.kinematics import TWO_PI, AircraftState
 from .alerting import alert_levels, conflict_lists
 from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_SPEED, AXIS_VERTICAL, REGION_MID, REGION_NAMES, REGION_NEAR,
                      REGION_NONE, REGION_RECOVERY, DaaConfig)
-from .trajectory import ManeuverPaths, PathConflicts, PathEvaluator
+from .trajectory import PathConflicts, PathEvaluator
+from daa_sil.daa.recovery import _Recovery, _runs2
+from daa_sil.daa.axis_paths import _maneuver_paths, _path_sizes, speed_limits
 
 
 @dataclass
@@ -202,119 +203,6 @@ def _side_order(arr, j_lo: int, j_hi: int):
     return np.concatenate([lo, arr[:, 1, :1], hi], axis=1)
 
 
-def _path_sizes(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[int, int]:
-    """Number of candidates on the low and high side of an axis for this batch (>= 0)."""
-    if axis == AXIS_HORIZONTAL:
-        j_lo = int(round(cfg.trk_range / cfg.trk_step))
-        full_circle = np.isclose(cfg.trk_range, np.pi)
-        return j_lo, (j_lo - 1 if full_circle and not cfg.daidalus_grid else j_lo)
-    cur, lo, hi, step = ((own.vs, -cfg.max_vs, cfg.max_vs, cfg.vs_step) if axis == AXIS_VERTICAL
-                         else (own.gs, cfg.min_gs, cfg.max_gs, cfg.gs_step))
-    j_lo = int(np.ceil(np.max(cur - lo, initial=0.0) / step - 1e-9))
-    j_hi = int(np.ceil(np.max(hi - cur, initial=0.0) / step - 1e-9))
-    return max(j_lo, 0), max(j_hi, 0)
-
-
-def _axis_state_soa(axis: int, cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, sgn, t, with_value: bool = False) -> tuple:
-    """Ownship position and velocity (six component arrays, arguments broadcast) on the maneuver of
-    ``axis`` toward side ``sgn`` (+-1) after ``t`` s; ``st``/``ct`` are the sine and cosine of the
-    initial track. Closed forms of :func:`daa_sil.kinematics.advance` for a constant-rate turn and for
-    an acceleration that saturates at the axis limit (with ``cfg.daidalus_grid`` it runs past the limit
-    by up to one step, as DAIDALUS evaluates its last candidate, but never below zero speed).
-    ``with_value``: ``(components, value)`` with the axis value (track change, vs or gs)."""
-    if axis == AXIS_HORIZONTAL:
-        w = cfg.turn_rate
-        th = w * t
-        r = gs0 / w
-        sth, cth = np.sin(th), np.cos(th)
-        fwd, lat = r * sth, sgn * r * (1.0 - cth)
-        ssth = sgn * sth
-        out = (x0 + fwd * st + lat * ct, y0 + fwd * ct - lat * st, z0 + vs0 * t,
-               gs0 * (st * cth + ct * ssth), gs0 * (ct * cth - st * ssth), vs0 + 0.0 * t)
-        return (out, sgn * th) if with_value else out
-    vertical = axis == AXIS_VERTICAL
-    acc = cfg.vertical_accel if vertical else cfg.horizontal_accel
-    if cfg.daidalus_grid:
-        lim = np.where(sgn < 0, -np.inf if vertical else 0.0, np.inf)
-    else:
-        lim = np.where(sgn < 0, -cfg.max_vs if vertical else cfg.min_gs, cfg.max_vs if vertical else cfg.max_gs)
-    v0 = vs0 if vertical else gs0
-    tc = np.minimum(t, np.maximum((lim - v0) * sgn / acc, 0.0))
-    dist = v0 * t + sgn * acc * tc * (t - 0.5 * tc)
-    v_t = v0 + sgn * acc * tc
-    if vertical:
-        out = x0 + gs0 * st * t, y0 + gs0 * ct * t, z0 + dist, gs0 * st + 0.0 * t, gs0 * ct + 0.0 * t, v_t
-    else:
-        out = x0 + dist * st, y0 + dist * ct, z0 + vs0 * t, v_t * st, v_t * ct, vs0 + 0.0 * t
-    return (out, v_t) if with_value else out
-
-
-def _turn_knots(cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, t):
-    """:func:`_axis_state_soa` of the turn for both sides at once (side axis 1: left, right), the same
-    numbers: the two sides share every term but the sign of the lateral ones. Returns the six components
-    (the vertical ones without the side axis) and the signed track change ``(1, 2, K)``."""
-    w = cfg.turn_rate
-    th = w * t
-    r = gs0 / w
-    sth, cth = np.sin(th), np.cos(th)
-    fwd = r * sth
-    lat = r * (1.0 - cth)
-    both = lambda base, off: np.stack([base - off, base + off], axis=1)[:, :, 0]  # noqa: E731  (left, right)
-    out = (both(x0 + fwd * st, lat * ct), both(y0 + fwd * ct, -(lat * st)), z0 + vs0 * t,
-           both(st * cth, ct * sth) * gs0, both(ct * cth, -(st * sth)) * gs0, vs0 + 0.0 * t)
-    return out, np.concatenate([-th, th], axis=1)
-
-
-def _axis_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Ownship on the low-side and high-side maneuver paths at knots 0..j: position and velocity
-    ``(N, 2, j+1, 3)``, the axis value ``(N, 2, j+1)`` and the knot times ``(j+1,)``."""
-    paths, value = _maneuver_paths(own, axis, cfg, j)
-    return *paths.stacked(), value, paths.knot_times()[0, 0] if own.shape[0] else np.asarray(paths.t)[0, 0]
-
-
-def _maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int,
-                    with_values: bool = True) -> tuple[ManeuverPaths, "np.ndarray | None"]:
-    """Low-side and high-side maneuver paths of ``axis`` at knots 0..j (P = 2) and the axis value at
-    each knot ``(N, 2, j+1)`` (None without ``with_values``)."""
-    knot = {AXIS_HORIZONTAL: cfg.knot_trk, AXIS_VERTICAL: cfg.knot_vs, AXIS_SPEED: cfg.knot_gs}[axis]
-    t = np.arange(j + 1) * knot
-    sgn = np.array([-1.0, 1.0])
-    n = own.shape[0]
-    st, ct = np.sin(own.trk), np.cos(own.trk)
-    x0, y0, z0, gs0, vs0 = own.x.copy(), own.y.copy(), own.z.copy(), own.gs.copy(), own.vs.copy()
-    col = lambda a: a[:, None, None]  # noqa: E731
-    s3, t3 = sgn[None, :, None], t[None, None, :]
-    if axis == AXIS_HORIZONTAL:
-        comp, value = _turn_knots(cfg, col(x0), col(y0), col(z0), col(gs0), col(st), col(ct), col(vs0), t3)
-        if with_values:
-            value = col(own.trk) + value
-            # wrap to [0, 2pi) as frames.wrap_2pi (the same numbers: |turn| <= pi, fmod there is one subtraction)
-            value = np.where(value < 0.0, value + TWO_PI, np.where(value >= TWO_PI, value - TWO_PI, value))
-    else:
-        comp, value = _axis_state_soa(axis, cfg, col(x0), col(y0), col(z0), col(gs0), col(st), col(ct), col(vs0), s3,
-                                      t3, with_value=True)
-    kink = None
-    if axis == AXIS_HORIZONTAL:  # constant-rate turn: |a| = V w, |da/dt| = V w^2
-        acc_h, acc_v, jerk = own.gs * cfg.turn_rate, np.zeros(n), own.gs * cfg.turn_rate ** 2
-    elif axis == AXIS_SPEED:  # along-track acceleration until the speed limit (a kink there)
-        acc_h, acc_v, jerk = np.full(n, cfg.horizontal_accel), np.zeros(n), np.zeros(n)
-        if not cfg.daidalus_grid:
-            lim = np.array([cfg.min_gs, cfg.max_gs])[None, :]
-            kink = np.maximum((lim - own.gs[:, None]) * sgn[None, :] / cfg.horizontal_accel, 0.0)
-    else:  # vertical acceleration: the horizontal motion is straight
-        acc_h, acc_v, jerk = np.zeros(n), np.full(n, cfg.vertical_accel), np.zeros(n)
-
-    def state_at(ni, pi):  # f(t): true ownship state on paths pi of encounters ni at times t
-        args = (x0[ni], y0[ni], z0[ni], gs0[ni], st[ni], ct[ni], vs0[ni], sgn[pi])
-        return lambda tq: _axis_state_soa(axis, cfg, *args, tq)
-
-    two = lambda a: np.repeat(a[:, None], 2, 1)  # noqa: E731
-    paths = ManeuverPaths(comp[:3], comp[3:], t[None, None, :], state_at, two(acc_h), two(acc_v),
-                          vz_const=axis != AXIS_VERTICAL, jerk_h=two(jerk), kink_t=kink)
-    return paths, (np.broadcast_to(value, (n, 2, j + 1)) if with_values else None)
-
-
 def _over_intruders(a: np.ndarray, reduce) -> np.ndarray:
     """``reduce(a, axis=1)`` (a view for one intruder)."""
     return a[:, 0] if a.shape[1] == 1 else reduce(a, axis=1)
@@ -330,11 +218,7 @@ def _candidate_values(own: AircraftState, axis: int, cfg: DaaConfig, sgn: np.nda
         value = np.where(value < 0.0, value + TWO_PI, np.where(value >= TWO_PI, value - TWO_PI, value))
         return value, np.repeat(th[None, :], n, axis=0), cfg.turn_rate
     vertical = axis == AXIS_VERTICAL
-    acc = cfg.vertical_accel if vertical else cfg.horizontal_accel
-    if cfg.daidalus_grid:
-        lim = np.where(sgn < 0, -np.inf if vertical else 0.0, np.inf)
-    else:
-        lim = np.where(sgn < 0, -cfg.max_vs if vertical else cfg.min_gs, cfg.max_vs if vertical else cfg.max_gs)
+    acc, lim = speed_limits(vertical, cfg, sgn)
     v0 = (own.vs if vertical else own.gs)[:, None]
     tc = np.minimum(t, np.maximum((lim - v0) * sgn / acc, 0.0))
     value = v0 + sgn * acc * tc
@@ -350,112 +234,6 @@ def _first_on_side(ok, side, want: int, k0: int):
     j = np.argmax(part, axis=1)
     found = part[np.arange(ok.shape[0]), j]
     return (k0 + 1 + j) if want > 0 else (k0 - 1 - j), found
-
-
-def _runs2(green: np.ndarray) -> np.ndarray:
-    """``green`` without isolated candidates (a run of one is not a band)."""
-    left = np.zeros_like(green)
-    right = np.zeros_like(green)
-    left[:, 1:] = green[:, :-1]
-    right[:, :-1] = green[:, 1:]
-    return green & (left | right)
-
-
-def _cylinder(h: float, v: float) -> Thresholds:
-    return Thresholds(name=f"cylinder {h:.1f} m / {v:.1f} m", dthr=h, zthr=v, tthr=0.0, tcoa=0.0)
-
-
-class _Recovery:
-    """DAIDALUS's shrinking-cylinder recovery search for the rows of one axis that saturate (module doc).
-
-    ``paths``/``intr``: the saturated rows' maneuver paths and intruders; ``corrective``: their
-    corrective-volume intervals; ``listed`` (R, M): the intruders the MID bands consider;
-    ``horizon`` (R, M): their time horizons (the lookahead for conflict aircraft, the alerting time for
-    peripheral ones). Each cylinder is evaluated only for the rows still searching.
-    """
-
-    def __init__(self, paths: ManeuverPaths, intr: AircraftState, corrective: PathConflicts, listed, horizon,
-                 cfg: DaaConfig, order, runs):
-        self.paths, self.intr, self.cfg, self.order, self.runs = paths, intr, cfg, order, runs
-        L = cfg.lookahead_s
-        shape = corrective.tail_in.shape
-        self.tk = np.broadcast_to(corrective.t, shape)
-        self.horizon = horizon[:, :, None, None]  # (R, M, 1, 1) aircraft time horizon
-        self.window = np.minimum(L, self.horizon + self.tk)  # conflict-detector window end per candidate
-        self.listed = listed[:, :, None, None]
-        self.c_pre_out = corrective.prefix()[1]
-        self.c_in, self.c_out = corrective.tail_in, corrective.tail_out
-
-    def _green(self, red_i, rows) -> np.ndarray:
-        red = np.any(red_i & self.listed[rows], axis=1)  # (r, 2, J+1)
-        return self.runs(~self.order(red))
-
-    def _cylinder(self, rows, h: float, v: float):
-        """The (h, v) cylinder's first entries on the maneuvers, its tails, and 'red as the conflict
-        detector over [0, window]' for rows ``rows``."""
-        cyl = PathEvaluator(self.paths.subset(rows), self.intr[rows], self.cfg.lookahead_s).evaluate(_cylinder(h, v))
-        pre_in = cyl.prefix()[0]
-        red_only = (pre_in < self.window[rows]) | (cyl.tail_in < np.minimum(cyl.tail_out, self.window[rows]))
-        return pre_in, cyl.tail_in, cyl.tail_out, red_only
-
-    def _at_pivot(self, rows, cyl, pivot) -> np.ndarray:
-        """Green where the candidate avoids the cylinder on [0, B] and the corrective volume after B."""
-        pre_in, t_in, t_out, red_only = cyl
-        B = pivot[:, None, None, None]
-        tk, window = self.tk[rows], self.window[rows]
-        red = (self.c_pre_out[rows] > B) | (pre_in < B)
-        red |= np.maximum(self.c_in[rows], B) < np.minimum(self.c_out[rows], window)
-        red |= (tk < B) & (t_in < np.minimum(t_out, B))
-        red = np.where(B > self.horizon[rows], red_only, red)  # past the aircraft's horizon: the cylinder only
-        return self._green(red, rows)
-
-    def run(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(recovery green (R, K), time, nfactor, h, v); rows without recovery have no green candidate
-        and time -inf."""
-        cfg, th = self.cfg, self.cfg.th
-        n_rows = self.listed.shape[0]
-        k = self.c_in.shape[2] and self.order(np.zeros((1,) + self.c_in.shape[2:], bool)).shape[1]
-        green = np.zeros((n_rows, k), bool)
-        r_time = np.full(n_rows, -np.inf)
-        nfac = np.zeros(n_rows, np.int16)
-        r_h, r_v = np.full(n_rows, -np.inf), np.full(n_rows, -np.inf)
-        everyone = np.arange(n_rows)
-        nmac = self._cylinder(everyone, th.nmac_h, th.nmac_v)
-        active = self._green(nmac[3], everyone).any(axis=1)
-        h, v = cfg.recovery_cylinder
-        n = 0
-        L = cfg.lookahead_s
-        while active.any() and (h > th.nmac_h or v > th.nmac_v):
-            rows = np.flatnonzero(active)
-            cyl = self._cylinder(rows, h, v)
-            some = self._green(cyl[3], rows).any(axis=1)
-            if some.any():
-                sr = rows[some]
-                cs = tuple(a[some] for a in cyl)
-                red_p = np.zeros(sr.size)
-                green_p = np.full(sr.size, L + 1.0)
-                pivot = np.full(sr.size, L)
-                going = green_p - red_p > 0.5
-                while going.any():
-                    solid = ~self._at_pivot(sr, cs, pivot).any(axis=1)
-                    red_p = np.where(going & solid, pivot, red_p)
-                    green_p = np.where(going & ~solid, pivot, green_p)
-                    pivot = np.where(going, 0.5 * (red_p + green_p), pivot)
-                    going = green_p - red_p > 0.5
-                rt = np.where(green_p <= L, np.minimum(L, green_p + cfg.recovery_stability_s), red_p)
-                g = self._at_pivot(sr, cs, rt)
-                ok = g.any(axis=1)
-                done = sr[ok]
-                green[done], r_time[done], nfac[done], r_h[done], r_v[done] = g[ok], rt[ok], n, h, v
-                active[done] = False
-                if not cfg.ca_bands:
-                    active[sr] = False
-            if not cfg.ca_bands:
-                active[rows[~some]] = False
-            n += 1
-            h = max(th.nmac_h, h * (1.0 - cfg.ca_factor))
-            v = max(th.nmac_v, v * (1.0 - cfg.ca_factor))
-        return green, r_time, nfac, r_h, r_v
 
 
 def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig, alert: np.ndarray,

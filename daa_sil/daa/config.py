@@ -22,14 +22,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from ..kinematics import Performance
+from daa_sil.geometry.kinematics import Performance
 from ..errors import UsageError
-from ..thresholds import DEFAULT_PRESET, PRESETS, Thresholds, get_thresholds
-from ..units import DEG, FPM, FT, G0, KT, NMI
+from daa_sil.geometry.thresholds import DEFAULT_PRESET, PRESETS, Thresholds, get_thresholds
+from daa_sil.geometry.units import DEG, FPM, FT, G0, KT, NMI
 
 # --- codes -----------------------------------------------------------------------------------
 ALERT_NAMES = ("none", "preventive", "corrective", "warning")
 
+#: region codes (step log, MAVLink DAA_SIL_BAND_REGION). FAR is DAIDALUS's preventive-level band; our
+#: bands paint MID, NEAR and RECOVERY only, so FAR is a reserved code of the wire format and the
+#: vocabulary (painting it would change what the pilot model sees: a model change, docs/architecture.md)
 REGION_NONE, REGION_FAR, REGION_MID, REGION_NEAR, REGION_RECOVERY = range(5)
 REGION_NAMES = ("none", "far", "mid", "near", "recovery")
 
@@ -170,7 +173,7 @@ class DaaConfig:
         return th.with_(name=th.name + "-preventive", zthr=max(th.zthr, self.preventive_zthr))
 
     def performance(self) -> Performance:
-        """The ownship :class:`~daa_sil.kinematics.Performance` these bands assume."""
+        """The ownship :class:`~daa_sil.geometry.kinematics.Performance` these bands assume."""
         return Performance(max_turn_rate=self.turn_rate, horizontal_accel=self.horizontal_accel,
                            vertical_accel=self.vertical_accel, max_vs=self.max_vs,
                            min_gs=self.min_gs, max_gs=self.max_gs)

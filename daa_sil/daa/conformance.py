@@ -34,10 +34,10 @@ from typing import Iterable
 
 import numpy as np
 
-from .. import wellclear as wc
+from daa_sil.geometry import wellclear as wc
 from ..errors import FileFormatError
-from ..kinematics import AircraftState
-from ..units import FPM, KT
+from daa_sil.geometry.kinematics import AircraftState
+from daa_sil.geometry.units import FPM, KT
 from .alerting import alert_levels, relative_state
 from .bands import AxisBands, Bands, compute_bands
 from .config import REGION_NAMES, DaaConfig

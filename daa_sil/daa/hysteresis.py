@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from ..frames import wrap_pi
+from daa_sil.geometry.frames import wrap_pi
 from .bands import AxisBands, Bands, gap_regions, resolutions
 from .config import AXIS_HORIZONTAL, AXIS_SPEED, AXIS_VERTICAL, REGION_MID, REGION_NEAR, REGION_RECOVERY, DaaConfig
 

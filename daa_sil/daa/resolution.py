@@ -11,9 +11,9 @@ from functools import cached_property
 
 import numpy as np
 
-from ..frames import wrap_pi
-from ..kinematics import AircraftState, Command
-from ..units import DEG, FPM, KT
+from daa_sil.geometry.frames import wrap_pi
+from daa_sil.geometry.kinematics import AircraftState, Command
+from daa_sil.geometry.units import DEG, FPM, KT
 from .bands import Bands, compute_bands
 from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_NONE, AXIS_SPEED, AXIS_VERTICAL, DIR_AXIS, DIR_SIDE,
                      REGION_NONE, REGION_RECOVERY, RULE_ANY, RULE_AXIS, RULE_AXIS_DIR, RULE_BEST_EFFORT, DaaConfig,

@@ -1,7 +1,7 @@
 """Sans-IO MAVLink 2 codec for UDP: datagram bytes -> messages, messages -> bytes, optional signing.
 
 Built on the generated :mod:`daa_sil.link.dialect.daa_sil` module (pymavlink mavgen output).
-Network input is hostile, so decoding follows ``reference/mavlink_spec.md`` §3:
+Network input is hostile, so decoding follows these rules (docs/sil.md, "Signing and spoofing"):
 
 * each datagram is split into packets by a header walk and each packet decoded on its own (no
   stream-parser state survives a datagram, the effect of "reset the parser per datagram" without

@@ -21,20 +21,22 @@ whatever is enabled, so switching one knob does not shift the others' draws):
 * ``fifo=False``: no clamp at all, ``release_i = t_i + d_i`` (reorders if the delay decreases).
 
 Do not combine reordering with MAVLink signing: a signed packet older than one already received
-on its stream is rejected as a replay (``reference/mavlink_spec.md`` §3).
+on its stream is rejected as a replay (MAVLink 2 signing keeps a per-stream timestamp window;
+docs/sil.md, "Signing and spoofing").
 """
 
 from __future__ import annotations
 
 import heapq
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
 from ..errors import UsageError
-from ..latency import DelayModel, DelayProcess, as_seed_sequence, child_seed
+from daa_sil.models.latency import DelayModel
+from daa_sil.models.delay_process import DelayProcess, as_seed_sequence, child_seed
 
 
 def fifo_release(t_in: np.ndarray, delay: np.ndarray, keep: "np.ndarray | None" = None,
@@ -63,7 +65,7 @@ def delay_seed(seed: "int | np.random.SeedSequence") -> np.random.SeedSequence:
 
     ``BatchedDelay(model, [delay_seed(s) for s in seeds], epoch_s, duration_s)`` reproduces such
     lines. (The shim does not use this: it passes each line the encounter's fast-time delay stream
-    as a ready :class:`DelayProcess`; see :func:`daa_sil.link.shim.shim_delay_processes`.)
+    as a ready :class:`DelayProcess`; see :func:`daa_sil.sil.shim_config.shim_delay_processes`.)
     """
     return child_seed(seed, 0)
 
@@ -228,15 +230,6 @@ class DelayLine:
         self.counters.released += len(out)
         return out
 
-    def pop_due_timed(self, t_now: float) -> list[tuple[float, Any]]:
-        """Like :meth:`pop_due` but returns ``(release_time_s, item)`` pairs."""
-        out = []
-        heap = self._heap
-        while heap and heap[0][0] <= t_now:
-            r, _, item = heapq.heappop(heap)
-            out.append((r, item))
-        self.counters.released += len(out)
-        return out
 
     def next_release(self) -> "float | None":
         """Earliest pending release time (s), or None if nothing is in flight."""

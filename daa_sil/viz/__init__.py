@@ -20,7 +20,7 @@ API
       the web server (``close(keep_serving=True)`` leaves it running; :meth:`stop_serving` stops it).
 ``log_steplog(table, sinks, encounter_id=None, preset="do365") -> Path | None``
     Convert a step log (one encounter, or pick one with ``encounter_id``) into the sinks.
-:class:`daa_sil.viz_recorder.BackgroundRecorder`
+:class:`daa_sil.viz.recorder.BackgroundRecorder`
     What ``daa-sil run --rrd/--spawn-viewer`` uses: the same logging, done by a helper process
     prepared while the SIL plays, so that the run is not slowed.
 ``log_waitmap(rec, waitmap, vi=, vh=, theta=)``
@@ -54,7 +54,7 @@ Modules
 from __future__ import annotations
 
 from ..errors import OutputError, UsageError
-from ..thresholds import Thresholds, get_thresholds
+from daa_sil.geometry.thresholds import Thresholds, get_thresholds
 from .draw import DECISION_LEVEL, _arc, _fmt, _unit_enu, decision_text
 from .emitter import _Emitter, _rr
 from .layout import blueprint
@@ -62,7 +62,7 @@ from .logger import EncounterLogger
 from .records import BANDS, PER_INTRUDER, STRINGS, StepColumns, _bands_from_lists, _normalise, _pad_lists
 from .sinks import (APP_ID, SPAWN_PORT, WEB_GRPC_PORT, WEB_HTTP_PORT, Recording, SinkOptions, WebServer, _port_open,
                     _url_host_port, check_rrd_path, has_display, rerun_binary)
-from .steplog import focus, log_steplog, predicted_focus, select_encounter
+from .replay import focus, log_steplog, predicted_focus, select_encounter
 from .style import (ALERT_COLORS, BAND_RADIUS_FACTOR, DAA_COLOR, EXEC_COLOR, LEAD_S, OWN_COLOR, PILOT_COLOR,
                     REGION_COLORS, REGION_WIDTH, TRAIL_S, WC_OK, WC_VIOLATED)
 from .waitmap import log_waitmap, log_waitmap_points, wait_colors, waitmap_slice, write_waitmap

@@ -21,7 +21,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..thresholds import Thresholds
+from daa_sil.geometry.thresholds import Thresholds
 from .draw import _arc, _fmt, _unit_enu, decision_text
 from .records import StepColumns
 from .style import (ALERT_COLORS, BAND_RADIUS_FACTOR, DAA_COLOR, EXEC_COLOR, LEAD_S, OWN_COLOR, PILOT_COLOR,
@@ -191,7 +191,7 @@ class _Emitter:
         self.steps_logged += n
 
     def _wait_lookup(self, j: int, own, own_v, ipos, ivel) -> None:
-        from ..frames import to_paper_state
+        from daa_sil.geometry.frames import to_paper_state
 
         ok = np.all(np.isfinite(ipos), axis=-1) & np.all(np.isfinite(own_v), axis=-1)
         w = np.full(len(ok), np.nan)

@@ -12,7 +12,7 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 import pyarrow as pa
 
-from ..thresholds import Thresholds, get_thresholds
+from daa_sil.geometry.thresholds import Thresholds, get_thresholds
 from .emitter import _Emitter
 from .layout import blueprint
 from .records import StepColumns

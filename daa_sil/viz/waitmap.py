@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UsageError
-from ..thresholds import get_thresholds
+from daa_sil.geometry.thresholds import get_thresholds
 from .sinks import Recording, SinkOptions
 from .style import OWN_COLOR, WC_OK
 

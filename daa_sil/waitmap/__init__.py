@@ -1,6 +1,6 @@
 """MDP wait maps (Tabassum & Bai Sec. II and IV): how long the UAS may wait for its delayed remote pilot.
 
-State ``(dx, dy, dh, vi, vh, theta)`` in the paper's relative frame (``daa_sil.frames``: X ahead,
+State ``(dx, dy, dh, vi, vh, theta)`` in the paper's relative frame (``daa_sil.geometry.frames``: X ahead,
 Y left, theta CCW from the ownship track, + turn rate = left), actions wait / evade, paper Eq. 1-8
 kinematics with ownship 55 m/s along +X and dt = 1 s, intruder maneuvers from paper Table 1
 (horizontal pair OR vertical per step), multilinear mass splitting, EXIT outside the box,

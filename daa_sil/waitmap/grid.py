@@ -1,4 +1,4 @@
-"""State grids for the wait-map MDP, in the paper's relative frame (see ``daa_sil.frames``).
+"""State grids for the wait-map MDP, in the paper's relative frame (see ``daa_sil.geometry.frames``).
 
 A :class:`Grid` has six axes in the order of the paper state
 ``(dx [m], dy [m], dh [m], vi [m/s], vh [m/s], theta [rad])``. Each non-periodic axis is a sorted

@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from ..errors import UsageError
-from ..thresholds import PRESETS, Thresholds, get_thresholds
+from daa_sil.geometry.thresholds import PRESETS, Thresholds, get_thresholds
 
 DEG = np.pi / 180.0
 

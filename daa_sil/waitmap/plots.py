@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_path
+from daa_sil.files import atomic_path
 from .lookup import WaitMap, WaitMapFamily
 from .model import DEG
 
@@ -114,8 +114,3 @@ def _histogram(plt, fam: WaitMapFamily, path: Path, overwrite: bool) -> Path:
     return _save(fig, path, overwrite)
 
 
-def threatening_waits(wm: WaitMap) -> np.ndarray:
-    """Wait times (s) of the threatening states (:func:`daa_sil.waitmap.oracles.threatening`)."""
-    from .oracles import threatening
-
-    return threatening(wm)

@@ -8,7 +8,7 @@ the conditioning turn rate, solver statistics, and ``content_hash`` = SHA-256 ov
 a corrupt, truncated or edited file fails with one-line :class:`~daa_sil.errors.FileFormatError`;
 it also checks that the values are physical (``wait_s`` in [0, H] s, probabilities in [0, 1], no
 NaN), so a file written by a buggy tool with a matching hash is still refused.
-Writes are atomic (``daa_sil.io.atomic_path``). A family directory also has ``family.json``
+Writes are atomic (``daa_sil.files.atomic_path``). A family directory also has ``family.json``
 listing its map files by turn rate.
 """
 
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FileFormatError, UsageError
-from ..io import atomic_path, atomic_write_json, to_jsonable
+from daa_sil.files import atomic_path, atomic_write_json, to_jsonable
 from .grid import grid_from_dict
 from .lookup import WaitMap, WaitMapFamily
 from .model import MdpParams

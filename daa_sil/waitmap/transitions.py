@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .. import wellclear as wc
+from daa_sil.geometry import wellclear as wc
 from .grid import Grid
 from .model import MdpParams, Outcome, outcomes
 

@@ -6,7 +6,7 @@
 Runs, each resumable (an interrupted call picks up where it stopped):
 
 1. the seven groups (the paper's five and the two wait-map ablations) under every simulation
-   reading of ``daa_sil/readings.py`` on the fresh report seed ``--seed``;
+   reading of ``daa_sil/config/readings.py`` on the fresh report seed ``--seed``;
 2. the literal reading again on seed 0, the seed the models were developed against, so that the
    report can test whether the two seeds agree;
 3. ``campaign report`` of all of them (plus the paper's counting of the literal simulation as an

@@ -1,0 +1,322 @@
+"""One configuration for a run, with named presets (DAIDALUS-style configuration files).
+
+:class:`RunConfig` holds every parameter of a run, in sections:
+
+============== ===================================================================================
+``thresholds`` the well-clear / NMAC threshold preset (:mod:`daa_sil.geometry.thresholds`)
+``daa``        changes to the DAA configuration of that preset (fields of
+               :class:`daa_sil.daa.config.DaaConfig`, SI units: m, s, m/s, rad)
+``waitmap``    ``source`` (a map preset ``alerting`` / ``paper`` / ``fine``, a grid spec or a
+               ``waitmap build`` directory) and ``gamma`` (the MDP discount; null = the source's)
+``allocation`` ``wt`` (W_T, s) and ``projl_lookahead`` (N, s) of every group (null = each group's)
+``groups``     the groups flown, by name from the group table ``daa_sil/data/groups.yaml`` (the
+               one place groups are defined)
+``pilot``      changes to the remote-pilot model (fields of
+               :class:`daa_sil.models.pilot_config.PilotConfig`; times s, angles deg, ft)
+``latency``    a delay spec (``const:4``, ``gauss:5,3``) for every group's links (null = each group's)
+``link``       ``stale_command_s`` and ``link_timeout_s`` of the agent (null = the policy's 15 / 20 s)
+``reading``    ``name`` (a named reading of :mod:`daa_sil.config.readings`) and ``set`` (its overrides)
+``study``      ``encounters``, ``seed``, ``duration_s``, ``intruders``, ``chunk_size`` of a campaign
+============== ===================================================================================
+
+What each command reads (the rest of a configuration does not apply to it; the record in its
+output shows what was flown):
+
+* ``campaign run`` / ``campaign sweep``: every section;
+* ``daa``, ``conformance``: ``thresholds`` (unless ``--preset``) and ``daa``;
+* ``waitmap build``: ``thresholds`` (unless ``--preset``) and ``waitmap.gamma``;
+* ``run``, ``demo``, ``daa-vehicle``, ``daa-gcs``: the scenario file sets the thresholds, the
+  encounter, the link and the group; the configuration adds ``daa``, ``waitmap.source``,
+  ``allocation`` (over the scenario's, as ``--wt`` over a campaign's groups), ``link`` (where the
+  scenario sets none) and ``pilot``.
+
+Presets: ``paper`` (the paper's thresholds, HMD* 1220 m / d_h* 122 m; what ``campaign run`` flew
+before this object existed), ``do365`` (DO-365B thresholds) and ``daidalus`` (NASA DAIDALUS v2.0.4
+``DO_365B_no_SUM.conf``: thresholds and band settings). A YAML file names a preset under ``base``
+(default ``paper``) and changes any subset of the sections; an unknown key or a bad value is a
+one-line :class:`~daa_sil.errors.UsageError` naming the file and the key. Explicit command-line
+flags override the configuration; every output records the full configuration
+(:meth:`RunConfig.to_dict` with ``full=True``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from daa_sil.errors import UsageError
+from daa_sil.geometry.thresholds import PRESETS as THRESHOLD_PRESETS
+
+PRESET_NAMES = ("paper", "do365", "daidalus")
+#: keys of the sections that are mappings with a fixed set of keys
+_FIXED = {
+    "waitmap": ("source", "gamma"),
+    "allocation": ("wt", "projl_lookahead"),
+    "link": ("stale_command_s", "link_timeout_s"),
+    "reading": ("name", "set"),
+    "study": ("encounters", "seed", "duration_s", "intruders", "chunk_size"),
+}
+TOP_KEYS = ("base", "thresholds", "daa", "waitmap", "allocation", "groups", "pilot", "latency", "link",
+            "reading", "study")
+
+
+def _default_groups() -> tuple:
+    from daa_sil.config.groups import PAPER_GROUPS
+
+    return tuple(PAPER_GROUPS)
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Every parameter of a run (see the module docstring for the sections and their units)."""
+
+    base: str = "paper"  #: the preset it started from
+    thresholds: str = "paper"
+    daa: dict = field(default_factory=dict)
+    waitmap: dict = field(default_factory=lambda: {"source": "alerting", "gamma": None})
+    allocation: dict = field(default_factory=lambda: {"wt": None, "projl_lookahead": None})
+    groups: tuple = field(default_factory=_default_groups)
+    pilot: dict = field(default_factory=dict)
+    latency: "str | None" = None
+    link: dict = field(default_factory=lambda: {"stale_command_s": None, "link_timeout_s": None})
+    reading: dict = field(default_factory=lambda: {"name": "literal", "set": {}})
+    study: dict = field(default_factory=lambda: {"encounters": 10_000, "seed": 0, "duration_s": 240.0,
+                                                 "intruders": 1, "chunk_size": 2000})
+    source: str = field(default="<preset>", compare=False)
+
+    # --- the objects of the core --------------------------------------------------------------------
+    def daa_config(self, thresholds: "str | None" = None):
+        """The :class:`~daa_sil.daa.config.DaaConfig`: the threshold preset's, with ``daa`` applied."""
+        from daa_sil.daa.config import DaaConfig
+
+        return DaaConfig.for_preset(thresholds or self.thresholds, **self.daa)
+
+    def pilot_config(self, **changes):
+        """The :class:`~daa_sil.models.pilot_config.PilotConfig` with ``pilot`` (and ``changes``) applied."""
+        from daa_sil.models.pilot_config import PilotConfig
+
+        return PilotConfig(**{**self.pilot, **changes})
+
+    def campaign_config(self):
+        """The :class:`~daa_sil.study.campaign_config.CampaignConfig` of this configuration."""
+        from daa_sil.config.groups import parse_groups
+        from daa_sil.study.campaign_config import CampaignConfig
+
+        s = self.study
+        return CampaignConfig(groups=parse_groups(list(self.groups)), n_encounters=int(s["encounters"]),
+                              seed=int(s["seed"]), chunk_size=int(s["chunk_size"]), preset=self.thresholds,
+                              duration_s=float(s["duration_s"]), waitmap=str(self.waitmap["source"]),
+                              gamma=self.waitmap["gamma"], wt=self.allocation["wt"],
+                              projl_lookahead=self.allocation["projl_lookahead"], latency=self.latency,
+                              n_intruders=int(s["intruders"]), reading=str(self.reading["name"]),
+                              reading_set=dict(self.reading["set"]), daa=dict(self.daa), pilot=dict(self.pilot),
+                              link={k: v for k, v in self.link.items() if v is not None})
+
+    # --- YAML -------------------------------------------------------------------------------------
+    def to_dict(self, full: bool = False) -> dict:
+        """Plain data. ``full=True`` adds every resolved value (threshold numbers, every DAA and pilot
+        field, the group definitions, the reading's settings): what outputs record."""
+        d = {k: (list(v) if isinstance(v, tuple) else (dict(v) if isinstance(v, dict) else v))
+             for k, v in ((f.name, getattr(self, f.name)) for f in fields(self) if f.name != "source")}
+        d["reading"] = {"name": self.reading["name"], "set": dict(self.reading["set"])}
+        if full:
+            from daa_sil.config.groups import group_spec
+            from daa_sil.config.readings import reading_for
+
+            dc = self.daa_config()
+            th = dc.th
+            d["resolved"] = {
+                "thresholds": asdict(th),
+                "daa": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(dc).items()
+                        if k != "thresholds"},
+                "pilot": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self.pilot_config()).items()},
+                "groups": {g: group_spec(g).to_dict() for g in self.groups},
+                "reading": reading_for(self.reading["name"], **self.reading["set"]).to_dict(),
+            }
+        return d
+
+    def to_yaml(self, full: bool = False) -> str:
+        return yaml.safe_dump(self.to_dict(full), sort_keys=False)
+
+    def with_(self, **changes) -> "RunConfig":
+        return replace(self, **changes)
+
+
+def preset(name: str) -> RunConfig:
+    """The named preset ``paper``, ``do365`` or ``daidalus``."""
+    key = str(name).lower()
+    if key not in PRESET_NAMES:
+        raise UsageError(f"unknown configuration preset {name!r}; allowed: {', '.join(PRESET_NAMES)} or a YAML file")
+    return RunConfig(base=key, thresholds=key, source=f"preset {key}")
+
+
+def load_config(spec: "str | Path | None") -> RunConfig:
+    """A preset name or a YAML file (None = the ``paper`` preset); one-line UsageError on any problem."""
+    if spec is None:
+        return preset("paper")
+    if str(spec).lower() in PRESET_NAMES:
+        return preset(str(spec))
+    p = Path(spec)
+    if not p.is_file():
+        raise UsageError(f"--config {str(spec)!r} is neither a preset ({', '.join(PRESET_NAMES)}) nor a file")
+    try:
+        data = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UsageError(f"{p}: cannot read ({getattr(exc, 'strerror', None) or exc})") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise UsageError(f"{p}{f':{mark.line + 1}' if mark else ''}: not valid YAML "
+                         f"({getattr(exc, 'problem', None) or exc})") from None
+    return config_from_dict(data if data is not None else {}, str(p))
+
+
+def config_from_dict(data: Any, where: str = "<config>") -> RunConfig:
+    """Validate a mapping (the YAML form) into a :class:`RunConfig`; errors name ``where`` and the key."""
+    if not isinstance(data, dict):
+        raise UsageError(f"{where}: a configuration is a mapping of sections ({', '.join(TOP_KEYS)})")
+    unknown = [k for k in data if k not in TOP_KEYS and k != "resolved"]
+    if unknown:
+        raise UsageError(f"{where}: unknown key {unknown[0]!r}; allowed: {', '.join(TOP_KEYS)}")
+    cfg = preset(data.get("base", "paper"))
+    changes: dict = {"base": cfg.base, "source": where}
+    if "thresholds" in data:
+        th = str(data["thresholds"]).lower()
+        if th not in THRESHOLD_PRESETS:
+            raise UsageError(f"{where}: thresholds must be one of {', '.join(THRESHOLD_PRESETS)}, got {data['thresholds']!r}")
+        changes["thresholds"] = th
+    for key in _FIXED:
+        if key in data:
+            changes[key] = _section(data[key], key, getattr(cfg, key), where)
+    if "daa" in data:
+        changes["daa"] = _field_changes(data["daa"], "daa", _dataclass_fields("daa"), where)
+    if "pilot" in data:
+        changes["pilot"] = _field_changes(data["pilot"], "pilot", _dataclass_fields("pilot"), where)
+    if "groups" in data:
+        changes["groups"] = _groups(data["groups"], where)
+    if "latency" in data:
+        changes["latency"] = _latency(data["latency"], where)
+    out = cfg.with_(**changes)
+    _check(out, where)
+    return out
+
+
+def save_config(cfg: RunConfig, path: "str | Path", overwrite: bool = False) -> Path:
+    """Write ``cfg`` as YAML (atomically; loadable by :func:`load_config`)."""
+    from daa_sil.files import atomic_write_text
+
+    return atomic_write_text(path, cfg.to_yaml(), overwrite=overwrite)
+
+
+# --- validation ---------------------------------------------------------------------------------------
+def _section(node, key: str, default: dict, where: str) -> dict:
+    if not isinstance(node, dict):
+        raise UsageError(f"{where}: {key} must be a mapping with keys {', '.join(_FIXED[key])}")
+    bad = [k for k in node if k not in _FIXED[key]]
+    if bad:
+        raise UsageError(f"{where}: unknown key '{key}.{bad[0]}'; allowed: {', '.join(_FIXED[key])}")
+    return {**default, **node}
+
+
+def _dataclass_fields(which: str) -> dict:
+    if which == "daa":
+        from daa_sil.daa.config import DaaConfig as cls
+    else:
+        from daa_sil.models.pilot_config import PilotConfig as cls
+    return {f.name: f for f in fields(cls) if f.name != "thresholds"}
+
+
+def _field_changes(node, key: str, known: dict, where: str) -> dict:
+    if not isinstance(node, dict):
+        raise UsageError(f"{where}: {key} must be a mapping of field changes")
+    bad = [k for k in node if k not in known]
+    if bad:
+        raise UsageError(f"{where}: unknown key '{key}.{bad[0]}'; allowed: {', '.join(known)}")
+    return {k: (tuple(v) if isinstance(v, list) else v) for k, v in node.items()}
+
+
+def _groups(node, where: str) -> tuple:
+    from daa_sil.config.groups import group_table
+
+    names = node.split(",") if isinstance(node, str) else node
+    if not isinstance(names, (list, tuple)) or not names:
+        raise UsageError(f"{where}: groups must be a list of group names")
+    table = group_table()
+    for g in names:
+        if g not in table:
+            raise UsageError(f"{where}: unknown group {g!r} in groups; allowed: {', '.join(table)}")
+    return tuple(str(g) for g in names)
+
+
+def _latency(node, where: str) -> "str | None":
+    if node is None:
+        return None
+    from daa_sil.models.latency import SPEC_HELP, parse_delay_spec
+
+    try:
+        parse_delay_spec(str(node))
+    except UsageError as exc:
+        raise UsageError(f"{where}: latency: {exc} (allowed: {SPEC_HELP})") from None
+    return str(node)
+
+
+def _number(where: str, key: str, v, lo: float, hi: float, integer: bool = False) -> None:
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and lo <= v <= hi
+    if integer:
+        ok = ok and float(v).is_integer()
+    if not ok:
+        kind = "an integer" if integer else "a number"
+        raise UsageError(f"{where}: {key} must be {kind} within [{lo:g}, {hi:g}], got {v!r}")
+
+
+def _check(cfg: RunConfig, where: str) -> None:
+    """Values of the sections (ranges as on the command line); builds the objects they feed."""
+    w = cfg.waitmap
+    if not isinstance(w["source"], str) or not w["source"]:
+        raise UsageError(f"{where}: waitmap.source must be a map preset, grid spec or directory, got {w['source']!r}")
+    if w["gamma"] is not None:
+        _number(where, "waitmap.gamma", w["gamma"], 1e-6, 0.999999)
+    for k, v in cfg.allocation.items():
+        if v is not None:
+            _number(where, f"allocation.{k}", v, 0.0, 600.0)
+    for k, v in cfg.link.items():
+        if v is not None:
+            _number(where, f"link.{k}", v, 0.0, 3600.0)
+    s = cfg.study
+    _number(where, "study.encounters", s["encounters"], 1, 10_000_000, integer=True)
+    _number(where, "study.seed", s["seed"], 0, 2**63 - 1, integer=True)
+    _number(where, "study.duration_s", s["duration_s"], 10.0, 3600.0)
+    _number(where, "study.intruders", s["intruders"], 1, 8, integer=True)
+    _number(where, "study.chunk_size", s["chunk_size"], 1, 10_000_000, integer=True)
+    from daa_sil.config.readings import reading_for
+
+    r = cfg.reading
+    if not isinstance(r["set"], dict):
+        raise UsageError(f"{where}: reading.set must be a mapping of reading settings")
+    try:
+        reading_for(str(r["name"]), **r["set"])
+    except UsageError as exc:
+        raise UsageError(f"{where}: reading: {exc}") from None
+    except TypeError as exc:
+        raise UsageError(f"{where}: reading.set: {exc}") from None
+    for what, build in (("daa", cfg.daa_config), ("pilot", cfg.pilot_config)):
+        try:
+            build()
+        except UsageError as exc:
+            raise UsageError(f"{where}: {what}: {exc}") from None
+        except (TypeError, ValueError) as exc:
+            raise UsageError(f"{where}: {what}: bad value ({exc})") from None
+
+
+def add_config_argument(p, default_help: str = "paper") -> None:
+    """The ``--config PRESET|FILE`` option of a command."""
+    p.add_argument("--config", default=None, metavar="PRESET|FILE",
+                   help=f"run configuration: a preset ({', '.join(PRESET_NAMES)}) or a YAML file "
+                        f"('daa-sil config show {default_help}' prints one to start from); explicit flags override it")
+
+
+__all__ = ["RunConfig", "PRESET_NAMES", "preset", "load_config", "config_from_dict", "save_config",
+           "add_config_argument"]

@@ -1,0 +1,135 @@
+"""The maneuver paths of one band axis (track, vertical speed, ground speed): candidates anchored at
+the current value, knot times at the performance limits, and the true ownship state along each
+path."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from daa_sil.daa.config import (
+    AXIS_HORIZONTAL,
+    AXIS_SPEED,
+    AXIS_VERTICAL,
+    DaaConfig,
+)
+from daa_sil.daa.trajectory import ManeuverPaths
+from daa_sil.geometry.kinematics import TWO_PI, AircraftState
+
+
+def speed_limits(vertical: bool, cfg: DaaConfig, sgn) -> tuple:
+    """``(acceleration m/s^2, limit m/s per side)`` of the vertical-speed or ground-speed axis: the
+    side ``sgn < 0`` slows/descends to the lower limit, ``sgn > 0`` to the upper one (DAIDALUS grid:
+    no vertical limits, ground speed down to 0)."""
+    acc = cfg.vertical_accel if vertical else cfg.horizontal_accel
+    if cfg.daidalus_grid:
+        return acc, np.where(sgn < 0, -np.inf if vertical else 0.0, np.inf)
+    return acc, np.where(sgn < 0, -cfg.max_vs if vertical else cfg.min_gs, cfg.max_vs if vertical else cfg.max_gs)
+
+
+def _path_sizes(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[int, int]:
+    """Number of candidates on the low and high side of an axis for this batch (>= 0)."""
+    if axis == AXIS_HORIZONTAL:
+        j_lo = int(round(cfg.trk_range / cfg.trk_step))
+        full_circle = np.isclose(cfg.trk_range, np.pi)
+        return j_lo, (j_lo - 1 if full_circle and not cfg.daidalus_grid else j_lo)
+    cur, lo, hi, step = ((own.vs, -cfg.max_vs, cfg.max_vs, cfg.vs_step) if axis == AXIS_VERTICAL
+                         else (own.gs, cfg.min_gs, cfg.max_gs, cfg.gs_step))
+    j_lo = int(np.ceil(np.max(cur - lo, initial=0.0) / step - 1e-9))
+    j_hi = int(np.ceil(np.max(hi - cur, initial=0.0) / step - 1e-9))
+    return max(j_lo, 0), max(j_hi, 0)
+
+
+def _axis_state_soa(axis: int, cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, sgn, t, with_value: bool = False) -> tuple:
+    """Ownship position and velocity (six component arrays, arguments broadcast) on the maneuver of
+    ``axis`` toward side ``sgn`` (+-1) after ``t`` s; ``st``/``ct`` are the sine and cosine of the
+    initial track. Closed forms of :func:`daa_sil.geometry.kinematics.advance` for a constant-rate turn and for
+    an acceleration that saturates at the axis limit (with ``cfg.daidalus_grid`` it runs past the limit
+    by up to one step, as DAIDALUS evaluates its last candidate, but never below zero speed).
+    ``with_value``: ``(components, value)`` with the axis value (track change, vs or gs)."""
+    if axis == AXIS_HORIZONTAL:
+        w = cfg.turn_rate
+        th = w * t
+        r = gs0 / w
+        sth, cth = np.sin(th), np.cos(th)
+        fwd, lat = r * sth, sgn * r * (1.0 - cth)
+        ssth = sgn * sth
+        out = (x0 + fwd * st + lat * ct, y0 + fwd * ct - lat * st, z0 + vs0 * t,
+               gs0 * (st * cth + ct * ssth), gs0 * (ct * cth - st * ssth), vs0 + 0.0 * t)
+        return (out, sgn * th) if with_value else out
+    vertical = axis == AXIS_VERTICAL
+    acc, lim = speed_limits(vertical, cfg, sgn)
+    v0 = vs0 if vertical else gs0
+    tc = np.minimum(t, np.maximum((lim - v0) * sgn / acc, 0.0))
+    dist = v0 * t + sgn * acc * tc * (t - 0.5 * tc)
+    v_t = v0 + sgn * acc * tc
+    if vertical:
+        out = x0 + gs0 * st * t, y0 + gs0 * ct * t, z0 + dist, gs0 * st + 0.0 * t, gs0 * ct + 0.0 * t, v_t
+    else:
+        out = x0 + dist * st, y0 + dist * ct, z0 + vs0 * t, v_t * st, v_t * ct, vs0 + 0.0 * t
+    return (out, v_t) if with_value else out
+
+
+def _turn_knots(cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, t):
+    """:func:`_axis_state_soa` of the turn for both sides at once (side axis 1: left, right), the same
+    numbers: the two sides share every term but the sign of the lateral ones. Returns the six components
+    (the vertical ones without the side axis) and the signed track change ``(1, 2, K)``."""
+    w = cfg.turn_rate
+    th = w * t
+    r = gs0 / w
+    sth, cth = np.sin(th), np.cos(th)
+    fwd = r * sth
+    lat = r * (1.0 - cth)
+    both = lambda base, off: np.stack([base - off, base + off], axis=1)[:, :, 0]  # noqa: E731  (left, right)
+    out = (both(x0 + fwd * st, lat * ct), both(y0 + fwd * ct, -(lat * st)), z0 + vs0 * t,
+           both(st * cth, ct * sth) * gs0, both(ct * cth, -(st * sth)) * gs0, vs0 + 0.0 * t)
+    return out, np.concatenate([-th, th], axis=1)
+
+
+def _axis_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ownship on the low-side and high-side maneuver paths at knots 0..j: position and velocity
+    ``(N, 2, j+1, 3)``, the axis value ``(N, 2, j+1)`` and the knot times ``(j+1,)``."""
+    paths, value = _maneuver_paths(own, axis, cfg, j)
+    return *paths.stacked(), value, paths.knot_times()[0, 0] if own.shape[0] else np.asarray(paths.t)[0, 0]
+
+
+def _maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int,
+                    with_values: bool = True) -> tuple[ManeuverPaths, "np.ndarray | None"]:
+    """Low-side and high-side maneuver paths of ``axis`` at knots 0..j (P = 2) and the axis value at
+    each knot ``(N, 2, j+1)`` (None without ``with_values``)."""
+    knot = {AXIS_HORIZONTAL: cfg.knot_trk, AXIS_VERTICAL: cfg.knot_vs, AXIS_SPEED: cfg.knot_gs}[axis]
+    t = np.arange(j + 1) * knot
+    sgn = np.array([-1.0, 1.0])
+    n = own.shape[0]
+    st, ct = np.sin(own.trk), np.cos(own.trk)
+    x0, y0, z0, gs0, vs0 = own.x.copy(), own.y.copy(), own.z.copy(), own.gs.copy(), own.vs.copy()
+    col = lambda a: a[:, None, None]  # noqa: E731
+    s3, t3 = sgn[None, :, None], t[None, None, :]
+    if axis == AXIS_HORIZONTAL:
+        comp, value = _turn_knots(cfg, col(x0), col(y0), col(z0), col(gs0), col(st), col(ct), col(vs0), t3)
+        if with_values:
+            value = col(own.trk) + value
+            # wrap to [0, 2pi) as frames.wrap_2pi (the same numbers: |turn| <= pi, fmod there is one subtraction)
+            value = np.where(value < 0.0, value + TWO_PI, np.where(value >= TWO_PI, value - TWO_PI, value))
+    else:
+        comp, value = _axis_state_soa(axis, cfg, col(x0), col(y0), col(z0), col(gs0), col(st), col(ct), col(vs0), s3,
+                                      t3, with_value=True)
+    kink = None
+    if axis == AXIS_HORIZONTAL:  # constant-rate turn: |a| = V w, |da/dt| = V w^2
+        acc_h, acc_v, jerk = own.gs * cfg.turn_rate, np.zeros(n), own.gs * cfg.turn_rate ** 2
+    elif axis == AXIS_SPEED:  # along-track acceleration until the speed limit (a kink there)
+        acc_h, acc_v, jerk = np.full(n, cfg.horizontal_accel), np.zeros(n), np.zeros(n)
+        if not cfg.daidalus_grid:
+            lim = np.array([cfg.min_gs, cfg.max_gs])[None, :]
+            kink = np.maximum((lim - own.gs[:, None]) * sgn[None, :] / cfg.horizontal_accel, 0.0)
+    else:  # vertical acceleration: the horizontal motion is straight
+        acc_h, acc_v, jerk = np.zeros(n), np.full(n, cfg.vertical_accel), np.zeros(n)
+
+    def state_at(ni, pi):  # f(t): true ownship state on paths pi of encounters ni at times t
+        args = (x0[ni], y0[ni], z0[ni], gs0[ni], st[ni], ct[ni], vs0[ni], sgn[pi])
+        return lambda tq: _axis_state_soa(axis, cfg, *args, tq)
+
+    two = lambda a: np.repeat(a[:, None], 2, 1)  # noqa: E731
+    paths = ManeuverPaths(comp[:3], comp[3:], t[None, None, :], state_at, two(acc_h), two(acc_v),
+                          vz_const=axis != AXIS_VERTICAL, jerk_h=two(jerk), kink_t=kink)
+    return paths, (np.broadcast_to(value, (n, 2, j + 1)) if with_values else None)

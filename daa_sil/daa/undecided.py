@@ -1,0 +1,205 @@
+"""Resolving the pieces of a maneuver path that the chord certificates left undecided, on the true
+state: both ends violating give the exact entry and exit, one end violating a bisection, both ends
+clear a second-order certificate or sampling every CLIP_DT (the rules in docs/daa.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from daa_sil.daa.certify import CLEAR, _settle_time, classify_pieces, clear_second_order
+from daa_sil.daa.intervals import _wcv_soa
+
+#: most parts an undecided segment is split into (as many as its parts' chords need to meet V_TOL / P_TOL)
+MAX_SPLIT = 16
+#: s, how closely an entry into / an exit from the volume on the true path is located (bisection brackets;
+#: entries decide when a candidate conflicts, exits only rank recovery candidates)
+BISECT_DT_IN = 0.04
+BISECT_DT_OUT = 0.1
+#: s, sampling interval of the true predicate inside a short piece whose ends are clear but which is not
+#: certified clear (a clip of the volume shorter than this can be missed)
+CLIP_DT = 0.01
+#: most rounds of splitting an undecided piece
+MAX_DEPTH = 8
+
+
+class UndecidedPieces:
+    """Part of :class:`daa_sil.daa.trajectory.PathEvaluator` (a mixin: it uses the evaluator's attributes)."""
+
+    def _mover(self, path):
+        """``f(t)``: the true relative state (6 component arrays) of flat paths ``path`` at times ``t``."""
+        tab = self._path_tables()
+        own = self.paths.state_at(tab["n"][path], tab["p"][path])
+        nm = tab["nm"][path]
+        if getattr(self, "_intr_flat", None) is None:  # intruder position / velocity components, flat (N * M)
+            self._intr_flat = [np.ascontiguousarray(a[..., i]).reshape(-1) for a in (self.ipos, self.ivel) for i in range(3)]
+        ipx, ipy, ipz, ivx, ivy, ivz = (a[nm] for a in self._intr_flat)
+
+        def f(t):
+            ox, oy, oz, ovx, ovy, ovz = own(t)
+            return ox - (ipx + t * ivx), oy - (ipy + t * ivy), oz - (ipz + t * ivz), ovx - ivx, ovy - ivy, ovz - ivz
+        return f
+
+    def _state(self, path, t):
+        """True relative state (6 component arrays) of flat paths ``path`` at times ``t``."""
+        return self._mover(path)(t)
+
+    def _bisect(self, th, path, lo, hi, lo_in):
+        """Bracket ``(lo, hi)`` (s) of a crossing of the violation boundary on the true path between times
+        ``lo`` and ``hi`` (the predicate is ``lo_in`` at ``lo`` and the opposite at ``hi``; bool or array), at
+        most BISECT_DT_IN (an entry) or BISECT_DT_OUT (an exit) wide."""
+        lo, hi = lo.copy(), hi.copy()
+        f = self._mover(path)
+        lo_in = np.broadcast_to(np.asarray(lo_in, bool), lo.shape)
+
+        def steps(mask, dt):
+            return int(np.ceil(np.log2(max(np.max(hi[mask] - lo[mask], initial=0.0), dt) / dt)))
+        n_in, n_out = steps(~lo_in, BISECT_DT_IN), steps(lo_in, BISECT_DT_OUT)
+        mixed = n_in != n_out and lo_in.any() and not lo_in.all()
+        for k in range(max(n_in, n_out) if lo.size else 0):
+            mid = 0.5 * (lo + hi)
+            same = _wcv_soa(*f(mid), th) == lo_in
+            if mixed:  # the same number of halvings per kind as when they are bisected apart
+                live = np.where(lo_in, k < n_out, k < n_in)
+                lo = np.where(same & live, mid, lo)
+                hi = np.where(~same & live, mid, hi)
+            else:
+                lo = np.where(same, mid, lo)
+                hi = np.where(same, hi, mid)
+        return lo, hi
+
+    def _resolve(self, flat_seg, th, seg_in, seg_out) -> None:
+        """Undecided segments on the true path (module docstring); updates the flat ``seg_in``/``seg_out``.
+
+        The predicate is exact at both ends (true states). Both violate: first entry at the start, last
+        exit at the end. One violates: the boundary is found by bisection on the true path and the other
+        side is certified CLEAR. Neither violates (a possible clip inside), or the certificate fails: the
+        piece is split into parts (each with exact end flags) and examined again; a both-clear part as
+        short as V_TOL / P_TOL allow is sampled every CLIP_DT for a clip of the volume (:meth:`_clip`).
+        """
+        path, ka, t0, h = self._pieces(flat_seg)
+        s = [c.reshape(-1) for c in self.s]
+        v = [c.reshape(-1) for c in self.v]
+        sa, sb = [c[ka] for c in s], [c[ka + 1] for c in s]
+        va, vb = [c[ka] for c in v], [c[ka + 1] for c in v]
+        f0, f1 = _wcv_soa(*sa, *va, th), _wcv_soa(*sb, *vb, th)
+        pieces = (flat_seg, path, t0, t0 + h, sa, sb, f0, f1, va[:2], vb[:2])
+        tab = self._path_tables()
+        for depth in range(MAX_DEPTH):
+            sid, pth, ta, tb, pa, pb, fa, fb, ua, ub = pieces
+            if not sid.size:
+                return
+            both = fa & fb
+            if both.any():
+                _update(seg_in, seg_out, sid[both], ta[both], tb[both])
+            split = np.zeros(sid.size, bool)
+            last = depth == MAX_DEPTH - 1
+            settled = ((tb - ta) <= _settle_time(tab["acc_h"][pth], tab["acc_v"][pth]) * (1.0 + 1e-9)) | last
+            cross = np.flatnonzero(fa != fb)  # entries (start clear, end violating) and exits (start violating)
+            if cross.size and not self.exits:  # an exit: first entry at the start; the last exit is not needed
+                ex = cross[fa[cross]]
+                _update(seg_in, seg_out, sid[ex], ta[ex], tb[ex])
+                cross = cross[fb[cross]]
+            if cross.size:
+                entry = fb[cross]
+                lo, hi = self._bisect(th, pth[cross], ta[cross], tb[cross], lo_in=~entry)
+                # certify that the other side of the crossing is clear: before an entry, after an exit
+                mid_state = self._state(pth[cross], np.where(entry, lo, hi))
+                c_a, c_b = np.where(entry, ta[cross], hi), np.where(entry, lo, tb[cross])
+                p_a = [np.where(entry, pa[c][cross], mid_state[c]) for c in range(3)]
+                p_b = [np.where(entry, mid_state[c], pb[c][cross]) for c in range(3)]
+                ok = (self._classify_part(th, pth[cross], c_a, c_b, p_a, p_b) == CLEAR) | settled[cross]
+                t_cross = 0.5 * (lo + hi)
+                good, e, tc = cross[ok], entry[ok], t_cross[ok]
+                _update(seg_in, seg_out, sid[good], np.where(e, tc, ta[good]), np.where(e, tb[good], tc))
+                split[cross[~ok]] = True
+            j = np.flatnonzero(~fa & ~fb)  # both ends clear: a clip may lie inside unless certified clear
+            if j.size and depth > 0:  # (at depth 0 these are the segments the first-order test left undecided)
+                code = self._classify_part(th, pth[j], ta[j], tb[j], [c[j] for c in pa], [c[j] for c in pb])
+                j = j[code != CLEAR]
+            if j.size and tab["jerk"] is not None:  # the tighter second-order certificate (true end velocities)
+                j = j[~self._clear2(th, pth[j], ta[j], tb[j], [c[j] for c in pa], [c[j] for c in pb],
+                                    [c[j] for c in ua], [c[j] for c in ub])]
+            if j.size:
+                final = j[settled[j]]
+                if final.size:
+                    self._clip(th, sid[final], pth[final], ta[final], tb[final],
+                               [c[final] for c in pa], [c[final] for c in pb], seg_in, seg_out)
+                split[j[~settled[j]]] = True
+            idx = np.flatnonzero(split)
+            if not idx.size:
+                return
+            pieces = self._split(th, *(a[idx] for a in (sid, pth, ta, tb)), [c[idx] for c in pa], [c[idx] for c in pb],
+                                 fa[idx], fb[idx], [c[idx] for c in ua], [c[idx] for c in ub])
+
+    def _classify_part(self, th, pth, ta, tb, pa, pb) -> np.ndarray:
+        tab = self._path_tables()
+        h = tb - ta
+        a_h, a_v = tab["acc_h"][pth], tab["acc_v"][pth]
+        win = None
+        if self._vwin is not None:
+            vlo, vhi = self._vwin[0].reshape(-1)[pth], self._vwin[1].reshape(-1)[pth]
+            win = (np.maximum(vlo, ta) - ta, np.minimum(vhi, tb) - ta)
+        e_z = a_v * h * h * 0.125 if np.any(a_v) else 0.0
+        return classify_pieces(*pa, *pb, h, th, a_h * h * h * 0.125, a_h * h * 0.5, e_z, win)
+
+    def _clear2(self, th, pth, ta, tb, pa, pb, ua, ub) -> np.ndarray:
+        """Second-order CLEAR certificate of pieces (see :func:`clear_second_order`)."""
+        tab = self._path_tables()
+        h = tb - ta
+        a_h, a_v, jerk = tab["acc_h"][pth], tab["acc_v"][pth], tab["jerk"][pth]
+        e_v = jerk * h * h * 0.125
+        if tab["kink"] is not None:
+            kt = tab["kink"][pth]
+            across = (kt > ta) & (kt < tb) if kt.ndim == 1 else ((kt > ta[:, None]) & (kt < tb[:, None])).any(axis=-1)
+            e_v = e_v + np.where(across, a_h * h * 0.5, 0.0)
+        e_z = a_v * h * h * 0.125 if np.any(a_v) else 0.0
+        return clear_second_order(*pa, *pb, *ua, *ub, h, th, a_h * h * h * 0.125, e_v, e_z)
+
+    def _split(self, th, sid, pth, ta, tb, pa, pb, fa, fb, ua, ub):
+        """Split pieces into the fewest equal parts that settle (at least 2, at most MAX_SPLIT), with
+        exact states and flags at the new ends."""
+        tab = self._path_tables()
+        settle = _settle_time(tab["acc_h"][pth], tab["acc_v"][pth])
+        q = int(min(MAX_SPLIT, max(2, np.ceil(np.max((tb - ta) / settle) - 1e-9))))
+        L = sid.size
+        ts = ta[:, None] + (tb - ta)[:, None] * (np.arange(1, q) / q)[None, :]  # (L, q-1)
+        st = self._state(np.repeat(pth, q - 1), ts.ravel())
+        flag = _wcv_soa(*st, th).reshape(L, q - 1)
+        times = np.concatenate([ta[:, None], ts, tb[:, None]], axis=1)
+        pos = [np.concatenate([pa[c][:, None], st[c].reshape(L, q - 1), pb[c][:, None]], axis=1) for c in range(3)]
+        flags = np.concatenate([fa[:, None], flag, fb[:, None]], axis=1)
+        vel = [np.concatenate([ua[c][:, None], st[3 + c].reshape(L, q - 1), ub[c][:, None]], axis=1) for c in range(2)]
+        rep = lambda a: np.repeat(a, q)  # noqa: E731
+        return (rep(sid), rep(pth), times[:, :-1].ravel(), times[:, 1:].ravel(), [c[:, :-1].ravel() for c in pos],
+                [c[:, 1:].ravel() for c in pos], flags[:, :-1].ravel(), flags[:, 1:].ravel(),
+                [c[:, :-1].ravel() for c in vel], [c[:, 1:].ravel() for c in vel])
+
+    def _clip(self, th, sid, pth, ta, tb, pa, pb, seg_in, seg_out) -> None:
+        """Short pieces whose ends are clear but which are not certified clear (a clip of the volume may
+        lie inside): the true predicate sampled every CLIP_DT, and around the first and last violating
+        samples the entry and exit found by bisection on the true path."""
+        h = tb - ta
+        q = int(np.ceil(np.max(h) / CLIP_DT - 1e-9))
+        if q < 1:
+            return
+        frac = (np.arange(q) + 0.5) / q
+        ts = ta[:, None] + h[:, None] * frac[None, :]  # (L, q)
+        L = sid.size
+        hit = _wcv_soa(*self._state(np.repeat(pth, q), ts.ravel()), th).reshape(L, q)
+        rows = np.flatnonzero(hit.any(axis=1))
+        if not rows.size:
+            return
+        first = np.argmax(hit[rows], axis=1)
+        last = q - 1 - np.argmax(hit[rows, ::-1], axis=1)
+        t_first, t_last = ts[rows, first], ts[rows, last]
+        before = np.where(first > 0, ts[rows, np.maximum(first - 1, 0)], ta[rows])
+        after = np.where(last < q - 1, ts[rows, np.minimum(last + 1, q - 1)], tb[rows])
+        l1, h1 = self._bisect(th, pth[rows], before, t_first, lo_in=False)
+        l2, h2 = self._bisect(th, pth[rows], t_last, after, lo_in=True)
+        _update(seg_in, seg_out, sid[rows], 0.5 * (l1 + h1), 0.5 * (l2 + h2))
+
+
+def _update(seg_in, seg_out, sid, t_in, t_out) -> None:
+    """seg_in[sid] = min(seg_in[sid], t_in), seg_out[sid] = max(...) (repeated ids allowed)."""
+    np.minimum.at(seg_in, sid, t_in)
+    np.maximum.at(seg_out, sid, t_out)

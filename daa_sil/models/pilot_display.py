@@ -1,0 +1,96 @@
+"""What the remote pilot sees: the DAA guidance (bands, regions, preferred sides) as the pilot
+model's :class:`~daa_sil.models.pilot_config.Guidance`, from the bands the GCS receives or computed
+from the (delayed) traffic picture."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from daa_sil.geometry.kinematics import AircraftState
+from daa_sil.models.pilot_config import NO_BAND, Guidance
+
+_REGION_LEVEL = np.array([0.0, 2.0, 3.0, 4.0, 1.0])  # daa REGION_NONE, FAR, MID, NEAR, RECOVERY -> level
+
+
+def _side_candidate(ax, want: int) -> tuple[np.ndarray, np.ndarray]:
+    """Closest candidate (min time to reach) on side ``want`` among those with the side's lowest
+    level (0/1 merged); returns (value, level) with nan/inf where the side is empty."""
+    lvl = _REGION_LEVEL[np.asarray(ax.region, int)]
+    merged = np.where(lvl <= 1, 0.0, lvl)
+    on = (np.asarray(ax.side) == want)[None, :]
+    best = np.where(on, merged, np.inf).min(axis=1)
+    cost = np.where(on & (merged == best[:, None]), ax.t_man, np.inf)
+    k = np.argmin(cost, axis=1)
+    found = np.isfinite(np.take_along_axis(cost, k[:, None], 1)[:, 0])
+    val = np.take_along_axis(ax.values, k[:, None], 1)[:, 0]
+    level = np.take_along_axis(lvl, k[:, None], 1)[:, 0]
+    return np.where(found, val, np.nan), np.where(found, level, NO_BAND)
+
+
+def guidance_from_bands(bands) -> Guidance:
+    """:class:`Guidance` from :class:`daa_sil.daa.bands.Bands` (track and vertical-speed axes)."""
+    lt, ll = _side_candidate(bands.trk, -1)
+    rt, rl = _side_candidate(bands.trk, +1)
+    dv, dl = _side_candidate(bands.vs, -1)
+    uv, ul = _side_candidate(bands.vs, +1)
+    alert = np.asarray(bands.alert)
+    lvl = alert.max(axis=1) if alert.ndim == 2 and alert.shape[1] else np.zeros(len(lt))
+    return Guidance(alert_level=lvl, left_trk=lt, left_level=ll, right_trk=rt, right_level=rl, up_vs=uv,
+                    up_level=ul, down_vs=dv, down_level=dl)
+
+
+class PilotDisplay:
+    """What N pilots' displays show, refreshed only for the pilots that see newer telemetry (the GCS
+    of the SIL and the fast-time loop both use this, so the pilot reads the same guidance in both).
+
+    Per pilot: the vehicle's DAIDALUS alert level sent with that telemetry, well clear violated on
+    the observed states and, at or above ``alert_level_min``, the DAA bands' candidates of the
+    observed states (``cfg`` a :class:`daa_sil.daa.config.DaaConfig`); below it the last bands stay.
+    """
+
+    _KEYS = ("left_trk", "left_level", "right_trk", "right_level", "up_vs", "up_level", "down_vs", "down_level")
+
+    def __init__(self, n: int, cfg, alert_level_min: int):
+        self.cfg = cfg
+        self.alert_level_min = int(alert_level_min)
+        self.alert = np.zeros(n, np.int64)
+        self.wcv = np.zeros(n, bool)
+        self.bands = {k: np.full(n, np.inf if k.endswith("_level") else np.nan) for k in self._KEYS}
+
+    def refresh(self, rows: np.ndarray, own: AircraftState, intr: AircraftState, alert: np.ndarray) -> None:
+        """Pilots ``rows`` (indices) now see ownship ``own`` (R,), intruders ``intr`` (R, M) and the
+        vehicle's alert level ``alert`` (R,) sent with them."""
+        from daa_sil.daa.alerting import relative_state
+        from daa_sil.daa.bands import compute_bands
+        from daa_sil.geometry.wellclear import wcv
+
+        rows = np.asarray(rows, np.int64)
+        if not rows.size:
+            return
+        alert = np.asarray(alert, np.int64)
+        self.alert[rows] = alert
+        self.wcv[rows] = wcv(*relative_state(own, intr), self.cfg.th).any(axis=1)
+        sel = alert >= self.alert_level_min
+        if sel.any():
+            gb = guidance_from_bands(compute_bands(own[sel], intr[sel], self.cfg))
+            for key in self._KEYS:
+                self.bands[key][rows[sel]] = getattr(gb, key)
+
+    def guidance(self) -> Guidance:
+        """The current :class:`Guidance` of every pilot (N,)."""
+        return Guidance(alert_level=self.alert, wcv=self.wcv, **self.bands)
+
+
+def guidance_from_daa(own: AircraftState, intr: AircraftState, cfg=None) -> Guidance:
+    """Compute :class:`Guidance` with :mod:`daa_sil.daa` for ownship (N,) and intruders (N, M)
+    (``cfg``: a :class:`daa_sil.daa.config.DaaConfig`, default DO-365B); ``wcv`` from the preset."""
+    from daa_sil.daa.alerting import relative_state
+    from daa_sil.daa.bands import compute_bands
+    from daa_sil.daa.config import DaaConfig
+    from daa_sil.geometry.wellclear import wcv
+
+    cfg = cfg or DaaConfig()
+    g = guidance_from_bands(compute_bands(own, intr, cfg))
+    s, v = relative_state(own, intr)
+    g.wcv = wcv(s, v, cfg.th).any(axis=1)
+    return g

@@ -1,0 +1,284 @@
+"""Scenario files: one scripted encounter for the SIL (and for fast-time parity runs).
+
+A scenario is a YAML mapping. Units are SI except angles, which are degrees (compass tracks,
+clockwise from north). Positions are ENU metres from the scenario origin (x east, y north) with
+``alt_m`` the altitude above the origin. Every key is checked: an unknown key, a wrong type, a
+missing field or an out-of-range value raises :class:`daa_sil.errors.FileFormatError` naming the
+file, the line and the field, e.g. ``scenarios/x.yaml:12: intruders[0].cpa.hmd_m: must be within
+[-5000, 5000], got 9000``.
+
+Schema (``*`` = required; defaults in brackets)::
+
+    name*: str                      short identifier (used in result files)
+    description: str                [""]
+    seed: int >= 0                  [1]     root of every random stream (pilot, link up/down)
+    duration_s: float (0, 3600]     [240]   sim length; steps are dt = 1 s
+    thresholds: do365 | paper | daidalus   [do365] well-clear / NMAC / DAA preset
+    origin:                                 geodetic reference of the ENU frame (MAVLink output)
+      lat_deg: [-80, 80]            [37.4]
+      lon_deg: [-180, 180]          [-122.05]
+      alt_m:   [-500, 9000]         [0]     MSL altitude of ENU z = 0
+    ownship*:
+      x_m, y_m: float               [0]
+      alt_m*: float [0, 20000]
+      gs_mps*: float [5, 350]
+      track_deg*: float [0, 360)
+      vs_mps: float [-50, 50]       [0]
+    intruders*: list of 1..8, each
+      id: int [1, 16777215]         [1000 + index]  ICAO address in ADSB_VEHICLE
+      callsign: str, <= 8 chars     ["INTR<index+1>"]
+      initial:                      exactly one of initial / cpa
+        x_m*, y_m*, alt_m*, gs_mps*, track_deg*, vs_mps [0]
+      cpa:                          geometry at the closest point of approach (docs/models.md, "Encounters")
+        angle_deg*: [0, 360)        encounter angle, intruder track minus ownship track (180 = head-on)
+        hmd_m*: [-5000, 5000]       signed horizontal miss distance (+ = passes on the right)
+        vmd_m: [-1000, 1000]  [0]   intruder minus ownship altitude at CPA
+        t_cpa_s*: (0, duration_s]   time of CPA (unmaneuvered ownship)
+        gs_mps*: [5, 350]
+        vs_mps: [-50, 50]     [0]
+      maneuvers: list               intruder script, non-overlapping, in time order
+        - start_s*: [0, duration_s)
+          end_s*: (start_s, duration_s]
+          turn_rate_dps: [-10, 10]  [0] compass sense, + = right
+          accel_mps2: [-5, 5]       [0] along-track
+          vertical_accel_mps2: [-10, 10] [0]
+    link:                                   delay shim per direction
+      up: delay spec                [const:4] uplink (GCS -> vehicle): "const:4", "gauss:5,3",
+      down: delay spec              [= up]    "uniform:1,8" or {type: constant, seconds: 4} ...
+      epoch_s: float [0, 600]       [10]      piecewise-constant delay epoch (0 = per packet)
+      loss: [0, 1)                  [0]       Bernoulli loss probability (each direction)
+      dup: [0, 1)                   [0]       duplication probability (SIL shim only; fast-time ignores it)
+      reorder: [0, 1)               [0]       queue-jump reordering probability (SIL shim only)
+      outages: list                             link down windows, both directions: a datagram
+        - start_s*, end_s*                      sent in [start_s, end_s) is lost
+    pilot:
+      mode: model | scripted        [model]
+      model:                                    options of daa_sil.models.pilot.PilotModel
+        response: deterministic | fixed | guendel | no_atc | nasa_rayleigh5  [deterministic]
+      commands: list (scripted mode; required there, forbidden in model mode)
+        - t_s*: [0, duration_s]      first send time; the command is streamed once per step
+          until_s: (t_s, duration_s] [next command's t_s, else duration_s]
+          track_deg, vs_mps, gs_mps  at least one; omitted = keep current
+    allocation:
+      group: a group of daa_sil/data/groups.yaml (B-1 ... ID-2, ID-2-projl, ID-2-map) [ID-1]
+                                      its wait function, W_T, ProjL and blending are the defaults below
+      wait: none | constant | map | always  [from group]
+      wait_constant_s: [0, 120]       [from group, else 5]
+      blending: bool                  [from group]
+      projl: bool                     [from group]  ProjL veto
+      wait_threshold_s: [0, 120]      [from group]  W_T
+      link_timeout_s: (0, 120]        [agent default]
+      stale_command_s: (0, 120]       [agent default]
+    expect:                                   checked by ``daa-sil run`` (exit 1 if violated)
+      lowc: bool                      LoWC must (true) / must not (false) occur
+      nmac: bool
+      decisions_include: [decision names]  each must appear at least once
+      decisions_exclude: [decision names]  none may appear
+      min_range_at_least_m: float     minimum horizontal range must be >= this
+      link_lost_by_s: float           a link_lost decision must appear at or before this sim time
+    faults: list                              process faults, carried out by ``daa-sil run --clock
+      - kill*: gcs                            realtime`` (lockstep refuses them: there the GCS is part of
+        at_s*: (0, duration_s)                the clock). ``kill`` names the process (only the GCS: the
+        restart_s: (at_s, duration_s)         vehicle and the shim are the run); ``at_s`` / ``restart_s``
+        signal: KILL | TERM | INT  [KILL]     are vehicle sim times; a restart binds the same port and
+                                              writes its own command log. Omit restart_s = stays dead.
+                                              ``result.json`` ``faults`` says when each was carried out;
+                                              a fault that could not be carried out fails the run.
+
+Decision names: none, wait, no_wait, pilot, blend, daa_override, daa, stale, link_lost.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
+PILOT_RESPONSES = ("deterministic", "fixed", "guendel", "no_atc", "nasa_rayleigh5")
+MAX_INTRUDERS = 8
+
+
+# --------------------------------------------------------------------------------------------
+# dataclasses (the validated scenario)
+
+@dataclass
+class Origin:
+    lat_deg: float = 37.4
+    lon_deg: float = -122.05
+    alt_m: float = 0.0
+
+
+@dataclass
+class InitialState:
+    """ENU position (m), ground speed (m/s), compass track (deg), vertical speed (m/s, up)."""
+
+    x_m: float
+    y_m: float
+    alt_m: float
+    gs_mps: float
+    track_deg: float
+    vs_mps: float = 0.0
+
+
+@dataclass
+class CpaGeometry:
+    """Intruder placement by its closest point of approach to the unmaneuvered ownship."""
+
+    angle_deg: float
+    hmd_m: float
+    t_cpa_s: float
+    gs_mps: float
+    vmd_m: float = 0.0
+    vs_mps: float = 0.0
+
+
+@dataclass
+class Maneuver:
+    """Intruder script segment: rates held over ``[start_s, end_s)``."""
+
+    start_s: float
+    end_s: float
+    turn_rate_dps: float = 0.0
+    accel_mps2: float = 0.0
+    vertical_accel_mps2: float = 0.0
+
+
+@dataclass
+class IntruderSpec:
+    id: int
+    callsign: str
+    initial: "InitialState | None" = None
+    cpa: "CpaGeometry | None" = None
+    maneuvers: list = field(default_factory=list)
+
+
+@dataclass
+class Outage:
+    """Link down (both directions) for datagrams sent in ``[start_s, end_s)`` (sim s)."""
+
+    start_s: float
+    end_s: float
+
+
+@dataclass
+class LinkSpec:
+    """Delay specs are kept as given (str or dict); :func:`delay_model` builds the model."""
+
+    up: Any = "const:4"
+    down: Any = None
+    epoch_s: float = 10.0
+    loss: float = 0.0
+    outages: list = field(default_factory=list)
+    dup: float = 0.0
+    reorder: float = 0.0
+
+    def outage_windows(self) -> list[tuple[float, float]]:
+        """``(start_s, end_s)`` link-down windows (sim s)."""
+        return [(o.start_s, o.end_s) for o in self.outages]
+
+
+@dataclass
+class ScriptedCommand:
+    """A scripted pilot command (nan = keep current), streamed once per step over ``[t_s, until_s)``."""
+
+    t_s: float
+    until_s: float
+    track_deg: float = math.nan
+    vs_mps: float = math.nan
+    gs_mps: float = math.nan
+
+
+@dataclass
+class PilotSpec:
+    mode: str = "model"
+    response: str = "deterministic"
+    commands: list = field(default_factory=list)
+
+
+@dataclass
+class AllocationSpec:
+    group: str = "ID-1"
+    wait: str = "map"
+    wait_constant_s: float = 5.0
+    blending: bool = True
+    wait_threshold_s: float = 4.0
+    projl: bool = True
+    link_timeout_s: "float | None" = None
+    stale_command_s: "float | None" = None
+
+
+@dataclass
+class Expectation:
+    lowc: "bool | None" = None
+    nmac: "bool | None" = None
+    decisions_include: list = field(default_factory=list)
+    decisions_exclude: list = field(default_factory=list)
+    min_range_at_least_m: "float | None" = None
+    link_lost_by_s: "float | None" = None
+
+
+FAULT_PROCESSES = ("gcs",)
+FAULT_SIGNALS = ("KILL", "TERM", "INT")
+
+
+@dataclass
+class ProcessFault:
+    """Kill ``process`` with SIG``signal`` at vehicle sim time ``at_s``; restart it at ``restart_s`` (None = never)."""
+
+    process: str
+    at_s: float
+    restart_s: "float | None" = None
+    signal: str = "KILL"
+
+    def describe(self) -> str:
+        """``"SIGKILL gcs at 20 s, restart at 40 s"``."""
+        return (f"SIG{self.signal} {self.process} at {self.at_s:g} s"
+                + (f", restart at {self.restart_s:g} s" if self.restart_s is not None else ", no restart"))
+
+
+@dataclass
+class Scenario:
+    name: str
+    ownship: InitialState
+    intruders: list
+    description: str = ""
+    seed: int = 1
+    duration_s: float = 240.0
+    thresholds: str = "do365"
+    origin: Origin = field(default_factory=Origin)
+    link: LinkSpec = field(default_factory=LinkSpec)
+    pilot: PilotSpec = field(default_factory=PilotSpec)
+    allocation: AllocationSpec = field(default_factory=AllocationSpec)
+    expect: Expectation = field(default_factory=Expectation)
+    faults: list = field(default_factory=list)
+    source: str = field(default="<memory>", compare=False)
+
+    @property
+    def n_steps(self) -> int:
+        """Number of 1 s steps (``t_k = k``, k = 0 .. n_steps-1)."""
+        return int(math.floor(self.duration_s + 1e-9))
+
+    def to_dict(self) -> dict:
+        """Plain YAML-ready dict (the inverse of :func:`scenario_from_dict`)."""
+        d = asdict(self)
+        d.pop("source", None)
+        for intr in d["intruders"]:
+            for k in ("initial", "cpa"):
+                if intr[k] is None:
+                    intr.pop(k)
+        if d["link"]["down"] is None:
+            d["link"].pop("down")
+        d["pilot"]["commands"] = [{k: v for k, v in c.items() if not (isinstance(v, float) and math.isnan(v))}
+                                  for c in d["pilot"]["commands"]]
+        if d["pilot"]["mode"] == "model":
+            d["pilot"].pop("commands")
+        d["pilot"]["model"] = {"response": d["pilot"].pop("response")}
+        for sect in ("allocation", "expect"):
+            d[sect] = {k: v for k, v in d[sect].items() if v is not None and v != []}
+        if d["faults"]:
+            d["faults"] = [{("kill" if k == "process" else k): v for k, v in f.items() if v is not None}
+                           for f in d["faults"]]
+        else:
+            d.pop("faults")
+        return d

@@ -1,0 +1,129 @@
+"""The delay shim's tick handling: in lockstep and realtime-ticks modes the shim's sim clock follows
+the vehicle's SIM_TICK, releases what is due at each tick, forwards the tick to the GCS and echoes
+it, and keeps the tick schedule statistics."""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+
+from daa_sil.sil.shim_config import _ACK_ID, _TICK_ID, control_ids
+
+#: a GCS that has not acknowledged this many forwarded ticks is taken as gone (stamps fall back to the last tick)
+MAX_GCS_LAG_TICKS = 8
+
+
+class ShimTicks:
+    """Part of :class:`daa_sil.sil.shim.DelayShim` (a mixin: it uses the shim's attributes)."""
+
+    def _tick_datapath(self, side: str, data: bytes, t_rx: "float | None") -> None:
+        """Lockstep rules (module docstring): control messages move the clock, data is stamped by ticks."""
+        c = self.counters
+        ids = control_ids(data)
+        want = _TICK_ID if side == "vehicle" else _ACK_ID
+        if want in ids:
+            msg = self._decode_control(data, want)
+            if msg is not None:
+                if -1 in ids:
+                    c["mixed_control"] += 1
+                if side == "vehicle":
+                    self._on_tick(msg, data, t_rx)
+                else:
+                    self._on_ack(msg, data)
+                return
+            c["bad_control"] += 1
+        if side == "vehicle":
+            self.lines["down"].push(self.sim_time, data)
+            return
+        stamp = self._gcs_stamp()
+        recs = self.lines["up"].push(stamp, data)
+        if stamp < self.sim_time and any(not r.dropped and r.t_out <= self.sim_time for r in recs):
+            c["released_late"] += 1  # lockstep would have released it at a tick already processed
+
+    def _gcs_stamp(self) -> float:
+        """Sim time a GCS datagram is sent at: the oldest tick it has not acknowledged (module docstring)."""
+        if self._gcs_acks and self._unacked:
+            t = self._unacked[0][1]
+            if t < self.sim_time:
+                self.counters["gcs_lagged"] += 1
+            return t
+        return self.sim_time
+
+    def _decode_control(self, data: bytes, want: int):
+        msgs = self.codec.decode(data)
+        for m in msgs:
+            if m.get_msgId() == want:
+                return m
+        return None
+
+    def _on_tick(self, msg, data: bytes, t_rx: "float | None" = None) -> None:
+        c = self.counters
+        c["ticks"] += 1
+        rx = (t_rx if t_rx is not None else self._loop.time()) if self.config.clock == "realtime" else 0.0
+        t_k = msg.time_ms / 1000.0
+        k = int(msg.tick)
+        if t_k < self.sim_time:
+            c["clock_backwards"] += 1
+        else:
+            self.sim_time = t_k
+        self.last_tick = k
+        n = self._release("down", self.sim_time) + self._release("up", self.sim_time)
+        if self._send("gcs", data) and (not self._unacked or self._unacked[-1][0] < k):
+            self._unacked.append((k, t_k))
+            if len(self._unacked) > MAX_GCS_LAG_TICKS:  # the GCS ignores ticks: gone, or not ack-capable
+                self._unacked.clear()
+                if self._gcs_acks:
+                    c["gcs_unresponsive"] += 1
+                self._gcs_acks = False
+        side = self.sides.get("vehicle")
+        if side is not None and not side.closed and side.sendto(data, self.peers["vehicle"]):
+            c["tick_echoes"] += 1  # "shim alive, uplink due at t_k sent"
+        if self.config.clock == "realtime" and k not in self._seen_ticks and len(self._tick_log) < 1_000_000:
+            self._seen_ticks.add(k)
+            self._tick_log.append((t_k, rx, self._loop.time(), n))
+        for item in list(self._tick_waiters):
+            if item[0] <= self.last_tick and not item[1].done():
+                item[1].set_result(self.last_tick)
+        self._tick_waiters = [w for w in self._tick_waiters if not w[1].done()]
+
+    def _on_ack(self, msg, data: bytes) -> None:
+        self.counters["acks"] += 1
+        self._gcs_acks = True
+        k = int(msg.tick)
+        while self._unacked and self._unacked[0][0] <= k:
+            self._unacked.popleft()
+        self._send("vehicle", data)
+
+    # -- observability -----------------------------------------------------------------------------
+    async def wait_tick(self, tick: int, timeout: float) -> int:
+        """Wait (lockstep) until a tick >= ``tick`` has been processed; returns the last tick."""
+        if self.last_tick is not None and self.last_tick >= tick:
+            return self.last_tick
+        fut = asyncio.get_running_loop().create_future()
+        self._tick_waiters.append((tick, fut))
+        return await asyncio.wait_for(fut, timeout)
+
+    def _tick_origin(self) -> "float | None":
+        """Wall origin of the tick schedule: min over ticks k >= 1 of (arrival - t_k / speed) (s)."""
+        rows = [(t, rx) for t, rx, _, _ in self._tick_log if t > 0]
+        if not rows:
+            return None
+        return min(rx - t / self.config.speed for t, rx in rows)
+
+    def _tick_lateness(self) -> "np.ndarray | None":
+        """Per released packet: wall s from its tick's ideal instant to the end of that tick's releases."""
+        w0 = self._tick_origin()
+        if w0 is None:
+            return None
+        out = [done - (w0 + t / self.config.speed) for t, _, done, n in self._tick_log if t > 0 for _ in range(n)]
+        return np.array(out, float)
+
+    def _tick_schedule_stats(self) -> dict:
+        """How late ticks arrived against their schedule (ms): the vehicle's pacing plus the transit."""
+        w0 = self._tick_origin()
+        if w0 is None:
+            return {"ticks": len(self._tick_log)}
+        late = np.array([rx - (w0 + t / self.config.speed) for t, rx, _, _ in self._tick_log if t > 0]) * 1000.0
+        return {"ticks": int(late.size), "arrival_late_p50_ms": float(np.percentile(late, 50)),
+                "arrival_late_p99_ms": float(np.percentile(late, 99)), "arrival_late_max_ms": float(late.max())}

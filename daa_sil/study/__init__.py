@@ -1,0 +1,1 @@
+"""The fast-time study (sans-IO): batched simulation, campaigns over groups, statistics, metrics, findings, the report."""

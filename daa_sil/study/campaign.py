@@ -1,0 +1,272 @@
+"""Fast-time Monte Carlo campaigns over the paper's groups (Table 2), chunked over executors.
+
+One code path for every executor: chunks of encounters are submitted to a
+:class:`concurrent.futures.Executor` and collected with ``as_completed``, whichever executor it is:
+
+* ``workers=1`` -- in-process (one worker thread, so the progress bar stays live);
+* ``workers=K`` -- :class:`~concurrent.futures.ProcessPoolExecutor` (fork; the wait maps are loaded
+  once in the parent and inherited);
+* ``scheduler="local-dask"`` -- a local Dask ``LocalCluster`` with ``workers`` processes;
+* ``scheduler="tcp://host:8786"`` -- an existing Dask cluster, ``Client(addr).get_executor(pure=False)``
+  (``pure=False``: otherwise identical arguments would map to one key and run once).
+
+Determinism: the encounter set is generated once from the campaign seed and saved as
+``DIR/encounters.parquet``; every random stream of encounter ``i`` (pilot, uplink and downlink delay)
+comes from the encounter's own seed (:func:`encounter_seeds`), the same for every group (common
+random numbers), never from the chunk. Results therefore do not depend on chunking, worker count,
+executor or interruption: a killed campaign resumed with ``resume=True`` skips complete chunks and
+ends with exactly the tables of an uninterrupted run.
+
+Layout of ``DIR``::
+
+    campaign.json                      config, versions, preset, seed, status
+    encounters.parquet                 the encounter set (daa_sil.models.encounters format)
+    <group>/decisions-<chunk>.parquet  per-decision rows of one chunk (written first)
+    <group>/encounters-<chunk>.parquet per-encounter rows of one chunk (its presence = chunk done)
+
+Each file is written atomically by the driver (workers only compute and return Arrow tables, so a
+remote Dask cluster needs no shared file system).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import functools
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pyarrow as pa
+
+from daa_sil.errors import FileFormatError, UsageError
+from daa_sil.files import atomic_write_json, ensure_dir, remove_stale_temps
+from daa_sil.config.groups import GroupSpec, parse_groups
+from daa_sil.study.campaign_files import _versions, check_out_dir, chunk_done, load_campaign_json, write_chunk
+from daa_sil.study.executors import make_executor
+from daa_sil.study.campaign_files import CAMPAIGN_FORMAT
+from daa_sil.study.campaign_config import CampaignConfig
+
+
+# --- configuration --------------------------------------------------------------------------------
+
+
+def encounter_seeds(campaign_seed: int, encounter_ids: np.ndarray) -> np.ndarray:
+    """Per-encounter seeds (int64 >= 0): ``SeedSequence(campaign_seed, spawn_key=(i,))`` hashed to 63 bits
+    (:func:`daa_sil.models.encounters.encounter_seed`). ``SeedSequence(seed_i)`` is the root of every random
+    stream of encounter ``i`` in every group (:func:`daa_sil.study.fasttime.encounter_streams`), so one
+    encounter can be replayed (e.g. in the SIL) from its ``seed`` column alone."""
+    from daa_sil.models.encounters import encounter_seed
+
+    return encounter_seed(int(campaign_seed), encounter_ids)
+
+
+# --- chunk task (runs in a worker) ----------------------------------------------------------------
+@dataclass
+class ChunkTask:
+    """One chunk of one group: the work unit sent to an executor (small, picklable)."""
+
+    group: str
+    chunk: int
+    config: CampaignConfig
+    encounters: object  # EncounterSet subset for [lo, hi)
+    seeds: np.ndarray  # (n,) int64 per-encounter seeds
+
+
+@dataclass
+class ChunkResult:
+    """What a worker returns: the two result tables of one chunk and its compute time (s)."""
+
+    group: str
+    chunk: int
+    encounters: pa.Table
+    decisions: pa.Table
+    compute_s: float
+    n: int
+
+
+@functools.lru_cache(maxsize=4)
+def _wait_family(source: str, preset: str, gamma: "float | None" = None):
+    """The wait-map family of a campaign, loaded once per process (builds the cache if needed)."""
+    from daa_sil import waitmap
+
+    return waitmap.family_for(source, preset=preset, gamma=gamma)
+
+
+def campaign_family(config: CampaignConfig):
+    """The wait-map family a campaign's map groups read (None if no group uses the map)."""
+    return _wait_family(config.map_source, config.preset, config.gamma) if config.uses_map else None
+
+
+def run_chunk(task: ChunkTask) -> ChunkResult:
+    """Simulate one chunk of one group (pure function of the task; safe in any worker)."""
+    from .fasttime import simulate
+
+    t0 = time.perf_counter()
+    cfg = task.config
+    spec = cfg.group(task.group)
+    model = spec.delay_model()
+    fam = campaign_family(cfg) if spec.uses_map else None
+    enc_rows, dec_rows, _ = simulate(task.encounters, cfg.policy(task.group), model, model, cfg.pilot_config(),
+                                     daa_cfg=cfg.daa_config(), wait_family=fam,
+                                     seeds=task.seeds, preset=cfg.preset, duration_s=cfg.duration_s,
+                                     dt=cfg.dt_s, group=task.group, record_steps=False)
+    return ChunkResult(task.group, task.chunk, enc_rows, dec_rows, time.perf_counter() - t0, len(task.seeds))
+
+
+# --- files ----------------------------------------------------------------------------------------
+
+
+# --- executors ------------------------------------------------------------------------------------
+
+
+# --- the runner -----------------------------------------------------------------------------------
+@dataclass
+class CampaignSummary:
+    """What a run did: chunks computed/skipped, wall time (s), encounter-steps simulated."""
+
+    out_dir: Path
+    config: CampaignConfig
+    chunks_total: int
+    chunks_skipped: int
+    chunks_run: int
+    wall_s: float
+    compute_s: float
+    encounter_steps: int
+    groups: dict = field(default_factory=dict)
+
+
+def _progress(enabled: bool):
+    from rich.console import Console
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                               TimeRemainingColumn)
+
+    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("encounters"),
+                    TimeElapsedColumn(), TimeRemainingColumn(), console=Console(stderr=True),
+                    disable=not enabled)
+
+
+def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resume: bool = False):
+    """Validate, create ``DIR``, write or check ``campaign.json`` and the encounter set.
+
+    Returns ``(out_dir, config, encounter_set)``. On resume the stored config must equal ``config``.
+    """
+    from daa_sil.models import encounters as enc_mod
+    from daa_sil.models.encounter_files import load_encounters, save_encounters
+
+    config.validate()
+    out = check_out_dir(out_dir, resume)
+    meta_path = out / "campaign.json"
+    enc_path = out / "encounters.parquet"
+    if resume and meta_path.is_file():
+        stored = CampaignConfig.from_dict(load_campaign_json(out)["config"], str(meta_path))
+        if stored != config:
+            diff = [k for k in config.to_dict() if config.to_dict()[k] != stored.to_dict()[k]]
+            raise UsageError(f"--resume: {meta_path} was made with different settings ({', '.join(diff)}); "
+                             f"pass the same options or omit them")
+        if not enc_path.is_file():
+            raise FileFormatError(f"{enc_path} is missing; cannot resume this campaign")
+        stored_map = load_campaign_json(out).get("waitmap")
+        fam = campaign_family(config)
+        if stored_map and fam is not None and stored_map.get("content_hashes") != _describe_family(fam)["content_hashes"]:
+            raise UsageError(f"--resume: the wait maps of {config.map_source!r} are not the ones this campaign started with "
+                             f"(their content hashes differ: rebuilt with other code or parameters); start a new campaign")
+        encs = load_encounters(enc_path)
+        if len(encs) != config.n_encounters:
+            raise FileFormatError(f"{enc_path} holds {len(encs)} encounters, campaign.json says {config.n_encounters}")
+        return out, config, encs
+    fam = campaign_family(config)  # built (or loaded) before anything is written
+    ensure_dir(out)
+    encs = enc_mod.sample_encounters(config.n_encounters, seed=config.seed, preset=config.preset,
+                                     duration_s=config.duration_s, dt_s=config.dt_s,
+                                     t_cpa_s=config.duration_s / 2.0,  # paper: CPA at T/2
+                                     n_intruders=config.n_intruders,
+                                     **config.effective_reading.encounter_overrides())
+    save_encounters(encs, enc_path)  # atomic
+    meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "resolved_config": config.resolved(),
+            "versions": _versions(),
+            "preset": config.preset, "seed": config.seed, "status": "running",
+            "seeds": {"campaign": config.seed,
+                      "encounters": "encounter i: SeedSequence(campaign, spawn_key=(i,)); its 'seed' column in "
+                                    "encounters.parquet roots the pilot, uplink and downlink streams of every group"},
+            "groups": {g.name: g.to_dict() for g in config.effective_groups},
+            "waitmap": ({"source": config.map_source, **_describe_family(fam)} if fam is not None else None),
+            "layout": {"encounters": "<group>/encounters-<chunk>.parquet",
+                       "decisions": "<group>/decisions-<chunk>.parquet", "chunk_size": config.chunk_size}}
+    atomic_write_json(meta_path, meta)
+    return out, config, encs
+
+
+def _describe_family(fam) -> dict:
+    from daa_sil.waitmap import describe
+
+    return describe(fam)
+
+
+def run_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", *, workers: int = 1,
+                 scheduler: "str | None" = None, resume: bool = False, progress: bool = True,
+                 on_chunk: "Callable[[ChunkResult], None] | None" = None) -> CampaignSummary:
+    """Run (or resume) a campaign into ``out_dir``; see the module docstring for the layout."""
+    if not isinstance(workers, int) or workers < 1:
+        raise UsageError(f"--workers must be a positive integer, got {workers!r}")
+    t_start = time.perf_counter()
+    config.validate()
+    check_out_dir(out_dir, resume)
+    # the executor starts before anything is written: a missing or unreachable scheduler leaves no files
+    with make_executor(workers, scheduler) as ex:
+        summary = _run_with(ex, config, out_dir, scheduler, resume, progress, on_chunk)
+    summary.wall_s = time.perf_counter() - t_start
+    return summary
+
+
+def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resume: bool, progress: bool,
+              on_chunk) -> CampaignSummary:
+    out, config, encs = prepare_campaign(config, out_dir, resume)
+    if resume:
+        remove_stale_temps(out)  # temporaries of a writer killed mid-write
+    seeds = np.asarray(encs.seed, dtype=np.int64)
+    todo, skipped = [], 0
+    for g in config.group_names:
+        for c in range(config.n_chunks):
+            if chunk_done(out, g, c):
+                skipped += 1
+            else:
+                todo.append((g, c))
+    if any(config.group(g).uses_map for g, _ in todo) and scheduler is None:
+        campaign_family(config)  # build/load once here; forked workers inherit it
+    summary = CampaignSummary(out, config, config.n_chunks * len(config.group_names), skipped, 0, 0.0, 0.0, 0)
+    steps_per_enc = int(round(config.duration_s / config.dt_s))
+    futs: dict[cf.Future, tuple[str, int]] = {}
+    for g, c in todo:
+        lo, hi = config.chunk_range(c)
+        task = ChunkTask(g, c, config, encs.subset(np.arange(lo, hi)), seeds[lo:hi])
+        futs[ex.submit(run_chunk, task)] = (g, c)
+    todo_set = set(todo)
+    with _progress(progress) as prog:
+        bars = {}
+        for g in config.group_names:
+            done = sum(config.chunk_range(c)[1] - config.chunk_range(c)[0]
+                       for c in range(config.n_chunks) if (g, c) not in todo_set)
+            bars[g] = prog.add_task(f"group {g:5s}", total=config.n_encounters, completed=done)
+        for fut in cf.as_completed(list(futs)):
+            futs.pop(fut)
+            res: ChunkResult = fut.result()
+            write_chunk(out, res)
+            summary.chunks_run += 1
+            summary.compute_s += res.compute_s
+            summary.encounter_steps += res.n * steps_per_enc
+            prog.advance(bars[res.group], res.n)
+            if on_chunk is not None:
+                on_chunk(res)
+    meta = load_campaign_json(out)
+    meta["status"] = "complete"
+    atomic_write_json(out / "campaign.json", meta)
+    return summary
+
+
+__all__ = ["GroupSpec", "parse_groups", "campaign_family", "CampaignConfig", "encounter_seeds", "ChunkTask",
+           "ChunkResult", "run_chunk", "chunk_paths", "chunk_done", "write_chunk", "read_results",
+           "load_campaign_json", "check_out_dir", "make_executor", "prepare_campaign", "run_campaign",
+           "CampaignSummary", "DASK_HINT"]

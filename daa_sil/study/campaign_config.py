@@ -1,0 +1,224 @@
+"""Everything that determines a campaign's results (:class:`CampaignConfig`, recorded in
+``campaign.json`` and checked on ``--resume``): the groups with the campaign's overrides, the
+encounter set, the wait maps, the reading, and the DAA, pilot and link settings of its run
+configuration (:mod:`daa_sil.config.run_config`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+
+from daa_sil.config.groups import GroupSpec, parse_groups
+from daa_sil.errors import FileFormatError, UsageError
+from daa_sil.geometry.thresholds import PRESETS
+from daa_sil.waitmap.build import DEFAULT_MAP
+
+#: default encounter duration T (s) and step dt (s), paper §IV
+DEFAULT_DURATION_S = 240.0
+
+
+DEFAULT_DT_S = 1.0
+
+
+#: encounters per task: the per-step numpy overhead is paid once per chunk, so bigger chunks are
+#: faster (500 -> 2000 about 1.9x per core); one 2000-encounter chunk peaks at about 0.2 GB RSS
+DEFAULT_CHUNK = 2000
+
+
+@dataclass(frozen=True)
+class CampaignConfig:
+    """Everything that determines a campaign's results (stored in ``campaign.json``).
+
+    ``groups`` are the group definitions as given (:mod:`daa_sil.config.groups`); the overrides ``wt``
+    (W_T of every group with a wait function), ``projl_lookahead`` (ProjL look-ahead N of every
+    group) and ``latency`` (a delay spec such as ``gauss:5,3`` for every group's links) apply on
+    top (:attr:`effective_groups`). ``waitmap`` is a map preset, grid spec or family directory
+    (:func:`daa_sil.waitmap.family_for`), ``gamma`` the MDP discount (None: the map preset's).
+    """
+
+    groups: tuple = field(default_factory=lambda: parse_groups(None))
+    n_encounters: int = 10_000
+    seed: int = 0
+    chunk_size: int = DEFAULT_CHUNK
+    preset: str = "paper"
+    duration_s: float = DEFAULT_DURATION_S
+    dt_s: float = DEFAULT_DT_S
+    waitmap: str = DEFAULT_MAP
+    gamma: "float | None" = None
+    wt: "float | None" = None
+    projl_lookahead: "float | None" = None
+    latency: "str | None" = None
+    n_intruders: int = 1
+    reading: str = "literal"  #: a named reading of :mod:`daa_sil.config.readings`
+    reading_set: dict = field(default_factory=dict)  #: overrides of the reading's settings
+    daa: dict = field(default_factory=dict)  #: DaaConfig field changes on top of the preset's
+    pilot: dict = field(default_factory=dict)  #: PilotConfig field changes (the reading's then apply)
+    link: dict = field(default_factory=dict)  #: agent ``stale_command_s`` / ``link_timeout_s`` (empty = policy's)
+
+    def __post_init__(self):
+        # groups may be given by name (``("B-2", "ID-2")``) or as a --groups string
+        g = self.groups
+        if isinstance(g, str) or (isinstance(g, (tuple, list)) and any(isinstance(x, str) for x in g)):
+            names = g if isinstance(g, str) else [x if isinstance(x, str) else x.name for x in g]
+            specs = {s.name: s for s in g if isinstance(s, GroupSpec)} if not isinstance(g, str) else {}
+            parsed = parse_groups(names)
+            object.__setattr__(self, "groups", tuple(specs.get(p.name, p) for p in parsed))
+        else:
+            object.__setattr__(self, "groups", tuple(g))
+
+    def validate(self) -> "CampaignConfig":
+        """Raise UsageError (one line) on a bad value; returns self."""
+        if not self.groups or not all(isinstance(g, GroupSpec) for g in self.groups):
+            raise UsageError("a campaign needs at least one group definition")
+        for name, val in (("--encounters", self.n_encounters), ("--chunk-size", self.chunk_size),
+                          ("--intruders", self.n_intruders)):
+            if not isinstance(val, (int, np.integer)) or isinstance(val, bool) or val <= 0:
+                raise UsageError(f"{name} must be a positive integer, got {val!r}")
+        if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool) or self.seed < 0:
+            raise UsageError(f"--seed must be a non-negative integer, got {self.seed!r}")
+        if self.preset not in PRESETS:
+            raise UsageError(f"unknown --preset {self.preset!r}; allowed: {', '.join(PRESETS)}")
+        if not (math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise UsageError(f"duration must be > 0 s, got {self.duration_s!r}")
+        if not (math.isfinite(self.dt_s) and self.dt_s > 0):
+            raise UsageError(f"dt must be > 0 s, got {self.dt_s!r}")
+        for name, val, lo, hi in (("--wt", self.wt, 0.0, 600.0), ("--projl-lookahead", self.projl_lookahead, 0.0, 600.0),
+                                  ("--gamma", self.gamma, 1e-6, 0.999999)):
+            if val is not None and not (isinstance(val, (int, float)) and math.isfinite(val) and lo <= val <= hi):
+                raise UsageError(f"{name} must be within [{lo:g}, {hi:g}], got {val!r}")
+        if self.latency is not None:
+            from daa_sil.models.latency import parse_delay_spec
+
+            parse_delay_spec(self.latency)
+        self.effective_groups  # noqa: B018 -- validates the overridden definitions
+        bad = sorted(set(self.link) - {"stale_command_s", "link_timeout_s"})
+        if bad:
+            raise UsageError(f"unknown link setting {bad[0]!r}; allowed: stale_command_s, link_timeout_s")
+        for what, build in (("daa", self.daa_config), ("pilot", self.pilot_config)):
+            try:
+                build()
+            except TypeError as exc:
+                raise UsageError(f"{what}: {exc}") from None
+        r = self.effective_reading
+        if r.waitmap is not None and self.waitmap not in (DEFAULT_MAP, r.waitmap):
+            raise UsageError(f"reading {r.name!r} sets the wait maps to {r.waitmap!r}; drop --waitmap {self.waitmap}")
+        if self.uses_map:
+            from daa_sil.waitmap.build import check_source
+
+            check_source(self.map_source, self.preset, self.gamma)
+        return self
+
+    @property
+    def map_source(self) -> str:
+        """The ``--waitmap`` the map groups read: the reading's, else the campaign's."""
+        return self.effective_reading.waitmap or self.waitmap
+
+    @property
+    def effective_reading(self):
+        """The :class:`daa_sil.config.readings.Reading` flown and counted (named bundle + overrides)."""
+        from daa_sil.config.readings import reading_for
+
+        return reading_for(self.reading, **dict(self.reading_set))
+
+    @property
+    def group_names(self) -> tuple[str, ...]:
+        return tuple(g.name for g in self.groups)
+
+    @property
+    def effective_groups(self) -> tuple[GroupSpec, ...]:
+        """The groups with the campaign's overrides applied (what is flown)."""
+        out = []
+        for g in self.groups:
+            ch: dict = {}
+            if self.wt is not None and g.wait_mode != "none":
+                ch["wait_threshold_s"] = float(self.wt)
+            if self.projl_lookahead is not None:
+                ch["projl_horizon_s"] = float(self.projl_lookahead)
+            if self.latency is not None:
+                from daa_sil.models.latency import parse_delay_spec
+
+                ch["latency"] = parse_delay_spec(self.latency).to_dict()
+            out.append(g.with_(**ch) if ch else g)
+        return tuple(out)
+
+    def group(self, name: str) -> GroupSpec:
+        """The effective definition of one of the campaign's groups."""
+        for g in self.effective_groups:
+            if g.name == name:
+                return g
+        raise UsageError(f"group {name!r} is not part of this campaign ({', '.join(self.group_names)})")
+
+    @property
+    def uses_map(self) -> bool:
+        return any(g.uses_map for g in self.groups)
+
+    @property
+    def n_chunks(self) -> int:
+        return (self.n_encounters + self.chunk_size - 1) // self.chunk_size
+
+    def chunk_range(self, chunk: int) -> tuple[int, int]:
+        """Encounter index range ``[lo, hi)`` of a chunk."""
+        lo = chunk * self.chunk_size
+        return lo, min(lo + self.chunk_size, self.n_encounters)
+
+    def daa_config(self):
+        """The :class:`~daa_sil.daa.config.DaaConfig` flown: the preset's with :attr:`daa` applied."""
+        from daa_sil.daa.config import DaaConfig
+
+        return DaaConfig.for_preset(self.preset, **self.daa)
+
+    def pilot_config(self):
+        """The :class:`~daa_sil.models.pilot_config.PilotConfig` flown: :attr:`pilot`, then the reading's."""
+        from daa_sil.models.pilot_config import PilotConfig
+
+        return self.effective_reading.pilot_config(PilotConfig(**self.pilot))
+
+    def policy(self, name: str):
+        """The agent's :class:`~daa_sil.agent.AllocationPolicy` of group ``name`` (with :attr:`link`)."""
+        pol = self.group(name).policy()
+        return replace(pol, **self.link) if self.link else pol
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["groups"] = [g.to_dict() for g in self.groups]
+        d["reading_set"] = dict(self.reading_set)
+        d["daa"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.daa.items()}
+        d["pilot"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.pilot.items()}
+        d["link"] = dict(self.link)
+        d["readings"] = self.effective_reading.to_dict()  # derived: every setting of the reading
+        return d
+
+    def resolved(self) -> dict:
+        """Every value the campaign flies with, resolved: thresholds, the full DAA and pilot
+        configurations, the agent policy of each group (recorded in ``campaign.json``)."""
+        from daa_sil.geometry.thresholds import get_thresholds
+
+        def plain(obj):
+            return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(obj).items()}
+
+        daa = plain(self.daa_config())
+        daa.pop("thresholds", None)
+        return {"thresholds": asdict(get_thresholds(self.preset)), "daa": daa, "pilot": plain(self.pilot_config()),
+                "policies": {g.name: plain(self.policy(g.name)) for g in self.groups},
+                "reading": self.effective_reading.to_dict()}
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "campaign.json") -> "CampaignConfig":
+        try:
+            groups = tuple(GroupSpec.from_dict(g["name"], {k: v for k, v in g.items() if k != "name"}, where)
+                           for g in d["groups"])
+            opt = {k: d.get(k) for k in ("gamma", "wt", "projl_lookahead", "latency")}
+            return cls(groups=groups, n_encounters=int(d["n_encounters"]), seed=int(d["seed"]),
+                       chunk_size=int(d["chunk_size"]), preset=str(d["preset"]),
+                       duration_s=float(d["duration_s"]), dt_s=float(d["dt_s"]), waitmap=str(d["waitmap"]),
+                       n_intruders=int(d.get("n_intruders", 1)), reading=str(d.get("reading", "literal")),
+                       reading_set=dict(d.get("reading_set") or {}),
+                       daa={k: (tuple(v) if isinstance(v, list) else v) for k, v in (d.get("daa") or {}).items()},
+                       pilot={k: (tuple(v) if isinstance(v, list) else v) for k, v in (d.get("pilot") or {}).items()},
+                       link=dict(d.get("link") or {}), **opt).validate()
+        except (KeyError, TypeError, ValueError) as exc:
+            raise FileFormatError(f"{where}: bad or missing config field ({exc})") from None
+        except UsageError as exc:
+            raise FileFormatError(f"{where}: {exc}") from None

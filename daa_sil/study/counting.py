@@ -1,0 +1,209 @@
+"""How a campaign's tables are counted.
+
+The counting settings of a reading (which pilot commands count as received, over which window),
+the per-encounter columns each counted quantity sums (:data:`COUNT_SOURCES`), and the normalised
+per-decision table.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+
+from daa_sil.errors import UsageError
+from daa_sil.study.metrics import paper_results
+
+# ==================================================================================================
+# The encounter-level study
+# ==================================================================================================
+#: counting settings of a reading (``campaign.json`` ``config.readings`` keys) and their defaults
+COUNTING_DEFAULTS = {"received": "arrived", "window": "active"}
+
+
+#: allowed values of each counting setting, as documented for readers of a report
+COUNTING_HELP = {
+    "received": {"arrived": "every fresh pilot command that arrived during the window (incl. those the DAA overrode)",
+                 "pilot+blend": "executed as sent + blended (the paper's Table 5 arithmetic: received = pilot + blend)",
+                 "executed": "executed as sent only"},
+    "window": {"active": "steps where the agent decides (corrective alert, a wait or blend in progress, DAA holding)"},
+}
+
+
+#: counted quantity -> (the counting settings it depends on, {their values: per-encounter columns summed})
+#: decisions happen only in the active phase, so their whole-encounter count is the active one;
+#: commands also arrive outside it (``n_*_whole`` columns of :mod:`daa_sil.study.fasttime`)
+def _decisions(col: str) -> tuple:
+    return (("window",), {("active",): (col,), ("whole",): (col,)})
+
+
+COUNT_SOURCES: dict[str, tuple[tuple[str, ...], dict[tuple[str, ...], tuple[str, ...]]]] = {
+    "wait": _decisions("n_wait"),
+    "no_wait": _decisions("n_no_wait"),
+    "received": (("received", "window"), {("arrived", "active"): ("n_pilot_received",),
+                                          ("pilot+blend", "active"): ("n_pilot_exec", "n_blend"),
+                                          ("executed", "active"): ("n_pilot_exec",),
+                                          ("arrived", "whole"): ("n_pilot_received_whole",),
+                                          ("pilot+blend", "whole"): ("n_pilot_exec_whole", "n_blend"),
+                                          ("executed", "whole"): ("n_pilot_exec_whole",)}),
+    "pilot_exec": (("window",), {("active",): ("n_pilot_exec",), ("whole",): ("n_pilot_exec_whole",)}),
+    "blend": _decisions("n_blend"),
+    "daa_override": _decisions("n_daa_override"),
+    "blend_intent": _decisions("n_blend_intent"),
+    "blend_exact": _decisions("n_blend_exact"),
+    "blend_axis": _decisions("n_blend_axis"),
+    "stale": _decisions("n_stale"),
+    "link_lost": _decisions("n_link_lost"),
+}
+
+
+def counting_options() -> dict[str, list[str]]:
+    """The values each counting setting can take: every value some entry of :data:`COUNT_SOURCES`
+    uses (so a new table entry is a new allowed value; :data:`COUNTING_HELP` only describes them)."""
+    out: dict[str, list[str]] = {k: [] for k in COUNTING_DEFAULTS}
+    for keys, table in COUNT_SOURCES.values():
+        for opt in table:
+            for k, v in zip(keys, opt):
+                if v not in out.setdefault(k, []):
+                    out[k].append(v)
+    return out
+
+
+#: quantities a report can do without (older result tables lack their columns)
+OPTIONAL_QUANTITIES = ("blend_intent", "stale", "link_lost")
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One named reading of the paper: its ``name``, its ``settings`` (``config.readings``; the
+    counting keys of :data:`COUNTING_DEFAULTS` are used here, the rest is recorded) and where its
+    results come from (``source``)."""
+
+    name: str = "default"
+    settings: Mapping = field(default_factory=dict)
+    source: str = ""
+
+    def counting(self) -> dict:
+        """The counting settings in force: defaults overridden by the reading's."""
+        out = dict(COUNTING_DEFAULTS)
+        for k in COUNTING_DEFAULTS:
+            if k in self.settings and self.settings[k] is not None:
+                out[k] = str(self.settings[k])
+        return out
+
+    def columns_for(self, quantity: str) -> tuple[str, ...]:
+        """Per-encounter columns summed for ``quantity`` under this reading."""
+        direct = self.settings.get("columns") if isinstance(self.settings, Mapping) else None
+        if isinstance(direct, Mapping) and quantity in direct:
+            cols = direct[quantity]
+            return (cols,) if isinstance(cols, str) else tuple(str(c) for c in cols)
+        if quantity not in COUNT_SOURCES:
+            raise UsageError(f"unknown counted quantity {quantity!r}; known: {', '.join(COUNT_SOURCES)}")
+        keys, table = COUNT_SOURCES[quantity]
+        cnt = self.counting()
+        opt = tuple(cnt[k] for k in keys)
+        if opt not in table:
+            allowed = "; ".join(", ".join(f"{k}={v}" for k, v in zip(keys, o)) for o in table)
+            raise UsageError(f"reading {self.name!r}: {quantity!r} cannot be counted with "
+                             f"{', '.join(f'{k}={v}' for k, v in zip(keys, opt))}; allowed: {allowed}")
+        return table[opt]
+
+    def describe(self) -> str:
+        c = self.counting()
+        rest = {k: v for k, v in self.settings.items() if k not in COUNTING_DEFAULTS and k != "columns"}
+        txt = ", ".join(f"{k}={v}" for k, v in c.items())
+        if rest:
+            txt += "; " + ", ".join(f"{k}={v}" for k, v in sorted(rest.items()))
+        return txt
+
+
+def paper_setup(group: str) -> "str | None":
+    """``baseline`` / ``integrated`` for the paper's five groups (Table 2), None for others."""
+    g = paper_results().get("groups", {}).get(group)
+    return g.get("setup") if isinstance(g, dict) else None
+
+
+#: decision-table columns the study reads (provenance needs ``decided_by`` and/or ``in_box``)
+DECISION_COLUMNS = ("group", "encounter_id", "decision", "decided_by", "in_box", "wait_in_box")
+
+
+def normalise_decisions(dec) -> "dict | None":
+    """The decision table (Table or dict) as numpy columns for :class:`Study`: ``decided_by`` as
+    str with ``""`` for none, ``in_box`` as int8 (1 inside the map's box, 0 outside, -1 no lookup).
+    None when the table has neither provenance column."""
+    if dec is None:
+        return None
+    names = dec.column_names if hasattr(dec, "column_names") else list(dec)
+    if "in_box" not in names and "wait_in_box" in names:  # the simulator's name (daa_sil.study.fasttime)
+        if hasattr(dec, "rename_columns"):
+            dec = dec.rename_columns(["in_box" if c == "wait_in_box" else c for c in names])
+        else:
+            dec = {("in_box" if k == "wait_in_box" else k): v for k, v in dec.items()}
+        names = dec.column_names if hasattr(dec, "column_names") else list(dec)
+    if not any(c in names for c in ("decided_by", "in_box")):
+        return None
+    out = {}
+    if hasattr(dec, "column_names"):
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        def arr(c):
+            return dec.column(c)
+
+        out["group"] = np.asarray(arr("group").to_numpy(zero_copy_only=False)).astype(str)
+        out["encounter_id"] = np.asarray(arr("encounter_id").to_numpy(zero_copy_only=False), np.int64)
+        if "decision" in names:
+            out["decision"] = np.asarray(arr("decision").to_numpy(zero_copy_only=False)).astype(str)
+        if "decided_by" in names:
+            col = pc.cast(arr("decided_by"), pa.string())
+            out["decided_by"] = np.asarray(pc.fill_null(col, "").to_numpy(zero_copy_only=False)).astype(str)
+        if "in_box" in names:  # bool (or 0/1 numbers); null or nan = no lookup
+            col = arr("in_box")
+            valid = np.asarray(pc.is_valid(col).to_numpy(zero_copy_only=False), bool)
+            vals = np.asarray(pc.fill_null(pc.cast(col, pa.float64()), 0.0).to_numpy(zero_copy_only=False), float)
+            valid &= np.isfinite(vals)
+            out["in_box"] = np.where(valid, (vals != 0).astype(np.int8), np.int8(-1)).astype(np.int8)
+        return out
+    out["group"] = np.asarray(dec["group"]).astype(str)
+    out["encounter_id"] = np.asarray(dec["encounter_id"], np.int64)
+    if "decision" in dec:
+        out["decision"] = np.asarray(dec["decision"]).astype(str)
+    if "decided_by" in dec:
+        out["decided_by"] = np.array(["" if (b is None or b != b) else str(b) for b in dec["decided_by"]], dtype=str)
+    if "in_box" in dec:
+        out["in_box"] = np.array([-1 if (b is None or b != b) else int(bool(b)) for b in dec["in_box"]], np.int8)
+    return out
+
+
+def _decision_columns(dec: "dict | None", group: str, ids: np.ndarray) -> "dict | None":
+    """Per-encounter provenance counts of ``group`` from a normalised decision table (or None):
+    wait/no-wait decisions with a ``decided_by``, those decided by the map, by both and by ProjL;
+    map lookups (``in_box`` given) and those inside the box."""
+    if dec is None:
+        return None
+    m = dec["group"] == group
+    eid = dec["encounter_id"][m]
+    pos = np.searchsorted(ids, eid)
+    ok = (pos < ids.size) & (ids[np.minimum(pos, ids.size - 1)] == eid)
+    n = ids.size
+    out = {}
+
+    def count(mask):
+        sel = mask & ok
+        return np.bincount(pos[sel], minlength=n).astype(float)
+
+    if "decided_by" in dec:
+        by = dec["decided_by"][m]
+        has = by != ""
+        if "decision" in dec:
+            has &= np.isin(dec["decision"][m], ("wait", "no_wait"))
+        out["n_dec"] = count(has)
+        out["n_dec_map"] = count(has & (by == "map"))
+        out["n_dec_both"] = count(has & (by == "both"))
+        out["n_dec_projl"] = count(has & (by == "projl"))
+    if "in_box" in dec:
+        ib = dec["in_box"][m]
+        out["n_lookup"] = count(ib >= 0)
+        out["n_in_box"] = count(ib == 1)
+    return out
