@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys
@@ -112,14 +111,6 @@ def main() -> None:
 LATE_TARGET_MS = 50.0
 
 
-def _same(a, b) -> bool:
-    if isinstance(a, list):
-        return isinstance(b, list) and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
-    if isinstance(a, float) and isinstance(b, float):
-        return (math.isnan(a) and math.isnan(b)) or a == b
-    return a == b
-
-
 def _launch(scenario: Path, out: Path, clock: list, env: "dict | None" = None) -> subprocess.Popen:
     out.mkdir(parents=True, exist_ok=True)
     return subprocess.Popen([sys.executable, "-m", "daa_sil.cli", "run", str(scenario), "--out", str(out), "--json"]
@@ -136,14 +127,14 @@ def _evaluate(out: Path, rc: int, ref_rows: list, ref: dict) -> dict:
     except (OSError, ValueError):
         ev["error"] = (out / "stderr.txt").read_text()[-300:]
         return ev
-    from daa_sil.steplog import steplog_metadata
+    from daa_sil.steplog import cells_equal, steplog_metadata
 
     rows = read_steplog(out / "steplog.parquet").to_pylist()
     timing = json.loads(steplog_metadata(out / "steplog.parquet").get("realtime_timing", "{}"))
     ev["t0"], ev["late_ms"] = timing.get("t0_monotonic"), timing.get("late_ms", [])
     ev["ready_ms"] = timing.get("ready_ms", [])
     ev["speed"], ev["short_slice"] = timing.get("speed"), timing.get("short_slice")
-    cells = sum(1 for ra, rb in zip(ref_rows, rows) for k in ra if not _same(ra[k], rb[k]))
+    cells = sum(1 for ra, rb in zip(ref_rows, rows) for k in ra if not cells_equal(ra[k], rb[k]))
     rt = res.get("realtime") or {}
     lat = rt.get("shim_release_lateness_ms") or {}
     ev.update(identical=len(rows) == len(ref_rows) and cells == 0, cells_differing=cells,

@@ -255,6 +255,16 @@ def steplog_metadata(table_or_path: "pa.Table | str | os.PathLike") -> dict[str,
     return {k.decode(): v.decode() for k, v in meta.items()}
 
 
-__all__ = ["STEP_SCHEMA", "STEP_COLUMNS", "STEPLOG_VERSION", "INTRUDER_COLUMNS", "BAND_COLUMNS", "VOCAB",
+def cells_equal(a, b) -> bool:
+    """Step-log cells ``a`` and ``b`` (Python values from ``to_pylist``) are the same: lists
+    element-wise, floats exactly, NaN equal to NaN (an absent value in both logs)."""
+    if isinstance(a, list):
+        return isinstance(b, list) and len(a) == len(b) and all(cells_equal(x, y) for x, y in zip(a, b))
+    if isinstance(a, float) and isinstance(b, float):
+        return (np.isnan(a) and np.isnan(b)) or a == b
+    return a == b
+
+
+__all__ = ["cells_equal", "STEP_SCHEMA", "STEP_COLUMNS", "STEPLOG_VERSION", "INTRUDER_COLUMNS", "BAND_COLUMNS", "VOCAB",
            "DECISIONS", "RULES", "AUTHORITIES", "AXES", "DIRECTIONS", "REGIONS", "StepLogBuilder",
            "concat_steplogs", "write_steplog", "read_steplog", "check_steplog_schema", "steplog_metadata"]

@@ -18,12 +18,11 @@ saw every telemetry frame one step late at the GCS and every command one step la
 from __future__ import annotations
 
 import json
-import math
 import subprocess
 import sys
 from pathlib import Path
 
-from daa_sil.steplog import read_steplog
+from daa_sil.steplog import cells_equal, read_steplog
 
 ROOT = Path(__file__).resolve().parents[1]
 HANG_GUARD_S = 300
@@ -49,14 +48,6 @@ def _run(path: Path, out: Path, *clock) -> dict:
     return json.loads(cp.stdout)
 
 
-def _same(a, b) -> bool:
-    if isinstance(a, list):
-        return isinstance(b, list) and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
-    if isinstance(a, float) and isinstance(b, float):
-        return (math.isnan(a) and math.isnan(b)) or a == b
-    return a == b
-
-
 def _commands(out: Path) -> list:
     rows = [json.loads(x) for x in (out / "gcs_commands.jsonl").read_text().splitlines()]
     return [(r["t"], r["seq"], r["kind"], r["track_deg"], r["vs_mps"], r["gs_mps"]) for r in rows]
@@ -76,7 +67,7 @@ def test_realtime_gives_the_lockstep_step_log(tmp_path):
     ages = {r["pilot_cmd_age_s"] for r in a if r["pilot_cmd_received"]}
     assert len(ages) >= 2, ages
     assert len(a) == len(b) == 80
-    diff = [(ra["t"], k) for ra, rb in zip(a, b) for k in ra if not _same(ra[k], rb[k])]
+    diff = [(ra["t"], k) for ra, rb in zip(a, b) for k in ra if not cells_equal(ra[k], rb[k])]
     assert not diff, diff[:20]
     assert lock["decision_sequence"] == real["decision_sequence"]
     assert lock["min_range_m"] == real["min_range_m"] and lock["min_range_t_s"] == real["min_range_t_s"]

@@ -130,3 +130,12 @@ def test_reader_rejects_other_versions(tmp_path):
 def test_empty_builder_gives_empty_table():
     tab = sl.StepLogBuilder(np.arange(4), 2).finish()
     assert tab.num_rows == 0 and tab.schema.equals(sl.STEP_SCHEMA, check_metadata=False)
+
+
+def test_cells_equal_treats_nan_as_equal_and_compares_lists_elementwise():
+    from daa_sil.steplog import cells_equal
+
+    nan = float("nan")
+    assert cells_equal(nan, nan) and cells_equal([1.0, nan], [1.0, nan]) and cells_equal("wait", "wait")
+    assert not cells_equal(nan, 0.0) and not cells_equal([1.0], [1.0, 2.0]) and not cells_equal([1.0, 2.0], [1.0, 2.5])
+    assert not cells_equal(1.0, 1.0 + 1e-12)  # exact: parity means identical logs
