@@ -56,7 +56,9 @@ def test_mavproxy_attaches_shows_the_picture_and_sets_wt(tmp_path):
         veh = start(["vehicle", long_scenario(tmp_path), "--out", f"udp:127.0.0.1:{pv}", "--speed", "2",
                      "--steplog", tmp_path / "steplog.parquet"], tmp_path / "vehicle.log")
         procs.append(veh)
-        wait_for_text(tmp_path / "vehicle.log", "READY", 30.0, veh)
+        # CI runs this first on a fresh machine: the vehicle then builds and caches the default alerting
+        # maps before it is READY (about a minute of CPU; the assertions below need those maps' values)
+        wait_for_text(tmp_path / "vehicle.log", "READY", 300.0, veh)
         env = dict(os.environ, HOME=str(tmp_path))
         mp = subprocess.Popen([exe, f"--master=udpout:127.0.0.1:{pg}", f"--state-basedir={tmp_path}",
                                f"--default-modules={MODULES}"], stdin=subprocess.PIPE, stdout=open(log, "w"),
