@@ -168,8 +168,10 @@ def test_sigterm_and_sighup_stop_the_run_like_ctrl_c(tmp_path, sig, clock, extra
     try:
         # realtime at 10x: 80 s of sim time is 8 s of play, so progress lines (every >= 5 s) came
         kids = _running_children(proc, out, 80 if clock == "realtime" else 20)
+        t_sig = time.monotonic()
         os.kill(proc.pid, sig)
         _, err = proc.communicate(timeout=WAIT_S)
+        stopped_s = time.monotonic() - t_sig
         left = _wait_gone(kids, ORPHAN_DEADLINE_S)
     finally:
         _cleanup(proc, kids)
@@ -189,10 +191,12 @@ def test_sigterm_and_sighup_stop_the_run_like_ctrl_c(tmp_path, sig, clock, extra
     if "--quiet" in extra:
         assert progress == [] and "playing" not in err, err
     else:
-        _check_progress_lines(progress, out, wall_s=None)
+        _check_progress_lines(progress, out)
+    print(f"\n{name} ({clock}): exit {proc.returncode} {stopped_s:.2f} s after the signal, children gone, "
+          f"step log {n} steps, progress lines {len(progress)}; {last}")
 
 
-def _check_progress_lines(lines: list[str], out: Path, wall_s: "float | None") -> None:
+def _check_progress_lines(lines: list[str], out: Path) -> None:
     """Each progress line says what the step log says at its sim time (authority, decision, range)."""
     assert lines, "no progress line in a realtime run of 8 s and more"
     rows = {r["t"]: r for r in read_steplog(out / "steplog.parquet").to_pylist()}

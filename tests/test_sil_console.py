@@ -186,9 +186,11 @@ def test_viz_serve_web_leaves_no_rerun_behind(small_steplog, sig):
         assert line.startswith("web viewer: http://127.0.0.1:"), line + proc.stderr.read()
         rerun = _children_named(proc.pid, "rerun") + _children_named(proc.pid, "rerun-watch")
         assert len(rerun) == 1 and not _port_free(web) and not _port_free(grpc)
+        t_sig = time.monotonic()
         os.kill(proc.pid, sig)
         proc.wait(timeout=WAIT_S)
         gone = _wait_until(lambda: not _alive(rerun[0]) and _port_free(web) and _port_free(grpc), GONE_S)
+        gone_s = time.monotonic() - t_sig
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -199,6 +201,7 @@ def test_viz_serve_web_leaves_no_rerun_behind(small_steplog, sig):
     assert gone, f"rerun {rerun} alive or ports {web}/{grpc} held {GONE_S} s after {signal.Signals(sig).name}"
     if sig == signal.SIGTERM:
         assert proc.returncode == 0  # as Ctrl-C: the documented way to stop serving
+    print(f"\nviz steplog --serve-web, {signal.Signals(sig).name}: rerun gone and both ports free {gone_s:.2f} s later")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -282,6 +285,8 @@ def test_gcs_display_alert_is_the_onboard_alert_as_delayed(demo):
             assert "(alert < 2: manoeuvre in progress or pilot's course unsafe)" in line, line
             explained += 1
     assert checked >= 170
+    print(f"\nGCS display: {checked} lines, alert = onboard alert at seen@ (t - 4 s) in all; {explained} lines "
+          f"with the agent in control below alert 2, each explained")
     blending_quiet = [x for x in lines if re.match(r"t=\s*4[2-9]s", x)]
     assert all(" alert 0 " in x and "daa/blend" in x and "manoeuvre in progress" in x for x in blending_quiet[:8])
     assert explained >= 8
