@@ -21,7 +21,7 @@ from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.errors import OutputError, UsageError
 from ._args import check_speed
 from daa_sil.sil.children import interruptible
-from daa_sil.sil.summary import demo_legend, human_summary, pilot_story
+from daa_sil.sil.summary import PROGRESS_EVERY_S, demo_legend, human_summary, pilot_story
 from daa_sil.sil.play import RunOptions, check_faults_allowed, prepare_waitmap, run_sil
 
 
@@ -47,13 +47,13 @@ lockstep runs are logged from the step log when the vehicle exits, so nothing ru
 (--viz-live). An --rrd file is always written from the step log at the end.
 
 While it plays, a progress line (sim time, authority, decision, nearest intruder) comes at most
-every 5 s of wall time (--quiet: none). The processes are called daa-vehicle, daa-shim and daa-gcs
+every {every:g} s of wall time (--quiet: none). The processes are called daa-vehicle, daa-shim and daa-gcs
 (`pgrep daa-gcs`) and die with the run, also when it is killed.
 
 Exit status: 0 = the run matched the scenario's `expect:` block, 1 = an expectation was violated
 or a process failed, 2 = bad input, 130 = interrupted by Ctrl-C, 143 = by SIGTERM, 129 = by SIGHUP
 (the step log so far is still written; the expectation is not checked).
-"""
+""".format(every=PROGRESS_EVERY_S)
 
 
 # --------------------------------------------------------------------------------------------

@@ -53,8 +53,10 @@ def add_web_viewer_arguments(g, serve_help: str) -> None:
 
     g.add_argument("--serve-web", action="store_true", help=serve_help)
     g.add_argument("--bind", default="127.0.0.1", help="address of the web viewer (default 127.0.0.1)")
-    g.add_argument("--web-port", type=int, default=WEB_HTTP_PORT, help=f"web viewer HTTP port (default {WEB_HTTP_PORT})")
-    g.add_argument("--grpc-port", type=int, default=WEB_GRPC_PORT, help=f"web viewer gRPC port (default {WEB_GRPC_PORT})")
+    g.add_argument("--web-port", type=int, default=WEB_HTTP_PORT,
+                   help=f"web viewer HTTP port (default {WEB_HTTP_PORT})")
+    g.add_argument("--grpc-port", type=int, default=WEB_GRPC_PORT,
+                   help=f"web viewer gRPC port (default {WEB_GRPC_PORT})")
 
 
 def check_web_viewer_arguments(args) -> None:

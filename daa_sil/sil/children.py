@@ -12,7 +12,7 @@ a command the way Ctrl-C does.
   a Python child polls ``getppid()`` every :data:`WATCH_POLL_S` in a daemon thread
   (:func:`adopt`) and sends itself SIGTERM (SIGKILL :data:`WATCH_KILL_S` later) when the parent
   is gone; a non-Python child is started under a small watchdog (``python -m
-  daa_sil.sil.children watch PPID -- ARGV``) that does the same for it.
+  daa_sil.sil.children watch PPID NAME -- ARGV``) that does the same for it.
 * Names: a Python child calls :func:`adopt` first thing (``daa_sil.cli.main`` and
   :func:`daa_sil.cli.run_guarded` do); it takes the name :func:`spawn` put in its environment and
   sets it with ``prctl(PR_SET_NAME)`` (at most 15 bytes: ``daa-vehicle``, ``daa-gcs``,
