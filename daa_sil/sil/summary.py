@@ -210,7 +210,7 @@ DECISION_MEANINGS = {
     "wait": "no new pilot command; the wait map says the delayed pilot is worth waiting for, so the "
             "pilot's last command is kept",
     "no_wait": "no new pilot command and waiting is unsafe (wait map below W_T, or a loss of well clear "
-               "projected within 25 s): the onboard DAA resolves",
+               "projected within the ProjL look-ahead): the onboard DAA resolves",
     "pilot": "a new pilot command that is safe: it is flown",
     "blend": "a new pilot command that is unsafe: the onboard DAA flies the safe manoeuvre closest to it",
     "daa_override": "a new pilot command that is unsafe: the onboard DAA resolution is flown instead",
