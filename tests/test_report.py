@@ -2,7 +2,6 @@
 provenance, errors."""
 
 import json
-
 import zlib
 
 import numpy as np
