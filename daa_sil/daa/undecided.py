@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from daa_sil.daa.certify import CLEAR, _settle_time, classify_pieces, clear_second_order
-from daa_sil.daa.intervals import _wcv_soa
+from daa_sil.daa.intervals import wcv_soa
 
 #: most parts an undecided segment is split into (as many as its parts' chords need to meet V_TOL / P_TOL)
 MAX_SPLIT = 16
@@ -57,7 +57,7 @@ class UndecidedPieces:
         mixed = n_in != n_out and lo_in.any() and not lo_in.all()
         for k in range(max(n_in, n_out) if lo.size else 0):
             mid = 0.5 * (lo + hi)
-            same = _wcv_soa(*f(mid), th) == lo_in
+            same = wcv_soa(*f(mid), th) == lo_in
             if mixed:  # the same number of halvings per kind as when they are bisected apart
                 live = np.where(lo_in, k < n_out, k < n_in)
                 lo = np.where(same & live, mid, lo)
@@ -81,7 +81,7 @@ class UndecidedPieces:
         v = [c.reshape(-1) for c in self.v]
         sa, sb = [c[ka] for c in s], [c[ka + 1] for c in s]
         va, vb = [c[ka] for c in v], [c[ka + 1] for c in v]
-        f0, f1 = _wcv_soa(*sa, *va, th), _wcv_soa(*sb, *vb, th)
+        f0, f1 = wcv_soa(*sa, *va, th), wcv_soa(*sb, *vb, th)
         pieces = (flat_seg, path, t0, t0 + h, sa, sb, f0, f1, va[:2], vb[:2])
         tab = self._path_tables()
         for depth in range(MAX_DEPTH):
@@ -164,7 +164,7 @@ class UndecidedPieces:
         L = sid.size
         ts = ta[:, None] + (tb - ta)[:, None] * (np.arange(1, q) / q)[None, :]  # (L, q-1)
         st = self._state(np.repeat(pth, q - 1), ts.ravel())
-        flag = _wcv_soa(*st, th).reshape(L, q - 1)
+        flag = wcv_soa(*st, th).reshape(L, q - 1)
         times = np.concatenate([ta[:, None], ts, tb[:, None]], axis=1)
         pos = [np.concatenate([pa[c][:, None], st[c].reshape(L, q - 1), pb[c][:, None]], axis=1) for c in range(3)]
         flags = np.concatenate([fa[:, None], flag, fb[:, None]], axis=1)
@@ -185,7 +185,7 @@ class UndecidedPieces:
         frac = (np.arange(q) + 0.5) / q
         ts = ta[:, None] + h[:, None] * frac[None, :]  # (L, q)
         L = sid.size
-        hit = _wcv_soa(*self._state(np.repeat(pth, q), ts.ravel()), th).reshape(L, q)
+        hit = wcv_soa(*self._state(np.repeat(pth, q), ts.ravel()), th).reshape(L, q)
         rows = np.flatnonzero(hit.any(axis=1))
         if not rows.size:
             return
