@@ -227,3 +227,100 @@ def test_kernel_outcomes_are_not_trivial():
     assert np.isfinite(t_in).any() and np.isinf(t_in).any() and (t_in == 0).any()
     flags = intervals.wcv_soa(*comp, th)
     assert flags.any() and not flags.all()
+
+
+# --------------------------------------------------------------------------------------------------
+# the evaluator's compiled passes against its numpy reference, on real maneuver paths
+# --------------------------------------------------------------------------------------------------
+from daa_sil.daa import DaaConfig  # noqa: E402
+from daa_sil.daa.axis_paths import _maneuver_paths, _path_sizes  # noqa: E402
+from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_SPEED, AXIS_VERTICAL  # noqa: E402
+from daa_sil.daa.kernels.motion import rel_states_into  # noqa: E402
+from daa_sil.daa.safety import command_paths  # noqa: E402
+from daa_sil.daa.trajectory import PathEvaluator  # noqa: E402
+from daa_sil.geometry.kinematics import AircraftState, Command  # noqa: E402
+
+
+def _encounters(rng, n: int, m: int, cfg):
+    """Ownships at the axis limits or anywhere, intruders converging from 1-9 km, some level with the
+    ownship, some ZTHR above or below it, some standing still, some with nan or huge states."""
+    own = AircraftState(rng.normal(0, 100, n), rng.normal(0, 100, n), np.full(n, 1000.0),
+                        rng.choice([cfg.min_gs, cfg.max_gs, 55.0, 30.0, 120.0], n), rng.uniform(0, 2 * np.pi, n),
+                        rng.choice([0.0, cfg.max_vs, -cfg.max_vs, 3.0, -7.5], n))
+    rng_m = rng.uniform(1000, 9000, (n, m))
+    brg = rng.uniform(-np.pi, np.pi, (n, m))
+    dz = rng.choice([0.0, cfg.th.zthr, -cfg.th.zthr, 50.0, -300.0, 600.0], (n, m)) + rng.normal(0, 1, (n, m)) * (
+        rng.random((n, m)) < 0.5)
+    gs = rng.choice([0.0, 40.0, 80.0, 150.0, 250.0], (n, m))
+    intr = AircraftState(own.x[:, None] + rng_m * np.sin(brg), own.y[:, None] + rng_m * np.cos(brg),
+                         1000.0 + dz, gs, brg + np.pi + rng.normal(0, 0.3, (n, m)), rng.choice([0.0, 5.0, -5.0], (n, m)))
+    odd = rng.random(n) < 0.03
+    intr.x[odd, 0] = np.nan
+    intr.y[rng.random(n) < 0.02, 0] = 1e12
+    return own, intr
+
+
+def _same_conflicts(a, b):
+    for name in ("seg_in", "seg_out", "tail_in", "tail_out"):
+        _same(getattr(a, name), getattr(b, name))
+
+
+@pytest.mark.parametrize("preset", ["do365", "paper", "daidalus"])
+@pytest.mark.parametrize("axis", [AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED])
+def test_band_paths_evaluate_identical(preset, axis):
+    """Tails, certificates, undecided pieces (bisection on the compiled state) and candidates of every band
+    axis, for the corrective volume, the preventive one and a recovery cylinder."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"{preset}/{axis}".encode()))
+    own, intr = _encounters(rng, 400, 2, cfg)
+    j_lo, j_hi = _path_sizes(own, axis, cfg)
+    paths, _ = _maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
+    cyl = cfg.th.with_(name="cylinder", dthr=1000.0, zthr=100.0, tthr=0.0, tcoa=0.0)
+    for th in (cfg.th, cfg.th_preventive, cyl):
+        got = PathEvaluator(paths, intr, cfg.lookahead_s).evaluate(th)
+        ref = _ref(PathEvaluator(paths, intr, cfg.lookahead_s).evaluate_reference, th)
+        _same_conflicts(got, ref)
+        for g, r in zip(got.candidates(), _ref(ref.candidates_reference)):
+            _same(g, r)
+        assert np.isfinite(ref.seg_in).any() and np.isfinite(ref.tail_in).any()
+    sub = np.flatnonzero(rng.random(own.shape[0]) < 0.5)  # a subset (the recovery search evaluates those)
+    _same_conflicts(PathEvaluator(paths.subset(sub), intr[sub], 100.0).evaluate(cfg.th),
+                    _ref(PathEvaluator(paths.subset(sub), intr[sub], 100.0).evaluate_reference, cfg.th))
+
+
+@pytest.mark.parametrize("preset", ["do365", "daidalus"])
+def test_command_paths_evaluate_identical(preset):
+    """SM's paths (a command on up to three axes at once): last tails only, no exits."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(11)
+    own, intr = _encounters(rng, 600, 2, cfg)
+    n = own.shape[0]
+    cmd = Command(own.trk + rng.choice([0.0, 0.3, -1.2, np.pi], n), rng.choice([0.0, 10.0, -20.0, np.nan], n),
+                  rng.choice([40.0, 55.0, 90.0, np.nan], n))
+    paths = command_paths(own, cmd, cfg)
+    for exits in (False, True):
+        got = PathEvaluator(paths, intr, 85.0, tails="last", exits=exits).evaluate(cfg.th)
+        ref = _ref(PathEvaluator(paths, intr, 85.0, tails="last", exits=exits).evaluate_reference, cfg.th)
+        _same_conflicts(got, ref)
+        _same_pair(got.prefix(), ref.prefix())
+
+
+@pytest.mark.parametrize("axis", [AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED])
+def test_axis_state_kernel_identical(axis):
+    """The compiled ownship state on a band path equals the paths' numpy ``state_at`` at any time
+    (including before the start, at the speed limit and past it)."""
+    for preset in ("do365", "daidalus"):
+        cfg = DaaConfig.for_preset(preset)
+        rng = np.random.default_rng(axis)
+        own, _ = _encounters(rng, 2000, 1, cfg)
+        paths, _ = _maneuver_paths(own, axis, cfg, 10, with_values=False)
+        n_idx, p_idx = rng.integers(0, 2000, 20_000), rng.integers(0, 2, 20_000)
+        t = np.concatenate([rng.uniform(-5, 200, 19_000), rng.choice([0.0, 1e-9, 1e6, np.inf, np.nan], 1000)])
+        ref = _ref(lambda: paths.state_at(n_idx, p_idx)(t))
+        code, rate, kin = paths.kin
+        out = np.empty((6, t.size))
+        rel_states_into(code, rate, kin[n_idx, p_idx], np.zeros((t.size, 6)), t, out)
+        with np.errstate(all="ignore"):  # relative to an intruder at rest at the origin, as the numpy mover does
+            rel = [r - (0.0 + t * 0.0) for r in ref[:3]] + [r - 0.0 for r in ref[3:]]
+        for g, r in zip(out, rel):
+            _same(g, np.broadcast_to(r, t.shape).astype(float))

@@ -86,6 +86,9 @@ class ManeuverPaths:
     vz_const: bool = False
     jerk_h: "np.ndarray | None" = None  #: (N, P) bound on |d^2 v / dt^2| (m/s^3) away from kinks (None = unknown)
     kink_t: "np.ndarray | None" = None  #: (N, P) or (N, P, Q) s, times the horizontal acceleration jumps (inf = never)
+    #: (axis code, rate, (N, P, 9) rows of :data:`daa_sil.daa.kernels.motion.KIN_FIELDS`) when the paths are a band
+    #: axis's maneuvers: the compiled kernels then evaluate ``state_at`` themselves (None: they call it)
+    kin: "tuple | None" = None
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -107,7 +110,8 @@ class ManeuverPaths:
         sub = lambda a: None if a is None else a[idx]  # noqa: E731
         return ManeuverPaths(tuple(a[idx] for a in self.pos), tuple(a[idx] for a in self.vel), self.knot_times()[idx],
                              lambda n, p: base(idx[n], p),
-                             self.acc_h[idx], self.acc_v[idx], self.vz_const, sub(self.jerk_h), sub(self.kink_t))
+                             self.acc_h[idx], self.acc_v[idx], self.vz_const, sub(self.jerk_h), sub(self.kink_t),
+                             None if self.kin is None else (self.kin[0], self.kin[1], self.kin[2][idx]))
 
 
 @dataclass
@@ -188,6 +192,8 @@ class PathEvaluator(UndecidedPieces):
         #: relative velocity of the tails (N, M, P, K), contiguous
         self.v = [np.ascontiguousarray(np.broadcast_to(ovel_c[i][:, None] - iv[i], self.shape)) for i in range(3)]
         self._vwin = None
+        #: use the compiled kernels (False: the numpy reference, see :meth:`evaluate_reference`)
+        self.compiled = True
 
     def evaluate(self, th: Thresholds) -> PathConflicts:
         """Segment and tail intervals for volume ``th`` (see :class:`PathConflicts`), compiled kernels."""
@@ -198,6 +204,7 @@ class PathEvaluator(UndecidedPieces):
         return self._evaluate(th, compiled=False)
 
     def _evaluate(self, th: Thresholds, compiled: bool) -> PathConflicts:
+        self.compiled = compiled
         n, m, p, k = self.shape
         tt = np.broadcast_to(self.t, self.shape)
         seg_shape = (n, m, p, max(k - 1, 0))

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from daa_sil.daa.certify import CLEAR, _settle_time, classify_pieces, clear_second_order
-from daa_sil.daa.intervals import wcv_soa
+from daa_sil.daa.intervals import as_vector, wcv_soa
+from daa_sil.daa.kernels.motion import bisect_into, rel_states_into
 
 #: most parts an undecided segment is split into (as many as its parts' chords need to meet V_TOL / P_TOL)
 MAX_SPLIT = 16
@@ -25,8 +26,26 @@ MAX_DEPTH = 8
 class UndecidedPieces:
     """Part of :class:`daa_sil.daa.trajectory.PathEvaluator` (a mixin: it uses the evaluator's attributes)."""
 
+    def _kin_rows(self, path):
+        """(axis, rate, kin rows, intruder rows) of flat paths ``path`` for the compiled kernels, or None
+        when the paths have no kinematic table or the evaluator runs the numpy reference."""
+        if not self.compiled or self.paths.kin is None:
+            return None
+        tab = self._path_tables()
+        if getattr(self, "_ipv", None) is None:  # intruder position and velocity per flat (n, m), (N * M, 6)
+            self._ipv = np.concatenate([self.ipos, self.ivel], axis=-1).reshape(-1, 6)
+        axis, rate, kin = self.paths.kin
+        return axis, rate, kin[tab["n"][path], tab["p"][path]], self._ipv[tab["nm"][path]]
+
     def _mover(self, path):
         """``f(t)``: the true relative state (6 component arrays) of flat paths ``path`` at times ``t``."""
+        rows = self._kin_rows(path)
+        if rows is not None:
+            def f_compiled(t):
+                out = np.empty((6, path.size))
+                rel_states_into(*rows, as_vector(t, path.size), out)
+                return tuple(out)
+            return f_compiled
         tab = self._path_tables()
         own = self.paths.state_at(tab["n"][path], tab["p"][path])
         nm = tab["nm"][path]
@@ -48,13 +67,19 @@ class UndecidedPieces:
         ``lo`` and ``hi`` (the predicate is ``lo_in`` at ``lo`` and the opposite at ``hi``; bool or array), at
         most BISECT_DT_IN (an entry) or BISECT_DT_OUT (an exit) wide."""
         lo, hi = lo.copy(), hi.copy()
-        f = self._mover(path)
         lo_in = np.broadcast_to(np.asarray(lo_in, bool), lo.shape)
 
         def steps(mask, dt):
             return int(np.ceil(np.log2(max(np.max(hi[mask] - lo[mask], initial=0.0), dt) / dt)))
         n_in, n_out = steps(~lo_in, BISECT_DT_IN), steps(lo_in, BISECT_DT_OUT)
         mixed = n_in != n_out and lo_in.any() and not lo_in.all()
+        rows = self._kin_rows(path)
+        if rows is not None:
+            D = float(th.dthr)
+            bisect_into(*rows, lo, hi, lo_in, max(n_in, n_out) if lo.size else 0, n_in, n_out, bool(mixed), D * D,
+                        float(th.tthr), float(th.zthr), float(th.tcoa))
+            return lo, hi
+        f = self._mover(path)
         for k in range(max(n_in, n_out) if lo.size else 0):
             mid = 0.5 * (lo + hi)
             same = wcv_soa(*f(mid), th) == lo_in
