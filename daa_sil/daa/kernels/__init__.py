@@ -1,5 +1,41 @@
 """Compiled (numba) kernels of the DAA's hot loops; the rules are in :mod:`daa_sil.daa.kernels.jit`.
 
 The numpy functions they replace stay as ``*_reference`` in their modules and are the test oracles
-(``tests/test_daa_kernels.py``: identical results on random and adversarial inputs).
+(``tests/test_daa_kernels.py``: identical results on random and adversarial inputs). Importing this
+package compiles every kernel, or loads it from the cache, under the cache's file lock.
 """
+
+import importlib
+import sys
+import time
+
+from daa_sil.daa.kernels.jit import CACHE_DIR, compile_lock
+
+_MODULES = ("elementwise", "evaluate", "motion")
+
+
+def _load(clear: bool) -> tuple[float, float]:
+    """Import (so compile, or load from the cache) every kernel module under the lock; ``clear``: delete
+    the cache's entries first. Returns (s waited for the lock, s compiling / loading)."""
+    t0 = time.perf_counter()
+    with compile_lock():
+        t1 = time.perf_counter()
+        if clear:
+            for f in list(CACHE_DIR.rglob("*.nbi")) + list(CACHE_DIR.rglob("*.nbc")):
+                f.unlink(missing_ok=True)
+        for name in _MODULES:
+            importlib.import_module(f"{__name__}.{name}")
+    return t1 - t0, time.perf_counter() - t1
+
+
+try:
+    #: s this process waited for another one's compilation, and spent compiling / loading the kernels
+    LOCK_WAIT_S, LOAD_S = _load(clear=False)
+except Exception as exc:  # noqa: BLE001  (a damaged cache entry: say so, drop the cache, compile again)
+    for _name in _MODULES:
+        sys.modules.pop(f"{__name__}.{_name}", None)
+    print(f"daa-sil: the compiled-kernel cache {CACHE_DIR} could not be read ({type(exc).__name__}: {exc}); "
+          f"recompiling", file=sys.stderr)
+    LOCK_WAIT_S, LOAD_S = _load(clear=True)
+
+__all__ = ["CACHE_DIR", "LOAD_S", "LOCK_WAIT_S", "compile_lock"]

@@ -12,12 +12,17 @@
   entry to a temporary file and renames it, so processes that compile at the same time (three SIL
   processes on a cold machine) each compile and the last rename wins, with identical contents.
 * **When.** Every kernel has explicit signatures, so it is compiled (or loaded from the cache) when
-  its module is imported, never in the middle of a step; ``python -m daa_sil.daa.kernels`` does it
-  ahead of time and prints where the cache is.
+  its module is imported, never in the middle of a step. :mod:`daa_sil.daa.kernels` imports them all
+  under an exclusive file lock in the cache directory (:func:`compile_lock`): of processes starting
+  together on a cold machine one compiles and the others then load its cache, instead of each
+  compiling on the same cores; the lock is released when its holder exits, however it exits.
+  ``python -m daa_sil.daa.kernels`` compiles ahead of time (CI does, after installing) and prints
+  where the cache is and how long it took.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import sys
@@ -60,6 +65,24 @@ def _configure_cache() -> Path:
 
 
 CACHE_DIR = _configure_cache()
+
+
+@contextlib.contextmanager
+def compile_lock():
+    """Exclusive lock on ``CACHE_DIR/.compile.lock`` while held (no lock where that cannot be had)."""
+    try:
+        import fcntl
+
+        fh = open(CACHE_DIR / ".compile.lock", "a+b")
+    except (ImportError, OSError):
+        yield
+        return
+    with fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
 
 
 def kernel(signatures):
