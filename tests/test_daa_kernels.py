@@ -235,7 +235,7 @@ def test_kernel_outcomes_are_not_trivial():
 from daa_sil.daa import DaaConfig  # noqa: E402
 from daa_sil.daa.axis_paths import _maneuver_paths, _path_sizes  # noqa: E402
 from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_SPEED, AXIS_VERTICAL  # noqa: E402
-from daa_sil.daa.kernels.motion import rel_states_into  # noqa: E402
+from daa_sil.daa.kernels.motion import command_rel_states_into, rel_states_into  # noqa: E402
 from daa_sil.daa.safety import command_paths  # noqa: E402
 from daa_sil.daa.trajectory import PathEvaluator  # noqa: E402
 from daa_sil.geometry.kinematics import AircraftState, Command  # noqa: E402
@@ -317,10 +317,33 @@ def test_axis_state_kernel_identical(axis):
         n_idx, p_idx = rng.integers(0, 2000, 20_000), rng.integers(0, 2, 20_000)
         t = np.concatenate([rng.uniform(-5, 200, 19_000), rng.choice([0.0, 1e-9, 1e6, np.inf, np.nan], 1000)])
         ref = _ref(lambda: paths.state_at(n_idx, p_idx)(t))
-        code, rate, kin = paths.kin
+        _, code, rate, kin = paths.kin
         out = np.empty((6, t.size))
         rel_states_into(code, rate, kin[n_idx, p_idx], np.zeros((t.size, 6)), t, out)
         with np.errstate(all="ignore"):  # relative to an intruder at rest at the origin, as the numpy mover does
             rel = [r - (0.0 + t * 0.0) for r in ref[:3]] + [r - 0.0 for r in ref[3:]]
         for g, r in zip(out, rel):
             _same(g, np.broadcast_to(r, t.shape).astype(float))
+
+
+def test_command_state_kernel_identical():
+    """The compiled ownship state flying a command (SM) equals the numpy one (``_CommandMotion.state``) at
+    any time: during the turn and speed change, after either ends, after both, at the vertical target."""
+    cfg = DaaConfig.for_preset("do365")
+    rng = np.random.default_rng(21)
+    own, _ = _encounters(rng, 3000, 1, cfg)
+    n = own.shape[0]
+    cmd = Command(own.trk + rng.choice([0.0, 0.3, -1.2, np.pi, -np.pi, 2.5], n), rng.choice([0.0, 10.0, -20.0, np.nan], n),
+                  rng.choice([20.0, 40.0, 55.0, 90.0, 150.0, np.nan], n))
+    paths = command_paths(own, cmd, cfg)
+    assert paths.kin is not None
+    idx = rng.integers(0, n, 30_000)
+    t = np.concatenate([rng.uniform(0, 100, 29_000), rng.choice([0.0, 1e-9, 1e5, np.inf, np.nan, -1.0], 1000)])
+    ref = _ref(lambda: paths.state_at(idx, np.zeros_like(idx))(t))
+    _, phases, enc, *perf = paths.kin
+    out = np.empty((6, t.size))
+    command_rel_states_into(phases[idx], enc[idx], *perf, np.zeros((t.size, 6)), t, out)
+    with np.errstate(all="ignore"):
+        rel = [r - (0.0 + t * 0.0) for r in ref[:3]] + [r - 0.0 for r in ref[3:]]
+    for g, r in zip(out, rel):
+        _same(g, np.broadcast_to(r, t.shape).astype(float))

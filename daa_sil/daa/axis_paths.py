@@ -86,7 +86,7 @@ def _turn_knots(cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, t):
 
 
 def _kin_table(axis: int, cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, sgn) -> tuple:
-    """``(axis, rate, (N, 2, 9) rows)`` of the low/high-side paths for the compiled state kernel
+    """``("axis", axis, rate, (N, 2, 9) rows)`` of the low/high-side paths for the compiled state kernel
     (:data:`daa_sil.daa.kernels.motion.KIN_FIELDS`; the same inputs as :func:`_axis_state_soa`)."""
     if axis == AXIS_HORIZONTAL:
         rate, lim = cfg.turn_rate, np.zeros(2)
@@ -96,7 +96,7 @@ def _kin_table(axis: int, cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, sgn) -> 
     for j, a in enumerate((x0, y0, z0, gs0, st, ct, vs0)):
         kin[:, :, j] = a[:, None]
     kin[:, :, 7], kin[:, :, 8] = sgn, lim
-    return axis, float(rate), kin
+    return "axis", axis, float(rate), kin
 
 
 def _axis_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int

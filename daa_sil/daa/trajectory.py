@@ -86,8 +86,10 @@ class ManeuverPaths:
     vz_const: bool = False
     jerk_h: "np.ndarray | None" = None  #: (N, P) bound on |d^2 v / dt^2| (m/s^3) away from kinks (None = unknown)
     kink_t: "np.ndarray | None" = None  #: (N, P) or (N, P, Q) s, times the horizontal acceleration jumps (inf = never)
-    #: (axis code, rate, (N, P, 9) rows of :data:`daa_sil.daa.kernels.motion.KIN_FIELDS`) when the paths are a band
-    #: axis's maneuvers: the compiled kernels then evaluate ``state_at`` themselves (None: they call it)
+    #: the paths' motion as data for the compiled kernels, which then evaluate ``state_at`` themselves
+    #: (None: they call it): ``("axis", axis code, rate, (N, P, 9) rows of KIN_FIELDS)`` for a band axis's
+    #: maneuvers, ``("command", (N, 3, 9) PHASE_FIELDS, (N, 7) ENC_FIELDS, max turn rate, horizontal and
+    #: vertical acceleration)`` for a command (:mod:`daa_sil.daa.kernels.motion`)
     kin: "tuple | None" = None
 
     @property
@@ -111,7 +113,16 @@ class ManeuverPaths:
         return ManeuverPaths(tuple(a[idx] for a in self.pos), tuple(a[idx] for a in self.vel), self.knot_times()[idx],
                              lambda n, p: base(idx[n], p),
                              self.acc_h[idx], self.acc_v[idx], self.vz_const, sub(self.jerk_h), sub(self.kink_t),
-                             None if self.kin is None else (self.kin[0], self.kin[1], self.kin[2][idx]))
+                             _kin_subset(self.kin, idx))
+
+
+def _kin_subset(kin: "tuple | None", idx: np.ndarray) -> "tuple | None":
+    """:attr:`ManeuverPaths.kin` of encounters ``idx``."""
+    if kin is None:
+        return None
+    if kin[0] == "axis":
+        return kin[:3] + (kin[3][idx],)
+    return (kin[0], kin[1][idx], kin[2][idx]) + kin[3:]
 
 
 @dataclass

@@ -8,7 +8,7 @@ import numpy as np
 
 from daa_sil.daa.certify import CLEAR, _settle_time, classify_pieces, clear_second_order
 from daa_sil.daa.intervals import as_vector, wcv_soa
-from daa_sil.daa.kernels.motion import bisect_into, rel_states_into
+from daa_sil.daa.kernels.motion import bisect_into, command_bisect_into, command_rel_states_into, rel_states_into
 
 #: most parts an undecided segment is split into (as many as its parts' chords need to meet V_TOL / P_TOL)
 MAX_SPLIT = 16
@@ -27,15 +27,18 @@ class UndecidedPieces:
     """Part of :class:`daa_sil.daa.trajectory.PathEvaluator` (a mixin: it uses the evaluator's attributes)."""
 
     def _kin_rows(self, path):
-        """(axis, rate, kin rows, intruder rows) of flat paths ``path`` for the compiled kernels, or None
-        when the paths have no kinematic table or the evaluator runs the numpy reference."""
-        if not self.compiled or self.paths.kin is None:
+        """``(state kernel, bisection kernel, their leading arguments)`` for flat paths ``path``, or None when
+        the paths' motion is not given as data or the evaluator runs the numpy reference."""
+        kin = self.paths.kin
+        if not self.compiled or kin is None:
             return None
         tab = self._path_tables()
         if getattr(self, "_ipv", None) is None:  # intruder position and velocity per flat (n, m), (N * M, 6)
             self._ipv = np.concatenate([self.ipos, self.ivel], axis=-1).reshape(-1, 6)
-        axis, rate, kin = self.paths.kin
-        return axis, rate, kin[tab["n"][path], tab["p"][path]], self._ipv[tab["nm"][path]]
+        n, ipv = tab["n"][path], self._ipv[tab["nm"][path]]
+        if kin[0] == "axis":
+            return rel_states_into, bisect_into, (kin[1], kin[2], kin[3][n, tab["p"][path]], ipv)
+        return command_rel_states_into, command_bisect_into, (kin[1][n], kin[2][n], *kin[3:], ipv)
 
     def _mover(self, path):
         """``f(t)``: the true relative state (6 component arrays) of flat paths ``path`` at times ``t``."""
@@ -43,7 +46,7 @@ class UndecidedPieces:
         if rows is not None:
             def f_compiled(t):
                 out = np.empty((6, path.size))
-                rel_states_into(*rows, as_vector(t, path.size), out)
+                rows[0](*rows[2], as_vector(t, path.size), out)
                 return tuple(out)
             return f_compiled
         tab = self._path_tables()
@@ -76,7 +79,7 @@ class UndecidedPieces:
         rows = self._kin_rows(path)
         if rows is not None:
             D = float(th.dthr)
-            bisect_into(*rows, lo, hi, lo_in, max(n_in, n_out) if lo.size else 0, n_in, n_out, bool(mixed), D * D,
+            rows[1](*rows[2], lo, hi, lo_in, max(n_in, n_out) if lo.size else 0, n_in, n_out, bool(mixed), D * D,
                         float(th.tthr), float(th.zthr), float(th.tcoa))
             return lo, hi
         f = self._mover(path)

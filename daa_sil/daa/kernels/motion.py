@@ -87,3 +87,105 @@ def bisect_into(axis, rate, kin, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed, 
             else:
                 b = mid
         lo[i], hi[i] = a, b
+
+
+# --------------------------------------------------------------------------------------------------
+# a command flown kinematically (SM's paths): daa_sil.daa.safety._CommandMotion.state
+# --------------------------------------------------------------------------------------------------
+#: columns of an encounter's row in ``phases`` (one row per phase: turn and speed change, the longer
+#: one alone, straight) and in ``enc``
+PHASE_FIELDS = ("t0", "x", "y", "gs", "trk", "w", "acc", "sin0", "cos0")
+ENC_FIELDS = ("dpsi", "trk_cmd", "dgs", "tgt_gs", "z", "vs", "tgt_vs")
+_TWO_PI = 2.0 * math.pi
+A3 = types.Array(float64, 3, "A", readonly=True)
+
+
+@inline
+def npsign(x):
+    """``np.sign`` of a float."""
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    if x == 0.0:
+        return 0.0
+    return x
+
+
+@inline
+def command_state(ph_rows, enc, i, tau, max_turn, h_acc, v_acc):
+    """Ownship (x, y, z, vx, vy, vz) of encounter row ``i`` at ``tau`` s (``_CommandMotion.state``)."""
+    ph = (1 if tau > ph_rows[i, 1, 0] else 0) + (1 if tau > ph_rows[i, 2, 0] else 0)
+    t = tau - ph_rows[i, ph, 0]
+    gs0, acc, w, trk0 = ph_rows[i, ph, 3], ph_rows[i, ph, 6], ph_rows[i, ph, 5], ph_rows[i, ph, 4]
+    s0, c0 = ph_rows[i, ph, 7], ph_rows[i, ph, 8]
+    turning = w != 0.0
+    ws = w if turning else 1.0
+    th1 = trk0 + w * t
+    s1, c1 = math.sin(th1), math.cos(th1)
+    if turning:
+        ws2 = ws * ws
+        dx = gs0 * (c0 - c1) / ws + acc * (-t * c1 / ws + (s1 - s0) / ws2)
+        dy = gs0 * (s1 - s0) / ws + acc * (t * s1 / ws + (c1 - c0) / ws2)
+    else:
+        dist = gs0 * t + 0.5 * acc * t * t
+        dx, dy = dist * s0, dist * c0
+    x, y = ph_rows[i, ph, 1] + dx, ph_rows[i, ph, 2] + dy
+    gs, trk = gs0 + acc * t, th1
+    if abs(enc[i, 0]) <= max_turn * tau:
+        trk = enc[i, 1]
+    if abs(enc[i, 2]) <= h_acc * tau:
+        gs = enc[i, 3]
+    # kinematics._vertical(z, vs, tgt_vs, v_acc, tau)
+    z0, vs0, tgt = enc[i, 4], enc[i, 5], enc[i, 6]
+    dv = tgt - vs0
+    if v_acc > 0:
+        t1 = npmin(abs(dv) / v_acc, tau)
+    else:
+        t1 = 0.0 if dv == 0 else tau
+    a = npsign(dv) * v_acc
+    vs1 = vs0 + a * t1
+    z = z0 + vs0 * t1 + 0.5 * a * t1 * t1 + vs1 * (tau - t1)
+    vs = tgt if abs(dv) <= v_acc * tau else vs1
+    trk = trk % _TWO_PI
+    return x, y, z, gs * math.sin(trk), gs * math.cos(trk), vs
+
+
+@inline
+def command_rel_state(ph_rows, enc, ipv, i, t, max_turn, h_acc, v_acc):
+    """Relative state (ownship - intruder) of row ``i`` at ``t``."""
+    ox, oy, oz, ovx, ovy, ovz = command_state(ph_rows, enc, i, t, max_turn, h_acc, v_acc)
+    ivx, ivy, ivz = ipv[i, 3], ipv[i, 4], ipv[i, 5]
+    return (ox - (ipv[i, 0] + t * ivx), oy - (ipv[i, 1] + t * ivy), oz - (ipv[i, 2] + t * ivz),
+            ovx - ivx, ovy - ivy, ovz - ivz)
+
+
+@kernel(void(A3, A2, F, F, F, A2, A, types.Array(float64, 2, "C")))
+def command_rel_states_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, t, out):
+    """Relative state of row ``i`` at ``t[i]`` into ``out[:, i]``."""
+    for i in range(t.shape[0]):
+        out[0, i], out[1, i], out[2, i], out[3, i], out[4, i], out[5, i] = command_rel_state(
+            ph_rows, enc, ipv, i, t[i], max_turn, h_acc, v_acc)
+
+
+@kernel(void(A3, A2, F, F, F, A2, O, O, types.Array(boolean, 1, "A", readonly=True), I, I, I, boolean, F, F, F, F))
+def command_bisect_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed,
+                        DD, TT, H, TC):
+    """:func:`bisect_into` on command paths."""
+    for i in range(lo.shape[0]):
+        a, b, flag = lo[i], hi[i], lo_in[i]
+        for k in range(steps):
+            mid = 0.5 * (a + b)
+            sx, sy, sz, vx, vy, vz = command_rel_state(ph_rows, enc, ipv, i, mid, max_turn, h_acc, v_acc)
+            same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
+            if mixed:
+                if k < (n_out if flag else n_in):
+                    if same:
+                        a = mid
+                    else:
+                        b = mid
+            elif same:
+                a = mid
+            else:
+                b = mid
+        lo[i], hi[i] = a, b
