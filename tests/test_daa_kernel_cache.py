@@ -55,3 +55,13 @@ def test_cold_start_together_then_damaged_cache(tmp_path):
     assert len(lines) == 1 and "recompiling" in lines[0]
     (warm,) = _finish(_start(cache))  # rebuilt: nothing to report any more
     assert warm[2] == runs[0][2] and "compiled-kernel cache" not in warm[3]
+
+
+def test_the_numba_free_locator_agrees_with_the_kernels():
+    """daa_sil.jit_cache (which the SIL driver asks without importing numba) names the directory the kernels
+    use, and says it is warm once they are loaded."""
+    from daa_sil import jit_cache
+    from daa_sil.daa import kernels
+
+    assert jit_cache.cache_dir() == kernels.CACHE_DIR
+    assert jit_cache.is_warm()

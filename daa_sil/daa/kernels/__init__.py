@@ -10,6 +10,7 @@ import sys
 import time
 
 from daa_sil.daa.kernels.jit import CACHE_DIR, compile_lock
+from daa_sil.jit_cache import READY_MARKER
 
 _MODULES = ("elementwise", "evaluate", "motion")
 
@@ -21,7 +22,7 @@ def _load(clear: bool) -> tuple[float, float]:
     with compile_lock():
         t1 = time.perf_counter()
         if clear:
-            for f in list(CACHE_DIR.rglob("*.nbi")) + list(CACHE_DIR.rglob("*.nbc")):
+            for f in list(CACHE_DIR.rglob("*.nbi")) + list(CACHE_DIR.rglob("*.nbc")) + [CACHE_DIR / READY_MARKER]:
                 f.unlink(missing_ok=True)
         for name in _MODULES:
             importlib.import_module(f"{__name__}.{name}")
@@ -37,5 +38,9 @@ except Exception as exc:  # noqa: BLE001  (a damaged cache entry: say so, drop t
     print(f"daa-sil: the compiled-kernel cache {CACHE_DIR} could not be read ({type(exc).__name__}: {exc}); "
           f"recompiling", file=sys.stderr)
     LOCK_WAIT_S, LOAD_S = _load(clear=True)
+try:  # every kernel is cached now (daa_sil.jit_cache.is_warm)
+    (CACHE_DIR / READY_MARKER).touch()
+except OSError:
+    pass
 
 __all__ = ["CACHE_DIR", "LOAD_S", "LOCK_WAIT_S", "compile_lock"]

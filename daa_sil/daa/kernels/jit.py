@@ -6,7 +6,9 @@
   order of the numpy reference they replace (``docs/daa.md``, "Compiled kernels").
 * **Cache.** Compiled machine code is written to ``$NUMBA_CACHE_DIR`` when that is set, else to
   ``$XDG_CACHE_HOME/daa-sil-numba`` (``~/.cache/daa-sil-numba``), in a subdirectory named after a
-  hash of the kernel sources and the numba / llvmlite / numpy / Python versions. numba keys its own
+  hash of the kernel sources and the numba / llvmlite / numpy / Python versions
+  (:mod:`daa_sil.jit_cache`, which answers without importing numba; a ``ready`` file there says every
+  kernel is cached). numba keys its own
   cache on each kernel file's time stamp only, so a change in a helper another file calls would
   otherwise go unnoticed; the hash makes any change start a fresh directory. numba writes each
   entry to a temporary file and renames it, so processes that compile at the same time (three SIL
@@ -23,35 +25,11 @@
 from __future__ import annotations
 
 import contextlib
-import hashlib
-import os
-import sys
 from pathlib import Path
 
-import llvmlite
 import numba
-import numpy as np
 
-_HERE = Path(__file__).resolve().parent
-
-
-def source_hash() -> str:
-    """16 hex digits identifying the kernel sources and the compiler stack they were built with."""
-    h = hashlib.sha256()
-    for p in sorted(_HERE.glob("*.py")):
-        h.update(p.name.encode())
-        h.update(p.read_bytes())
-    h.update(f"{numba.__version__} {llvmlite.__version__} {np.__version__} {sys.version}".encode())
-    return h.hexdigest()[:16]
-
-
-def cache_dir() -> Path:
-    """Directory the compiled kernels are cached in (see the module docstring)."""
-    base = os.environ.get("NUMBA_CACHE_DIR")
-    if not base:
-        xdg = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        base = os.path.join(xdg, "daa-sil-numba")
-    return Path(base) / source_hash()
+from daa_sil.jit_cache import cache_dir
 
 
 def _configure_cache() -> Path:
