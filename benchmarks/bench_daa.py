@@ -103,22 +103,28 @@ print(f"{{t1 - t0:.3f}} {{t2 - t1:.3f}}")
 """
 
 
-def startup(preset: str) -> None:
-    """Start of a fresh process: import + first compute_bands, cold (empty kernel cache) and warm."""
+def startup(preset: str, baseline: "Path | None") -> None:
+    """Start of a fresh process: import + first compute_bands, cold (empty kernel cache) and warm (and the
+    baseline checkout's, which compiles nothing)."""
     code = STARTUP.format(preset=preset)
 
-    def once(env):
+    def once(env, python=sys.executable, cwd=None):
         t = time.perf_counter()
-        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+        out = subprocess.run([python, "-c", code], env=env, capture_output=True, text=True, check=True,
+                             cwd=cwd).stdout
         imp, first = (float(x) for x in out.split())
         return time.perf_counter() - t, imp, first
+
+    def show(label, total, imp, first):
+        print(f"start-up {label}: process {total:.2f} s = import {imp:.2f} s + first compute_bands "
+              f"{first:.2f} s + interpreter  [{load()}]")
 
     with tempfile.TemporaryDirectory() as d:
         env = dict(os.environ, NUMBA_CACHE_DIR=d)
         for label in ("cold (empty kernel cache)", "warm (cache filled by the cold run)"):
-            total, imp, first = once(env)
-            print(f"start-up {label}: process {total:.2f} s = import {imp:.2f} s + first compute_bands "
-                  f"{first:.2f} s + interpreter  [{load()}]")
+            show(label, *once(env))
+    if baseline is not None and (baseline / ".venv" / "bin" / "python").exists():
+        show("baseline", *once(dict(os.environ), str(baseline / ".venv" / "bin" / "python"), baseline))
 
 
 def main() -> None:
@@ -166,7 +172,7 @@ def main() -> None:
             print(f"this / baseline: {rate_batch / base[0]:.2f}x wall ({rate_batch:,.0f} vs {base[0]:,.0f}/s), "
                   f"{(args.n / c_batch) / base[1]:.2f}x CPU ({args.n / c_batch:,.0f} vs {base[1]:,.0f}/s)  [{load()}]")
     if args.startup:
-        startup(args.preset)
+        startup(args.preset, args.baseline)
 
 
 if __name__ == "__main__":
