@@ -63,5 +63,6 @@ def test_the_numba_free_locator_agrees_with_the_kernels():
     from daa_sil import jit_cache
     from daa_sil.daa import kernels
 
+    kernels.get()
     assert jit_cache.cache_dir() == kernels.CACHE_DIR
     assert jit_cache.is_warm()

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from daa_sil.daa.intervals import _in_blocks, as_vector
-from daa_sil.daa.kernels.elementwise import classify_into, clear2_into
+from daa_sil.daa import kernels
 from daa_sil.geometry import wellclear as wc
 from daa_sil.geometry.thresholds import Thresholds
 
@@ -35,7 +35,8 @@ def classify_pieces(x0, y0, z0, x1, y1, z1, h, th: Thresholds, e_p, e_v, e_z=0.0
     lo, hi = (v[0], v[0]) if window is None else (as_vector(window[0], n), as_vector(window[1], n))
     out = np.empty(n, np.int8)
     D = float(th.dthr)
-    classify_into(*v, lo, hi, window is not None, D, D * D, float(th.zthr), float(th.tthr), float(th.tcoa), out)
+    kernels.get().classify_into(*v, lo, hi, window is not None, D, D * D, float(th.zthr), float(th.tthr),
+                                float(th.tcoa), out)
     return out
 
 
@@ -138,8 +139,8 @@ def clear_second_order(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, th: Thresh
     n = np.shape(h)[0]
     out = np.empty(n, bool)
     D = float(th.dthr)
-    clear2_into(*(as_vector(a, n) for a in (x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, e_p, e_v, e_z)), D, D * D,
-                float(th.zthr), float(th.tthr), float(th.tcoa), out)
+    comp = (as_vector(a, n) for a in (x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, e_p, e_v, e_z))
+    kernels.get().clear2_into(*comp, D, D * D, float(th.zthr), float(th.tthr), float(th.tcoa), out)
     return out
 
 

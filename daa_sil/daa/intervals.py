@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from daa_sil.daa.kernels.elementwise import interval_into, wcv_soa_into
+from daa_sil.daa import kernels
 from daa_sil.geometry import wellclear as wc
 from daa_sil.geometry.thresholds import Thresholds
 
@@ -63,8 +63,8 @@ def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) ->
     lo, hi = (v[0], v[0]) if window is None else (as_vector(window[0], n), as_vector(window[1], n))
     t_in, t_out = np.empty(n), np.empty(n)
     D = float(th.dthr)
-    interval_into(*v, lo, hi, window is not None, D, D * D, D ** 2, float(th.tthr), float(th.zthr), float(th.tcoa),
-                  t_in, t_out)
+    kernels.get().interval_into(*v, lo, hi, window is not None, D, D * D, D ** 2, float(th.tthr), float(th.zthr),
+                                float(th.tcoa), t_in, t_out)
     return t_in, t_out
 
 
@@ -135,8 +135,8 @@ def wcv_soa(sx, sy, sz, vx, vy, vz, th: Thresholds) -> np.ndarray:
     n = np.shape(sx)[0]
     out = np.empty(n, bool)
     D = float(th.dthr)
-    wcv_soa_into(*(as_vector(a, n) for a in (sx, sy, sz, vx, vy, vz)), D * D, float(th.tthr), float(th.zthr),
-                 float(th.tcoa), out)
+    kernels.get().wcv_soa_into(*(as_vector(a, n) for a in (sx, sy, sz, vx, vy, vz)), D * D, float(th.tthr),
+                               float(th.zthr), float(th.tcoa), out)
     return out
 
 

@@ -43,7 +43,7 @@ from daa_sil.geometry.kinematics import (AircraftState)
 from daa_sil.geometry.thresholds import Thresholds
 from daa_sil.daa.intervals import _row_blocks, interval_soa
 from daa_sil.daa.certify import CLEAR, INSIDE, UNDECIDED, classify_pieces
-from daa_sil.daa.kernels.evaluate import candidates_into, segments_into, tails_into
+from daa_sil.daa import kernels
 from daa_sil.daa.undecided import UndecidedPieces
 
 #: knot-to-knot segments examined together first (a block far from the volume is clear as a whole)
@@ -157,8 +157,8 @@ class PathConflicts:
         shape = self.tail_in.shape
         t_in, t_out = np.empty(shape), np.empty(shape)
         flat = lambda a: np.ascontiguousarray(a).reshape(-1)  # noqa: E731
-        candidates_into(flat(self.tail_in), flat(self.tail_out), flat(self.seg_in), flat(self.seg_out), shape[-1],
-                        float(self.t_end), t_in.reshape(-1), t_out.reshape(-1))
+        kernels.get().candidates_into(flat(self.tail_in), flat(self.tail_out), flat(self.seg_in), flat(self.seg_out),
+                                      shape[-1], float(self.t_end), t_in.reshape(-1), t_out.reshape(-1))
         return t_in, t_out
 
     def candidates_reference(self) -> tuple[np.ndarray, np.ndarray]:
@@ -252,9 +252,10 @@ class PathEvaluator(UndecidedPieces):
         """:meth:`_tails` (every knot, or the last one with ``tails="last"``) in one compiled pass."""
         lo, hi, has = self._vwin_flat()
         D = float(th.dthr)
-        tails_into(*(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v), self._flat_times(),
-                   self.shape[3], has, lo, hi, self.with_tails == "last", self.t_end, D, D * D, D ** 2,
-                   float(th.tthr), float(th.zthr), float(th.tcoa), pc.tail_in.reshape(-1), pc.tail_out.reshape(-1))
+        kernels.get().tails_into(*(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v),
+                                 self._flat_times(), self.shape[3], has, lo, hi, self.with_tails == "last", self.t_end,
+                                 D, D * D, D ** 2, float(th.tthr), float(th.zthr), float(th.tcoa),
+                                 pc.tail_in.reshape(-1), pc.tail_out.reshape(-1))
 
     def _segments_compiled(self, th: Thresholds, pc: PathConflicts) -> None:
         """:meth:`_segments` with the certificates in one compiled pass (undecided pieces: :meth:`_resolve`)."""
@@ -264,9 +265,9 @@ class PathEvaluator(UndecidedPieces):
         code = np.empty(n * m * p * (k - 1), np.int8)
         seg_in, seg_out = pc.seg_in.reshape(-1), pc.seg_out.reshape(-1)
         D = float(th.dthr)
-        segments_into(*(c.reshape(-1) for c in self.s), self._flat_times(), k, BLOCK, tab["acc_h"], tab["acc_v"], has,
-                      lo, hi, self.t_end, D, D * D, float(th.zthr), float(th.tthr), float(th.tcoa), code, seg_in,
-                      seg_out)
+        kernels.get().segments_into(*(c.reshape(-1) for c in self.s), self._flat_times(), k, BLOCK, tab["acc_h"],
+                                    tab["acc_v"], has, lo, hi, self.t_end, D, D * D, float(th.zthr), float(th.tthr),
+                                    float(th.tcoa), code, seg_in, seg_out)
         todo = np.flatnonzero(code == UNDECIDED)
         if todo.size:
             self._resolve(todo, th, seg_in, seg_out)

@@ -8,7 +8,7 @@ import numpy as np
 
 from daa_sil.daa.certify import CLEAR, _settle_time, classify_pieces, clear_second_order
 from daa_sil.daa.intervals import as_vector, wcv_soa
-from daa_sil.daa.kernels.motion import bisect_into, command_bisect_into, command_rel_states_into, rel_states_into
+from daa_sil.daa import kernels
 
 #: most parts an undecided segment is split into (as many as its parts' chords need to meet V_TOL / P_TOL)
 MAX_SPLIT = 16
@@ -36,9 +36,10 @@ class UndecidedPieces:
         if getattr(self, "_ipv", None) is None:  # intruder position and velocity per flat (n, m), (N * M, 6)
             self._ipv = np.concatenate([self.ipos, self.ivel], axis=-1).reshape(-1, 6)
         n, ipv = tab["n"][path], self._ipv[tab["nm"][path]]
+        k = kernels.get()
         if kin[0] == "axis":
-            return rel_states_into, bisect_into, (kin[1], kin[2], kin[3][n, tab["p"][path]], ipv)
-        return command_rel_states_into, command_bisect_into, (kin[1][n], kin[2][n], *kin[3:], ipv)
+            return k.rel_states_into, k.bisect_into, (kin[1], kin[2], kin[3][n, tab["p"][path]], ipv)
+        return k.command_rel_states_into, k.command_bisect_into, (kin[1][n], kin[2][n], *kin[3:], ipv)
 
     def _mover(self, path):
         """``f(t)``: the true relative state (6 component arrays) of flat paths ``path`` at times ``t``."""

@@ -172,7 +172,9 @@ def prepare_kernels(say: "Callable[[str], None] | None") -> None:
     t = time.monotonic()
     if say:
         say(f"compiling the DAA kernels (first run; cached in {cache_dir()}) ...")
-    import daa_sil.daa.kernels  # noqa: F401  (the import compiles)
+    from daa_sil.daa import kernels
+
+    kernels.get()
 
     if say:
         say(f"DAA kernels ready ({time.monotonic() - t:.1f} s)")

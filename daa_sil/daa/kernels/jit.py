@@ -14,12 +14,14 @@
   entry to a temporary file and renames it, so processes that compile at the same time (three SIL
   processes on a cold machine) each compile and the last rename wins, with identical contents.
 * **When.** Every kernel has explicit signatures, so it is compiled (or loaded from the cache) when
-  its module is imported, never in the middle of a step. :mod:`daa_sil.daa.kernels` imports them all
+  its module is imported, never in the middle of a step. Nothing imports them, or numba, until the
+  first DAA computation of a process calls :func:`daa_sil.daa.kernels.get`, which imports them all
   under an exclusive file lock in the cache directory (:func:`compile_lock`): of processes starting
   together on a cold machine one compiles and the others then load its cache, instead of each
   compiling on the same cores; the lock is released when its holder exits, however it exits.
-  ``python -m daa_sil.daa.kernels`` compiles ahead of time (CI does, after installing) and prints
-  where the cache is and how long it took.
+  ``python -m daa_sil.daa.kernels`` compiles ahead of time (CI does, after installing; the SIL driver
+  does when the cache is cold, before it starts the vehicle and the GCS) and prints where the cache is
+  and how long it took.
 """
 
 from __future__ import annotations

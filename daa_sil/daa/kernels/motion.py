@@ -14,7 +14,7 @@ import math
 from numba import boolean, float64, int64, types, void
 
 from daa_sil.daa.kernels.jit import inline, kernel
-from daa_sil.daa.kernels.scalar import npmax, npmin, wcv_soa
+from daa_sil.daa.kernels.scalar import npmax, npmin, npsign, wcv_soa
 
 #: columns of a path's row in ``kin``
 KIN_FIELDS = ("x0", "y0", "z0", "gs0", "st", "ct", "vs0", "sgn", "lim")
@@ -98,18 +98,6 @@ PHASE_FIELDS = ("t0", "x", "y", "gs", "trk", "w", "acc", "sin0", "cos0")
 ENC_FIELDS = ("dpsi", "trk_cmd", "dgs", "tgt_gs", "z", "vs", "tgt_vs")
 _TWO_PI = 2.0 * math.pi
 A3 = types.Array(float64, 3, "A", readonly=True)
-
-
-@inline
-def npsign(x):
-    """``np.sign`` of a float."""
-    if x > 0.0:
-        return 1.0
-    if x < 0.0:
-        return -1.0
-    if x == 0.0:
-        return 0.0
-    return x
 
 
 @inline
