@@ -179,3 +179,19 @@ def test_every_knob_is_recorded_and_checked_on_resume(tmp_path, capsys):
     assert main(argv[:-3] + ["--wt", "8", "--out", str(out), "--resume", "--no-progress"]) == 2
     assert "different settings (wt)" in capsys.readouterr().err
     assert main(["campaign", "run", "--out", str(out), "--resume", "--no-progress"]) == 0  # stored knobs reused
+
+
+def test_campaign_json_records_the_kernel_compiler_versions(tmp_path):
+    """Provenance: campaign.json names the numba / llvmlite that compiled the DAA kernels (issue 21)."""
+    import json
+
+    import llvmlite
+    import numba
+
+    from daa_sil.cli import main
+
+    out = tmp_path / "c"
+    assert main(["campaign", "run", "--groups", "B-2", "--encounters", "3", "--seed", "5", "--out", str(out),
+                 "--no-progress"]) == 0
+    versions = json.loads((out / "campaign.json").read_text())["versions"]
+    assert versions["numba"] == numba.__version__ and versions["llvmlite"] == llvmlite.__version__

@@ -85,6 +85,20 @@ def _turn_knots(cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, t):
     return out, np.concatenate([-th, th], axis=1)
 
 
+def _kin_table(axis: int, cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, sgn) -> tuple:
+    """``("axis", axis, rate, (N, 2, 9) rows)`` of the low/high-side paths for the compiled state kernel
+    (:data:`daa_sil.daa.kernels.motion.KIN_FIELDS`; the same inputs as :func:`_axis_state_soa`)."""
+    if axis == AXIS_HORIZONTAL:
+        rate, lim = cfg.turn_rate, np.zeros(2)
+    else:
+        rate, lim = speed_limits(axis == AXIS_VERTICAL, cfg, sgn)
+    kin = np.empty((x0.shape[0], 2, 9))
+    for j, a in enumerate((x0, y0, z0, gs0, st, ct, vs0)):
+        kin[:, :, j] = a[:, None]
+    kin[:, :, 7], kin[:, :, 8] = sgn, lim
+    return "axis", axis, float(rate), kin
+
+
 def _axis_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Ownship on the low-side and high-side maneuver paths at knots 0..j: position and velocity
@@ -131,5 +145,6 @@ def _maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int,
 
     two = lambda a: np.repeat(a[:, None], 2, 1)  # noqa: E731
     paths = ManeuverPaths(comp[:3], comp[3:], t[None, None, :], state_at, two(acc_h), two(acc_v),
-                          vz_const=axis != AXIS_VERTICAL, jerk_h=two(jerk), kink_t=kink)
+                          vz_const=axis != AXIS_VERTICAL, jerk_h=two(jerk), kink_t=kink,
+                          kin=_kin_table(axis, cfg, x0, y0, z0, gs0, st, ct, vs0, sgn))
     return paths, (np.broadcast_to(value, (n, 2, j + 1)) if with_values else None)

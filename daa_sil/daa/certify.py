@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from daa_sil.daa.intervals import _in_blocks
+from daa_sil.daa.intervals import _in_blocks, as_vector
+from daa_sil.daa import kernels
 from daa_sil.geometry import wellclear as wc
 from daa_sil.geometry.thresholds import Thresholds
 
@@ -26,8 +27,21 @@ P_TOL = 0.5
 CLEAR, INSIDE, UNDECIDED = 0, 1, 2
 
 
-@_in_blocks
 def classify_pieces(x0, y0, z0, x1, y1, z1, h, th: Thresholds, e_p, e_v, e_z=0.0, window=None) -> np.ndarray:
+    """CLEAR / INSIDE / UNDECIDED code (int8) of pieces of a true relative path (1-D arrays; compiled,
+    :func:`classify_pieces_reference` is the same in numpy and documents the arguments)."""
+    n = np.shape(h)[0]
+    v = [as_vector(a, n) for a in (x0, y0, z0, x1, y1, z1, h, e_p, e_v, e_z)]
+    lo, hi = (v[0], v[0]) if window is None else (as_vector(window[0], n), as_vector(window[1], n))
+    out = np.empty(n, np.int8)
+    D = float(th.dthr)
+    kernels.get().classify_into(*v, lo, hi, window is not None, D, D * D, float(th.zthr), float(th.tthr),
+                                float(th.tcoa), out)
+    return out
+
+
+@_in_blocks
+def classify_pieces_reference(x0, y0, z0, x1, y1, z1, h, th: Thresholds, e_p, e_v, e_z=0.0, window=None) -> np.ndarray:
     """CLEAR / INSIDE / UNDECIDED code (int8) of pieces of a true relative path.
 
     A piece runs from relative position ``(x0, y0, z0)`` to ``(x1, y1, z1)`` in ``h`` s; at every instant
@@ -119,8 +133,20 @@ def _line_min2(ax, ay, bx, by, lo, hi):
     return ax * ax + ay * ay + t * (2.0 * ab + t * bb)
 
 
-@_in_blocks
 def clear_second_order(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, th: Thresholds, e_p, e_v, e_z=0.0) -> np.ndarray:
+    """Second-order CLEAR certificate (1-D arrays; compiled, :func:`clear_second_order_reference` is the
+    same in numpy and documents it)."""
+    n = np.shape(h)[0]
+    out = np.empty(n, bool)
+    D = float(th.dthr)
+    comp = (as_vector(a, n) for a in (x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, e_p, e_v, e_z))
+    kernels.get().clear2_into(*comp, D, D * D, float(th.zthr), float(th.tthr), float(th.tcoa), out)
+    return out
+
+
+@_in_blocks
+def clear_second_order_reference(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, th: Thresholds, e_p, e_v,
+                                 e_z=0.0) -> np.ndarray:
     """True where a piece is certified CLEAR with a second-order model: the chord for position and the
     line between the true end velocities ``u0``, ``u1`` for the horizontal velocity, the true path within
     ``e_p`` / ``e_z`` (position) and ``e_v`` (velocity, ``|d^2v/dt^2| h^2 / 8``) of it. Much tighter than

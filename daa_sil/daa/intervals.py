@@ -1,14 +1,16 @@
-"""Closed-form well-clear violation intervals on contiguous component arrays.
+"""Closed-form well-clear violation intervals on component arrays.
 
 The kernel the trajectory evaluator (:mod:`daa_sil.daa.trajectory`) calls for every straight tail:
-the same numbers as :func:`daa_sil.geometry.wellclear.violation_interval`, about 2x faster. Times
-in s from now; no violation is ``(inf, -inf)``.
+the same numbers as :func:`daa_sil.geometry.wellclear.violation_interval`. :func:`interval_soa` and
+:func:`wcv_soa` run compiled (:mod:`daa_sil.daa.kernels`); the numpy versions ``*_reference`` are
+their test oracles. Times in s from now; no violation is ``(inf, -inf)``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from daa_sil.daa import kernels
 from daa_sil.geometry import wellclear as wc
 from daa_sil.geometry.thresholds import Thresholds
 
@@ -46,8 +48,28 @@ def _row_blocks(n: int, per_row: int):
     return [slice(i, min(i + step, n)) for i in range(0, n, step)]
 
 
-@_in_blocks
+def as_vector(a, n: int) -> np.ndarray:
+    """``a`` as a 1-D float array of length ``n`` (a scalar or a length-1 array broadcast, not copied)."""
+    a = np.asarray(a, dtype=float)
+    return a if a.shape == (n,) else np.broadcast_to(a, (n,))
+
+
 def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`daa_sil.geometry.wellclear.violation_interval` over ``[0, length]`` for 1-D component arrays
+    (compiled; :func:`interval_soa_reference` is the same in numpy). ``window`` = the vertical window
+    ``(lo, hi)`` when the caller has it."""
+    n = np.shape(sx)[0]
+    v = [as_vector(a, n) for a in (sx, sy, sz, vx, vy, vz, length)]
+    lo, hi = (v[0], v[0]) if window is None else (as_vector(window[0], n), as_vector(window[1], n))
+    t_in, t_out = np.empty(n), np.empty(n)
+    D = float(th.dthr)
+    kernels.get().interval_into(*v, lo, hi, window is not None, D, D * D, D ** 2, float(th.tthr), float(th.zthr),
+                                float(th.tcoa), t_in, t_out)
+    return t_in, t_out
+
+
+@_in_blocks
+def interval_soa_reference(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`daa_sil.geometry.wellclear.violation_interval` over ``[0, length]`` for 1-D component arrays.
 
     The same window functions (:func:`~daa_sil.geometry.wellclear.vertical_window`,
@@ -107,8 +129,19 @@ def filtered_interval(s, v, th: Thresholds, length) -> tuple[np.ndarray, np.ndar
     return t_in.reshape(shape), t_out.reshape(shape)
 
 
+def wcv_soa(sx, sy, sz, vx, vy, vz, th: Thresholds) -> np.ndarray:
+    """:func:`daa_sil.geometry.wellclear.wcv` on 1-D component arrays (relative position m, velocity
+    m/s), compiled; :func:`wcv_soa_reference` is the same in numpy."""
+    n = np.shape(sx)[0]
+    out = np.empty(n, bool)
+    D = float(th.dthr)
+    kernels.get().wcv_soa_into(*(as_vector(a, n) for a in (sx, sy, sz, vx, vy, vz)), D * D, float(th.tthr),
+                               float(th.zthr), float(th.tcoa), out)
+    return out
+
+
 @_in_blocks
-def _wcv_soa(sx, sy, sz, vx, vy, vz, th: Thresholds) -> np.ndarray:
+def wcv_soa_reference(sx, sy, sz, vx, vy, vz, th: Thresholds) -> np.ndarray:
     """:func:`daa_sil.geometry.wellclear.wcv` on component arrays (relative position and velocity)."""
     D, TT = th.dthr, th.tthr
     r2 = sx * sx + sy * sy

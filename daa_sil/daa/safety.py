@@ -57,6 +57,17 @@ class _CommandMotion:
         self.sin0, self.cos0 = np.sin(self.trk), np.cos(self.trk)
         self.exotic = bool(np.any((self.w != 0.0) & (np.abs(self.w) < _W_EPS)))  # (as _arc's "small" branch)
 
+    def kin(self) -> "tuple | None":
+        """The motion as data for the compiled kernels (:attr:`ManeuverPaths.kin`), None when exotic."""
+        if self.exotic:
+            return None
+        phases = np.stack([self.t0, self.x, self.y, self.gs, self.trk, self.w, self.acc, self.sin0, self.cos0], axis=-1)
+        o = self.own
+        enc = np.stack([self.dpsi, self.trk_cmd, self.dgs, self.tgt_gs, o.z, o.vs, self.tgt_vs], axis=-1)
+        p = self.perf
+        return ("command", np.ascontiguousarray(phases.transpose(1, 0, 2), dtype=float), np.asarray(enc, float),
+                float(p.max_turn_rate), float(p.horizontal_accel), float(p.vertical_accel))
+
     def state(self, n: np.ndarray, tau: np.ndarray) -> tuple:
         """Position and velocity (six arrays) of encounters ``n`` at times ``tau`` (broadcast together)."""
         if self.exotic:  # a turn rate _arc treats as straight: the reference implementation
@@ -119,7 +130,7 @@ def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverP
     return ManeuverPaths((px[:, None], py[:, None], pz[:, None]), (vx[:, None], vy[:, None], vz[:, None]),
                          t[:, None], state_at,
                          acc_h[:, None], acc_v[:, None], vz_const=not np.any(t_vs > eps), jerk_h=jerk[:, None],
-                         kink_t=kink[:, None])
+                         kink_t=kink[:, None], kin=motion.kin())
 
 
 def command_conflicts(own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,

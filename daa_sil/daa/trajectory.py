@@ -43,10 +43,12 @@ from daa_sil.geometry.kinematics import (AircraftState)
 from daa_sil.geometry.thresholds import Thresholds
 from daa_sil.daa.intervals import _row_blocks, interval_soa
 from daa_sil.daa.certify import CLEAR, INSIDE, UNDECIDED, classify_pieces
+from daa_sil.daa import kernels
 from daa_sil.daa.undecided import UndecidedPieces
 
 #: knot-to-knot segments examined together first (a block far from the volume is clear as a whole)
 BLOCK = 4
+_NONE = np.zeros(0)
 
 #: ``state_at(n, p) -> f`` with ``f(t) -> (x, y, z, vx, vy, vz)``: the true ownship state on path ``p[i]`` of
 #: encounter ``n[i]`` at time ``t[i]`` (the per-path parameters are gathered once, then ``f`` is cheap)
@@ -84,6 +86,11 @@ class ManeuverPaths:
     vz_const: bool = False
     jerk_h: "np.ndarray | None" = None  #: (N, P) bound on |d^2 v / dt^2| (m/s^3) away from kinks (None = unknown)
     kink_t: "np.ndarray | None" = None  #: (N, P) or (N, P, Q) s, times the horizontal acceleration jumps (inf = never)
+    #: the paths' motion as data for the compiled kernels, which then evaluate ``state_at`` themselves
+    #: (None: they call it): ``("axis", axis code, rate, (N, P, 9) rows of KIN_FIELDS)`` for a band axis's
+    #: maneuvers, ``("command", (N, 3, 9) PHASE_FIELDS, (N, 7) ENC_FIELDS, max turn rate, horizontal and
+    #: vertical acceleration)`` for a command (:mod:`daa_sil.daa.kernels.motion`)
+    kin: "tuple | None" = None
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -105,7 +112,17 @@ class ManeuverPaths:
         sub = lambda a: None if a is None else a[idx]  # noqa: E731
         return ManeuverPaths(tuple(a[idx] for a in self.pos), tuple(a[idx] for a in self.vel), self.knot_times()[idx],
                              lambda n, p: base(idx[n], p),
-                             self.acc_h[idx], self.acc_v[idx], self.vz_const, sub(self.jerk_h), sub(self.kink_t))
+                             self.acc_h[idx], self.acc_v[idx], self.vz_const, sub(self.jerk_h), sub(self.kink_t),
+                             _kin_subset(self.kin, idx))
+
+
+def _kin_subset(kin: "tuple | None", idx: np.ndarray) -> "tuple | None":
+    """:attr:`ManeuverPaths.kin` of encounters ``idx``."""
+    if kin is None:
+        return None
+    if kin[0] == "axis":
+        return kin[:3] + (kin[3][idx],)
+    return (kin[0], kin[1][idx], kin[2][idx]) + kin[3:]
 
 
 @dataclass
@@ -136,7 +153,16 @@ class PathConflicts:
 
     def candidates(self) -> tuple[np.ndarray, np.ndarray]:
         """First violation and last exit of candidate k (maneuver to knot k, then straight) over
-        ``[0, t_end]``, ``(N, M, P, K)``; no violation is ``(inf, -inf)``."""
+        ``[0, t_end]``, ``(N, M, P, K)``; no violation is ``(inf, -inf)`` (compiled)."""
+        shape = self.tail_in.shape
+        t_in, t_out = np.empty(shape), np.empty(shape)
+        flat = lambda a: np.ascontiguousarray(a).reshape(-1)  # noqa: E731
+        kernels.get().candidates_into(flat(self.tail_in), flat(self.tail_out), flat(self.seg_in), flat(self.seg_out),
+                                      shape[-1], float(self.t_end), t_in.reshape(-1), t_out.reshape(-1))
+        return t_in, t_out
+
+    def candidates_reference(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`candidates` in numpy (the kernel's test oracle)."""
         t_in, t_out = self.tail_in.copy(), self.tail_out.copy()
         if t_in.shape[-1] > 1:  # min / max with the prefix (k = 0 has none)
             np.minimum(t_in[..., 1:], np.minimum.accumulate(self.seg_in, axis=-1), out=t_in[..., 1:])
@@ -177,9 +203,19 @@ class PathEvaluator(UndecidedPieces):
         #: relative velocity of the tails (N, M, P, K), contiguous
         self.v = [np.ascontiguousarray(np.broadcast_to(ovel_c[i][:, None] - iv[i], self.shape)) for i in range(3)]
         self._vwin = None
+        #: use the compiled kernels (False: the numpy reference, see :meth:`evaluate_reference`)
+        self.compiled = True
 
     def evaluate(self, th: Thresholds) -> PathConflicts:
-        """Segment and tail intervals for volume ``th`` (see :class:`PathConflicts`)."""
+        """Segment and tail intervals for volume ``th`` (see :class:`PathConflicts`), compiled kernels."""
+        return self._evaluate(th, compiled=True)
+
+    def evaluate_reference(self, th: Thresholds) -> PathConflicts:
+        """:meth:`evaluate` with the numpy tails and chord certificates (the kernels' test oracle)."""
+        return self._evaluate(th, compiled=False)
+
+    def _evaluate(self, th: Thresholds, compiled: bool) -> PathConflicts:
+        self.compiled = compiled
         n, m, p, k = self.shape
         tt = np.broadcast_to(self.t, self.shape)
         seg_shape = (n, m, p, max(k - 1, 0))
@@ -190,6 +226,12 @@ class PathEvaluator(UndecidedPieces):
         tail = (lambda fill: np.empty(self.shape)) if full_tails else (lambda fill: np.full(self.shape, fill))  # noqa: E731
         pc = PathConflicts(np.full(seg_shape, np.inf), np.full(seg_shape, -np.inf), tail(np.inf), tail(-np.inf), self.t,
                            self.t_end)
+        if compiled:
+            if k > 1:
+                self._segments_compiled(th, pc)
+            if self.with_tails:
+                self._tails_compiled(th, pc)
+            return pc
         if k > 1:
             self._segments(th, tt, pc)
         if self.with_tails:
@@ -199,6 +241,36 @@ class PathEvaluator(UndecidedPieces):
                 want[..., -1] = True
             self._tails(th, pc, want)
         return pc
+
+    def _vwin_flat(self):
+        """(lo, hi, present): the per-path vertical windows as flat arrays."""
+        if self._vwin is None:
+            return _NONE, _NONE, False
+        return self._vwin[0].reshape(-1), self._vwin[1].reshape(-1), True
+
+    def _tails_compiled(self, th: Thresholds, pc: PathConflicts) -> None:
+        """:meth:`_tails` (every knot, or the last one with ``tails="last"``) in one compiled pass."""
+        lo, hi, has = self._vwin_flat()
+        D = float(th.dthr)
+        kernels.get().tails_into(*(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v),
+                                 self._flat_times(), self.shape[3], has, lo, hi, self.with_tails == "last", self.t_end,
+                                 D, D * D, D ** 2, float(th.tthr), float(th.zthr), float(th.tcoa),
+                                 pc.tail_in.reshape(-1), pc.tail_out.reshape(-1))
+
+    def _segments_compiled(self, th: Thresholds, pc: PathConflicts) -> None:
+        """:meth:`_segments` with the certificates in one compiled pass (undecided pieces: :meth:`_resolve`)."""
+        n, m, p, k = self.shape
+        lo, hi, has = self._vwin_flat()
+        tab = self._path_tables()
+        code = np.empty(n * m * p * (k - 1), np.int8)
+        seg_in, seg_out = pc.seg_in.reshape(-1), pc.seg_out.reshape(-1)
+        D = float(th.dthr)
+        kernels.get().segments_into(*(c.reshape(-1) for c in self.s), self._flat_times(), k, BLOCK, tab["acc_h"],
+                                    tab["acc_v"], has, lo, hi, self.t_end, D, D * D, float(th.zthr), float(th.tthr),
+                                    float(th.tcoa), code, seg_in, seg_out)
+        todo = np.flatnonzero(code == UNDECIDED)
+        if todo.size:
+            self._resolve(todo, th, seg_in, seg_out)
 
     def _tails(self, th: Thresholds, pc: PathConflicts, want: "np.ndarray | None") -> None:
         """Tail intervals of every knot (``want`` None) or of the knots where ``want``."""

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from daa_sil.daa.certify import CLEAR, _settle_time, classify_pieces, clear_second_order
-from daa_sil.daa.intervals import _wcv_soa
+from daa_sil.daa.intervals import as_vector, wcv_soa
+from daa_sil.daa import kernels
 
 #: most parts an undecided segment is split into (as many as its parts' chords need to meet V_TOL / P_TOL)
 MAX_SPLIT = 16
@@ -25,8 +26,30 @@ MAX_DEPTH = 8
 class UndecidedPieces:
     """Part of :class:`daa_sil.daa.trajectory.PathEvaluator` (a mixin: it uses the evaluator's attributes)."""
 
+    def _kin_rows(self, path):
+        """``(state kernel, bisection kernel, their leading arguments)`` for flat paths ``path``, or None when
+        the paths' motion is not given as data or the evaluator runs the numpy reference."""
+        kin = self.paths.kin
+        if not self.compiled or kin is None:
+            return None
+        tab = self._path_tables()
+        if getattr(self, "_ipv", None) is None:  # intruder position and velocity per flat (n, m), (N * M, 6)
+            self._ipv = np.concatenate([self.ipos, self.ivel], axis=-1).reshape(-1, 6)
+        n, ipv = tab["n"][path], self._ipv[tab["nm"][path]]
+        k = kernels.get()
+        if kin[0] == "axis":
+            return k.rel_states_into, k.bisect_into, (kin[1], kin[2], kin[3][n, tab["p"][path]], ipv)
+        return k.command_rel_states_into, k.command_bisect_into, (kin[1][n], kin[2][n], *kin[3:], ipv)
+
     def _mover(self, path):
         """``f(t)``: the true relative state (6 component arrays) of flat paths ``path`` at times ``t``."""
+        rows = self._kin_rows(path)
+        if rows is not None:
+            def f_compiled(t):
+                out = np.empty((6, path.size))
+                rows[0](*rows[2], as_vector(t, path.size), out)
+                return tuple(out)
+            return f_compiled
         tab = self._path_tables()
         own = self.paths.state_at(tab["n"][path], tab["p"][path])
         nm = tab["nm"][path]
@@ -48,16 +71,22 @@ class UndecidedPieces:
         ``lo`` and ``hi`` (the predicate is ``lo_in`` at ``lo`` and the opposite at ``hi``; bool or array), at
         most BISECT_DT_IN (an entry) or BISECT_DT_OUT (an exit) wide."""
         lo, hi = lo.copy(), hi.copy()
-        f = self._mover(path)
         lo_in = np.broadcast_to(np.asarray(lo_in, bool), lo.shape)
 
         def steps(mask, dt):
             return int(np.ceil(np.log2(max(np.max(hi[mask] - lo[mask], initial=0.0), dt) / dt)))
         n_in, n_out = steps(~lo_in, BISECT_DT_IN), steps(lo_in, BISECT_DT_OUT)
         mixed = n_in != n_out and lo_in.any() and not lo_in.all()
+        rows = self._kin_rows(path)
+        if rows is not None:
+            D = float(th.dthr)
+            rows[1](*rows[2], lo, hi, lo_in, max(n_in, n_out) if lo.size else 0, n_in, n_out, bool(mixed), D * D,
+                        float(th.tthr), float(th.zthr), float(th.tcoa))
+            return lo, hi
+        f = self._mover(path)
         for k in range(max(n_in, n_out) if lo.size else 0):
             mid = 0.5 * (lo + hi)
-            same = _wcv_soa(*f(mid), th) == lo_in
+            same = wcv_soa(*f(mid), th) == lo_in
             if mixed:  # the same number of halvings per kind as when they are bisected apart
                 live = np.where(lo_in, k < n_out, k < n_in)
                 lo = np.where(same & live, mid, lo)
@@ -81,7 +110,7 @@ class UndecidedPieces:
         v = [c.reshape(-1) for c in self.v]
         sa, sb = [c[ka] for c in s], [c[ka + 1] for c in s]
         va, vb = [c[ka] for c in v], [c[ka + 1] for c in v]
-        f0, f1 = _wcv_soa(*sa, *va, th), _wcv_soa(*sb, *vb, th)
+        f0, f1 = wcv_soa(*sa, *va, th), wcv_soa(*sb, *vb, th)
         pieces = (flat_seg, path, t0, t0 + h, sa, sb, f0, f1, va[:2], vb[:2])
         tab = self._path_tables()
         for depth in range(MAX_DEPTH):
@@ -164,7 +193,7 @@ class UndecidedPieces:
         L = sid.size
         ts = ta[:, None] + (tb - ta)[:, None] * (np.arange(1, q) / q)[None, :]  # (L, q-1)
         st = self._state(np.repeat(pth, q - 1), ts.ravel())
-        flag = _wcv_soa(*st, th).reshape(L, q - 1)
+        flag = wcv_soa(*st, th).reshape(L, q - 1)
         times = np.concatenate([ta[:, None], ts, tb[:, None]], axis=1)
         pos = [np.concatenate([pa[c][:, None], st[c].reshape(L, q - 1), pb[c][:, None]], axis=1) for c in range(3)]
         flags = np.concatenate([fa[:, None], flag, fb[:, None]], axis=1)
@@ -185,7 +214,7 @@ class UndecidedPieces:
         frac = (np.arange(q) + 0.5) / q
         ts = ta[:, None] + h[:, None] * frac[None, :]  # (L, q)
         L = sid.size
-        hit = _wcv_soa(*self._state(np.repeat(pth, q), ts.ravel()), th).reshape(L, q)
+        hit = wcv_soa(*self._state(np.repeat(pth, q), ts.ravel()), th).reshape(L, q)
         rows = np.flatnonzero(hit.any(axis=1))
         if not rows.size:
             return

@@ -168,11 +168,31 @@ def _gcs_argv(opts: RunOptions, out: Path, listen: str, gcs_side: str, clock_arg
         ["--config", str(opts.config)] if opts.config is not None else [])
 
 
+def prepare_kernels(say: "Callable[[str], None] | None") -> None:
+    """Compile the DAA kernels here when their cache is cold, before the vehicle and the GCS start: they
+    then load them instead of compiling on the same cores against their READY timeouts (docs/daa.md,
+    "Compiled kernels"). Nothing is imported when the cache is warm."""
+    from daa_sil.jit_cache import cache_dir, is_warm
+
+    if is_warm():
+        return
+    t = time.monotonic()
+    if say:
+        say(f"compiling the DAA kernels (first run; cached in {cache_dir()}) ...")
+    from daa_sil.daa import kernels
+
+    kernels.get()
+
+    if say:
+        say(f"DAA kernels ready ({time.monotonic() - t:.1f} s)")
+
+
 def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, recorder) -> dict:
     from daa_sil.files import atomic_write_json
 
     from daa_sil.steplog import read_steplog
 
+    prepare_kernels(lambda m: _say(opts, m))
     t0 = time.monotonic()
     interrupted: "KeyboardInterrupt | None" = None
     failure: "str | None" = None

@@ -92,8 +92,11 @@ def load_campaign_json(out_dir: Path) -> dict:
 
 
 def _versions() -> dict:
+    import llvmlite
+    import numba
+
     out = {"daa_sil": __version__, "python": platform.python_version(), "numpy": np.__version__,
-           "pyarrow": pa.__version__}
+           "pyarrow": pa.__version__, "numba": numba.__version__, "llvmlite": llvmlite.__version__}
     return out
 
 

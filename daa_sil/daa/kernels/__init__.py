@@ -1,0 +1,72 @@
+"""Compiled (numba) kernels of the DAA's hot loops; the rules are in :mod:`daa_sil.daa.kernels.jit`.
+
+The numpy functions they replace stay as ``*_reference`` in their modules and are the test oracles
+(``tests/test_daa_kernels.py``: identical results on random and adversarial inputs). Nothing is
+compiled, and numba is not imported, until the first kernel is needed: :func:`get` then compiles every
+kernel, or loads it from the cache, under the cache's file lock (a process that imports the DAA
+without computing bands -- the shim, a report -- pays nothing).
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import time
+from types import SimpleNamespace
+
+from daa_sil.jit_cache import READY_MARKER, cache_dir
+
+_MODULES = ("elementwise", "evaluate", "motion")
+#: where the kernels are cached (:func:`daa_sil.jit_cache.cache_dir`)
+CACHE_DIR = cache_dir()
+#: s this process waited for another one's compilation, and spent compiling / loading the kernels
+#: (None until :func:`get` has run)
+LOCK_WAIT_S: "float | None" = None
+LOAD_S: "float | None" = None
+_KERNELS: "SimpleNamespace | None" = None
+
+
+def _load(clear: bool) -> tuple[float, float]:
+    """Import (so compile, or load from the cache) every kernel module under the lock; ``clear``: delete
+    the cache's entries first. Returns (s waited for the lock, s compiling / loading)."""
+    from daa_sil.daa.kernels.jit import compile_lock
+
+    t0 = time.perf_counter()
+    with compile_lock():
+        t1 = time.perf_counter()
+        if clear:
+            for f in list(CACHE_DIR.rglob("*.nbi")) + list(CACHE_DIR.rglob("*.nbc")) + [CACHE_DIR / READY_MARKER]:
+                f.unlink(missing_ok=True)
+        for name in _MODULES:
+            importlib.import_module(f"{__name__}.{name}")
+    return t1 - t0, time.perf_counter() - t1
+
+
+def get() -> SimpleNamespace:
+    """Every kernel (attributes named as in the kernel modules), compiled or loaded on the first call."""
+    global _KERNELS, LOCK_WAIT_S, LOAD_S
+    if _KERNELS is not None:
+        return _KERNELS
+    try:
+        LOCK_WAIT_S, LOAD_S = _load(clear=False)
+    except Exception as exc:  # noqa: BLE001  (a damaged cache entry: say so, drop the cache, compile again)
+        for name in _MODULES:
+            sys.modules.pop(f"{__name__}.{name}", None)
+        print(f"daa-sil: the compiled-kernel cache {CACHE_DIR} could not be read ({type(exc).__name__}: {exc}); "
+              f"recompiling", file=sys.stderr)
+        LOCK_WAIT_S, LOAD_S = _load(clear=True)
+    try:  # every kernel is cached now (daa_sil.jit_cache.is_warm)
+        (CACHE_DIR / READY_MARKER).touch()
+    except OSError:
+        pass
+    ns = SimpleNamespace()
+    for name in _MODULES:
+        mod = sys.modules[f"{__name__}.{name}"]
+        for attr in dir(mod):
+            if attr.endswith("_into"):
+                setattr(ns, attr, getattr(mod, attr))
+    _KERNELS = ns
+    return ns
+
+
+__all__ = ["CACHE_DIR", "LOAD_S", "LOCK_WAIT_S", "get"]

@@ -1,0 +1,120 @@
+"""Kernels of :class:`daa_sil.daa.trajectory.PathEvaluator`: straight tails, the chord certificates of
+the maneuver between knots (blocks first), and the candidates' first entry / last exit.
+
+Arrays are flat over ``(N, M, P, K)`` (knots last) or ``(N, M, P)`` (one value per path); the
+numpy code they replace is kept as the ``*_reference`` methods of the evaluator.
+"""
+
+from __future__ import annotations
+
+from numba import boolean, float64, int8, int64, types, void
+
+from daa_sil.daa.kernels.jit import inline, kernel
+from daa_sil.daa.kernels.pieces import CLEAR, INSIDE, UNDECIDED, classify
+from daa_sil.daa.kernels.scalar import INF, interval, npmax, npmin, vertical_window
+
+A = types.Array(float64, 1, "A", readonly=True)
+O = float64[:]
+F = float64
+I = int64
+
+
+@kernel(void(A, A, A, A, A, A, A, I, boolean, A, A, boolean, F, F, F, F, F, F, F, O, O))
+def tails_into(s0, s1, s2, v0, v1, v2, tk, K, has_vwin, vlo, vhi, last_only, t_end, D, DD, D2, TT, H, TC,
+               tail_in, tail_out):
+    """Violation interval of the straight tail from every knot (``last_only``: the last knot of each
+    path) over ``[t_k, t_end]``, absolute s; ``vlo``/``vhi`` the path's vertical window when ``has_vwin``."""
+    n_paths = tk.shape[0] // K
+    for path in range(n_paths):
+        for k in range(K - 1 if last_only else 0, K):
+            i = path * K + k
+            t = tk[i]
+            length = npmax(t_end - t, 0.0)
+            if has_vwin:
+                lo, hi = npmax(vlo[path], t) - t, npmin(vhi[path], t_end) - t
+            else:
+                lo, hi = vertical_window(s2[i], v2[i], 0.0, length, H, TC)
+            a, b = interval(s0[i], s1[i], s2[i], v0[i], v1[i], v2[i], length, lo, hi, D, DD, D2, TT, H, TC)
+            if last_only:
+                if t <= t_end:
+                    tail_in[i], tail_out[i] = a + t, b + t
+                else:
+                    tail_in[i], tail_out[i] = INF, -INF
+            elif t > t_end:
+                tail_in[i], tail_out[i] = INF, -INF
+            else:
+                tail_in[i], tail_out[i] = a + t, b + t
+
+
+@inline
+def _piece(s0, s1, s2, tk, ia, ib, t_win_end, a_h, a_v, has_vwin, w_lo, w_hi, D, DD, H, TT, TC):
+    """Code of the chord from flat knot ``ia`` to ``ib``; the window is clipped to ``[t_a, t_win_end]``."""
+    t0 = tk[ia]
+    h = tk[ib] - t0
+    lo, hi = 0.0, 0.0
+    if has_vwin:
+        lo, hi = npmax(w_lo, t0) - t0, npmin(w_hi, t_win_end) - t0
+    return classify(s0[ia], s1[ia], s2[ia], s0[ib], s1[ib], s2[ib], h, a_h * h * h * 0.125, a_h * h * 0.5,
+                    a_v * h * h * 0.125, lo, hi, has_vwin, D, DD, H, TT, TC)
+
+
+@kernel(void(A, A, A, A, I, I, A, A, boolean, A, A, F, F, F, F, F, F, int8[:], O, O))
+def segments_into(s0, s1, s2, tk, K, block, acc_h, acc_v, has_vwin, vlo, vhi, t_end, D, DD, H, TT, TC,
+                  code, seg_in, seg_out):
+    """Certificate code of the maneuver between knots j and j+1 of every path (``code`` flat over
+    ``(N, M, P, K-1)``): with more than ``block`` segments, blocks of ``block`` segments first (an
+    undecided block's segments are then certified one by one); INSIDE segments get ``seg_in``/``seg_out``
+    = their knot times; segments starting after ``t_end`` are CLEAR."""
+    n_paths = tk.shape[0] // K
+    S = K - 1
+    for path in range(n_paths):
+        a_h, a_v = acc_h[path], acc_v[path]
+        w_lo, w_hi = (vlo[path], vhi[path]) if has_vwin else (0.0, 0.0)
+        base = path * K
+        if S > block:
+            b0 = 0
+            while b0 < S:
+                b1 = min(b0 + block, S)
+                c = _piece(s0, s1, s2, tk, base + b0, base + b1, tk[base + b1], a_h, a_v, has_vwin, w_lo, w_hi,
+                           D, DD, H, TT, TC)
+                for j in range(b0, b1):
+                    if c == UNDECIDED:  # the block's segments one by one (end time t0 + h, as the reference)
+                        t0 = tk[base + j]
+                        t1 = t0 + (tk[base + j + 1] - t0)
+                        code[path * S + j] = _piece(s0, s1, s2, tk, base + j, base + j + 1, t1, a_h, a_v, has_vwin,
+                                                    w_lo, w_hi, D, DD, H, TT, TC)
+                    else:
+                        code[path * S + j] = INSIDE if c == INSIDE else CLEAR
+                b0 = b1
+        else:
+            for j in range(S):
+                code[path * S + j] = _piece(s0, s1, s2, tk, base + j, base + j + 1, tk[base + j + 1], a_h, a_v,
+                                            has_vwin, w_lo, w_hi, D, DD, H, TT, TC)
+        for j in range(S):
+            i = path * S + j
+            if not (tk[base + j] < t_end):
+                code[i] = CLEAR
+            elif code[i] == INSIDE:
+                seg_in[i], seg_out[i] = tk[base + j], tk[base + j + 1]
+
+
+@kernel(void(A, A, A, A, I, F, O, O))
+def candidates_into(tail_in, tail_out, seg_in, seg_out, K, t_end, t_in, t_out):
+    """First violation / last exit of candidate k (maneuver to knot k, then straight) over ``[0, t_end]``
+    (:meth:`daa_sil.daa.trajectory.PathConflicts.candidates`); no violation is ``(inf, -inf)``."""
+    n_paths = tail_in.shape[0] // K
+    S = K - 1
+    for path in range(n_paths):
+        acc_in, acc_out = INF, -INF
+        for k in range(K):
+            i = path * K + k
+            a, b = tail_in[i], tail_out[i]
+            if k > 0:
+                j = path * S + k - 1
+                acc_in = seg_in[j] if k == 1 else npmin(acc_in, seg_in[j])
+                acc_out = seg_out[j] if k == 1 else npmax(acc_out, seg_out[j])
+                a, b = npmin(a, acc_in), npmax(b, acc_out)
+            if a <= t_end:
+                t_in[i], t_out[i] = a, npmin(b, t_end)
+            else:
+                t_in[i], t_out[i] = INF, -INF

@@ -1,0 +1,74 @@
+"""How the DAA kernels are compiled: numba, without fastmath, numpy's error model, cached on disk.
+
+* **Exactness.** No ``fastmath`` (so no reassociation and no fused multiply-add: every ``a * b + c``
+  is rounded twice, as numpy's one-operation-per-call loops do), ``error_model="numpy"`` (a division by
+  zero gives inf / nan instead of raising). The kernels write every expression in the operation
+  order of the numpy reference they replace (``docs/daa.md``, "Compiled kernels").
+* **Cache.** Compiled machine code is written to ``$NUMBA_CACHE_DIR`` when that is set, else to
+  ``$XDG_CACHE_HOME/daa-sil-numba`` (``~/.cache/daa-sil-numba``), in a subdirectory named after a
+  hash of the kernel sources and the numba / llvmlite / numpy / Python versions
+  (:mod:`daa_sil.jit_cache`, which answers without importing numba; a ``ready`` file there says every
+  kernel is cached). numba keys its own
+  cache on each kernel file's time stamp only, so a change in a helper another file calls would
+  otherwise go unnoticed; the hash makes any change start a fresh directory. numba writes each
+  entry to a temporary file and renames it, so processes that compile at the same time (three SIL
+  processes on a cold machine) each compile and the last rename wins, with identical contents.
+* **When.** Every kernel has explicit signatures, so it is compiled (or loaded from the cache) when
+  its module is imported, never in the middle of a step. Nothing imports them, or numba, until the
+  first DAA computation of a process calls :func:`daa_sil.daa.kernels.get`, which imports them all
+  under an exclusive file lock in the cache directory (:func:`compile_lock`): of processes starting
+  together on a cold machine one compiles and the others then load its cache, instead of each
+  compiling on the same cores; the lock is released when its holder exits, however it exits.
+  ``python -m daa_sil.daa.kernels`` compiles ahead of time (CI does, after installing; the SIL driver
+  does when the cache is cold, before it starts the vehicle and the GCS) and prints where the cache is
+  and how long it took.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+import numba
+
+from daa_sil.jit_cache import cache_dir
+
+
+def _configure_cache() -> Path:
+    path = cache_dir()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError:  # unwritable: numba then compiles in memory on every start (slower, same results)
+        return path
+    numba.config.CACHE_DIR = str(path)
+    return path
+
+
+CACHE_DIR = _configure_cache()
+
+
+@contextlib.contextmanager
+def compile_lock():
+    """Exclusive lock on ``CACHE_DIR/.compile.lock`` while held (no lock where that cannot be had)."""
+    try:
+        import fcntl
+
+        fh = open(CACHE_DIR / ".compile.lock", "a+b")
+    except (ImportError, OSError):
+        yield
+        return
+    with fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def kernel(signatures):
+    """Decorator: compile eagerly for ``signatures`` with the project's settings (module docstring)."""
+    return numba.njit(signatures, cache=True, fastmath=False, error_model="numpy", nogil=True)
+
+
+#: decorator for the scalar helpers the kernels call (compiled into each kernel, not on their own)
+inline = numba.njit(cache=False, fastmath=False, error_model="numpy")

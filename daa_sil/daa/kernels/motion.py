@@ -1,0 +1,179 @@
+"""The true ownship state on a band axis's maneuver path, relative to a straight-line intruder, and
+the bisection of a crossing of the well-clear boundary on it (compiled).
+
+A path is one row of ``kin``: ``x0, y0, z0, gs0, sin(trk0), cos(trk0), vs0, side (+-1), limit`` (SI) of
+:data:`KIN_FIELDS`; the axis code and its rate (turn rate rad/s or acceleration m/s^2) are scalars.
+The numpy references are :func:`daa_sil.daa.axis_paths._axis_state_soa` and
+:meth:`daa_sil.daa.undecided.UndecidedPieces._bisect`.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import boolean, float64, int64, types, void
+
+from daa_sil.daa.kernels.jit import inline, kernel
+from daa_sil.daa.kernels.scalar import npmax, npmin, npsign, wcv_soa
+
+#: columns of a path's row in ``kin``
+KIN_FIELDS = ("x0", "y0", "z0", "gs0", "st", "ct", "vs0", "sgn", "lim")
+#: axis codes (daa.config.AXIS_*)
+_HORIZONTAL, _VERTICAL = 1, 2
+
+A2 = types.Array(float64, 2, "A", readonly=True)
+A = types.Array(float64, 1, "A", readonly=True)
+O = float64[:]
+F = float64
+I = int64
+
+
+@inline
+def axis_state(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, lim, t):
+    """Ownship (x, y, z, vx, vy, vz) after ``t`` s on the path (``_axis_state_soa``)."""
+    if axis == _HORIZONTAL:
+        th = rate * t
+        r = gs0 / rate
+        sth, cth = math.sin(th), math.cos(th)
+        fwd, lat = r * sth, sgn * r * (1.0 - cth)
+        ssth = sgn * sth
+        return (x0 + fwd * st + lat * ct, y0 + fwd * ct - lat * st, z0 + vs0 * t,
+                gs0 * (st * cth + ct * ssth), gs0 * (ct * cth - st * ssth), vs0 + 0.0 * t)
+    v0 = vs0 if axis == _VERTICAL else gs0
+    tc = npmin(t, npmax((lim - v0) * sgn / rate, 0.0))
+    sa = sgn * rate
+    dist = v0 * t + sa * tc * (t - 0.5 * tc)
+    v_t = v0 + sa * tc
+    if axis == _VERTICAL:
+        return x0 + gs0 * st * t, y0 + gs0 * ct * t, z0 + dist, gs0 * st + 0.0 * t, gs0 * ct + 0.0 * t, v_t
+    return x0 + dist * st, y0 + dist * ct, z0 + vs0 * t, v_t * st, v_t * ct, vs0 + 0.0 * t
+
+
+@inline
+def rel_state(axis, rate, kin, ipv, i, t):
+    """Relative state (ownship - intruder) of path row ``i`` at ``t``."""
+    ox, oy, oz, ovx, ovy, ovz = axis_state(axis, rate, kin[i, 0], kin[i, 1], kin[i, 2], kin[i, 3], kin[i, 4],
+                                           kin[i, 5], kin[i, 6], kin[i, 7], kin[i, 8], t)
+    ivx, ivy, ivz = ipv[i, 3], ipv[i, 4], ipv[i, 5]
+    return (ox - (ipv[i, 0] + t * ivx), oy - (ipv[i, 1] + t * ivy), oz - (ipv[i, 2] + t * ivz),
+            ovx - ivx, ovy - ivy, ovz - ivz)
+
+
+@kernel(void(I, F, A2, A2, A, types.Array(float64, 2, "C")))
+def rel_states_into(axis, rate, kin, ipv, t, out):
+    """Relative state of path row ``i`` at ``t[i]`` into ``out[:, i]`` (six rows)."""
+    for i in range(t.shape[0]):
+        out[0, i], out[1, i], out[2, i], out[3, i], out[4, i], out[5, i] = rel_state(axis, rate, kin, ipv, i, t[i])
+
+
+@kernel(void(I, F, A2, A2, O, O, types.Array(boolean, 1, "A", readonly=True), I, I, I, boolean, F, F, F, F))
+def bisect_into(axis, rate, kin, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed, DD, TT, H, TC):
+    """Halve ``[lo, hi]`` ``steps`` times keeping the predicate ``lo_in`` at ``lo``; with ``mixed``, rows
+    starting inside stop after ``n_out`` halvings and the others after ``n_in`` (``_bisect``)."""
+    for i in range(lo.shape[0]):
+        a, b, flag = lo[i], hi[i], lo_in[i]
+        for k in range(steps):
+            mid = 0.5 * (a + b)
+            sx, sy, sz, vx, vy, vz = rel_state(axis, rate, kin, ipv, i, mid)
+            same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
+            if mixed:
+                if k < (n_out if flag else n_in):
+                    if same:
+                        a = mid
+                    else:
+                        b = mid
+            elif same:
+                a = mid
+            else:
+                b = mid
+        lo[i], hi[i] = a, b
+
+
+# --------------------------------------------------------------------------------------------------
+# a command flown kinematically (SM's paths): daa_sil.daa.safety._CommandMotion.state
+# --------------------------------------------------------------------------------------------------
+#: columns of an encounter's row in ``phases`` (one row per phase: turn and speed change, the longer
+#: one alone, straight) and in ``enc``
+PHASE_FIELDS = ("t0", "x", "y", "gs", "trk", "w", "acc", "sin0", "cos0")
+ENC_FIELDS = ("dpsi", "trk_cmd", "dgs", "tgt_gs", "z", "vs", "tgt_vs")
+_TWO_PI = 2.0 * math.pi
+A3 = types.Array(float64, 3, "A", readonly=True)
+
+
+@inline
+def command_state(ph_rows, enc, i, tau, max_turn, h_acc, v_acc):
+    """Ownship (x, y, z, vx, vy, vz) of encounter row ``i`` at ``tau`` s (``_CommandMotion.state``)."""
+    ph = (1 if tau > ph_rows[i, 1, 0] else 0) + (1 if tau > ph_rows[i, 2, 0] else 0)
+    t = tau - ph_rows[i, ph, 0]
+    gs0, acc, w, trk0 = ph_rows[i, ph, 3], ph_rows[i, ph, 6], ph_rows[i, ph, 5], ph_rows[i, ph, 4]
+    s0, c0 = ph_rows[i, ph, 7], ph_rows[i, ph, 8]
+    turning = w != 0.0
+    ws = w if turning else 1.0
+    th1 = trk0 + w * t
+    s1, c1 = math.sin(th1), math.cos(th1)
+    if turning:
+        ws2 = ws * ws
+        dx = gs0 * (c0 - c1) / ws + acc * (-t * c1 / ws + (s1 - s0) / ws2)
+        dy = gs0 * (s1 - s0) / ws + acc * (t * s1 / ws + (c1 - c0) / ws2)
+    else:
+        dist = gs0 * t + 0.5 * acc * t * t
+        dx, dy = dist * s0, dist * c0
+    x, y = ph_rows[i, ph, 1] + dx, ph_rows[i, ph, 2] + dy
+    gs, trk = gs0 + acc * t, th1
+    if abs(enc[i, 0]) <= max_turn * tau:
+        trk = enc[i, 1]
+    if abs(enc[i, 2]) <= h_acc * tau:
+        gs = enc[i, 3]
+    # kinematics._vertical(z, vs, tgt_vs, v_acc, tau)
+    z0, vs0, tgt = enc[i, 4], enc[i, 5], enc[i, 6]
+    dv = tgt - vs0
+    if v_acc > 0:
+        t1 = npmin(abs(dv) / v_acc, tau)
+    else:
+        t1 = 0.0 if dv == 0 else tau
+    a = npsign(dv) * v_acc
+    vs1 = vs0 + a * t1
+    z = z0 + vs0 * t1 + 0.5 * a * t1 * t1 + vs1 * (tau - t1)
+    vs = tgt if abs(dv) <= v_acc * tau else vs1
+    trk = trk % _TWO_PI
+    return x, y, z, gs * math.sin(trk), gs * math.cos(trk), vs
+
+
+@inline
+def command_rel_state(ph_rows, enc, ipv, i, t, max_turn, h_acc, v_acc):
+    """Relative state (ownship - intruder) of row ``i`` at ``t``."""
+    ox, oy, oz, ovx, ovy, ovz = command_state(ph_rows, enc, i, t, max_turn, h_acc, v_acc)
+    ivx, ivy, ivz = ipv[i, 3], ipv[i, 4], ipv[i, 5]
+    return (ox - (ipv[i, 0] + t * ivx), oy - (ipv[i, 1] + t * ivy), oz - (ipv[i, 2] + t * ivz),
+            ovx - ivx, ovy - ivy, ovz - ivz)
+
+
+@kernel(void(A3, A2, F, F, F, A2, A, types.Array(float64, 2, "C")))
+def command_rel_states_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, t, out):
+    """Relative state of row ``i`` at ``t[i]`` into ``out[:, i]``."""
+    for i in range(t.shape[0]):
+        out[0, i], out[1, i], out[2, i], out[3, i], out[4, i], out[5, i] = command_rel_state(
+            ph_rows, enc, ipv, i, t[i], max_turn, h_acc, v_acc)
+
+
+@kernel(void(A3, A2, F, F, F, A2, O, O, types.Array(boolean, 1, "A", readonly=True), I, I, I, boolean, F, F, F, F))
+def command_bisect_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed,
+                        DD, TT, H, TC):
+    """:func:`bisect_into` on command paths."""
+    for i in range(lo.shape[0]):
+        a, b, flag = lo[i], hi[i], lo_in[i]
+        for k in range(steps):
+            mid = 0.5 * (a + b)
+            sx, sy, sz, vx, vy, vz = command_rel_state(ph_rows, enc, ipv, i, mid, max_turn, h_acc, v_acc)
+            same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
+            if mixed:
+                if k < (n_out if flag else n_in):
+                    if same:
+                        a = mid
+                    else:
+                        b = mid
+            elif same:
+                a = mid
+            else:
+                b = mid
+        lo[i], hi[i] = a, b

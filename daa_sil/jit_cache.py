@@ -1,0 +1,47 @@
+"""Where the DAA's compiled kernels are cached, without importing numba (the SIL driver asks before it
+starts the processes that use them). The rules are in :mod:`daa_sil.daa.kernels.jit`."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import sys
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+#: the kernels' sources (hashed: a change anywhere in them starts a fresh cache directory)
+KERNEL_DIR = Path(__file__).resolve().parent / "daa" / "kernels"
+#: file written into the cache directory once every kernel is in it
+READY_MARKER = "ready"
+
+
+def _version(dist: str) -> str:
+    try:
+        return version(dist)
+    except PackageNotFoundError:
+        return "-"
+
+
+def source_hash() -> str:
+    """16 hex digits identifying the kernel sources and the numba / llvmlite / numpy / Python versions."""
+    h = hashlib.sha256()
+    for p in sorted(KERNEL_DIR.glob("*.py")):
+        h.update(p.name.encode())
+        h.update(p.read_bytes())
+    h.update(" ".join([_version("numba"), _version("llvmlite"), _version("numpy"), sys.version]).encode())
+    return h.hexdigest()[:16]
+
+
+def cache_dir() -> Path:
+    """``$NUMBA_CACHE_DIR`` (or ``$XDG_CACHE_HOME/daa-sil-numba``, default ``~/.cache/daa-sil-numba``) /
+    :func:`source_hash`."""
+    base = os.environ.get("NUMBA_CACHE_DIR")
+    if not base:
+        xdg = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        base = os.path.join(xdg, "daa-sil-numba")
+    return Path(base) / source_hash()
+
+
+def is_warm() -> bool:
+    """True when every kernel is in the cache (a process will load them instead of compiling)."""
+    return (cache_dir() / READY_MARKER).is_file()

@@ -1,0 +1,68 @@
+"""The compiled-kernel cache (daa_sil.daa.kernels.jit): processes starting together on a cold cache
+all start, one compiles while the others wait for it and load its result, and a damaged cache is
+reported in one line, dropped and rebuilt, with the same numbers."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+#: prints the lock wait and a few band numbers of a fixed encounter
+PROBE = """
+import numpy as np
+from daa_sil.daa import DaaConfig, compute_bands, kernels
+from daa_sil.geometry.kinematics import AircraftState
+own = AircraftState(*(np.array([v]) for v in (0.0, 0.0, 1000.0, 55.0, 0.0, 0.0)))
+intr = AircraftState(*(np.array([[v]]) for v in (300.0, 6000.0, 1010.0, 60.0, np.pi, 0.0)))
+b = compute_bands(own, intr, DaaConfig.for_preset("do365"))
+print(kernels.LOCK_WAIT_S, kernels.CACHE_DIR, repr(b.trk.t_in[0].tolist()))
+"""
+
+
+def _start(cache, n=1):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    return [subprocess.Popen([sys.executable, "-c", PROBE], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True) for _ in range(n)]
+
+
+def _finish(procs, timeout=600):
+    out = []
+    for p in procs:
+        stdout, stderr = p.communicate(timeout=timeout)
+        assert p.returncode == 0, stderr[-2000:]
+        wait, cache_dir, t_in = stdout.split(" ", 2)
+        out.append((float(wait), cache_dir, t_in.strip(), stderr))
+    return out
+
+
+@pytest.mark.slow  # two cold compilations (about 10 s each on a quiet machine, a minute under load)
+def test_cold_start_together_then_damaged_cache(tmp_path):
+    cache = tmp_path / "numba"
+    runs = _finish(_start(cache, 3))
+    assert len({r[2] for r in runs}) == 1  # the same bands in each
+    waited = sorted(r[0] for r in runs)
+    assert waited[-1] > 0.5  # someone waited for the one that compiled (compiling takes seconds)
+    entries = list(cache.rglob("*.nbc"))
+    assert entries and all(r[1].startswith(str(cache)) for r in runs)
+    for f in entries:  # truncate every compiled entry
+        f.write_bytes(f.read_bytes()[:64])
+    (again,) = _finish(_start(cache))
+    assert again[2] == runs[0][2]
+    lines = [ln for ln in again[3].splitlines() if "compiled-kernel cache" in ln]
+    assert len(lines) == 1 and "recompiling" in lines[0]
+    (warm,) = _finish(_start(cache))  # rebuilt: nothing to report any more
+    assert warm[2] == runs[0][2] and "compiled-kernel cache" not in warm[3]
+
+
+def test_the_numba_free_locator_agrees_with_the_kernels():
+    """daa_sil.jit_cache (which the SIL driver asks without importing numba) names the directory the kernels
+    use, and says it is warm once they are loaded."""
+    from daa_sil import jit_cache
+    from daa_sil.daa import kernels
+
+    kernels.get()
+    assert jit_cache.cache_dir() == kernels.CACHE_DIR
+    assert jit_cache.is_warm()

@@ -1,0 +1,349 @@
+"""The compiled DAA kernels (daa_sil.daa.kernels) give exactly the numbers of their numpy references.
+
+Identical, not close: every float output equal (nan where the reference has nan), every code and
+flag equal, on random inputs and on adversarial ones -- components drawn from boundary values of
+the thresholds (on DTHR, ZTHR, tangent lines, zero discriminants), zero and tiny speeds, single-
+instant windows, zero-length pieces, nan, +-inf and huge values.
+"""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+import pytest
+
+#: the adversarial inputs overflow and make nan on purpose
+pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
+
+from daa_sil.daa import certify, intervals
+from daa_sil.geometry.thresholds import get_thresholds
+
+THRESHOLDS = [get_thresholds("do365"), get_thresholds("paper"), get_thresholds("daidalus"),
+              get_thresholds("do365").with_(name="tcoa", tcoa=20.0),
+              get_thresholds("do365").with_(name="cylinder", tthr=0.0, tcoa=0.0)]
+
+
+def _special(th) -> np.ndarray:
+    """Values at or next to the boundaries of ``th`` and the numeric edge cases."""
+    D, H = th.dthr, th.zthr
+    base = [0.0, -0.0, 1e-13, -1e-13, 1e-12, -1e-12, 1e-300, 1e300, -1e300, np.inf, -np.inf, np.nan,
+            D, -D, H, -H, D * D, 0.5 * th.tthr, th.tthr, 1.0, -1.0]
+    near = [np.nextafter(x, s) for x in (D, -D, H, -H) for s in (np.inf, -np.inf)]
+    return np.array(base + near)
+
+
+def _draw(rng, n: int, th, scale: float, p_special: float = 0.25) -> np.ndarray:
+    """Random values of magnitude ``scale``, a fraction ``p_special`` replaced by special values."""
+    x = rng.normal(0.0, scale, n)
+    x[rng.random(n) < 0.1] = rng.uniform(-2.0, 2.0, int(np.count_nonzero(rng.random(n) < 0.1)) or 1)[0]
+    sp = _special(th)
+    pick = rng.random(n) < p_special
+    x[pick] = sp[rng.integers(0, sp.size, int(pick.sum()))]
+    return x
+
+
+def _tangent(rng, n: int, th):
+    """Relative states whose straight line grazes the DTHR circle (cross product = DTHR |v|) or starts on
+    it, with vertical speeds that make the vertical window a single instant."""
+    D, H = th.dthr, th.zthr
+    w = rng.uniform(1.0, 300.0, n)
+    ang = rng.uniform(0, 2 * np.pi, n)
+    ux, uy = np.sin(ang), np.cos(ang)
+    back = rng.uniform(0.0, 5e4, n)
+    sx, sy = D * uy - back * ux, -D * ux - back * uy  # offset D perpendicular to the motion
+    vx, vy = w * ux, w * uy
+    sz = np.where(rng.random(n) < 0.5, H, rng.uniform(-2 * H, 2 * H, n))
+    vz = np.where(rng.random(n) < 0.3, 0.0, rng.uniform(-20, 20, n))
+    return sx, sy, sz, vx, vy, vz
+
+
+def _ref(fn, *args):
+    """The numpy reference (its warnings for nan / inf inputs are expected here)."""
+    with np.errstate(all="ignore"):
+        return fn(*args)
+
+
+def _same(a, b) -> None:
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.dtype == b.dtype and a.shape == b.shape
+    if a.dtype.kind == "f":
+        bad = ~((a == b) | (np.isnan(a) & np.isnan(b)))
+    else:
+        bad = a != b
+    assert not bad.any(), f"{int(bad.sum())} of {a.size} differ, first at {np.flatnonzero(bad)[:5]}: " \
+                          f"{a[bad][:5]} vs {b[bad][:5]}"
+
+
+def _states(rng, n, th):
+    if rng.random() < 0.5:
+        return tuple(_draw(rng, n, th, s) for s in (8000.0, 8000.0, 300.0, 150.0, 150.0, 10.0))
+    return _tangent(rng, n, th)
+
+
+@pytest.mark.parametrize("th", THRESHOLDS, ids=lambda t: t.name)
+@pytest.mark.parametrize("seed", range(6))
+def test_interval_soa_identical(th, seed):
+    rng = np.random.default_rng(seed)
+    n = 40_000
+    comp = _states(rng, n, th)
+    length = np.abs(_draw(rng, n, th, 100.0, 0.1))
+    length[rng.random(n) < 0.05] = 0.0
+    _same_pair(intervals.interval_soa(*comp, length, th), _ref(intervals.interval_soa_reference, *comp, length, th))
+    # with the caller's vertical window (a single instant in some rows)
+    lo = np.abs(_draw(rng, n, th, 20.0, 0.1))
+    hi = np.where(rng.random(n) < 0.2, lo, lo + np.abs(rng.normal(0, 30, n)))
+    hi[rng.random(n) < 0.1] = -np.inf
+    got = intervals.interval_soa(*comp, length, th, (lo, hi))
+    _same_pair(got, _ref(intervals.interval_soa_reference, *comp, length, th, (lo, hi)))
+
+
+def _same_pair(got, ref):
+    for g, r in zip(got, ref):
+        _same(g, r)
+
+
+@pytest.mark.parametrize("th", THRESHOLDS, ids=lambda t: t.name)
+@pytest.mark.parametrize("seed", range(6))
+def test_wcv_soa_identical(th, seed):
+    rng = np.random.default_rng(100 + seed)
+    comp = _states(rng, 40_000, th)
+    _same(intervals.wcv_soa(*comp, th), _ref(intervals.wcv_soa_reference, *comp, th))
+
+
+def _pieces(rng, n, th):
+    """Chord pieces: start / end relative positions (end = start + h v + a curvature offset), duration,
+    error bounds (arrays or 0.0) and true end velocities."""
+    x0, y0, z0, vx, vy, vz = _states(rng, n, th)
+    h = np.abs(_draw(rng, n, th, 2.0, 0.1))
+    h[rng.random(n) < 0.05] = 0.0
+    bend = rng.normal(0, 3.0, (3, n))
+    x1, y1, z1 = x0 + h * vx + bend[0], y0 + h * vy + bend[1], z0 + h * vz + bend[2]
+    acc = np.abs(_draw(rng, n, th, 3.0, 0.1))
+    e_p, e_v = acc * h * h * 0.125, acc * h * 0.5
+    e_z = 0.0 if rng.random() < 0.5 else np.abs(_draw(rng, n, th, 0.5, 0.1))
+    u0 = (vx + rng.normal(0, 2, n), vy + rng.normal(0, 2, n))
+    u1 = (vx + rng.normal(0, 2, n), vy + rng.normal(0, 2, n))
+    return (x0, y0, z0, x1, y1, z1), h, e_p, e_v, e_z, u0, u1
+
+
+@pytest.mark.parametrize("th", THRESHOLDS, ids=lambda t: t.name)
+@pytest.mark.parametrize("seed", range(6))
+def test_classify_pieces_identical(th, seed):
+    rng = np.random.default_rng(200 + seed)
+    n = 40_000
+    ends, h, e_p, e_v, e_z, _, _ = _pieces(rng, n, th)
+    _same(certify.classify_pieces(*ends, h, th, e_p, e_v, e_z),
+          _ref(certify.classify_pieces_reference, *ends, h, th, e_p, e_v, e_z))
+    lo = np.abs(_draw(rng, n, th, 2.0, 0.1))
+    hi = np.where(rng.random(n) < 0.2, lo, lo + np.abs(rng.normal(0, 2, n)))
+    hi[rng.random(n) < 0.1] = -np.inf
+    _same(certify.classify_pieces(*ends, h, th, e_p, e_v, e_z, (lo, hi)),
+          _ref(certify.classify_pieces_reference, *ends, h, th, e_p, e_v, e_z, (lo, hi)))
+
+
+@pytest.mark.parametrize("th", THRESHOLDS, ids=lambda t: t.name)
+@pytest.mark.parametrize("seed", range(6))
+def test_clear_second_order_identical(th, seed):
+    rng = np.random.default_rng(300 + seed)
+    ends, h, e_p, e_v, e_z, u0, u1 = _pieces(rng, 40_000, th)
+    _same(certify.clear_second_order(*ends, *u0, *u1, h, th, e_p, e_v, e_z),
+          _ref(certify.clear_second_order_reference, *ends, *u0, *u1, h, th, e_p, e_v, e_z))
+
+
+def _flip_points(ref, p_lo, p_hi):
+    """Adjacent floats ``(a, b)`` per row with ``ref(a) != ref(b)`` between ``p_lo`` and ``p_hi`` (> 0), by
+    bisection on the float's bits: the exact place where the reference's decision flips, where a
+    kernel that rounds any operation differently decides differently."""
+    a, b = p_lo.view(np.int64).copy(), p_hi.view(np.int64).copy()
+    at_a = ref(a.view(float))
+    keep = at_a != ref(b.view(float))
+    a, b, at_a = a[keep], b[keep], at_a[keep]
+    for _ in range(70):
+        gap = b - a > 1
+        if not gap.any():
+            break
+        mid = np.where(gap, a + (b - a) // 2, a)
+        same = ref(mid.view(float), keep) == at_a
+        a, b = np.where(gap & same, mid, a), np.where(gap & ~same, mid, b)
+    return keep, a.view(float), b.view(float)
+
+
+@pytest.mark.parametrize("th", THRESHOLDS[:3] + THRESHOLDS[4:], ids=lambda t: t.name)
+@pytest.mark.parametrize("knob", ["scale", "e_p", "e_v", "h"])
+def test_certificates_identical_at_their_flip_points(th, knob):
+    """At the float where the reference's verdict flips (moving one input), the kernel decides the same
+    on both sides and on the neighbouring floats."""
+    rng = np.random.default_rng(zlib.crc32(f"{th.name}/{knob}".encode()))
+    n = 4000
+    ends, h, e_p, e_v, e_z, u0, u1 = _pieces(rng, n, th)
+    base = dict(ends=ends, h=h, e_p=e_p, e_v=e_v)
+
+    def args(value, rows):
+        d = {k: (tuple(c[rows] for c in v) if isinstance(v, tuple) else v[rows]) for k, v in base.items()}
+        if knob == "scale":
+            x0, y0, z0, x1, y1, z1 = d["ends"]
+            d["ends"] = (x0 * value, y0 * value, z0, x1 * value, y1 * value, z1)
+        else:
+            d[knob] = value
+        return d
+
+    flips = {"classify": 0, "clear2": 0}
+    for name, fn, ref_fn in (("classify", certify.classify_pieces, certify.classify_pieces_reference),
+                             ("clear2", certify.clear_second_order, certify.clear_second_order_reference)):
+        def call(f, value, rows=None):
+            rows = np.arange(n) if rows is None else rows
+            d = args(value, rows)
+            ez = e_z if np.ndim(e_z) == 0 else e_z[rows]
+            if name == "classify":
+                return f(*d["ends"], d["h"], th, d["e_p"], d["e_v"], ez)
+            return f(*d["ends"], *(c[rows] for c in u0 + u1), d["h"], th, d["e_p"], d["e_v"], ez)
+
+        lo, hi = (np.full(n, 1e-3), np.full(n, 1e3)) if knob == "scale" else (np.full(n, 1e-9), np.full(n, 1e4))
+        keep, a, b = _flip_points(lambda v, rows=None: _ref(call, ref_fn, v, rows), lo, hi)
+        rows = np.flatnonzero(keep)
+        if knob in ("scale", "e_p"):  # (the other knobs flip few rows, or none on some seeds)
+            assert rows.size >= 100, f"{name}/{knob}: too few flips to test ({rows.size})"
+        flips[name] += rows.size
+        for k in range(-2, 3):
+            v = np.nextafter(a, np.inf) if k > 0 else a
+            for _ in range(abs(k) - (k > 0)):
+                v = np.nextafter(v, np.inf if k > 0 else -np.inf)
+            _same(call(fn, v, rows), _ref(call, ref_fn, v, rows))
+        _same(call(fn, b, rows), _ref(call, ref_fn, b, rows))
+
+
+def test_kernel_outcomes_are_not_trivial():
+    """The inputs above reach every outcome (so the comparisons exercise each branch)."""
+    th = THRESHOLDS[0]
+    rng = np.random.default_rng(7)
+    ends, h, e_p, e_v, e_z, u0, u1 = _pieces(rng, 40_000, th)
+    codes = certify.classify_pieces(*ends, h, th, e_p, e_v, e_z)
+    assert set(np.unique(codes)) == {certify.CLEAR, certify.INSIDE, certify.UNDECIDED}
+    clear = certify.clear_second_order(*ends, *u0, *u1, h, th, e_p, e_v, e_z)
+    assert clear.any() and not clear.all()
+    comp = _states(np.random.default_rng(8), 40_000, th)
+    t_in, t_out = intervals.interval_soa(*comp, np.full(40_000, 180.0), th)
+    assert np.isfinite(t_in).any() and np.isinf(t_in).any() and (t_in == 0).any()
+    flags = intervals.wcv_soa(*comp, th)
+    assert flags.any() and not flags.all()
+
+
+# --------------------------------------------------------------------------------------------------
+# the evaluator's compiled passes against its numpy reference, on real maneuver paths
+# --------------------------------------------------------------------------------------------------
+from daa_sil.daa import DaaConfig  # noqa: E402
+from daa_sil.daa.axis_paths import _maneuver_paths, _path_sizes  # noqa: E402
+from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_SPEED, AXIS_VERTICAL  # noqa: E402
+from daa_sil.daa.kernels.motion import command_rel_states_into, rel_states_into  # noqa: E402
+from daa_sil.daa.safety import command_paths  # noqa: E402
+from daa_sil.daa.trajectory import PathEvaluator  # noqa: E402
+from daa_sil.geometry.kinematics import AircraftState, Command  # noqa: E402
+
+
+def _encounters(rng, n: int, m: int, cfg):
+    """Ownships at the axis limits or anywhere, intruders converging from 1-9 km, some level with the
+    ownship, some ZTHR above or below it, some standing still, some with nan or huge states."""
+    own = AircraftState(rng.normal(0, 100, n), rng.normal(0, 100, n), np.full(n, 1000.0),
+                        rng.choice([cfg.min_gs, cfg.max_gs, 55.0, 30.0, 120.0], n), rng.uniform(0, 2 * np.pi, n),
+                        rng.choice([0.0, cfg.max_vs, -cfg.max_vs, 3.0, -7.5], n))
+    rng_m = rng.uniform(1000, 9000, (n, m))
+    brg = rng.uniform(-np.pi, np.pi, (n, m))
+    dz = rng.choice([0.0, cfg.th.zthr, -cfg.th.zthr, 50.0, -300.0, 600.0], (n, m)) + rng.normal(0, 1, (n, m)) * (
+        rng.random((n, m)) < 0.5)
+    gs = rng.choice([0.0, 40.0, 80.0, 150.0, 250.0], (n, m))
+    intr = AircraftState(own.x[:, None] + rng_m * np.sin(brg), own.y[:, None] + rng_m * np.cos(brg),
+                         1000.0 + dz, gs, brg + np.pi + rng.normal(0, 0.3, (n, m)), rng.choice([0.0, 5.0, -5.0], (n, m)))
+    odd = rng.random(n) < 0.03
+    intr.x[odd, 0] = np.nan
+    intr.y[rng.random(n) < 0.02, 0] = 1e12
+    return own, intr
+
+
+def _same_conflicts(a, b):
+    for name in ("seg_in", "seg_out", "tail_in", "tail_out"):
+        _same(getattr(a, name), getattr(b, name))
+
+
+@pytest.mark.parametrize("preset", ["do365", "paper", "daidalus"])
+@pytest.mark.parametrize("axis", [AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED])
+def test_band_paths_evaluate_identical(preset, axis):
+    """Tails, certificates, undecided pieces (bisection on the compiled state) and candidates of every band
+    axis, for the corrective volume, the preventive one and a recovery cylinder."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"{preset}/{axis}".encode()))
+    own, intr = _encounters(rng, 400, 2, cfg)
+    j_lo, j_hi = _path_sizes(own, axis, cfg)
+    paths, _ = _maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
+    cyl = cfg.th.with_(name="cylinder", dthr=1000.0, zthr=100.0, tthr=0.0, tcoa=0.0)
+    for th in (cfg.th, cfg.th_preventive, cyl):
+        got = PathEvaluator(paths, intr, cfg.lookahead_s).evaluate(th)
+        ref = _ref(PathEvaluator(paths, intr, cfg.lookahead_s).evaluate_reference, th)
+        _same_conflicts(got, ref)
+        for g, r in zip(got.candidates(), _ref(ref.candidates_reference)):
+            _same(g, r)
+        assert np.isfinite(ref.seg_in).any() and np.isfinite(ref.tail_in).any()
+    sub = np.flatnonzero(rng.random(own.shape[0]) < 0.5)  # a subset (the recovery search evaluates those)
+    _same_conflicts(PathEvaluator(paths.subset(sub), intr[sub], 100.0).evaluate(cfg.th),
+                    _ref(PathEvaluator(paths.subset(sub), intr[sub], 100.0).evaluate_reference, cfg.th))
+
+
+@pytest.mark.parametrize("preset", ["do365", "daidalus"])
+def test_command_paths_evaluate_identical(preset):
+    """SM's paths (a command on up to three axes at once): last tails only, no exits."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(11)
+    own, intr = _encounters(rng, 600, 2, cfg)
+    n = own.shape[0]
+    cmd = Command(own.trk + rng.choice([0.0, 0.3, -1.2, np.pi], n), rng.choice([0.0, 10.0, -20.0, np.nan], n),
+                  rng.choice([40.0, 55.0, 90.0, np.nan], n))
+    paths = command_paths(own, cmd, cfg)
+    for exits in (False, True):
+        got = PathEvaluator(paths, intr, 85.0, tails="last", exits=exits).evaluate(cfg.th)
+        ref = _ref(PathEvaluator(paths, intr, 85.0, tails="last", exits=exits).evaluate_reference, cfg.th)
+        _same_conflicts(got, ref)
+        _same_pair(got.prefix(), ref.prefix())
+
+
+@pytest.mark.parametrize("axis", [AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED])
+def test_axis_state_kernel_identical(axis):
+    """The compiled ownship state on a band path equals the paths' numpy ``state_at`` at any time
+    (including before the start, at the speed limit and past it)."""
+    for preset in ("do365", "daidalus"):
+        cfg = DaaConfig.for_preset(preset)
+        rng = np.random.default_rng(axis)
+        own, _ = _encounters(rng, 2000, 1, cfg)
+        paths, _ = _maneuver_paths(own, axis, cfg, 10, with_values=False)
+        n_idx, p_idx = rng.integers(0, 2000, 20_000), rng.integers(0, 2, 20_000)
+        t = np.concatenate([rng.uniform(-5, 200, 19_000), rng.choice([0.0, 1e-9, 1e6, np.inf, np.nan], 1000)])
+        ref = _ref(lambda: paths.state_at(n_idx, p_idx)(t))
+        _, code, rate, kin = paths.kin
+        out = np.empty((6, t.size))
+        rel_states_into(code, rate, kin[n_idx, p_idx], np.zeros((t.size, 6)), t, out)
+        with np.errstate(all="ignore"):  # relative to an intruder at rest at the origin, as the numpy mover does
+            rel = [r - (0.0 + t * 0.0) for r in ref[:3]] + [r - 0.0 for r in ref[3:]]
+        for g, r in zip(out, rel):
+            _same(g, np.broadcast_to(r, t.shape).astype(float))
+
+
+def test_command_state_kernel_identical():
+    """The compiled ownship state flying a command (SM) equals the numpy one (``_CommandMotion.state``) at
+    any time: during the turn and speed change, after either ends, after both, at the vertical target."""
+    cfg = DaaConfig.for_preset("do365")
+    rng = np.random.default_rng(21)
+    own, _ = _encounters(rng, 3000, 1, cfg)
+    n = own.shape[0]
+    cmd = Command(own.trk + rng.choice([0.0, 0.3, -1.2, np.pi, -np.pi, 2.5], n), rng.choice([0.0, 10.0, -20.0, np.nan], n),
+                  rng.choice([20.0, 40.0, 55.0, 90.0, 150.0, np.nan], n))
+    paths = command_paths(own, cmd, cfg)
+    assert paths.kin is not None
+    idx = rng.integers(0, n, 30_000)
+    t = np.concatenate([rng.uniform(0, 100, 29_000), rng.choice([0.0, 1e-9, 1e5, np.inf, np.nan, -1.0], 1000)])
+    ref = _ref(lambda: paths.state_at(idx, np.zeros_like(idx))(t))
+    _, phases, enc, *perf = paths.kin
+    out = np.empty((6, t.size))
+    command_rel_states_into(phases[idx], enc[idx], *perf, np.zeros((t.size, 6)), t, out)
+    with np.errstate(all="ignore"):
+        rel = [r - (0.0 + t * 0.0) for r in ref[:3]] + [r - 0.0 for r in ref[3:]]
+    for g, r in zip(out, rel):
+        _same(g, np.broadcast_to(r, t.shape).astype(float))
