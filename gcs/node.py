@@ -127,6 +127,9 @@ class GcsNode:
                                     plan=ownship_state(scenario) if scenario is not None else None,
                                     daa_cfg=self.daa_cfg)
             self.pilot_display = PilotDisplay(1, self.daa_cfg, self.pilot.cfg.alert_level_min)
+            from daa_sil.daa import kernels
+
+            kernels.get()  # load the compiled DAA before READY, not at the first conflict in realtime
         self._g_seen = math.nan
         self.seq = 0
         self.sent: list[dict] = []

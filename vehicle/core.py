@@ -43,8 +43,10 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
     ``daa`` changes on top of the scenario's threshold preset, its ``allocation`` (W_T of a group
     that waits, ProjL N: as ``--wt`` / ``--projl-lookahead`` of a campaign, over the scenario's), its
     ``link`` timeouts where the scenario sets none, and its wait-map source."""
+    from daa_sil.daa import kernels
     from daa_sil.onboard import OnboardCore
 
+    kernels.get()  # load the compiled DAA now, not at the first conflict (a realtime run would stall)
     es = encounter_set(sc)
     policy = policy or build_policy(sc)
     if config is not None:
