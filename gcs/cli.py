@@ -98,7 +98,7 @@ async def _amain(args) -> int:
     if sc is None and args.pilot != "scripted":
         raise UsageError("give --scenario FILE (pilot model settings, origin); without it only --pilot scripted "
                          "with no commands is possible")
-    key = load_key_option(args.key)
+    key = load_key_option(args.key, "daa-gcs")
     from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
 
     vconn = parse_connection(args.vehicle, "--vehicle", SEND)

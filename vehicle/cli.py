@@ -93,7 +93,7 @@ def _options(args):
         raise UsageError(f"--tick-timeout must be within [0.1, 3600] s, got {args.tick_timeout:g}")
     if args.start_timeout is not None and not (math.isfinite(args.start_timeout) and 0.1 <= args.start_timeout <= 3600):
         raise UsageError(f"--start-timeout must be within [0.1, 3600] s, got {args.start_timeout:g}")
-    key = load_key_option(args.key)
+    key = load_key_option(args.key, "daa-vehicle")
     from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
 
     tap = None if args.tap in (None, "", "none") else args.tap

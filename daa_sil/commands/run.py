@@ -18,7 +18,7 @@ from pathlib import Path
 
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.errors import UsageError
-from ._args import check_speed
+from ._args import check_speed, load_key_option
 from daa_sil.sil.summary import pilot_story, human_summary
 from daa_sil.sil.play import RunOptions, check_faults_allowed, prepare_waitmap, run_sil
 
@@ -111,8 +111,10 @@ def _check_args(args) -> None:
     check_speed(args.speed)
     if args.config:
         load_config(args.config)  # a bad file fails here, one line, before any process starts
-    if args.key is not None and not args.key.is_file():
-        raise UsageError(f"--key: key file {args.key} does not exist")
+    if args.key is not None:
+        if not args.key.is_file():
+            raise UsageError(f"--key: key file {args.key} does not exist")
+        load_key_option(args.key)  # a bad key file fails here (one line), its warnings show once
     if args.tap:
         from daa_sil.sil.endpoint import parse_udp_address
 
