@@ -368,7 +368,7 @@ def test_vehicle_out_udpin_listens_and_answers_the_first_gcs(tmp_path):
     (["--out", "udpin:127.0.0.1:14550", "--listen", "udp:127.0.0.1:0"], "already listens"),
     (["--listen", "udpout:127.0.0.1:5"], "--listen"),
     (["--tap", "udpin:127.0.0.1:5"], "--tap"),
-    (["--out", "tcp:127.0.0.1:5760"], "only udp"),
+    (["--out", "tcp:127.0.0.1:5760"], "only UDP is supported (udp:, udpin: or udpout:"),
     (["--tap-writable"], "--tap-writable needs --tap"),
 ])
 def test_vehicle_connection_string_errors_are_one_line(args, needle):

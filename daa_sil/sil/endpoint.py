@@ -60,7 +60,7 @@ def parse_udp_address(text: str, name: str = "address", allow_port_zero: bool = 
     if sep and scheme.lower() in _SCHEMES:
         s = rest
     elif sep and scheme.lower() in ("tcp", "tcpin", "serial", "ws", "mcast", "udpbcast"):
-        raise UsageError(f"{name}: only udp:HOST:PORT is supported, got {text!r}")
+        raise UsageError(f"{name}: only UDP is supported (udp:, udpin: or udpout:HOST:PORT), got {text!r}")
     if s.startswith("["):
         host, _, port_s = s[1:].partition("]")
         port_s = port_s[1:] if port_s.startswith(":") else ""
