@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from daa_sil.agent import AUTHORITY_NAMES, DECISION_NAMES  # the wire codes are the agent's (link/messages.py)
 from daa_sil.geometry.frames import geodetic_to_enu
 from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec
@@ -43,10 +44,9 @@ from daa_sil.sil.endpoint import MavEndpoint, Received, format_udp_address, open
 
 GCS_SYSID, GCS_COMPID = 255, 190
 VEHICLE_SYSID = 1
-AUTHORITY_NAMES = ("pilot", "daa", "hold")
+
 #: wall seconds without a SIM_TICK (after ticks came) before the vehicle side is reported silent
 SILENT_AFTER_S = 3.0
-DECISION_NAMES = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
 
 
 @dataclass
@@ -212,7 +212,7 @@ class GcsNode:
                                                 m.ver_velocity / 100.0)
             v.callsigns[int(m.ICAO_address)] = m.callsign
         elif t == "ALLOCATION_DECISION":
-            v.authority = AUTHORITY_NAMES[m.authority] if m.authority < 3 else "?"
+            v.authority = AUTHORITY_NAMES[m.authority] if m.authority < len(AUTHORITY_NAMES) else "?"
             v.decision = DECISION_NAMES[m.decision] if m.decision < len(DECISION_NAMES) else "?"
             v.wait_s = m.wait_s
         elif t == "DAA_BANDS" and m.part == 0:

@@ -24,7 +24,7 @@ def _messages():
         d.MAVLink_daa_bands_message(12000, d.DAA_SIL_BAND_DIMENSION_TRACK, 2, 0, 1,
                                     [10.0, 200.5] + [0.0] * 14, [45.0, 260.0] + [0.0] * 14,
                                     [d.DAA_SIL_BAND_REGION_NEAR, d.DAA_SIL_BAND_REGION_FAR] + [0] * 14),
-        d.MAVLink_allocation_decision_message(13000, d.DAA_SIL_AUTHORITY_HOLD, d.DAA_SIL_DECISION_BLEND,
+        d.MAVLink_allocation_decision_message(13000, d.DAA_SIL_AUTHORITY_WAITING, d.DAA_SIL_DECISION_BLEND,
                                               d.DAA_SIL_RULE_AXIS_DIR, 7.5, 1, -2.25, 12.0, d.DAA_SIL_AXIS_HORIZONTAL,
                                               d.DAA_SIL_DIRECTION_LEFT, d.DAA_SIL_AXIS_VERTICAL,
                                               d.DAA_SIL_DIRECTION_UP, 270.0, 5.0, NAN, 42, 6.5),

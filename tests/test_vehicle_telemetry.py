@@ -17,8 +17,12 @@ from vehicle.streams import StreamRates
 
 # --- identity and modes -------------------------------------------------------------------------------
 def test_authorities_map_to_arduplane_modes_by_name():
-    assert [ident.mode_name(ident.mode_of(a)) for a in ("pilot", "daa", "hold")] == ["GUIDED", "AVOID_ADSB", "CRUISE"]
+    assert [ident.mode_name(ident.mode_of(a)) for a in ("pilot", "daa", "waiting")] == ["GUIDED", "AVOID_ADSB", "CRUISE"]
     assert ident.mode_of("daa", agent_enabled=False) == ident.GUIDED  # the agent off never takes authority
+    from daa_sil.agent import AUTHORITY_NAMES
+
+    # every authority the agent names has its mode and its wire code (a renamed one cannot fall back silently)
+    assert set(ident.AUTHORITY_MODE) == set(AUTHORITY_NAMES) == set(T.AUTHORITY_CODE)
     from pymavlink import mavutil
 
     for num, name in ident.PLANE_MODES.items():  # the same numbering pymavlink / MAVProxy decode with
@@ -29,7 +33,7 @@ def test_base_mode_as_arduplane():
     b = ident.base_mode(ident.GUIDED)
     assert b & M.MAV_MODE_FLAG_SAFETY_ARMED and b & M.MAV_MODE_FLAG_GUIDED_ENABLED and b & 1
     assert not ident.base_mode(ident.CRUISE) & M.MAV_MODE_FLAG_GUIDED_ENABLED
-    hb = T.heartbeat("hold")
+    hb = T.heartbeat("waiting")
     assert (hb.autopilot, hb.type, hb.custom_mode) == (M.MAV_AUTOPILOT_ARDUPILOTMEGA, M.MAV_TYPE_FIXED_WING, 7)
 
 
