@@ -136,17 +136,26 @@ def test_home_position_on_request_and_get_home(link):
     assert abs(h.latitude / 1e7 - sc.origin.lat_deg) < 0.2 and abs(h.altitude / 1000 - (sc.origin.alt_m + 1000)) < 5
 
 
-def test_message_interval_refuses_faster_than_the_sim_step(link):
+def test_message_interval_faster_than_the_sim_step_is_sent_once_per_step(link):
+    """Issue 20 §11: like ArduPilot SITL, a faster SET_MESSAGE_INTERVAL is ACCEPTED (a GCS reports an error
+    on DENIED), the message goes out once per step, a STATUSTEXT says so, GET reports the interval used."""
     from pymavlink import mavutil
 
     conn, *_ = link
     m = mavutil.mavlink
     conn.mav.command_long_send(1, 1, m.MAV_CMD_SET_MESSAGE_INTERVAL, 0, m.MAVLINK_MSG_ID_VFR_HUD, 250000, 0, 0, 0, 0, 0)
     ack, got = _ack(conn, m.MAV_CMD_SET_MESSAGE_INTERVAL)
-    assert ack.result == m.MAV_RESULT_DENIED
+    assert ack.result == m.MAV_RESULT_ACCEPTED
     texts = [x.text for x in got + recv_until(conn, lambda x: x.get_type() == "STATUSTEXT", 2.0)
              if x.get_type() == "STATUSTEXT"]
-    assert any("faster than the sim step" in t for t in texts), texts
+    assert "VFR_HUD once per step (1 s)" in texts, texts
+    conn.mav.command_long_send(1, 1, m.MAV_CMD_GET_MESSAGE_INTERVAL, 0, m.MAVLINK_MSG_ID_VFR_HUD, 0, 0, 0, 0, 0, 0)
+    iv = [x for x in recv_until(conn, lambda x: x.get_type() == "MESSAGE_INTERVAL", 3.0) if x.get_type() == "MESSAGE_INTERVAL"]
+    assert iv and iv[-1].interval_us == 1_000_000
+    msgs = recv_until(conn, lambda x: False, 3.0)
+    n_pos = sum(x.get_type() == "GLOBAL_POSITION_INT" for x in msgs)  # once per step, in the step's datagram
+    n_hud = sum(x.get_type() == "VFR_HUD" for x in msgs)
+    assert n_pos >= 6 and abs(n_hud - n_pos) <= 1, (n_pos, n_hud)  # VFR_HUD in every step's datagram, no more
     # a 3 s interval is honoured in sim time: VFR_HUD every 3rd step, GLOBAL_POSITION_INT still every step
     conn.mav.command_long_send(1, 1, m.MAV_CMD_SET_MESSAGE_INTERVAL, 0, m.MAVLINK_MSG_ID_VFR_HUD, 3e6, 0, 0, 0, 0, 0)
     assert _ack(conn, m.MAV_CMD_SET_MESSAGE_INTERVAL)[0].result == m.MAV_RESULT_ACCEPTED

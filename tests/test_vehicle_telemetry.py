@@ -79,12 +79,23 @@ def test_interval_in_sim_time_and_refusals():
     r.due(0.0)
     assert r.set_interval(HUD, 2.5e6, 1.0)[0] == M.MAV_RESULT_ACCEPTED
     assert _emissions(r, HUD, 1, 10) == [1, 4, 7]  # due 1, 3.5 -> 4, 6.5 -> 7: at the first step at/after due
+    # issue 20 §11: faster than the 1 s step is accepted (as ArduPilot SITL), sent once per step, said in a
+    # STATUSTEXT (<= 50 characters), and GET_MESSAGE_INTERVAL reports the interval used: one step
     res, why = r.set_interval(HUD, 250_000, 10.0)
-    assert res == M.MAV_RESULT_DENIED and "faster than the sim step" in why and r.interval_us(HUD) == 2_500_000
+    assert res == M.MAV_RESULT_ACCEPTED and why == "VFR_HUD once per step (1 s)" and r.interval_us(HUD) == 1_000_000
+    assert _emissions(r, HUD, 10, 14) == [10, 11, 12, 13]
+    assert r.set_interval(HUD, 1e6, 14.0) == (M.MAV_RESULT_ACCEPTED, "")  # exactly one step: nothing to say
+    long_name = M.MAVLINK_MSG_ID_POSITION_TARGET_GLOBAL_INT
+    assert len(r.set_interval(long_name, 1, 14.0)[1]) <= 50 and r.interval_us(long_name) == 1_000_000
     assert r.set_interval(HUD, -1, 10.0)[0] == M.MAV_RESULT_ACCEPTED and r.interval_us(HUD) == -1
     assert _emissions(r, HUD, 10, 15) == []
     assert r.set_interval(HUD, 0, 15.0)[0] == M.MAV_RESULT_ACCEPTED and r.interval_us(HUD) == 1_000_000
     assert r.set_interval(M.MAVLINK_MSG_ID_HEARTBEAT, 5e6, 0.0)[0] == M.MAV_RESULT_DENIED
+    assert r.set_interval(M.MAVLINK_MSG_ID_HEARTBEAT, -1, 0.0)[0] == M.MAV_RESULT_DENIED  # liveness needs it
+    assert r.set_interval(M.MAVLINK_MSG_ID_HEARTBEAT, 2e5, 0.0)[0] == M.MAV_RESULT_ACCEPTED  # once per step anyway
+    # MESSAGE_INTERVAL reports int32 microseconds: a longer interval is refused, never stored
+    assert r.set_interval(HUD, 2**31, 0.0)[0] == M.MAV_RESULT_DENIED and r.interval_us(HUD) == 1_000_000
+    assert r.set_interval(HUD, 2**31 - 1, 0.0)[0] == M.MAV_RESULT_ACCEPTED and r.interval_us(HUD) == 2**31 - 1
     assert r.set_interval(999, 1e6, 0.0)[0] == M.MAV_RESULT_UNSUPPORTED and r.interval_us(999) == 0
     assert r.set_interval(HUD, -5, 0.0)[0] == M.MAV_RESULT_DENIED
 

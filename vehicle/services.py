@@ -27,6 +27,7 @@ import struct
 from dataclasses import dataclass, field
 
 from daa_sil.link.codec import mavlink as M
+from daa_sil.link.messages import wire_int
 
 from . import identity as ident
 from . import telemetry as T
@@ -37,6 +38,7 @@ SYSID, COMPID = 1, 1
 CMD_ACK_FOR_SET_MODE = M.MAVLINK_MSG_ID_SET_MODE  #: ArduPilot acks the SET_MODE message with command = 11
 FORCE_DISARM_MAGIC = 21196
 FTP_OP_NACK, FTP_ERR_UNKNOWN_COMMAND = 129, 7
+MAX_MSG_ID = 2**24 - 1  #: MAVLink 2 message ids are 24-bit
 
 _READ_COMMANDS = {M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_GET_HOME_POSITION, M.MAV_CMD_SET_MESSAGE_INTERVAL,
                   M.MAV_CMD_GET_MESSAGE_INTERVAL, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
@@ -189,27 +191,31 @@ class GcsServices:
             return []
         c = int(msg.command)
         p1, p2 = float(msg.param1), float(msg.param2)
+        if c in (M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAV_CMD_GET_MESSAGE_INTERVAL):
+            # a message id in a float: NaN, inf, a fraction or out of range is refused, never int()-ed
+            hi = 0xFFFF if c == M.MAV_CMD_GET_MESSAGE_INTERVAL else MAX_MSG_ID  # MESSAGE_INTERVAL: uint16 id
+            if wire_int(p1, 0, hi) is None:
+                return [_ack(msg, c, M.MAV_RESULT_DENIED), _text(f"message id {p1!r} invalid", M.MAV_SEVERITY_WARNING)]
         if c == M.MAV_CMD_REQUEST_MESSAGE or c == M.MAV_CMD_GET_HOME_POSITION \
                 or c == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             mid = (M.MAVLINK_MSG_ID_HOME_POSITION if c == M.MAV_CMD_GET_HOME_POSITION else
-                   M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if c == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES else
-                   int(p1) if math.isfinite(p1) else -1)
+                   M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if c == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES else int(p1))
             msgs = self._one_shot(mid, link)
             if msgs is None:
                 return [_ack(msg, c, M.MAV_RESULT_UNSUPPORTED),
                         _text(f"REQUEST_MESSAGE: {msg_name(mid)} is not produced here", M.MAV_SEVERITY_WARNING)]
             return [_ack(msg, c, M.MAV_RESULT_ACCEPTED)] + msgs
         if c == M.MAV_CMD_SET_MESSAGE_INTERVAL:
-            result, reason = self.link_rates(link).set_interval(int(p1) if math.isfinite(p1) else -2, p2, self.now())
-            out = [_ack(msg, c, result)]
-            return out + ([_text(reason, M.MAV_SEVERITY_WARNING)] if reason else [])
+            result, note = self.link_rates(link).set_interval(int(p1), p2, self.now())
+            sev = M.MAV_SEVERITY_INFO if result == M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_WARNING
+            return [_ack(msg, c, result)] + ([_text(note, sev)] if note else [])
         if c == M.MAV_CMD_GET_MESSAGE_INTERVAL:
-            mid = int(p1) if math.isfinite(p1) else -1
+            mid = int(p1)
             return [_ack(msg, c, M.MAV_RESULT_ACCEPTED), T.message_interval(mid, self.link_rates(link).interval_us(mid))]
         if c == M.MAV_CMD_COMPONENT_ARM_DISARM:
             if p1 == 1.0:
                 return [_ack(msg, c, M.MAV_RESULT_ACCEPTED), _text("Arm: already armed (airborne)")]
-            forced = int(p2) == FORCE_DISARM_MAGIC
+            forced = p2 == FORCE_DISARM_MAGIC  # compared as floats: int(NaN) raised here (issue 20 §1)
             return [_ack(msg, c, M.MAV_RESULT_FAILED),
                     _text("Disarm refused: airborne" + (" (forced too)" if forced else ""), M.MAV_SEVERITY_WARNING)]
         return [_ack(msg, c, M.MAV_RESULT_UNSUPPORTED)]
@@ -236,10 +242,12 @@ class GcsServices:
             return self._mode(msg, CMD_ACK_FOR_SET_MODE, int(msg.base_mode), int(msg.custom_mode), link,
                               t_received, t_sent)
         if t in ("COMMAND_LONG", "COMMAND_INT") and int(msg.command) == M.MAV_CMD_DO_SET_MODE and _targets_us(msg):
-            p1, p2 = float(msg.param1), float(msg.param2)
-            if not (math.isfinite(p1) and math.isfinite(p2)):
-                return [_ack(msg, M.MAV_CMD_DO_SET_MODE, M.MAV_RESULT_DENIED)]
-            return self._mode(msg, M.MAV_CMD_DO_SET_MODE, int(p1), int(p2), link, t_received, t_sent)
+            base, custom = wire_int(msg.param1, 0, 0xFF), wire_int(msg.param2, 0, 2**32 - 1)
+            if base is None or custom is None:  # base_mode is a uint8, custom_mode a uint32
+                return [_ack(msg, M.MAV_CMD_DO_SET_MODE, M.MAV_RESULT_DENIED),
+                        _text(f"DO_SET_MODE: mode {float(msg.param1)!r}, {float(msg.param2)!r} invalid",
+                              M.MAV_SEVERITY_WARNING)]
+            return self._mode(msg, M.MAV_CMD_DO_SET_MODE, base, custom, link, t_received, t_sent)
         return []
 
     def _log(self, **kw) -> SettingEvent:
