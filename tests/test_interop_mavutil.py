@@ -322,17 +322,18 @@ def test_settings_are_in_the_step_log(link):
     ev = json.loads(steplog_metadata(tmp / "steplog.parquet")["settings"])
     wt = [e for e in ev if e["name"] == "DAA_WT"]
     assert [(e["status"], e["link"]) for e in wt] == [("accepted", "gcs"), ("out_of_range", "gcs"),
-                                                      ("denied_tap", "tap")]
+                                                      ("denied_readonly", "tap")]
     assert wt[0]["old"] == 4.0 and wt[0]["new"] == 6.0 and wt[0]["t_sent"] is None  # mavutil stamps no send time
     assert wt[0]["t_applied"] >= wt[0]["t_received"] - 1e-9 and wt[0]["t_applied"] == round(wt[0]["t_applied"])
     modes = [(e["name"], e["status"]) for e in ev if e["kind"] == "mode"]
     assert modes[:5] == [("GUIDED", "accepted"), ("AVOID_ADSB", "denied"), ("RTL", "denied"), ("GUIDED", "denied"),
-                         ("GUIDED", "denied_tap")]
+                         ("GUIDED", "denied_readonly")]
     assert modes[5][1] in ("temporarily_rejected", "accepted")
 
 
 def test_vehicle_out_udpin_listens_and_answers_the_first_gcs(tmp_path):
-    """``daa-vehicle --out udpin:`` as SITL: a mavutil ``udpout:`` client attaches; a second sender is ignored."""
+    """``daa-vehicle --out udpin:`` as SITL: a mavutil ``udpout:`` client attaches; a second sender is dropped,
+    with one warning naming it (as an unknown sender in ``udp:`` mode)."""
     from pymavlink import mavutil
 
     (port,) = free_ports(1)
@@ -370,14 +371,18 @@ def test_vehicle_out_udpin_listens_and_answers_the_first_gcs(tmp_path):
     from daa_sil.steplog import steplog_metadata
 
     meta = steplog_metadata(tmp_path / "steplog.parquet")
-    assert json.loads(meta["vehicle"])["other_address_ignored"] >= 1 and json.loads(meta["settings"]) == []
+    assert json.loads(meta["link"])["rejected_peer"] >= 1 and json.loads(meta["settings"]) == []
+    # issue 20 §12: the second sender is reported as in udp: mode (it used to be dropped silently)
+    log = (tmp_path / "vehicle.log").read_text()
+    warned = [x for x in log.splitlines() if x.startswith("daa-vehicle: warning: dropping datagrams from udp:127.0.0.1:")]
+    assert len(warned) == 1 and "from system 200" in warned[0] and "the first GCS that sent" in warned[0], log
 
 
 @pytest.mark.parametrize("args,needle", [
     (["--out", "udpin:127.0.0.1:14550", "--listen", "udp:127.0.0.1:0"], "already listens"),
     (["--listen", "udpout:127.0.0.1:5"], "--listen"),
     (["--tap", "udpin:127.0.0.1:5"], "--tap"),
-    (["--out", "tcp:127.0.0.1:5760"], "only UDP is supported (udp:, udpin: or udpout:"),
+    (["--out", "tcp:127.0.0.1:5760"], "only UDP is supported (udp:HOST:PORT, udpin:HOST:PORT or udpout:HOST:PORT)"),
     (["--tap-writable"], "--tap-writable needs --tap"),
 ])
 def test_vehicle_connection_string_errors_are_one_line(args, needle):

@@ -163,9 +163,9 @@ def test_connection_strings_as_mavproxy(text, option, default, role, addr):
 @pytest.mark.parametrize("text,option,default,allow,needle", [
     ("udpout:127.0.0.1:5", "--listen", LISTEN, (LISTEN,), "use udp:, udpin:HOST:PORT"),
     ("udpin:127.0.0.1:5", "--tap", SEND, (SEND,), "use udp:, udpout:HOST:PORT"),
-    ("tcp:127.0.0.1:5760", "--out", SEND, (LISTEN, SEND), "only UDP is supported (udp:, udpin: or udpout:"),
+    ("tcp:127.0.0.1:5760", "--out", SEND, (LISTEN, SEND), "only UDP is supported (udp:HOST:PORT, udpin:HOST:PORT or udpout:HOST:PORT)"),
     ("udp:127.0.0.1:0", "--out", SEND, (LISTEN, SEND), "within [1, 65535]"),
-    ("serial:/dev/ttyUSB0", "--out", SEND, (LISTEN, SEND), "only UDP is supported (udp:, udpin: or udpout:"),
+    ("serial:/dev/ttyUSB0", "--out", SEND, (LISTEN, SEND), "only UDP is supported (udp:HOST:PORT, udpin:HOST:PORT or udpout:HOST:PORT)"),
 ])
 def test_other_connection_strings_are_one_line_errors(text, option, default, allow, needle):
     with pytest.raises(UsageError) as ei:

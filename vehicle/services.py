@@ -7,12 +7,14 @@ split the way the timing needs it:
   TIMESYNC, PING, REQUEST_DATA_STREAM, MISSION_REQUEST_LIST, FILE_TRANSFER_PROTOCOL, and the
   COMMAND_LONG / COMMAND_INT that change nothing the simulation uses (REQUEST_MESSAGE,
   GET_HOME_POSITION, SET_ / GET_MESSAGE_INTERVAL, REQUEST_AUTOPILOT_CAPABILITIES, ARM / DISARM,
-  unknown commands). Rates are per link, so a tap asking for rates changes only its own stream.
+  unknown commands). Rates are per link (output), so an observer asking for rates changes only its
+  own stream.
   In realtime the node answers reads as they arrive; in lockstep at the step boundary.
 * **writes** (:meth:`GcsServices.write`): PARAM_SET, SET_MODE and DO_SET_MODE. A PARAM_SET changes
   the agent's policy, so the node applies writes only at a step boundary (the change holds from
-  the step after arrival) and only from the GCS link (through the shim, delayed like pilot
-  commands); from the tap only with ``tap_writable``. Mode requests change nothing the agent
+  the step after arrival) and only from a link in ``writable``: the GCS link (through the shim,
+  delayed like pilot commands), and observers marked writable (``--tap-writable``, ``--out
+  CONN,rw``; :mod:`daa_sil.sil.outputs`). Mode requests change nothing the agent
   decides (:mod:`vehicle.identity`) but are answered and logged the same way. Each write is kept
   as a :class:`SettingEvent` for the step log.
 
@@ -59,8 +61,8 @@ class SettingEvent:
     name: str
     old: float
     new: float
-    status: str  #: accepted / unchanged / read_only / out_of_range / not_integer / unknown / denied_tap / denied
-    link: str  #: "gcs" or "tap"
+    status: str  #: accepted / unchanged / read_only / out_of_range / not_integer / unknown / denied_readonly / denied
+    link: str  #: the output it came from: "gcs", "tap", "out2", ...
     source: tuple
     t_received: float
     t_applied: float
@@ -105,7 +107,8 @@ class GcsServices:
     latest: object
     now: object
     dt: float = 1.0
-    tap_writable: bool = False
+    #: links (outputs) whose parameter and mode writes are applied; the others are read-only observers
+    writable: frozenset = frozenset({"gcs"})
     step_t: object = None  #: () -> the step a write takes effect at (s); default ``now``
     current_mode: object = None  #: () -> the ArduPlane mode the vehicle shows now
     rates: dict = field(default_factory=dict)
@@ -263,12 +266,12 @@ class GcsServices:
         res = self.params.set(msg.param_id, float(msg.param_value), pol)
         name = res.spec.name if res.spec is not None else str(msg.param_id).split("\0", 1)[0]
         status, reason = res.status, res.reason
-        if link == "tap" and not self.tap_writable and res.spec is not None:
-            status, reason = "denied_tap", f"{name}: tap is read-only (--tap-writable)"
+        if link not in self.writable and res.spec is not None:
+            status, reason = "denied_readonly", f"{name}: {link} is read-only"
         elif res.status == "accepted":
             self.set_policy(res.policy)
         value = res.value if status in ("accepted", "unchanged") else res.old
-        self._log(kind="param", name=name, old=res.old, new=value, status=status, link="tap" if link == "tap" else "gcs",
+        self._log(kind="param", name=name, old=res.old, new=value, status=status, link=link,
                   source=src, t_received=t_received, t_sent=t_sent, reason=reason)
         out = []
         if res.spec is not None:
@@ -286,10 +289,10 @@ class GcsServices:
         result, reason = ident.mode_request(base, custom, current)
         status = {M.MAV_RESULT_ACCEPTED: "accepted", M.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily_rejected"}.get(
             result, "denied")
-        if link == "tap" and not self.tap_writable:
-            result, status, reason = M.MAV_RESULT_DENIED, "denied_tap", "mode: tap is read-only (--tap-writable)"
+        if link not in self.writable:
+            result, status, reason = M.MAV_RESULT_DENIED, "denied_readonly", f"mode: {link} is read-only"
         self._log(kind="mode", name=ident.mode_name(custom), old=float(current), new=float(current), status=status,
-                  link="tap" if link == "tap" else "gcs", source=src, t_received=t_received, t_sent=t_sent,
+                  link=link, source=src, t_received=t_received, t_sent=t_sent,
                   reason=reason)
         self.answered += 1
         sev = M.MAV_SEVERITY_INFO if result == M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_WARNING
