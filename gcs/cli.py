@@ -132,9 +132,9 @@ async def _amain(args) -> int:
           f"telemetry rejected {node.view.rejected}, ticks {node.ticks_seen} (ticks skipped {node.ticks_skipped})"
           + (f"; log {path}" if path else ""), flush=True)
     print("daa-gcs: link stats " + json.dumps(st, sort_keys=True), flush=True)
-    drops = node.ep.drops.summary()
-    if drops:
-        print(f"daa-gcs: {drops}", flush=True)
+    for line in (node.ep.drops.summary(), node.ep.guard.summary()):
+        if line:
+            print(f"daa-gcs: {line}", flush=True)
     return 0
 
 

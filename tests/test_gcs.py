@@ -138,3 +138,43 @@ async def test_gcs_ignores_non_finite_and_older_telemetry():
     finally:
         node.close()
         veh.close()
+
+
+def test_view_takes_only_physical_telemetry():
+    """Issue 20 §1 (the GCS side): hostile telemetry with finite but absurd values (a position of 3e38 m,
+    latitude 214 deg, alert level 7, a stamp ahead of the newest tick) used to reach the pilot's view;
+    it is counted in ``rejected`` and the view keeps what it had."""
+    from gcs.view import View
+
+    def enu(lat_e7, lon_e7, alt_mm):  # a flat frame: 1e-7 deg = 0.011 m, enough for the bounds
+        return lat_e7 * 0.0111, lon_e7 * 0.0111, alt_mm / 1000.0
+
+    v = View()
+    good = M.MAVLink_local_position_ned_message(5000, 100.0, 0.0, -1000.0, 55.0, 0.0, 0.0)
+    v.take(good, enu, newest_tick=5.0)
+    assert v.own[0] == 5.0 and v.rejected == 0
+    for bad in (M.MAVLink_local_position_ned_message(6000, 3e38, 0.0, -1000.0, 55.0, 0.0, 0.0),  # 3e38 m north
+                M.MAVLink_local_position_ned_message(6000, 0.0, 0.0, -1000.0, 2000.0, 0.0, 0.0),  # 2,000 m/s
+                M.MAVLink_local_position_ned_message(6000, 0.0, 0.0, -2e5, 55.0, 0.0, 0.0),  # 200 km up
+                M.MAVLink_local_position_ned_message(7500, 0.0, 0.0, -1000.0, 55.0, 0.0, 0.0)):  # after tick 5 + 1 s
+        v.take(bad, enu, newest_tick=5.0)
+    assert v.own[0] == 5.0 and v.rejected == 4
+    v.take(M.MAVLink_local_position_ned_message(6000, 160.0, 0.0, -1000.0, 55.0, 0.0, 0.0), enu, newest_tick=5.0)
+    assert v.own[0] == 6.0 and v.rejected == 4  # one step after the tick is fine (the vehicle's publish)
+    for level, ok in ((7, False), (-1, False), (2**31 - 1, False), (2, True)):
+        v.take(M.MAVLink_named_value_int_message(6000, b"DAA_ALERT", level), enu, newest_tick=5.0)
+        assert (v.alert == (6.0, level)) == ok
+    assert v.rejected == 7
+
+    def adsb(lat_e7, heading_cdeg):
+        return M.MAVLink_adsb_vehicle_message(1001, lat_e7, 0, 0, 1_000_000, heading_cdeg, 6000, 0, b"HEAD1", 0, 0,
+                                              M.ADSB_FLAGS_VALID_COORDS, 0)
+
+    v.take(adsb(2_140_000_000, 18000), enu)  # latitude 214 deg
+    v.take(adsb(100_000, 40_000), enu)  # heading 400 deg
+    assert v.intruders == {} and v.rejected == 9
+    v.take(adsb(100_000, 18000), enu)
+    assert list(v.intruders) == [1001]
+    bands = M.MAVLink_daa_bands_message(6000, 0, 255, 0, 1, [0.0] * 16, [1.0] * 16, [3] + [0] * 15)
+    v.take(bands, enu)  # count 255 > 16 slots: read as the 16 there are
+    assert v.alert_regions == 3
