@@ -178,3 +178,40 @@ def test_view_takes_only_physical_telemetry():
     bands = M.MAVLink_daa_bands_message(6000, 0, 255, 0, 1, [0.0] * 16, [1.0] * 16, [3] + [0] * 15)
     v.take(bands, enu)  # count 255 > 16 slots: read as the 16 there are
     assert v.alert_regions == 3
+
+
+@pytest.mark.asyncio
+async def test_gcs_udpin_takes_the_first_vehicle_and_warns_about_a_second(capfd):
+    """Issue 20 §12: ``daa-gcs --vehicle udpin:`` answered whoever sent first and took every later sender's
+    telemetry too (silently); now a second sender is dropped with one warning, as in ``udp:`` mode."""
+    from daa_sil.sil.supervise import free_udp_ports
+
+    (port,) = free_udp_ports(1)
+    sc = parse_scenario(SCENARIO)
+    node = GcsNode(sc, GcsOptions(vehicle=f"udpin:127.0.0.1:{port}", clock="lockstep", display=False))
+    await node.start()
+    task = asyncio.create_task(node.run())
+    first = await open_endpoint(MavCodec(1, 1), "udp:127.0.0.1:0", peer=("127.0.0.1", port))
+    second = await open_endpoint(MavCodec(1, 1), "udp:127.0.0.1:0", peer=("127.0.0.1", port))
+    try:
+        first.send(M.MAVLink_local_position_ned_message(1000, 10.0, 0.0, -1000.0, 55.0, 0.0, 0.0))
+        for _ in range(200):
+            if node.view.own is not None:
+                break
+            await asyncio.sleep(0.01)
+        second.send(M.MAVLink_local_position_ned_message(2000, 9e6, 0.0, -1000.0, 55.0, 0.0, 0.0))
+        for _ in range(200):
+            if node.ep.counters.datagrams_rejected_peer:
+                break
+            await asyncio.sleep(0.01)
+    finally:
+        node.stop.set()
+        await asyncio.wait_for(task, 5.0)
+        node.close()
+        first.close()
+        second.close()
+    assert node.peer == first.local_address and node.view.own[0] == 1.0  # the second sender's position: not taken
+    assert node.ep.counters.datagrams_rejected_peer == 1
+    err = capfd.readouterr().err
+    warned = [x for x in err.splitlines() if "dropping datagrams from" in x]
+    assert len(warned) == 1 and f"udp:127.0.0.1:{second.local_address[1]} (LOCAL_POSITION_NED from system 1)" in warned[0]
