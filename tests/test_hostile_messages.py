@@ -294,19 +294,19 @@ def _report():
     print(f"\nhostile-message runs compared with their reference: {COMPARED}")
 
 
-@_settings(6)
+@_settings(4)
 @given(msgs=VEHICLE_DATAGRAM)
 def test_hostile_messages_from_the_tap_lockstep(msgs):
     check_from_tap("lockstep", msgs)
 
 
-@_settings(6)
+@_settings(4)
 @given(msgs=VEHICLE_DATAGRAM)
 def test_hostile_messages_from_the_gcs_peer_lockstep(msgs):
     check_from_gcs("lockstep", msgs)
 
 
-@_settings(3)
+@_settings(2)
 @given(msgs=GCS_DATAGRAM)
 def test_hostile_messages_from_the_vehicle_peer_lockstep(msgs):
     check_from_vehicle("lockstep", msgs)

@@ -65,7 +65,6 @@ VEHICLE_SYSID, VEHICLE_COMPID = 1, 1
 PILOT_MANEUVER_ID = M.MAVLINK_MSG_ID_PILOT_MANEUVER
 
 
-
 class VehicleNode(StepLogWriter, TickClock):
     """The vehicle process logic around a :class:`vehicle.core.VehicleCore`.
 
