@@ -82,3 +82,25 @@ def test_unsupported_scheme_names_every_accepted_one(text):
     msg = str(info.value)
     assert "udp:" in msg and "udpin:" in msg and "udpout:" in msg and text in msg
     assert "only udp:HOST:PORT is supported" not in msg
+
+
+def test_vehicle_and_run_examples_parse_and_their_outputs_are_valid():
+    """The --out / --vehicle-out examples (issue 20 §12) are accepted by the parsers and the output rules."""
+    from daa_sil.cli import build_parser as daa_sil_parser
+    from daa_sil.commands.run import EXAMPLES as RUN_EXAMPLES
+    from daa_sil.sil.outputs import output_specs
+    from vehicle.cli import EXAMPLES as VEHICLE_EXAMPLES, build_parser as vehicle_parser
+
+    vp = vehicle_parser()
+    lines = _example_lines(VEHICLE_EXAMPLES, "daa-vehicle")
+    assert any(argv.count("--out") >= 3 for _, argv in lines)
+    for _, argv in lines:
+        args = vp.parse_args(argv)
+        output_specs(args.out or ["udp:127.0.0.1:14550"], args.tap, args.tap_writable)
+    sp = daa_sil_parser()
+    runs = _example_lines(RUN_EXAMPLES, "daa-sil")
+    assert any("--vehicle-out" in argv for _, argv in runs)
+    for _, argv in runs:
+        args = sp.parse_args(argv)
+        if getattr(args, "vehicle_outs", None):
+            output_specs(["udp:127.0.0.1:1", *args.vehicle_outs], args.tap)
