@@ -49,11 +49,11 @@ from daa_sil.link.codec import mavlink as M
 from daa_sil.sil.connstr import LISTEN, parse_connection
 from daa_sil.sil.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint
 from daa_sil.sil.msgguard import MessageGuard
+from daa_sil.sil.outputs import PILOT_LINK, Output, output_specs
 
 from . import telemetry as T
 from .commands import CommandGate, reposition_command, setpoint_command
 from .core import VehicleCore
-from daa_sil.sil.outputs import PILOT_LINK, Output, output_specs
 from .params import ParamTable
 from .services import GcsServices
 from .streams import STREAMED
