@@ -60,7 +60,29 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _adopt(prog: "str | None") -> None:
+    """Take the process name and parent watch of a child started by ``daa-sil run`` (or name a
+    console script ``prog``): :func:`daa_sil.sil.children.adopt`."""
+    from daa_sil.sil.children import NAME_ENV, PARENT_ENV, adopt
+
+    if prog or NAME_ENV in os.environ or PARENT_ENV in os.environ:
+        adopt(prog)
+
+
+def _interrupted(prog: str, exc: KeyboardInterrupt) -> int:
+    """One line for Ctrl-C / SIGTERM / SIGHUP (what was cut short, if the command said); exit 128 + signal."""
+    from daa_sil.sil.children import interrupt_signum
+
+    detail = str(exc) if str(exc).startswith("interrupted") else "interrupted"
+    try:
+        print(f"{prog}: {detail}", file=sys.stderr, flush=True)
+    except OSError:  # a closed terminal (SIGHUP)
+        pass
+    return 128 + interrupt_signum(exc)
+
+
 def main(argv: "list[str] | None" = None) -> int:
+    _adopt(None)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -70,9 +92,8 @@ def main(argv: "list[str] | None" = None) -> int:
             raise
         print(f"daa-sil: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
-        print("daa-sil: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        return _interrupted("daa-sil", exc)
     except BrokenPipeError:
         return 0
     return int(rc or 0)
@@ -80,7 +101,9 @@ def main(argv: "list[str] | None" = None) -> int:
 
 def run_guarded(prog: str, fn) -> int:
     """Run ``fn()`` for a console script named ``prog``: a DaaSilError becomes one line on stderr and
-    its exit code, Ctrl-C exits 130 (tracebacks only with ``DAA_SIL_DEBUG=1``)."""
+    its exit code, Ctrl-C exits 130 (tracebacks only with ``DAA_SIL_DEBUG=1``). The process is named
+    ``prog`` (ps/pgrep) and, when ``daa-sil run`` started it, dies with its parent."""
+    _adopt(prog)
     try:
         return int(fn() or 0)
     except DaaSilError as exc:

@@ -1,16 +1,26 @@
 """One line per sim second of what the remote pilot sees (rich colours on a TTY, plain otherwise).
 
 ``t=  42s  seen@  38s own trk   0.0 alt   1000m gs   55  nearest 4660 r   6123m dh    +0m  alert 2
-GUIDED pilot/none  sent #3 maneuver2 trk 30``: the GCS's sim time, the (delayed) time of the newest
-ownship state it has, the ownship's track / altitude / ground speed, the nearest intruder's range
-and height difference, the highest band region, the vehicle's flight mode (HEARTBEAT), the
-agent's authority / decision (ALLOCATION_DECISION) and the last command sent (or setting).
+bands mid  GUIDED daa/blend  sent #3 maneuver2 trk 30``: the GCS's sim time, the (delayed) time of
+the newest ownship state it has, the ownship's track / altitude / ground speed, the nearest
+intruder's range and height difference, the **onboard** DAIDALUS alert level (DAA_ALERT, 0-3) of
+that same vehicle time -- so it is the vehicle's alert delayed by the downlink, with ``@T`` added
+if it is of another vehicle time T --, the highest region of the track bands (DAA_BANDS), the
+vehicle's flight mode (HEARTBEAT), the agent's authority / decision (ALLOCATION_DECISION) and the
+last command sent (or setting).
+
+The agent may keep control below the corrective alert (2): a wait or blend goes on until the
+ownship has reached its command, and control returns to the pilot only onto a safe course. The
+line then says ``(alert < 2: manoeuvre in progress or pilot's course unsafe)``, so that ``alert 0``
+next to ``daa/blend`` is not taken for a disagreement.
 """
 
 from __future__ import annotations
 
 import math
 import sys
+
+from daa_sil.daa.config import REGION_NAMES
 
 _console = None
 
@@ -28,7 +38,14 @@ def format_line(node, t: float, n_cmd: int) -> str:
             parts.append(f"nearest {i} r {rng[i]:6.0f}m dh {v.intruders[i][2] - z:+5.0f}m")
     else:
         parts.append("no telemetry yet")
-    parts.append(f"alert {v.alert_regions}  {v.mode} {v.authority}/{v.decision}")
+    level = int(v.alert[1]) if math.isfinite(v.alert[0]) else None
+    alert = "alert ?" if level is None else f"alert {level}"
+    if level is not None and (v.own is None or v.alert[0] != v.own[0]):
+        alert += f"@{v.alert[0]:.0f}s"
+    region = REGION_NAMES[v.alert_regions] if 0 <= v.alert_regions < len(REGION_NAMES) else "?"
+    parts.append(f"{alert} bands {region}  {v.mode} {v.authority}/{v.decision}")
+    if v.authority not in ("pilot", "?") and level is not None and level < 2:
+        parts.append("(alert < 2: manoeuvre in progress or pilot's course unsafe)")
     if n_cmd and node.sent:
         c = node.sent[-1]
         if c.get("kind") in ("param", "mode"):

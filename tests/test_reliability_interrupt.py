@@ -5,8 +5,8 @@ The orchestrator is started in its own session and sent SIGINT the way a termina
 orchestrator, not by the terminal). Afterwards: exit 130, one ``interrupted`` line and no traceback,
 the vehicle, shim and GCS processes are gone (checked by pid), the step log is a valid Parquet file
 holding exactly the steps the vehicle flew (0..n-1, contiguous, the count the vehicle reported when
-it stopped), ``result.json`` says ``interrupted``, the GCS command log holds only whole JSON lines,
-and no temporary file is left.
+it stopped), ``result.json`` says ``interrupted`` and that the expectation was not checked (as the
+console line does), the GCS command log holds only whole JSON lines, and no temporary file is left.
 """
 
 from __future__ import annotations
@@ -112,6 +112,11 @@ def test_ctrl_c_mid_run_flushes_the_steplog_and_leaves_no_process(tmp_path):
     # the result: marked interrupted and consistent with the step log
     res = json.loads((out / "result.json").read_text())
     assert res["interrupted"] is True and res["steps"] == n and res["clock"] == "realtime"
+    # ... and claims no outcome (issue 20 §6: it said "checked": true, "ok": true), as the console says
+    assert res["expectation"] == {"checked": False, "ok": None, "violations": [],
+                                  "reason": f"interrupted by SIGINT at t = {n} s of 180 s"}
+    assert res["interrupted_by"] == "SIGINT"
+    assert f"interrupted by SIGINT at t = {n} s of 180 s; the expected outcome was not checked" in err, err
 
     # the GCS command log: whole JSON lines only
     lines = (out / "gcs_commands.jsonl").read_text().splitlines()

@@ -94,6 +94,23 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def check_steplog_path(path: Path) -> None:
+    """``--steplog``: a one-line usage error now, not after the whole flight, if it cannot be written
+    (its directory is created if missing and probed with a file, as ``daa-sil run --out`` is)."""
+    from daa_sil.errors import OutputError
+    from daa_sil.files import ensure_dir
+
+    if path.is_dir():
+        raise UsageError(f"--steplog {path} is a directory, not a file path")
+    blocker = next((p for p in path.parents if p.exists()), None)
+    if blocker is not None and not blocker.is_dir():
+        raise UsageError(f"--steplog {path}: {blocker} is a file, not a directory")
+    try:
+        ensure_dir(path.parent)
+    except OutputError as exc:
+        raise UsageError(f"--steplog {path}: {exc}") from None
+
+
 def _options(args):
     import math
 
@@ -118,6 +135,8 @@ def _options(args):
         parse_connection(args.listen, "--listen", LISTEN, allow=(LISTEN,))
         if specs[0].listens:
             raise UsageError(f"--out {outs[0]} already listens; drop --listen {args.listen}")
+    if args.steplog is not None:
+        check_steplog_path(args.steplog)
     live = None if args.live in (None, "", "none") else args.live
     if live is not None:
         from daa_sil.sil.live import parse_live_address
@@ -135,6 +154,8 @@ def _options(args):
 
 
 async def _amain(args) -> int:
+    import numpy as np
+
     from daa_sil.sil.connstr import describe
     from daa_sil.sil.endpoint import format_udp_address
     from daa_sil.sil.scenario import load_scenario
@@ -166,8 +187,10 @@ async def _amain(args) -> int:
 
     def progress(nd, out):
         if not args.quiet and nd.k % 10 == 0:
-            print(f"t={nd.t:5.0f}s authority={nd.core.last_authority:5s} decision={nd.core.last_decision}",
-                  flush=True)
+            rng = np.asarray(out.geometry["range_m"][0], float)  # every intruder's horizontal range, m
+            near = f"{np.min(rng):.0f}m" if rng.size and np.isfinite(rng).any() else "n/a"
+            print(f"t={nd.t:5.0f}s authority={nd.core.last_authority:5s} decision={nd.core.last_decision} "
+                  f"range={near}", flush=True)
 
     try:
         await node.run(on_step=progress)

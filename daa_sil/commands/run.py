@@ -1,9 +1,10 @@
 """``daa-sil run SCENARIO`` and ``daa-sil demo``: the three-process SIL (vehicle, shim, GCS).
 
 The orchestrator starts ``daa-vehicle``, the delay shim and ``daa-gcs`` as **separate processes**
-(each in its own process group) on OS-chosen loopback ports, plays the encounter, stops them
-(SIGINT, then SIGTERM, then SIGKILL, each with a timeout; also on Ctrl-C, so no orphans), and
-summarises the vehicle's step log into ``DIR/result.json``.
+(each in its own process group, named ``daa-vehicle``, ``daa-shim``, ``daa-gcs``, each dying with
+the orchestrator even on SIGKILL) on OS-chosen loopback ports, plays the encounter, stops them
+(SIGINT, then SIGTERM, then SIGKILL, each with a timeout; also on Ctrl-C, SIGTERM and SIGHUP, so no
+orphans), and summarises the vehicle's step log into ``DIR/result.json``.
 
 The orchestration lives in :mod:`daa_sil.sil.play` (processes) and :mod:`daa_sil.sil.summary`
 (result); this module is the command line.
@@ -17,9 +18,10 @@ import sys
 from pathlib import Path
 
 from daa_sil.config.run_config import add_config_argument, load_config
-from daa_sil.errors import UsageError
+from daa_sil.errors import OutputError, UsageError
 from ._args import check_speed, load_key_option
-from daa_sil.sil.summary import pilot_story, human_summary
+from daa_sil.sil.children import interruptible
+from daa_sil.sil.summary import PROGRESS_EVERY_S, demo_legend, human_summary, pilot_story
 from daa_sil.sil.play import RunOptions, check_faults_allowed, prepare_waitmap, run_sil
 
 
@@ -41,13 +43,21 @@ EXAMPLES = """examples:
   daa-sil run scenarios/head_on.yaml --clock realtime --speed 4 --spawn-viewer --rrd head_on.rrd
   daa-sil run scenarios/head_on.yaml --clock realtime --connect rerun+http://127.0.0.1:9876/proxy
 
+  # no display: serve the finished run in the web viewer (http://127.0.0.1:9090) until Ctrl-C
+  daa-sil run scenarios/head_on.yaml --serve-web
+
 Rerun: realtime runs with --spawn-viewer/--connect show every step in the viewer as it happens;
 lockstep runs are logged from the step log when the vehicle exits, so nothing runs next to the SIL
 (--viz-live). An --rrd file is always written from the step log at the end.
 
+While it plays, a progress line (sim time, authority, decision, nearest intruder) comes at most
+every {every:g} s of wall time (--quiet: none). The processes are called daa-vehicle, daa-shim and daa-gcs
+(`pgrep daa-gcs`) and die with the run, also when it is killed.
+
 Exit status: 0 = the run matched the scenario's `expect:` block, 1 = an expectation was violated
-or a process failed, 2 = bad input, 130 = interrupted (the step log is still written).
-"""
+or a process failed, 2 = bad input, 130 = interrupted by Ctrl-C, 143 = by SIGTERM, 129 = by SIGHUP
+(the step log so far is still written; the expectation is not checked).
+""".format(every=PROGRESS_EVERY_S)
 
 
 # --------------------------------------------------------------------------------------------
@@ -82,7 +92,8 @@ def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
     p.add_argument("--waitmap", default=None, metavar="PRESET|GRID|DIR",
                    help="the vehicle's wait maps, as in 'campaign run': alerting (default), paper, fine, a grid "
                         "spec or a 'waitmap build' directory")
-    p.add_argument("--json", action="store_true", help="print result.json instead of the summary")
+    p.add_argument("--json", action="store_true", help="print result.json instead of the summary (implies --quiet)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr while it plays")
     add_config_argument(p)
     if _viz_available():
         p.add_argument("--rrd", type=Path, metavar="FILE", help="write a Rerun recording")
@@ -95,6 +106,10 @@ def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
                             "the recorder over loopback, fire-and-forget); lockstep runs are shown when the "
                             "vehicle exits, so nothing runs next to the SIL. on: live in lockstep too; off: "
                             "never. The --rrd file is always made from the step log (the same either way)")
+        from .viz import add_web_viewer_arguments
+
+        add_web_viewer_arguments(p, "when the run ends, serve its recording in the Rerun web viewer until "
+                                    "Ctrl-C (as 'viz steplog --serve-web'; no display needed)")
 
 
 def register(sub) -> None:
@@ -105,14 +120,14 @@ def register(sub) -> None:
                        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", type=Path, help="scenario YAML file (see docs/sil.md)")
     _add_common(p, "sil-out")
-    p.set_defaults(func=run)
+    p.set_defaults(func=interruptible(run))  # SIGTERM / SIGHUP stop it as Ctrl-C does
     d = sub.add_parser("demo", help="head-on encounter with a 4 s link delay through the real link",
                        description="The main job: a head-on encounter, 4 s link delay each way, remote-pilot "
                                    "model on the GCS, allocation agent with the MDP wait map on the vehicle, "
                                    "everything over MAVLink through the delay shim (lockstep).",
                        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     _add_common(d, "demo-out")
-    d.set_defaults(func=demo, scenario=None)
+    d.set_defaults(func=interruptible(demo), scenario=None)
 
 
 def _check_args(args) -> None:
@@ -136,6 +151,10 @@ def _check_args(args) -> None:
         from ..viz import _url_host_port
 
         _url_host_port(args.connect)  # a malformed URL is a usage error; a missing viewer only a warning
+    if hasattr(args, "serve_web"):
+        from .viz import check_web_viewer_arguments
+
+        check_web_viewer_arguments(args)  # a taken port fails before the run
     rrd = getattr(args, "rrd", None)
     if rrd is not None:
         if rrd.suffix != ".rrd":
@@ -161,16 +180,15 @@ def _waitmap_source(args) -> "str | None":
 
 
 def _options(args, scenario: Path) -> RunOptions:
-    quiet = args.json
     return RunOptions(scenario_path=scenario, out_dir=Path(args.out), clock=args.clock, speed=args.speed,
                       key=args.key, tap=args.tap, vehicle_outs=tuple(args.vehicle_outs), rrd=getattr(args, "rrd", None),
                       spawn_viewer=getattr(args, "spawn_viewer", False), connect=getattr(args, "connect", None),
                       viz_live=getattr(args, "viz_live", "auto"), waitmap=_waitmap_source(args),
                       config=args.config,
-                      progress=None if quiet else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
+                      progress=_say("daa-sil", args))
 
 
-def _finish(args, result: dict, sc) -> int:
+def _finish(args, result: dict, sc, legend: "str | None" = None) -> int:
     if args.json:
         from daa_sil.files import to_jsonable
 
@@ -181,8 +199,38 @@ def _finish(args, result: dict, sc) -> int:
               f"({result['realtime_ratio']}x real time, clock {result['clock']})")
         if result["files"].get("rrd"):
             print(f"  Rerun recording: {result['files']['rrd']}  (open it with: rerun {result['files']['rrd']})")
+        if legend:
+            print(legend)
     exp = result.get("expectation") or {}
-    return 0 if exp.get("ok", True) else 1
+    rc = 0 if exp.get("ok", True) is True else 1
+    if getattr(args, "serve_web", False):
+        _serve_web(args, result)
+    return rc
+
+
+def _serve_web(args, result: dict) -> None:
+    """``--serve-web``: the run's step log in the Rerun web viewer until Ctrl-C (as ``viz steplog``)."""
+    from daa_sil.steplog import read_steplog
+    from daa_sil.viz import SinkOptions, log_steplog
+    from daa_sil.viz.warning import one_line_warnings
+
+    sinks = SinkOptions(serve_web=True, bind=args.bind, web_port=args.web_port, grpc_port=args.grpc_port)
+    with one_line_warnings():
+        _, logger = log_steplog(read_steplog(result["files"]["steplog"]), sinks, preset=result["preset"],
+                                keep_serving=True)
+    if logger.web is None or not logger.web.alive():
+        raise OutputError(f"--serve-web: the Rerun web viewer did not start on {args.bind} "
+                          f"(ports {args.web_port}, {args.grpc_port})")
+    print(f"web viewer: {logger.web.url}  (Ctrl-C to stop)", file=sys.stderr if args.json else sys.stdout,
+          flush=True)
+    logger.wait_serving()
+
+
+def _say(prefix: str, args):
+    """Progress lines on stderr (None with --json / --quiet)."""
+    if args.json or args.quiet:
+        return None
+    return lambda m: print(f"{prefix}: {m}", file=sys.stderr, flush=True)
 
 
 def run(args) -> int:
@@ -191,8 +239,7 @@ def run(args) -> int:
 
     _check_args(args)
     ensure_dir(args.out)  # an unusable --out fails here, before the maps are built or anything starts
-    prepare_waitmap(load_scenario(args.scenario), _waitmap_source(args),
-                    None if args.json else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
+    prepare_waitmap(load_scenario(args.scenario), _waitmap_source(args), _say("daa-sil", args))
     result = run_sil(_options(args, args.scenario))
     return _finish(args, result, load_scenario(args.scenario))
 
@@ -215,10 +262,11 @@ def demo(args) -> int:
     if not args.json:
         print(f"daa-sil demo: {sc.description.strip().splitlines()[0]}", flush=True)
     ensure_dir(args.out)
-    prepare_waitmap(sc, _waitmap_source(args), None if args.json else (lambda m: print(f"daa-sil demo: {m}", flush=True)))
+    say = _say("daa-sil demo", args)
+    prepare_waitmap(sc, _waitmap_source(args), say and (lambda m: print(f"daa-sil demo: {m}", flush=True)))
     result = run_sil(_options(args, path))
     if not args.json:
         print(pilot_story(Path(args.out)))
-    return _finish(args, result, sc)
+    return _finish(args, result, sc, legend=demo_legend(result, sc, Path(args.out)))
 
 

@@ -9,9 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FileFormatError, UsageError
+from ..errors import FileFormatError, OutputError, UsageError
 from daa_sil.geometry.thresholds import PRESETS
 from ._args import finite_float
+from daa_sil.sil.children import interruptible
 from daa_sil.viz.warning import one_line_warnings
 
 STEPLOG_EX = """examples:
@@ -42,11 +43,32 @@ def _sink_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--force", action="store_true", help="overwrite an existing --rrd file")
     g.add_argument("--spawn-viewer", action="store_true", help="open the native Rerun viewer (needs a display)")
     g.add_argument("--connect", metavar="URL", help="stream to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
-    g.add_argument("--serve-web", action="store_true", help="serve the web viewer until Ctrl-C")
-    g.add_argument("--bind", default="127.0.0.1", help="address of the web viewer (default 127.0.0.1)")
-    g.add_argument("--web-port", type=int, default=9090, help="web viewer HTTP port (default 9090)")
-    g.add_argument("--grpc-port", type=int, default=9877, help="web viewer gRPC port (default 9877)")
+    add_web_viewer_arguments(g, "serve the web viewer until Ctrl-C")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
+
+
+def add_web_viewer_arguments(g, serve_help: str) -> None:
+    """``--serve-web``, ``--bind``, ``--web-port``, ``--grpc-port`` (``viz steplog|replay`` and ``run``)."""
+    from daa_sil.viz.sinks import WEB_GRPC_PORT, WEB_HTTP_PORT
+
+    g.add_argument("--serve-web", action="store_true", help=serve_help)
+    g.add_argument("--bind", default="127.0.0.1", help="address of the web viewer (default 127.0.0.1)")
+    g.add_argument("--web-port", type=int, default=WEB_HTTP_PORT,
+                   help=f"web viewer HTTP port (default {WEB_HTTP_PORT})")
+    g.add_argument("--grpc-port", type=int, default=WEB_GRPC_PORT,
+                   help=f"web viewer gRPC port (default {WEB_GRPC_PORT})")
+
+
+def check_web_viewer_arguments(args) -> None:
+    """The ports are TCP ports and, with ``--serve-web``, free on ``--bind`` (UsageError, one line)."""
+    for name in ("web_port", "grpc_port"):
+        port = getattr(args, name)
+        if not 1 <= port <= 65535:
+            raise UsageError(f"--{name.replace('_', '-')} must be a TCP port 1..65535, got {port}")
+    if args.serve_web:
+        from daa_sil.viz.sinks import check_web_ports
+
+        check_web_ports(args.bind, {"--grpc-port": args.grpc_port, "--web-port": args.web_port})
 
 
 def register(sub) -> None:
@@ -62,7 +84,7 @@ def register(sub) -> None:
                                     "(default: the log's metadata, else do365)")
     s.add_argument("--until", type=finite_float("--until", 0.0), metavar="S", help="keep steps with t <= S")
     _sink_args(s)
-    s.set_defaults(func=run_steplog)
+    s.set_defaults(func=interruptible(run_steplog))
     r = vs.add_parser("replay", help="re-simulate one campaign encounter with step logging", epilog=REPLAY_EX,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
     r.add_argument("results", metavar="RESULTS", help="campaign results directory (with campaign.json)")
@@ -73,7 +95,7 @@ def register(sub) -> None:
     r.add_argument("--until", type=finite_float("--until", 0.0), metavar="S", help="keep steps with t <= S")
     r.add_argument("--save-steplog", metavar="FILE", help="also write the step log as Parquet")
     _sink_args(r)
-    r.set_defaults(func=run_replay)
+    r.set_defaults(func=interruptible(run_replay))
 
 
 def sink_options(args):
@@ -82,10 +104,7 @@ def sink_options(args):
 
     if not (args.rrd or args.spawn_viewer or args.connect or args.serve_web):
         raise UsageError("choose an output: --rrd FILE, --serve-web, --spawn-viewer or --connect URL")
-    for name in ("web_port", "grpc_port"):
-        port = getattr(args, name)
-        if not 1 <= port <= 65535:
-            raise UsageError(f"--{name.replace('_', '-')} must be a TCP port 1..65535, got {port}")
+    check_web_viewer_arguments(args)
     if args.rrd and not str(args.rrd).endswith(".rrd"):
         raise UsageError(f"--rrd {args.rrd!r} should end in .rrd")
     return SinkOptions(rrd=args.rrd, spawn=args.spawn_viewer, connect=args.connect, serve_web=args.serve_web,
@@ -104,6 +123,9 @@ def _finish(args, path, logger, summary: dict) -> int:
             print(f"web viewer: {summary['web_url']}  (Ctrl-C to stop)")
     if args.rrd and path is None:
         return 1
+    if args.serve_web and not summary["web_url"]:
+        raise OutputError(f"--serve-web: the Rerun web viewer did not start on {args.bind} "
+                          f"(ports {args.web_port}, {args.grpc_port}); nothing is served")
     if summary["web_url"]:
         sys.stdout.flush()
         logger.wait_serving()

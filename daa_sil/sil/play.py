@@ -6,7 +6,9 @@ command ``daa-sil run`` (:mod:`daa_sil.commands.run`) is a thin shell around :fu
 
 Readiness: every child prints one ``READY key=value ...`` line on stdout once its sockets are
 bound; the orchestrator reads the addresses from it (no guessed ports, no races). All child
-output goes to ``DIR/logs/<name>.log``.
+output goes to ``DIR/logs/<name>.log``; the GCS's holds the pilot's display, one line per sim second
+(:mod:`gcs.display`). The children die with the orchestrator, even on SIGKILL, and are called
+``daa-vehicle``, ``daa-shim``, ``daa-gcs`` (:mod:`daa_sil.sil.children`).
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ from pathlib import Path
 from typing import Callable
 
 from daa_sil.errors import DaaSilError, UsageError
-from daa_sil.sil.summary import gcs_ticks_skipped, realtime_report, summarize_steplog
+from daa_sil.sil.children import Interrupted, interrupt_signum, signal_name
+from daa_sil.sil.summary import ProgressLine, gcs_ticks_skipped, realtime_report, summarize_steplog
 from daa_sil.sil.supervise import (
     READY_TIMEOUT_S,
     ProcessGroup,
@@ -72,6 +75,8 @@ class RunOptions:
     waitmap: "str | None" = None
     #: ``--config`` of the vehicle and the GCS: a preset name or a YAML file (None = the scenario alone)
     config: "str | None" = None
+    #: gets the run's progress lines for people (None = quiet): start, the vehicle's progress at a
+    #: bounded rate (:class:`daa_sil.sil.summary.ProgressLine`), a failure
     progress: "Callable[[str], None] | None" = None
 
 
@@ -84,8 +89,10 @@ def run_sil(opts: RunOptions) -> dict:
     """Play ``opts.scenario_path`` through vehicle, shim and GCS processes; return the result dict.
 
     Writes ``out_dir/result.json``, ``out_dir/steplog.parquet``, ``out_dir/gcs_commands.jsonl``
-    and ``out_dir/logs/``. Raises DaaSilError if a process fails; KeyboardInterrupt propagates
-    after every child is stopped and whatever step log exists is summarised.
+    and ``out_dir/logs/``. Raises DaaSilError if a process fails. Ctrl-C (and SIGTERM/SIGHUP under
+    :func:`daa_sil.sil.children.signals_interrupt`) stops every child, summarises whatever step log
+    exists without checking the expectation, and raises :class:`~daa_sil.sil.children.Interrupted`
+    saying so.
     """
     from daa_sil.files import ensure_dir
     from daa_sil.sil.scenario import load_scenario
@@ -159,7 +166,7 @@ def _gcs_argv(opts: RunOptions, out: Path, listen: str, gcs_side: str, clock_arg
               log_name: str = "gcs_commands.jsonl") -> list:
     return python_module_argv("gcs") + [
         "--scenario", str(opts.scenario_path), "--listen", listen, "--vehicle", gcs_side,
-        "--log", str(out / log_name), "--no-display"] + clock_args + key_args + (
+        "--log", str(out / log_name)] + clock_args + key_args + (
         ["--config", str(opts.config)] if opts.config is not None else [])
 
 
@@ -169,7 +176,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
     from daa_sil.steplog import read_steplog
 
     t0 = time.monotonic()
-    interrupted = False
+    interrupted: "KeyboardInterrupt | None" = None
     failure: "str | None" = None
     monitor: "RunMonitor | None" = None
     gcs_logs = [out / "gcs_commands.jsonl"]
@@ -215,9 +222,11 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
                 log = f"gcs_commands_{name}.jsonl"
                 gcs_logs.append(out / log)
                 return pg.start(name, _gcs_argv(opts, out, gcs_listen, sready["gcs_side"], clock_args, key_args,
-                                                log_name=log))
+                                                log_name=log), process_name=f"daa-{fault.process}")
 
-            monitor = RunMonitor(vehicle, {"shim": shim, "gcs": gcs}, faults=sc.faults, restart=restart)
+            progress = ProgressLine(opts.progress, sc.duration_s) if opts.progress is not None else None
+            monitor = RunMonitor(vehicle, {"shim": shim, "gcs": gcs}, faults=sc.faults, restart=restart,
+                                 progress=progress)
             failure = monitor.wait()
             exited = time.monotonic()
             if failure is not None:
@@ -226,20 +235,28 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
             if recorder is not None and rc == 0 and steplog.exists():
                 # logs (deferred) or completes (live) while the shim and GCS are stopped and the result is made
                 recorder.submit(steplog, vehicle_exit=exited)
-        except KeyboardInterrupt:
-            interrupted = True
+        except KeyboardInterrupt as exc:
+            interrupted = exc
     wall = time.monotonic() - t0
     if not steplog.exists():
-        if interrupted:
-            raise KeyboardInterrupt
+        if interrupted is not None:
+            raise Interrupted(interrupt_signum(interrupted), "before the vehicle wrote a step log")
         raise DaaSilError(failure or f"the vehicle wrote no step log (logs: {out / 'logs'})")
     table = read_steplog(steplog)
     result = summarize_steplog(table, sc)
+    if interrupted is not None or failure is not None:
+        # a run cut short says nothing about the scenario's expected outcome
+        why = (f"interrupted by {signal_name(interrupt_signum(interrupted))}" if interrupted is not None
+               else "the run failed")
+        result["expectation"] = {"checked": False, "ok": None, "violations": [],
+                                 "reason": f"{why} at t = {result['duration_s']:g} s of {sc.duration_s:g} s"}
     result.update({"scenario": sc.name, "scenario_file": str(opts.scenario_path), "seed": sc.seed,
                    "preset": sc.thresholds, "clock": opts.clock, "wall_s": round(wall, 3),
                    "waitmap": _waitmap_record(sc, opts.waitmap),
                    "realtime_ratio": round(result["duration_s"] / wall, 2) if wall > 0 else None,
-                   "interrupted": interrupted, "failure": failure,
+                   "interrupted": interrupted is not None,
+                   "interrupted_by": signal_name(interrupt_signum(interrupted)) if interrupted is not None else None,
+                   "failure": failure,
                    "process_died": monitor.death if monitor is not None else None,
                    "files": {"steplog": str(steplog), "gcs_log": str(out / "gcs_commands.jsonl"),
                              "gcs_logs": [str(x) for x in gcs_logs if x.is_file()], "logs": str(out / "logs")}})
@@ -266,17 +283,22 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
         # Ctrl-C aborts it and no .rrd is written)
         try:
             rrd = _finish_recorder(recorder, steplog)
-        except KeyboardInterrupt:
-            rrd, interrupted = None, True
+        except KeyboardInterrupt as exc:
+            rrd, interrupted = None, exc
             result["interrupted"] = True
+            result["interrupted_by"] = signal_name(interrupt_signum(exc))
         result["files"]["rrd"] = str(rrd) if rrd else None
         result["rrd_timing"] = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in (
             ("helper", recorder.mode), ("prepared_before_end", recorder.prepared_in_time),
             ("finish_s", recorder.finish_s), ("wait_s", recorder.wait_s))}
         result["rrd_timing"]["live"] = (recorder.result or {}).get("live")
     atomic_write_json(out / "result.json", result)
-    if interrupted:
-        raise KeyboardInterrupt
+    if interrupted is not None:
+        when = (f"at t = {result['duration_s']:g} s of {sc.duration_s:g} s; the expected outcome was not checked"
+                if not result["expectation"]["checked"]
+                else "while the Rerun recording was written (the run itself was complete)")
+        raise Interrupted(interrupt_signum(interrupted),
+                          f"{when}; {result['steps']} steps in {steplog}, summary in {out / 'result.json'}")
     if failure:
         raise DaaSilError(failure)
     return result

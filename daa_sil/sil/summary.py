@@ -1,12 +1,17 @@
-"""Summaries of a SIL run: LoWC/NMAC, separation, decision counts, what the pilot sent, and the
+"""Summaries of a SIL run: LoWC/NMAC, separation, decision counts, what the pilot sent, the
 realtime run's lockstep-equivalence report (a step-log table and the children's counters in, a
-dict or text out)."""
+dict or text out), the legend of the words they use, and the progress line while it plays."""
 
 from __future__ import annotations
 
 import json
 import re
+import time
 from pathlib import Path
+from typing import Callable
+
+#: ``daa-sil run`` prints the vehicle's progress at most once per this many wall seconds
+PROGRESS_EVERY_S = 5.0
 
 
 def summarize_steplog(table, scenario=None) -> dict:
@@ -92,7 +97,9 @@ def human_summary(result: dict, scenario=None, out_dir: "Path | None" = None) ->
                  else "  min horizontal range: n/a")
     lines.append(f"  LoWC: {'YES' if result['lowc'] else 'no'}   NMAC: {'YES' if result['nmac'] else 'no'}")
     exp = result.get("expectation")
-    if exp:
+    if exp and not exp.get("checked", True):
+        lines.append(f"  expected outcome: not checked ({exp.get('reason', 'the run was cut short')})")
+    elif exp:
         lines.append("  expected outcome: " + ("OK" if exp["ok"] else "VIOLATED: " + "; ".join(exp["violations"])))
     if out_dir is not None:
         lines.append(f"  results: {out_dir / 'result.json'}  step log: {out_dir / 'steplog.parquet'}")
@@ -159,3 +166,76 @@ def pilot_story(out_dir: Path) -> str:
         parts.append(f"t={r['t']:.0f}s {r.get('kind', 'cmd')} ({what})")
     return (f"  pilot: {len(rows)} command packets; " + "; ".join(parts)
             + (" ..." if len(firsts) > 4 else ""))
+
+
+_VEHICLE_PROGRESS = re.compile(r"^t=\s*([0-9.]+)s\s+authority=(\S+)\s+decision=(\S+)(?:\s+range=(\S+))?")
+
+
+class ProgressLine:
+    """The run's progress for people: the vehicle's latest progress line (``t=  30s authority=waiting
+    decision=wait range=4660m``, every 10 sim s) as ``t = 30 s of 180 s: authority waiting, decision
+    wait, nearest intruder 4660 m``, at most once per ``every_s`` wall seconds (the first after
+    ``every_s``: a lockstep run that ends sooner prints none). ``say`` gets each line; if it raises
+    OSError (a closed terminal) the lines stop."""
+
+    def __init__(self, say: Callable[[str], None], duration_s: float, every_s: float = PROGRESS_EVERY_S,
+                 clock: Callable[[], float] = time.monotonic):
+        self.say, self.duration_s, self.every_s, self.clock = say, float(duration_s), float(every_s), clock
+        self.last_said = clock()
+        self.last_line: "str | None" = None
+        self.lines: list[str] = []
+
+    def update(self, vehicle_line: "str | None") -> None:
+        if not vehicle_line or vehicle_line == self.last_line or self.say is None:
+            return
+        now = self.clock()
+        if now - self.last_said < self.every_s:
+            return
+        m = _VEHICLE_PROGRESS.match(vehicle_line)
+        if m is None:
+            return
+        self.last_line, self.last_said = vehicle_line, now
+        rng = m.group(4)
+        text = (f"t = {float(m.group(1)):.0f} s of {self.duration_s:g} s: authority {m.group(2)}, decision "
+                f"{m.group(3)}" + (f", nearest intruder {rng[:-1]} m" if rng and rng.endswith("m") else ""))
+        self.lines.append(text)
+        try:
+            self.say(text)
+        except OSError:
+            self.say = None
+
+
+#: what each allocation decision of the timeline means (one line each, for the demo's legend)
+DECISION_MEANINGS = {
+    "wait": "no new pilot command; the wait map says the delayed pilot is worth waiting for, so the "
+            "pilot's last command is kept",
+    "no_wait": "no new pilot command and waiting is unsafe (wait map below W_T, or a loss of well clear "
+               "projected within the ProjL look-ahead): the onboard DAA resolves",
+    "pilot": "a new pilot command that is safe: it is flown",
+    "blend": "a new pilot command that is unsafe: the onboard DAA flies the safe manoeuvre closest to it",
+    "daa_override": "a new pilot command that is unsafe: the onboard DAA resolution is flown instead",
+    "daa": "the onboard DAA resolution is flown",
+    "stale": "a pilot command that arrived too old to fly: decided as if none came",
+    "link_lost": "nothing heard from the GCS for the link timeout: the onboard DAA resolves",
+}
+
+
+def demo_legend(result: dict, scenario, out_dir: Path) -> str:
+    """The words of the summary (the timeline's decisions, the pilot's ``hold``, LoWC, NMAC) and the
+    command that opens the run's recording."""
+    from daa_sil.geometry.thresholds import get_thresholds
+
+    th = get_thresholds(getattr(scenario, "thresholds", None))
+    seen = [d for d in DECISION_MEANINGS if (result.get("decision_counts") or {}).get(d)]
+    lines = ["  legend:"]
+    lines += [f"    {d:<9s} {DECISION_MEANINGS[d]}" for d in seen]
+    lines += [f"    {'hold':<9s} (pilot line) the pilot's 'keep flying as you are' command (the track, climb rate and "
+              f"speed it sees), sent while it decides on a manoeuvre",
+              f"    {'LoWC':<9s} loss of well clear: the intruder inside the {th.name} well-clear volume "
+              f"(horizontal {th.dthr:.0f} m or modified tau {th.tthr:g} s, and vertical {th.zthr:.0f} m)",
+              f"    {'NMAC':<9s} near mid-air collision: within {th.nmac_h:.0f} m horizontally and "
+              f"{th.nmac_v:.0f} m vertically"]
+    steplog = Path(out_dir) / "steplog.parquet"
+    lines.append(f"  open the recording: daa-sil viz steplog {steplog} --serve-web   (a browser; with a display: "
+                 f"--spawn-viewer)")
+    return "\n".join(lines)

@@ -2,7 +2,9 @@
 monitor that notices a dead process within a poll interval and names it, and scheduled faults.
 
 :class:`ProcessGroup` starts children (stdout+stderr to ``logs/<name>.log``, each in its own
-session) and stops them all (SIGINT, SIGTERM, SIGKILL, each with a timeout; also on Ctrl-C).
+session, through :func:`daa_sil.sil.children.spawn`: each dies with this process, even on SIGKILL,
+and is called ``daa-<name>`` in ps/pgrep) and stops them all (SIGINT, SIGTERM, SIGKILL, each with a
+timeout; also on Ctrl-C, SIGTERM and SIGHUP).
 :class:`RunMonitor` waits for the vehicle to finish while polling every other child every
 ``POLL_S``: a shim or GCS that exits on its own stops the run at once, and the failure names it,
 its exit status or signal, when it died (wall seconds into the play and the vehicle's sim time)
@@ -26,6 +28,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from daa_sil.errors import DaaSilError
+from daa_sil.sil.children import signals_ignored, spawn
 
 #: wall-clock limits (s)
 READY_TIMEOUT_S = 60.0  # start-up guard: 20 runs starting together on 2 cores take a while
@@ -79,8 +82,11 @@ class ProcessGroup:
         self.stop_all()
 
     def start(self, name: str, argv: Sequence[str], env: "dict | None" = None,
-              ready_parser: "Callable[[str], dict | None] | None" = None) -> Child:
-        """Start ``argv`` (stdin closed, stdout+stderr to ``logs/<name>.log``).
+              ready_parser: "Callable[[str], dict | None] | None" = None,
+              process_name: "str | None" = None) -> Child:
+        """Start ``argv`` (stdin closed, stdout+stderr to ``logs/<name>.log``) with
+        :func:`daa_sil.sil.children.spawn`: it dies with this process and is called ``process_name``
+        (default ``daa-<name>``) in ps/pgrep.
 
         Readiness: the first output line for which ``ready_parser(line)`` returns a dict (default:
         a ``READY key=value ...`` line).
@@ -90,9 +96,9 @@ class ProcessGroup:
         full_env = dict(os.environ)
         full_env["PYTHONUNBUFFERED"] = "1"
         full_env.update(env or {})
-        proc = subprocess.Popen(list(argv), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, start_new_session=True, env=full_env,
-                                text=True, errors="replace", bufsize=1)
+        proc = spawn(list(argv), process_name or f"daa-{name}", env=full_env, stdin=subprocess.DEVNULL,
+                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True,
+                     text=True, errors="replace", bufsize=1)
         child = Child(name, proc, log_path, parser=ready_parser or parse_ready_line)
         child.reader = threading.Thread(target=self._pump, args=(child,), daemon=True, name=f"log-{name}")
         child.reader.start()
@@ -150,9 +156,9 @@ class ProcessGroup:
         return child.proc.returncode if child.proc.returncode is not None else -9
 
     def stop_all(self) -> None:
-        """Stop every child (last started first); Ctrl-C during this is ignored until done."""
-        old = signal.signal(signal.SIGINT, signal.SIG_IGN) if threading.current_thread() is threading.main_thread() else None
-        try:
+        """Stop every child (last started first); Ctrl-C, SIGTERM and SIGHUP during this are ignored
+        until done."""
+        with signals_ignored():
             # escalate for all children together (SIGINT, SIGTERM, SIGKILL), so stopping takes one
             # grace period, not one per child
             for sig, wait in ((signal.SIGINT, STOP_GRACE_S), (signal.SIGTERM, STOP_TERM_S), (signal.SIGKILL, 5.0)):
@@ -169,9 +175,6 @@ class ProcessGroup:
                         pass
             for child in self.children:
                 self.stop(child)  # reaps, kills any leftover group member, joins the log reader
-        finally:
-            if old is not None:
-                signal.signal(signal.SIGINT, old)
 
 
 def parse_ready_line(line: str) -> "dict | None":
@@ -267,11 +270,14 @@ class RunMonitor:
     """Wait for the vehicle; stop the run as soon as another child dies; carry out scheduled faults.
 
     ``children``: name -> Child of every process of the run except the vehicle. ``restart(fault,
-    n)`` starts the ``n``-th replacement of ``fault.process`` and returns its Child.
+    n)`` starts the ``n``-th replacement of ``fault.process`` and returns its Child. ``progress``
+    (a :class:`daa_sil.sil.summary.ProgressLine`) gets the vehicle's latest progress line each poll.
     """
 
-    def __init__(self, vehicle: Child, children: dict, faults=(), restart=None, poll_s: float = POLL_S):
+    def __init__(self, vehicle: Child, children: dict, faults=(), restart=None, poll_s: float = POLL_S,
+                 progress=None):
         self.vehicle = vehicle
+        self.progress = progress
         self.children = dict(children)
         self.poll_s = float(poll_s)
         self.restart = restart
@@ -292,6 +298,8 @@ class RunMonitor:
             if failure:
                 return failure
             self._run_faults()
+            if self.progress is not None:
+                self.progress.update(self.vehicle.latest.get("t="))
             time.sleep(self.poll_s)
         if rc != 0:
             return self._died(self.vehicle)

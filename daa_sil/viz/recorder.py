@@ -18,7 +18,9 @@
 4. :meth:`BackgroundRecorder.finish` waits for that (usually not at all) and returns the path.
 
 :meth:`BackgroundRecorder.abort` (errors, a second Ctrl-C, a timeout) kills the helper and removes
-its temporary file; if the orchestrator dies, the helper reads EOF and does the same. So the final
+its temporary file; if the orchestrator dies, the helper reads EOF, or (blocked elsewhere, or the
+orchestrator SIGKILLed) gets SIGTERM from :func:`daa_sil.sil.children.die_with_parent`, and does
+the same. The helper is called ``daa-recorder`` in ps/pgrep. So the final
 path holds a complete recording or nothing. A helper that fails is a
 :class:`~daa_sil.viz.VizWarning` and ``finish`` returns None; only a bad explicit ``.rrd`` path
 raises (:class:`~daa_sil.errors.OutputError`), in the constructor.
@@ -61,8 +63,11 @@ from typing import IO
 
 from daa_sil.geometry.thresholds import PRESETS, Thresholds, get_thresholds
 from . import (SinkOptions, _url_host_port, _warn, check_rrd_path)
+from daa_sil.sil.children import die_with_parent, set_process_name, spawn
 from daa_sil.viz.recorder_helper import _serve
 
+#: the helper's process name (ps/pgrep)
+RECORDER_NAME = "daa-recorder"
 #: fallback priority (nice) where SCHED_IDLE is not available
 RECORDER_NICE = 10
 #: how long :meth:`BackgroundRecorder.finish` waits for the helper, s
@@ -166,9 +171,9 @@ class BackgroundRecorder:
 
     # starting the helper --------------------------------------------------------------------
     def _exec(self) -> subprocess.Popen:
-        proc = subprocess.Popen(
+        proc = spawn(
             [sys.executable, "-c", "from daa_sil.viz.recorder_helper import main; raise SystemExit(main())",
-             json.dumps(self._args)],
+             json.dumps(self._args)], RECORDER_NAME, python=True,
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=None, text=True, bufsize=1,
             start_new_session=True,  # own group: a terminal Ctrl-C reaches the caller, which decides
             pass_fds=(self._args["live_fd"],) if self._args.get("live_fd") is not None else ())
@@ -180,10 +185,13 @@ class BackgroundRecorder:
         rep_r, rep_w = os.pipe()
         for stream in (sys.stdout, sys.stderr):
             stream.flush()  # or the child would write the parent's buffered output again
+        parent = os.getpid()
         pid = os.fork()
         if pid == 0:  # the helper: never returns into the caller's code
             status = 1
             try:
+                die_with_parent(parent)  # also if the orchestrator is SIGKILLed
+                set_process_name(RECORDER_NAME)
                 os.setsid()
                 os.close(req_w)
                 os.close(rep_r)

@@ -194,6 +194,9 @@ def _serve(args: dict, requests: IO[str], replies: IO[str]) -> int:
 
 def main(argv: "list[str] | None" = None) -> int:
     """Entry point of the ``mode="exec"`` helper: the JSON arguments in ``argv[0]``, stdin/stdout pipes."""
+    from daa_sil.sil.children import adopt
+
+    adopt()  # the name and the parent watch spawn() handed over
     args = json.loads((sys.argv[1:] if argv is None else argv)[0])
     status = _serve(args, sys.stdin, sys.stdout)
     os._exit(status)  # skip Rerun's atexit work: everything is flushed and the file is in place

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import OutputError, UsageError
+from ..sil.children import spawn
 from .warning import _warn
 
 APP_ID = "daa_sil"
@@ -77,8 +78,23 @@ def rerun_binary() -> str:
     return str(Path(rerun_cli.__file__).parent / exe)
 
 
+def check_web_ports(bind: str, ports: "dict[str, int]") -> None:
+    """UsageError (one line, naming the flag) if one of ``ports`` (flag -> TCP port) cannot be bound on
+    ``bind`` now, as the web viewer will (SO_REUSEADDR, like its server)."""
+    family = socket.AF_INET6 if ":" in bind else socket.AF_INET
+    for flag, port in ports.items():
+        with socket.socket(family, socket.SOCK_STREAM) as sk:
+            sk.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                sk.bind((bind, int(port)))
+            except OSError as exc:
+                raise UsageError(f"{flag} {port}: cannot serve the web viewer on {bind}:{port} "
+                                 f"({exc.strerror or exc}); choose a free port with {flag}") from None
+
+
 class WebServer:
-    """The rerun binary serving the web viewer and a gRPC proxy on ``bind`` (own process group)."""
+    """The rerun binary serving the web viewer and a gRPC proxy on ``bind`` (own process group; it
+    dies with this process, also on SIGKILL: :func:`daa_sil.sil.children.spawn`)."""
 
     def __init__(self, bind: str = "127.0.0.1", grpc_port: int = WEB_GRPC_PORT, web_port: int = WEB_HTTP_PORT,
                  rrd: "str | None" = None, startup_s: float = 20.0):
@@ -91,8 +107,9 @@ class WebServer:
                 raise OSError(f"port {port} on {host} is already in use")
         cmd = [rerun_binary(), "--serve-web", "--bind", bind, "--port", str(grpc_port),
                "--web-viewer-port", str(web_port)] + ([str(rrd)] if rrd else [])
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.DEVNULL, start_new_session=True)
+        # dies with us, also on SIGKILL (daa_sil.sil.children); own group, stopped by stop()
+        self.proc = spawn(cmd, "rerun", python=False, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                          stderr=subprocess.DEVNULL, start_new_session=True)
         atexit.register(self.stop)
         deadline = time.monotonic() + startup_s
         while not (_port_open(host, grpc_port) and _port_open(host, web_port)):
