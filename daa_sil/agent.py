@@ -35,8 +35,10 @@ Semantics follow ``docs/architecture.md`` "Allocation semantics":
   the decision would have been ``wait``.
 * ``projl_horizon_s`` default 25 s = the DO-365 warning alerting time: a LoWC predicted that soon
   leaves no time to wait for a command delayed by up to 10 s plus a 5-10 s maneuver.
-* Authority: ``pilot`` (pilot command or inactive), ``hold`` (wait), ``daa`` (DAA resolution,
-  blend, override, link lost).
+* Authority: ``pilot`` (pilot command or inactive), ``waiting`` (a wait: the agent keeps the pilot's
+  last command while it waits for the delayed pilot), ``daa`` (DAA resolution, blend, override, link
+  lost). Named ``hold`` up to bba2fd8, which clashed with the pilot's "hold" command kind; old logs
+  are read through :data:`daa_sil.steplog.RENAMED`.
 """
 
 from __future__ import annotations
@@ -60,8 +62,8 @@ BY_NONE, BY_MAP, BY_PROJL, BY_BOTH, BY_NEITHER = range(5)
 WAIT_MODES = ("none", "constant", "map", "always")
 WAIT_RULES = ("threshold", "countdown")
 (D_NONE, D_WAIT, D_NO_WAIT, D_PILOT, D_BLEND, D_DAA_OVERRIDE, D_DAA, D_STALE, D_LINK_LOST) = range(9)
-AUTHORITY_NAMES = ("pilot", "daa", "hold")
-A_PILOT, A_DAA, A_HOLD = range(3)
+AUTHORITY_NAMES = ("pilot", "daa", "waiting")
+A_PILOT, A_DAA, A_WAITING = range(3)
 
 #: keys of the decision record (every value is an array with leading axis N)
 DECISION_FIELDS = (
@@ -343,7 +345,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     use_daa = active & ~pilot_ok & ~wait & ~(unsafe & policy.blending)
     exec_cmd = last_pilot.where(~active | pilot_ok | wait, blend_cmd.where(unsafe & policy.blending, daa_cmd))
     exec_cmd = exec_cmd.where(~use_daa, daa_cmd)
-    authority = np.where(~active | pilot_ok, A_PILOT, np.where(wait, A_HOLD, A_DAA)).astype(np.int8)
+    authority = np.where(~active | pilot_ok, A_PILOT, np.where(wait, A_WAITING, A_DAA)).astype(np.int8)
 
     # --- safety of what is executed -------------------------------------------------------------
     # pilot: its SM; blend / DAA: the chosen band candidate's SM (same trajectory model); hold: computed

@@ -30,8 +30,19 @@ COMMAND_MODULES = [
 ]
 
 EPILOG = """examples:
+  # the demo: a head-on encounter, 4 s link delay, vehicle / delay shim / GCS over MAVLink
+  daa-sil demo --out demo-out
+
+  # any scenario through the three processes (lockstep), or in real time at 10x
+  daa-sil run scenarios/head_on.yaml --out runs/head_on
+  daa-sil run scenarios/crossing_left.yaml --clock realtime --speed 10 --out runs/crossing
+
+  # the fast-time study: a quick campaign of two groups, then its report
+  daa-sil campaign run --groups B-2,ID-2 --encounters 200 --seed 7 --out runs/quick
+  daa-sil campaign report runs/quick --out runs/quick/report
+
+  # one geometry at a glance
   daa-sil geometry --own 0,0,1000,0,55,0 --intruder 0,6000,1000,0,-100,0
-  daa-sil geometry --own 0,0,1000,0,55,0 --intruder 0,6000,1000,0,-100,0 --preset paper --json
 
 Every command has --help with examples. Units are SI (m, s, m/s) in the ENU frame unless a flag says otherwise.
 """

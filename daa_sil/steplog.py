@@ -33,11 +33,16 @@ STEPLOG_VERSION = "2"
 # vocabularies of the string columns (integer codes index these tuples)
 DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
 RULES = ("-", "axis_dir", "axis", "any", "best_effort")
-AUTHORITIES = ("pilot", "daa", "hold")
+AUTHORITIES = ("pilot", "daa", "waiting")
 AXES = ("none", "horizontal", "vertical", "speed")
 DIRECTIONS = ("none", "left", "right", "up", "down", "faster", "slower")
 REGIONS = ("none", "far", "mid", "near", "recovery")
 DECIDED_BY = ("none", "map", "projl", "both", "neither")
+
+#: values renamed since bba2fd8, applied when a step log (or a campaign table) is read: column -> {old: new}.
+#: The waiting authority was ``hold``, the same word as the pilot's "hold the current course" command
+#: kind (``gcs_commands.jsonl`` ``kind``); it is ``waiting`` now. The wire code (2) is unchanged.
+RENAMED: dict[str, dict[str, str]] = {"authority": {"hold": "waiting"}}
 
 #: vocabulary of every string column (scalar or list)
 VOCAB: dict[str, tuple[str, ...]] = {
@@ -241,9 +246,28 @@ def read_steplog(path: "str | os.PathLike") -> pa.Table:
         raise FileFormatError(f"step log {p} has version {version.decode()}, this daa-sil reads {STEPLOG_VERSION}")
     check_steplog_schema(schema, str(p))
     try:
-        return pf.read()
+        table = pf.read()
     except (OSError, pa.ArrowException) as exc:
         raise FileFormatError(f"step log {p} is corrupt: {str(exc).splitlines()[0]}") from None
+    return rename_legacy(table)
+
+
+def rename_legacy(table: pa.Table) -> pa.Table:
+    """``table`` with the old names of :data:`RENAMED` replaced by the new ones (scalar string
+    columns; other columns and the schema metadata untouched). A table without old names is returned as is."""
+    import pyarrow.compute as pc
+
+    for col, mapping in RENAMED.items():
+        i = table.schema.get_field_index(col)
+        if i < 0 or table.schema.field(i).type != _S:
+            continue
+        arr = table.column(i)
+        for old, new in mapping.items():
+            hit = pc.equal(arr, old)
+            if pc.any(hit).as_py():
+                arr = pc.if_else(hit, new, arr)
+                table = table.set_column(i, table.schema.field(i), arr)
+    return table
 
 
 def steplog_metadata(table_or_path: "pa.Table | str | os.PathLike") -> dict[str, str]:
@@ -267,4 +291,5 @@ def cells_equal(a, b) -> bool:
 
 __all__ = ["cells_equal", "STEP_SCHEMA", "STEP_COLUMNS", "STEPLOG_VERSION", "INTRUDER_COLUMNS", "BAND_COLUMNS", "VOCAB",
            "DECISIONS", "RULES", "AUTHORITIES", "AXES", "DIRECTIONS", "REGIONS", "StepLogBuilder",
-           "concat_steplogs", "write_steplog", "read_steplog", "check_steplog_schema", "steplog_metadata"]
+           "concat_steplogs", "write_steplog", "read_steplog", "check_steplog_schema", "steplog_metadata", "RENAMED",
+           "rename_legacy"]

@@ -27,7 +27,11 @@ EXAMPLES = """examples:
       --clock lockstep --log gcs.jsonl
 
   # the pilot raises W_T to 6 s at t = 30 s and switches the onboard agent off at t = 90 s (through the link)
-  daa-gcs --vehicle udp:127.0.0.1:14602 --scenario scenarios/head_on.yaml --set 30:DAA_WT=6 --set 90:MODE=GUIDED
+  daa-gcs --vehicle udp:127.0.0.1:14602 --scenario scenarios/head_on.yaml --set 30:DAA_WT=6 --set 90:DAA_ENABLE=0
+
+  # ask for GUIDED at t = 60 s: accepted while the pilot flies, refused (TEMPORARILY_REJECTED) while
+  # the agent does; a mode never switches the agent off (DAA_ENABLE does)
+  daa-gcs --vehicle udp:127.0.0.1:14602 --scenario scenarios/head_on.yaml --set 60:MODE=GUIDED
 
 connection strings (as MAVProxy): udpin:HOST:PORT listens, udpout:HOST:PORT sends; a bare udp:HOST:PORT
 listens for --listen and sends for --vehicle.
@@ -98,7 +102,7 @@ async def _amain(args) -> int:
     if sc is None and args.pilot != "scripted":
         raise UsageError("give --scenario FILE (pilot model settings, origin); without it only --pilot scripted "
                          "with no commands is possible")
-    key = load_key_option(args.key)
+    key = load_key_option(args.key, "daa-gcs")
     from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
 
     vconn = parse_connection(args.vehicle, "--vehicle", SEND)
@@ -128,9 +132,9 @@ async def _amain(args) -> int:
           f"telemetry rejected {node.view.rejected}, ticks {node.ticks_seen} (ticks skipped {node.ticks_skipped})"
           + (f"; log {path}" if path else ""), flush=True)
     print("daa-gcs: link stats " + json.dumps(st, sort_keys=True), flush=True)
-    drops = node.ep.drops.summary()
-    if drops:
-        print(f"daa-gcs: {drops}", flush=True)
+    for line in (node.ep.drops.summary(), node.ep.guard.summary()):
+        if line:
+            print(f"daa-gcs: {line}", flush=True)
     return 0
 
 

@@ -64,7 +64,7 @@ def render_line(node, t: float, n_cmd: int) -> None:
             from rich.console import Console
 
             _console = Console()
-        style = {"daa": "bold red", "hold": "yellow", "pilot": "green"}.get(node.view.authority, "")
+        style = {"daa": "bold red", "waiting": "yellow", "pilot": "green"}.get(node.view.authority, "")
         _console.print(line, style=style, highlight=False)
     else:
         print(line, flush=True)

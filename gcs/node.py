@@ -16,6 +16,14 @@ Per step ``k`` at sim time ``t_k`` (``docs/architecture.md`` step 1):
 
 Ticks that stop for 3 s after they came are reported (stderr), naming the address they came from.
 
+Hostile input: only the vehicle side's address and system id are accepted (``--vehicle udpin:``: the
+first sender, any other is dropped with a warning); every message is handled under the endpoint's
+:class:`daa_sil.sil.msgguard.MessageGuard` (one that raises is counted as malformed, the rest of its
+datagram is still handled); telemetry the pilot would see is taken only if its values are physical
+(:data:`daa_sil.geometry.kinematics.STATE_BOUNDS`, latitudes/longitudes, DAIDALUS alert levels 0-3),
+not older than what the pilot already sees and, when ticks drive the GCS, not stamped after the
+newest tick (``View.rejected`` counts the rest).
+
 Pilot: ``model`` = :class:`daa_sil.models.pilot.PilotModel` (N = 1) on the observed ownship
 (LOCAL_POSITION_NED, float) and intruders (ADSB_VEHICLE), streaming per the allocation semantics;
 ``scripted`` = the scenario's ``pilot.commands`` (each sent once per step over ``[t_s, until_s)``).
@@ -41,12 +49,14 @@ from daa_sil.link.codec import mavlink as M
 from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
 from daa_sil.sil.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint
 
+from .view import View
+
 GCS_SYSID, GCS_COMPID = 255, 190
 VEHICLE_SYSID = 1
-AUTHORITY_NAMES = ("pilot", "daa", "hold")
+
 #: wall seconds without a SIM_TICK (after ticks came) before the vehicle side is reported silent
 SILENT_AFTER_S = 3.0
-DECISION_NAMES = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
+
 
 
 @dataclass
@@ -66,26 +76,6 @@ class GcsOptions:
     #: ``--config``: a :class:`daa_sil.config.run_config.RunConfig` whose ``daa`` changes shape the
     #: pilot's display and whose ``pilot`` changes the pilot model (None = the scenario alone)
     config: "object | None" = None
-
-
-@dataclass
-class View:
-    """The newest telemetry the GCS has (vehicle sim times in s)."""
-
-    own: "tuple | None" = None  #: (t, x, y, z, gs, trk, vs) ENU
-    intruders: dict = field(default_factory=dict)  #: icao -> (x, y, z, gs, trk, vs)
-    callsigns: dict = field(default_factory=dict)
-    authority: str = "?"
-    decision: str = "?"
-    wait_s: float = math.nan
-    alert_regions: int = 0
-    alert: tuple = (math.nan, 0)  #: (vehicle sim time, DAIDALUS alert level 0-3) from DAA_ALERT
-    last_t: float = -math.inf
-    rejected: int = 0  #: telemetry messages dropped: non-finite, or older than the newest seen
-    acks: int = 0
-    statustext: list = field(default_factory=list)
-    mode: str = "?"  #: the vehicle's flight mode name (HEARTBEAT custom_mode, ArduPlane numbering)
-    params: dict = field(default_factory=dict)  #: parameter name -> value, from PARAM_VALUE
 
 
 class GcsNode:
@@ -136,7 +126,6 @@ class GcsNode:
         self.done_tick = -1
         self.steps = 0
         self.stop = asyncio.Event()
-        self._fresh = True  # the last position message was accepted (ADSB in its datagram follows it)
         self._wall0: "float | None" = None
         self._t_sync = 0.0
         self.ticks_skipped = 0  #: ticks never received between two received ones (no step ran for them)
@@ -144,6 +133,7 @@ class GcsNode:
         self._last_tick_wall: "float | None" = None
         self._tick_silent = False
         self.silence_warnings = 0
+        self._tick_t = -math.inf  #: sim time of the newest SIM_TICK (s): no genuine telemetry is newer
 
     async def start(self) -> None:
         """Bind, then greet the vehicle side with a HEARTBEAT (a shim learns our address from it).
@@ -153,7 +143,9 @@ class GcsNode:
         """
         if self.vehicle_conn.listens:  # --vehicle udpin:HOST:PORT: listen there, answer who sends first
             self.ep = await open_endpoint(self.codec, self.vehicle_conn.addr, peer=None, learn_peer=True,
-                                          allow_sysids=[VEHICLE_SYSID], name="daa-gcs")
+                                          lock_peer=True, allow_sysids=[VEHICLE_SYSID], name="daa-gcs",
+                                          peer_label="--vehicle udpin: the first sender",
+                                          drop_hint="the GCS takes telemetry only from the first vehicle that sent")
             return
         self.ep = await open_endpoint(self.codec, self.listen_conn.addr, peer=self.peer, learn_peer=False,
                                       allow_peers=[self.peer], allow_sysids=[VEHICLE_SYSID], name="daa-gcs",
@@ -185,53 +177,13 @@ class GcsNode:
         return float(x), float(y), float(z)
 
     def handle(self, r: Received) -> None:
-        """Take in one telemetry message (never raises on content)."""
-        m = r.msg
-        t = m.get_type()
-        v = self.view
-        if t == "LOCAL_POSITION_NED":
-            # hostile / reordered input: only finite and not older than what the pilot already sees
-            tm = m.time_boot_ms / 1000.0
-            vals = (float(m.x), float(m.y), float(m.z), float(m.vx), float(m.vy), float(m.vz))
-            self._fresh = all(map(math.isfinite, vals)) and not tm < v.last_t
-            if not self._fresh:
-                v.rejected += 1
-                return
-            gs = math.hypot(m.vx, m.vy)
-            v.own = (tm, float(m.y), float(m.x), -float(m.z), gs, math.atan2(m.vy, m.vx) % (2 * math.pi), -float(m.vz))
-            v.last_t = tm
-        elif t == "ADSB_VEHICLE" and not self._fresh:  # rides in a datagram whose position was rejected
-            v.rejected += 1
-        elif t == "NAMED_VALUE_INT" and m.name == "DAA_ALERT" and m.time_boot_ms / 1000.0 < v.alert[0]:
-            v.rejected += 1  # an older alert level than the one shown
-        elif t == "GLOBAL_POSITION_INT" and self.origin is not None and v.own is None:
-            x, y, z = self._enu(m.lat, m.lon, m.alt)
-            vn, ve = m.vx / 100.0, m.vy / 100.0
-            v.own = (m.time_boot_ms / 1000.0, x, y, z, math.hypot(vn, ve), math.atan2(ve, vn) % (2 * math.pi),
-                     -m.vz / 100.0)
-        elif t == "ADSB_VEHICLE" and m.flags & M.ADSB_FLAGS_VALID_COORDS:
-            x, y, z = self._enu(m.lat, m.lon, m.altitude)
-            v.intruders[int(m.ICAO_address)] = (x, y, z, m.hor_velocity / 100.0, math.radians(m.heading / 100.0),
-                                                m.ver_velocity / 100.0)
-            v.callsigns[int(m.ICAO_address)] = m.callsign
-        elif t == "ALLOCATION_DECISION":
-            v.authority = AUTHORITY_NAMES[m.authority] if m.authority < 3 else "?"
-            v.decision = DECISION_NAMES[m.decision] if m.decision < len(DECISION_NAMES) else "?"
-            v.wait_s = m.wait_s
-        elif t == "DAA_BANDS" and m.part == 0:
-            v.alert_regions = max([int(x) for x in m.region[:m.count] if int(x) in (1, 2, 3)] or [0])
-        elif t == "NAMED_VALUE_INT" and m.name == "DAA_ALERT":
-            v.alert = (m.time_boot_ms / 1000.0, int(m.value))
-        elif t == "COMMAND_ACK":
-            v.acks += 1
-        elif t == "HEARTBEAT" and m.get_srcComponent() == 1:
-            from vehicle.identity import mode_name
+        """Take in one telemetry message (:meth:`gcs.view.View.take`); run it under ``self.ep.guard``."""
+        self.view.take(r.msg, self._enu, origin_known=self.origin is not None,
+                       newest_tick=self._tick_t if self.ticks_seen else None)
 
-            v.mode = mode_name(m.custom_mode)
-        elif t == "PARAM_VALUE":
-            v.params[str(m.param_id)] = float(m.param_value)
-        elif t == "STATUSTEXT":
-            v.statustext = (v.statustext + [m.text])[-5:]
+    def take(self, r: Received) -> None:
+        """One message from the vehicle side, under the guard: a tick steps the pilot, the rest is telemetry."""
+        self.ep.guard.run(self._on_tick if r.msg.get_type() == "SIM_TICK" else self.handle, r)
 
     def observed(self) -> "tuple[AircraftState, AircraftState] | None":
         """Observed ownship (1,) and intruders (1, M) in scenario order, or None before telemetry."""
@@ -335,6 +287,7 @@ class GcsNode:
         """``SIM_TICK(k, t_k)``: run step ``t_k`` if ``k`` is new (a repeated tick is only re-acked), then ack."""
         k, t = int(r.msg.tick), r.msg.time_ms / 1000.0
         now = asyncio.get_running_loop().time()
+        self._tick_t = max(self._tick_t, t)
         if self._tick_silent:
             self._tick_silent = False
             self._say(f"ticks from {self._peer_text()} are back at t = {t:g} s "
@@ -380,10 +333,7 @@ class GcsNode:
                     self.ep.send(self._heartbeat())
                 self._check_silence()
                 continue
-            if r.msg.get_type() == "SIM_TICK":
-                self._on_tick(r)
-            else:
-                self.handle(r)
+            self.take(r)
 
     def sim_now(self, loop) -> "float | None":
         if self._wall0 is None:
@@ -402,10 +352,9 @@ class GcsNode:
             timeout = 0.2 if now is None or next_t is None else max(0.0, (next_t - now) / self.opts.speed)
             try:
                 r = await asyncio.wait_for(self.ep.inbox.get(), min(timeout, 0.5))
+                self.take(r)
                 if r.msg.get_type() == "SIM_TICK":
-                    self._on_tick(r)
                     continue
-                self.handle(r)
                 if self._wall0 is None and math.isfinite(self.view.last_t):
                     self._wall0, self._t_sync = loop.time(), self.view.last_t + assumed_down
                     # one sim second of grace: a vehicle that sends ticks has sent one by then

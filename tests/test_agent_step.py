@@ -106,7 +106,7 @@ def test_long_wait_holds_pilot_course_without_projl():
     mem = AgentMemory.initial(1, own)
     mem.pilot_trk[:] = 10 * DEG  # the last pilot command differs from the current course
     cmd, dec, mem2 = agent_step(10.0, own, intr, PilotInput.nothing(1, 9.0), mem, ID2, CFG, const_lookup(30.0))
-    assert dec["decision"][0] == D_WAIT and decode(dec)["authority"][0] == "hold"
+    assert dec["decision"][0] == D_WAIT and decode(dec)["authority"][0] == "waiting"
     assert cmd.trk[0] == pytest.approx(10 * DEG) and dec["wait_s"][0] == 30.0
 
 

@@ -70,3 +70,51 @@ def test_compare_campaigns_finds_identical_and_different_tables(tmp_path):
     res = run("compare_campaigns.py", [str(a), str(b)], tmp_path)
     assert res.returncode == 1
     assert "identical: no" in res.stdout and "'min_range_m' differs" in res.stdout
+
+
+def test_compare_campaigns_maps_old_authority_names_so_old_step_logs_still_compare(tmp_path):
+    """Issue 20 §15: the waiting authority was called ``hold`` up to bba2fd8 (the pilot's command kind
+    is ``hold`` too). ``tests/data/steplog_head_on_bba2fd8.parquet`` is the fast-time step log of
+    ``scenarios/head_on.yaml`` written by bba2fd8 itself (17 steps ``hold``); the same log made now
+    says ``waiting`` there, and compare_campaigns.py reads the old name as the new one (documented
+    in its --help), so the two compare identical; a real difference is still found."""
+    import numpy as np
+
+    from daa_sil import waitmap
+    from daa_sil.daa.config import DaaConfig
+    from daa_sil.models.pilot_config import PilotConfig
+    from daa_sil.sil.scenario import delay_models, encounter_set, load_scenario
+    from daa_sil.steplog import read_steplog, write_steplog
+    from daa_sil.study.fasttime import simulate
+    from vehicle.core import build_policy
+
+    old = ROOT / "tests" / "data" / "steplog_head_on_bba2fd8.parquet"
+    raw = pq.read_table(old).column("authority").to_pylist()
+    assert raw.count("hold") == 17 and "waiting" not in raw
+    sc = load_scenario(ROOT / "scenarios" / "head_on.yaml")
+    up, down = delay_models(sc)
+    _, _, log = simulate(encounter_set(sc), build_policy(sc), up, down, PilotConfig(mode=sc.pilot.response),
+                         DaaConfig(thresholds=sc.thresholds), waitmap.family_for(None, preset="paper"),
+                         seeds=np.array([sc.seed]), preset=sc.thresholds, duration_s=sc.duration_s,
+                         epoch_s=sc.link.epoch_s, record_steps=True)
+    new_auth = log.column("authority").to_pylist()
+    assert [i for i, a in enumerate(new_auth) if a == "waiting"] == [i for i, a in enumerate(raw) if a == "hold"]
+    new = tmp_path / "new.parquet"
+    write_steplog(log, new)
+    res = run("compare_campaigns.py", [str(old), str(new)], tmp_path)
+    assert res.returncode == 0 and "identical: yes" in res.stdout, res.stdout + res.stderr
+    assert read_steplog(old).column("authority").to_pylist() == new_auth  # the step-log reader maps it too
+    # as run directories, and as directories of runs (one per scenario)
+    for d, f in ((tmp_path / "A" / "head_on", old), (tmp_path / "B" / "head_on", new)):
+        d.mkdir(parents=True)
+        (d / "steplog.parquet").write_bytes(f.read_bytes())
+    res = run("compare_campaigns.py", [str(tmp_path / "A"), str(tmp_path / "B")], tmp_path)
+    assert res.returncode == 0 and "head_on/steplog.parquet: 180 rows" in res.stdout, res.stdout + res.stderr
+    i = new_auth.index("waiting")
+    changed = log.set_column(log.column_names.index("authority"), "authority",
+                             [new_auth[:i] + ["daa"] + new_auth[i + 1:]])
+    write_steplog(changed, new)
+    res = run("compare_campaigns.py", [str(old), str(new)], tmp_path)
+    assert res.returncode == 1 and "'authority' differs" in res.stdout
+    helptext = run("compare_campaigns.py", ["--help"], tmp_path).stdout
+    assert "'hold' -> 'waiting'" in helptext

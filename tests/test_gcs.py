@@ -138,3 +138,80 @@ async def test_gcs_ignores_non_finite_and_older_telemetry():
     finally:
         node.close()
         veh.close()
+
+
+def test_view_takes_only_physical_telemetry():
+    """Issue 20 §1 (the GCS side): hostile telemetry with finite but absurd values (a position of 3e38 m,
+    latitude 214 deg, alert level 7, a stamp ahead of the newest tick) used to reach the pilot's view;
+    it is counted in ``rejected`` and the view keeps what it had."""
+    from gcs.view import View
+
+    def enu(lat_e7, lon_e7, alt_mm):  # a flat frame: 1e-7 deg = 0.011 m, enough for the bounds
+        return lat_e7 * 0.0111, lon_e7 * 0.0111, alt_mm / 1000.0
+
+    v = View()
+    good = M.MAVLink_local_position_ned_message(5000, 100.0, 0.0, -1000.0, 55.0, 0.0, 0.0)
+    v.take(good, enu, newest_tick=5.0)
+    assert v.own[0] == 5.0 and v.rejected == 0
+    for bad in (M.MAVLink_local_position_ned_message(6000, 3e38, 0.0, -1000.0, 55.0, 0.0, 0.0),  # 3e38 m north
+                M.MAVLink_local_position_ned_message(6000, 0.0, 0.0, -1000.0, 2000.0, 0.0, 0.0),  # 2,000 m/s
+                M.MAVLink_local_position_ned_message(6000, 0.0, 0.0, -2e5, 55.0, 0.0, 0.0),  # 200 km up
+                M.MAVLink_local_position_ned_message(7500, 0.0, 0.0, -1000.0, 55.0, 0.0, 0.0)):  # after tick 5 + 1 s
+        v.take(bad, enu, newest_tick=5.0)
+    assert v.own[0] == 5.0 and v.rejected == 4
+    v.take(M.MAVLink_local_position_ned_message(6000, 160.0, 0.0, -1000.0, 55.0, 0.0, 0.0), enu, newest_tick=5.0)
+    assert v.own[0] == 6.0 and v.rejected == 4  # one step after the tick is fine (the vehicle's publish)
+    for level, ok in ((7, False), (-1, False), (2**31 - 1, False), (2, True)):
+        v.take(M.MAVLink_named_value_int_message(6000, b"DAA_ALERT", level), enu, newest_tick=5.0)
+        assert (v.alert == (6.0, level)) == ok
+    assert v.rejected == 7
+
+    def adsb(lat_e7, heading_cdeg):
+        return M.MAVLink_adsb_vehicle_message(1001, lat_e7, 0, 0, 1_000_000, heading_cdeg, 6000, 0, b"HEAD1", 0, 0,
+                                              M.ADSB_FLAGS_VALID_COORDS, 0)
+
+    v.take(adsb(2_140_000_000, 18000), enu)  # latitude 214 deg
+    v.take(adsb(100_000, 40_000), enu)  # heading 400 deg
+    assert v.intruders == {} and v.rejected == 9
+    v.take(adsb(100_000, 18000), enu)
+    assert list(v.intruders) == [1001]
+    bands = M.MAVLink_daa_bands_message(6000, 0, 255, 0, 1, [0.0] * 16, [1.0] * 16, [3] + [0] * 15)
+    v.take(bands, enu)  # count 255 > 16 slots: read as the 16 there are
+    assert v.alert_regions == 3
+
+
+@pytest.mark.asyncio
+async def test_gcs_udpin_takes_the_first_vehicle_and_warns_about_a_second(capfd):
+    """Issue 20 §12: ``daa-gcs --vehicle udpin:`` answered whoever sent first and took every later sender's
+    telemetry too (silently); now a second sender is dropped with one warning, as in ``udp:`` mode."""
+    from daa_sil.sil.supervise import free_udp_ports
+
+    (port,) = free_udp_ports(1)
+    sc = parse_scenario(SCENARIO)
+    node = GcsNode(sc, GcsOptions(vehicle=f"udpin:127.0.0.1:{port}", clock="lockstep", display=False))
+    await node.start()
+    task = asyncio.create_task(node.run())
+    first = await open_endpoint(MavCodec(1, 1), "udp:127.0.0.1:0", peer=("127.0.0.1", port))
+    second = await open_endpoint(MavCodec(1, 1), "udp:127.0.0.1:0", peer=("127.0.0.1", port))
+    try:
+        first.send(M.MAVLink_local_position_ned_message(1000, 10.0, 0.0, -1000.0, 55.0, 0.0, 0.0))
+        for _ in range(200):
+            if node.view.own is not None:
+                break
+            await asyncio.sleep(0.01)
+        second.send(M.MAVLink_local_position_ned_message(2000, 9e6, 0.0, -1000.0, 55.0, 0.0, 0.0))
+        for _ in range(200):
+            if node.ep.counters.datagrams_rejected_peer:
+                break
+            await asyncio.sleep(0.01)
+    finally:
+        node.stop.set()
+        await asyncio.wait_for(task, 5.0)
+        node.close()
+        first.close()
+        second.close()
+    assert node.peer == first.local_address and node.view.own[0] == 1.0  # the second sender's position: not taken
+    assert node.ep.counters.datagrams_rejected_peer == 1
+    err = capfd.readouterr().err
+    warned = [x for x in err.splitlines() if "dropping datagrams from" in x]
+    assert len(warned) == 1 and f"udp:127.0.0.1:{second.local_address[1]} (LOCAL_POSITION_NED from system 1)" in warned[0]

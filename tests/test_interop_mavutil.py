@@ -136,17 +136,26 @@ def test_home_position_on_request_and_get_home(link):
     assert abs(h.latitude / 1e7 - sc.origin.lat_deg) < 0.2 and abs(h.altitude / 1000 - (sc.origin.alt_m + 1000)) < 5
 
 
-def test_message_interval_refuses_faster_than_the_sim_step(link):
+def test_message_interval_faster_than_the_sim_step_is_sent_once_per_step(link):
+    """Issue 20 §11: like ArduPilot SITL, a faster SET_MESSAGE_INTERVAL is ACCEPTED (a GCS reports an error
+    on DENIED), the message goes out once per step, a STATUSTEXT says so, GET reports the interval used."""
     from pymavlink import mavutil
 
     conn, *_ = link
     m = mavutil.mavlink
     conn.mav.command_long_send(1, 1, m.MAV_CMD_SET_MESSAGE_INTERVAL, 0, m.MAVLINK_MSG_ID_VFR_HUD, 250000, 0, 0, 0, 0, 0)
     ack, got = _ack(conn, m.MAV_CMD_SET_MESSAGE_INTERVAL)
-    assert ack.result == m.MAV_RESULT_DENIED
+    assert ack.result == m.MAV_RESULT_ACCEPTED
     texts = [x.text for x in got + recv_until(conn, lambda x: x.get_type() == "STATUSTEXT", 2.0)
              if x.get_type() == "STATUSTEXT"]
-    assert any("faster than the sim step" in t for t in texts), texts
+    assert "VFR_HUD once per step (1 s)" in texts, texts
+    conn.mav.command_long_send(1, 1, m.MAV_CMD_GET_MESSAGE_INTERVAL, 0, m.MAVLINK_MSG_ID_VFR_HUD, 0, 0, 0, 0, 0, 0)
+    iv = [x for x in recv_until(conn, lambda x: x.get_type() == "MESSAGE_INTERVAL", 3.0) if x.get_type() == "MESSAGE_INTERVAL"]
+    assert iv and iv[-1].interval_us == 1_000_000
+    msgs = recv_until(conn, lambda x: False, 3.0)
+    n_pos = sum(x.get_type() == "GLOBAL_POSITION_INT" for x in msgs)  # once per step, in the step's datagram
+    n_hud = sum(x.get_type() == "VFR_HUD" for x in msgs)
+    assert n_pos >= 6 and abs(n_hud - n_pos) <= 1, (n_pos, n_hud)  # VFR_HUD in every step's datagram, no more
     # a 3 s interval is honoured in sim time: VFR_HUD every 3rd step, GLOBAL_POSITION_INT still every step
     conn.mav.command_long_send(1, 1, m.MAV_CMD_SET_MESSAGE_INTERVAL, 0, m.MAVLINK_MSG_ID_VFR_HUD, 3e6, 0, 0, 0, 0, 0)
     assert _ack(conn, m.MAV_CMD_SET_MESSAGE_INTERVAL)[0].result == m.MAV_RESULT_ACCEPTED
@@ -313,17 +322,18 @@ def test_settings_are_in_the_step_log(link):
     ev = json.loads(steplog_metadata(tmp / "steplog.parquet")["settings"])
     wt = [e for e in ev if e["name"] == "DAA_WT"]
     assert [(e["status"], e["link"]) for e in wt] == [("accepted", "gcs"), ("out_of_range", "gcs"),
-                                                      ("denied_tap", "tap")]
+                                                      ("denied_readonly", "tap")]
     assert wt[0]["old"] == 4.0 and wt[0]["new"] == 6.0 and wt[0]["t_sent"] is None  # mavutil stamps no send time
     assert wt[0]["t_applied"] >= wt[0]["t_received"] - 1e-9 and wt[0]["t_applied"] == round(wt[0]["t_applied"])
     modes = [(e["name"], e["status"]) for e in ev if e["kind"] == "mode"]
     assert modes[:5] == [("GUIDED", "accepted"), ("AVOID_ADSB", "denied"), ("RTL", "denied"), ("GUIDED", "denied"),
-                         ("GUIDED", "denied_tap")]
+                         ("GUIDED", "denied_readonly")]
     assert modes[5][1] in ("temporarily_rejected", "accepted")
 
 
 def test_vehicle_out_udpin_listens_and_answers_the_first_gcs(tmp_path):
-    """``daa-vehicle --out udpin:`` as SITL: a mavutil ``udpout:`` client attaches; a second sender is ignored."""
+    """``daa-vehicle --out udpin:`` as SITL: a mavutil ``udpout:`` client attaches; a second sender is dropped,
+    with one warning naming it (as an unknown sender in ``udp:`` mode)."""
     from pymavlink import mavutil
 
     (port,) = free_ports(1)
@@ -361,14 +371,18 @@ def test_vehicle_out_udpin_listens_and_answers_the_first_gcs(tmp_path):
     from daa_sil.steplog import steplog_metadata
 
     meta = steplog_metadata(tmp_path / "steplog.parquet")
-    assert json.loads(meta["vehicle"])["other_address_ignored"] >= 1 and json.loads(meta["settings"]) == []
+    assert json.loads(meta["link"])["rejected_peer"] >= 1 and json.loads(meta["settings"]) == []
+    # issue 20 §12: the second sender is reported as in udp: mode (it used to be dropped silently)
+    log = (tmp_path / "vehicle.log").read_text()
+    warned = [x for x in log.splitlines() if x.startswith("daa-vehicle: warning: dropping datagrams from udp:127.0.0.1:")]
+    assert len(warned) == 1 and "from system 200" in warned[0] and "the first GCS that sent" in warned[0], log
 
 
 @pytest.mark.parametrize("args,needle", [
     (["--out", "udpin:127.0.0.1:14550", "--listen", "udp:127.0.0.1:0"], "already listens"),
     (["--listen", "udpout:127.0.0.1:5"], "--listen"),
     (["--tap", "udpin:127.0.0.1:5"], "--tap"),
-    (["--out", "tcp:127.0.0.1:5760"], "only udp"),
+    (["--out", "tcp:127.0.0.1:5760"], "only UDP is supported (udp:HOST:PORT, udpin:HOST:PORT or udpout:HOST:PORT)"),
     (["--tap-writable"], "--tap-writable needs --tap"),
 ])
 def test_vehicle_connection_string_errors_are_one_line(args, needle):

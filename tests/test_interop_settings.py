@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import struct
 
 import pytest
 
@@ -33,7 +34,7 @@ def test_param_table_accepts_and_refuses_by_the_protocol():
     for bad in (120.5, -0.1, math.nan, math.inf):
         r2 = pt.set("DAA_WT", bad, pol)
         assert r2.status == "out_of_range" and r2.value == 4.0 and r2.policy is None
-    assert pt.set("DAA_LINK_TO", 0.0, pol).status == "out_of_range"  # (0, 120]: 0 excluded
+    assert pt.set("DAA_LINK_TO", 0.0, pol).status == "out_of_range"  # [1, 120]: 0 excluded
     assert pt.set("DAA_LINK_TO", 120.0, pol).policy.link_timeout_s == 120.0
     assert pt.set("DAA_ENABLE", 0.5, pol).status == "not_integer"
     assert pt.set("DAA_ENABLE", 0.0, pol).policy.enabled is False
@@ -45,6 +46,33 @@ def test_param_table_accepts_and_refuses_by_the_protocol():
     assert r3.value == float32(4.2) != 4.2 and r3.policy.wait_threshold_s == float32(4.2)  # what travelled
     assert pt.value(pt.find("DAA_PRESET")[1], pol) == 1.0  # "paper" is preset 1
     assert pt.find(index=len(pt)) is None and pt.find("DAA_PROJL_S")[1].field == "projl_horizon_s"
+
+
+def test_timeouts_have_a_practical_minimum_and_minus_zero_is_plain_zero():
+    """Issue 20 §8: DAA_LINK_TO and DAA_STALE_S took 1.4e-45 s (the smallest float32); the GCS sends at most
+    once per 1 s step, so anything under one step is refused. -0.0 is stored and reported as 0.0."""
+    pt = ParamTable("paper")
+    pol = _policy()
+    tiny = struct.unpack("<f", struct.pack("<I", 1))[0]  # 1.4e-45, the value the issue sent
+    for name in ("DAA_LINK_TO", "DAA_STALE_S"):
+        for bad in (tiny, 0.5, 0.999, -0.0):
+            r = pt.set(name, bad, pol)
+            assert r.status == "out_of_range" and r.policy is None, (name, bad, r)
+            assert "[1, 120]" in r.reason
+        ok = pt.set(name, 1.0, pol)
+        assert ok.status == "accepted" and ok.value == 1.0
+    for name, field in (("DAA_WT", "wait_threshold_s"), ("DAA_PROJL_S", "projl_horizon_s")):
+        r = pt.set(name, -0.0, pol)
+        assert r.status == "accepted" and math.copysign(1.0, r.value) == 1.0
+        assert math.copysign(1.0, getattr(r.policy, field)) == 1.0  # the policy holds +0.0 ...
+        assert math.copysign(1.0, pt.value(r.spec, r.policy)) == 1.0  # ... and PARAM_VALUE reports it
+        assert pt.set(name, -0.0, r.policy).status == "unchanged"
+    # a policy that already holds -0.0 (e.g. from a scenario file) is reported as 0.0
+    from dataclasses import replace
+
+    assert math.copysign(1.0, pt.value(pt.find("DAA_WT")[1], replace(pol, wait_threshold_s=-0.0))) == 1.0
+    r = pt.set("DAA_ENABLE", -0.0, pol)
+    assert r.status == "accepted" and r.policy.enabled is False and math.copysign(1.0, r.value) == 1.0
 
 
 def _lockstep_run(tmp, settings: list[str]) -> "tuple[dict, list]":

@@ -7,6 +7,7 @@ import math
 import os
 import stat
 import struct
+from pathlib import Path
 
 import pytest
 
@@ -23,7 +24,7 @@ def _messages():
         d.MAVLink_daa_bands_message(12000, d.DAA_SIL_BAND_DIMENSION_TRACK, 2, 0, 1,
                                     [10.0, 200.5] + [0.0] * 14, [45.0, 260.0] + [0.0] * 14,
                                     [d.DAA_SIL_BAND_REGION_NEAR, d.DAA_SIL_BAND_REGION_FAR] + [0] * 14),
-        d.MAVLink_allocation_decision_message(13000, d.DAA_SIL_AUTHORITY_HOLD, d.DAA_SIL_DECISION_BLEND,
+        d.MAVLink_allocation_decision_message(13000, d.DAA_SIL_AUTHORITY_WAITING, d.DAA_SIL_DECISION_BLEND,
                                               d.DAA_SIL_RULE_AXIS_DIR, 7.5, 1, -2.25, 12.0, d.DAA_SIL_AXIS_HORIZONTAL,
                                               d.DAA_SIL_DIRECTION_LEFT, d.DAA_SIL_AXIS_VERTICAL,
                                               d.DAA_SIL_DIRECTION_UP, 270.0, 5.0, NAN, 42, 6.5),
@@ -187,3 +188,62 @@ def test_key_files(tmp_path):
         load_key(tmp_path / "nope")
     with pytest.raises(UsageError, match="32 bytes"):
         MavCodec(1, 1, key=b"short")
+
+
+def test_key_file_rules_permissions_short_passphrases_and_a_trailing_newline(tmp_path):
+    """Issue 20 §7. A raw 32-byte key with a line break (``echo``, an editor) was taken silently as a
+    passphrase (or refused as not UTF-8); a passphrase of 1 character was accepted; a key file anyone
+    may read was used without a word. Now: binary + line break = the raw key (the break ignored), 32
+    printable characters + line break = a passphrase, and a warning says which; passphrases need 8
+    characters; a group/other-readable file is used with a warning naming ``chmod 600``."""
+    import subprocess
+    import sys
+
+    raw = bytes(range(200, 232))  # 32 bytes, not UTF-8
+    assert len(raw) == 32
+    notes: list = []
+    for ending in (b"\n", b"\r\n"):
+        p = tmp_path / f"raw{len(ending)}.key"
+        p.write_bytes(raw + ending)
+        p.chmod(0o600)
+        notes.clear()
+        assert load_key(p, warn=notes.append) == raw
+        assert len(notes) == 1 and "raw bytes and a line break" in notes[0] and "ignored" in notes[0]
+    text = "0123456789abcdef0123456789abcdef"  # 32 printable characters: typed, so a passphrase
+    p = tmp_path / "text.key"
+    p.write_text(text + "\n")
+    p.chmod(0o600)
+    notes.clear()
+    assert load_key(p, warn=notes.append) == hashlib.sha256(text.encode()).digest()
+    assert len(notes) == 1 and "read as a passphrase" in notes[0]
+    p.write_text(text)  # exactly 32 bytes: the raw key, as documented
+    assert load_key(p) == text.encode()
+    for short in ("x", "seven77", "  abc  \n"):
+        s = tmp_path / "short.key"
+        s.write_text(short)
+        s.chmod(0o600)
+        with pytest.raises(FileFormatError, match="at least 8"):
+            load_key(s)
+    ok = tmp_path / "eight.key"
+    ok.write_text("eight888\n")
+    ok.chmod(0o600)
+    notes.clear()
+    assert load_key(ok, warn=notes.append) == hashlib.sha256(b"eight888").digest() and notes == []
+    wide = tmp_path / "wide.key"
+    generate_key_file(wide)
+    wide.chmod(0o644)
+    notes.clear()
+    assert len(load_key(wide, warn=notes.append)) == 32
+    assert len(notes) == 1 and "readable by group or others (mode 0644)" in notes[0] and "chmod 600" in notes[0]
+    # at the command line: the warning is one line on stderr; a short passphrase is one error line, exit 2
+    s = tmp_path / "short.key"
+    cp = subprocess.run([sys.executable, "-m", "vehicle", "scenarios/head_on.yaml", "--key", str(s)],
+                        capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
+    assert cp.returncode == 2 and cp.stderr.strip().count("\n") == 0, cp.stderr
+    assert cp.stderr.startswith("daa-vehicle: error: signing key file") and "at least 8" in cp.stderr
+    cp = subprocess.run([sys.executable, "-m", "daa_sil.cli", "run", "scenarios/head_on.yaml", "--key", str(wide),
+                         "--out", str(tmp_path / "run"), "--tap", "tcp:127.0.0.1:1"],
+                        capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
+    lines = cp.stderr.strip().splitlines()
+    assert cp.returncode == 2 and len(lines) == 2, cp.stderr  # the key warning, then the --tap error
+    assert lines[0].startswith("daa-sil: warning: signing key file") and "chmod 600" in lines[0]

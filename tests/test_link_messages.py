@@ -76,7 +76,7 @@ def test_bands_split_and_reassemble():
 
 
 def test_allocation_decision_from_agent_record():
-    rec = {"decision": np.array([agent.D_BLEND, agent.D_WAIT]), "authority": np.array([agent.A_DAA, agent.A_HOLD]),
+    rec = {"decision": np.array([agent.D_BLEND, agent.D_WAIT]), "authority": np.array([agent.A_DAA, agent.A_WAITING]),
            "rule": np.array([1, 0]), "wait_s": np.array([np.nan, 7.5]), "projl": np.array([True, False]),
            "sm_pilot": np.array([-3.0, np.nan]), "cmd_trk": np.array([math.pi / 2, np.nan]),
            "cmd_vs": np.array([0.0, np.nan]), "pilot_axis": np.array([1, 0]), "pilot_dir": np.array([2, 0])}

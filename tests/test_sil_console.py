@@ -350,12 +350,12 @@ def test_progress_line_rate_and_text():
     p.update("t=    0s authority=pilot decision=none range=17236m")  # at once: not yet 5 s
     assert said == []
     for k, line in enumerate(["t=   10s authority=pilot decision=none range=16091m",
-                              "t=   20s authority=hold  decision=wait range=14941m",
+                              "t=   20s authority=waiting decision=wait range=14941m",
                               "t=   30s authority=daa   decision=blend range=13791m"]):
         now[0] += 2.5  # a new vehicle line every 2.5 s of wall time (4x): only every second one is said
         p.update(line)
         p.update(line)  # the same line again: nothing new
-    assert said == ["t = 20 s of 180 s: authority hold, decision wait, nearest intruder 14941 m"]
+    assert said == ["t = 20 s of 180 s: authority waiting, decision wait, nearest intruder 14941 m"]
     now[0] += 5.0
     p.update("t=   40s authority=daa   decision=blend range=n/a")
     assert said[-1] == "t = 40 s of 180 s: authority daa, decision blend"

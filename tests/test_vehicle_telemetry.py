@@ -17,8 +17,12 @@ from vehicle.streams import StreamRates
 
 # --- identity and modes -------------------------------------------------------------------------------
 def test_authorities_map_to_arduplane_modes_by_name():
-    assert [ident.mode_name(ident.mode_of(a)) for a in ("pilot", "daa", "hold")] == ["GUIDED", "AVOID_ADSB", "CRUISE"]
+    assert [ident.mode_name(ident.mode_of(a)) for a in ("pilot", "daa", "waiting")] == ["GUIDED", "AVOID_ADSB", "CRUISE"]
     assert ident.mode_of("daa", agent_enabled=False) == ident.GUIDED  # the agent off never takes authority
+    from daa_sil.agent import AUTHORITY_NAMES
+
+    # every authority the agent names has its mode and its wire code (a renamed one cannot fall back silently)
+    assert set(ident.AUTHORITY_MODE) == set(AUTHORITY_NAMES) == set(T.AUTHORITY_CODE)
     from pymavlink import mavutil
 
     for num, name in ident.PLANE_MODES.items():  # the same numbering pymavlink / MAVProxy decode with
@@ -29,7 +33,7 @@ def test_base_mode_as_arduplane():
     b = ident.base_mode(ident.GUIDED)
     assert b & M.MAV_MODE_FLAG_SAFETY_ARMED and b & M.MAV_MODE_FLAG_GUIDED_ENABLED and b & 1
     assert not ident.base_mode(ident.CRUISE) & M.MAV_MODE_FLAG_GUIDED_ENABLED
-    hb = T.heartbeat("hold")
+    hb = T.heartbeat("waiting")
     assert (hb.autopilot, hb.type, hb.custom_mode) == (M.MAV_AUTOPILOT_ARDUPILOTMEGA, M.MAV_TYPE_FIXED_WING, 7)
 
 
@@ -75,12 +79,23 @@ def test_interval_in_sim_time_and_refusals():
     r.due(0.0)
     assert r.set_interval(HUD, 2.5e6, 1.0)[0] == M.MAV_RESULT_ACCEPTED
     assert _emissions(r, HUD, 1, 10) == [1, 4, 7]  # due 1, 3.5 -> 4, 6.5 -> 7: at the first step at/after due
+    # issue 20 §11: faster than the 1 s step is accepted (as ArduPilot SITL), sent once per step, said in a
+    # STATUSTEXT (<= 50 characters), and GET_MESSAGE_INTERVAL reports the interval used: one step
     res, why = r.set_interval(HUD, 250_000, 10.0)
-    assert res == M.MAV_RESULT_DENIED and "faster than the sim step" in why and r.interval_us(HUD) == 2_500_000
+    assert res == M.MAV_RESULT_ACCEPTED and why == "VFR_HUD once per step (1 s)" and r.interval_us(HUD) == 1_000_000
+    assert _emissions(r, HUD, 10, 14) == [10, 11, 12, 13]
+    assert r.set_interval(HUD, 1e6, 14.0) == (M.MAV_RESULT_ACCEPTED, "")  # exactly one step: nothing to say
+    long_name = M.MAVLINK_MSG_ID_POSITION_TARGET_GLOBAL_INT
+    assert len(r.set_interval(long_name, 1, 14.0)[1]) <= 50 and r.interval_us(long_name) == 1_000_000
     assert r.set_interval(HUD, -1, 10.0)[0] == M.MAV_RESULT_ACCEPTED and r.interval_us(HUD) == -1
     assert _emissions(r, HUD, 10, 15) == []
     assert r.set_interval(HUD, 0, 15.0)[0] == M.MAV_RESULT_ACCEPTED and r.interval_us(HUD) == 1_000_000
     assert r.set_interval(M.MAVLINK_MSG_ID_HEARTBEAT, 5e6, 0.0)[0] == M.MAV_RESULT_DENIED
+    assert r.set_interval(M.MAVLINK_MSG_ID_HEARTBEAT, -1, 0.0)[0] == M.MAV_RESULT_DENIED  # liveness needs it
+    assert r.set_interval(M.MAVLINK_MSG_ID_HEARTBEAT, 2e5, 0.0)[0] == M.MAV_RESULT_ACCEPTED  # once per step anyway
+    # MESSAGE_INTERVAL reports int32 microseconds: a longer interval is refused, never stored
+    assert r.set_interval(HUD, 2**31, 0.0)[0] == M.MAV_RESULT_DENIED and r.interval_us(HUD) == 1_000_000
+    assert r.set_interval(HUD, 2**31 - 1, 0.0)[0] == M.MAV_RESULT_ACCEPTED and r.interval_us(HUD) == 2**31 - 1
     assert r.set_interval(999, 1e6, 0.0)[0] == M.MAV_RESULT_UNSUPPORTED and r.interval_us(999) == 0
     assert r.set_interval(HUD, -5, 0.0)[0] == M.MAV_RESULT_DENIED
 
@@ -148,9 +163,9 @@ def test_connection_strings_as_mavproxy(text, option, default, role, addr):
 @pytest.mark.parametrize("text,option,default,allow,needle", [
     ("udpout:127.0.0.1:5", "--listen", LISTEN, (LISTEN,), "use udp:, udpin:HOST:PORT"),
     ("udpin:127.0.0.1:5", "--tap", SEND, (SEND,), "use udp:, udpout:HOST:PORT"),
-    ("tcp:127.0.0.1:5760", "--out", SEND, (LISTEN, SEND), "only udp"),
+    ("tcp:127.0.0.1:5760", "--out", SEND, (LISTEN, SEND), "only UDP is supported (udp:HOST:PORT, udpin:HOST:PORT or udpout:HOST:PORT)"),
     ("udp:127.0.0.1:0", "--out", SEND, (LISTEN, SEND), "within [1, 65535]"),
-    ("serial:/dev/ttyUSB0", "--out", SEND, (LISTEN, SEND), "only udp"),
+    ("serial:/dev/ttyUSB0", "--out", SEND, (LISTEN, SEND), "only UDP is supported (udp:HOST:PORT, udpin:HOST:PORT or udpout:HOST:PORT)"),
 ])
 def test_other_connection_strings_are_one_line_errors(text, option, default, allow, needle):
     with pytest.raises(UsageError) as ei:

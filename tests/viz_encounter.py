@@ -88,7 +88,7 @@ def make_steplog(n_steps: int = 240, encounter_id: int = 7, preset: str = "do365
             "dh_m": [float(intr.z - own.z)], "tau_mod_s": [float(wc.tau_mod(s, v, th.dthr))],
             "alert_level": [alert], "wcv": [bool(wc.wcv(s, v, th))], "intr_turn_est_dps": [0.0],
             "decision": decision, "rule": "axis" if decision == "blend" else "-",
-            "authority": "daa" if decision in ("no_wait", "blend") else ("hold" if decision == "wait" else "pilot"),
+            "authority": "daa" if decision in ("no_wait", "blend") else ("waiting" if decision == "wait" else "pilot"),
             "wait_s": 6.0 - 0.02 * k if active else np.nan, "projl": decision == "no_wait",
             "decided_by": ("projl" if decision == "no_wait" else "neither") if decision in ("wait", "no_wait") else "none",
             "wait_p_lowc": 0.3 if active else np.nan, "wait_in_box": False,

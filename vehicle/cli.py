@@ -38,8 +38,17 @@ EXAMPLES = """examples:
   # like SITL: listen on 14550 and stream to whichever GCS (MAVProxy --master udpout:...) speaks first
   daa-vehicle scenarios/head_on.yaml --out udpin:127.0.0.1:14550
 
+  # more ground stations, as SITL's --out: the shim (the pilot's link), QGC read-only on 14550,
+  # a MAVProxy on 14560 that may also set parameters and modes (,rw; undelayed!)
+  daa-vehicle scenarios/head_on.yaml --out udp:127.0.0.1:14601 --out udp:127.0.0.1:14550 --out udp:127.0.0.1:14560,rw
+
 connection strings (as MAVProxy): udpin:HOST:PORT listens, udpout:HOST:PORT sends, a bare udp:HOST:PORT
 listens for --listen and sends for --out / --tap.
+
+outputs: the first --out is the pilot's link (GCS or delay shim): pilot commands and settings travel
+on it. Every further --out (and --tap) is an observer with its own stream rates that may read
+parameters and ask for messages; it is read-only unless marked ,rw (then it may also set parameters
+and modes). Pilot commands are taken from the first --out only (they must cross the delayed link).
 """
 
 
@@ -47,9 +56,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="daa-vehicle", description=__doc__.splitlines()[0], epilog=EXAMPLES,
                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", type=Path, help="scenario YAML file")
-    p.add_argument("--out", default="udp:127.0.0.1:14550", metavar="udp:HOST:PORT",
-                   help="GCS (or delay shim) to stream to and take commands from (default udp:127.0.0.1:14550); "
-                        "udpin:HOST:PORT listens there and answers the first GCS that sends")
+    p.add_argument("--out", action="append", default=None, metavar="CONN[,rw]",
+                   help="repeatable. The first: the GCS (or delay shim) to stream to and take commands from "
+                        "(default udp:127.0.0.1:14550); udpin:HOST:PORT listens there and answers the first GCS "
+                        "that sends. Each further one: an observer with its own rates, read-only unless ,rw "
+                        "(see 'outputs' below)")
     p.add_argument("--listen", default=None, metavar="udp:HOST:PORT",
                    help="local socket (default udp:127.0.0.1:0 = OS-chosen port; not with --out udpin:)")
     p.add_argument("--tap", default=None, metavar="udp:HOST:PORT|none",
@@ -110,19 +121,20 @@ def _options(args):
         raise UsageError(f"--tick-timeout must be within [0.1, 3600] s, got {args.tick_timeout:g}")
     if args.start_timeout is not None and not (math.isfinite(args.start_timeout) and 0.1 <= args.start_timeout <= 3600):
         raise UsageError(f"--start-timeout must be within [0.1, 3600] s, got {args.start_timeout:g}")
-    key = load_key_option(args.key)
-    from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
+    key = load_key_option(args.key, "daa-vehicle")
+    from daa_sil.sil.connstr import LISTEN, parse_connection
+
+    from daa_sil.sil.outputs import output_specs
 
     tap = None if args.tap in (None, "", "none") else args.tap
-    out = parse_connection(args.out, "--out", SEND)
-    if args.listen is not None:
-        parse_connection(args.listen, "--listen", LISTEN, allow=(LISTEN,))
-        if out.listens:
-            raise UsageError(f"--out {args.out} already listens; drop --listen {args.listen}")
-    if tap is not None:
-        parse_connection(tap, "--tap", SEND, allow=(SEND,))
+    outs = args.out or ["udp:127.0.0.1:14550"]
     if args.tap_writable and tap is None:
         raise UsageError("--tap-writable needs --tap udp:HOST:PORT")
+    specs = output_specs(outs, tap, args.tap_writable)  # one line for a malformed --out / --tap
+    if args.listen is not None:
+        parse_connection(args.listen, "--listen", LISTEN, allow=(LISTEN,))
+        if specs[0].listens:
+            raise UsageError(f"--out {outs[0]} already listens; drop --listen {args.listen}")
     if args.steplog is not None:
         check_steplog_path(args.steplog)
     live = None if args.live in (None, "", "none") else args.live
@@ -133,7 +145,8 @@ def _options(args):
     def clock_start(wall0: float) -> None:  # orchestrators time scheduled faults from this line
         print(f"CLOCK t0_monotonic={wall0:.6f} speed={args.speed:g}", flush=True)
 
-    return VehicleOptions(out=args.out, listen=args.listen or "udp:127.0.0.1:0", tap=tap, clock=args.clock,
+    return VehicleOptions(out=outs[0], also_out=tuple(outs[1:]), listen=args.listen or "udp:127.0.0.1:0", tap=tap,
+                          clock=args.clock,
                           speed=args.speed, key=key, steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live,
                           waitmap=args.waitmap, config=load_config(args.config) if args.config else None,
                           tap_writable=args.tap_writable, start_timeout_s=args.start_timeout,
@@ -168,8 +181,9 @@ async def _amain(args) -> int:
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, on_signal, sig)
+    observers = " ".join(f"{o.name}={describe(o.spec.conn)}{',rw' if o.spec.writable else ''}" for o in node.outputs[1:])
     print(f"READY listen={node.local_address} out={describe(node.out) if node.out.listens else format_udp_address(node.out.addr)} clock={opts.clock} "
-          f"scenario={sc.name} steps={node.core.n_steps}", flush=True)
+          f"scenario={sc.name} steps={node.core.n_steps}" + (f" {observers}" if observers else ""), flush=True)
 
     def progress(nd, out):
         if not args.quiet and nd.k % 10 == 0:
@@ -192,7 +206,7 @@ async def _amain(args) -> int:
         node.close()
         raise
     path = node.write_steplog()
-    st = node.ep.stats()
+    st = {"dropped": node.dropped()}
     node.close()
     g = node.gate.counters
     print(f"daa-vehicle: done, {node.stats.steps} steps; commands accepted {g.accepted}, dropped "
@@ -206,9 +220,9 @@ async def _amain(args) -> int:
         print(f"daa-vehicle: realtime: ticks answered by {v.sync_partner}, steps run before their tick was "
               f"confirmed {v.steps_unconfirmed}, GCS acks late {v.acks_late}; step lateness mean {v.late_mean_ms:.1f} "
               f"ms, max {v.late_max_ms:.1f} ms", flush=True)
-    drops = node.ep.drops.summary()
-    if drops:
-        print(f"daa-vehicle: {drops}", flush=True)
+    for line in [ep.drops.summary() for ep in node.endpoints] + [node.guard.summary()]:
+        if line:
+            print(f"daa-vehicle: {line}", flush=True)
     return 0
 
 

@@ -14,6 +14,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from daa_sil.link.codec import mavlink as M
+
 
 @dataclass(frozen=True)
 class PilotCommand:
@@ -72,6 +74,10 @@ class CommandGate:
         c.accepted += 1
         return True
 
+    def last_accepted(self, source: tuple) -> "tuple[float, int] | None":
+        """``(t_sent, seq)`` of the newest command accepted from ``source`` ``(sysid, compid)``; None if none."""
+        return self._last.get(tuple(source))
+
 
 def reposition_command(msg, own_xyz: tuple, origin, t_sent: float, seq: int) -> "PilotCommand | str":
     """A ``MAV_CMD_DO_REPOSITION`` (COMMAND_INT: x/y degE7; COMMAND_LONG: param5/6 deg) as a pilot command.
@@ -98,3 +104,29 @@ def reposition_command(msg, own_xyz: tuple, origin, t_sent: float, seq: int) -> 
     trk = math.degrees(math.atan2(de, dn)) % 360.0
     return PilotCommand(t_sent, int(seq), trk, math.nan, gs, (msg.get_srcSystem(), msg.get_srcComponent()),
                         "DO_REPOSITION")
+
+
+#: SET_POSITION_TARGET_GLOBAL_INT type_mask bits that must be clear for a velocity setpoint
+_VEL_IGNORE = (M.POSITION_TARGET_TYPEMASK_VX_IGNORE | M.POSITION_TARGET_TYPEMASK_VY_IGNORE
+               | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE)
+
+
+def setpoint_command(msg, vehicle_sysid: int = 1) -> "PilotCommand | None":
+    """A PILOT_MANEUVER or a stock SET_POSITION_TARGET_GLOBAL_INT velocity setpoint (NED m/s) as a pilot
+    command; None if it is not for this vehicle or not a velocity setpoint. Values are checked by the
+    :class:`CommandGate` (NaN = keep, infinities and out-of-range values invalid)."""
+    src = (msg.get_srcSystem(), msg.get_srcComponent())
+    if msg.target_system not in (0, vehicle_sysid):
+        return None
+    if msg.get_type() == "PILOT_MANEUVER":
+        return PilotCommand(msg.time_boot_ms / 1000.0, int(msg.cmd_seq), float(msg.track_deg), float(msg.vs),
+                            float(msg.gs), src, "PILOT_MANEUVER")
+    if msg.type_mask & _VEL_IGNORE:
+        return None
+    vn, ve, vd = float(msg.vx), float(msg.vy), float(msg.vz)
+    if not all(math.isfinite(v) for v in (vn, ve, vd)):
+        return None
+    gs = math.hypot(vn, ve)
+    trk = math.degrees(math.atan2(ve, vn)) % 360.0 if gs > 0.5 else math.nan
+    return PilotCommand(msg.time_boot_ms / 1000.0, 0, trk, -vd, gs if gs > 0.5 else math.nan, src,
+                        "SET_POSITION_TARGET_GLOBAL_INT")

@@ -12,7 +12,7 @@ authority (agent)       ArduPlane mode  why this mode
 pilot                   GUIDED (15)     the aircraft flies setpoints sent from the ground
 daa (DAA, blend,        AVOID_ADSB (14) ArduPilot's mode while its ADS-B avoidance flies
 override, link lost)
-hold (agent waits)      CRUISE (7)      holds the last course, climb rate and speed: what the
+waiting (agent waits)   CRUISE (7)      holds the last course, climb rate and speed: what the
                                         agent does while it waits for the delayed pilot
 ======================  ==============  =====================================================
 
@@ -48,7 +48,7 @@ PLANE_MODES = {0: "MANUAL", 1: "CIRCLE", 2: "STABILIZE", 3: "TRAINING", 4: "ACRO
                15: "GUIDED", 16: "INITIALISING"}
 GUIDED, AVOID_ADSB, CRUISE = 15, 14, 7
 #: authority -> ArduPlane mode number
-AUTHORITY_MODE = {"pilot": GUIDED, "daa": AVOID_ADSB, "hold": CRUISE}
+AUTHORITY_MODE = {"pilot": GUIDED, "daa": AVOID_ADSB, "waiting": CRUISE}
 #: capabilities actually served (AUTOPILOT_VERSION): MAVLink 2, COMMAND_INT (DO_REPOSITION, modes),
 #: SET_POSITION_TARGET_GLOBAL_INT velocity setpoints, and the C-cast parameter encoding (integer
 #: parameters travel as their float value, as ArduPilot does). No missions, no FTP.

@@ -26,98 +26,43 @@ kept (and, with ``live``, sent at once to the Rerun recorder's loopback feed, fi
 :class:`daa_sil.sil.live.LiveSender`), and truth advances. The step log is written atomically at the end, on Ctrl-C and on
 SIGTERM (:meth:`VehicleNode.write_steplog`).
 
-Hostile input: the endpoint/codec count and drop malformed, forged and replayed packets; the
+Outputs (:mod:`daa_sil.sil.outputs`): the first ``--out`` is the pilot's link (``gcs``); further
+``--out`` and ``--tap`` are observers with their own stream rates, read-only unless marked writable.
+
+Hostile input: the endpoint/codec count and drop malformed, forged and replayed packets; every
+message's handling runs under the endpoint's :class:`daa_sil.sil.msgguard.MessageGuard`, so one
+that raises is counted as malformed and the rest of its datagram is still handled; the
 :class:`~vehicle.commands.CommandGate` drops duplicate, older, future-stamped and invalid pilot
-commands; commands from the tap address are ignored (it may only observe). Link liveness for the
-agent counts only **data** from the GCS (HEARTBEAT, commands), never the lockstep control
-messages, which bypass the delay line.
+commands; pilot commands from an observer are ignored. Link liveness for the agent counts only
+**data** from the GCS (HEARTBEAT, commands), never the lockstep control messages, which bypass the
+delay line.
 """
 
 from __future__ import annotations
 
 import asyncio
-import math
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
+from functools import partial
 
 from daa_sil.link.codec import MavCodec
 from daa_sil.link.codec import mavlink as M
-from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
-from daa_sil.sil.endpoint import MavEndpoint, Received, _norm_host, format_udp_address, open_endpoint
+from daa_sil.sil.connstr import LISTEN, parse_connection
+from daa_sil.sil.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint
+from daa_sil.sil.msgguard import MessageGuard
+from daa_sil.sil.outputs import PILOT_LINK, Output, output_specs
 
 from . import telemetry as T
-from .commands import CommandGate, PilotCommand, reposition_command
+from .commands import CommandGate, reposition_command, setpoint_command
 from .core import VehicleCore
 from .params import ParamTable
 from .services import GcsServices
 from .streams import STREAMED
 from vehicle.ticks import TickClock
 from vehicle.node_steplog import StepLogWriter
+from vehicle.node_options import VehicleOptions, VehicleStats
 
 VEHICLE_SYSID, VEHICLE_COMPID = 1, 1
 PILOT_MANEUVER_ID = M.MAVLINK_MSG_ID_PILOT_MANEUVER
-#: SET_POSITION_TARGET_GLOBAL_INT type_mask bits that must be clear for a velocity setpoint
-_VEL_IGNORE = (M.POSITION_TARGET_TYPEMASK_VX_IGNORE | M.POSITION_TARGET_TYPEMASK_VY_IGNORE
-               | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE)
-
-
-@dataclass
-class VehicleOptions:
-    """Runtime options of the vehicle node (addresses ``udp:HOST:PORT``; timeouts in wall s)."""
-
-    out: str = "udp:127.0.0.1:14550"
-    listen: str = "udp:127.0.0.1:0"
-    tap: "str | None" = None
-    clock: str = "realtime"
-    speed: float = 1.0
-    key: "bytes | None" = None
-    steplog: "Path | None" = None
-    tick_timeout_s: float = 10.0
-    tick_retry_s: float = 2.0
-    #: wall seconds to wait for the answer to tick 0 (the partner may still be starting); None = tick_timeout_s
-    start_timeout_s: "float | None" = None
-    #: ``udp:127.0.0.1:PORT``: publish each step's step-log row there (:mod:`daa_sil.sil.live`)
-    live: "str | None" = None
-    #: ``--waitmap``: map preset, grid spec or family directory (None = the default map)
-    waitmap: "str | None" = None
-    #: ``--config``: a :class:`daa_sil.config.run_config.RunConfig` (None = the scenario alone)
-    config: "object | None" = None
-    #: let the (undelayed) tap set parameters and modes; by default it may only read
-    tap_writable: bool = False
-    #: realtime: "auto" (start at once, wait for tick answers only from a partner that gives them) or
-    #: "wait" (start the clock once tick 0 is acknowledged; error after tick_timeout_s)
-    tick_sync: str = "auto"
-    #: called once with the wall (``time.monotonic``) instant of step 0's deadline when the clock starts
-    on_clock_start: "object | None" = None
-
-
-@dataclass
-class VehicleStats:
-    steps: int = 0
-    ticks_sent: int = 0
-    tick_retries: int = 0
-    gcs_requests_answered: int = 0
-    commands_from_tap_ignored: int = 0
-    foreign_messages_ignored: int = 0
-    #: ``--out udpin:``: messages from an address other than the learned GCS (or the tap), dropped
-    other_address_ignored: int = 0
-    authority_changes: int = 0
-    #: realtime: how late each step's telemetry went out after its due wall time ``W_k``, ms
-    late_mean_ms: float = 0.0
-    late_max_ms: float = 0.0
-    late_p99_ms: float = 0.0
-    #: ticks the shim echoed back (it is alive, and the uplink due at that tick was sent)
-    tick_echoes: int = 0
-    #: realtime: who confirms ticks: "shim" (echoes), "gcs" (acks, no shim between) or "none"
-    sync_partner: str = "none"
-    #: realtime: steps that ran before their tick was confirmed (0 = each step saw what lockstep sees)
-    steps_unconfirmed: int = 0
-    #: realtime: ticks the GCS acknowledged only after the next tick had gone out
-    acks_late: int = 0
-    #: warnings printed because the shim or the GCS stopped answering ticks
-    silence_warnings: int = 0
-    extra: dict = field(default_factory=dict)
 
 
 class VehicleNode(StepLogWriter, TickClock):
@@ -131,14 +76,14 @@ class VehicleNode(StepLogWriter, TickClock):
         self.sc = scenario
         self.opts = opts
         self.core = core if core is not None else VehicleCore(scenario, waitmap=opts.waitmap, config=opts.config)
-        self.out = parse_connection(opts.out, "--out", SEND)
+        self.specs = output_specs([opts.out, *opts.also_out], opts.tap, opts.tap_writable)
+        self.out = self.specs[0].conn
         self.listen = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))
-        tap = parse_connection(opts.tap, "--tap", SEND, allow=(SEND,)).addr if opts.tap else None
-        # numeric hosts, so they compare equal to the addresses datagrams come from ("localhost" -> 127.0.0.1)
-        self.tap = (_norm_host(tap[0]), tap[1]) if tap is not None else None
-        self._peer = None if self.out.listens else (_norm_host(self.out.addr[0]), self.out.addr[1])
         self.codec = MavCodec(VEHICLE_SYSID, VEHICLE_COMPID, key=opts.key, allow_unsigned=())
-        self.ep: "MavEndpoint | None" = None
+        self.ep: "MavEndpoint | None" = None  #: the main socket (the pilot's link, fixed observers)
+        self.outputs: "list[Output]" = []  #: filled by :meth:`start`; outputs[0] is the pilot's link
+        #: every received message's handling runs under it (all endpoints share it)
+        self.guard = MessageGuard("daa-vehicle")
         self.gate = CommandGate()
         self.stats = VehicleStats()
         self.k = 0
@@ -162,7 +107,8 @@ class VehicleNode(StepLogWriter, TickClock):
         self.home: "T.Kin | None" = None
         self.latest: dict = {}
         self.services = GcsServices(ParamTable(scenario.thresholds), lambda: self.core.core.policy, self._set_policy,
-                                    lambda: self.latest, self.sim_now, dt=self.core.dt, tap_writable=opts.tap_writable,
+                                    lambda: self.latest, self.sim_now, dt=self.core.dt,
+                                    writable=frozenset(s.name for s in self.specs if s.writable or s.name == PILOT_LINK),
                                     step_t=lambda: self.t, current_mode=self._mode_now)
         self.live = None
         if opts.live:
@@ -172,10 +118,9 @@ class VehicleNode(StepLogWriter, TickClock):
 
     @property
     def peer(self):
-        """The GCS side (``--out``): fixed, or with ``--out udpin:`` the first address that sent a good message."""
-        if self._peer is None and self.ep is not None and self.ep.peer is not None:
-            self._peer = tuple(self.ep.peer)
-        return self._peer
+        """The pilot's link (the first ``--out``): fixed, or with ``udpin:`` the first address that sent a good
+        message; None before that (or before :meth:`start`)."""
+        return self.outputs[0].addr if self.outputs else None
 
     def _mode_now(self) -> int:
         from .identity import mode_of
@@ -200,23 +145,48 @@ class VehicleNode(StepLogWriter, TickClock):
 
     # -- lifecycle -------------------------------------------------------------------------------
     async def start(self) -> None:
-        """Bind the listen socket; the peer (``--out``) is fixed, the tap only observes.
+        """Bind the sockets: the main one (``--listen``, or the first ``--out`` if it is ``udpin:``) and one
+        per further ``udpin:`` output.
 
-        Only datagrams from the peer's and the tap's exact ``(host, port)`` are accepted; anything
-        else (another port claiming the GCS's system id, an early copy of a genuine packet, ...)
-        is counted and dropped by the endpoint without touching the signing state.
+        Only datagrams from the outputs' exact ``(host, port)`` are accepted (a ``udpin:`` output: its
+        first sender); anything else (another port claiming the GCS's system id, an early copy of a
+        genuine packet, ...) is counted, reported and dropped by the endpoint without touching the
+        signing state.
         """
-        on_msg = self._on_message if self.opts.clock != "lockstep" else None
-        if self.out.listens:  # --out udpin:HOST:PORT: listen there, answer the first GCS that sends
-            self.ep = await open_endpoint(self.codec, self.out.addr, peer=None, learn_peer=True, on_message=on_msg,
-                                          name="daa-vehicle")
-            return
-        allow = [self.peer] + ([self.tap] if self.tap is not None else [])
-        self.ep = await open_endpoint(self.codec, self.listen.addr, peer=self.peer, learn_peer=False,
-                                      allow_peers=allow, on_message=on_msg, name="daa-vehicle",
-                                      peer_label="--out / --tap",
-                                      drop_hint="if that is your GCS or shim, give its address as --out "
-                                                "(commands are taken only from --out)")
+        primary, rest = self.specs[0], self.specs[1:]
+        fixed = [s.addr for s in rest if not s.listens]
+        common = dict(name="daa-vehicle", guard=self.guard)
+        if primary.listens:  # --out udpin:HOST:PORT: listen there, answer the first GCS that sends
+            self.ep = await open_endpoint(self.codec, primary.addr, peer=None, learn_peer=True, lock_peer=True,
+                                          allow_peers=fixed, peer_label="--out udpin: the first GCS that sent",
+                                          drop_hint="the vehicle answers only the first GCS that sent to "
+                                                    f"{primary.conn.text}", **common)
+        else:
+            self.ep = await open_endpoint(self.codec, self.listen.addr, peer=primary.addr, learn_peer=False,
+                                          allow_peers=[primary.addr] + fixed, peer_label="--out / --tap",
+                                          drop_hint="if that is your GCS or shim, give its address as --out "
+                                                    "(commands are taken only from the first --out)", **common)
+        self.outputs = [Output(primary, self.ep)]
+        for s in rest:
+            ep = self.ep
+            if s.listens:
+                ep = await open_endpoint(self.codec, s.addr, peer=None, learn_peer=True, lock_peer=True,
+                                         peer_label=f"{s.name}: the first sender",
+                                         drop_hint=f"{s.name} ({s.conn.text}) answers only its first sender", **common)
+            self.outputs.append(Output(s, ep))
+        if self.opts.clock != "lockstep":  # realtime: reads are answered the moment they arrive
+            for ep in self.endpoints:
+                ep.on_message = partial(self._on_message, ep=ep)
+
+    def dropped(self) -> int:
+        """Messages dropped on every socket: codec rejections, unexpected peers, overflow, malformed content."""
+        return sum(ep.stats()["dropped"] - ep.guard.total for ep in self.endpoints) + self.guard.total
+
+    @property
+    def endpoints(self) -> "list[MavEndpoint]":
+        """Every socket of the vehicle, the main one first."""
+        eps = [self.ep] if self.ep is not None else []
+        return eps + [o.ep for o in self.outputs if o.ep is not self.ep]
 
     def request_stop(self) -> None:
         """Stop playing: :meth:`run` raises ``asyncio.CancelledError`` at its next step or wait."""
@@ -231,47 +201,53 @@ class VehicleNode(StepLogWriter, TickClock):
         return format_udp_address(self.ep.local_address)
 
     def close(self) -> None:
-        if self.ep is not None:
-            self.ep.close()
+        for ep in self.endpoints:
+            ep.close()
         if self.live is not None:
             self.live.close()
 
     # -- receiving -------------------------------------------------------------------------------
-    def _link_of(self, addr) -> "str | None":
-        """``"gcs"`` (the --out peer), ``"tap"`` or None (``--out udpin:``: someone else)."""
-        a = tuple(addr)
-        if self.peer is not None and a == tuple(self.peer):
-            return "gcs"
-        if self.tap is not None and a == tuple(self.tap):
-            return "tap"
+    def _link_of(self, addr, ep=None) -> "str | None":
+        """The name of the output ``addr`` is on (``gcs``, ``tap``, ``out2``, ...) for a datagram that came in on
+        ``ep`` (default: the main socket), or None (someone else)."""
+        ep, a = ep or self.ep, tuple(addr)
+        for o in self.outputs:
+            if o.ep is ep and o.addr is not None and tuple(o.addr) == a:
+                return o.name
         return None
 
-    def _on_message(self, r: Received) -> None:
+    def _on_message(self, r: Received, ep=None) -> None:
         """Realtime: answer reads (parameters, requests, TIMESYNC, ...) the moment they arrive."""
         msg = r.msg
         if msg.get_srcSystem() == VEHICLE_SYSID or not GcsServices.is_read(msg):
             return
-        link = self._link_of(r.addr)
+        link = self._link_of(r.addr, ep)
         if link is not None:
-            self._reply(self.services.read(msg, link), r.addr)
+            self._reply(self.services.read(msg, link), r.addr, ep=ep)
 
-    def _reply(self, msgs: list, addr, count: bool = True) -> None:
+    def _reply(self, msgs: list, addr, count: bool = True, ep=None) -> None:
         if msgs:
-            self.ep.send_many(msgs, addr)
+            (ep or self.ep).send_many(msgs, addr)
             self.stats.gcs_requests_answered += int(count)
 
-    def handle(self, r: Received) -> None:
-        """Process one good message (commands, settings, stock-GCS requests, acks); never raises on content."""
+    def take(self, r: Received, ep=None) -> None:
+        """:meth:`handle` ``r`` under the guard: if it raises, ``r`` counts as malformed (warned, with counts)
+        and nothing else is lost."""
+        self.guard.run(partial(self.handle, ep=ep), r)
+
+    def handle(self, r: Received, ep=None) -> None:
+        """Process one good message (commands, settings, stock-GCS requests, acks) that came in on ``ep``
+        (default: the main socket). Run it through :meth:`take`: content it did not foresee may raise."""
         msg = r.msg
         mtype = msg.get_type()
-        link = self._link_of(r.addr)
+        link = self._link_of(r.addr, ep)
         if mtype == "SIM_TICK_ACK":
-            if link == "gcs" and int(msg.tick) <= self._tick_sent_k:
+            if link == PILOT_LINK and int(msg.tick) <= self._tick_sent_k:
                 if int(msg.tick) > self._acked:
                     self._acked = int(msg.tick)
                     self._answered("gcs")
             return
-        if mtype == "SIM_TICK" and msg.get_srcSystem() == VEHICLE_SYSID and link == "gcs":
+        if mtype == "SIM_TICK" and msg.get_srcSystem() == VEHICLE_SYSID and link == PILOT_LINK:
             self.stats.tick_echoes += 1  # our own tick, echoed by the shim (one we never sent changes nothing)
             if int(msg.tick) <= self._tick_sent_k:
                 if int(msg.tick) > self._echoed:
@@ -284,31 +260,32 @@ class VehicleNode(StepLogWriter, TickClock):
         if link is None:
             self.stats.other_address_ignored += 1
             return
-        from_tap = link == "tap"
-        if not from_tap:
+        observer = link != PILOT_LINK
+        if not observer:
             self.core.note_gcs_data(self.t)
         if mtype == "SYSTEM_TIME":  # a GCS's send-time stamp for the settings in the same datagram
             self._stamp = (tuple(r.addr), r.t, msg.time_boot_ms / 1000.0)
             return
         if GcsServices.is_read(msg):
             if self.opts.clock == "lockstep":  # realtime: answered on arrival (_on_message)
-                self._reply(self.services.read(msg, link), r.addr)
+                self._reply(self.services.read(msg, link), r.addr, ep=ep)
             return
         if GcsServices.is_write(msg):
             stamp = self._stamp
             t_sent = stamp[2] if stamp is not None and stamp[0] == tuple(r.addr) and stamp[1] == r.t else None
             n0 = len(self.services.events)
-            self._reply(self.services.write(msg, link, self._sim_time_of(r.t), t_sent), r.addr)
+            self._reply(self.services.write(msg, link, self._sim_time_of(r.t), t_sent), r.addr, ep=ep)
             for ev in self.services.events[n0:]:
                 self._announce(ev)
             return
         if mtype in ("PILOT_MANEUVER", "SET_POSITION_TARGET_GLOBAL_INT") or (
                 mtype in ("COMMAND_INT", "COMMAND_LONG") and int(msg.command) == M.MAV_CMD_DO_REPOSITION):
-            if from_tap:
-                self.stats.commands_from_tap_ignored += 1
+            if observer:  # a command must cross the delayed link: only the first --out flies
+                self.stats.commands_from_observers_ignored += 1
                 if mtype.startswith("COMMAND"):
                     self._reply([M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_DENIED, 0, 0,
-                                                               msg.get_srcSystem(), msg.get_srcComponent())], r.addr)
+                                                               msg.get_srcSystem(), msg.get_srcComponent())],
+                                r.addr, ep=ep)
                 return
             self._pilot_command(msg, r)
 
@@ -322,7 +299,7 @@ class VehicleNode(StepLogWriter, TickClock):
             cmd = reposition_command(msg, (float(o.x[0]), float(o.y[0]), float(o.z[0])), self.sc.origin,
                                      self._sim_time_of(r.t), msg.get_seq())
         else:
-            cmd = self._command_from(msg)
+            cmd = setpoint_command(msg, VEHICLE_SYSID)
         if cmd is None or isinstance(cmd, str):
             self.gate.counters.invalid += 1
             if is_cmd:
@@ -342,38 +319,24 @@ class VehicleNode(StepLogWriter, TickClock):
         # SET_POSITION_TARGET_GLOBAL_INT: no COMMAND_ACK (not a command); POSITION_TARGET_GLOBAL_INT is the feedback
 
     def _announce(self, ev) -> None:
-        """A setting write: one console line, and a STATUSTEXT to the observer too."""
+        """A setting write: one console line, and an accepted one as a STATUSTEXT to the other outputs too."""
         sent = f", sent t={ev.t_sent:g}s" if ev.t_sent is not None else ""
         print(f"t={ev.t_applied:5.0f}s {ev.kind} {ev.name} {ev.status}: {ev.reason} (from {ev.link}, "
               f"received t={ev.t_received:.1f}s{sent})", flush=True)
-        if ev.status == "accepted" and self.tap is not None and ev.link != "tap":
-            self.ep.send_many([T.statustext(ev.reason[:50])], self.tap)
-
-    def _command_from(self, msg) -> "PilotCommand | None":
-        src = (msg.get_srcSystem(), msg.get_srcComponent())
-        if msg.get_type() == "PILOT_MANEUVER":
-            if msg.target_system not in (0, VEHICLE_SYSID):
-                return None
-            return PilotCommand(msg.time_boot_ms / 1000.0, int(msg.cmd_seq), float(msg.track_deg), float(msg.vs),
-                                float(msg.gs), src, "PILOT_MANEUVER")
-        # stock GCS: SET_POSITION_TARGET_GLOBAL_INT velocity setpoint (NED m/s) -> track/vs/gs
-        if msg.target_system not in (0, VEHICLE_SYSID) or msg.type_mask & _VEL_IGNORE:
-            return None
-        vn, ve, vd = float(msg.vx), float(msg.vy), float(msg.vz)
-        if not all(math.isfinite(v) for v in (vn, ve, vd)):
-            return None
-        gs = math.hypot(vn, ve)
-        trk = math.degrees(math.atan2(ve, vn)) % 360.0 if gs > 0.5 else math.nan
-        return PilotCommand(msg.time_boot_ms / 1000.0, 0, trk, -vd, gs if gs > 0.5 else math.nan, src,
-                            "SET_POSITION_TARGET_GLOBAL_INT")
+        if ev.status == "accepted":
+            for o in self.outputs:
+                if o.name != ev.link and o.name != PILOT_LINK and o.addr is not None:
+                    o.ep.send_many([T.statustext(ev.reason[:50])], o.addr)
 
     def _drain(self) -> None:
-        while True:
-            try:
-                r = self.ep.inbox.get_nowait()
-            except asyncio.QueueEmpty:
-                return
-            self.handle(r)
+        """Handle everything received on every socket so far (each message under the guard)."""
+        for ep in self.endpoints:
+            while True:
+                try:
+                    r = ep.inbox.get_nowait()
+                except asyncio.QueueEmpty:
+                    break
+                self.take(r, ep if ep is not self.ep else None)
 
     # -- sending ---------------------------------------------------------------------------------
     def _send(self, msgs: list, addr=None) -> None:
@@ -382,7 +345,7 @@ class VehicleNode(StepLogWriter, TickClock):
             self.ep.send_many(msgs, dest)
 
     def publish(self, t: float, out) -> None:
-        """Telemetry for ``t`` (s): per link (peer, tap), one datagram of the messages due on that link."""
+        """Telemetry for ``t`` (s): per output, one datagram of the messages due on that output's stream."""
         pol = self.core.core.policy
         if self.home is None:
             self.home = T.kin_of(out.own, 0)
@@ -396,12 +359,12 @@ class VehicleNode(StepLogWriter, TickClock):
             extra.append(T.statustext(f"DAA-SIL t={t:.0f}s authority {self.authority}->{new_auth}"
                                       f" ({self.core.last_decision})"))
             self.authority = new_auth
-        for link, addr in (("gcs", self.peer), ("tap", self.tap)):
-            if addr is None:
+        for o in self.outputs:
+            if o.addr is None:  # udpin: nobody has spoken yet
                 continue
-            due = self.services.link_rates(link).due(t)
+            due = self.services.link_rates(o.name).due(t)
             batch = [m for mid in STREAMED if mid in due for m in msgs.get(mid, ())]
-            self.ep.send_many(batch + extra, addr)
+            o.ep.send_many(batch + extra, o.addr)
 
     # -- main loop -------------------------------------------------------------------------------
     async def run(self, on_step=None) -> None:

@@ -13,9 +13,9 @@ DAA_WT         REAL32  wait threshold W_T, s                    [0, 120]     yes
                ``wait_threshold_s``
 DAA_PROJL_S    REAL32  ProjL look-ahead, s                      [0, 120]     yes
                ``projl_horizon_s``
-DAA_STALE_S    REAL32  stale-command limit, s                   (0, 120]     yes
+DAA_STALE_S    REAL32  stale-command limit, s                   [1, 120]     yes
                ``stale_command_s``
-DAA_LINK_TO    REAL32  link-lost timeout, s                     (0, 120]     yes
+DAA_LINK_TO    REAL32  link-lost timeout, s                     [1, 120]     yes
                ``link_timeout_s``
 DAA_WAIT_MODE  INT8    wait function: 0 none, 1 constant,       --           read-only
                        2 MDP map, 3 always (``wait_mode``)
@@ -23,7 +23,12 @@ DAA_WAIT_CONST REAL32  constant wait, s (``constant_wait_s``)   --           rea
 DAA_PRESET     INT8    threshold preset: 0 do365, 1 paper       --           read-only
 =============  ======  =====================================  ===========  ==========
 
-Ranges are the scenario file's (``daa_sil/sil/scenario/schema.py``). Integer parameters travel C-cast (the
+Ranges are the scenario file's (``daa_sil/sil/scenario/schema.py``), except that DAA_STALE_S and
+DAA_LINK_TO start at :data:`MIN_TIMEOUT_S` (one sim step, 1 s): the GCS sends at most once per step,
+so a link timeout shorter than a step declares the link lost between any two packets, and a stale
+limit shorter than a step makes every command that crossed the link stale; a value like 1.4e-45 s
+(the smallest float32) is no setting anyone means. ``-0.0`` is stored and reported as ``0.0``.
+Integer parameters travel C-cast (the
 float value of the integer, ``MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST``), as ArduPilot's do.
 Per the parameter protocol a rejected PARAM_SET (read-only, out of range, not a number, not an
 integer for an integer parameter) is answered with a PARAM_VALUE holding the **current** value;
@@ -40,6 +45,8 @@ from typing import Callable
 from daa_sil.link.codec import mavlink as M
 
 REAL32, INT8 = M.MAV_PARAM_TYPE_REAL32, M.MAV_PARAM_TYPE_INT8
+#: smallest DAA_STALE_S / DAA_LINK_TO a PARAM_SET may give (s): one sim step (see the module docstring)
+MIN_TIMEOUT_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -53,7 +60,6 @@ class ParamSpec:
     field: "str | None" = None  #: AllocationPolicy field written by PARAM_SET (None = read-only)
     lo: float = -math.inf
     hi: float = math.inf
-    lo_open: bool = False
     integer: bool = False
 
     @property
@@ -63,7 +69,7 @@ class ParamSpec:
     def range_text(self) -> str:
         if self.integer:
             return f"{int(self.lo)}..{int(self.hi)}"
-        return f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}]"
+        return f"[{self.lo:g}, {self.hi:g}]"
 
 
 @dataclass(frozen=True)
@@ -105,9 +111,9 @@ class ParamTable:
             ParamSpec("DAA_PROJL_S", REAL32, "ProjL look-ahead (s)", lambda p: float(p.projl_horizon_s),
                       "projl_horizon_s", 0.0, 120.0),
             ParamSpec("DAA_STALE_S", REAL32, "stale pilot command limit (s)", lambda p: float(p.stale_command_s),
-                      "stale_command_s", 0.0, 120.0, lo_open=True),
+                      "stale_command_s", MIN_TIMEOUT_S, 120.0),
             ParamSpec("DAA_LINK_TO", REAL32, "link-lost timeout (s)", lambda p: float(p.link_timeout_s),
-                      "link_timeout_s", 0.0, 120.0, lo_open=True),
+                      "link_timeout_s", MIN_TIMEOUT_S, 120.0),
             ParamSpec("DAA_WAIT_MODE", INT8, f"wait function: {', '.join(f'{i} {n}' for i, n in enumerate(WAIT_MODES))}"
                       " (read-only)", lambda p: float(WAIT_MODES.index(p.wait_mode))),
             ParamSpec("DAA_WAIT_CONST", REAL32, "constant wait (s, read-only)", lambda p: float(p.constant_wait_s)),
@@ -130,7 +136,7 @@ class ParamTable:
         return None if i is None else (i, self.specs[i])
 
     def value(self, spec: ParamSpec, policy) -> float:
-        return float32(spec.get(policy))
+        return float32(spec.get(policy)) + 0.0  # never -0.0
 
     def set(self, name, value: float, policy) -> SetResult:
         """Check a PARAM_SET of ``name`` to ``value`` against ``policy`` (never raises on content)."""
@@ -141,10 +147,10 @@ class ParamTable:
             return SetResult("unknown", None, math.nan, math.nan, reason=f"unknown parameter {shown!r}")
         _, spec = found
         old = self.value(spec, policy)
-        v = float(value)
+        v = float(value) + 0.0  # -0.0 -> 0.0: a sign on zero is not a setting
         if not spec.writable:
             return SetResult("read_only", spec, old, old, reason=f"{spec.name} is read-only")
-        if not math.isfinite(v) or v > spec.hi or v < spec.lo or (spec.lo_open and v <= spec.lo):
+        if not math.isfinite(v) or v > spec.hi or v < spec.lo:
             return SetResult("out_of_range", spec, old, old,
                              reason=f"{spec.name} {value!r} out of range {spec.range_text()}; kept {old:g}")
         if spec.integer and v != round(v):

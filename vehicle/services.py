@@ -7,12 +7,14 @@ split the way the timing needs it:
   TIMESYNC, PING, REQUEST_DATA_STREAM, MISSION_REQUEST_LIST, FILE_TRANSFER_PROTOCOL, and the
   COMMAND_LONG / COMMAND_INT that change nothing the simulation uses (REQUEST_MESSAGE,
   GET_HOME_POSITION, SET_ / GET_MESSAGE_INTERVAL, REQUEST_AUTOPILOT_CAPABILITIES, ARM / DISARM,
-  unknown commands). Rates are per link, so a tap asking for rates changes only its own stream.
+  unknown commands). Rates are per link (output), so an observer asking for rates changes only its
+  own stream.
   In realtime the node answers reads as they arrive; in lockstep at the step boundary.
 * **writes** (:meth:`GcsServices.write`): PARAM_SET, SET_MODE and DO_SET_MODE. A PARAM_SET changes
   the agent's policy, so the node applies writes only at a step boundary (the change holds from
-  the step after arrival) and only from the GCS link (through the shim, delayed like pilot
-  commands); from the tap only with ``tap_writable``. Mode requests change nothing the agent
+  the step after arrival) and only from a link in ``writable``: the GCS link (through the shim,
+  delayed like pilot commands), and observers marked writable (``--tap-writable``, ``--out
+  CONN,rw``; :mod:`daa_sil.sil.outputs`). Mode requests change nothing the agent
   decides (:mod:`vehicle.identity`) but are answered and logged the same way. Each write is kept
   as a :class:`SettingEvent` for the step log.
 
@@ -27,6 +29,7 @@ import struct
 from dataclasses import dataclass, field
 
 from daa_sil.link.codec import mavlink as M
+from daa_sil.link.messages import wire_int
 
 from . import identity as ident
 from . import telemetry as T
@@ -37,6 +40,7 @@ SYSID, COMPID = 1, 1
 CMD_ACK_FOR_SET_MODE = M.MAVLINK_MSG_ID_SET_MODE  #: ArduPilot acks the SET_MODE message with command = 11
 FORCE_DISARM_MAGIC = 21196
 FTP_OP_NACK, FTP_ERR_UNKNOWN_COMMAND = 129, 7
+MAX_MSG_ID = 2**24 - 1  #: MAVLink 2 message ids are 24-bit
 
 _READ_COMMANDS = {M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_GET_HOME_POSITION, M.MAV_CMD_SET_MESSAGE_INTERVAL,
                   M.MAV_CMD_GET_MESSAGE_INTERVAL, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
@@ -57,8 +61,8 @@ class SettingEvent:
     name: str
     old: float
     new: float
-    status: str  #: accepted / unchanged / read_only / out_of_range / not_integer / unknown / denied_tap / denied
-    link: str  #: "gcs" or "tap"
+    status: str  #: accepted / unchanged / read_only / out_of_range / not_integer / unknown / denied_readonly / denied
+    link: str  #: the output it came from: "gcs", "tap", "out2", ...
     source: tuple
     t_received: float
     t_applied: float
@@ -103,7 +107,8 @@ class GcsServices:
     latest: object
     now: object
     dt: float = 1.0
-    tap_writable: bool = False
+    #: links (outputs) whose parameter and mode writes are applied; the others are read-only observers
+    writable: frozenset = frozenset({"gcs"})
     step_t: object = None  #: () -> the step a write takes effect at (s); default ``now``
     current_mode: object = None  #: () -> the ArduPlane mode the vehicle shows now
     rates: dict = field(default_factory=dict)
@@ -189,27 +194,31 @@ class GcsServices:
             return []
         c = int(msg.command)
         p1, p2 = float(msg.param1), float(msg.param2)
+        if c in (M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAV_CMD_GET_MESSAGE_INTERVAL):
+            # a message id in a float: NaN, inf, a fraction or out of range is refused, never int()-ed
+            hi = 0xFFFF if c == M.MAV_CMD_GET_MESSAGE_INTERVAL else MAX_MSG_ID  # MESSAGE_INTERVAL: uint16 id
+            if wire_int(p1, 0, hi) is None:
+                return [_ack(msg, c, M.MAV_RESULT_DENIED), _text(f"message id {p1!r} invalid", M.MAV_SEVERITY_WARNING)]
         if c == M.MAV_CMD_REQUEST_MESSAGE or c == M.MAV_CMD_GET_HOME_POSITION \
                 or c == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             mid = (M.MAVLINK_MSG_ID_HOME_POSITION if c == M.MAV_CMD_GET_HOME_POSITION else
-                   M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if c == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES else
-                   int(p1) if math.isfinite(p1) else -1)
+                   M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if c == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES else int(p1))
             msgs = self._one_shot(mid, link)
             if msgs is None:
                 return [_ack(msg, c, M.MAV_RESULT_UNSUPPORTED),
                         _text(f"REQUEST_MESSAGE: {msg_name(mid)} is not produced here", M.MAV_SEVERITY_WARNING)]
             return [_ack(msg, c, M.MAV_RESULT_ACCEPTED)] + msgs
         if c == M.MAV_CMD_SET_MESSAGE_INTERVAL:
-            result, reason = self.link_rates(link).set_interval(int(p1) if math.isfinite(p1) else -2, p2, self.now())
-            out = [_ack(msg, c, result)]
-            return out + ([_text(reason, M.MAV_SEVERITY_WARNING)] if reason else [])
+            result, note = self.link_rates(link).set_interval(int(p1), p2, self.now())
+            sev = M.MAV_SEVERITY_INFO if result == M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_WARNING
+            return [_ack(msg, c, result)] + ([_text(note, sev)] if note else [])
         if c == M.MAV_CMD_GET_MESSAGE_INTERVAL:
-            mid = int(p1) if math.isfinite(p1) else -1
+            mid = int(p1)
             return [_ack(msg, c, M.MAV_RESULT_ACCEPTED), T.message_interval(mid, self.link_rates(link).interval_us(mid))]
         if c == M.MAV_CMD_COMPONENT_ARM_DISARM:
             if p1 == 1.0:
                 return [_ack(msg, c, M.MAV_RESULT_ACCEPTED), _text("Arm: already armed (airborne)")]
-            forced = int(p2) == FORCE_DISARM_MAGIC
+            forced = p2 == FORCE_DISARM_MAGIC  # compared as floats: int(NaN) raised here (issue 20 §1)
             return [_ack(msg, c, M.MAV_RESULT_FAILED),
                     _text("Disarm refused: airborne" + (" (forced too)" if forced else ""), M.MAV_SEVERITY_WARNING)]
         return [_ack(msg, c, M.MAV_RESULT_UNSUPPORTED)]
@@ -236,10 +245,12 @@ class GcsServices:
             return self._mode(msg, CMD_ACK_FOR_SET_MODE, int(msg.base_mode), int(msg.custom_mode), link,
                               t_received, t_sent)
         if t in ("COMMAND_LONG", "COMMAND_INT") and int(msg.command) == M.MAV_CMD_DO_SET_MODE and _targets_us(msg):
-            p1, p2 = float(msg.param1), float(msg.param2)
-            if not (math.isfinite(p1) and math.isfinite(p2)):
-                return [_ack(msg, M.MAV_CMD_DO_SET_MODE, M.MAV_RESULT_DENIED)]
-            return self._mode(msg, M.MAV_CMD_DO_SET_MODE, int(p1), int(p2), link, t_received, t_sent)
+            base, custom = wire_int(msg.param1, 0, 0xFF), wire_int(msg.param2, 0, 2**32 - 1)
+            if base is None or custom is None:  # base_mode is a uint8, custom_mode a uint32
+                return [_ack(msg, M.MAV_CMD_DO_SET_MODE, M.MAV_RESULT_DENIED),
+                        _text(f"DO_SET_MODE: mode {float(msg.param1)!r}, {float(msg.param2)!r} invalid",
+                              M.MAV_SEVERITY_WARNING)]
+            return self._mode(msg, M.MAV_CMD_DO_SET_MODE, base, custom, link, t_received, t_sent)
         return []
 
     def _log(self, **kw) -> SettingEvent:
@@ -255,12 +266,12 @@ class GcsServices:
         res = self.params.set(msg.param_id, float(msg.param_value), pol)
         name = res.spec.name if res.spec is not None else str(msg.param_id).split("\0", 1)[0]
         status, reason = res.status, res.reason
-        if link == "tap" and not self.tap_writable and res.spec is not None:
-            status, reason = "denied_tap", f"{name}: tap is read-only (--tap-writable)"
+        if link not in self.writable and res.spec is not None:
+            status, reason = "denied_readonly", f"{name}: {link} is read-only"
         elif res.status == "accepted":
             self.set_policy(res.policy)
         value = res.value if status in ("accepted", "unchanged") else res.old
-        self._log(kind="param", name=name, old=res.old, new=value, status=status, link="tap" if link == "tap" else "gcs",
+        self._log(kind="param", name=name, old=res.old, new=value, status=status, link=link,
                   source=src, t_received=t_received, t_sent=t_sent, reason=reason)
         out = []
         if res.spec is not None:
@@ -278,10 +289,10 @@ class GcsServices:
         result, reason = ident.mode_request(base, custom, current)
         status = {M.MAV_RESULT_ACCEPTED: "accepted", M.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily_rejected"}.get(
             result, "denied")
-        if link == "tap" and not self.tap_writable:
-            result, status, reason = M.MAV_RESULT_DENIED, "denied_tap", "mode: tap is read-only (--tap-writable)"
+        if link not in self.writable:
+            result, status, reason = M.MAV_RESULT_DENIED, "denied_readonly", f"mode: {link} is read-only"
         self._log(kind="mode", name=ident.mode_name(custom), old=float(current), new=float(current), status=status,
-                  link="tap" if link == "tap" else "gcs", source=src, t_received=t_received, t_sent=t_sent,
+                  link=link, source=src, t_received=t_received, t_sent=t_sent,
                   reason=reason)
         self.answered += 1
         sev = M.MAV_SEVERITY_INFO if result == M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_WARNING

@@ -7,9 +7,13 @@ message can usefully go out faster than once per step. Hence:
 * defaults: every message once per step (ArduPlane's SITL defaults are 1 Hz for each stream group;
   its 5 Hz ADS-B default is above the sim rate, so once per step too); HEARTBEAT fixed at 1 Hz;
   HOME_POSITION once at the first step and on request (as ArduPilot: sent when home is set);
-* ``SET_MESSAGE_INTERVAL`` with an interval shorter than ``dt`` is **refused** (``DENIED``, with a
-  STATUSTEXT saying the limit); an interval >= ``dt`` is honoured in sim time (the message goes out
-  at the first step at or after the due time); -1 stops it, 0 restores the default;
+* ``SET_MESSAGE_INTERVAL`` with an interval shorter than ``dt`` is **accepted**, as ArduPilot SITL
+  accepts it and streams as fast as it can: here that is once per step, and a STATUSTEXT says so
+  (a GCS that gets DENIED reports an error); GET_MESSAGE_INTERVAL then reports the interval used
+  (``dt``). An interval >= ``dt`` is honoured in sim time (the message goes out at the first step at
+  or after the due time); -1 stops it, 0 restores the default; longer than MESSAGE_INTERVAL's int32
+  can report (2,147 s) is DENIED. HEARTBEAT stays at 1 Hz: a faster request is accepted (it is
+  once per step already), a slower one or -1 DENIED;
 * ``REQUEST_DATA_STREAM`` (no ACK exists) above ``1 / dt`` is clamped to once per step and a
   STATUSTEXT says so; rate 0 or ``start_stop`` 0 stops the group. Groups as ArduPilot's:
   EXTENDED_STATUS (SYS_STATUS, GPS_RAW_INT, POSITION_TARGET_GLOBAL_INT, EXTENDED_SYS_STATE),
@@ -26,6 +30,8 @@ import math
 from daa_sil.link.codec import mavlink as M
 
 HEARTBEAT = M.MAVLINK_MSG_ID_HEARTBEAT
+#: longest interval MESSAGE_INTERVAL can report (its ``interval_us`` is an int32), us
+MAX_INTERVAL_US = 2**31 - 1
 HOME_POSITION = M.MAVLINK_MSG_ID_HOME_POSITION
 #: every message the vehicle streams, in the order they go out in a step's datagram
 STREAMED = (HEARTBEAT, M.MAVLINK_MSG_ID_SYSTEM_TIME, M.MAVLINK_MSG_ID_SYS_STATUS, M.MAVLINK_MSG_ID_GPS_RAW_INT,
@@ -80,21 +86,27 @@ class StreamRates:
         return out
 
     def interval_us(self, msg_id: int) -> int:
-        """MESSAGE_INTERVAL value: > 0 us, -1 stopped, 0 not produced by this vehicle."""
+        """MESSAGE_INTERVAL value: the interval used (> 0 us; never below one step), -1 stopped, 0 not
+        produced by this vehicle."""
         if int(msg_id) not in DEFAULT_INTERVAL_S:
             return 0
         iv = self.interval[int(msg_id)]
-        return -1 if iv is None else int(round(iv * 1e6))
+        return -1 if iv is None else int(round(max(iv, self.dt) * 1e6))
 
     def set_interval(self, msg_id: int, interval_us: float, t_now: float) -> "tuple[int, str]":
-        """SET_MESSAGE_INTERVAL: ``(MAV_RESULT, reason)``; applied from the next step."""
+        """SET_MESSAGE_INTERVAL: ``(MAV_RESULT, note)``; applied from the next step. The note (for a
+        STATUSTEXT; '' if none) says why a request was refused, or that an accepted one is faster than
+        the sim step and goes out once per step."""
         m = int(msg_id)
         if m not in DEFAULT_INTERVAL_S:
             return M.MAV_RESULT_UNSUPPORTED, f"{msg_name(m)} is not produced by this vehicle"
         if not math.isfinite(interval_us) or (interval_us < 0 and interval_us != -1):
             return M.MAV_RESULT_DENIED, f"interval {interval_us!r} us invalid (-1 stop, 0 default, > 0 us)"
-        if m == HEARTBEAT and interval_us != 0 and abs(interval_us - 1e6) > 1:
+        if interval_us > MAX_INTERVAL_US:
+            return M.MAV_RESULT_DENIED, f"interval {interval_us:g} us too long (at most {MAX_INTERVAL_US / 1e6:.0f} s)"
+        if m == HEARTBEAT and (interval_us == -1 or interval_us > 1e6 + 1):
             return M.MAV_RESULT_DENIED, "HEARTBEAT is fixed at 1 Hz"
+        note = ""
         if interval_us == -1:
             self.interval[m] = None
         elif interval_us == 0:
@@ -102,10 +114,10 @@ class StreamRates:
         else:
             s = interval_us / 1e6
             if s < self.dt - 1e-9:
-                return M.MAV_RESULT_DENIED, f"faster than the sim step ({self.dt:g} s): {msg_name(m)} {s:g} s"
+                note = f"{msg_name(m)} once per step ({self.dt:g} s)"  # <= 50 characters: one STATUSTEXT
             self.interval[m] = s
         self._next[m] = t_now
-        return M.MAV_RESULT_ACCEPTED, ""
+        return M.MAV_RESULT_ACCEPTED, note
 
     def request_data_stream(self, stream_id: int, rate_hz: float, start: bool, t_now: float) -> str:
         """REQUEST_DATA_STREAM; returns a note for a STATUSTEXT ('' if none). Unknown groups: no-op."""

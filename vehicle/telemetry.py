@@ -5,7 +5,7 @@ Conventions (``docs/sil.md`` "Identity, telemetry and rates"):
 * every ``time_boot_ms`` is **sim time** (ms since scenario start); SYSTEM_TIME publishes the
   scenario epoch (``time_unix_usec`` = epoch + sim time); ``time_usec`` fields are sim time in us;
 * HEARTBEAT from compid 1 as an ArduPlane (:mod:`vehicle.identity`): ``custom_mode`` = the ArduPlane
-  mode of the authority (GUIDED pilot / AVOID_ADSB DAA / CRUISE hold), ``base_mode`` as ArduPlane;
+  mode of the authority (GUIDED pilot / AVOID_ADSB DAA / CRUISE waiting), ``base_mode`` as ArduPlane;
 * intruders as ADSB_VEHICLE with the **vehicle's** sysid, flags = coords | altitude | heading |
   velocity | callsign | simulated | vertical velocity (223), ``tslc`` 0, ``heading`` = course
   over ground, ``ver_velocity`` positive up;
@@ -38,7 +38,8 @@ SCENARIO_EPOCH_UNIX = 1_704_067_200
 ADSB_FLAGS = (M.ADSB_FLAGS_VALID_COORDS | M.ADSB_FLAGS_VALID_ALTITUDE | M.ADSB_FLAGS_VALID_HEADING
               | M.ADSB_FLAGS_VALID_VELOCITY | M.ADSB_FLAGS_VALID_CALLSIGN | M.ADSB_FLAGS_SIMULATED
               | M.ADSB_FLAGS_VERTICAL_VELOCITY_VALID)
-AUTHORITY_CODE = {"pilot": M.DAA_SIL_AUTHORITY_PILOT, "daa": M.DAA_SIL_AUTHORITY_DAA, "hold": M.DAA_SIL_AUTHORITY_HOLD}
+AUTHORITY_CODE = {"pilot": M.DAA_SIL_AUTHORITY_PILOT, "daa": M.DAA_SIL_AUTHORITY_DAA,
+                  "waiting": M.DAA_SIL_AUTHORITY_WAITING}
 DECISION_CODE = {"none": 0, "wait": 1, "no_wait": 2, "pilot": 3, "blend": 4, "daa_override": 5, "daa": 6,
                  "stale": 7, "link_lost": 8}
 RULE_CODE = {"-": 0, "axis_dir": 1, "axis": 2, "any": 3, "best_effort": 4}

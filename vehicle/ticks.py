@@ -120,7 +120,7 @@ class TickClock:
                     self.stats.tick_retries += 1
                     next_retry = loop.time() + retry
                 continue
-            self.handle(r)
+            self.take(r)
 
     def _confirmed(self, k: int) -> bool:
         """Realtime: has the partner answered tick ``k`` (shim: echo; GCS wired directly: ack)?"""
@@ -142,7 +142,7 @@ class TickClock:
                 r = await asyncio.wait_for(self.ep.inbox.get(), left)
             except asyncio.TimeoutError:
                 return
-            self.handle(r)
+            self.take(r)
 
     async def _realtime_tick(self, k: int, t: float, period: float) -> float:
         """Realtime step ``k``: send its tick a lead before the deadline, then wait for the partner's

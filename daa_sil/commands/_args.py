@@ -26,13 +26,16 @@ def check_speed(speed: float) -> float:
     return speed
 
 
-def load_key_option(path) -> "bytes | None":
-    """The MAVLink 2 signing key of ``--key FILE`` (None without the option)."""
+def load_key_option(path, prog: str = "daa-sil") -> "bytes | None":
+    """The MAVLink 2 signing key of ``--key FILE`` (None without the option); notes about the file
+    (mode, passphrase or raw key) go to stderr as ``PROG: warning: ...``."""
     if path is None:
         return None
+    import sys
+
     from ..link.codec import load_key
 
-    return load_key(path)
+    return load_key(path, warn=lambda text: print(f"{prog}: warning: {text}", file=sys.stderr, flush=True))
 
 
 def int_at_least(name: str, lo: int):

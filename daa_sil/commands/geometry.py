@@ -10,6 +10,7 @@ import numpy as np
 from daa_sil.geometry import wellclear as wc
 from ..errors import UsageError
 from daa_sil.files import to_jsonable
+from daa_sil.geometry.kinematics import STATE_BOUNDS  # physical bounds of a state: (component, lo, hi, unit)
 from daa_sil.geometry.thresholds import PRESETS, get_thresholds
 from ._args import finite_float, parse_vector
 
@@ -25,9 +26,6 @@ States are "x,y,z,vx,vy,vz" in the ENU frame: metres east, north, up and m/s. Al
 Allowed ranges: |x|, |y| <= 1e7 m, z in [-1e4, 1e5] m, |vx|, |vy| <= 1000 m/s, |vz| <= 500 m/s.
 """
 
-#: physical bounds of a state given on the command line: (component, lo, hi, unit)
-STATE_BOUNDS = (("x", -1e7, 1e7, "m"), ("y", -1e7, 1e7, "m"), ("z", -1e4, 1e5, "m"),
-                ("vx", -1000.0, 1000.0, "m/s"), ("vy", -1000.0, 1000.0, "m/s"), ("vz", -500.0, 500.0, "m/s"))
 
 
 def parse_state(text: str, name: str) -> np.ndarray:

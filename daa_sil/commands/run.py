@@ -19,7 +19,7 @@ from pathlib import Path
 
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.errors import OutputError, UsageError
-from ._args import check_speed
+from ._args import check_speed, load_key_option
 from daa_sil.sil.children import interruptible
 from daa_sil.sil.summary import PROGRESS_EVERY_S, demo_legend, human_summary, pilot_story
 from daa_sil.sil.play import RunOptions, check_faults_allowed, prepare_waitmap, run_sil
@@ -34,6 +34,10 @@ EXAMPLES = """examples:
 
   # the same in real time at 10x speed
   daa-sil run scenarios/crossing_left.yaml --clock realtime --speed 10
+
+  # two ground stations watching the vehicle undelayed: QGC on 14550 (read-only) and a MAVProxy on
+  # 14560 that may also set parameters (,rw); pilot commands still come only through the delayed link
+  daa-sil run scenarios/head_on.yaml --clock realtime --vehicle-out udp:127.0.0.1:14550 --vehicle-out udp:127.0.0.1:14560,rw
 
   # watch it in Rerun step by step as it plays (a viewer it spawns, or one already running)
   daa-sil run scenarios/head_on.yaml --clock realtime --speed 4 --spawn-viewer --rrd head_on.rrd
@@ -81,6 +85,10 @@ def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
     p.add_argument("--key", type=Path, metavar="FILE", help="MAVLink 2 signing key file (all three processes)")
     p.add_argument("--tap", metavar="udp:HOST:PORT",
                    help="also stream undelayed telemetry to an observer (QGC/MAVProxy), e.g. udp:127.0.0.1:14550")
+    p.add_argument("--vehicle-out", action="append", default=[], metavar="CONN[,rw]", dest="vehicle_outs",
+                   help="repeatable: a further output of daa-vehicle (its --out after the shim's), e.g. a ground "
+                        "station: undelayed telemetry with its own rates, read-only unless ,rw (then it may set "
+                        "parameters and modes); udpin:HOST:PORT listens there (see daa-vehicle --help)")
     p.add_argument("--waitmap", default=None, metavar="PRESET|GRID|DIR",
                    help="the vehicle's wait maps, as in 'campaign run': alerting (default), paper, fine, a grid "
                         "spec or a 'waitmap build' directory")
@@ -126,12 +134,19 @@ def _check_args(args) -> None:
     check_speed(args.speed)
     if args.config:
         load_config(args.config)  # a bad file fails here, one line, before any process starts
-    if args.key is not None and not args.key.is_file():
-        raise UsageError(f"--key: key file {args.key} does not exist")
+    if args.key is not None:
+        if not args.key.is_file():
+            raise UsageError(f"--key: key file {args.key} does not exist")
+        load_key_option(args.key)  # a bad key file fails here (one line), its warnings show once
     if args.tap:
         from daa_sil.sil.endpoint import parse_udp_address
 
         parse_udp_address(args.tap, "--tap")
+    if args.vehicle_outs:
+        from daa_sil.sil.outputs import output_specs
+
+        # the shim's side is the vehicle's first --out; these follow it (a malformed one: one line, exit 2)
+        output_specs(["udp:127.0.0.1:1", *args.vehicle_outs], args.tap, option_of_extra="--vehicle-out")
     if getattr(args, "connect", None):
         from ..viz import _url_host_port
 
@@ -166,7 +181,7 @@ def _waitmap_source(args) -> "str | None":
 
 def _options(args, scenario: Path) -> RunOptions:
     return RunOptions(scenario_path=scenario, out_dir=Path(args.out), clock=args.clock, speed=args.speed,
-                      key=args.key, tap=args.tap, rrd=getattr(args, "rrd", None),
+                      key=args.key, tap=args.tap, vehicle_outs=tuple(args.vehicle_outs), rrd=getattr(args, "rrd", None),
                       spawn_viewer=getattr(args, "spawn_viewer", False), connect=getattr(args, "connect", None),
                       viz_live=getattr(args, "viz_live", "auto"), waitmap=_waitmap_source(args),
                       config=args.config,

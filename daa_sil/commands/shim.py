@@ -11,11 +11,10 @@ import sys
 
 from ..errors import UsageError
 from daa_sil.models.latency import SPEC_HELP, parse_delay_spec
-from ..link.codec import load_key
 from daa_sil.sil.endpoint import format_udp_address
 from daa_sil.sil.shim import run_shim
 from daa_sil.sil.shim_config import CLOCKS, ShimConfig
-from ._args import finite_float
+from ._args import finite_float, load_key_option
 
 EXAMPLES = """examples:
   # paper group B-2/ID-2 delays, vehicle sends to 14601, GCS to 14602, peers learned
@@ -102,7 +101,7 @@ def config_from_args(args) -> ShimConfig:
                      listen_vehicle=args.listen_vehicle, listen_gcs=args.listen_gcs, vehicle=args.vehicle,
                      gcs=args.gcs, epoch_s=args.epoch, loss=args.loss, dup=args.dup, reorder=args.reorder,
                      outages=args.outage, seed=args.seed, clock=args.clock, speed=args.speed,
-                     key=load_key(args.key) if args.key else None, stats_json=args.stats_json,
+                     key=load_key_option(args.key), stats_json=args.stats_json,
                      timing=args.timing)
     cfg.validate()
     return cfg

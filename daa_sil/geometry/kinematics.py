@@ -97,6 +97,17 @@ class Performance:
 
 DEFAULT_PERFORMANCE = Performance()
 
+#: physical bounds of an aircraft state (component, lo, hi, unit; ENU m and m/s): a value outside is an
+#: error (a typo, a corrupt or hostile message), never an aircraft. Used by ``daa-sil geometry`` and by
+#: the GCS for the telemetry it takes in.
+STATE_BOUNDS = (("x", -1e7, 1e7, "m"), ("y", -1e7, 1e7, "m"), ("z", -1e4, 1e5, "m"),
+                ("vx", -1000.0, 1000.0, "m/s"), ("vy", -1000.0, 1000.0, "m/s"), ("vz", -500.0, 500.0, "m/s"))
+
+
+def state_in_bounds(x: float, y: float, z: float, vx: float, vy: float, vz: float) -> bool:
+    """True if the ENU state (m, m/s) is finite and within :data:`STATE_BOUNDS` (NaN is outside)."""
+    return all(lo <= v <= hi for v, (_, lo, hi, _) in zip((x, y, z, vx, vy, vz), STATE_BOUNDS))
+
 
 @dataclass
 class Command:

@@ -8,8 +8,10 @@
   none turns into another valid one, except by a framing change that a 1-in-65536 CRC match
   accepts);
 * ``truncated``: one genuine packet cut at a random byte (at least one byte kept);
-* ``oversized``: 281 bytes up to the UDP maximum 65,507 bytes (log-uniform length): genuine
-  packets, each with 1-3 bit flips, back to back, or random bytes behind a MAVLink 2 start marker;
+* ``oversized``: 281 bytes up to the UDP maximum 65,507 bytes (log-uniform length ``n``): genuine
+  packets, each with 1-3 bit flips, back to back and cut at ``n`` (the last packet may be cut: a
+  datagram is never longer than :data:`UDP_MAX`, so a relay can always send it on), or random bytes
+  behind a MAVLink 2 start marker;
 * ``random``: 1-300 uniform random bytes (some start with 0xFD / 0xFE);
 * ``splice``: the head of one genuine datagram glued to the tail of another;
 * ``empty``: a zero-length datagram;
@@ -183,7 +185,7 @@ class Fuzzer:
                 while size < n:
                     parts.append(self._flip(self._pick(), int(rng.integers(1, 4))))
                     size += len(parts[-1])
-                return kind, b"".join(parts)
+                return kind, b"".join(parts)[:n]  # n <= UDP_MAX: the whole last packet could overshoot it
             return kind, b"\xfd" + rng.integers(0, 256, size=n - 1, dtype=np.uint8).tobytes()
         if kind == "random":
             d = rng.integers(0, 256, size=int(rng.integers(1, 301)), dtype=np.uint8).tobytes()

@@ -49,6 +49,19 @@ NAMES = {
 CODES = {kind: {n: i for i, n in enumerate(names)} for kind, names in NAMES.items()}
 
 
+def wire_int(x, lo: int, hi: int) -> "int | None":
+    """A number from the wire that must be an integer within ``[lo, hi]`` (e.g. a message id carried in
+    a COMMAND_LONG float parameter): the int, or None for NaN, +-inf, fractions and values outside the
+    range (``int(nan)`` would raise, ``int(1e30)`` or ``int(2.7)`` would pass an absurd value on). Never raises."""
+    try:
+        v = float(x)
+    except (TypeError, ValueError, OverflowError):
+        return None
+    if not (lo <= v <= hi) or v != math.floor(v):
+        return None
+    return int(v)
+
+
 def ms(t_s: float) -> int:
     """Sim seconds -> uint32 milliseconds (rounded); one-line UsageError if out of range."""
     if not (isinstance(t_s, (int, float, np.floating, np.integer)) and math.isfinite(t_s)):

@@ -23,7 +23,15 @@ system 1): not the expected peer udp:127.0.0.1:14600 (--vehicle) ...``). ICMP "p
 errors on the socket (nothing listening at the address we send to) are counted as ``refused``.
 
 Peer: a fixed ``peer`` address, or (``learn_peer=True``, default when no peer is given) the
-sender of the first datagram that contained a good message -- garbage cannot claim the link.
+sender of the first datagram that contained a good message -- garbage cannot claim the link. With
+``lock_peer=True`` (``udpin:`` connections of the vehicle and the GCS) datagrams from any other
+address than the learned peer (and ``allow_peers``) are then dropped and reported like those of an
+unexpected peer; an address in ``allow_peers`` is never learned as the peer.
+
+Handling: each good message goes to ``on_message`` (if given) under the endpoint's
+:class:`daa_sil.sil.msgguard.MessageGuard` (an exception there counts the message as malformed,
+``malformed_content``, drops it, and the next message of the datagram is still handled), then to the inbox;
+consumers of the inbox run their handling under the same guard (``ep.guard.run(handler, r)``).
 Binds 127.0.0.1 by default and asks for a 4 MB receive buffer (the default 212 KB overflows on
 bursts: a lockstep step delivers every delayed packet of both
 directions at once).
@@ -42,6 +50,7 @@ from typing import Callable, Iterable, NamedTuple
 
 from daa_sil.errors import UsageError
 from daa_sil.link.codec import MavCodec, MAVLinkMessage
+from daa_sil.sil.msgguard import MessageGuard
 
 Address = tuple[str, int]
 DEFAULT_HOST = "127.0.0.1"
@@ -60,7 +69,8 @@ def parse_udp_address(text: str, name: str = "address", allow_port_zero: bool = 
     if sep and scheme.lower() in _SCHEMES:
         s = rest
     elif sep and scheme.lower() in ("tcp", "tcpin", "serial", "ws", "mcast", "udpbcast"):
-        raise UsageError(f"{name}: only udp:HOST:PORT is supported, got {text!r}")
+        raise UsageError(f"{name}: only UDP is supported (udp:HOST:PORT, udpin:HOST:PORT or udpout:HOST:PORT), "
+                         f"got {text!r}")
     if s.startswith("["):
         host, _, port_s = s[1:].partition("]")
         port_s = port_s[1:] if port_s.startswith(":") else ""
@@ -86,7 +96,8 @@ def format_udp_address(addr: Address) -> str:
     return f"udp:[{host}]:{addr[1]}" if ":" in host else f"udp:{host}:{addr[1]}"
 
 
-def _norm_host(host: str) -> str:
+def norm_host(host: str) -> str:
+    """``host`` as a numeric address (``"localhost"`` -> ``"127.0.0.1"``), so it compares equal to a sender's."""
     try:
         return str(ipaddress.ip_address(host))
     except ValueError:
@@ -200,19 +211,23 @@ class MavEndpoint(asyncio.DatagramProtocol):
                  allow_peers: "Iterable[Address | str] | None" = None, allow_sysids: "Iterable[int] | None" = None,
                  inbox_size: int = 10_000, on_message: "Callable[[Received], None] | None" = None,
                  name: str = "daa-sil", peer_label: str = "", drop_hint: str = "",
-                 drop_warn_every_s: float = 10.0, warn: "Callable[[str], None] | None" = None):
+                 drop_warn_every_s: float = 10.0, warn: "Callable[[str], None] | None" = None,
+                 lock_peer: bool = False, guard: "MessageGuard | None" = None):
         self.codec = codec
         self.peer = peer
         self.learn_peer = (peer is None) if learn_peer is None else bool(learn_peer)
+        self.lock_peer = bool(lock_peer)
+        #: every message's handling runs under it (shared with the node that owns the endpoint)
+        self.guard = guard if guard is not None else MessageGuard(name, emit=warn)
         self._allow_hosts: "set[str] | None" = None
         self._allow_addrs: "set[Address] | None" = None
         if allow_peers is not None:
             self._allow_hosts, self._allow_addrs = set(), set()
             for a in allow_peers:
                 if isinstance(a, str):
-                    self._allow_hosts.add(_norm_host(a))
+                    self._allow_hosts.add(norm_host(a))
                 else:
-                    self._allow_addrs.add((_norm_host(a[0]), int(a[1])))
+                    self._allow_addrs.add((norm_host(a[0]), int(a[1])))
         self.allow_sysids = None if allow_sysids is None else frozenset(int(s) for s in allow_sysids)
         self.inbox: "asyncio.Queue[Received]" = asyncio.Queue(maxsize=inbox_size)
         self.on_message = on_message
@@ -224,12 +239,10 @@ class MavEndpoint(asyncio.DatagramProtocol):
         self.drops = DropReporter(name, self._expected_text, hint=drop_hint, emit=warn, every_s=drop_warn_every_s)
 
     def _expected_text(self) -> str:
-        if self._allow_addrs:
-            who = ", ".join(format_udp_address(a) for a in sorted(self._allow_addrs))
-        elif self.peer is not None:
-            who = format_udp_address(self.peer)
-        else:
-            who = "(none yet)"
+        addrs = sorted(self._allow_addrs or ())
+        if self.peer is not None and (not addrs or self.lock_peer) and tuple(self.peer) not in addrs:
+            addrs = [tuple(self.peer)] + addrs
+        who = ", ".join(format_udp_address(a) for a in addrs) if addrs else "(none yet)"
         return who + (f" ({self.peer_label})" if self.peer_label else "")
 
     # -- asyncio protocol ----------------------------------------------------------------------
@@ -248,10 +261,15 @@ class MavEndpoint(asyncio.DatagramProtocol):
             self.counters.refused += 1
             self.last_refused = time.monotonic()
 
+    def _listed(self, addr: Address) -> bool:
+        return self._allow_hosts is not None and (addr[0] in self._allow_hosts or (addr[0], addr[1]) in self._allow_addrs)
+
     def _peer_allowed(self, addr: Address) -> bool:
+        if self.lock_peer:  # the learned peer (or, before one is learned, anyone) and the allowed list
+            return self._listed(addr) or self.peer is None or (addr[0], addr[1]) == tuple(self.peer)
         if self._allow_hosts is None:
             return True
-        return addr[0] in self._allow_hosts or (addr[0], addr[1]) in self._allow_addrs
+        return self._listed(addr)
 
     def datagram_received(self, data: bytes, addr) -> None:
         c = self.counters
@@ -273,13 +291,13 @@ class MavEndpoint(asyncio.DatagramProtocol):
             msgs = keep
             if not msgs:
                 return
-        if self.peer is None and self.learn_peer:
+        if self.peer is None and self.learn_peer and not (self.lock_peer and self._listed(addr)):
             self.peer = addr
         now = time.monotonic()
         for m in msgs:
             item = Received(now, addr, m)
-            if self.on_message is not None:
-                self.on_message(item)
+            if self.on_message is not None and not self.guard.run(self.on_message, item):
+                continue  # malformed (counted, reported): dropped; the datagram's other messages go on
             try:
                 self.inbox.put_nowait(item)
                 c.received += 1
@@ -337,8 +355,9 @@ class MavEndpoint(asyncio.DatagramProtocol):
         """Transport and codec counters in one dict (``dropped`` = every rejected packet)."""
         d = dict(self.codec.counters.as_dict())
         d.update(self.counters.__dict__)
+        d["malformed_content"] = self.guard.total  # decoded, but its handling raised (msgguard)
         d["dropped"] = (self.codec.counters.dropped + self.counters.rejected_peer + self.counters.rejected_sysid
-                        + self.counters.inbox_overflow)
+                        + self.counters.inbox_overflow + self.guard.total)
         return d
 
     def close(self) -> None:
@@ -368,7 +387,7 @@ async def open_endpoint(codec: MavCodec, local: "str | Address" = f"udp:{DEFAULT
     laddr = parse_udp_address(local, "local address") if isinstance(local, str) else local
     paddr = parse_udp_address(peer, "peer address", allow_port_zero=False) if isinstance(peer, str) else peer
     if paddr is not None:
-        paddr = (_norm_host(paddr[0]), paddr[1])
+        paddr = (norm_host(paddr[0]), paddr[1])
     loop = asyncio.get_running_loop()
     try:
         _, proto = await loop.create_datagram_endpoint(lambda: MavEndpoint(codec, peer=paddr, **kwargs),

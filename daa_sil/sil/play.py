@@ -69,6 +69,8 @@ class RunOptions:
     #: --spawn-viewer / --connect), "on" or "off" (log the step log when the vehicle exits)
     viz_live: str = "auto"
     tap: "str | None" = None
+    #: further ``daa-vehicle --out`` (observers, ``CONN[,rw]``: :mod:`daa_sil.sil.outputs`), after the shim's
+    vehicle_outs: tuple = ()
     #: ``--waitmap`` of the vehicle: a map preset, grid spec or family directory (None = the default)
     waitmap: "str | None" = None
     #: ``--config`` of the vehicle and the GCS: a preset name or a YAML file (None = the scenario alone)
@@ -210,6 +212,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
                             ready_parser=parse_shim_ready)
             gcs = pg.start("gcs", _gcs_argv(opts, out, gcs_listen, sready["gcs_side"], clock_args, key_args))
             vargs = [str(opts.scenario_path), "--listen", "udp:127.0.0.1:0", "--out", sready["vehicle_side"],
+                     *(a for o in opts.vehicle_outs for a in ("--out", o)),
                      "--steplog", str(steplog), "--tap", opts.tap or "none",
                      "--tick-timeout", f"{opts.tick_timeout_s:g}",
                      # tick 0: the GCS may still be starting (the monitor below notices a dead one at once)

@@ -76,6 +76,10 @@ their own signing stream (``MavCodec.encode(msg, link_id=CONTROL_LINK_ID)``) bec
 overtake delayed data. In lockstep the GCS must be known before the first tick: give ``gcs`` or
 let the GCS send any datagram (e.g. a HEARTBEAT) to the shim first.
 
+Hostile input: each datagram's handling (control messages included) runs under a
+:class:`daa_sil.sil.msgguard.MessageGuard`: one that raises is counted (``malformed_content``) and
+reported, and the next datagram is handled; the shim never stops on content.
+
 Never silent: datagrams from an address that is not the learned peer are dropped with a warning
 (first one per address at once, then with counts at most every 10 s), datagrams due for a side
 nobody has claimed yet likewise, and a side that has talked and then falls silent for
@@ -98,6 +102,7 @@ from daa_sil.models.delay_process import as_seed_sequence
 from daa_sil.link.codec import MavCodec
 from daa_sil.link.delayline import DelayLine
 from .endpoint import Address, DropReporter, format_udp_address, parse_udp_address
+from .msgguard import MessageGuard
 from .rtclock import (PreciseTimer, request_short_slice, set_timer_slack)
 from .shim_config import _TICK_ID, ShimConfig, control_ids, direction_seeds, shim_delay_processes
 from daa_sil.sil.shim_socket import _Side, _bind_udp
@@ -158,6 +163,8 @@ class DelayShim(ShimTicks):
         self._last_rx: dict[str, "float | None"] = {"vehicle": None, "gcs": None}
         self._silent: dict[str, "float | None"] = {"vehicle": None, "gcs": None}
         self._no_peer_warned: set[str] = set()
+        #: every datagram's handling runs under it (:mod:`daa_sil.sil.shim_socket`)
+        self.guard = MessageGuard("daa-sil shim", emit=lambda text: self.warn(text))
         self._watch: "asyncio.TimerHandle | None" = None
 
     def _peer_text(self, side: str) -> str:
@@ -357,7 +364,7 @@ class DelayShim(ShimTicks):
         out = {"clock": self.config.clock, "speed": self.config.speed, "sim_time_s": self.now() if self._loop else 0.0,
                "last_tick": self.last_tick, "seed": self.config.seed, "epoch_s": self.config.epoch_s,
                "peers": {k: (format_udp_address(v) if v else None) for k, v in self.peers.items()},
-               "counters": dict(self.counters),
+               "counters": {**self.counters, "malformed_content": self.guard.total},
                "control_codec": {k: v for k, v in self.codec.counters.as_dict().items() if v},
                "down": self.lines["down"].stats(), "up": self.lines["up"].stats()}
         if self._timing_info:

@@ -41,7 +41,10 @@ class _Side:
             except OSError:  # e.g. ICMP port unreachable reported on this socket
                 counters["socket_errors"] += 1
                 continue
-            shim._on_datagram(self.name, data, (addr[0], addr[1]), rx_time(anc) if self.stamped else None)
+            # under the guard: a datagram whose handling raises is counted as malformed, the burst goes on
+            shim.guard.call(shim._on_datagram, self.name, data, (addr[0], addr[1]),
+                            rx_time(anc) if self.stamped else None, what=f"datagram from the {self.name} side",
+                            source=addr)
 
     def sendto(self, data: bytes, addr: Address) -> bool:
         try:

@@ -172,8 +172,8 @@ _VEHICLE_PROGRESS = re.compile(r"^t=\s*([0-9.]+)s\s+authority=(\S+)\s+decision=(
 
 
 class ProgressLine:
-    """The run's progress for people: the vehicle's latest progress line (``t=  30s authority=hold
-    decision=wait range=4660m``, every 10 sim s) as ``t = 30 s of 180 s: authority hold, decision
+    """The run's progress for people: the vehicle's latest progress line (``t=  30s authority=waiting
+    decision=wait range=4660m``, every 10 sim s) as ``t = 30 s of 180 s: authority waiting, decision
     wait, nearest intruder 4660 m``, at most once per ``every_s`` wall seconds (the first after
     ``every_s``: a lockstep run that ends sooner prints none). ``say`` gets each line; if it raises
     OSError (a closed terminal) the lines stop."""

@@ -397,8 +397,8 @@ DAA_SIL_AUTHORITY_PILOT = 0
 enums["DAA_SIL_AUTHORITY"][0] = EnumEntry("DAA_SIL_AUTHORITY_PILOT", """Remote pilot.""")
 DAA_SIL_AUTHORITY_DAA = 1
 enums["DAA_SIL_AUTHORITY"][1] = EnumEntry("DAA_SIL_AUTHORITY_DAA", """Onboard DAA.""")
-DAA_SIL_AUTHORITY_HOLD = 2
-enums["DAA_SIL_AUTHORITY"][2] = EnumEntry("DAA_SIL_AUTHORITY_HOLD", """Agent holds the last pilot course while waiting.""")
+DAA_SIL_AUTHORITY_WAITING = 2
+enums["DAA_SIL_AUTHORITY"][2] = EnumEntry("DAA_SIL_AUTHORITY_WAITING", """The agent waits for the delayed pilot, flying the last pilot command (named HOLD up to bba2fd8; same value).""")
 DAA_SIL_AUTHORITY_ENUM_END = 3
 enums["DAA_SIL_AUTHORITY"][3] = EnumEntry("DAA_SIL_AUTHORITY_ENUM_END", """""")
 
