@@ -29,3 +29,11 @@ class OutputError(DaaSilError):
     """An output cannot be written (unwritable directory, disk full, would overwrite) (exit 1)."""
 
     exit_code = 1
+
+
+def warn(message: str) -> None:
+    """Print ``daa-sil: warning: <message>`` as one line on stderr (something was wrong and was
+    repaired or worked around; the command goes on)."""
+    import sys
+
+    print(f"daa-sil: warning: {' '.join(str(message).split())}", file=sys.stderr, flush=True)

@@ -232,12 +232,14 @@ def run_cmd(args) -> int:
     info = {"out": str(summary.out_dir), "groups": list(cfg.group_names), "encounters": cfg.n_encounters,
             "seed": cfg.seed, "preset": cfg.preset, "chunks_total": summary.chunks_total,
             "chunks_skipped": summary.chunks_skipped, "chunks_run": summary.chunks_run,
+            "chunks_damaged": summary.chunks_damaged,
             "wall_s": round(summary.wall_s, 3), "encounter_steps_per_s": rate,
             "config": cfg.to_dict(), "resolved_config": cfg.resolved()}
     if args.json:
         print(json.dumps(to_jsonable(info), indent=2, sort_keys=True))
     else:
-        print(f"campaign {summary.out_dir}: {summary.chunks_run} chunks run, {summary.chunks_skipped} skipped "
+        redone = f" ({len(summary.chunks_damaged)} of them damaged on disk)" if summary.chunks_damaged else ""
+        print(f"campaign {summary.out_dir}: {summary.chunks_run} chunks run{redone}, {summary.chunks_skipped} skipped "
               f"({len(cfg.groups)} groups x {cfg.n_encounters} encounters, preset {cfg.preset}, wait maps "
               f"{cfg.map_source}, reading {cfg.effective_reading.name}) in "
               f"{summary.wall_s:.1f} s ({rate:,.0f} encounter-steps/s)", file=sys.stderr)
