@@ -37,3 +37,10 @@ def warn(message: str) -> None:
     import sys
 
     print(f"daa-sil: warning: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+
+
+def error_class(name: str) -> type:
+    """The error class of this module called ``name`` (DaaSilError if none is): re-raises an error a
+    worker process reported by name with the same exit code."""
+    cls = globals().get(str(name))
+    return cls if isinstance(cls, type) and issubclass(cls, DaaSilError) else DaaSilError

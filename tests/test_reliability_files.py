@@ -233,6 +233,12 @@ def _make_map(kind: str, maps: Path, d: Path) -> Path:
         shutil.copytree(maps, d / "fam")
         (d / "fam" / "waitmap_turn+5.0.npz").unlink()
         return d / "fam"
+    elif kind in ("family-entry-removed", "family-entry-duplicated"):
+        shutil.copytree(maps, d / "fam")
+        info = json.loads((d / "fam" / "family.json").read_text())
+        info["maps"] = info["maps"][:1] if kind == "family-entry-removed" else [info["maps"][0]] * 2
+        (d / "fam" / "family.json").write_text(json.dumps(info))
+        return d / "fam"
     elif kind == "empty-directory":
         (d / "fam").mkdir()
         return d / "fam"
@@ -255,8 +261,10 @@ MAP_CASES = {
     "no-metadata": (2, ["no meta_json entry"]),
     "pickled-object": (2, ["not a readable wait-map .npz"]),
     "family-index-broken": (2, ["family.json", "not a valid wait-map family index"]),
-    "family-member-truncated": (2, ["waitmap_turn+5.0.npz", "not a readable wait-map .npz"]),
+    "family-member-truncated": (2, ["waitmap_turn+5.0.npz", "1000 bytes, family.json records"]),
     "family-member-missing": (2, ["waitmap_turn+5.0.npz", "does not exist"]),
+    "family-entry-removed": (2, ["family.json", "lists the maps +0 deg/s, but its family hash covers +0, +5"]),
+    "family-entry-duplicated": (2, ["family.json", "lists the map waitmap_turn+0.0.npz more than once"]),
     "empty-directory": (2, ["no wait maps found"]),
     "missing": (2, ["m.npz", "does not exist"]),
 }

@@ -1,26 +1,28 @@
-"""Building maps and families, and the on-disk cache behind :func:`default_family`.
+"""Building maps and families, serially in memory (:func:`build_family`) or one process per map
+into a directory (:func:`build_members`), and the named map presets behind ``--waitmap``.
 
-Cache: ``$DAA_SIL_CACHE`` (or ``~/.cache/daa-sil``) ``/waitmaps/<hash>/`` where ``<hash>`` is the
-content hash of the grid, all parameters, the turn-rate list and the file format. A family is built
-in a private temporary directory and renamed into place in one step, so concurrent processes either
-see a complete family or none; the loser of a race discards its copy and loads the winner's.
+The maps of a family are independent, so :func:`build_members` builds them in up to
+``min(cores, maps)`` processes at once, each map written atomically as soon as it is finished: an
+interrupted build keeps the maps it finished. Each process runs the same :func:`build_map` as the
+serial build, so the arrays are bit-identical (``tests/test_waitmap_cache.py``). The on-disk cache
+behind :func:`default_family` is :mod:`.cache`.
 """
 
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
+import signal
+import sys
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
-from ..errors import FileFormatError
+from ..errors import DaaSilError, error_class
 from .grid import Grid, resolve_grid
 from .lookup import WaitMap, WaitMapFamily
 from .model import PAPER_TURN_RATES, MdpParams, params_hash
 from .solve import value_iteration, wait_time
-from .store import load_family, save_family
+from .store import load_family, map_filename, save
 from .transitions import build_transitions
 
 
@@ -56,18 +58,144 @@ def build_family(grid: Grid, params: MdpParams, turn_rates=PAPER_TURN_RATES,
     return WaitMapFamily(maps)
 
 
+def default_workers(n_maps: int) -> int:
+    """Processes for building ``n_maps`` maps: ``min(usable cores, n_maps)``."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, int(n_maps)))
+
+
+def build_members(grid: Grid, params: MdpParams, turn_rates: Sequence[float], directory: "str | os.PathLike",
+                  workers: "int | None" = None,
+                  progress: "Callable[[float], None] | None" = None) -> list[Path]:
+    """Build one map per turn rate (deg/s) into ``directory`` (file :func:`~.store.map_filename`),
+    each written atomically as soon as it is finished, in up to ``workers`` processes (default
+    :func:`default_workers`; 1 builds in this process). ``progress(rate)`` is called as each map is
+    written. On Ctrl-C or an error the processes still building are stopped; the maps already
+    written stay. Returns the paths in the order of ``turn_rates``."""
+    d = Path(directory)
+    rates = [float(r) for r in turn_rates]
+    n = default_workers(len(rates)) if workers is None else max(1, int(workers))
+    if n == 1 or len(rates) <= 1:
+        for r in rates:
+            save(build_map(grid, params, r), d / map_filename(r), overwrite=True)
+            if progress:
+                progress(r)
+    else:
+        _build_in_processes(grid, params, rates, d, n, progress)
+    return [d / map_filename(r) for r in rates]
+
+
+def _build_in_processes(grid: Grid, params: MdpParams, rates: list, d: Path, n: int, progress) -> None:
+    """At most ``n`` spawned processes at a time, one per map; each reports ``("ok",)`` or
+    ``("error", class name, message)`` on its pipe."""
+    import multiprocessing as mp
+    from multiprocessing.connection import wait
+
+    ctx = mp.get_context("spawn")  # no fork of a process that may hold threads (progress bars, the SIL)
+    pending, running = list(rates), {}
+    try:
+        while pending or running:
+            while pending and len(running) < n:
+                r = pending.pop(0)
+                recv, send = ctx.Pipe(duplex=False)
+                proc = ctx.Process(target=_member_process, name=f"daa-sil-waitmap{r:+g}", daemon=True,
+                                   args=(os.getpid(), grid, params, r, d / map_filename(r), send))
+                _start_without_sigint(proc)
+                send.close()
+                running[proc.sentinel] = (proc, recv, r)
+            for sentinel in wait(list(running)):
+                proc, recv, r = running.pop(sentinel)
+                try:
+                    msg = recv.recv() if recv.poll() else None
+                except (EOFError, OSError):  # ended without a word (killed, crashed)
+                    msg = None
+                proc.join()
+                recv.close()
+                if msg is None or msg[0] != "ok":
+                    raise error_class(msg[1] if msg else "")(
+                        msg[2] if msg else f"building the {r:+g} deg/s wait map failed: its process ended "
+                                           f"with exit code {proc.exitcode}")
+                if progress:
+                    progress(r)
+    finally:
+        for proc, _, _ in running.values():  # Ctrl-C or an error: stop the rest, keep what is written
+            proc.terminate()
+        for proc, recv, _ in running.values():
+            proc.join()
+            recv.close()
+
+
+def _start_without_sigint(proc) -> None:
+    """Start ``proc`` with SIGINT ignored from its first instruction (a spawned interpreter keeps an
+    inherited SIG_IGN), so Ctrl-C reaches only this process, which stops the builders itself."""
+    try:
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: signals are the main thread's business
+        proc.start()
+        return
+    try:
+        proc.start()
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _member_process(parent_pid: int, grid: Grid, params: MdpParams, rate: float, path: Path, conn) -> None:
+    """Body of one builder process: build and save one map, report on ``conn``. SIGTERM (the parent
+    stopping it) raises SystemExit, so a half-written temporary is removed on the way out."""
+    _die_with_parent(parent_pid)
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)
+    try:
+        save(build_map(grid, params, rate), path, overwrite=True)
+        msg: tuple = ("ok",)
+    except DaaSilError as exc:
+        msg = ("error", type(exc).__name__, str(exc))
+    except MemoryError:
+        msg = ("error", "OutputError", f"out of memory building the {rate:+g} deg/s wait map")
+    except Exception as exc:  # noqa: BLE001 -- reported to the parent, which raises it as one line
+        msg = ("error", "DaaSilError", f"building the {rate:+g} deg/s wait map failed: {type(exc).__name__}: {exc}")
+    try:
+        conn.send(msg)
+    except OSError:  # the parent is gone or stopped listening
+        pass
+    finally:
+        conn.close()
+
+
+def _exit_on_sigterm(signum, frame) -> None:
+    raise SystemExit(128 + signum)
+
+
+#: the name a builder process shows to ``ps`` and ``pgrep`` on Linux (at most 15 characters)
+PROCESS_NAME = "daa-sil-waitmap"
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """Linux: have the kernel SIGKILL this process when its parent dies (``PR_SET_PDEATHSIG``), name
+    it :data:`PROCESS_NAME`, and exit at once if the parent is already gone. Elsewhere a daemonic
+    child is stopped when its parent exits normally; a killed parent leaves it to finish its one map
+    and exit."""
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+            libc.prctl(15, ctypes.c_char_p(PROCESS_NAME.encode()), 0, 0, 0)  # 15 = PR_SET_NAME: pgrep finds it
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+
 #: named wait-map configurations: grid preset and wait-time horizon H (s). ``alerting`` is the
 #: default: the paper's +-1,500 m box holds about 9 % of the states the agent decides at, so on
 #: the paper grid most decisions read a clamped edge value; the alerting grid covers the DO-365
 #: alerting region, and its horizon is long enough to reach LoWC from the edge of the box.
 MAP_PRESETS = {"paper": ("paper", 60.0), "alerting": ("alerting", 120.0), "fine": ("fine", 60.0)}
 DEFAULT_MAP = "alerting"
-
-
-def cache_dir() -> Path:
-    """``$DAA_SIL_CACHE`` or ``~/.cache/daa-sil``."""
-    env = os.environ.get("DAA_SIL_CACHE")
-    return Path(env) if env else Path.home() / ".cache" / "daa-sil"
 
 
 def map_params(grid: "str | None", preset: str = "paper", **overrides) -> tuple[Grid, MdpParams]:
@@ -81,8 +209,10 @@ def map_params(grid: "str | None", preset: str = "paper", **overrides) -> tuple[
 
 
 def default_family(preset: str = "paper", grid: "Grid | str | None" = None, params: "MdpParams | None" = None,
-                   turn_rates=PAPER_TURN_RATES, progress: "Callable[[float], None] | None" = None) -> WaitMapFamily:
-    """Load the cached family for these settings, building (and caching) it on first use.
+                   turn_rates=PAPER_TURN_RATES, progress: "Callable[[float], None] | None" = None,
+                   workers: "int | None" = None) -> WaitMapFamily:
+    """Load the cached family for these settings, building (and caching) it on first use, or
+    repairing it (:mod:`.cache`); ``workers`` as in :func:`build_members`.
 
     ``grid`` is a map preset (:data:`MAP_PRESETS`, default :data:`DEFAULT_MAP`), a grid spec or a
     Grid; ``params`` overrides the preset's parameters (its threshold preset is replaced by ``preset``).
@@ -93,38 +223,20 @@ def default_family(preset: str = "paper", grid: "Grid | str | None" = None, para
         g, p = map_params(grid, preset)
     if params is not None:
         p = params.with_(preset=preset)
-    key = params_hash(g.to_dict(), p, turn_rates)
-    root = cache_dir() / "waitmaps"
-    final = root / key[:24]
-    if (final / "family.json").is_file():
-        try:
-            return load_family(final)
-        except FileFormatError:
-            shutil.rmtree(final, ignore_errors=True)  # corrupt cache entry: rebuild
-    fam = build_family(g, p, turn_rates, progress=progress)
-    root.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{key[:24]}.", dir=root))
-    try:
-        save_family(fam, tmp, family_hash=key)
-        try:
-            os.rename(tmp, final)
-        except OSError:  # another process finished first (or a stale entry): use theirs
-            if (final / "family.json").is_file():
-                return load_family(final)
-            shutil.rmtree(final, ignore_errors=True)
-            os.rename(tmp, final)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return fam
+    from .cache import cached_family
+
+    return cached_family(g, p, turn_rates, progress=progress, workers=workers)
 
 
 def is_cached(source: "str | os.PathLike | None", preset: str = "paper", gamma: "float | None" = None,
               turn_rates=PAPER_TURN_RATES) -> bool:
     """True if :func:`family_for` would load the family (a directory, or a built cache entry)."""
+    from .cache import entry_ready
+
     g, p = check_source(source, preset, gamma)
     if g is None:
         return True
-    return (cache_dir() / "waitmaps" / params_hash(g.to_dict(), p, turn_rates)[:24] / "family.json").is_file()
+    return entry_ready(params_hash(g.to_dict(), p, turn_rates), turn_rates)
 
 
 def family_for(source: "str | os.PathLike | None", preset: str = "paper", gamma: "float | None" = None,
