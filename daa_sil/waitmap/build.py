@@ -58,8 +58,16 @@ def build_family(grid: Grid, params: MdpParams, turn_rates=PAPER_TURN_RATES,
     return WaitMapFamily(maps)
 
 
-def default_workers(n_maps: int) -> int:
-    """Processes for building ``n_maps`` maps: ``min(usable cores, n_maps)``."""
+#: below this many states a map builds in well under the ~1 s a builder process needs to start
+#: (interpreter, numpy, scipy), so such families build in this process
+MIN_STATES_FOR_PROCESSES = 150_000
+
+
+def default_workers(n_maps: int, states: int = MIN_STATES_FOR_PROCESSES) -> int:
+    """Processes for building ``n_maps`` maps of ``states`` states: ``min(usable cores, n_maps)``,
+    or 1 (this process) for maps smaller than :data:`MIN_STATES_FOR_PROCESSES`."""
+    if states < MIN_STATES_FOR_PROCESSES:
+        return 1
     try:
         cores = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
@@ -71,14 +79,14 @@ def build_members(grid: Grid, params: MdpParams, turn_rates: Sequence[float], di
                   workers: "int | None" = None,
                   progress: "Callable[[float], None] | None" = None) -> list[Path]:
     """Build one map per turn rate (deg/s) into ``directory`` (file :func:`~.store.map_filename`),
-    each written atomically as soon as it is finished, in up to ``workers`` processes (default
+    each written atomically as soon as it is finished, in ``workers`` processes (default
     :func:`default_workers`; 1 builds in this process). ``progress(rate)`` is called as each map is
     written. On Ctrl-C or an error the processes still building are stopped; the maps already
     written stay. Returns the paths in the order of ``turn_rates``."""
     d = Path(directory)
     rates = [float(r) for r in turn_rates]
-    n = default_workers(len(rates)) if workers is None else max(1, int(workers))
-    if n == 1 or len(rates) <= 1:
+    n = default_workers(len(rates), grid.size) if workers is None else max(1, min(int(workers), len(rates)))
+    if n == 1:
         for r in rates:
             save(build_map(grid, params, r), d / map_filename(r), overwrite=True)
             if progress:
@@ -89,43 +97,51 @@ def build_members(grid: Grid, params: MdpParams, turn_rates: Sequence[float], di
 
 
 def _build_in_processes(grid: Grid, params: MdpParams, rates: list, d: Path, n: int, progress) -> None:
-    """At most ``n`` spawned processes at a time, one per map; each reports ``("ok",)`` or
-    ``("error", class name, message)`` on its pipe."""
+    """``n`` spawned builder processes, each taking the next turn rate as soon as it is free; a
+    builder answers each ``(rate, path)`` with ``("ok",)`` or ``("error", class name, message)``."""
     import multiprocessing as mp
     from multiprocessing.connection import wait
 
     ctx = mp.get_context("spawn")  # no fork of a process that may hold threads (progress bars, the SIL)
-    pending, running = list(rates), {}
+    pending, builders, busy = list(rates), [], {}
     try:
-        while pending or running:
-            while pending and len(running) < n:
+        for _ in range(n):
+            conn, child = ctx.Pipe()
+            proc = ctx.Process(target=_builder_process, args=(os.getpid(), grid, params, child), daemon=True,
+                               name=PROCESS_NAME)
+            _start_without_sigint(proc)
+            child.close()
+            builders.append((proc, conn))
+        for proc, conn in builders:
+            if pending:
                 r = pending.pop(0)
-                recv, send = ctx.Pipe(duplex=False)
-                proc = ctx.Process(target=_member_process, name=f"daa-sil-waitmap{r:+g}", daemon=True,
-                                   args=(os.getpid(), grid, params, r, d / map_filename(r), send))
-                _start_without_sigint(proc)
-                send.close()
-                running[proc.sentinel] = (proc, recv, r)
-            for sentinel in wait(list(running)):
-                proc, recv, r = running.pop(sentinel)
+                conn.send((r, d / map_filename(r)))
+                busy[conn] = (proc, r)
+        while busy:
+            ready = wait(list(busy) + [proc.sentinel for proc, _ in busy.values()])
+            for conn in [c for c in busy if c in ready or busy[c][0].sentinel in ready]:
+                proc, r = busy.pop(conn)
                 try:
-                    msg = recv.recv() if recv.poll() else None
+                    msg = conn.recv()
                 except (EOFError, OSError):  # ended without a word (killed, crashed)
                     msg = None
-                proc.join()
-                recv.close()
                 if msg is None or msg[0] != "ok":
                     raise error_class(msg[1] if msg else "")(
                         msg[2] if msg else f"building the {r:+g} deg/s wait map failed: its process ended "
                                            f"with exit code {proc.exitcode}")
                 if progress:
                     progress(r)
+                if pending:
+                    r = pending.pop(0)
+                    conn.send((r, d / map_filename(r)))
+                    busy[conn] = (proc, r)
     finally:
-        for proc, _, _ in running.values():  # Ctrl-C or an error: stop the rest, keep what is written
-            proc.terminate()
-        for proc, recv, _ in running.values():
+        for proc, conn in builders:  # done: they exit on EOF; Ctrl-C or an error: stop them now
+            if busy:
+                proc.terminate()
+            conn.close()
+        for proc, _ in builders:
             proc.join()
-            recv.close()
 
 
 def _start_without_sigint(proc) -> None:
@@ -142,26 +158,31 @@ def _start_without_sigint(proc) -> None:
         signal.signal(signal.SIGINT, old)
 
 
-def _member_process(parent_pid: int, grid: Grid, params: MdpParams, rate: float, path: Path, conn) -> None:
-    """Body of one builder process: build and save one map, report on ``conn``. SIGTERM (the parent
-    stopping it) raises SystemExit, so a half-written temporary is removed on the way out."""
+def _builder_process(parent_pid: int, grid: Grid, params: MdpParams, conn) -> None:
+    """Body of one builder process: build and save each ``(rate, path)`` received, answer each, and
+    exit when the parent closes the pipe. SIGTERM (the parent stopping it) raises SystemExit, so a
+    half-written temporary is removed on the way out."""
     _die_with_parent(parent_pid)
     signal.signal(signal.SIGTERM, _exit_on_sigterm)
-    try:
-        save(build_map(grid, params, rate), path, overwrite=True)
-        msg: tuple = ("ok",)
-    except DaaSilError as exc:
-        msg = ("error", type(exc).__name__, str(exc))
-    except MemoryError:
-        msg = ("error", "OutputError", f"out of memory building the {rate:+g} deg/s wait map")
-    except Exception as exc:  # noqa: BLE001 -- reported to the parent, which raises it as one line
-        msg = ("error", "DaaSilError", f"building the {rate:+g} deg/s wait map failed: {type(exc).__name__}: {exc}")
-    try:
-        conn.send(msg)
-    except OSError:  # the parent is gone or stopped listening
-        pass
-    finally:
-        conn.close()
+    while True:
+        try:
+            rate, path = conn.recv()
+        except (EOFError, OSError):
+            return
+        try:
+            save(build_map(grid, params, rate), path, overwrite=True)
+            msg: tuple = ("ok",)
+        except DaaSilError as exc:
+            msg = ("error", type(exc).__name__, str(exc))
+        except MemoryError:
+            msg = ("error", "OutputError", f"out of memory building the {rate:+g} deg/s wait map")
+        except Exception as exc:  # noqa: BLE001 -- reported to the parent, which raises it as one line
+            msg = ("error", "DaaSilError", f"building the {rate:+g} deg/s wait map failed: "
+                                          f"{type(exc).__name__}: {exc}")
+        try:
+            conn.send(msg)
+        except OSError:  # the parent is gone or stopped listening
+            return
 
 
 def _exit_on_sigterm(signum, frame) -> None:
