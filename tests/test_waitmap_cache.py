@@ -339,3 +339,24 @@ def test_builder_processes_die_with_their_parent_even_on_sigkill(tmp_path):
     while any(_alive(p) for p in builders) and time.monotonic() < end:
         time.sleep(0.05)
     assert not [p for p in builders if _alive(p)], "builder processes outlived their parent by 5 s"
+
+
+@pytest.mark.parametrize("how", ["script", "stdin"])
+def test_a_script_without_a_main_guard_builds_in_parallel(how, tmp_path):
+    """The builders are spawned without re-running the caller's main script: a script that builds
+    a family at top level (no ``if __name__ == "__main__"``) would otherwise run again in every
+    builder and wait there for the cache lock its parent holds; ``python - < script`` has no file
+    to re-run at all."""
+    script = tmp_path / "build.py"
+    script.write_text(f"from daa_sil import waitmap\n"
+                      f"fam = waitmap.default_family('paper', grid={SMALL!r}, workers=2)\n"
+                      f"print(len(fam.maps))\n")
+    env = dict(os.environ, DAA_SIL_CACHE=str(tmp_path / "cache"))
+    argv = [sys.executable, str(script)] if how == "script" else [sys.executable, "-"]
+    stdin = None if how == "script" else open(script)
+    try:
+        res = subprocess.run(argv, stdin=stdin, capture_output=True, text=True, env=env, timeout=120)
+    finally:
+        if stdin is not None:
+            stdin.close()
+    assert res.returncode == 0 and res.stdout.strip() == "5", res.stderr[-2000:]

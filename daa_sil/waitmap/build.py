@@ -14,6 +14,7 @@ import os
 import signal
 import sys
 import time
+import types
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -109,7 +110,7 @@ def _build_in_processes(grid: Grid, params: MdpParams, rates: list, d: Path, n: 
             conn, child = ctx.Pipe()
             proc = ctx.Process(target=_builder_process, args=(os.getpid(), grid, params, child), daemon=True,
                                name=PROCESS_NAME)
-            _start_without_sigint(proc)
+            _start_builder(proc)
             child.close()
             builders.append((proc, conn))
         for proc, conn in builders:
@@ -144,18 +145,30 @@ def _build_in_processes(grid: Grid, params: MdpParams, rates: list, d: Path, n: 
             proc.join()
 
 
-def _start_without_sigint(proc) -> None:
-    """Start ``proc`` with SIGINT ignored from its first instruction (a spawned interpreter keeps an
-    inherited SIG_IGN), so Ctrl-C reaches only this process, which stops the builders itself."""
+def _start_builder(proc) -> None:
+    """Start ``proc`` (spawn context) as a builder that needs nothing from this process's main script.
+
+    * SIGINT is ignored from the child's first instruction (a spawned interpreter keeps an inherited
+      SIG_IGN), so Ctrl-C reaches only this process, which stops the builders itself.
+    * ``spawn`` normally re-runs the parent's main script in the child. A script that calls
+      :func:`default_family` without an ``if __name__ == "__main__"`` guard would then wait in the
+      child for the cache lock its parent holds (a deadlock), and ``python - < script`` has no
+      script to re-run at all. The builder needs only this module, so the main module is hidden
+      while the child's start-up data is taken.
+    """
+    main = sys.modules.get("__main__")
+    sys.modules["__main__"] = types.ModuleType("__main__")
     try:
         old = signal.signal(signal.SIGINT, signal.SIG_IGN)
     except ValueError:  # not the main thread: signals are the main thread's business
-        proc.start()
-        return
+        old = None
     try:
         proc.start()
     finally:
-        signal.signal(signal.SIGINT, old)
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+        if main is not None:
+            sys.modules["__main__"] = main
 
 
 def _builder_process(parent_pid: int, grid: Grid, params: MdpParams, conn) -> None:
