@@ -111,10 +111,16 @@ def test_limits_are_exact():
     assert load_yaml(nest(MAX_DEPTH), "f", "test") == {"a": _nested(MAX_DEPTH - 1)}
     with pytest.raises(FileFormatError, match="nested more than"):
         load_yaml(nest(MAX_DEPTH + 1), "f", "test")
-    flat = lambda n: "[" + ",".join(["1"] * (n - 1)) + "]"  # noqa: E731 -- n - 1 scalars and the list
-    assert len(load_yaml(flat(MAX_NODES), "f", "test")) == MAX_NODES - 1
+    # nodes: root, key a, list a (100 values), key b, list b, then m aliases of list a (100 each)
+    aliases = lambda m: "a: &a [" + ",".join(["1"] * 99) + "]\nb: [" + ",".join(["*a"] * m) + "]\n"  # noqa: E731
+    m_max = (MAX_NODES - 4) // 100 - 1  # 4 + 100 (m + 1) <= MAX_NODES
+    assert len(load_yaml(aliases(m_max), "f", "test")["b"]) == m_max
     with pytest.raises(FileFormatError, match="values"):
-        load_yaml(flat(MAX_NODES + 1), "f", "test")
+        load_yaml(aliases(m_max + 1), "f", "test")
+    big = "a: '" + "x" * (MAX_BYTES - 6) + "'\n"  # MAX_BYTES characters exactly
+    assert len(big) == MAX_BYTES and len(load_yaml(big, "f", "test")["a"]) == MAX_BYTES - 6
+    with pytest.raises(FileFormatError, match="at most"):
+        load_yaml(big + " ", "f", "test")
     aliased = "a: &a [1, 2]\nb: *a\n"  # an ordinary alias is fine
     assert load_yaml(aliased, "f", "test") == {"a": [1, 2], "b": [1, 2]}
 

@@ -5,12 +5,14 @@ package's own data files all go through :func:`read_yaml_text` and :func:`load_y
 YAML from a user is bounded before and while it is parsed, so that a hostile or mistaken file
 costs a second at most and fails with one line (:class:`~daa_sil.errors.FileFormatError`, exit 2):
 
-* :data:`MAX_BYTES` (256 KiB): the pure-Python parser reads about 50-150 kB/s, so a 50 MB file
-  would parse for minutes in gigabytes of memory; the largest input we ship is 10 kB;
-* :data:`MAX_DEPTH` (32 levels of nesting): PyYAML composes recursively, and a few hundred levels
-  end in a RecursionError; a scenario nests 5 levels;
-* :data:`MAX_NODES` (100,000 values, every alias counted as a copy of what it names): aliases let
-  a small file describe an exponentially large document ("billion laughs");
+* :data:`MAX_BYTES` (64 KiB): the pure-Python parser reads 50-150 kB of YAML per second of CPU,
+  so a 50 MB file parsed for minutes in gigabytes of memory; at 64 KiB the worst file we tried
+  (65,536 bytes of nested flow lists) takes 1.3 s of CPU on a loaded machine; the largest YAML we
+  ship is 10 kB (``daa_sil/data/paper_findings.yaml``), a scenario about 1 kB;
+* :data:`MAX_DEPTH` (32 levels: a value counts one level below its container): PyYAML composes
+  recursively, and a few hundred levels end in a RecursionError; a scenario nests 4 levels;
+* :data:`MAX_NODES` (50,000 values, every alias counted as a copy of what it names): aliases let
+  a file of 200 bytes describe a million values ("billion laughs");
 * UTF-8 only; a NUL or other control character is named with its line, not reported as PyYAML's
   two-line "in <unicode string>, position N".
 
@@ -27,9 +29,9 @@ import yaml
 
 from daa_sil.errors import FileFormatError
 
-MAX_BYTES = 256 * 1024  #: largest YAML input, bytes
+MAX_BYTES = 64 * 1024  #: largest YAML input, bytes
 MAX_DEPTH = 32  #: deepest nesting of mappings and lists
-MAX_NODES = 100_000  #: most values in one document, each alias counted as the values it names
+MAX_NODES = 50_000  #: most values in one document, each alias counted as the values it names
 
 
 class _Limit(Exception):
