@@ -28,7 +28,7 @@ HOSTILE = {
     "nested-lists": (b"name: x\nownship: " + b"[" * 500 + b"]" * 500 + b"\n", f"nested more than {MAX_DEPTH} levels"),
     "nested-mappings": (b"name: x\nownship: " + b"{a: " * 500 + b"1" + b"}" * 500 + b"\n",
                         f"nested more than {MAX_DEPTH} levels"),
-    "nested-blocks": (b"name: x\n" + b"".join(b"  " * i + b"k%d:\n" % i for i in range(500)) + b"  " * 500 + b"v: 1\n",
+    "nested-blocks": (b"name: x\n" + b"".join(b"  " * i + b"k%d:\n" % i for i in range(200)) + b"  " * 200 + b"v: 1\n",
                       f"nested more than {MAX_DEPTH} levels"),
     "50-MB": (b"name: x\n" + b"# padding padding padding padding padding padding\n" * 1_000_000,
               f"50,000,008 bytes; a"),
