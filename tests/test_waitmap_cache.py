@@ -222,18 +222,24 @@ def test_parallel_build_is_bit_identical_to_the_serial_build(tmp_path):
     assert not [f for f in parallel.iterdir() if f.name.startswith(".")]  # no temporary left
 
 
-def _children(pid: int) -> list[int]:
-    """Pids of the live processes whose parent is ``pid`` (Linux /proc)."""
-    out = []
+def _stat(pid: int) -> "list[str] | None":
+    """Fields of /proc/PID/stat after the command name (state first), or None if there is none."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return stat[stat.rindex(")") + 2:].split()
+
+
+def _children(pid: int) -> dict[int, str]:
+    """The live processes whose parent is ``pid`` (Linux /proc): pid -> start time (which tells a
+    process from a later one that reuses its pid)."""
+    out = {}
     for d in Path("/proc").iterdir():
         if d.name.isdigit():
-            try:
-                stat = (d / "stat").read_text()
-            except OSError:
-                continue
-            fields = stat[stat.rindex(")") + 2:].split()
-            if int(fields[1]) == pid and fields[0] != "Z":
-                out.append(int(d.name))
+            f = _stat(int(d.name))
+            if f is not None and int(f[1]) == pid and f[0] != "Z":
+                out[int(d.name)] = f[19]
     return out
 
 
@@ -248,12 +254,15 @@ def _named_children(pid: int, name: str = "daa-sil-waitmap") -> list[int]:
     return out
 
 
-def _alive(pid: int) -> bool:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat[stat.rindex(")") + 2:].split()[0] != "Z"
+def _wait_gone(procs: dict, limit_s: float) -> None:
+    end = time.monotonic() + limit_s
+    while any(_alive(p, t) for p, t in procs.items()) and time.monotonic() < end:
+        time.sleep(0.05)
+
+
+def _alive(pid: int, start: str) -> bool:
+    f = _stat(pid)
+    return f is not None and f[19] == start and f[0] != "Z"
 
 
 def _console(name: str) -> str:
@@ -292,7 +301,7 @@ def test_ctrl_c_during_a_first_build_keeps_the_finished_maps(tmp_path):
     try:
         maps = lambda: list(cache.glob("waitmaps/*/waitmap_turn*.npz"))  # noqa: E731
         _wait_for(lambda: len(maps()) >= 1, proc, "the first finished map")
-        builders = _children(proc.pid)
+        children = _children(proc.pid)  # the builders, and multiprocessing's resource tracker
         os.killpg(proc.pid, signal.SIGINT)
         out, err = proc.communicate(timeout=LIMIT_S)
     finally:
@@ -305,7 +314,8 @@ def test_ctrl_c_during_a_first_build_keeps_the_finished_maps(tmp_path):
     kept = {f.name: (f.stat().st_ino, f.read_bytes()) for f in entry.glob("waitmap_turn*.npz")}
     assert 1 <= len(kept) < 5, sorted(kept)
     assert not (entry / "family.json").exists()
-    assert not [p for p in builders if _alive(p)], "a builder process outlived the interrupted build"
+    _wait_gone(children, 5.0)
+    assert not [p for p, t in children.items() if _alive(p, t)], "a process it started outlived the build by 5 s"
     assert not list(entry.glob(".*.tmp"))
     for name in kept:
         load(entry / name)  # each finished map is whole
@@ -329,17 +339,15 @@ def test_builder_processes_die_with_their_parent_even_on_sigkill(tmp_path):
     try:
         # two builders at work, each named so that pgrep finds it
         _wait_for(lambda: len(_named_children(proc.pid)) >= 2, proc, "two builder processes named daa-sil-waitmap")
-        builders = _children(proc.pid)
+        children = _children(proc.pid)  # the builders, and multiprocessing's resource tracker
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=LIMIT_S)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
-    end = time.monotonic() + 5.0
-    while any(_alive(p) for p in builders) and time.monotonic() < end:
-        time.sleep(0.05)
-    assert not [p for p in builders if _alive(p)], "builder processes outlived their parent by 5 s"
+    _wait_gone(children, 5.0)
+    assert not [p for p, t in children.items() if _alive(p, t)], "processes it started outlived their parent by 5 s"
 
 
 @pytest.mark.parametrize("how", ["script", "stdin"])
