@@ -29,3 +29,18 @@ class OutputError(DaaSilError):
     """An output cannot be written (unwritable directory, disk full, would overwrite) (exit 1)."""
 
     exit_code = 1
+
+
+def warn(message: str) -> None:
+    """Print ``daa-sil: warning: <message>`` as one line on stderr (something was wrong and was
+    repaired or worked around; the command goes on)."""
+    import sys
+
+    print(f"daa-sil: warning: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+
+
+def error_class(name: str) -> type:
+    """The error class of this module called ``name`` (DaaSilError if none is): re-raises an error a
+    worker process reported by name with the same exit code."""
+    cls = globals().get(str(name))
+    return cls if isinstance(cls, type) and issubclass(cls, DaaSilError) else DaaSilError

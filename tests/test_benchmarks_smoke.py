@@ -24,7 +24,7 @@ CASES = {
     "bench_wellclear.py": (["--pairs", "2000", "--loop-pairs", "50", "--repeat", "1"], "vectorised violation_interval"),
     "bench_link.py": (["--part", "codec", "--n", "200"], "MavCodec unsigned"),
     "bench_report.py": (["--encounters", "40", "--replicates", "100", "--repeat", "1"], "ratio new / old"),
-    "bench_waitmap.py": (["--skip-large"], "[1] paper grid"),
+    "bench_waitmap.py": (["--skip-large"], "[5] first-run build"),
     "bench_campaign.py": (["--encounters", "10", "--groups", "B-2,ID-2", "--loop-n", "2", "--chunk-size", "5",
                            "--lookup-n", "5", "--memory-sizes", "5,10", "--workers", "1"], "[campaign] per worker core"),
     "bench_sil.py": (["--part", "lockstep", "--repeat", "1"], "SIL/baseline"),

@@ -14,7 +14,7 @@ import pytest
 
 from daa_sil.study.campaign import run_campaign
 from daa_sil.study.campaign_config import CampaignConfig
-from daa_sil.study.campaign_files import chunk_paths, read_results
+from daa_sil.study.campaign_files import checksum_path, chunk_paths, read_results
 from daa_sil.cli import main
 from daa_sil.errors import UsageError
 
@@ -118,7 +118,7 @@ def test_resume_after_sigkill_gives_the_uninterrupted_tables(tmp_path):
     proc = subprocess.Popen(_cli(*args, "--out", str(killed)), stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, env=env, start_new_session=True)
     try:
-        first = chunk_paths(killed, "B-1", 0)[0]
+        first = checksum_path(killed, "B-1", 0)  # written last: the first chunk is complete
         while not first.exists() and proc.poll() is None:
             time.sleep(0.02)
         assert proc.poll() is None, "the campaign finished before it could be killed"
@@ -127,7 +127,7 @@ def test_resume_after_sigkill_gives_the_uninterrupted_tables(tmp_path):
         if proc.poll() is None:
             proc.kill()
         proc.wait()
-    done = list(killed.rglob("encounters-*.parquet"))
+    done = list(killed.rglob("chunk-*.sha256"))  # written last: one per complete chunk
     assert 1 <= len(done) < 8, "kill should land after the first and before the last chunk"
     assert json.loads((killed / "campaign.json").read_text())["status"] == "running"
     # resume needs only --out: the stored config is used

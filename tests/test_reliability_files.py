@@ -233,6 +233,12 @@ def _make_map(kind: str, maps: Path, d: Path) -> Path:
         shutil.copytree(maps, d / "fam")
         (d / "fam" / "waitmap_turn+5.0.npz").unlink()
         return d / "fam"
+    elif kind in ("family-entry-removed", "family-entry-duplicated"):
+        shutil.copytree(maps, d / "fam")
+        info = json.loads((d / "fam" / "family.json").read_text())
+        info["maps"] = info["maps"][:1] if kind == "family-entry-removed" else [info["maps"][0]] * 2
+        (d / "fam" / "family.json").write_text(json.dumps(info))
+        return d / "fam"
     elif kind == "empty-directory":
         (d / "fam").mkdir()
         return d / "fam"
@@ -255,8 +261,10 @@ MAP_CASES = {
     "no-metadata": (2, ["no meta_json entry"]),
     "pickled-object": (2, ["not a readable wait-map .npz"]),
     "family-index-broken": (2, ["family.json", "not a valid wait-map family index"]),
-    "family-member-truncated": (2, ["waitmap_turn+5.0.npz", "not a readable wait-map .npz"]),
+    "family-member-truncated": (2, ["waitmap_turn+5.0.npz", "1000 bytes, family.json records"]),
     "family-member-missing": (2, ["waitmap_turn+5.0.npz", "does not exist"]),
+    "family-entry-removed": (2, ["family.json", "lists the maps +0 deg/s, but its family hash covers +0, +5"]),
+    "family-entry-duplicated": (2, ["family.json", "lists the map waitmap_turn+0.0.npz more than once"]),
     "empty-directory": (2, ["no wait maps found"]),
     "missing": (2, ["m.npz", "does not exist"]),
 }
@@ -410,7 +418,7 @@ def test_campaign_report_and_replay_bad_inputs(camp, tmp_path, blocker):
     cases = [
         (["campaign", "report", tmp_path / "nothere"], 2, ["is not a campaign directory"]),
         (["campaign", "report", bad, "--out", tmp_path / "rep"], 2,
-         ["encounters-00000.parquet is not a readable Parquet file"]),
+         ["chunk 0 of group B-1 is damaged", "encounters-00000.parquet", "--resume"]),
         (["campaign", "report", camp, "--out", blocker / "rep"], 1, ["cannot create output directory"]),
         (["viz", "replay", tmp_path / "nothere", "--group", "B-1", "--encounter", "0", "--rrd", tmp_path / "x.rrd"],
          2, ["not a campaign directory"]),
@@ -422,7 +430,7 @@ def test_campaign_report_and_replay_bad_inputs(camp, tmp_path, blocker):
         (["viz", "replay", camp, "--group", "B-1", "--encounter", "0", "--rrd", blocker / "x.rrd"], 1,
          ["cannot write", "x.rrd"]),
         (["viz", "replay", bad, "--group", "B-1", "--worst", "--rrd", tmp_path / "x.rrd"], 2,
-         ["not a readable Parquet file"]),
+         ["chunk 0 of group B-1 is damaged"]),
     ]
     for argv, code, needles in cases:
         rc, _, err = cli(argv)
@@ -548,24 +556,22 @@ def test_disk_full_campaign_report(camp, tmp_path):
 
 
 def test_enospc_mid_chunk_write_leaves_no_chunk_file(tmp_path, monkeypatch):
-    """A real ENOSPC in the middle of a Parquet write (half the bytes, then the error)."""
-    import pyarrow.parquet as pq
-
-    real = pq.write_table
+    """A real ENOSPC in the middle of a chunk table's write (half the bytes, then the error)."""
+    real = Path.write_bytes
     calls = []
 
-    def full_after_first(table, where, **kw):
-        calls.append(Path(where).name)
-        if len(calls) == 1:
-            return real(table, where, **kw)  # encounters.parquet
-        Path(where).write_bytes(b"PAR1" + b"\0" * 512)  # a partial file ...
+    def full_on_decisions(self, data):
+        calls.append(self.name)
+        if not self.name.startswith(".decisions-"):
+            return real(self, data)
+        real(self, data[: len(data) // 2])  # a partial file ...
         raise OSError(errno.ENOSPC, "No space left on device")  # ... then the disk is full
 
-    monkeypatch.setattr(pq, "write_table", full_after_first)
+    monkeypatch.setattr(Path, "write_bytes", full_on_decisions)
     out = tmp_path / "c"
     rc, _, err = cli(RUN + ["--out", out])
     assert_one_line_error(rc, err, 1, "disk full while writing", "decisions-00000.parquet", "nothing was written")
-    assert len(calls) == 2
+    assert any(c.startswith(".decisions-00000.parquet.") for c in calls)
     assert sorted(p.name for p in (out / "B-1").iterdir()) == []  # no chunk file, no temporary
     assert json.loads((out / "campaign.json").read_text())["status"] == "running"
 

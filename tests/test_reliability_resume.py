@@ -3,7 +3,8 @@ files byte-identical to an uninterrupted run.
 
 Kills land (1) at chosen points inside the writer (driven by a small wrapper that SIGKILLs the
 process from within: after the encounter set but before ``campaign.json``, with half a chunk file in
-its temporary, between a chunk's two files, and just before the final status) and (2) at seeded
+its temporary, between a chunk's two files, between its tables and its checksum file, and just
+before the final status) and (2) at seeded
 random times. After the last resume every file under the campaign directory -- the encounter set,
 every chunk's Parquet tables, ``campaign.json`` -- must equal the uninterrupted run's byte for
 byte, and so must the merged tables the report reads.
@@ -45,20 +46,26 @@ if point in ("before-campaign-json", "before-complete"):
         return real_json(path, obj, **kw)
     camp.atomic_write_json = write_json
 elif point == "mid-chunk-write":
-    real_write = pq.write_table
-    def write_table(table, where, **kw):
-        real_write(table, where, **kw)
-        if Path(str(where)).name.startswith(".decisions-"):
-            data = Path(where).read_bytes()
-            Path(where).write_bytes(data[: len(data) // 2])  # half of the file is on disk ...
-            die()                                            # ... when the process dies
-    pq.write_table = write_table
+    real_write = Path.write_bytes
+    def write_bytes(self, data):
+        if self.name.startswith(".decisions-"):  # the chunk writer's temporary
+            real_write(self, data[: len(data) // 2])  # half of the file is on disk ...
+            die()                                     # ... when the process dies
+        return real_write(self, data)
+    Path.write_bytes = write_bytes
 elif point == "between-chunk-files":
     real_replace = os.replace
     def replace(src, dst):
         real_replace(src, dst)
         if Path(dst).name.startswith("decisions-"):
             die()
+    os.replace = replace
+elif point == "before-checksums":
+    real_replace = os.replace
+    def replace(src, dst):
+        if Path(dst).name.startswith("chunk-"):
+            die()
+        real_replace(src, dst)
     os.replace = replace
 elif point != "none":
     raise SystemExit(f"unknown point {point}")
@@ -96,7 +103,7 @@ def snapshot(d: Path) -> dict:
 
 
 def _chunks_done(d: Path) -> int:
-    return len(list(d.rglob("encounters-*.parquet")))
+    return len(list(d.rglob("chunk-*.sha256")))  # the checksum file is written last
 
 
 def _merged_bytes(d: Path, kind: str) -> bytes:
@@ -118,7 +125,7 @@ def _kill_resume_cycle(tmp_path: Path, groups: str, n: int, chunk: int, duration
     assert _wait(_start("before-campaign-json", argv)) == -signal.SIGKILL
     assert (killed / "encounters.parquet").is_file() and not (killed / "campaign.json").exists()
     figures["scripted_kills"] += 1
-    for point in ("mid-chunk-write", "between-chunk-files"):
+    for point in ("mid-chunk-write", "between-chunk-files", "before-checksums"):
         before = _chunks_done(killed)
         assert _wait(_start(point, argv + ["--resume"])) == -signal.SIGKILL, point
         figures["scripted_kills"] += 1
@@ -126,8 +133,10 @@ def _kill_resume_cycle(tmp_path: Path, groups: str, n: int, chunk: int, duration
         if point == "mid-chunk-write":  # the half-written temporary is there, never a final file
             tmps = [p for p in killed.rglob(".decisions-*.tmp")]
             assert len(tmps) == 1 and tmps[0].stat().st_size > 0
-        else:  # a chunk with its decisions file but not its encounters file (= not done)
+        elif point == "between-chunk-files":  # a chunk with its decisions file but not its encounters file
             assert len(list(killed.rglob("decisions-*.parquet"))) == _chunks_done(killed) + 1
+        else:  # a chunk with both tables but no checksum file (= not done)
+            assert len(list(killed.rglob("encounters-*.parquet"))) == _chunks_done(killed) + 1
         assert _chunks_done(killed) == before
 
     # 2. seeded random kill times
@@ -183,8 +192,8 @@ def _kill_resume_cycle(tmp_path: Path, groups: str, n: int, chunk: int, duration
 
 def test_sigkill_at_scripted_and_random_points_then_resume_is_byte_identical(tmp_path):
     f = _kill_resume_cycle(tmp_path, "B-2,ID-2", n=16, chunk=4, duration=120.0, n_random=2, seed=2024)
-    assert f["scripted_kills"] == 4 and f["random_kills"] + f["random_finished_first"] == 2
-    assert f["chunks"] == 8 and f["files_compared"] == 2 + 2 * 8
+    assert f["scripted_kills"] == 5 and f["random_kills"] + f["random_finished_first"] == 2
+    assert f["chunks"] == 8 and f["files_compared"] == 2 + 3 * 8  # two tables and a checksum file per chunk
     assert f["decision_rows"] > 0
 
 
@@ -206,3 +215,73 @@ def test_resume_recomputes_a_damaged_chunk_and_clears_stale_temporaries(tmp_path
     stale.write_bytes(b"left by a killed writer")
     assert main(argv + ["--resume", "--json"]) == 0
     assert snapshot(out) == ref  # the chunk is back, byte for byte, and the temporary is gone
+
+
+def _console(name: str) -> str:
+    """The installed console script ``name`` next to this interpreter (what a user runs)."""
+    path = Path(sys.executable).parent / name
+    assert path.is_file(), f"{path} is not installed (pip install -e .)"
+    return str(path)
+
+
+def _zero_64_bytes(path: Path, silent: bool) -> int:
+    """Zero 64 bytes of ``path``'s body (between the 4-byte magic and the footer); with ``silent``
+    at the first offset where the file still reads as Parquet but with other values, otherwise at
+    the first offset where it no longer reads. Returns the offset."""
+    data = path.read_bytes()
+    body_end = len(data) - 8 - int.from_bytes(data[-8:-4], "little")
+    good = pq.read_table(io.BytesIO(data))
+    for off in range(4, body_end - 64):
+        bad = data[:off] + bytes(64) + data[off + 64:]
+        if bad == data:
+            continue
+        try:
+            table = pq.read_table(io.BytesIO(bad))
+            reads, same = True, table.equals(good)
+        except Exception:  # noqa: BLE001 -- any decoding error
+            reads, same = False, False
+        if (silent and reads and not same) or (not silent and not reads):
+            path.write_bytes(bad)
+            return off
+    raise AssertionError(f"no offset in {path} gives that kind of damage")
+
+
+def test_resume_recomputes_chunks_with_zeroed_bytes_and_names_them(tmp_path):
+    """Issue 20 item 3: 64 zeroed bytes in a chunk's body used to pass the resume check (only the
+    footer was read): "0 chunks run", and the report then failed, or, where the bytes still decode,
+    read wrong numbers. Now each chunk is checked against its SHA-256 checksum file: the resume names
+    a damaged chunk and computes it again (the directory ends byte-identical to the undamaged run),
+    and the report refuses a damaged chunk with one line instead of reading it."""
+    out = tmp_path / "c"
+    argv = _argv(out, "B-1,B-2", 8, 4, 120.0)
+    daa_sil = _console("daa-sil")
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")
+
+    def run(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run([daa_sil, *args], capture_output=True, text=True, env=env, timeout=LIMIT_S)
+
+    first = run(*argv)
+    assert first.returncode == 0, first.stderr
+    ref = snapshot(out)
+    # one damage that still decodes (wrong values, no error) and one that does not decode
+    _zero_64_bytes(out / "B-1" / "decisions-00000.parquet", silent=True)
+    _zero_64_bytes(out / "B-2" / "encounters-00001.parquet", silent=False)
+
+    resumed = run(*argv, "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    assert "2 chunks run (2 of them damaged on disk), 2 skipped" in resumed.stderr, resumed.stderr
+    warnings = [ln for ln in resumed.stderr.splitlines() if ": warning: " in ln]
+    assert len(warnings) == 2, resumed.stderr
+    assert any("chunk 0 of group B-1" in w and "decisions-00000.parquet" in w for w in warnings), warnings
+    assert any("chunk 1 of group B-2" in w and "encounters-00001.parquet" in w for w in warnings), warnings
+    assert snapshot(out) == ref  # both chunks are back, byte for byte
+    report = run("campaign", "report", str(out), "--out", str(tmp_path / "r"))
+    assert report.returncode == 0, report.stderr
+
+    # the report itself does not read a damaged chunk's numbers
+    _zero_64_bytes(out / "B-1" / "decisions-00000.parquet", silent=True)
+    report = run("campaign", "report", str(out), "--out", str(tmp_path / "r2"))
+    assert report.returncode == 2, report.stderr
+    (line,) = report.stderr.strip().splitlines()
+    assert line.startswith("daa-sil: error: ") and "chunk 0 of group B-1" in line and "--resume" in line, line
+    assert not (tmp_path / "r2").exists()

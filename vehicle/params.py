@@ -42,6 +42,7 @@ import struct
 from dataclasses import dataclass, replace
 from typing import Callable
 
+from daa_sil.config.limits import WT_RANGE_S
 from daa_sil.link.codec import mavlink as M
 
 REAL32, INT8 = M.MAV_PARAM_TYPE_REAL32, M.MAV_PARAM_TYPE_INT8
@@ -107,7 +108,7 @@ class ParamTable:
             ParamSpec("DAA_ENABLE", INT8, "onboard allocation agent on (1) / off (0)",
                       lambda p: float(bool(p.enabled)), "enabled", 0, 1, integer=True),
             ParamSpec("DAA_WT", REAL32, "wait threshold W_T (s)", lambda p: float(p.wait_threshold_s),
-                      "wait_threshold_s", 0.0, 120.0),
+                      "wait_threshold_s", *WT_RANGE_S),
             ParamSpec("DAA_PROJL_S", REAL32, "ProjL look-ahead (s)", lambda p: float(p.projl_horizon_s),
                       "projl_horizon_s", 0.0, 120.0),
             ParamSpec("DAA_STALE_S", REAL32, "stale pilot command limit (s)", lambda p: float(p.stale_command_s),

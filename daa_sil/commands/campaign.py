@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from ..errors import UsageError
+from daa_sil.config.limits import WT_RANGE_S
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.files import to_jsonable
 from daa_sil.config.readings import READINGS, parse_reading_settings
@@ -148,7 +149,7 @@ def _add_run_options(r) -> None:
                         "'waitmap build' directory")
     r.add_argument("--gamma", type=finite_float("--gamma", 1e-6, 0.999999), default=None,
                    help="MDP discount of the wait maps (default: the map preset's, 0.95)")
-    r.add_argument("--wt", type=finite_float("--wt", 0.0, 600.0), default=None, metavar="S",
+    r.add_argument("--wt", type=finite_float("--wt", *WT_RANGE_S), default=None, metavar="S",
                    help="wait threshold W_T of every group with a wait function (default: each group's, 4 s)")
     r.add_argument("--projl-lookahead", type=finite_float("--projl-lookahead", 0.0, 600.0), default=None,
                    metavar="S", help="ProjL look-ahead N of every group (default: each group's, 25 s)")
@@ -232,12 +233,14 @@ def run_cmd(args) -> int:
     info = {"out": str(summary.out_dir), "groups": list(cfg.group_names), "encounters": cfg.n_encounters,
             "seed": cfg.seed, "preset": cfg.preset, "chunks_total": summary.chunks_total,
             "chunks_skipped": summary.chunks_skipped, "chunks_run": summary.chunks_run,
+            "chunks_damaged": summary.chunks_damaged,
             "wall_s": round(summary.wall_s, 3), "encounter_steps_per_s": rate,
             "config": cfg.to_dict(), "resolved_config": cfg.resolved()}
     if args.json:
         print(json.dumps(to_jsonable(info), indent=2, sort_keys=True))
     else:
-        print(f"campaign {summary.out_dir}: {summary.chunks_run} chunks run, {summary.chunks_skipped} skipped "
+        redone = f" ({len(summary.chunks_damaged)} of them damaged on disk)" if summary.chunks_damaged else ""
+        print(f"campaign {summary.out_dir}: {summary.chunks_run} chunks run{redone}, {summary.chunks_skipped} skipped "
               f"({len(cfg.groups)} groups x {cfg.n_encounters} encounters, preset {cfg.preset}, wait maps "
               f"{cfg.map_source}, reading {cfg.effective_reading.name}) in "
               f"{summary.wall_s:.1f} s ({rate:,.0f} encounter-steps/s)", file=sys.stderr)

@@ -14,7 +14,7 @@ from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.files import to_jsonable
 from daa_sil.geometry.thresholds import PRESETS
 from ..waitmap.model import WAIT_DEFINITIONS
-from ._args import finite_float
+from ._args import finite_float, int_at_least
 
 BUILD_EX = """examples:
   daa-sil waitmap build --out maps/paper                      # the paper grid, 5 turn-rate maps
@@ -29,8 +29,10 @@ BUILD_EX = """examples:
 alerting region, H = 120 s; fine), a YAML file ({base: paper, dx: {min: -1500, max: 1500, n: 24},
 theta: {n: 8}}) or an inline spec "base,axis=N,axis=lo:hi:N" (H = 60 s). --definition paper (the
 default) stores E[time to LoWC | LoWC within H]; until_evade the expected time until LoWC or an
-evade-optimal state. Existing maps are never overwritten without --force. A directory built here is
-used by 'campaign run --waitmap DIR' and 'daa-sil run --waitmap DIR'.
+evade-optimal state. The maps are built min(cores, maps) at a time (--workers), each written as soon
+as it is finished; family.json, written last, makes the directory a family. Existing maps are never
+overwritten without --force. A directory built here is used by 'campaign run --waitmap DIR' and
+'daa-sil run --waitmap DIR'.
 """
 
 CHECK_EX = """examples:
@@ -105,6 +107,8 @@ def register(sub) -> None:
                    help="wait time stored: paper (default) or until_evade")
     b.add_argument("--p-min", type=finite_float("--p-min", 1e-9, 0.5), default=1e-3, metavar="P",
                    help="LoWC-probability floor: states below it are no threat, W = H (default 0.001)")
+    b.add_argument("--workers", type=int_at_least("--workers", 1), default=None, metavar="K",
+                   help="maps built at once, one process each (default: min(cores, maps))")
     b.add_argument("--force", action="store_true", help="overwrite existing maps in DIR")
     b.add_argument("--json", action="store_true", help="print a JSON summary instead of paths")
     b.set_defaults(func=run_build)
@@ -159,7 +163,8 @@ def run_build(args) -> int:
     from .. import waitmap
     from daa_sil.files import ensure_dir
     from ..waitmap.model import params_hash
-    from ..waitmap.store import FAMILY_INDEX, map_filename
+    from ..waitmap.build import default_workers
+    from ..waitmap.store import FAMILY_INDEX, map_filename, read_meta, write_family_index
 
     rc = load_config(args.config) if args.config else None
     args.preset = args.preset or (rc.thresholds if rc else "paper")
@@ -181,11 +186,17 @@ def run_build(args) -> int:
 
             raise OutputError(f"{clash[0]} exists; refusing to overwrite (use --force or another --out)")
     ensure_dir(out)
+    (out / FAMILY_INDEX).unlink(missing_ok=True)  # --force: the old index must not describe new maps
+    workers = args.workers or default_workers(len(rates))
     with Progress(transient=True) as prog:
-        task = prog.add_task(f"building {len(rates)} maps on {grid.size:,} states", total=len(rates))
-        fam = waitmap.build_family(grid, params, rates, progress=lambda r: prog.advance(task))
-    paths = waitmap.save_family(fam, out, overwrite=True,
-                                family_hash=params_hash(grid.to_dict(), params, rates))
+        task = prog.add_task(f"building {len(rates)} maps on {grid.size:,} states ({workers} processes)",
+                             total=len(rates))
+        paths = waitmap.build_members(grid, params, rates, out, workers=workers,
+                                      progress=lambda r: prog.advance(task))
+    write_family_index(out, [(r, p, read_meta(p)["content_hash"]) for r, p in zip(rates, paths)],
+                       params_hash(grid.to_dict(), params, rates), rates)
+    fam = waitmap.load_family(out)
+    paths = [out / map_filename(m.turn_rate_deg) for m in fam.maps]
     if args.json:
         print(json.dumps(to_jsonable({"maps": [str(p) for p in paths], "states": grid.size,
                                       "stats": [m.stats for m in fam.maps]}), sort_keys=True))

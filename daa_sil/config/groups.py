@@ -26,6 +26,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Sequence
 
+from daa_sil.config.limits import WT_RANGE_S
 from daa_sil.errors import FileFormatError, UsageError
 
 #: the paper's groups (Table 2), in the paper's order
@@ -109,7 +110,7 @@ class GroupSpec:
             wait = float(wait)
         spec = cls(name=name, setup=str(d["setup"]), latency=dict(d["latency"]) if isinstance(d["latency"], dict)
                    else d["latency"], wait=wait,
-                   wait_threshold_s=_number(d, "wait_threshold_s", 4.0, 0.0, 600.0, at),
+                   wait_threshold_s=_number(d, "wait_threshold_s", 4.0, *WT_RANGE_S, at),
                    projl=_flag(d, "projl", True, at), projl_horizon_s=_number(d, "projl_horizon_s", 25.0, 0.0, 600.0, at),
                    blending=_flag(d, "blending", True, at), wait_rule=str(d.get("wait_rule", "threshold")),
                    description=str(d.get("description", "")))
@@ -135,10 +136,10 @@ def _flag(d: dict, key: str, default: bool, where: str) -> bool:
 @functools.lru_cache(maxsize=1)
 def group_table() -> dict[str, GroupSpec]:
     """The built-in groups (``daa_sil/data/groups.yaml``) by name, in file order."""
-    import yaml
+    from daa_sil.config.yaml_input import load_yaml
 
     text = resources.files("daa_sil").joinpath("data/groups.yaml").read_text(encoding="utf-8")
-    raw = yaml.safe_load(text)
+    raw = load_yaml(text, "daa_sil/data/groups.yaml", "group table")
     return {name: GroupSpec.from_dict(name, d, "daa_sil/data/groups.yaml") for name, d in raw.items()}
 
 
@@ -154,15 +155,13 @@ def group_spec(name: str) -> GroupSpec:
 
 def load_group_file(path: "str | Path") -> tuple[GroupSpec, ...]:
     """Group definitions from a YAML file (mapping name -> fields, ``base:`` a built-in group)."""
-    import yaml
+    from daa_sil.config.yaml_input import load_yaml_file
 
     p = Path(path)
     try:
-        raw = yaml.safe_load(p.read_text(encoding="utf-8"))
+        raw = load_yaml_file(p, "group definitions")  # bounded size, depth and aliases; one-line errors
     except FileNotFoundError:
         raise UsageError(f"group file {p} does not exist") from None
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise FileFormatError(f"{p}: cannot read group definitions: {str(exc).splitlines()[0]}") from None
     if not isinstance(raw, dict) or not raw:
         raise UsageError(f"{p}: expected a mapping of group name -> fields, got {type(raw).__name__}")
     out = []

@@ -48,6 +48,8 @@ from typing import Any
 
 import yaml
 
+from daa_sil.config.limits import WT_RANGE_S
+from daa_sil.config.yaml_input import load_yaml_file
 from daa_sil.errors import UsageError
 from daa_sil.geometry.thresholds import PRESETS as THRESHOLD_PRESETS
 
@@ -164,13 +166,9 @@ def load_config(spec: "str | Path | None") -> RunConfig:
     if not p.is_file():
         raise UsageError(f"--config {str(spec)!r} is neither a preset ({', '.join(PRESET_NAMES)}) nor a file")
     try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UsageError(f"{p}: cannot read ({getattr(exc, 'strerror', None) or exc})") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise UsageError(f"{p}{f':{mark.line + 1}' if mark else ''}: not valid YAML "
-                         f"({getattr(exc, 'problem', None) or exc})") from None
+        data = load_yaml_file(p, "run configuration")  # bounded size, depth and aliases; one-line errors
+    except FileNotFoundError:
+        raise UsageError(f"--config {str(spec)!r} is neither a preset ({', '.join(PRESET_NAMES)}) nor a file") from None
     return config_from_dict(data if data is not None else {}, str(p))
 
 
@@ -281,7 +279,7 @@ def _check(cfg: RunConfig, where: str) -> None:
         _number(where, "waitmap.gamma", w["gamma"], 1e-6, 0.999999)
     for k, v in cfg.allocation.items():
         if v is not None:
-            _number(where, f"allocation.{k}", v, 0.0, 600.0)
+            _number(where, f"allocation.{k}", v, *(WT_RANGE_S if k == "wt" else (0.0, 600.0)))
     for k, v in cfg.link.items():
         if v is not None:
             _number(where, f"link.{k}", v, 0.0, 3600.0)

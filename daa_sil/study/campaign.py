@@ -14,15 +14,18 @@ Determinism: the encounter set is generated once from the campaign seed and save
 ``DIR/encounters.parquet``; every random stream of encounter ``i`` (pilot, uplink and downlink delay)
 comes from the encounter's own seed (:func:`encounter_seeds`), the same for every group (common
 random numbers), never from the chunk. Results therefore do not depend on chunking, worker count,
-executor or interruption: a killed campaign resumed with ``resume=True`` skips complete chunks and
+executor or interruption: a killed campaign resumed with ``resume=True`` skips complete chunks (each
+checked against its checksum file; a damaged one is named in a warning and computed again) and
 ends with exactly the tables of an uninterrupted run.
 
 Layout of ``DIR``::
 
     campaign.json                      config, versions, preset, seed, status
     encounters.parquet                 the encounter set (daa_sil.models.encounters format)
-    <group>/decisions-<chunk>.parquet  per-decision rows of one chunk (written first)
-    <group>/encounters-<chunk>.parquet per-encounter rows of one chunk (its presence = chunk done)
+    <group>/decisions-<chunk>.parquet  per-decision rows of one chunk
+    <group>/encounters-<chunk>.parquet per-encounter rows of one chunk
+    <group>/chunk-<chunk>.sha256       SHA-256 of the chunk's two tables (sha256sum format), written
+                                       last: a chunk is done when it exists and both tables match it
 
 Each file is written atomically by the driver (workers only compute and return Arrow tables, so a
 remote Dask cluster needs no shared file system).
@@ -41,10 +44,11 @@ from typing import Callable
 import numpy as np
 import pyarrow as pa
 
-from daa_sil.errors import FileFormatError, UsageError
+from daa_sil.errors import FileFormatError, UsageError, warn
 from daa_sil.files import atomic_write_json, ensure_dir, remove_stale_temps
 from daa_sil.config.groups import GroupSpec, parse_groups
-from daa_sil.study.campaign_files import _versions, check_out_dir, chunk_done, load_campaign_json, write_chunk
+from daa_sil.study.campaign_files import (_versions, check_out_dir, chunk_done, chunk_paths, chunk_problem,
+                                         load_campaign_json, write_chunk)
 from daa_sil.study.executors import make_executor
 from daa_sil.study.campaign_files import CAMPAIGN_FORMAT
 from daa_sil.study.campaign_config import CampaignConfig
@@ -125,7 +129,7 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
 # --- the runner -----------------------------------------------------------------------------------
 @dataclass
 class CampaignSummary:
-    """What a run did: chunks computed/skipped, wall time (s), encounter-steps simulated."""
+    """What a run did: chunks computed/skipped/found damaged, wall time (s), encounter-steps simulated."""
 
     out_dir: Path
     config: CampaignConfig
@@ -136,6 +140,7 @@ class CampaignSummary:
     compute_s: float
     encounter_steps: int
     groups: dict = field(default_factory=dict)
+    chunks_damaged: list = field(default_factory=list)  # "<group>/<chunk>" found damaged and computed again
 
 
 def _progress(enabled: bool):
@@ -194,7 +199,8 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
             "groups": {g.name: g.to_dict() for g in config.effective_groups},
             "waitmap": ({"source": config.map_source, **_describe_family(fam)} if fam is not None else None),
             "layout": {"encounters": "<group>/encounters-<chunk>.parquet",
-                       "decisions": "<group>/decisions-<chunk>.parquet", "chunk_size": config.chunk_size}}
+                       "decisions": "<group>/decisions-<chunk>.parquet",
+                       "checksums": "<group>/chunk-<chunk>.sha256", "chunk_size": config.chunk_size}}
     atomic_write_json(meta_path, meta)
     return out, config, encs
 
@@ -227,16 +233,26 @@ def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resum
     if resume:
         remove_stale_temps(out)  # temporaries of a writer killed mid-write
     seeds = np.asarray(encs.seed, dtype=np.int64)
-    todo, skipped = [], 0
+    todo, skipped, damaged, unsummed = [], 0, [], []
     for g in config.group_names:
         for c in range(config.n_chunks):
-            if chunk_done(out, g, c):
+            why = chunk_problem(out, g, c)
+            if why is None:
                 skipped += 1
-            else:
-                todo.append((g, c))
+                continue
+            todo.append((g, c))
+            if why != "missing":
+                damaged.append(f"{g}/{c}")
+                warn(f"chunk {c} of group {g} in {out} is damaged ({why}); computing it again")
+            elif chunk_paths(out, g, c)[0].is_file():
+                unsummed.append(f"{g}/{c}")
+    if unsummed:
+        warn(f"{len(unsummed)} chunk(s) have tables but no checksum file (the writer was stopped before it, or an "
+             f"older daa-sil wrote them): computing {', '.join(unsummed[:5])}{' ...' if len(unsummed) > 5 else ''} again")
     if any(config.group(g).uses_map for g, _ in todo) and scheduler is None:
         campaign_family(config)  # build/load once here; forked workers inherit it
-    summary = CampaignSummary(out, config, config.n_chunks * len(config.group_names), skipped, 0, 0.0, 0.0, 0)
+    summary = CampaignSummary(out, config, config.n_chunks * len(config.group_names), skipped, 0, 0.0, 0.0, 0,
+                              chunks_damaged=damaged)
     steps_per_enc = int(round(config.duration_s / config.dt_s))
     futs: dict[cf.Future, tuple[str, int]] = {}
     for g, c in todo:

@@ -11,6 +11,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from daa_sil.config.groups import GroupSpec, parse_groups
+from daa_sil.config.limits import WT_RANGE_S
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.geometry.thresholds import PRESETS
 from daa_sil.waitmap.build import DEFAULT_MAP
@@ -84,7 +85,7 @@ class CampaignConfig:
             raise UsageError(f"duration must be > 0 s, got {self.duration_s!r}")
         if not (math.isfinite(self.dt_s) and self.dt_s > 0):
             raise UsageError(f"dt must be > 0 s, got {self.dt_s!r}")
-        for name, val, lo, hi in (("--wt", self.wt, 0.0, 600.0), ("--projl-lookahead", self.projl_lookahead, 0.0, 600.0),
+        for name, val, lo, hi in (("--wt", self.wt, *WT_RANGE_S), ("--projl-lookahead", self.projl_lookahead, 0.0, 600.0),
                                   ("--gamma", self.gamma, 1e-6, 0.999999)):
             if val is not None and not (isinstance(val, (int, float)) and math.isfinite(val) and lo <= val <= hi):
                 raise UsageError(f"{name} must be within [{lo:g}, {hi:g}], got {val!r}")

@@ -1,11 +1,14 @@
-"""A campaign directory on disk: chunk tables (Parquet, written atomically), ``campaign.json``, the
-check that an output directory is empty unless resumed, and reading the merged tables back."""
+"""A campaign directory on disk: chunk tables (Parquet, written atomically) with their checksum files,
+``campaign.json``, the check that an output directory is empty unless resumed, and reading the
+merged tables back (after checking every chunk against its checksums)."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import platform
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
@@ -15,13 +18,15 @@ import pyarrow.parquet as pq
 
 from daa_sil import __version__
 from daa_sil.errors import FileFormatError, UsageError
-from daa_sil.files import atomic_path
+from daa_sil.files import atomic_write_bytes, atomic_write_text
 
 if TYPE_CHECKING:
     from daa_sil.study.campaign import ChunkResult
 
 #: campaign.json format version
 CAMPAIGN_FORMAT = 1
+#: one line of a ``sha256sum`` file: 64 hex digits, two spaces, a file name
+_SUM_LINE = re.compile(r"([0-9a-f]{64})  ([^/\\\n]+)")
 
 
 def chunk_paths(out_dir: Path, group: str, chunk: int) -> tuple[Path, Path]:
@@ -29,39 +34,109 @@ def chunk_paths(out_dir: Path, group: str, chunk: int) -> tuple[Path, Path]:
     return (out_dir / group / f"encounters-{chunk:05d}.parquet", out_dir / group / f"decisions-{chunk:05d}.parquet")
 
 
-def chunk_done(out_dir: Path, group: str, chunk: int) -> bool:
-    """A chunk is complete when both files exist (decisions is written first, encounters last) and
-    both have a readable Parquet footer (a damaged chunk is computed again on resume)."""
-    enc, dec = chunk_paths(out_dir, group, chunk)
-    if not (enc.is_file() and dec.is_file()):
-        return False
+def checksum_path(out_dir: Path, group: str, chunk: int) -> Path:
+    """The chunk's checksum file ``<group>/chunk-<chunk>.sha256`` (``sha256sum`` format, written last:
+    its presence marks the chunk complete; ``sha256sum -c`` in the group directory verifies it)."""
+    return out_dir / group / f"chunk-{chunk:05d}.sha256"
+
+
+def _parse_checksums(path: Path) -> dict[str, str]:
+    """``{file name: sha256 hex}`` of a checksum file; FileFormatError if it is not one."""
     try:
-        pq.read_metadata(enc)
-        pq.read_metadata(dec)
-    except (OSError, pa.ArrowException):
-        return False
-    return True
+        text = path.read_text(encoding="ascii")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FileFormatError(f"{path}: unreadable checksum file ({getattr(exc, 'strerror', None) or exc})") from None
+    sums: dict[str, str] = {}
+    for line in text.splitlines():
+        m = _SUM_LINE.fullmatch(line)
+        if m is None or m.group(2) in sums:
+            raise FileFormatError(f"{path}: not a sha256sum checksum file")
+        sums[m.group(2)] = m.group(1)
+    return sums
 
 
-def _write_table(table: pa.Table, path: Path) -> None:
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp, compression="zstd")
+def chunk_problem(out_dir: Path, group: str, chunk: int) -> "str | None":
+    """Why the chunk is not complete and intact, or None if it is.
+
+    Complete means: the checksum file exists and lists exactly the chunk's two tables, and each table's
+    SHA-256 equals its entry. The whole of both files is hashed (a few hundred kB per chunk: well
+    under a millisecond of hashing per chunk, so milliseconds for a campaign of hundreds of chunks),
+    because reading them as Parquet is not enough: zeroed bytes inside a data page often decode to
+    different values without any error. Returns ``"missing"`` when the chunk was never finished (no
+    checksum file), otherwise a description of the damage naming the file.
+    """
+    enc, dec = chunk_paths(out_dir, group, chunk)
+    sums_path = checksum_path(out_dir, group, chunk)
+    if not sums_path.is_file():
+        return "missing"
+    try:
+        sums = _parse_checksums(sums_path)
+    except FileFormatError:
+        return f"{sums_path.name} is not a checksum file"
+    if sorted(sums) != sorted((enc.name, dec.name)):
+        return f"{sums_path.name} does not list {dec.name} and {enc.name}"
+    for f in (dec, enc):
+        try:
+            digest = hashlib.sha256(f.read_bytes()).hexdigest()
+        except FileNotFoundError:
+            return f"{f.name} is missing"
+        except OSError as exc:
+            return f"{f.name} cannot be read ({exc.strerror or exc})"
+        if digest != sums[f.name]:
+            return f"{f.name} does not match its SHA-256 in {sums_path.name}"
+    return None
+
+
+def chunk_done(out_dir: Path, group: str, chunk: int) -> bool:
+    """True if the chunk is complete and intact (:func:`chunk_problem` is None)."""
+    return chunk_problem(out_dir, group, chunk) is None
+
+
+def _table_bytes(table: pa.Table) -> bytes:
+    buf = pa.BufferOutputStream()
+    pq.write_table(table, buf, compression="zstd")
+    return buf.getvalue().to_pybytes()
 
 
 def write_chunk(out_dir: Path, res: ChunkResult) -> None:
-    """Write a chunk's two tables atomically, decisions first (so encounters marks completion)."""
+    """Write a chunk's two tables atomically, then its checksum file (which marks completion)."""
     enc, dec = chunk_paths(out_dir, res.group, res.chunk)
-    _write_table(res.decisions, dec)
-    _write_table(res.encounters, enc)
+    sums = checksum_path(out_dir, res.group, res.chunk)
+    sums.unlink(missing_ok=True)  # a chunk being (re)written is not complete until its new checksums are
+    lines = []
+    for table, path in ((res.decisions, dec), (res.encounters, enc)):
+        data = _table_bytes(table)
+        atomic_write_bytes(path, data)
+        lines.append(f"{hashlib.sha256(data).hexdigest()}  {path.name}\n")
+    atomic_write_text(sums, "".join(lines))
+
+
+def verify_chunks(out_dir: Path) -> None:
+    """Check every chunk that has a checksum file (FileFormatError naming the first damaged one).
+
+    Chunks without one (campaigns written before checksums existed, or a chunk being written) are
+    not checked here; ``campaign run --resume`` computes a chunk without checksums again."""
+    out = Path(out_dir)
+    for sums_path in sorted(out.glob("*/chunk-*.sha256")):
+        m = re.fullmatch(r"chunk-(\d+)\.sha256", sums_path.name)
+        if m is None:
+            continue
+        group, chunk = sums_path.parent.name, int(m.group(1))
+        why = chunk_problem(out, group, chunk)
+        if why is not None and why != "missing":
+            raise FileFormatError(f"{out}: chunk {chunk} of group {group} is damaged: {why}; "
+                                  f"'daa-sil campaign run --out {out} --resume' computes it again")
 
 
 def read_results(out_dir: "str | os.PathLike", kind: str = "encounters",
                  groups: "Sequence[str] | None" = None) -> pa.Table:
     """Concatenate the per-chunk tables of ``kind`` (``encounters`` or ``decisions``) in
-    (group, chunk) order."""
+    (group, chunk) order, after checking every chunk against its checksums (:func:`verify_chunks`)."""
     out = Path(out_dir)
     if kind not in ("encounters", "decisions"):
         raise UsageError(f"kind must be 'encounters' or 'decisions', got {kind!r}")
+    if out.is_dir():
+        verify_chunks(out)
     cfg = load_campaign_json(out)["config"] if (out / "campaign.json").is_file() else None
     names = list(groups) if groups is not None else ([g["name"] for g in cfg["groups"]] if cfg else
                                                      sorted(p.name for p in out.iterdir() if p.is_dir()))

@@ -185,10 +185,10 @@ def _lookup(pr: dict, key: str, group: "str | None") -> float:
 
 @lru_cache(maxsize=1)
 def _raw() -> dict:
-    import yaml
+    from daa_sil.config.yaml_input import load_yaml
 
     text = resources.files("daa_sil").joinpath("data/paper_findings.yaml").read_text(encoding="utf-8")
-    return yaml.safe_load(text)
+    return load_yaml(text, "daa_sil/data/paper_findings.yaml", "list of the paper's findings")
 
 
 def load_findings() -> list[Finding]:

@@ -128,10 +128,10 @@ def mean_t(x, conf: float = CONF) -> tuple[float, float, float]:
 @lru_cache(maxsize=1)
 def paper_results() -> dict:
     """The paper's published numbers (``daa_sil/data/paper_results.yaml``)."""
-    import yaml
+    from daa_sil.config.yaml_input import load_yaml
 
     text = resources.files("daa_sil").joinpath("data/paper_results.yaml").read_text(encoding="utf-8")
-    return yaml.safe_load(text)
+    return load_yaml(text, "daa_sil/data/paper_results.yaml", "table of the paper's results")
 
 
 def faa_category(p_per_hr: float) -> str:

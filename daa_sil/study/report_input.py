@@ -51,6 +51,9 @@ def load_results(src) -> dict:
             files = sorted(d.glob("*/encounters-*.parquet"))
             if not files:
                 raise FileFormatError(f"{d} holds no <group>/encounters-*.parquet results")
+            from daa_sil.study.campaign_files import verify_chunks
+
+            verify_chunks(d)  # a chunk damaged on disk is named here, not read as wrong numbers
     elif isinstance(src, (list, tuple)) and src and all(isinstance(s, (str, os.PathLike)) for s in src):
         files = [Path(s) for s in src]
         for f in files:

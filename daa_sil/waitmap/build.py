@@ -1,26 +1,29 @@
-"""Building maps and families, and the on-disk cache behind :func:`default_family`.
+"""Building maps and families, serially in memory (:func:`build_family`) or one process per map
+into a directory (:func:`build_members`), and the named map presets behind ``--waitmap``.
 
-Cache: ``$DAA_SIL_CACHE`` (or ``~/.cache/daa-sil``) ``/waitmaps/<hash>/`` where ``<hash>`` is the
-content hash of the grid, all parameters, the turn-rate list and the file format. A family is built
-in a private temporary directory and renamed into place in one step, so concurrent processes either
-see a complete family or none; the loser of a race discards its copy and loads the winner's.
+The maps of a family are independent, so :func:`build_members` builds them in up to
+``min(cores, maps)`` processes at once, each map written atomically as soon as it is finished: an
+interrupted build keeps the maps it finished. Each process runs the same :func:`build_map` as the
+serial build, so the arrays are bit-identical (``tests/test_waitmap_cache.py``). The on-disk cache
+behind :func:`default_family` is :mod:`.cache`.
 """
 
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
+import signal
+import sys
 import time
+import types
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
-from ..errors import FileFormatError
+from ..errors import DaaSilError, error_class
 from .grid import Grid, resolve_grid
 from .lookup import WaitMap, WaitMapFamily
 from .model import PAPER_TURN_RATES, MdpParams, params_hash
 from .solve import value_iteration, wait_time
-from .store import load_family, save_family
+from .store import load_family, map_filename, save
 from .transitions import build_transitions
 
 
@@ -56,18 +59,177 @@ def build_family(grid: Grid, params: MdpParams, turn_rates=PAPER_TURN_RATES,
     return WaitMapFamily(maps)
 
 
+#: below this many states a map builds in well under the ~1 s a builder process needs to start
+#: (interpreter, numpy, scipy), so such families build in this process
+MIN_STATES_FOR_PROCESSES = 150_000
+
+
+def default_workers(n_maps: int, states: int = MIN_STATES_FOR_PROCESSES) -> int:
+    """Processes for building ``n_maps`` maps of ``states`` states: ``min(usable cores, n_maps)``,
+    or 1 (this process) for maps smaller than :data:`MIN_STATES_FOR_PROCESSES`."""
+    if states < MIN_STATES_FOR_PROCESSES:
+        return 1
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, int(n_maps)))
+
+
+def build_members(grid: Grid, params: MdpParams, turn_rates: Sequence[float], directory: "str | os.PathLike",
+                  workers: "int | None" = None,
+                  progress: "Callable[[float], None] | None" = None) -> list[Path]:
+    """Build one map per turn rate (deg/s) into ``directory`` (file :func:`~.store.map_filename`),
+    each written atomically as soon as it is finished, in ``workers`` processes (default
+    :func:`default_workers`; 1 builds in this process). ``progress(rate)`` is called as each map is
+    written. On Ctrl-C or an error the processes still building are stopped; the maps already
+    written stay. Returns the paths in the order of ``turn_rates``."""
+    d = Path(directory)
+    rates = [float(r) for r in turn_rates]
+    n = default_workers(len(rates), grid.size) if workers is None else max(1, min(int(workers), len(rates)))
+    if n == 1:
+        for r in rates:
+            save(build_map(grid, params, r), d / map_filename(r), overwrite=True)
+            if progress:
+                progress(r)
+    else:
+        _build_in_processes(grid, params, rates, d, n, progress)
+    return [d / map_filename(r) for r in rates]
+
+
+def _build_in_processes(grid: Grid, params: MdpParams, rates: list, d: Path, n: int, progress) -> None:
+    """``n`` spawned builder processes, each taking the next turn rate as soon as it is free; a
+    builder answers each ``(rate, path)`` with ``("ok",)`` or ``("error", class name, message)``."""
+    import multiprocessing as mp
+    from multiprocessing.connection import wait
+
+    ctx = mp.get_context("spawn")  # no fork of a process that may hold threads (progress bars, the SIL)
+    pending, builders, busy = list(rates), [], {}
+    try:
+        for _ in range(n):
+            conn, child = ctx.Pipe()
+            proc = ctx.Process(target=_builder_process, args=(os.getpid(), grid, params, child), daemon=True,
+                               name=PROCESS_NAME)
+            _start_builder(proc)
+            child.close()
+            builders.append((proc, conn))
+        for proc, conn in builders:
+            if pending:
+                r = pending.pop(0)
+                conn.send((r, d / map_filename(r)))
+                busy[conn] = (proc, r)
+        while busy:
+            ready = wait(list(busy) + [proc.sentinel for proc, _ in busy.values()])
+            for conn in [c for c in busy if c in ready or busy[c][0].sentinel in ready]:
+                proc, r = busy.pop(conn)
+                try:
+                    msg = conn.recv()
+                except (EOFError, OSError):  # ended without a word (killed, crashed)
+                    msg = None
+                if msg is None or msg[0] != "ok":
+                    raise error_class(msg[1] if msg else "")(
+                        msg[2] if msg else f"building the {r:+g} deg/s wait map failed: its process ended "
+                                           f"with exit code {proc.exitcode}")
+                if progress:
+                    progress(r)
+                if pending:
+                    r = pending.pop(0)
+                    conn.send((r, d / map_filename(r)))
+                    busy[conn] = (proc, r)
+    finally:
+        for proc, conn in builders:  # done: they exit on EOF; Ctrl-C or an error: stop them now
+            if busy:
+                proc.terminate()
+            conn.close()
+        for proc, _ in builders:
+            proc.join()
+
+
+def _start_builder(proc) -> None:
+    """Start ``proc`` (spawn context) as a builder that needs nothing from this process's main script.
+
+    * SIGINT is ignored from the child's first instruction (a spawned interpreter keeps an inherited
+      SIG_IGN), so Ctrl-C reaches only this process, which stops the builders itself.
+    * ``spawn`` normally re-runs the parent's main script in the child. A script that calls
+      :func:`default_family` without an ``if __name__ == "__main__"`` guard would then wait in the
+      child for the cache lock its parent holds (a deadlock), and ``python - < script`` has no
+      script to re-run at all. The builder needs only this module, so the main module is hidden
+      while the child's start-up data is taken.
+    """
+    main = sys.modules.get("__main__")
+    sys.modules["__main__"] = types.ModuleType("__main__")
+    try:
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: signals are the main thread's business
+        old = None
+    try:
+        proc.start()
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+        if main is not None:
+            sys.modules["__main__"] = main
+
+
+def _builder_process(parent_pid: int, grid: Grid, params: MdpParams, conn) -> None:
+    """Body of one builder process: build and save each ``(rate, path)`` received, answer each, and
+    exit when the parent closes the pipe. SIGTERM (the parent stopping it) raises SystemExit, so a
+    half-written temporary is removed on the way out."""
+    _die_with_parent(parent_pid)
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)
+    while True:
+        try:
+            rate, path = conn.recv()
+        except (EOFError, OSError):
+            return
+        try:
+            save(build_map(grid, params, rate), path, overwrite=True)
+            msg: tuple = ("ok",)
+        except DaaSilError as exc:
+            msg = ("error", type(exc).__name__, str(exc))
+        except MemoryError:
+            msg = ("error", "OutputError", f"out of memory building the {rate:+g} deg/s wait map")
+        except Exception as exc:  # noqa: BLE001 -- reported to the parent, which raises it as one line
+            msg = ("error", "DaaSilError", f"building the {rate:+g} deg/s wait map failed: "
+                                          f"{type(exc).__name__}: {exc}")
+        try:
+            conn.send(msg)
+        except OSError:  # the parent is gone or stopped listening
+            return
+
+
+def _exit_on_sigterm(signum, frame) -> None:
+    raise SystemExit(128 + signum)
+
+
+#: the name a builder process shows to ``ps`` and ``pgrep`` on Linux (at most 15 characters)
+PROCESS_NAME = "daa-sil-waitmap"
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """Linux: have the kernel SIGKILL this process when its parent dies (``PR_SET_PDEATHSIG``), name
+    it :data:`PROCESS_NAME`, and exit at once if the parent is already gone. Elsewhere a daemonic
+    child is stopped when its parent exits normally; a killed parent leaves it to finish its one map
+    and exit."""
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+            libc.prctl(15, ctypes.c_char_p(PROCESS_NAME.encode()), 0, 0, 0)  # 15 = PR_SET_NAME: pgrep finds it
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+
 #: named wait-map configurations: grid preset and wait-time horizon H (s). ``alerting`` is the
 #: default: the paper's +-1,500 m box holds about 9 % of the states the agent decides at, so on
 #: the paper grid most decisions read a clamped edge value; the alerting grid covers the DO-365
 #: alerting region, and its horizon is long enough to reach LoWC from the edge of the box.
 MAP_PRESETS = {"paper": ("paper", 60.0), "alerting": ("alerting", 120.0), "fine": ("fine", 60.0)}
 DEFAULT_MAP = "alerting"
-
-
-def cache_dir() -> Path:
-    """``$DAA_SIL_CACHE`` or ``~/.cache/daa-sil``."""
-    env = os.environ.get("DAA_SIL_CACHE")
-    return Path(env) if env else Path.home() / ".cache" / "daa-sil"
 
 
 def map_params(grid: "str | None", preset: str = "paper", **overrides) -> tuple[Grid, MdpParams]:
@@ -81,8 +243,10 @@ def map_params(grid: "str | None", preset: str = "paper", **overrides) -> tuple[
 
 
 def default_family(preset: str = "paper", grid: "Grid | str | None" = None, params: "MdpParams | None" = None,
-                   turn_rates=PAPER_TURN_RATES, progress: "Callable[[float], None] | None" = None) -> WaitMapFamily:
-    """Load the cached family for these settings, building (and caching) it on first use.
+                   turn_rates=PAPER_TURN_RATES, progress: "Callable[[float], None] | None" = None,
+                   workers: "int | None" = None) -> WaitMapFamily:
+    """Load the cached family for these settings, building (and caching) it on first use, or
+    repairing it (:mod:`.cache`); ``workers`` as in :func:`build_members`.
 
     ``grid`` is a map preset (:data:`MAP_PRESETS`, default :data:`DEFAULT_MAP`), a grid spec or a
     Grid; ``params`` overrides the preset's parameters (its threshold preset is replaced by ``preset``).
@@ -93,38 +257,20 @@ def default_family(preset: str = "paper", grid: "Grid | str | None" = None, para
         g, p = map_params(grid, preset)
     if params is not None:
         p = params.with_(preset=preset)
-    key = params_hash(g.to_dict(), p, turn_rates)
-    root = cache_dir() / "waitmaps"
-    final = root / key[:24]
-    if (final / "family.json").is_file():
-        try:
-            return load_family(final)
-        except FileFormatError:
-            shutil.rmtree(final, ignore_errors=True)  # corrupt cache entry: rebuild
-    fam = build_family(g, p, turn_rates, progress=progress)
-    root.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{key[:24]}.", dir=root))
-    try:
-        save_family(fam, tmp, family_hash=key)
-        try:
-            os.rename(tmp, final)
-        except OSError:  # another process finished first (or a stale entry): use theirs
-            if (final / "family.json").is_file():
-                return load_family(final)
-            shutil.rmtree(final, ignore_errors=True)
-            os.rename(tmp, final)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return fam
+    from .cache import cached_family
+
+    return cached_family(g, p, turn_rates, progress=progress, workers=workers)
 
 
 def is_cached(source: "str | os.PathLike | None", preset: str = "paper", gamma: "float | None" = None,
               turn_rates=PAPER_TURN_RATES) -> bool:
     """True if :func:`family_for` would load the family (a directory, or a built cache entry)."""
+    from .cache import entry_ready
+
     g, p = check_source(source, preset, gamma)
     if g is None:
         return True
-    return (cache_dir() / "waitmaps" / params_hash(g.to_dict(), p, turn_rates)[:24] / "family.json").is_file()
+    return entry_ready(params_hash(g.to_dict(), p, turn_rates), turn_rates)
 
 
 def family_for(source: "str | os.PathLike | None", preset: str = "paper", gamma: "float | None" = None,

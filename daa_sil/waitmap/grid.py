@@ -291,14 +291,14 @@ def resolve_grid(spec: "str | os.PathLike | Grid | dict | None") -> Grid:
         return GRID_PRESETS[text]()
     path = Path(text)
     if path.suffix.lower() in (".yaml", ".yml", ".json") or path.is_file():
-        import yaml
+        from daa_sil.config.yaml_input import load_yaml_file
 
         try:
-            data = yaml.safe_load(path.read_text())
+            data = load_yaml_file(path, "grid")  # bounded size, depth and aliases; one-line errors
         except FileNotFoundError:
             raise UsageError(f"grid file {path} does not exist") from None
-        except (OSError, yaml.YAMLError) as exc:
-            raise FileFormatError(f"cannot read grid file {path}: {str(exc).splitlines()[0]}") from None
+        except FileFormatError as exc:
+            raise FileFormatError(f"cannot read grid file {exc}") from None
         return grid_from_dict(data or {}, name=path.stem)
     if "=" in text:
         return parse_inline(text)

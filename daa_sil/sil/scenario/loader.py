@@ -14,6 +14,9 @@ from typing import Callable
 
 import yaml
 
+from daa_sil.config.limits import WT_RANGE_S
+from daa_sil.config.yaml_input import compose_yaml, read_yaml_text
+
 from daa_sil.errors import FileFormatError, UsageError
 
 from .schema import (MAX_INTRUDERS, PILOT_RESPONSES, DECISIONS, FAULT_PROCESSES, FAULT_SIGNALS, AllocationSpec, CpaGeometry,
@@ -252,7 +255,8 @@ def _allocation(v: _V, node, path) -> AllocationSpec:
         wait=v.opt(m, "wait", path, v.string, g.wait_mode, choices=WAIT_MODES),
         wait_constant_s=v.opt(m, "wait_constant_s", path, v.number, g.constant_wait_s, lo=0, hi=120),
         blending=v.opt(m, "blending", path, v.boolean, g.blending),
-        wait_threshold_s=v.opt(m, "wait_threshold_s", path, v.number, g.wait_threshold_s, lo=0, hi=120),
+        wait_threshold_s=v.opt(m, "wait_threshold_s", path, v.number, g.wait_threshold_s, lo=WT_RANGE_S[0],
+                               hi=WT_RANGE_S[1]),
         projl=v.opt(m, "projl", path, v.boolean, g.projl),
         link_timeout_s=v.opt(m, "link_timeout_s", path, v.number, None, lo=0, hi=120, lo_open=True),
         stale_command_s=v.opt(m, "stale_command_s", path, v.number, None, lo=0, hi=120, lo_open=True))
@@ -333,12 +337,7 @@ def _scenario(v: _V, root) -> Scenario:
 
 def parse_scenario(text: str, source: str = "<string>") -> Scenario:
     """Validate YAML ``text``; errors name ``source``, the line and the field."""
-    try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f":{mark.line + 1}" if mark is not None else ""
-        raise FileFormatError(f"{source}{line}: not valid YAML: {getattr(exc, 'problem', None) or exc}") from None
+    root = compose_yaml(text, source, "scenario")  # bounded size, depth and aliases; one-line errors
     if root is None:
         raise FileFormatError(f"{source}: empty scenario file")
     return _scenario(_V(source), root)
@@ -348,11 +347,9 @@ def load_scenario(path: "str | os.PathLike") -> Scenario:
     """Load and validate a scenario file (FileFormatError naming file/line/field on any problem)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = read_yaml_text(p, "scenario")
     except FileNotFoundError:
         raise FileFormatError(f"{p}: scenario file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FileFormatError(f"{p}: cannot read scenario: {getattr(exc, 'strerror', None) or exc}") from None
     return parse_scenario(text, str(p))
 
 
