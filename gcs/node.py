@@ -113,7 +113,7 @@ class GcsNode:
             self.daa_cfg = rc.daa_config() if rc is not None else DaaConfig()
         self.pilot = None
         if self.mode == "model":
-            from daa_sil.study.fasttime import STREAM_PILOT, encounter_streams
+            from daa_sil.models.streams import STREAM_PILOT, encounter_streams
             from daa_sil.models.pilot import PilotModel
             from daa_sil.models.pilot_display import PilotDisplay
             from daa_sil.models.pilot_config import PilotConfig
