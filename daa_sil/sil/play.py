@@ -35,12 +35,13 @@ START_TIMEOUT_S = 120.0
 
 def shim_argv(sc, clock_args: list, key_args: list, stats_json: Path, vehicle_port: int = 0,
               gcs_port: int = 0) -> list[str]:
-    """``daa-sil shim`` arguments for scenario ``sc`` (link delays, loss, outages, seed)."""
+    """``daa-sil shim`` command line for scenario ``sc`` (link delays, loss, outages, seed), run as
+    ``python -m daa_sil.commands.shim``: the shim's own entry point imports only what it needs."""
     from daa_sil.sil.scenario import delay_spec_string
 
     link = sc.link
-    argv = python_module_argv("daa_sil.cli") + [
-        "shim", "--listen-vehicle", f"udp:127.0.0.1:{vehicle_port}", "--listen-gcs", f"udp:127.0.0.1:{gcs_port}",
+    argv = python_module_argv("daa_sil.commands.shim") + [
+        "--listen-vehicle", f"udp:127.0.0.1:{vehicle_port}", "--listen-gcs", f"udp:127.0.0.1:{gcs_port}",
         "--delay-up", delay_spec_string(link.up),
         "--delay-down", delay_spec_string(link.down if link.down is not None else link.up),
         "--epoch", f"{link.epoch_s:g}", "--loss", f"{link.loss:g}", "--seed", str(sc.seed),
