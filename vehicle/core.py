@@ -36,7 +36,7 @@ def build_policy(sc: Scenario) -> "A.AllocationPolicy":
 
 
 def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, config=None):
-    """``(OnboardCore, EncounterSet, policy)`` for scenario ``sc`` (N = 1). ``waitmap`` is a
+    """``(OnboardCore, EncounterSet, policy, wait-map family or None)`` for scenario ``sc`` (N = 1). ``waitmap`` is a
     ``--waitmap`` value (map preset, grid spec or family directory; None = the configuration's, else
     the default map), read exactly as fast-time reads it (:func:`daa_sil.waitmap.family_for`, LoWC
     preset ``paper``). ``config`` (a :class:`daa_sil.config.run_config.RunConfig`) contributes its
@@ -61,13 +61,14 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
         policy = replace(policy, **link) if link else policy
         waitmap = waitmap if waitmap is not None else config.waitmap["source"]
     daa_cfg = config.daa_config(sc.thresholds) if config is not None else _preset_daa(sc.thresholds)
-    lookup = None
+    lookup = family = None
     if policy.wait_mode == "map":
         from daa_sil import waitmap as wm
 
-        lookup = A.make_wait_lookup(wm.family_for(waitmap, preset="paper"), cfg=daa_cfg)
+        family = wm.family_for(waitmap, preset="paper")
+        lookup = A.make_wait_lookup(family, cfg=daa_cfg)
     core = OnboardCore(es.own, es.intr, es.intruder_controls, policy, daa_cfg, lookup, thresholds=sc.thresholds)
-    return core, es, policy
+    return core, es, policy, family
 
 
 def _preset_daa(name: str):
@@ -122,7 +123,14 @@ class VehicleCore:
     def __init__(self, sc: Scenario, policy=None, waitmap: "str | None" = None, config=None):
         self.sc = sc
         self.config = config
-        self.core, self.es, self.policy = build_onboard(sc, policy, waitmap, config)
+        self.core, self.es, self.policy, family = build_onboard(sc, policy, waitmap, config)
+        #: the wait maps flown (``waitmap.describe``: grid, parameters, turn rates, the content hashes
+        #: the load verified), None without a map; the step log's ``waitmap`` metadata
+        self.waitmap_record = None
+        if family is not None:
+            from daa_sil.waitmap import describe
+
+            self.waitmap_record = describe(family)
         self.dt = 1.0
         self.n_steps = sc.n_steps
         self._new: list[PilotCommand] = []

@@ -235,7 +235,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
     result = summarize_steplog(table, sc)
     result.update({"scenario": sc.name, "scenario_file": str(opts.scenario_path), "seed": sc.seed,
                    "preset": sc.thresholds, "clock": opts.clock, "wall_s": round(wall, 3),
-                   "waitmap": _waitmap_record(sc, opts.waitmap),
+                   "waitmap": _waitmap_record(sc, opts.waitmap, steplog),
                    "realtime_ratio": round(result["duration_s"] / wall, 2) if wall > 0 else None,
                    "interrupted": interrupted, "failure": failure,
                    "process_died": monitor.death if monitor is not None else None,
@@ -280,26 +280,37 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
     return result
 
 
-def _waitmap_record(sc, source: "str | None") -> "dict | None":
-    """What result.json records about the vehicle's wait maps (None when its policy reads no map)."""
+def _waitmap_record(sc, source: "str | None", steplog: Path) -> "dict | None":
+    """What result.json records about the vehicle's wait maps (None when its policy reads no map):
+    the description the vehicle wrote into its step log's metadata from the family it loaded and
+    verified (``waitmap.describe``), so the maps are not loaded again here. A step log without it
+    (not written by this vehicle) falls back to loading the family."""
     if sc.allocation.wait != "map":
         return None
     from daa_sil import waitmap
+    from daa_sil.steplog import steplog_metadata
 
-    fam = waitmap.family_for(source, preset="paper")  # cached: loaded, not built
-    return {"source": source or waitmap.DEFAULT_MAP, **waitmap.describe(fam)}
+    try:
+        described = json.loads(steplog_metadata(steplog).get("waitmap") or "null")
+    except ValueError:
+        described = None
+    if not isinstance(described, dict):
+        described = waitmap.describe(waitmap.family_for(source, preset="paper"))  # cached: loaded, not built
+    return {"source": source or waitmap.DEFAULT_MAP, **described}
 
 
 def prepare_waitmap(sc, source: "str | None", say: "Callable[[str], None] | None") -> None:
-    """Build (or load) the vehicle's wait maps before any process starts, so the vehicle loads them
-    from the cache; a bad ``--waitmap`` is a one-line usage error here. ``say`` gets progress lines."""
+    """Build the vehicle's wait maps before any process starts if they are not cached yet, so the
+    vehicle loads them from the cache; a bad ``--waitmap`` is a one-line usage error here. A cached
+    family is not loaded here: the vehicle loads it once and checks every map's content hash (a
+    broken file is its one-line error, relayed by the run). ``say`` gets progress lines."""
     if sc.allocation.wait != "map":
         return
     from daa_sil import waitmap
 
     t = time.monotonic()
     if waitmap.is_cached(source, preset="paper"):
-        say = None  # loaded in well under a second: nothing to report
+        return  # the vehicle loads (and verifies) it: loading it here too cost ~0.3 s of every run
     if say:
         say(f"loading the MDP wait maps ({source or waitmap.DEFAULT_MAP}; the first run builds and caches them) ...")
     progress = (lambda r: say(f"  built the {r:+g} deg/s map ({time.monotonic() - t:.0f} s)")) if say else None
