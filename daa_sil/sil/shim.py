@@ -45,6 +45,10 @@ Clocks
    answers late from stamping its step-k commands with a later step (``gcs_lagged`` counts them).
 3. A datagram from the GCS containing a valid ``SIM_TICK_ACK(k)`` (cumulative: every tick <= k)
    is forwarded to the vehicle at once.
+4. A new tick that arrives while the GCS has not acknowledged the last tick forwarded to it is
+   held and processed (rule 1) as soon as that ack arrives (``ticks_held``). The vehicle runs its
+   step on the echo, in parallel with the GCS's step of the same tick; the hold keeps the GCS's
+   datagrams of that step ahead of the next tick's releases (:mod:`daa_sil.sil.shim_ticks`).
 
 ``realtime`` with a vehicle that sends ticks (what ``daa-vehicle`` does): **the same tick-driven
 rules as lockstep**, only the ticks are paced by the vehicle's wall clock instead of by the GCS's
@@ -130,7 +134,7 @@ class DelayShim(ShimTicks):
             "datagrams_from_vehicle", "datagrams_from_gcs", "forwarded_to_vehicle", "forwarded_to_gcs",
             "rejected_peer", "rejected_claim", "no_peer", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards",
             "socket_errors", "send_would_block", "tick_echoes", "held_for_vehicle", "held_dropped", "gcs_lagged",
-            "gcs_unresponsive", "released_late")}
+            "gcs_unresponsive", "released_late", "ticks_held")}
         self.codec = MavCodec(0, 0, key=config.key, sign_outgoing=False)  # verifies control messages only
         self.sim_time = 0.0  # lockstep clock (s)
         self.last_tick: "int | None" = None
@@ -146,6 +150,9 @@ class DelayShim(ShimTicks):
         self.tick_mode: "bool | None" = True if config.clock == "lockstep" else None
         self._held: list[tuple["float | None", bytes]] = []  # realtime, mode undecided: GCS datagrams
         self._unacked: "deque[tuple[int, float]]" = deque()  # ticks forwarded to the GCS, not yet acked
+        self._unacked_data = b""  # the newest of them, as forwarded (re-sent when the vehicle retries)
+        #: lockstep: the vehicle's next tick, held until the GCS acknowledges its pending one (shim_ticks)
+        self._held_tick: "tuple | None" = None
         self._gcs_acks = False  # the GCS acknowledges ticks (so its data can be stamped by them)
         self._tick_log: list[tuple[float, float, float, int]] = []  # realtime ticks: (t_k, rx, done, released)
         self._seen_ticks: set[int] = set()

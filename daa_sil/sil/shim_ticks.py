@@ -1,6 +1,15 @@
 """The delay shim's tick handling: in lockstep and realtime-ticks modes the shim's sim clock follows
 the vehicle's SIM_TICK, releases what is due at each tick, forwards the tick to the GCS and echoes
-it, and keeps the tick schedule statistics."""
+it, and keeps the tick schedule statistics.
+
+Lockstep pipelining: a new tick ``k`` that arrives while the GCS has not yet acknowledged the tick
+it was forwarded last (``k - 1``) is **held** (``ticks_held``) and processed the moment that ack
+arrives. So the GCS's step-(k-1) datagram is queued (stamped ``t_{k-1}``) before tick ``k``
+releases anything, exactly as when the vehicle waited for the ack itself; but the vehicle can run
+its step ``k - 1`` while the GCS runs its own, on the shim's echo. Neither needs the other's step
+of the same tick: every one-way delay is at least ``DELAY_MIN_S`` (0.2 s), so nothing sent at
+``t_k`` is due at ``t_k``. A vehicle that re-sends a held tick (its retry) makes the shim forward
+the GCS's pending tick again, in case that datagram was lost."""
 
 from __future__ import annotations
 
@@ -60,6 +69,16 @@ class ShimTicks:
     def _on_tick(self, msg, data: bytes, t_rx: "float | None" = None) -> None:
         c = self.counters
         c["ticks"] += 1
+        if self.config.clock == "lockstep" and self._unacked and int(msg.tick) > self._unacked[-1][0]:
+            if self._held_tick is not None and int(self._held_tick[0].tick) == int(msg.tick):
+                self._send("gcs", self._unacked_data)  # the vehicle's retry: the GCS may have lost its tick
+            self._held_tick = (msg, data, t_rx)
+            c["ticks_held"] += 1
+            return
+        self._process_tick(msg, data, t_rx)
+
+    def _process_tick(self, msg, data: bytes, t_rx: "float | None") -> None:
+        c = self.counters
         rx = (t_rx if t_rx is not None else self._loop.time()) if self.config.clock == "realtime" else 0.0
         t_k = msg.time_ms / 1000.0
         k = int(msg.tick)
@@ -71,6 +90,7 @@ class ShimTicks:
         n = self._release("down", self.sim_time) + self._release("up", self.sim_time)
         if self._send("gcs", data) and (not self._unacked or self._unacked[-1][0] < k):
             self._unacked.append((k, t_k))
+            self._unacked_data = data
             if len(self._unacked) > MAX_GCS_LAG_TICKS:  # the GCS ignores ticks: gone, or not ack-capable
                 self._unacked.clear()
                 if self._gcs_acks:
@@ -94,6 +114,9 @@ class ShimTicks:
         while self._unacked and self._unacked[0][0] <= k:
             self._unacked.popleft()
         self._send("vehicle", data)
+        if self._held_tick is not None and not self._unacked:  # lockstep: the held tick may go now
+            held, self._held_tick = self._held_tick, None
+            self._process_tick(*held)
 
     # -- observability -----------------------------------------------------------------------------
     async def wait_tick(self, tick: int, timeout: float) -> int:
