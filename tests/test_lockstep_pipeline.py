@@ -1,7 +1,8 @@
 """Lockstep pipelining (issue 21, item 5): the vehicle's and the GCS's step of one tick run in parallel.
 
-Every one-way delay is >= 0.2 s, so nothing sent at ``t_k`` is due at ``t_k``: the vehicle's step
-``k`` never reads the GCS's step ``k`` and vice versa. The shim holds a new tick until the GCS has
+The shim releases packets only when it processes a tick, so what one side sends during tick ``k``
+reaches the other at tick ``k + 1`` at the earliest: the vehicle's step ``k`` never reads the
+GCS's step ``k`` and vice versa. The shim holds a new tick until the GCS has
 acknowledged the previous one (so the GCS's datagrams of that step are queued, stamped with its
 tick, before the next releases), and the vehicle steps on the shim's echo instead of waiting for
 the GCS's ack. The step logs of every scenario stay identical (tests/test_sil_run.py and the

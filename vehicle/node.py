@@ -6,7 +6,8 @@ Per step ``k`` (``t_k = k`` s, ``docs/architecture.md`` "The step order"):
   receive until the shim echoes it: the shim processes tick ``k`` (releases every packet due at
   ``t_k``, forwards the tick to the GCS, echoes it) only once the GCS acknowledged tick ``k - 1``,
   so the GCS's step ``k`` and this step ``k`` run in parallel -- neither reads the other's output
-  of the same tick, every delay being >= 0.2 s (:meth:`vehicle.ticks.TickClock._lockstep_ready`).
+  of the same tick, which the shim releases at tick ``k + 1`` at the earliest
+  (:meth:`vehicle.ticks.TickClock._lockstep_ready`).
   Tick 0 and the end of the run wait for the GCS's ``SIM_TICK_ACK``; wired straight to a GCS (no
   shim, no echo) every tick does. No answer within ``tick_timeout_s`` wall seconds ->
   :class:`vehicle.ticks.TickTimeout` (one clear line). The tick is re-sent every ``tick_retry_s``

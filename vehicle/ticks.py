@@ -105,8 +105,9 @@ class TickClock:
         """May lockstep step ``k`` run? Once the GCS acknowledged tick ``k``; behind a shim (it echoes
         ticks) already on its echo of tick ``k >= 1``: the shim processes tick ``k`` only after the
         GCS acknowledged tick ``k - 1`` (:mod:`daa_sil.sil.shim_ticks`), so every uplink packet due at
-        ``t_k`` has been sent to us, and nothing the GCS sends at ``t_k`` is due before ``t_k`` + 0.2 s
-        (the smallest delay): the two steps of a tick run in parallel. Tick 0 waits for the ack (the
+        ``t_k`` has been sent to us; what the GCS sends at ``t_k`` is released at a later tick at the
+        earliest (the shim releases only when it processes a tick): the two steps of a tick run in
+        parallel. Tick 0 waits for the ack (the
         GCS may still be starting and must run its step 0), and so does ``need_ack``."""
         return self._acked >= k or (k > 0 and not need_ack and self._echoed >= k)
 

@@ -7,8 +7,8 @@ it was forwarded last (``k - 1``) is **held** (``ticks_held``) and processed the
 arrives. So the GCS's step-(k-1) datagram is queued (stamped ``t_{k-1}``) before tick ``k``
 releases anything, exactly as when the vehicle waited for the ack itself; but the vehicle can run
 its step ``k - 1`` while the GCS runs its own, on the shim's echo. Neither needs the other's step
-of the same tick: every one-way delay is at least ``DELAY_MIN_S`` (0.2 s), so nothing sent at
-``t_k`` is due at ``t_k``. A vehicle that re-sends a held tick (its retry) makes the shim forward
+of the same tick: the shim releases packets only when it processes a tick, so what either side
+sends during tick ``k`` reaches the other at tick ``k + 1`` at the earliest. A vehicle that re-sends a held tick (its retry) makes the shim forward
 the GCS's pending tick again, in case that datagram was lost."""
 
 from __future__ import annotations
