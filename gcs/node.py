@@ -369,14 +369,18 @@ class GcsNode:
         print(f"daa-gcs: {text}", file=sys.stderr, flush=True)
 
     async def _run_lockstep(self) -> None:
+        inbox = self.ep.inbox
         while not self.stop.is_set():
-            try:
-                r = await asyncio.wait_for(self.ep.inbox.get(), 0.1)
-            except asyncio.TimeoutError:
-                if self.done_tick < 0:  # nothing yet: greet again (a shim may have started after us)
-                    self.ep.send(self._heartbeat())
-                self._check_silence()
-                continue
+            try:  # what already arrived first: a tick's datagrams come together, one wait per burst
+                r = inbox.get_nowait()
+            except asyncio.QueueEmpty:
+                try:
+                    r = await asyncio.wait_for(inbox.get(), 0.1)
+                except asyncio.TimeoutError:
+                    if self.done_tick < 0:  # nothing yet: greet again (a shim may have started after us)
+                        self.ep.send(self._heartbeat())
+                    self._check_silence()
+                    continue
             if r.msg.get_type() == "SIM_TICK":
                 self._on_tick(r)
             else:

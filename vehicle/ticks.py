@@ -127,16 +127,20 @@ class TickClock:
             self._check_stop()
             now = loop.time()
             if now >= deadline:
-                raise TickTimeout(f"no SIM_TICK_ACK for tick {k} (t = {t:g} s) within {limit:g} s: "
+                what = "SIM_TICK_ACK" if need_ack or k == 0 or self.stats.sync_partner != "shim" else "echo"
+                raise TickTimeout(f"no {what} for tick {k} (t = {t:g} s) within {limit:g} s: "
                                   + self._who_is_silent(k))
-            try:
-                r = await asyncio.wait_for(self.ep.inbox.get(), min(deadline, next_retry) - now)
-            except asyncio.TimeoutError:
-                if loop.time() >= next_retry and loop.time() < deadline:
-                    self._send_tick(k, t)
-                    self.stats.tick_retries += 1
-                    next_retry = loop.time() + retry
-                continue
+            try:  # what already arrived first (one wait per burst of datagrams, not per message)
+                r = self.ep.inbox.get_nowait()
+            except asyncio.QueueEmpty:
+                try:
+                    r = await asyncio.wait_for(self.ep.inbox.get(), min(deadline, next_retry) - now)
+                except asyncio.TimeoutError:
+                    if loop.time() >= next_retry and loop.time() < deadline:
+                        self._send_tick(k, t)
+                        self.stats.tick_retries += 1
+                        next_retry = loop.time() + retry
+                    continue
             self.handle(r)
 
     def _confirmed(self, k: int) -> bool:
