@@ -155,3 +155,25 @@ def test_waitmap_record_falls_back_to_loading_without_the_step_log_entry(tmp_pat
     rec = play._waitmap_record(sc, None, path)
     fam = waitmap.family_for(None, preset="paper")
     assert rec["content_hashes"] == [m.content_hash for m in fam.maps] and rec["source"] == waitmap.DEFAULT_MAP
+
+
+def _commands(parser) -> set:
+    return set(next(a for a in parser._actions if a.dest == "command").choices)
+
+
+def test_cli_imports_only_the_module_of_the_command_given():
+    """``daa-sil run ...`` builds the parser of the run module only; the map covers every command."""
+    from daa_sil.cli import COMMANDS, build_parser
+
+    assert _commands(build_parser()) == set(COMMANDS)
+    for name in COMMANDS:
+        assert name in _commands(build_parser(name))
+    mods = _modules_after("from daa_sil.cli import build_parser\nbuild_parser('run').parse_args(['run', 'x.yaml'])")
+    assert _under(mods, "daa_sil.commands.campaign", "daa_sil.commands.viz", "daa_sil.viz", "daa_sil.study",
+                  "pyarrow") == []
+
+
+def test_cli_unknown_command_is_the_usual_one_line_error():
+    res = subprocess.run([sys.executable, "-m", "daa_sil.cli", "bogus"], cwd=ROOT, capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 2 and "invalid choice: 'bogus'" in res.stderr and "'campaign'" in res.stderr
