@@ -162,10 +162,17 @@ def _gcs_argv(opts: RunOptions, out: Path, listen: str, gcs_side: str, clock_arg
         ["--config", str(opts.config)] if opts.config is not None else [])
 
 
+def _preload(module: str) -> None:
+    """Import ``module`` in a daemon thread: while the vehicle is the only process still starting up,
+    a core is free, and the end of the run then does not wait for the import."""
+    import importlib
+    import threading
+
+    threading.Thread(target=importlib.import_module, args=(module,), daemon=True, name=f"preload {module}").start()
+
+
 def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, recorder) -> dict:
     from daa_sil.files import atomic_write_json
-
-    from daa_sil.steplog import read_steplog
 
     t0 = time.monotonic()
     interrupted = False
@@ -200,6 +207,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
             vehicle = pg.start("vehicle", python_module_argv("vehicle") + vargs)
             pg.wait_ready(shim)
             pg.wait_ready(gcs)
+            _preload("daa_sil.steplog")  # pyarrow, for the step log at the end: while only the vehicle starts
             pg.wait_ready(vehicle, timeout=READY_TIMEOUT_S + 120.0)  # may build the wait map first
             if recorder is not None:
                 # now, not at launch: the three processes' start-up is CPU-bound (a helper importing
@@ -231,6 +239,8 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
         if interrupted:
             raise KeyboardInterrupt
         raise DaaSilError(failure or f"the vehicle wrote no step log (logs: {out / 'logs'})")
+    from daa_sil.steplog import read_steplog  # pyarrow: imported while the vehicle started (_preload)
+
     table = read_steplog(steplog)
     result = summarize_steplog(table, sc)
     result.update({"scenario": sc.name, "scenario_file": str(opts.scenario_path), "seed": sc.seed,
