@@ -98,23 +98,21 @@ def link_delay_processes(sc: Scenario) -> "dict | None":
 
 
 def track_intervals(values_deg: np.ndarray, regions: np.ndarray) -> tuple[list, list, list]:
-    """Merge ordered track band samples (deg) with region codes into ``(lo, hi, region name)`` lists."""
+    """Merge ordered track band samples (deg) with region codes into ``(lo, hi, region name)`` lists.
+
+    Samples with a non-finite value or a negative region are left out; each run of equal regions
+    among the rest is one interval, from its first to its last sample (vectorised: one call a step)."""
     from daa_sil.daa.config import REGION_NAMES
 
-    lo, hi, rg = [], [], []
-    cur = None
-    for v, r in zip(values_deg, regions):
-        if not np.isfinite(v) or r < 0:
-            continue
-        if cur is not None and cur[2] == r:
-            cur[1] = float(v)
-        else:
-            if cur is not None:
-                lo.append(cur[0]); hi.append(cur[1]); rg.append(REGION_NAMES[cur[2]])  # noqa: E702
-            cur = [float(v), float(v), int(r)]
-    if cur is not None:
-        lo.append(cur[0]); hi.append(cur[1]); rg.append(REGION_NAMES[cur[2]])  # noqa: E702
-    return lo, hi, rg
+    v = np.asarray(values_deg, float)
+    r = np.asarray(regions)
+    keep = np.isfinite(v) & (r >= 0)
+    v, r = v[keep], r[keep].astype(np.int64)
+    if not v.size:
+        return [], [], []
+    first = np.flatnonzero(np.concatenate(([True], r[1:] != r[:-1])))
+    last = np.append(first[1:] - 1, v.size - 1)
+    return v[first].tolist(), v[last].tolist(), [REGION_NAMES[i] for i in r[first].tolist()]
 
 
 class VehicleCore:
