@@ -15,7 +15,7 @@ datagram that is due while its destination is still unknown is counted as ``no_p
 
 Seeds (:func:`shim_seeds`): the *delays* of a shim seeded ``seed`` are the encounter's fast-time
 delay streams, ``DelayProcess(model, encounter_streams(seed)[STREAM_UP], epoch_s)`` for the up line
-and ``[STREAM_DOWN]`` for the down line (:func:`daa_sil.study.fasttime.encounter_streams`), so a SIL run
+and ``[STREAM_DOWN]`` for the down line (:func:`daa_sil.models.streams.encounter_streams`), so a SIL run
 of a scenario sees draw for draw the delays fast-time gives the same encounter. The *impairment*
 draws (loss, duplication, reordering) come from ``child_seed(SeedSequence(seed), 0)`` (down) /
 ``1`` (up) (:func:`direction_seeds`); fast-time has no impairments.
