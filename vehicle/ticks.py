@@ -107,8 +107,8 @@ class TickClock:
         GCS acknowledged tick ``k - 1`` (:mod:`daa_sil.sil.shim_ticks`), so every uplink packet due at
         ``t_k`` has been sent to us; what the GCS sends at ``t_k`` is released at a later tick at the
         earliest (the shim releases only when it processes a tick): the two steps of a tick run in
-        parallel. Tick 0 waits for the ack (the
-        GCS may still be starting and must run its step 0), and so does ``need_ack``."""
+        parallel. Tick 0 waits for the ack (the GCS may still be starting and must run its step 0),
+        and so does ``need_ack``."""
         return self._acked >= k or (k > 0 and not need_ack and self._echoed >= k)
 
     async def _await_ack(self, k: int, t: float, need_ack: bool = False, send: bool = True) -> None:

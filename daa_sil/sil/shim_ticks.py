@@ -8,8 +8,9 @@ arrives. So the GCS's step-(k-1) datagram is queued (stamped ``t_{k-1}``) before
 releases anything, exactly as when the vehicle waited for the ack itself; but the vehicle can run
 its step ``k - 1`` while the GCS runs its own, on the shim's echo. Neither needs the other's step
 of the same tick: the shim releases packets only when it processes a tick, so what either side
-sends during tick ``k`` reaches the other at tick ``k + 1`` at the earliest. A vehicle that re-sends a held tick (its retry) makes the shim forward
-the GCS's pending tick again, in case that datagram was lost."""
+sends during tick ``k`` reaches the other at tick ``k + 1`` at the earliest. A vehicle that
+re-sends a held tick (its retry) makes the shim forward the GCS's pending tick again, in case that
+datagram was lost."""
 
 from __future__ import annotations
 
