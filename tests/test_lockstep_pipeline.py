@@ -69,9 +69,15 @@ async def test_shim_holds_a_tick_until_the_gcs_acked_the_previous_one():
             await _nothing(veh, ("SIM_TICK",))  # held: no echo ...
             await _nothing(gcs, ("SIM_TICK",))  # ... nor forwarded ...
             assert shim.sim_time == 0.0 and shim.counters["ticks_held"] == 1  # ... nor released anything
-            # a retry of the held tick makes the shim forward the GCS's pending tick again
+            # the vehicle's retry (tick 0 again, then tick 1): the repeated tick reaches the GCS again,
+            # tick 1 stays held
+            veh.send(d.MAVLink_sim_tick_message(0, 0))
             veh.send(d.MAVLink_sim_tick_message(1, 1000))
             assert (await _next(gcs, ("SIM_TICK",))).tick == 0
+            assert (await _next(veh, ("SIM_TICK",))).tick == 0  # a repeated tick is echoed again
+            await _nothing(gcs, ("SIM_TICK",))
+            await _nothing(veh, ("SIM_TICK",))
+            assert shim.sim_time == 0.0 and shim.counters["ticks_held"] == 2
             # the GCS's step 0: a command stamped t = 0 (due at 0.5 s), then its ack
             gcs.send(d.MAVLink_pilot_maneuver_message(0, 1, 1, 1, 90.0, 0.0, 55.0))
             gcs.send(d.MAVLink_sim_tick_ack_message(0, 0, 1))
@@ -138,3 +144,44 @@ async def test_vehicle_steps_on_the_shims_echo_and_waits_for_the_last_ack(tmp_pa
             node.close()
     assert ticks == list(range(n))  # each tick once: no retry, no timeout
     assert node.stats.sync_partner == "shim" and node.stats.tick_retries == 0
+
+
+@pytest.mark.asyncio
+async def test_vehicle_retry_of_a_held_tick_resends_the_previous_one():
+    """A shim stand-in holds tick 2 (the GCS's ack of tick 1 is missing); the vehicle's retry sends
+    tick 1 again before tick 2, and the run goes on once the stand-in answers."""
+    from daa_sil.sil.scenario import parse_scenario
+    from vehicle.node import VehicleNode, VehicleOptions
+
+    sc = parse_scenario(SCENARIO)
+    n = sc.n_steps
+    async with await open_endpoint(MavCodec(1, 1), LOCAL) as shim:
+        node = VehicleNode(sc, VehicleOptions(out=f"udp:127.0.0.1:{shim.local_address[1]}", clock="lockstep",
+                                              tick_timeout_s=10.0, tick_retry_s=0.3))
+        await node.start()
+        run = asyncio.create_task(node.run())
+        ticks, held = [], True
+        try:
+            while True:
+                r = await shim.recv(10.0)
+                if r.msg.get_type() != "SIM_TICK":
+                    continue
+                k = int(r.msg.tick)
+                ticks.append(k)
+                if k == 2 and held:
+                    continue  # held: no echo
+                if k == 1 and ticks.count(1) == 2:  # the retry: the GCS acks tick 1, tick 2 goes
+                    held = False
+                    shim.send(d.MAVLink_sim_tick_ack_message(1, 1000, 1), addr=r.addr)
+                    shim.send(d.MAVLink_sim_tick_message(2, 2000), addr=r.addr)
+                    continue
+                shim.send(d.MAVLink_sim_tick_message(k, r.msg.time_ms), addr=r.addr)
+                if k in (0, n - 1):
+                    shim.send(d.MAVLink_sim_tick_ack_message(k, r.msg.time_ms, 1), addr=r.addr)
+                if k == n - 1:
+                    break
+            await asyncio.wait_for(run, 10.0)
+        finally:
+            run.cancel()
+            node.close()
+    assert ticks[:5] == [0, 1, 2, 1, 2] and node.stats.steps == n and node.stats.tick_retries == 1

@@ -137,6 +137,10 @@ class TickClock:
                     r = await asyncio.wait_for(self.ep.inbox.get(), min(deadline, next_retry) - now)
                 except asyncio.TimeoutError:
                     if loop.time() >= next_retry and loop.time() < deadline:
+                        if k > 0 and not need_ack and self._acked < k - 1:
+                            # a shim holds tick k until the GCS acknowledges tick k - 1: send that one
+                            # again too (the shim forwards a repeated tick), in case it was lost
+                            self._send_tick(k - 1, t - self.core.dt)
                         self._send_tick(k, t)
                         self.stats.tick_retries += 1
                         next_retry = loop.time() + retry

@@ -150,7 +150,6 @@ class DelayShim(ShimTicks):
         self.tick_mode: "bool | None" = True if config.clock == "lockstep" else None
         self._held: list[tuple["float | None", bytes]] = []  # realtime, mode undecided: GCS datagrams
         self._unacked: "deque[tuple[int, float]]" = deque()  # ticks forwarded to the GCS, not yet acked
-        self._unacked_data = b""  # the newest of them, as forwarded (re-sent when the vehicle retries)
         #: lockstep: the vehicle's next tick, held until the GCS acknowledges its pending one (shim_ticks)
         self._held_tick: "tuple | None" = None
         self._gcs_acks = False  # the GCS acknowledges ticks (so its data can be stamped by them)

@@ -8,9 +8,9 @@ arrives. So the GCS's step-(k-1) datagram is queued (stamped ``t_{k-1}``) before
 releases anything, exactly as when the vehicle waited for the ack itself; but the vehicle can run
 its step ``k - 1`` while the GCS runs its own, on the shim's echo. Neither needs the other's step
 of the same tick: the shim releases packets only when it processes a tick, so what either side
-sends during tick ``k`` reaches the other at tick ``k + 1`` at the earliest. A vehicle that
-re-sends a held tick (its retry) makes the shim forward the GCS's pending tick again, in case that
-datagram was lost."""
+sends during tick ``k`` reaches the other at tick ``k + 1`` at the earliest. (A vehicle whose tick
+is held past its retry interval re-sends tick ``k - 1`` before tick ``k``: a repeated tick is
+forwarded again, so a lost one is recovered, signed or not.)"""
 
 from __future__ import annotations
 
@@ -71,9 +71,7 @@ class ShimTicks:
         c = self.counters
         c["ticks"] += 1
         if self.config.clock == "lockstep" and self._unacked and int(msg.tick) > self._unacked[-1][0]:
-            if self._held_tick is not None and int(self._held_tick[0].tick) == int(msg.tick):
-                self._send("gcs", self._unacked_data)  # the vehicle's retry: the GCS may have lost its tick
-            self._held_tick = (msg, data, t_rx)
+            self._held_tick = (msg, data, t_rx)  # the newest copy (a retry replaces it)
             c["ticks_held"] += 1
             return
         self._process_tick(msg, data, t_rx)
@@ -91,7 +89,6 @@ class ShimTicks:
         n = self._release("down", self.sim_time) + self._release("up", self.sim_time)
         if self._send("gcs", data) and (not self._unacked or self._unacked[-1][0] < k):
             self._unacked.append((k, t_k))
-            self._unacked_data = data
             if len(self._unacked) > MAX_GCS_LAG_TICKS:  # the GCS ignores ticks: gone, or not ack-capable
                 self._unacked.clear()
                 if self._gcs_acks:
