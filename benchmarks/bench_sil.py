@@ -1,11 +1,18 @@
 """SIL benchmarks: lockstep speed, and realtime timing and parity under load.
 
-**Lockstep** (``--part lockstep``): a 240 s encounter through three processes (vehicle, shim, GCS).
-Prints the wall time of the whole ``daa-sil run`` (process start to result.json) and the ratio
-against real time, plus the in-process baseline measured in the same run (the same OnboardCore
-steps with no link: the cost of the SIL's processes and sockets is the difference) and the cost of
-building and encoding each step's telemetry (the ArduPilot-SITL message set, per link).
-Target (lockstep): <= 2.5 s wall for the 240 s encounter with the full telemetry.
+**Lockstep** (``--part lockstep``): a 240 s head-on encounter through three processes (vehicle,
+shim, GCS), ``daa-sil run`` started as a fresh process and timed from its start to its exit.
+Measured in the same run, interleaved, for this checkout and a baseline checkout (``--baseline``,
+default bba2fd8 installed apart in /work/baseline with its own venv and ``DAA_SIL_CACHE``), each
+**with and without .pyc** (copies of the packages, compiled or not: see ``sil_probe.py``).
+Prints per configuration the best and median wall time, the ratio to the baseline, start-up to
+READY of each process (wall s after the run started, and its CPU s by then), CPU per step of the
+vehicle, the GCS and the shim, the wall time per lockstep step, and the load average around each
+run. Every run's step log must be identical to the baseline's (``daa_sil.steplog.cells_equal``).
+Then the in-process figure: the vehicle's core alone (``VehicleCore`` built and flown for every
+step, no link, no processes) and its telemetry cost per step, for both checkouts.
+Targets (issue 21): <= 2.0 s wall with .pyc; in-process <= 1.0 s; at N = 1 the vehicle's step
+<= 1.5 ms and the GCS's <= 1 ms of CPU.
 
 **Realtime** (``--part realtime``): ``N`` (default 20) concurrent ``daa-sil run --clock realtime``
 encounters of the head-on scenario at each ``--speeds`` factor (default 1 and 4), after one run
@@ -17,7 +24,8 @@ lockstep semantics, and whether its step log is **identical** to the lockstep ru
 their times, minimum range). It prints the machine's load average while the runs played, and the
 ratio of the loaded figures to the alone run.
 
-    python benchmarks/bench_sil.py [--part lockstep|realtime|all] [--repeat 3]
+    python benchmarks/bench_sil.py [--part lockstep|realtime|all] [--repeat 3] [--pyc both|present|absent]
+    python benchmarks/bench_sil.py --baseline none          # this checkout only
     python benchmarks/bench_sil.py --part realtime --runs 20 --speeds 1,4 [--duration 180]
 """
 
@@ -34,6 +42,10 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+TARGET_S, TARGET_INPROC_S, TARGET_VEHICLE_MS, TARGET_GCS_MS = 2.0, 1.0, 1.5, 1.0
+DEFAULT_BASELINE = "/work/baseline"
 
 
 def main() -> None:
@@ -41,68 +53,152 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--scenario", type=Path, default=ROOT / "scenarios" / "head_on.yaml")
     ap.add_argument("--part", choices=("lockstep", "realtime", "all"), default="lockstep")
+    ap.add_argument("--pyc", choices=("both", "present", "absent"), default="both",
+                    help="lockstep: measure with the project's .pyc present, absent or both (default)")
+    ap.add_argument("--baseline", default=DEFAULT_BASELINE,
+                    help=f"lockstep: checkout of the baseline with its .venv (default {DEFAULT_BASELINE}, bba2fd8 "
+                         f"installed apart, if it exists); none = this checkout only")
+    ap.add_argument("--baseline-cache", default="/work/cache-baseline",
+                    help="lockstep: DAA_SIL_CACHE of the baseline (default /work/cache-baseline)")
     ap.add_argument("--runs", type=int, default=20, help="realtime: concurrent runs (default 20)")
     ap.add_argument("--speeds", default="1,4", help="realtime: speed factors, comma-separated (default 1,4)")
     ap.add_argument("--duration", type=float, default=None, help="realtime: sim s per run (default: the scenario's)")
     ap.add_argument("--stagger", type=float, default=0.5, help="realtime: wall s between launches (default 0.5)")
-    ap.add_argument("--keep", type=Path, default=None, help="realtime: keep the run directories here")
+    ap.add_argument("--keep", type=Path, default=None, help="keep the run directories here")
     ap.add_argument("--ab-slice", action="store_true",
                     help="realtime: every other concurrent run's vehicle without the short EEVDF slice "
                          "(DAA_SIL_VEHICLE_SLICE_US=0), and compare the two halves")
     args = ap.parse_args()
     if args.part == "realtime":
         return bench_realtime(args)
+    bench_lockstep(args)
+    if args.part == "all":
+        bench_realtime(args)
 
-    from daa_sil.sil.play import RunOptions, run_sil
+
+# ------------------------------------------------------------------------------------------------
+# lockstep: this checkout against the baseline, with and without .pyc
+
+def _f(x, fmt=".2f") -> str:
+    return "-" if x is None else format(x, fmt)
+
+
+def _label(k) -> str:
+    return f"{k[0]} {'with' if k[1] else 'no'} .pyc"
+
+
+def _ratio(a, b) -> str:
+    return "-" if a is None or not b else f"{a / b:.2f}x"
+
+
+def bench_lockstep(args) -> None:
+    import yaml
+
+    import sil_probe as P
     from daa_sil.sil.scenario import load_scenario, scenario_from_dict
+    from daa_sil.steplog import cells_equal, read_steplog
 
     sc = load_scenario(args.scenario)
     d = sc.to_dict()
     d["duration_s"] = 240.0
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "bench.yaml"
-        path.write_text(__import__("yaml").safe_dump(d, sort_keys=False))
-        scenario_from_dict(d)  # validate
-        from vehicle.core import VehicleCore
-
-        from daa_sil.link.codec import MavCodec
-        from vehicle import telemetry as T
-
-        t0 = time.perf_counter()
-        vc = VehicleCore(load_scenario(path))
-        for k in range(vc.n_steps):
-            vc.step(float(k))
-        base = time.perf_counter() - t0
-        # telemetry: the same steps again, each one's full message set built and encoded (one datagram)
-        codec = MavCodec(1, 1)
-        vc = VehicleCore(load_scenario(path))
-        t_tel, n_msgs, n_bytes = 0.0, 0, 0
-        home = None
-        for k in range(vc.n_steps):
-            out = vc.step(float(k))
-            t1 = time.perf_counter()
-            home = home or T.kin_of(out.own, 0)
-            msgs = [m for ms in T.step_messages(vc, float(k), out, home).values() for m in ms]
-            data = codec.encode_many(msgs)
-            t_tel += time.perf_counter() - t1
-            n_msgs += len(msgs)
-            n_bytes += len(data)
-        walls = []
-        for i in range(args.repeat):
-            t0 = time.perf_counter()
-            res = run_sil(RunOptions(path, Path(tmp) / f"run{i}"))
-            walls.append(time.perf_counter() - t0)
-            assert res["steps"] == 240
-    best = min(walls)
-    print(f"lockstep SIL, 240 s encounter ({sc.name}), 3 processes: best {best:.2f} s wall of {args.repeat} "
-          f"(all: {', '.join(f'{w:.2f}' for w in walls)}) -> {240.0 / best:.0f}x real time "
-          f"(target <= 2.5 s: {'met' if best <= 2.5 else 'NOT met'})")
-    print(f"in-process baseline (same OnboardCore steps, no link, no processes): {base:.2f} s -> "
-          f"{240.0 / base:.0f}x real time; SIL/baseline = {best / base:.1f}x")
-    print(f"telemetry per step: {n_msgs / 240:.1f} messages, {n_bytes / 240:.0f} bytes, built + encoded in "
-          f"{1e3 * t_tel / 240:.2f} ms ({100 * t_tel / best:.1f} % of the SIL wall time, per link)")
-    if args.part == "all":
-        bench_realtime(args)
+    n_steps = scenario_from_dict(d).n_steps
+    tmp = tempfile.TemporaryDirectory(prefix="bench_sil_")
+    base = args.keep or Path(tmp.name)
+    base.mkdir(parents=True, exist_ok=True)
+    path = base / "bench.yaml"
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    probe = P.write_probe(base / "probe")
+    checkouts = {"new": (ROOT, sys.executable, os.environ.get("DAA_SIL_CACHE"))}
+    bpy = Path(args.baseline) / ".venv" / "bin" / "python"
+    if args.baseline == DEFAULT_BASELINE and not bpy.is_file():
+        print(f"bench_sil: no baseline at {DEFAULT_BASELINE}: this checkout only (--baseline DIR to compare)")
+        args.baseline = "none"
+    if args.baseline != "none":
+        if not bpy.is_file():
+            sys.exit(f"bench_sil: no baseline interpreter {bpy} (give --baseline DIR or --baseline none)")
+        checkouts["base"] = (Path(args.baseline), str(bpy), args.baseline_cache)
+    pycs = {"both": (True, False), "present": (True,), "absent": (False,)}[args.pyc]
+    configs = [(c, pyc) for pyc in pycs for c in checkouts]
+    trees = {}
+    for c, pyc in configs:
+        root, py, _ = checkouts[c]
+        trees[c, pyc] = P.prepare_tree(root, base / f"{c}-{'pyc' if pyc else 'nopyc'}", py, compiled=pyc)
+    print(f"lockstep SIL, 240 s encounter ({sc.name}), 3 processes, `daa-sil run` as a fresh process; "
+          f"{os.cpu_count()} CPUs; load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print(f"  new = {ROOT}; base = {checkouts['base'][0] if 'base' in checkouts else '(none)'}; "
+          f"{args.repeat} interleaved repeats of {len(configs)} configurations")
+    # one warm-up run per checkout (page cache, wait-map cache present)
+    for c in checkouts:
+        root, py, cache = checkouts[c]
+        P.run_probed(py, trees[c, pycs[0]], probe, path, base / f"warm-{c}", cache)
+    res = {k: [] for k in configs}
+    for i in range(args.repeat):
+        for c, pyc in configs:
+            root, py, cache = checkouts[c]
+            out = base / f"{c}-{'pyc' if pyc else 'nopyc'}-run{i}"
+            l0 = P.load()
+            run = P.run_probed(py, trees[c, pyc], probe, path, out, cache)
+            if run["rc"] not in (0, 1):
+                sys.exit(f"bench_sil: {c} run failed (exit {run['rc']}): {run['stderr']}")
+            fig = P.figures(run, n_steps)
+            fig["load"] = max(l0, P.load())
+            bad = [m for m in fig["modules"].values() if m and not str(m).startswith(str(trees[c, pyc]))]
+            if bad:
+                sys.exit(f"bench_sil: a {c} process imported daa_sil from {bad[0]}, not the copy under test")
+            fig["rows"] = read_steplog(out / "steplog.parquet").to_pylist()
+            res[c, pyc].append(fig)
+    # identity: every run's step log against the baseline's first one (or the first run without a baseline)
+    ref = (res.get(("base", pycs[0])) or res[configs[0]])[0]["rows"]
+    diff = {k: sum(1 for f in v for ra, rb in zip(ref, f["rows"]) for col in ra if not cells_equal(ra[col], rb[col]))
+            + sum(abs(len(f["rows"]) - len(ref)) for f in v) for k, v in res.items()}
+    print("\n  configuration      wall best / median (s)  vs base   load    READY (s after start; CPU s): "
+          "vehicle / gcs / shim      CPU per step (ms): vehicle / gcs / shim   wall per step (ms)")
+    best = {k: min(f["wall"] for f in v) for k, v in res.items()}
+    for k in configs:
+        v = res[k]
+        med = {key: P.median([f[key] for f in v]) for key in v[0] if key not in ("modules", "rows")}
+        b = ("base", k[1])
+        vs = _ratio(best[k], best.get(b)) if k[0] != "base" and b in res else ""
+        print(f"  {k[0]:4s} {'with' if k[1] else 'no':4s} .pyc    {best[k]:6.2f} / {med['wall']:6.2f}         "
+              f"{vs:7s}  {_f(med['load'], '.1f'):>4s}    "
+              f"{_f(med['ready_vehicle'])} ({_f(med['ready_cpu_vehicle'])}) / {_f(med['ready_gcs'])} "
+              f"({_f(med['ready_cpu_gcs'])}) / {_f(med['ready_shim'])} ({_f(med['ready_cpu_shim'])})      "
+              f"{_f(med['step_ms_vehicle'])} / {_f(med['step_ms_gcs'])} / {_f(med['step_ms_shim'])}"
+              f"              {_f(med['play_ms_per_step'])}")
+    for pyc in pycs:
+        vs = (f" vs bba2fd8 {best['base', pyc]:.2f} s in the same run: ratio {best['new', pyc] / best['base', pyc]:.2f}"
+              if ("base", pyc) in best else " (no baseline)")
+        print(f"  => {'with' if pyc else 'without'} .pyc: {best['new', pyc]:.2f} s{vs}"
+              + (f" (target <= {TARGET_S:g} s: {'met' if best['new', pyc] <= TARGET_S else 'NOT met'})" if pyc else ""))
+    print(f"  => step logs identical to the baseline's: {'yes' if not any(diff.values()) else 'NO'} "
+          f"({', '.join(f'{_label(k)}: {n} cells differ' for k, n in diff.items())})")
+    # in-process: the vehicle's core alone
+    print("\n  in-process (VehicleCore built + every step, no link, no processes; best of "
+          f"{args.repeat}):")
+    inp = {}
+    for c in checkouts:
+        root, py, cache = checkouts[c]
+        runs = []
+        for _ in range(args.repeat):
+            l0 = P.load()
+            r = P.in_process(py, trees[c, pycs[0]], probe, path, cache)
+            r["load"] = max(l0, P.load())
+            runs.append(r)
+        inp[c] = min(runs, key=lambda r: r["wall"])
+        r = inp[c]
+        print(f"  {c:4s}: {r['wall']:.2f} s (build {r['build_wall']:.2f} s, steps {r['step_ms']:.2f} ms CPU each; "
+              f"telemetry {r['telemetry_ms']:.2f} ms a step; load {r['load']:.1f})")
+    if "base" in inp:
+        print(f"  => in-process {inp['new']['wall']:.2f} s vs bba2fd8 {inp['base']['wall']:.2f} s: ratio "
+              f"{inp['new']['wall'] / inp['base']['wall']:.2f} (target <= {TARGET_INPROC_S:g} s: "
+              f"{'met' if inp['new']['wall'] <= TARGET_INPROC_S else 'NOT met'})")
+    k = ("new", pycs[0])
+    vm = P.median([f["step_ms_vehicle"] for f in res[k]])
+    gm = P.median([f["step_ms_gcs"] for f in res[k]])
+    print(f"  => per-step CPU in the SIL (median, {'with' if k[1] else 'no'} .pyc): vehicle {_f(vm)} ms (target <= "
+          f"{TARGET_VEHICLE_MS:g}), GCS {_f(gm)} ms (target <= {TARGET_GCS_MS:g}); load average after: "
+          f"{', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    tmp.cleanup()
 
 
 # ------------------------------------------------------------------------------------------------

@@ -28,6 +28,11 @@ COMMAND_MODULES = [
     "daa_sil.commands.campaign",
     "daa_sil.commands.viz",
 ]
+#: the commands each module registers (``daa-sil COMMAND ...`` imports only that module)
+COMMANDS = {"config": "daa_sil.commands.config", "geometry": "daa_sil.commands.geometry",
+            "daa": "daa_sil.commands.daa", "conformance": "daa_sil.commands.conformance",
+            "waitmap": "daa_sil.commands.waitmap", "shim": "daa_sil.commands.shim", "run": "daa_sil.commands.run",
+            "demo": "daa_sil.commands.run", "campaign": "daa_sil.commands.campaign", "viz": "daa_sil.commands.viz"}
 
 EPILOG = """examples:
   # the demo: a head-on encounter, 4 s link delay, vehicle / delay shim / GCS over MAVLink
@@ -48,14 +53,16 @@ Every command has --help with examples. Units are SI (m, s, m/s) in the ENU fram
 """
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: "str | None" = None) -> argparse.ArgumentParser:
+    """The ``daa-sil`` parser with every command, or with ``command``'s module only (its commands:
+    ``daa-sil run ...`` then imports neither the campaign nor the viewer modules)."""
     parser = _Parser(prog="daa-sil", description=__doc__.splitlines()[0] + "\n\n"
                      "MAVLink SIL bridge and fast-time study for UAS detect-and-avoid with a delayed remote pilot.",
                      epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"daa-sil {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
-    for name in COMMAND_MODULES:
+    for name in ([COMMANDS[command]] if command in COMMANDS else COMMAND_MODULES):
         importlib.import_module(name).register(sub)
     return parser
 
@@ -83,7 +90,8 @@ def _interrupted(prog: str, exc: KeyboardInterrupt) -> int:
 
 def main(argv: "list[str] | None" = None) -> int:
     _adopt(None)
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv[0] if argv else None)
     try:
         args = parser.parse_args(argv)
         rc = args.func(args)

@@ -103,7 +103,7 @@ class GcsNode:
             self.daa_cfg = rc.daa_config() if rc is not None else DaaConfig()
         self.pilot = None
         if self.mode == "model":
-            from daa_sil.study.fasttime import STREAM_PILOT, encounter_streams
+            from daa_sil.models.streams import STREAM_PILOT, encounter_streams
             from daa_sil.models.pilot import PilotModel
             from daa_sil.models.pilot_display import PilotDisplay
             from daa_sil.models.pilot_config import PilotConfig
@@ -325,14 +325,18 @@ class GcsNode:
         print(f"daa-gcs: {text}", file=sys.stderr, flush=True)
 
     async def _run_lockstep(self) -> None:
+        inbox = self.ep.inbox
         while not self.stop.is_set():
-            try:
-                r = await asyncio.wait_for(self.ep.inbox.get(), 0.1)
-            except asyncio.TimeoutError:
-                if self.done_tick < 0:  # nothing yet: greet again (a shim may have started after us)
-                    self.ep.send(self._heartbeat())
-                self._check_silence()
-                continue
+            try:  # what already arrived first: a tick's datagrams come together, one wait per burst
+                r = inbox.get_nowait()
+            except asyncio.QueueEmpty:
+                try:
+                    r = await asyncio.wait_for(inbox.get(), 0.1)
+                except asyncio.TimeoutError:
+                    if self.done_tick < 0:  # nothing yet: greet again (a shim may have started after us)
+                        self.ep.send(self._heartbeat())
+                    self._check_silence()
+                    continue
             self.take(r)
 
     def sim_now(self, loop) -> "float | None":

@@ -28,7 +28,7 @@ def child_pid(out: Path, name: str) -> int:
     Found by its command line: the module it runs and the output file only that child is given."""
     import os
 
-    marker = {"vehicle": ("-m vehicle", f"{out}/steplog.parquet"), "shim": ("daa_sil.cli shim", f"{out}/shim_stats.json"),
+    marker = {"vehicle": ("-m vehicle", f"{out}/steplog.parquet"), "shim": ("-m daa_sil.commands.shim", f"{out}/shim_stats.json"),
               "gcs": ("-m gcs", f"{out}/gcs_commands.jsonl")}[name]
     found = []
     for d in Path("/proc").iterdir():

@@ -58,7 +58,7 @@ def _alive(pid: int, marker: str) -> bool:
 
 
 def _role(cmd: str) -> str:
-    if " shim " in cmd:
+    if "-m daa_sil.commands.shim " in cmd or " shim " in cmd:  # daa-sil run's shim, or `daa-sil shim`
         return "shim"
     if "-m gcs" in cmd or "daa-gcs" in cmd:
         return "gcs"

@@ -36,7 +36,7 @@ def build_policy(sc: Scenario) -> "A.AllocationPolicy":
 
 
 def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, config=None):
-    """``(OnboardCore, EncounterSet, policy)`` for scenario ``sc`` (N = 1). ``waitmap`` is a
+    """``(OnboardCore, EncounterSet, policy, wait-map family or None)`` for scenario ``sc`` (N = 1). ``waitmap`` is a
     ``--waitmap`` value (map preset, grid spec or family directory; None = the configuration's, else
     the default map), read exactly as fast-time reads it (:func:`daa_sil.waitmap.family_for`, LoWC
     preset ``paper``). ``config`` (a :class:`daa_sil.config.run_config.RunConfig`) contributes its
@@ -63,13 +63,14 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
         policy = replace(policy, **link) if link else policy
         waitmap = waitmap if waitmap is not None else config.waitmap["source"]
     daa_cfg = config.daa_config(sc.thresholds) if config is not None else _preset_daa(sc.thresholds)
-    lookup = None
+    lookup = family = None
     if policy.wait_mode == "map":
         from daa_sil import waitmap as wm
 
-        lookup = A.make_wait_lookup(wm.family_for(waitmap, preset="paper"), cfg=daa_cfg)
+        family = wm.family_for(waitmap, preset="paper")
+        lookup = A.make_wait_lookup(family, cfg=daa_cfg)
     core = OnboardCore(es.own, es.intr, es.intruder_controls, policy, daa_cfg, lookup, thresholds=sc.thresholds)
-    return core, es, policy
+    return core, es, policy, family
 
 
 def _preset_daa(name: str):
@@ -99,23 +100,21 @@ def link_delay_processes(sc: Scenario) -> "dict | None":
 
 
 def track_intervals(values_deg: np.ndarray, regions: np.ndarray) -> tuple[list, list, list]:
-    """Merge ordered track band samples (deg) with region codes into ``(lo, hi, region name)`` lists."""
+    """Merge ordered track band samples (deg) with region codes into ``(lo, hi, region name)`` lists.
+
+    Samples with a non-finite value or a negative region are left out; each run of equal regions
+    among the rest is one interval, from its first to its last sample (vectorised: one call a step)."""
     from daa_sil.daa.config import REGION_NAMES
 
-    lo, hi, rg = [], [], []
-    cur = None
-    for v, r in zip(values_deg, regions):
-        if not np.isfinite(v) or r < 0:
-            continue
-        if cur is not None and cur[2] == r:
-            cur[1] = float(v)
-        else:
-            if cur is not None:
-                lo.append(cur[0]); hi.append(cur[1]); rg.append(REGION_NAMES[cur[2]])  # noqa: E702
-            cur = [float(v), float(v), int(r)]
-    if cur is not None:
-        lo.append(cur[0]); hi.append(cur[1]); rg.append(REGION_NAMES[cur[2]])  # noqa: E702
-    return lo, hi, rg
+    v = np.asarray(values_deg, float)
+    r = np.asarray(regions)
+    keep = np.isfinite(v) & (r >= 0)
+    v, r = v[keep], r[keep].astype(np.int64)
+    if not v.size:
+        return [], [], []
+    first = np.flatnonzero(np.concatenate(([True], r[1:] != r[:-1])))
+    last = np.append(first[1:] - 1, v.size - 1)
+    return v[first].tolist(), v[last].tolist(), [REGION_NAMES[i] for i in r[first].tolist()]
 
 
 class VehicleCore:
@@ -124,7 +123,14 @@ class VehicleCore:
     def __init__(self, sc: Scenario, policy=None, waitmap: "str | None" = None, config=None):
         self.sc = sc
         self.config = config
-        self.core, self.es, self.policy = build_onboard(sc, policy, waitmap, config)
+        self.core, self.es, self.policy, family = build_onboard(sc, policy, waitmap, config)
+        #: the wait maps flown (``waitmap.describe``: grid, parameters, turn rates, the content hashes
+        #: the load verified), None without a map; the step log's ``waitmap`` metadata
+        self.waitmap_record = None
+        if family is not None:
+            from daa_sil.waitmap import describe
+
+            self.waitmap_record = describe(family)
         self.dt = 1.0
         self.n_steps = sc.n_steps
         self._new: list[PilotCommand] = []

@@ -3,9 +3,14 @@
 Per step ``k`` (``t_k = k`` s, ``docs/architecture.md`` "The step order"):
 
 * **lockstep**: send ``SIM_TICK(k, t_k)`` alone in its datagram to the peer (the shim), then
-  receive until ``SIM_TICK_ACK(k)`` arrives (the shim forwards it after releasing every packet due
-  at ``t_k`` and queueing the GCS's step-k commands). No ack within ``tick_timeout_s`` wall
-  seconds -> :class:`vehicle.ticks.TickTimeout` (one clear line). The tick is re-sent every ``tick_retry_s``
+  receive until the shim echoes it: the shim processes tick ``k`` (releases every packet due at
+  ``t_k``, forwards the tick to the GCS, echoes it) only once the GCS acknowledged tick ``k - 1``,
+  so the GCS's step ``k`` and this step ``k`` run in parallel -- neither reads the other's output
+  of the same tick, which the shim releases at tick ``k + 1`` at the earliest
+  (:meth:`vehicle.ticks.TickClock._lockstep_ready`).
+  Tick 0 and the end of the run wait for the GCS's ``SIM_TICK_ACK``; wired straight to a GCS (no
+  shim, no echo) every tick does. No answer within ``tick_timeout_s`` wall seconds ->
+  :class:`vehicle.ticks.TickTimeout` (one clear line). The tick is re-sent every ``tick_retry_s``
   in case a datagram was lost (the GCS re-acks a tick it already did).
 * **realtime**: the same ticks, paced by the wall clock instead of waiting for the GCS (see
   ``docs/sil.md``, "Realtime and lockstep"). ``SIM_TICK(k)`` goes out a lead of half a step
@@ -414,5 +419,8 @@ class VehicleNode(StepLogWriter, TickClock):
             if on_step is not None:
                 on_step(self, out)
             await asyncio.sleep(0)
+        if lockstep and n:
+            # the GCS ran its last step in parallel: done once it acknowledged it (as every other tick)
+            await self._await_ack(n - 1, (n - 1) * self.core.dt, need_ack=True, send=False)
 
 

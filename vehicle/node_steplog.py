@@ -50,5 +50,7 @@ class StepLogWriter:
         # parameter / mode writes: kind, name, old, new, status, link, source, t_received, t_applied, t_sent
         meta["settings"] = json.dumps([e.as_dict() for e in self.services.events], sort_keys=True)
         meta["config"] = json.dumps(self._config_record(), sort_keys=True, default=str)
+        if self.core.waitmap_record is not None:  # what `daa-sil run` records, without loading the maps again
+            meta["waitmap"] = json.dumps(self.core.waitmap_record, sort_keys=True)
         # only the steps flown: a step computed but stopped before it was published is not in the log
         return self.core.write_steplog(self.opts.steplog, meta, n_rows=self.stats.steps)

@@ -318,7 +318,8 @@ def step_messages(vc, t: float, out, home: Kin, agent_enabled: bool = True) -> "
     it = out.intruders
     m = it.shape[1]
     # one geodetic conversion for the ownship and every intruder
-    lat, lon, alt = enu_to_geodetic(np.r_[own0.x[0], it.x[0]], np.r_[own0.y[0], it.y[0]], np.r_[own0.z[0], it.z[0]],
+    lat, lon, alt = enu_to_geodetic(*(np.concatenate((a[:1], b[0])) for a, b in ((own0.x, it.x), (own0.y, it.y),
+                                                                                   (own0.z, it.z))),
                                     origin.lat_deg, origin.lon_deg, origin.alt_m)
     lat, lon, alt = lat.tolist(), lon.tolist(), alt.tolist()
     g0 = (lat[0], lon[0], alt[0])

@@ -1,6 +1,7 @@
-"""The vehicle node's clock handshake: sending SIM_TICK, waiting for its answer (lockstep: the GCS's
-ack; realtime: the shim's echo, within a grace past the deadline), recording who answered and
-naming a partner that went silent (docs/sil.md, "Realtime and lockstep")."""
+"""The vehicle node's clock handshake: sending SIM_TICK, waiting for its answer (lockstep: the shim's
+echo -- the GCS's ack for tick 0, after the last step and without a shim; realtime: the shim's echo,
+within a grace past the deadline), recording who answered and naming a partner that went silent
+(docs/sil.md, "Realtime and lockstep")."""
 
 from __future__ import annotations
 
@@ -87,6 +88,9 @@ class TickClock:
         import time
 
         peer = self.out.text
+        if k > 0 and self._echoed == k - 1 and self._acked < k - 1:
+            return (f"the shim at {peer} holds tick {k} until the GCS behind it acknowledges tick {k - 1}, which "
+                    f"it has not: is daa-gcs still running (with --clock lockstep), pointed at the shim's GCS side?")
         if self._echoed >= k:
             return (f"the shim at {peer} relays tick {k} but the GCS behind it does not acknowledge it: is daa-gcs "
                     f"running (with --clock lockstep) and pointed at the shim's GCS side?")
@@ -97,7 +101,19 @@ class TickClock:
         return (f"no answer at all from {peer} (no tick echo, no ack): is a lockstep shim or GCS running there "
                 f"with --clock lockstep?")
 
-    async def _await_ack(self, k: int, t: float) -> None:
+    def _lockstep_ready(self, k: int, need_ack: bool = False) -> bool:
+        """May lockstep step ``k`` run? Once the GCS acknowledged tick ``k``; behind a shim (it echoes
+        ticks) already on its echo of tick ``k >= 1``: the shim processes tick ``k`` only after the
+        GCS acknowledged tick ``k - 1`` (:mod:`daa_sil.sil.shim_ticks`), so every uplink packet due at
+        ``t_k`` has been sent to us; what the GCS sends at ``t_k`` is released at a later tick at the
+        earliest (the shim releases only when it processes a tick): the two steps of a tick run in
+        parallel. Tick 0 waits for the ack (the GCS may still be starting and must run its step 0),
+        and so does ``need_ack``."""
+        return self._acked >= k or (k > 0 and not need_ack and self._echoed >= k)
+
+    async def _await_ack(self, k: int, t: float, need_ack: bool = False, send: bool = True) -> None:
+        """Send SIM_TICK(k) (unless ``send`` is False: already sent) and wait until step ``k`` may run
+        (:meth:`_lockstep_ready`), re-sending it every ``tick_retry_s``; TickTimeout after the limit."""
         loop = asyncio.get_running_loop()
         limit = self.opts.tick_timeout_s
         if k == 0 and self.opts.start_timeout_s is not None:
@@ -105,21 +121,30 @@ class TickClock:
         deadline = loop.time() + limit
         retry = self.opts.tick_retry_s if k > 0 else min(0.2, self.opts.tick_retry_s)  # GCS may still start
         next_retry = loop.time() + retry
-        self._send_tick(k, t)
-        while self._acked < k:
+        if send:
+            self._send_tick(k, t)
+        while not self._lockstep_ready(k, need_ack):
             self._check_stop()
             now = loop.time()
             if now >= deadline:
-                raise TickTimeout(f"no SIM_TICK_ACK for tick {k} (t = {t:g} s) within {limit:g} s: "
+                what = "SIM_TICK_ACK" if need_ack or k == 0 or self.stats.sync_partner != "shim" else "echo"
+                raise TickTimeout(f"no {what} for tick {k} (t = {t:g} s) within {limit:g} s: "
                                   + self._who_is_silent(k))
-            try:
-                r = await asyncio.wait_for(self.ep.inbox.get(), min(deadline, next_retry) - now)
-            except asyncio.TimeoutError:
-                if loop.time() >= next_retry and loop.time() < deadline:
-                    self._send_tick(k, t)
-                    self.stats.tick_retries += 1
-                    next_retry = loop.time() + retry
-                continue
+            try:  # what already arrived first (one wait per burst of datagrams, not per message)
+                r = self.ep.inbox.get_nowait()
+            except asyncio.QueueEmpty:
+                try:
+                    r = await asyncio.wait_for(self.ep.inbox.get(), min(deadline, next_retry) - now)
+                except asyncio.TimeoutError:
+                    if loop.time() >= next_retry and loop.time() < deadline:
+                        if k > 0 and not need_ack and self._acked < k - 1:
+                            # a shim holds tick k until the GCS acknowledges tick k - 1: send that one
+                            # again too (the shim forwards a repeated tick), in case it was lost
+                            self._send_tick(k - 1, t - self.core.dt)
+                        self._send_tick(k, t)
+                        self.stats.tick_retries += 1
+                        next_retry = loop.time() + retry
+                    continue
             self.take(r)
 
     def _confirmed(self, k: int) -> bool:

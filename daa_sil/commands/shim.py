@@ -1,4 +1,8 @@
-"""``daa-sil shim``: the UDP delay shim between a vehicle and a GCS (realtime or lockstep clock)."""
+"""``daa-sil shim``: the UDP delay shim between a vehicle and a GCS (realtime or lockstep clock).
+
+Also runnable alone as ``python -m daa_sil.commands.shim ARGS`` (the same arguments and behaviour):
+``daa-sil run`` starts its shim that way, importing only what the shim needs (not every command's
+modules, as ``daa-sil``'s parser does)."""
 
 from __future__ import annotations
 
@@ -50,11 +54,29 @@ def _outage(text: str) -> tuple[float, float]:
     return lo, hi
 
 
+DESCRIPTION = ("Relay MAVLink datagrams between a vehicle and a GCS with seeded per-direction delay, loss, "
+               "duplication, reordering and outages; bytes are never modified.")
+
+
 def register(sub) -> None:
     p = sub.add_parser("shim", help="UDP delay shim between vehicle and GCS (delay, loss, dup, outages)",
-                       description="Relay MAVLink datagrams between a vehicle and a GCS with seeded per-direction "
-                                   "delay, loss, duplication, reordering and outages; bytes are never modified.",
-                       epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=DESCRIPTION, epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(p)
+    p.set_defaults(func=run)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The shim's own parser (``python -m daa_sil.commands.shim``): the arguments of ``daa-sil shim``."""
+    from ._args import OneLineParser
+
+    p = OneLineParser(prog="daa-sil shim", description=DESCRIPTION, epilog=EXAMPLES,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(p)
+    return p
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Every ``daa-sil shim`` option on ``p``."""
     p.add_argument("--vehicle", metavar="udp:HOST:PORT", help="vehicle address (default: learned from its first datagram)")
     p.add_argument("--gcs", metavar="udp:HOST:PORT", help="GCS address (default: learned from its first datagram)")
     p.add_argument("--listen-vehicle", default="udp:127.0.0.1:14601", metavar="udp:HOST:PORT",
@@ -86,7 +108,6 @@ def register(sub) -> None:
     p.add_argument("--duration", type=finite_float("--duration", 0.0, 1e7), metavar="S",
                    help="stop after S wall seconds (default: run until Ctrl-C / SIGTERM)")
     p.add_argument("--stats-json", metavar="FILE", help="write the final stats JSON here (atomic)")
-    p.set_defaults(func=run)
 
 
 def config_from_args(args) -> ShimConfig:
@@ -144,3 +165,15 @@ def run(args) -> int:
     stats = asyncio.run(_main(cfg, args.duration))
     print(json.dumps(stats, indent=2, sort_keys=True))
     return 0
+
+
+def main(argv: "list[str] | None" = None) -> int:
+    """``python -m daa_sil.commands.shim ARGS``: ``daa-sil shim ARGS`` without the other commands' imports."""
+    from daa_sil.cli import run_guarded
+
+    args = build_parser().parse_args(argv)
+    return run_guarded("daa-sil", lambda: run(args))
+
+
+if __name__ == "__main__":  # pragma: no cover - exercised through daa-sil run (tests/test_sil_run.py)
+    sys.exit(main())

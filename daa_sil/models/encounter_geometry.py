@@ -38,12 +38,15 @@ class IntruderGeometry:
 
 def encounter_from_geometry(intruders: "Sequence[IntruderGeometry] | IntruderGeometry", *,
                             own: "AircraftState | None" = None, duration_s: float = 240.0, dt_s: float = 1.0,
-                            check_dt_s: float = 0.1, encounter_id: int = 0, seed: int = 0) -> EncounterSet:
+                            check_dt_s: float = 0.1, encounter_id: int = 0, seed: int = 0,
+                            realised: bool = True) -> EncounterSet:
     """A one-encounter set (N = 1, M = len(intruders)) placed deterministically from CPA geometry.
 
     ``own``: the ownship at t = 0 (flies straight; default north at 55 m/s, 1500 m). Realised
     HMD/VMD/t_cpa over ``[0, duration_s]`` are stored in ``params`` (a turn may move the CPA; check
-    ``t_cpa_real_s``). Raises UsageError for a bad value.
+    ``t_cpa_real_s``); ``realised=False`` leaves them nan and skips that integration (``duration_s /
+    check_dt_s`` single-aircraft steps: ~0.2 s for 240 s) for callers that only need the states,
+    such as the SIL vehicle. Raises UsageError for a bad value.
     """
     geoms = [intruders] if isinstance(intruders, IntruderGeometry) else list(intruders)
     if not geoms:
@@ -90,7 +93,10 @@ def encounter_from_geometry(intruders: "Sequence[IntruderGeometry] | IntruderGeo
         inits.append(init)
         bearings.append(b)
     intr = AircraftState(*(np.concatenate([getattr(s, f) for s in inits], axis=1) for f in "x y z gs trk vs".split()))
-    r_h, r_v, r_t = _realised_cpa(own0, intr, segt, duration_s, dt_s, check_dt_s)
+    if realised:
+        r_h, r_v, r_t = _realised_cpa(own0, intr, segt, duration_s, dt_s, check_dt_s)
+    else:
+        r_h = r_v = r_t = np.full((1, m), np.nan)
     params = {k: np.full((1, m), np.nan) for k in PARAM_NAMES}
     params.update(speed_mps=gs, vs_mps=vs, hmd_m=np.abs([[g.hmd_m for g in geoms]]).astype(float),
                   vmd_m=np.array([[g.vmd_m for g in geoms]], float), t_cpa_s=tc, hmd_real_m=r_h, vmd_real_m=r_v,

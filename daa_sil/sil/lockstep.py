@@ -18,7 +18,9 @@ the vehicle (it is alive, and the uplink due at that tick has been sent); :class
 counts the echoes (``echoes``) and does not hand them on.
 
 Realtime runs use the same messages, paced by the vehicle's wall clock (``vehicle/node.py``,
-``docs/sil.md`` "Realtime and lockstep").
+``docs/sil.md`` "Realtime and lockstep"). ``daa-vehicle`` itself steps on the shim's echo (the
+shim holds a tick until the GCS acknowledged the previous one, :mod:`daa_sil.sil.shim_ticks`);
+:class:`LockstepVehicle` waits for the ack, which that shim rule never delays.
 """
 
 from __future__ import annotations

@@ -38,12 +38,13 @@ START_TIMEOUT_S = 120.0
 
 def shim_argv(sc, clock_args: list, key_args: list, stats_json: Path, vehicle_port: int = 0,
               gcs_port: int = 0) -> list[str]:
-    """``daa-sil shim`` arguments for scenario ``sc`` (link delays, loss, outages, seed)."""
+    """``daa-sil shim`` command line for scenario ``sc`` (link delays, loss, outages, seed), run as
+    ``python -m daa_sil.commands.shim``: the shim's own entry point imports only what it needs."""
     from daa_sil.sil.scenario import delay_spec_string
 
     link = sc.link
-    argv = python_module_argv("daa_sil.cli") + [
-        "shim", "--listen-vehicle", f"udp:127.0.0.1:{vehicle_port}", "--listen-gcs", f"udp:127.0.0.1:{gcs_port}",
+    argv = python_module_argv("daa_sil.commands.shim") + [
+        "--listen-vehicle", f"udp:127.0.0.1:{vehicle_port}", "--listen-gcs", f"udp:127.0.0.1:{gcs_port}",
         "--delay-up", delay_spec_string(link.up),
         "--delay-down", delay_spec_string(link.down if link.down is not None else link.up),
         "--epoch", f"{link.epoch_s:g}", "--loss", f"{link.loss:g}", "--seed", str(sc.seed),
@@ -189,10 +190,17 @@ def prepare_kernels(say: "Callable[[str], None] | None") -> None:
         say(f"DAA kernels ready ({time.monotonic() - t:.1f} s)")
 
 
+def _preload(module: str) -> None:
+    """Import ``module`` in a daemon thread: while the vehicle is the only process still starting up,
+    a core is free, and the end of the run then does not wait for the import."""
+    import importlib
+    import threading
+
+    threading.Thread(target=importlib.import_module, args=(module,), daemon=True, name=f"preload {module}").start()
+
+
 def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, recorder) -> dict:
     from daa_sil.files import atomic_write_json
-
-    from daa_sil.steplog import read_steplog
 
     prepare_kernels(lambda m: _say(opts, m))
     t0 = time.monotonic()
@@ -229,6 +237,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
             vehicle = pg.start("vehicle", python_module_argv("vehicle") + vargs)
             pg.wait_ready(shim)
             pg.wait_ready(gcs)
+            _preload("daa_sil.steplog")  # pyarrow, for the step log at the end: while only the vehicle starts
             pg.wait_ready(vehicle, timeout=READY_TIMEOUT_S + 120.0)  # may build the wait map first
             if recorder is not None:
                 # now, not at launch: the three processes' start-up is CPU-bound (a helper importing
@@ -262,6 +271,8 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
         if interrupted is not None:
             raise Interrupted(interrupt_signum(interrupted), "before the vehicle wrote a step log")
         raise DaaSilError(failure or f"the vehicle wrote no step log (logs: {out / 'logs'})")
+    from daa_sil.steplog import read_steplog  # pyarrow: imported while the vehicle started (_preload)
+
     table = read_steplog(steplog)
     result = summarize_steplog(table, sc)
     if interrupted is not None or failure is not None:
@@ -272,7 +283,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
                                  "reason": f"{why} at t = {result['duration_s']:g} s of {sc.duration_s:g} s"}
     result.update({"scenario": sc.name, "scenario_file": str(opts.scenario_path), "seed": sc.seed,
                    "preset": sc.thresholds, "clock": opts.clock, "wall_s": round(wall, 3),
-                   "waitmap": _waitmap_record(sc, opts.waitmap),
+                   "waitmap": _waitmap_record(sc, opts.waitmap, steplog),
                    "realtime_ratio": round(result["duration_s"] / wall, 2) if wall > 0 else None,
                    "interrupted": interrupted is not None,
                    "interrupted_by": signal_name(interrupt_signum(interrupted)) if interrupted is not None else None,
@@ -324,26 +335,37 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
     return result
 
 
-def _waitmap_record(sc, source: "str | None") -> "dict | None":
-    """What result.json records about the vehicle's wait maps (None when its policy reads no map)."""
+def _waitmap_record(sc, source: "str | None", steplog: Path) -> "dict | None":
+    """What result.json records about the vehicle's wait maps (None when its policy reads no map):
+    the description the vehicle wrote into its step log's metadata from the family it loaded and
+    verified (``waitmap.describe``), so the maps are not loaded again here. A step log without it
+    (not written by this vehicle) falls back to loading the family."""
     if sc.allocation.wait != "map":
         return None
     from daa_sil import waitmap
+    from daa_sil.steplog import steplog_metadata
 
-    fam = waitmap.family_for(source, preset="paper")  # cached: loaded, not built
-    return {"source": source or waitmap.DEFAULT_MAP, **waitmap.describe(fam)}
+    try:
+        described = json.loads(steplog_metadata(steplog).get("waitmap") or "null")
+    except ValueError:
+        described = None
+    if not isinstance(described, dict):
+        described = waitmap.describe(waitmap.family_for(source, preset="paper"))  # cached: loaded, not built
+    return {"source": source or waitmap.DEFAULT_MAP, **described}
 
 
 def prepare_waitmap(sc, source: "str | None", say: "Callable[[str], None] | None") -> None:
-    """Build (or load) the vehicle's wait maps before any process starts, so the vehicle loads them
-    from the cache; a bad ``--waitmap`` is a one-line usage error here. ``say`` gets progress lines."""
+    """Build the vehicle's wait maps before any process starts if they are not cached yet, so the
+    vehicle loads them from the cache; a bad ``--waitmap`` is a one-line usage error here. A cached
+    family is not loaded here: the vehicle loads it once and checks every map's content hash (a
+    broken file is its one-line error, relayed by the run). ``say`` gets progress lines."""
     if sc.allocation.wait != "map":
         return
     from daa_sil import waitmap
 
     t = time.monotonic()
     if waitmap.is_cached(source, preset="paper"):
-        say = None  # loaded in well under a second: nothing to report
+        return  # the vehicle loads (and verifies) it: loading it here too cost ~0.3 s of every run
     if say:
         say(f"loading the MDP wait maps ({source or waitmap.DEFAULT_MAP}; the first run builds and caches them) ...")
     progress = (lambda r: say(f"  built the {r:+g} deg/s map ({time.monotonic() - t:.0f} s)")) if say else None

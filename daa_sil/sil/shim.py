@@ -15,7 +15,7 @@ datagram that is due while its destination is still unknown is counted as ``no_p
 
 Seeds (:func:`shim_seeds`): the *delays* of a shim seeded ``seed`` are the encounter's fast-time
 delay streams, ``DelayProcess(model, encounter_streams(seed)[STREAM_UP], epoch_s)`` for the up line
-and ``[STREAM_DOWN]`` for the down line (:func:`daa_sil.study.fasttime.encounter_streams`), so a SIL run
+and ``[STREAM_DOWN]`` for the down line (:func:`daa_sil.models.streams.encounter_streams`), so a SIL run
 of a scenario sees draw for draw the delays fast-time gives the same encounter. The *impairment*
 draws (loss, duplication, reordering) come from ``child_seed(SeedSequence(seed), 0)`` (down) /
 ``1`` (up) (:func:`direction_seeds`); fast-time has no impairments.
@@ -45,6 +45,10 @@ Clocks
    answers late from stamping its step-k commands with a later step (``gcs_lagged`` counts them).
 3. A datagram from the GCS containing a valid ``SIM_TICK_ACK(k)`` (cumulative: every tick <= k)
    is forwarded to the vehicle at once.
+4. A new tick that arrives while the GCS has not acknowledged the last tick forwarded to it is
+   held and processed (rule 1) as soon as that ack arrives (``ticks_held``). The vehicle runs its
+   step on the echo, in parallel with the GCS's step of the same tick; the hold keeps the GCS's
+   datagrams of that step ahead of the next tick's releases (:mod:`daa_sil.sil.shim_ticks`).
 
 ``realtime`` with a vehicle that sends ticks (what ``daa-vehicle`` does): **the same tick-driven
 rules as lockstep**, only the ticks are paced by the vehicle's wall clock instead of by the GCS's
@@ -135,7 +139,7 @@ class DelayShim(ShimTicks):
             "datagrams_from_vehicle", "datagrams_from_gcs", "forwarded_to_vehicle", "forwarded_to_gcs",
             "rejected_peer", "rejected_claim", "no_peer", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards",
             "socket_errors", "send_would_block", "tick_echoes", "held_for_vehicle", "held_dropped", "gcs_lagged",
-            "gcs_unresponsive", "released_late")}
+            "gcs_unresponsive", "released_late", "ticks_held")}
         self.codec = MavCodec(0, 0, key=config.key, sign_outgoing=False)  # verifies control messages only
         self.sim_time = 0.0  # lockstep clock (s)
         self.last_tick: "int | None" = None
@@ -151,6 +155,8 @@ class DelayShim(ShimTicks):
         self.tick_mode: "bool | None" = True if config.clock == "lockstep" else None
         self._held: list[tuple["float | None", bytes]] = []  # realtime, mode undecided: GCS datagrams
         self._unacked: "deque[tuple[int, float]]" = deque()  # ticks forwarded to the GCS, not yet acked
+        #: lockstep: the vehicle's next tick, held until the GCS acknowledges its pending one (shim_ticks)
+        self._held_tick: "tuple | None" = None
         self._gcs_acks = False  # the GCS acknowledges ticks (so its data can be stamped by them)
         self._tick_log: list[tuple[float, float, float, int]] = []  # realtime ticks: (t_k, rx, done, released)
         self._seen_ticks: set[int] = set()

@@ -37,7 +37,7 @@ def delay_stream_seeds(seed: "int | np.random.SeedSequence | None") -> dict:
     Equal to ``encounter_streams(seed)[STREAM_DOWN]`` / ``[STREAM_UP]`` for an int seed (the
     children ``(2,)`` / ``(1,)`` of ``SeedSequence(seed)``; for a SeedSequence, its children).
     """
-    from daa_sil.study.fasttime import STREAM_DOWN, STREAM_UP
+    from daa_sil.models.streams import STREAM_DOWN, STREAM_UP
 
     ss = as_seed_sequence(seed)
     return {"down": child_seed(ss, STREAM_DOWN), "up": child_seed(ss, STREAM_UP)}

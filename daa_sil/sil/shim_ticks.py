@@ -1,6 +1,16 @@
 """The delay shim's tick handling: in lockstep and realtime-ticks modes the shim's sim clock follows
 the vehicle's SIM_TICK, releases what is due at each tick, forwards the tick to the GCS and echoes
-it, and keeps the tick schedule statistics."""
+it, and keeps the tick schedule statistics.
+
+Lockstep pipelining: a new tick ``k`` that arrives while the GCS has not yet acknowledged the tick
+it was forwarded last (``k - 1``) is **held** (``ticks_held``) and processed the moment that ack
+arrives. So the GCS's step-(k-1) datagram is queued (stamped ``t_{k-1}``) before tick ``k``
+releases anything, exactly as when the vehicle waited for the ack itself; but the vehicle can run
+its step ``k - 1`` while the GCS runs its own, on the shim's echo. Neither needs the other's step
+of the same tick: the shim releases packets only when it processes a tick, so what either side
+sends during tick ``k`` reaches the other at tick ``k + 1`` at the earliest. (A vehicle whose tick
+is held past its retry interval re-sends tick ``k - 1`` before tick ``k``: a repeated tick is
+forwarded again, so a lost one is recovered, signed or not.)"""
 
 from __future__ import annotations
 
@@ -60,6 +70,14 @@ class ShimTicks:
     def _on_tick(self, msg, data: bytes, t_rx: "float | None" = None) -> None:
         c = self.counters
         c["ticks"] += 1
+        if self.config.clock == "lockstep" and self._unacked and int(msg.tick) > self._unacked[-1][0]:
+            self._held_tick = (msg, data, t_rx)  # the newest copy (a retry replaces it)
+            c["ticks_held"] += 1
+            return
+        self._process_tick(msg, data, t_rx)
+
+    def _process_tick(self, msg, data: bytes, t_rx: "float | None") -> None:
+        c = self.counters
         rx = (t_rx if t_rx is not None else self._loop.time()) if self.config.clock == "realtime" else 0.0
         t_k = msg.time_ms / 1000.0
         k = int(msg.tick)
@@ -94,6 +112,9 @@ class ShimTicks:
         while self._unacked and self._unacked[0][0] <= k:
             self._unacked.popleft()
         self._send("vehicle", data)
+        if self._held_tick is not None and not self._unacked:  # lockstep: the held tick may go now
+            held, self._held_tick = self._held_tick, None
+            self._process_tick(*held)
 
     # -- observability -----------------------------------------------------------------------------
     async def wait_tick(self, tick: int, timeout: float) -> int:

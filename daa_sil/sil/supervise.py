@@ -300,7 +300,10 @@ class RunMonitor:
             self._run_faults()
             if self.progress is not None:
                 self.progress.update(self.vehicle.latest.get("t="))
-            time.sleep(self.poll_s)
+            try:  # like sleeping poll_s, but back within a few ms of the vehicle's exit
+                self.vehicle.proc.wait(timeout=self.poll_s)
+            except subprocess.TimeoutExpired:
+                pass
         if rc != 0:
             return self._died(self.vehicle)
         # the vehicle finished: a child that died meanwhile is still a failure

@@ -60,7 +60,7 @@ from daa_sil.study.campaign_config import CampaignConfig
 def encounter_seeds(campaign_seed: int, encounter_ids: np.ndarray) -> np.ndarray:
     """Per-encounter seeds (int64 >= 0): ``SeedSequence(campaign_seed, spawn_key=(i,))`` hashed to 63 bits
     (:func:`daa_sil.models.encounters.encounter_seed`). ``SeedSequence(seed_i)`` is the root of every random
-    stream of encounter ``i`` in every group (:func:`daa_sil.study.fasttime.encounter_streams`), so one
+    stream of encounter ``i`` in every group (:func:`daa_sil.models.streams.encounter_streams`), so one
     encounter can be replayed (e.g. in the SIL) from its ``seed`` column alone."""
     from daa_sil.models.encounters import encounter_seed
 

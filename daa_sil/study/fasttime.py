@@ -61,9 +61,9 @@ from daa_sil.models.pilot import PilotModel
 from daa_sil.models.pilot_display import PilotDisplay
 from daa_sil.models.pilot_config import PilotConfig
 from daa_sil.geometry.thresholds import get_thresholds
+# the encounter's random streams (defined with the models: the SIL's GCS and shim use them too)
+from daa_sil.models.streams import STREAM_DOWN, STREAM_PILOT, STREAM_UP, encounter_streams
 
-#: stream indices under an encounter's seed
-STREAM_PILOT, STREAM_UP, STREAM_DOWN = 0, 1, 2
 
 _I = pa.int64()
 ENCOUNTER_SCHEMA = pa.schema(
@@ -89,14 +89,6 @@ _DEC_FIELDS = ("decision", "rule", "wait_s", "projl", "decided_by", "wait_p_lowc
                "wait_map_turn_dps", "sm_pilot", "sm_exec", "pilot_axis", "pilot_dir", "exec_axis", "exec_dir",
                "exact_match")
 
-
-def encounter_streams(seed: int) -> list[np.random.SeedSequence]:
-    """``[pilot, uplink, downlink]`` SeedSequences of one encounter (children of ``SeedSequence(seed)``).
-
-    The delay streams are the *delay-process* seeds: a SIL shim replaying encounter ``seed`` uses
-    ``DelayProcess(model, streams[STREAM_UP], epoch_s)`` for the uplink (same draws).
-    """
-    return [np.random.SeedSequence(int(seed), spawn_key=(k,)) for k in (STREAM_PILOT, STREAM_UP, STREAM_DOWN)]
 
 
 def _gather_state(hist: np.ndarray, idx: np.ndarray) -> AircraftState:

@@ -34,7 +34,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from .model import MdpParams
 from .transitions import Transitions
@@ -98,6 +97,8 @@ def value_iteration_csr(P_wait: sp.csr_matrix, P_evade: sp.csr_matrix, r_wait: n
 
     ``fixed`` pins terminal values (state index -> value). Returns ``(V, sweeps)``.
     """
+    import scipy.sparse as sp  # lazily: only building a map needs scipy
+
     n = P_wait.shape[0]
     P = sp.vstack([P_wait, P_evade]).tocsr()
     R = np.concatenate([r_wait, r_evade])

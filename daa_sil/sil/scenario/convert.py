@@ -69,7 +69,8 @@ def encounter_set(sc: Scenario, encounter_id: int = 0):
                 c = spec.cpa
                 one = encounter_from_geometry(
                     [IntruderGeometry(c.angle_deg, c.hmd_m, c.t_cpa_s, c.gs_mps, c.vmd_m, c.vs_mps, mv)],
-                    own=own, duration_s=sc.duration_s, dt_s=1.0, encounter_id=encounter_id, seed=sc.seed)
+                    own=own, duration_s=sc.duration_s, dt_s=1.0, encounter_id=encounter_id, seed=sc.seed,
+                    realised=False)  # only the placed state is kept: its realised CPA is never read
                 states.append(one.intr[:, 0])
             else:
                 i = spec.initial
