@@ -25,8 +25,8 @@ CASES = {
     "bench_link.py": (["--part", "codec", "--n", "200"], "MavCodec unsigned"),
     "bench_report.py": (["--encounters", "40", "--replicates", "100", "--repeat", "1"], "ratio new / old"),
     "bench_waitmap.py": (["--skip-large"], "[1] paper grid"),
-    "bench_campaign.py": (["--encounters", "10", "--groups", "B-2,ID-2", "--loop-n", "2", "--chunk-size", "5",
-                           "--lookup-n", "5", "--memory-sizes", "5,10", "--workers", "1"], "[campaign] per worker core"),
+    "bench_campaign.py": (["--encounters", "6", "--groups", "B-2,ID-2", "--workers", "1", "--no-baseline"],
+                          "[campaign] 2 groups x 6 encounters"),
     "bench_sil.py": (["--part", "lockstep", "--repeat", "1"], "SIL/baseline"),
     "bench_viz.py": (["--skip-sil", "--repeat", "1", "--live-repeat", "1"], "[3] fast-time"),
 }

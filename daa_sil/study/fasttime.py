@@ -91,18 +91,20 @@ def encounter_streams(seed: int) -> list[np.random.SeedSequence]:
 def _release_pointer(ptr: np.ndarray, release, upto: int, t: float) -> np.ndarray:
     """Advance per-encounter counts of released packets: slots ``< upto`` with release ``<= t``.
 
-    ``release`` is ``(N, K)`` (release time of each slot) or a function ``slots (N,) -> (N,)``
-    release times; it is non-decreasing along the slots (FIFO), so the count only grows.
+    ``release`` is ``(N, K)`` (release time of each slot) or a function ``(slots, rows) -> release
+    times`` of those rows' slots; it is non-decreasing along the slots (FIFO), so the count only
+    grows. Only the encounters that may still advance are looked at.
     """
-    rows = np.arange(ptr.size)
     if not callable(release):
         table = release
-        release = lambda s: table[rows, np.minimum(s, table.shape[1] - 1)]  # noqa: E731
-    while True:
-        can = (ptr < upto) & (release(ptr) <= t + 1e-9)
-        if not can.any():
-            return ptr
-        ptr = ptr + can
+        release = lambda s, r: table[r, np.minimum(s, table.shape[1] - 1)]  # noqa: E731
+    ptr = ptr.copy()
+    cand = np.flatnonzero(ptr < upto)
+    while cand.size:
+        cand = cand[release(ptr[cand], cand) <= t + 1e-9]
+        ptr[cand] += 1
+        cand = cand[ptr[cand] < upto]
+    return ptr
 
 
 @dataclass
@@ -227,8 +229,8 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     last_cmd_slot = np.full(n, -1, np.int64)  # newest command slot delivered to the vehicle
     last_down, last_up = np.full(n, -np.inf), np.full(n, -np.inf)
     display = PilotDisplay(n, cfg, pcfg.alert_level_min, daa_batches=batches)
-    down_release = lambda s: downlink.gather("release", s)  # noqa: E731
-    up_release = lambda s: uplink.gather("release", s)  # noqa: E731
+    down_release = lambda s, r: downlink.gather("release", s, r)  # noqa: E731
+    up_release = lambda s, r: uplink.gather("release", s, r)  # noqa: E731
 
     for k in range(n_steps):
         t = k * dt
@@ -241,9 +243,10 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         obs_intr = AircraftState.from_array(downlink.gather("intr", obs))
         i = np.flatnonzero(new & (obs >= 0))
         if i.size:
-            known = dict(zip(PilotDisplay.KEYS, downlink.gather("guidance", obs)[i].T))
-            display.refresh(i, obs_own[i], obs_intr[i], downlink.gather("alert", obs)[i],
-                            known=(downlink.gather("guided", obs)[i], known))
+            o = obs[i]
+            known = dict(zip(PilotDisplay.KEYS, downlink.gather("guidance", o, i).T))
+            display.refresh(i, obs_own[i], obs_intr[i], downlink.gather("alert", o, i),
+                            known=(downlink.gather("guided", o, i), known))
         downlink.release(max(int(down_ptr.min()) - 1, 0))
         pout = pilot.step(t, obs_own, display.guidance(), obs_intr)
         # GCS packet of step k (heartbeat + command if streaming), FIFO-released on the vehicle side

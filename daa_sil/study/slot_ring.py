@@ -52,12 +52,13 @@ class SlotRing:
         pos = k % self.capacity
         return {name: arr[pos] for name, arr in self.data.items()}
 
-    def gather(self, name: str, idx: np.ndarray) -> np.ndarray:
-        """Field ``name`` of slot ``idx[i]`` for every encounter ``i`` ``(N, ...)``; the fill where
-        ``idx < 0``. A slot outside ``oldest..newest`` gives unspecified values (callers mask them)."""
+    def gather(self, name: str, idx: np.ndarray, rows: "np.ndarray | None" = None) -> np.ndarray:
+        """Field ``name`` of slot ``idx[i]`` for encounter ``rows[i]`` (default: every encounter,
+        ``idx`` (N,)); the fill where ``idx < 0``. A slot outside ``oldest..newest`` gives
+        unspecified values (callers mask them)."""
         idx = np.asarray(idx, np.int64)
         arr = self.data[name]
-        got = arr[np.where(idx >= 0, idx % self.capacity, 0), self._rows]
+        got = arr[np.where(idx >= 0, idx % self.capacity, 0), self._rows if rows is None else rows]
         none = idx < 0
         if none.any():
             got[none] = self.spec[name][2]
