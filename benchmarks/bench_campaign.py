@@ -1,143 +1,148 @@
-"""Benchmark the fast-time campaign: encounter-steps/s, vectorised vs per-encounter loop, memory vs N.
+"""Benchmark the fast-time campaign: wall time and peak memory, against bba2fd8 in the same run.
 
 Usage::
 
-    python benchmarks/bench_campaign.py                       # full: 10,000 x 5 groups x 240 s, 2 workers
-    python benchmarks/bench_campaign.py --encounters 1000     # a smaller full-pipeline run
-    python benchmarks/bench_campaign.py --skip-campaign       # only the loop ratio and memory checks
+    python benchmarks/bench_campaign.py                                  # the figure: 10,000 x 5 groups x 240 s, 2 workers
+    python benchmarks/bench_campaign.py --scaling 1000,2000,5000,10000 --intruders 1,2   # the scaling table
+    python benchmarks/bench_campaign.py --encounters 1000 --no-baseline  # a quick look at this code alone
 
-Prints (1) the campaign throughput (target: 10,000 encounters x 5 groups x 240 s within 60 s on
-2 cores), (2) the ratio of the vectorised simulator to a per-encounter loop over the same functions
-(``simulate`` called with one encounter at a time) on a small subsample, measured in the same run,
-and (3) the peak RSS of one chunk's simulation for growing N (chunking keeps it flat).
+Every campaign runs as ``daa-sil campaign run`` in a subprocess (``--reading literal``, pinned: a
+benchmark must not change what it measures when a default moves), reading its wall time and the
+peak RSS of its largest process (driver or worker; ``wait4``). The baseline is the code at bba2fd8
+installed apart (``--baseline-python``, default ``/work/baseline/.venv/bin/python``, with its own
+cache ``--baseline-cache``), run on the same configuration in the same run, alternating with this
+code so both see the same machine load; the 1-minute load average is printed with every figure.
+Target (issue 21): 10,000 x 5 groups <= 40 s on 2 workers (stretch 20 s); peak memory <= 1 GiB per
+worker. Results of both runs are compared (``identical: yes`` when the baseline ran).
 """
 
 from __future__ import annotations
 
 import argparse
-import resource
+import os
+import shutil
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+ROOT = Path(__file__).resolve().parents[1]
+BASELINE_PYTHON = Path("/work/baseline/.venv/bin/python")
+BASELINE_CACHE = Path("/work/cache-baseline")
+GROUPS = "B-1,B-2,IC-1,ID-1,ID-2"
 
-def _loop_ratio(n: int, group: str) -> float:
-    from daa_sil.study.campaign import campaign_family
-    from daa_sil.study.campaign_config import CampaignConfig
-    from daa_sil.models.encounters import sample_encounters
-    from daa_sil.study.fasttime import simulate
-    from daa_sil.config.groups import group_spec
 
-    spec = group_spec(group)
-    model = spec.delay_model()
-    fam = campaign_family(CampaignConfig()) if spec.uses_map else None
-    es = sample_encounters(n, seed=99, preset="paper")
+def _load() -> float:
+    return os.getloadavg()[0]
+
+
+def run_campaign(python: str, out: Path, n: int, m: int, groups: str, workers: int, seed: int, env: dict,
+                 extra: "list[str] | None" = None) -> tuple[float, float, tuple[float, float]]:
+    """One ``campaign run`` subprocess: (wall s, peak RSS MiB of its largest process, load before/after)."""
+    cmd = [python, "-m", "daa_sil.cli", "campaign", "run", "--groups", groups, "--encounters", str(n),
+           "--intruders", str(m), "--seed", str(seed), "--reading", "literal", "--workers", str(workers),
+           "--out", str(out), "--no-progress", *(extra or [])]
+    load0 = _load()
     t0 = time.perf_counter()
-    vec = simulate(es, spec.policy(), model, model, wait_family=fam, group=group)[0]
-    t_vec = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    rows = [simulate(es.subset([i]), spec.policy(), model, model, wait_family=fam, group=group)[0] for i in range(n)]
-    t_loop = time.perf_counter() - t0
-    same = all(r["n_active_steps"][0].as_py() == vec["n_active_steps"][i].as_py() for i, r in enumerate(rows))
-    steps = n * 240
-    print(f"[loop ratio, {group}, {n} encounters] vectorised {t_vec:.2f} s ({steps / t_vec:,.0f} enc-steps/s), "
-          f"per-encounter loop {t_loop:.2f} s ({steps / t_loop:,.0f} enc-steps/s): x{t_loop / t_vec:.1f} "
-          f"(identical counts: {same})")
-    return steps / t_loop
+    # cwd outside any checkout: each python imports its own installed daa_sil
+    proc = subprocess.Popen(cmd, cwd=tempfile.gettempdir(), env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    err = proc.stderr.read().decode(errors="replace")
+    if proc.returncode != 0:
+        raise SystemExit(f"bench_campaign: {' '.join(cmd)} failed ({proc.returncode}): {err.strip()[-2000:]}")
+    return wall, usage.ru_maxrss / 1024.0, (load0, _load())
 
 
-_MEM_CHILD = """
-import resource, sys
-from daa_sil.study.campaign import CampaignConfig, ChunkTask, run_chunk
-from daa_sil.models.encounters import sample_encounters
-n = int(sys.argv[1]); chunk = int(sys.argv[2])
-es = sample_encounters(n, seed=1, preset="paper")
-from daa_sil.config.groups import parse_groups
-cfg = CampaignConfig(groups=parse_groups("B-2"), n_encounters=n, chunk_size=chunk)
-for c in range(cfg.n_chunks):
-    lo, hi = cfg.chunk_range(c)
-    run_chunk(ChunkTask("B-2", c, cfg, es.subset(list(range(lo, hi))), es.seed[lo:hi]))
-print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
-"""
+def _warm(python: str, env: dict, m: int) -> None:
+    """Load (or build) the wait maps and import everything once, outside the clock."""
+    with tempfile.TemporaryDirectory(prefix="bench-campaign-warm-") as tmp:
+        run_campaign(python, Path(tmp) / "w", 1, m, "ID-2", 1, 1, env, ["--duration", "20"])
 
 
-def _lookup_cost(n: int, waitmap: str) -> None:
-    """One ID-2 chunk with the wait map against the same chunk with the map replaced by 'always wait'
-    (same encounters, same process): what the map lookup (turn-rate map choice + 64-corner
-    interpolation + the most-threatening-intruder selection) costs the campaign."""
-    from dataclasses import replace
+def _identical(a: Path, b: Path) -> str:
+    from daa_sil.study.campaign_compare import compare_dirs
 
-    from daa_sil.study.campaign import campaign_family
-    from daa_sil.study.campaign_config import CampaignConfig
-    from daa_sil.models.encounters import sample_encounters
-    from daa_sil.study.fasttime import simulate
-    from daa_sil.config.groups import group_spec
-
-    spec = group_spec("ID-2")
-    model = spec.delay_model()
-    fam = campaign_family(CampaignConfig(waitmap=waitmap))
-    es = sample_encounters(n, seed=99, preset="paper")
-    times = {}
-    for name, pol in (("map", spec.policy()), ("always", replace(spec.policy(), wait_mode="always"))):
-        simulate(es.subset(list(range(min(20, n)))), pol, model, model, wait_family=fam)  # warm-up
-        t0 = time.perf_counter()
-        simulate(es, pol, model, model, wait_family=fam)
-        times[name] = time.perf_counter() - t0
-    print(f"[lookup cost, ID-2, {n} encounters] with the {waitmap} wait map {times['map']:.2f} s, with 'always wait' "
-          f"(no lookup) {times['always']:.2f} s: x{times['map'] / times['always']:.2f}")
+    res = compare_dirs(a, b)
+    return "yes" if res.identical else f"NO ({len(res.differences)} differences: {res.differences[0]})"
 
 
-def _memory(chunk: int, sizes: list[int]) -> None:
-    for n in sizes:
-        res = subprocess.run([sys.executable, "-c", _MEM_CHILD, str(n), str(chunk)], capture_output=True,
-                             text=True, check=True)
-        print(f"[memory] N={n:6d} in chunks of {chunk}: peak RSS {float(res.stdout.strip()):.0f} MiB")
+def measure(n: int, m: int, args, env_new: dict, env_base: "dict | None") -> dict:
+    """This code (and bba2fd8, alternating) on one configuration; returns the figures."""
+    out = {}
+    with tempfile.TemporaryDirectory(prefix="bench-campaign-") as tmp:
+        tmp = Path(tmp)
+        for rep in range(args.repeat):
+            order = [("new", sys.executable, env_new)] + ([("base", args.baseline_python, env_base)] if env_base else [])
+            if rep % 2:
+                order.reverse()
+            for name, py, env in order:
+                d = tmp / f"{name}-{rep}"
+                wall, rss, load = run_campaign(str(py), d, n, m, args.groups, args.workers, args.seed, env)
+                best = out.get(name)
+                if best is None or wall < best["wall"]:
+                    out[name] = {"wall": wall, "rss": rss, "load": load, "dir": d}
+                elif d.exists():
+                    shutil.rmtree(d)
+        if "base" in out:
+            out["identical"] = _identical(out["base"]["dir"], out["new"]["dir"])
+    return out
+
+
+def _fmt(r: dict) -> str:
+    return f"{r['wall']:.1f} s, peak RSS {r['rss']:.0f} MiB (load {r['load'][0]:.1f}->{r['load'][1]:.1f})"
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--encounters", type=int, default=10_000)
-    ap.add_argument("--groups", default="B-1,B-2,IC-1,ID-1,ID-2")
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], epilog=__doc__.split("Usage::")[1],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--encounters", type=int, default=10_000, help="encounters per group of the figure (default 10000)")
+    ap.add_argument("--groups", default=GROUPS, help=f"groups (default {GROUPS}, the paper's five)")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--chunk-size", type=int, default=None, help="encounters per task (default: the campaign's, 2000)")
-    ap.add_argument("--loop-n", type=int, default=40, help="subsample size for the per-encounter loop ratio")
-    ap.add_argument("--skip-campaign", action="store_true")
-    ap.add_argument("--waitmap", default="alerting", help="wait maps of the map groups (default alerting, the study's)")
-    ap.add_argument("--lookup-n", type=int, default=2000, help="encounters of the wait-map lookup cost check")
-    ap.add_argument("--memory-sizes", default="200,800,1600",
-                    help="N of the memory check, in chunks of the first (comma-separated)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--intruders", default="1", help="intruders per encounter, comma-separated (default 1)")
+    ap.add_argument("--scaling", default=None, metavar="N1,N2,...",
+                    help="instead of the figure: a table of wall time and peak RSS at these encounter counts")
+    ap.add_argument("--repeat", type=int, default=1, help="runs per configuration and code, best kept (default 1)")
+    ap.add_argument("--baseline-python", type=Path, default=BASELINE_PYTHON,
+                    help=f"python of bba2fd8 installed apart (default {BASELINE_PYTHON})")
+    ap.add_argument("--baseline-cache", type=Path, default=BASELINE_CACHE,
+                    help=f"DAA_SIL_CACHE of the baseline (default {BASELINE_CACHE})")
+    ap.add_argument("--no-baseline", action="store_true", help="measure this code only")
     args = ap.parse_args()
+    intruders = [int(x) for x in args.intruders.split(",")]
+    sizes = [int(x) for x in args.scaling.split(",")] if args.scaling else [args.encounters]
 
-    from daa_sil.study.campaign import parse_groups, run_campaign
-    from daa_sil.study.campaign_config import DEFAULT_CHUNK, CampaignConfig
-
-    args.chunk_size = args.chunk_size or DEFAULT_CHUNK
-    loop_rates = [_loop_ratio(args.loop_n, "B-2"), _loop_ratio(args.loop_n, "ID-2")]
-    _lookup_cost(args.lookup_n, args.waitmap)
-    sizes = [int(x) for x in args.memory_sizes.split(",")]
-    _memory(sizes[0], sizes)
-    _memory(args.chunk_size, [args.chunk_size, 3 * args.chunk_size])
-    if args.skip_campaign:
-        return
-    groups = parse_groups(args.groups)
-    cfg = CampaignConfig(groups=groups, n_encounters=args.encounters, seed=0, chunk_size=args.chunk_size,
-                         waitmap=args.waitmap)
-    from daa_sil.study.campaign import campaign_family
-
-    campaign_family(cfg)  # built/loaded before the clock starts (cached after the first run)
-    with tempfile.TemporaryDirectory(prefix="bench-campaign-") as tmp:
-        s = run_campaign(cfg, Path(tmp) / "c", workers=args.workers, progress=False)
-    steps = s.encounter_steps
-    print(f"[campaign] {len(groups)} groups x {args.encounters} encounters x 240 s, {args.workers} workers, "
-          f"chunks of {args.chunk_size}: {s.wall_s:.1f} s wall ({steps / s.wall_s:,.0f} encounter-steps/s; "
-          f"target 60 s for 10,000 x 5 with the {args.waitmap} wait maps); worker compute {s.compute_s:.1f} s; driver peak RSS "
-          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
-    per_core = steps / s.compute_s
-    loop = sum(loop_rates) / len(loop_rates)
-    print(f"[campaign] per worker core {per_core:,.0f} encounter-steps/s = x{per_core / loop:.0f} the per-encounter "
-          f"loop over the same functions ({loop:,.0f} encounter-steps/s, same run)")
+    env_new = dict(os.environ, PYTHONPATH=str(ROOT))
+    env_base = None
+    if not args.no_baseline:
+        if not args.baseline_python.is_file():
+            raise SystemExit(f"bench_campaign: no baseline python at {args.baseline_python} "
+                             f"(install bba2fd8 apart, pass --baseline-python, or --no-baseline)")
+        env_base = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+        env_base["DAA_SIL_CACHE"] = str(args.baseline_cache)
+    print(f"[load] 1-minute load average {_load():.2f} on {os.cpu_count()} cores; reading literal; "
+          f"groups {args.groups}; {args.workers} workers")
+    for m in intruders:
+        _warm(sys.executable, env_new, m)
+        if env_base:
+            _warm(str(args.baseline_python), env_base, m)
+    n_groups = len(args.groups.split(","))
+    for m in intruders:
+        for n in sizes:
+            r = measure(n, m, args, env_new, env_base)
+            new = r["new"]
+            steps = n * n_groups * 240
+            line = (f"{n_groups} groups x {n} encounters x 240 s, {m} intruder{'s' if m > 1 else ''}: "
+                    f"{_fmt(new)}, {steps / new['wall']:,.0f} encounter-steps/s")
+            if "base" in r:
+                line += (f"; bba2fd8 same run {_fmt(r['base'])}: ratio x{r['base']['wall'] / new['wall']:.2f} "
+                         f"(identical: {r['identical']})")
+            tag = "[campaign]" if not args.scaling else "[scaling]"
+            target = "; target 40 s (stretch 20 s), <= 1 GiB per worker" if not args.scaling else ""
+            print(f"{tag} {line}{target}", flush=True)
 
 
 if __name__ == "__main__":

@@ -43,8 +43,8 @@ Semantics follow ``docs/architecture.md`` "Allocation semantics":
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, fields, replace
-from typing import Callable
 
 import numpy as np
 
@@ -52,15 +52,14 @@ from .daa import (AXIS_NONE, DaaConfig, DaaState, alert_levels, classify_command
                   proj_lowc, resolve, safety_metric, search_maneuver, sm_from_tin)
 from .daa.config import AXIS_NAMES, DIR_NAMES, RULE_NAMES
 from .daa.resolution import command_deltas
-from .errors import UsageError
-from daa_sil.geometry.frames import to_paper_state
+from daa_sil.allocation import WAIT_MODES, WAIT_RULES, AllocationPolicy, PolicyRows
+from daa_sil.wait_function import WaitLookup, WaitValue, make_wait_lookup, wait_values
+from daa_sil.daa_batches import check_batches, positions_by_batch
 from daa_sil.geometry.kinematics import AircraftState, Command
 
 DECISION_NAMES = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
 DECIDED_BY_NAMES = ("none", "map", "projl", "both", "neither")
 BY_NONE, BY_MAP, BY_PROJL, BY_BOTH, BY_NEITHER = range(5)
-WAIT_MODES = ("none", "constant", "map", "always")
-WAIT_RULES = ("threshold", "countdown")
 (D_NONE, D_WAIT, D_NO_WAIT, D_PILOT, D_BLEND, D_DAA_OVERRIDE, D_DAA, D_STALE, D_LINK_LOST) = range(9)
 AUTHORITY_NAMES = ("pilot", "daa", "waiting")
 A_PILOT, A_DAA, A_WAITING = range(3)
@@ -78,52 +77,6 @@ DECISION_FIELDS = (
 #: name tables for the integer-coded fields
 CODE_NAMES = {"decision": DECISION_NAMES, "rule": RULE_NAMES, "authority": AUTHORITY_NAMES, "decided_by": DECIDED_BY_NAMES,
               "pilot_axis": AXIS_NAMES, "exec_axis": AXIS_NAMES, "pilot_dir": DIR_NAMES, "exec_dir": DIR_NAMES}
-
-@dataclass
-class WaitValue:
-    """The wait function's answer for N encounters (arrays ``(N,)``; nan where not applicable)."""
-
-    wait_s: np.ndarray  #: w, s
-    p_lowc: np.ndarray  #: the map's P(LoWC within H while waiting)
-    in_box: np.ndarray  #: bool, the state was inside the map's box (not clamped)
-    turn_dps: np.ndarray  #: estimated turn rate of the intruder read, compass deg/s (+ = right)
-    map_turn_dps: np.ndarray  #: conditioning turn rate of the map read, compass deg/s (+ = right)
-
-    @classmethod
-    def constant(cls, n: int, value: float) -> "WaitValue":
-        nan = np.full(n, np.nan)
-        return cls(np.full(n, float(value)), nan, np.zeros(n, bool), nan.copy(), nan.copy())
-
-
-#: ``lookup(own (N,), intruders (N, M), turn_rate (N, M) compass rad/s) -> WaitValue``
-WaitLookup = Callable[[AircraftState, AircraftState, np.ndarray], WaitValue]
-
-
-@dataclass(frozen=True)
-class AllocationPolicy:
-    """One experimental group's allocation settings (groups are data, not code paths: see
-    :mod:`daa_sil.config.groups`). Times in s."""
-
-    wait_mode: str  #: :data:`WAIT_MODES`: none (w = 0, always DAA), constant, map, always (w = inf)
-    constant_wait_s: float = 5.0
-    wait_threshold_s: float = 4.0  #: W_T
-    projl: bool = True  #: ProjL veto on (the paper) or off (the map alone decides)
-    projl_horizon_s: float = 25.0  #: the paper's N
-    blending: bool = True  #: False = baseline: unsafe pilot command -> DAA override
-    stale_command_s: float = 15.0
-    link_timeout_s: float = 20.0
-    wait_rule: str = "threshold"  #: :data:`WAIT_RULES`: w(S(k)) >= W_T every step, or a countdown budget
-    name: str = "custom"
-    #: False = the agent never takes authority: the pilot's last command is always flown, the
-    #: decision is always ``none`` (alert levels are still computed); the SIL's ``DAA_ENABLE 0``
-    enabled: bool = True
-
-    def __post_init__(self):
-        if self.wait_mode not in WAIT_MODES:
-            raise UsageError(f"wait_mode must be one of {', '.join(WAIT_MODES)}, got {self.wait_mode!r}")
-        if self.wait_rule not in WAIT_RULES:
-            raise UsageError(f"wait_rule must be one of {', '.join(WAIT_RULES)}, got {self.wait_rule!r}")
-
 
 def policy_for_group(group: str) -> AllocationPolicy:
     """The policy of a named group of the group table (:mod:`daa_sil.config.groups`: B-1, ..., ID-2-map)."""
@@ -196,34 +149,56 @@ def _reached(own: AircraftState, cmd: Command) -> np.ndarray:
     return (np.abs(dtrk) < np.radians(0.5)) & (np.abs(dvs) < 0.25) & (np.abs(dgs) < 0.5)
 
 
-def _wait_values(own, intr, policy: AllocationPolicy, lookup: "WaitLookup | None", turn_rate, idx) -> WaitValue:
-    n = len(idx)
-    if policy.wait_mode == "none" or n == 0:
-        return WaitValue.constant(n, 0.0)
-    if policy.wait_mode == "constant":
-        return WaitValue.constant(n, policy.constant_wait_s)
-    if policy.wait_mode == "always":
-        return WaitValue.constant(n, np.inf)
-    if lookup is None:
-        raise UsageError("policy wait_mode 'map' needs a wait_lookup (daa_sil.agent.make_wait_lookup)")
-    rate = np.zeros(intr.shape) if turn_rate is None else np.broadcast_to(np.asarray(turn_rate, float), intr.shape)
-    return lookup(own[idx], intr[idx], rate[idx])
+@dataclass
+class ActiveBands:
+    """Bands the agent computed this step from the state alone (no hysteresis, not passed in):
+    ``bands`` of the encounters ``rows`` (one DAA batch). Anyone who needs the bands of the same
+    state, configuration and batch can reuse them (fast-time's pilot display)."""
+
+    rows: np.ndarray
+    bands: object  #: :class:`daa_sil.daa.bands.Bands` of ``rows``
+
+
+def _safety(batch_of, rows: np.ndarray, own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
+            horizon: float, known: "dict | None" = None) -> np.ndarray:
+    """SM(u) of ``cmd`` (one per row of ``rows``), one :func:`safety_metric` call per DAA batch.
+    ``known`` maps the bytes of a call's rows to SM values already computed by a call on exactly
+    those rows (the same batch, so the same numbers); the calls made here are added to it."""
+    out = np.empty(rows.size)
+    for pos in positions_by_batch(batch_of, rows):
+        r = rows[pos]
+        key = r.tobytes()
+        got = known.get(key) if known is not None else None
+        if got is None:
+            got = safety_metric(own[r], intr[r], cmd[pos] if pos.size != rows.size else cmd, cfg, horizon)
+            if known is not None:
+                known[key] = got
+        out[pos] = got
+    return out
 
 
 def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotInput, memory: AgentMemory,
-               policy: AllocationPolicy, daa_cfg: "DaaConfig | None" = None,
-               wait_lookup: "WaitLookup | None" = None, bands=None, turn_rate: "np.ndarray | None" = None
-               ) -> tuple[Command, dict, AgentMemory]:
+               policy: "AllocationPolicy | PolicyRows", daa_cfg: "DaaConfig | None" = None,
+               wait_lookup: "WaitLookup | None" = None, bands=None, turn_rate: "np.ndarray | None" = None,
+               *, band_record: bool = True, daa_batches: "np.ndarray | None" = None) -> tuple[Command, dict, AgentMemory]:
     """One allocation step at sim time ``t`` (s) for ownship ``(N,)`` and intruders ``(N, M)``.
 
     Returns ``(command to fly, decision record, new memory)``; the record has the keys
-    :data:`DECISION_FIELDS` (codes in :data:`CODE_NAMES`; nan where not applicable). ``bands``
-    (a :class:`~daa_sil.daa.Bands` for the whole batch) may be passed to avoid recomputing them.
+    :data:`DECISION_FIELDS` (codes in :data:`CODE_NAMES`; nan where not applicable), plus
+    ``active_bands`` (a list of :class:`ActiveBands`). ``policy`` one
+    :class:`~daa_sil.allocation.AllocationPolicy` for every row, or a
+    :class:`~daa_sil.allocation.PolicyRows` (each row its own). ``bands`` (a
+    :class:`~daa_sil.daa.Bands` for the whole batch) may be passed to avoid recomputing them.
     ``turn_rate`` ``(N, M)`` is each intruder's estimated turn rate (compass rad/s, + = right;
     default 0), which picks the wait map (:class:`daa_sil.onboard.TurnRateEstimator`).
+    ``band_record=False`` leaves ``bands_trk``/``bands_trk_region`` None (nobody reads them).
+    ``daa_batches`` ``(N,)``: the DAA is called once per batch (:mod:`daa_sil.daa_batches`).
     """
     cfg = daa_cfg if daa_cfg is not None else DaaConfig()
     n = own.shape[0]
+    pol = PolicyRows.of(policy, n)
+    batch_of = check_batches(daa_batches, n)
+    blending = pol.value("blending").astype(bool)
     nan = np.full(n, np.nan)
     horizon = cfg.sm_horizon_s
     # --- DAA alerting: stateless, or with DAIDALUS hysteresis / M-of-N / persistence (cfg.stateful) ----
@@ -239,9 +214,9 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     received = np.asarray(pilot.received, bool)
     link_t = np.fmax(memory.last_packet_t, np.asarray(pilot.link_alive_t, float))
     link_t = np.where(received, np.fmax(link_t, pilot.t_recv), link_t)
-    link_lost = (t - link_t) > policy.link_timeout_s
+    link_lost = (t - link_t) > pol.value("link_timeout_s")
     age = np.where(received, t - np.asarray(pilot.t_sent, float), np.nan)
-    fresh = received & (age <= policy.stale_command_s)
+    fresh = received & (age <= pol.value("stale_command_s"))
     stale = received & ~fresh
     pcmd = pilot.cmd.resolved(own)
     p_trk = np.where(fresh, pcmd.trk, memory.pilot_trk)
@@ -255,34 +230,48 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     # Once the onboard DAA (or a blend) holds authority, handing back to the pilot's course is only
     # done when that course is safe: otherwise the ownship would fly back into the conflict it just
     # resolved as soon as the alert clears, and alternate between the two every step.
+    # SM of the last pilot command by the rows of each call: a later call on exactly the same rows
+    # (same state and command) takes these numbers (always so at N = 1, the SIL vehicle)
+    sm_calls: dict = {}
     unsafe_revert = np.zeros(n, bool)
     check = (memory.authority == A_DAA) & ~((max_alert >= 2) | in_progress)
     if check.any():
         j = np.nonzero(check)[0]
-        unsafe_revert[j] = ~(safety_metric(own[j], intr[j], last_pilot[j], cfg, horizon) > 0)
-    active = ((max_alert >= 2) | in_progress | unsafe_revert) & bool(policy.enabled)
+        unsafe_revert[j] = ~(_safety(batch_of, j, own, intr, last_pilot[j], cfg, horizon, sm_calls) > 0)
+    active = ((max_alert >= 2) | in_progress | unsafe_revert) & pol.value("enabled").astype(bool)
     ia = np.nonzero(active)[0]
-    own_a, intr_a = own[ia], intr[ia]
 
-    # --- DAA: bands and resolution for the active encounters -------------------------------------
-    if bands is not None:
-        b_a = bands if ia.size == n else bands[ia]
-    else:
-        lists = conflict_lists(own_a, intr_a, cfg, daa_state.band_early_level(t)[ia]) if cfg.stateful else None
-        b_a = compute_bands(own_a, intr_a, cfg, alert[ia], lists)
-    if cfg.stateful:  # band, resolution and preferred-direction hysteresis
-        b_a = daa_state.update_bands(t, b_a, cfg, ia)
-    daa_cmd_a, daa_ax_a, daa_dir_a, daa_tin_a = resolve(own_a, intr_a, cfg, (memory.daa_axis[ia], memory.daa_dir[ia]),
-                                                        b_a, return_t_in=True)
+    # --- DAA: bands and resolution for the active encounters, per DAA batch (none when none is active)
     sm_daa = nan.copy()
-    sm_daa[ia] = sm_from_tin(daa_tin_a, horizon, cfg)
+    daa_cmd = Command(nan.copy(), nan.copy(), nan.copy())
+    daa_axis = np.zeros(n, np.int8)
+    daa_dir = np.zeros(n, np.int8)
+    parts: list = []  # (rows, Bands) per DAA batch
+    active_bands: list = []
+    for pos in positions_by_batch(batch_of, ia):
+        r = ia[pos]
+        o, i_ = own[r], intr[r]
+        if bands is not None:
+            b = bands if r.size == n else bands[r]
+        else:
+            lists = conflict_lists(o, i_, cfg, daa_state.band_early_level(t)[r]) if cfg.stateful else None
+            b = compute_bands(o, i_, cfg, alert[r], lists)
+            if not cfg.stateful:
+                active_bands.append(ActiveBands(r, b))
+        if cfg.stateful:  # band, resolution and preferred-direction hysteresis
+            b = daa_state.update_bands(t, b, cfg, r)
+        cmd_b, ax_b, dir_b, tin_b = resolve(o, i_, cfg, (memory.daa_axis[r], memory.daa_dir[r]), b, return_t_in=True)
+        sm_daa[r] = sm_from_tin(tin_b, horizon, cfg)
+        daa_cmd.trk[r], daa_cmd.vs[r], daa_cmd.gs[r] = cmd_b.trk, cmd_b.vs, cmd_b.gs
+        daa_axis[r], daa_dir[r] = ax_b, dir_b
+        parts.append((r, b))
 
-    # --- pilot command safety -----------------------------------------------------------------
+    # --- pilot command safety (a fresh command is the last pilot command) ----------------------
     sm_pilot = nan.copy()
-    fa = fresh[ia]
+    fa = fresh & active
     if fa.any():
-        j = ia[fa]
-        sm_pilot[j] = safety_metric(own[j], intr[j], pcmd[j], cfg, horizon)
+        j = np.nonzero(fa)[0]
+        sm_pilot[j] = _safety(batch_of, j, own, intr, pcmd[j], cfg, horizon, sm_calls)
     # The pilot's (axis, direction) preference is the change from the pilot's previous course to the
     # new command, not from the current state: once the DAA or a blend has moved the ownship, a
     # repeated "hold" command would otherwise read as a turn back and flip the blend every step.
@@ -298,72 +287,77 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     wait_s, w_pl, w_turn, w_map = nan.copy(), nan.copy(), nan.copy(), nan.copy()
     w_box = np.zeros(n, bool)
     projl = np.zeros(n, bool)
-    if ia.size:
-        projl[ia] = proj_lowc(own_a, intr_a, cfg, policy.projl_horizon_s).any(axis=1) if intr.shape[1] else False
+    if ia.size and intr.shape[1]:  # element-wise per encounter: one call per look-ahead present
+        horizons = pol.value("projl_horizon_s")[ia]
+        for h in np.unique(horizons):
+            r = ia[horizons == h]
+            projl[r] = proj_lowc(own[r], intr[r], cfg, float(h)).any(axis=1)
     nc = active & ~fresh & ~link_lost
     inc = np.nonzero(nc)[0]
     wait_start = np.where(active & ~fresh, memory.wait_start, np.nan)
     if inc.size:
-        wv = _wait_values(own, intr, policy, wait_lookup, turn_rate, inc)
+        wv = wait_values(own, intr, pol, wait_lookup, turn_rate, inc)
         w = wv.wait_s
-        if policy.wait_rule == "countdown":
-            w = w - np.where(np.isfinite(wait_start[inc]), t - wait_start[inc], 0.0)
+        countdown = pol.value("wait_rule")[inc] == "countdown"
+        if countdown.any():
+            w = np.where(countdown, w - np.where(np.isfinite(wait_start[inc]), t - wait_start[inc], 0.0), w)
         wait_s[inc], w_pl[inc], w_box[inc], w_turn[inc], w_map[inc] = w, wv.p_lowc, wv.in_box, wv.turn_dps, wv.map_turn_dps
-    veto_map = nc & ~(np.nan_to_num(wait_s, nan=-np.inf) >= policy.wait_threshold_s)
-    veto_projl = nc & projl & policy.projl
+    veto_map = nc & ~(np.nan_to_num(wait_s, nan=-np.inf) >= pol.value("wait_threshold_s"))
+    veto_projl = nc & projl & pol.value("projl").astype(bool)
     wait = nc & ~veto_map & ~veto_projl
     decided_by = np.select([~nc, veto_map & veto_projl, veto_map, veto_projl], [BY_NONE, BY_BOTH, BY_MAP, BY_PROJL],
                            BY_NEITHER).astype(np.int8)
     wait_start = np.where(wait & np.isnan(wait_start), t, wait_start)
 
-    # --- blend for unsafe fresh pilot commands --------------------------------------------------
+    # --- blend for unsafe fresh pilot commands (baseline groups: DAA override) ------------------
     pilot_ok = active & fresh & ~link_lost & (sm_pilot > 0)
     unsafe = active & fresh & ~link_lost & ~(sm_pilot > 0)
+    blend = unsafe & blending
     rule = np.zeros(n, np.int8)
     blend_cmd = Command(nan.copy(), nan.copy(), nan.copy())
     sm_blend = nan.copy()
-    if policy.blending and unsafe.any():
-        sel = unsafe[ia]
-        j = ia[sel]
-        bc, br, bt_in = search_maneuver(own[j], intr[j], p_axis[j], p_dir[j], cfg, ref=pcmd[j], horizon_s=horizon,
-                                        bands=b_a[sel], return_t_in=True)
-        blend_cmd.trk[j], blend_cmd.vs[j], blend_cmd.gs[j] = bc.trk, bc.vs, bc.gs
-        rule[j] = br
-        sm_blend[j] = sm_from_tin(bt_in, horizon, cfg)
+    for r, b in parts:
+        sel = blend[r]
+        if sel.any():
+            j = r[sel]
+            bc, br, bt_in = search_maneuver(own[j], intr[j], p_axis[j], p_dir[j], cfg, ref=pcmd[j], horizon_s=horizon,
+                                            bands=b[sel], return_t_in=True)
+            blend_cmd.trk[j], blend_cmd.vs[j], blend_cmd.gs[j] = bc.trk, bc.vs, bc.gs
+            rule[j] = br
+            sm_blend[j] = sm_from_tin(bt_in, horizon, cfg)
 
     # --- decision codes -----------------------------------------------------------------------
     decision = np.full(n, D_NONE, np.int8)
     decision = np.where(active & link_lost, D_LINK_LOST, decision)
     decision = np.where(pilot_ok, D_PILOT, decision)
-    decision = np.where(unsafe, D_BLEND if policy.blending else D_DAA_OVERRIDE, decision)
+    decision = np.where(blend, D_BLEND, np.where(unsafe, D_DAA_OVERRIDE, decision))
     decision = np.where(nc & wait, D_WAIT, decision)
     decision = np.where(nc & ~wait, D_NO_WAIT, decision)
     decision = np.where(active & stale & ~link_lost, D_STALE, decision).astype(np.int8)
 
-    daa_cmd = Command(nan.copy(), nan.copy(), nan.copy())
-    daa_cmd.trk[ia], daa_cmd.vs[ia], daa_cmd.gs[ia] = daa_cmd_a.trk, daa_cmd_a.vs, daa_cmd_a.gs
-    use_daa = active & ~pilot_ok & ~wait & ~(unsafe & policy.blending)
-    exec_cmd = last_pilot.where(~active | pilot_ok | wait, blend_cmd.where(unsafe & policy.blending, daa_cmd))
+    use_daa = active & ~pilot_ok & ~wait & ~blend
+    exec_cmd = last_pilot.where(~active | pilot_ok | wait, blend_cmd.where(blend, daa_cmd))
     exec_cmd = exec_cmd.where(~use_daa, daa_cmd)
     authority = np.where(~active | pilot_ok, A_PILOT, np.where(wait, A_WAITING, A_DAA)).astype(np.int8)
 
     # --- safety of what is executed -------------------------------------------------------------
-    # pilot: its SM; blend / DAA: the chosen band candidate's SM (same trajectory model); hold: computed
-    sm_exec = np.where(pilot_ok, sm_pilot, np.where(unsafe & policy.blending, sm_blend,
-                                                    np.where(use_daa, sm_daa, np.nan)))
+    # pilot: its SM; blend / DAA: the chosen band candidate's SM (same trajectory model); hold: the
+    # last pilot command's SM (computed, or taken from a call on exactly these rows)
+    sm_exec = np.where(pilot_ok, sm_pilot, np.where(blend, sm_blend, np.where(use_daa, sm_daa, np.nan)))
     other = active & np.isnan(sm_exec)
     if other.any():
         j = np.nonzero(other)[0]
-        sm_exec[j] = safety_metric(own[j], intr[j], exec_cmd[j], cfg, horizon)
+        sm_exec[j] = _safety(batch_of, j, own, intr, exec_cmd[j], cfg, horizon, sm_calls if wait[j].all() else None)
     e_axis, e_dir = classify_command(own, exec_cmd, cfg)
     exact = (decision == D_BLEND) & (p_axis != AXIS_NONE) & (e_axis == p_axis) & (e_dir == p_dir)
 
-    bt = np.full((n, b_a.trk.values.shape[1]), np.nan)
-    br_ = np.full((n, b_a.trk.values.shape[1]), -1, np.int8)
-    bt[ia], br_[ia] = np.degrees(b_a.trk.values), b_a.trk.region
-    daa_axis = np.zeros(n, np.int8)
-    daa_dir = np.zeros(n, np.int8)
-    daa_axis[ia], daa_dir[ia] = daa_ax_a, daa_dir_a
+    bt = br_ = None
+    if band_record:
+        k_trk = (parts[0][1] if parts else _empty_bands(cfg)).trk.values.shape[1]
+        bt = np.full((n, k_trk), np.nan)
+        br_ = np.full((n, k_trk), -1, np.int8)
+        for r, b in parts:
+            bt[r], br_[r] = np.degrees(b.trk.values), b.trk.region
 
     dec = {
         "active": active, "decision": decision, "rule": rule, "authority": authority, "wait_s": wait_s,
@@ -374,7 +368,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
         "cmd_trk": exec_cmd.trk, "cmd_vs": exec_cmd.vs, "cmd_gs": exec_cmd.gs,
         "pilot_trk": p_trk, "pilot_vs": p_vs, "pilot_gs": p_gs,
         "daa_trk": daa_cmd.trk, "daa_vs": daa_cmd.vs, "daa_gs": daa_cmd.gs,
-        "bands_trk": bt, "bands_trk_region": br_,
+        "bands_trk": bt, "bands_trk_region": br_, "active_bands": active_bands,
     }
     new_mem = replace(memory, pilot_trk=p_trk, pilot_vs=p_vs, pilot_gs=p_gs,
                       pilot_t_sent=np.where(fresh, pilot.t_sent, memory.pilot_t_sent), last_packet_t=link_t,
@@ -385,6 +379,13 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     return exec_cmd, dec, new_mem
 
 
+@functools.lru_cache(maxsize=8)
+def _empty_bands(cfg: DaaConfig):
+    """Bands of an empty batch (their shapes: the track candidates of ``cfg``)."""
+    e = AircraftState(*(np.zeros(0) for _ in range(6)))
+    return compute_bands(e, AircraftState(*(np.zeros((0, 1)) for _ in range(6))), cfg)
+
+
 def decode(decisions: dict) -> dict:
     """Copy of a decision record with the integer-coded fields as string arrays."""
     out = dict(decisions)
@@ -392,37 +393,6 @@ def decode(decisions: dict) -> dict:
         if key in out:
             out[key] = np.asarray(names, dtype=object)[np.asarray(out[key], int)]
     return out
-
-
-def make_wait_lookup(family, cfg: "DaaConfig | None" = None) -> WaitLookup:
-    """Wrap a wait-map family (``family.lookup(paper_states, turn_rate)``) as a :data:`WaitLookup`.
-
-    Each intruder is converted to the paper frame (:func:`daa_sil.geometry.frames.to_paper_state`) and read
-    from the map of its estimated turn rate (compass rad/s, + = right, passed to the family in the
-    paper sense, + = left). The wait of the **most threatening** intruder is used: the one with the
-    earliest straight-line LoWC over the DAA lookahead (ties: the smallest range).
-    """
-    cfg = cfg or DaaConfig()
-    from .geometry import wellclear as wc
-    from .daa.alerting import relative_state
-
-    def lookup(own: AircraftState, intr: AircraftState, turn_rate: np.ndarray) -> WaitValue:
-        n, m = intr.shape
-        if m == 0:
-            return WaitValue.constant(n, np.inf)
-        paper = to_paper_state(own.position()[:, None], own.velocity()[:, None], intr.position(), intr.velocity())
-        rate = np.broadcast_to(np.asarray(turn_rate, float), (n, m))
-        res = family.lookup(paper, -rate)
-        s, v = relative_state(own, intr)
-        t_in, _ = wc.violation_interval(s, v, cfg.th, 0.0, cfg.lookahead_s)
-        key = np.minimum(t_in, 1e9) * 1e6 + wc.horizontal_range(s)
-        k = np.argmin(key, axis=1)
-        r = np.arange(n)
-        return WaitValue(np.asarray(res.wait_s, float)[r, k], np.asarray(res.p_lowc, float)[r, k],
-                         np.asarray(res.in_box, bool)[r, k], np.degrees(rate[r, k]),
-                         0.0 - np.asarray(res.map_turn_deg, float)[r, k])  # 0.0 - x: no -0.0 for the 0 map
-
-    return lookup
 
 
 __all__ = ["AllocationPolicy", "WaitValue", "WaitLookup", "WAIT_MODES", "WAIT_RULES", "DECIDED_BY_NAMES", "policy_for_group", "PilotInput", "AgentMemory", "agent_step",

@@ -63,11 +63,11 @@ class StepOutput:
     command: Command  #: (N,) command flown over [t, t + dt]
     decisions: dict  #: the agent's decision record (fields ``agent.DECISION_FIELDS``)
     telemetry: Telemetry  #: downlink payload for t
-    geometry: dict  #: (N, M) range_m, hmd_m, dh_m, tau_mod_s, wcv at t
+    geometry: "dict | None"  #: (N, M) range_m, hmd_m, dh_m, tau_mod_s, wcv at t (None without a step log)
     lowc: np.ndarray  #: (N,) LoWC with any intruder on [t, t + dt]
     nmac: np.ndarray  #: (N,) NMAC with any intruder on [t, t + dt]
     lowc_time_s: np.ndarray  #: (N,) s in LoWC on the segment (max over intruders)
-    pen_rate: np.ndarray  #: (N,) penetration rate at t (max over intruders), PI = sum * dt
+    pen_rate: "np.ndarray | None"  #: (N,) penetration rate at t (max over intruders); None without a step log
     seg_min_range_m: np.ndarray  #: (N,) minimum horizontal range on the segment (over intruders)
     seg_vsep_m: np.ndarray  #: (N,) vertical separation at that minimum
     turn_est: "np.ndarray | None" = None  #: (N, M) estimated intruder turn rates, compass rad/s
@@ -149,7 +149,8 @@ class OnboardCore:
     def __init__(self, own: AircraftState, intruders: AircraftState, controls: IntruderControls, policy,
                  daa_cfg=None, wait_lookup=None, *, thresholds: "Thresholds | str | None" = None,
                  t0: float = 0.0, dt: float = 1.0, perf: "Performance | None" = None,
-                 intruder_perf: "Performance | None" = None, memory=None):
+                 intruder_perf: "Performance | None" = None, memory=None, step_log: bool = True,
+                 daa_batches: "np.ndarray | None" = None):
         from . import agent
         from .daa.config import DEFAULT_CONFIG
 
@@ -173,6 +174,8 @@ class OnboardCore:
         self.intruder_perf = intruder_perf if intruder_perf is not None else INTRUDER_PERFORMANCE
         self.memory = memory if memory is not None else agent.AgentMemory.initial(self.n, self.own)
         self.turn_estimator = TurnRateEstimator((self.n, self.m))
+        self.step_log = bool(step_log)
+        self.daa_batches = daa_batches
 
     @classmethod
     def from_encounters(cls, encounters, policy, daa_cfg=None, wait_lookup=None, **kw) -> "OnboardCore":
@@ -181,9 +184,11 @@ class OnboardCore:
                    dt=encounters.dt_s, **kw)
 
 
-    def geometry(self) -> dict:
-        """Per-intruder well-clear quantities at the current time, (N, M) each."""
-        s, v = relative_state(self.own, self.intruders)
+    def geometry(self, s=None, v=None) -> dict:
+        """Per-intruder well-clear quantities at the current time, (N, M) each (``s``, ``v``: the
+        relative state if already computed)."""
+        if s is None:
+            s, v = relative_state(self.own, self.intruders)
         return {"range_m": wc.horizontal_range(s), "hmd_m": wc.hmd(s, v, self.daa_cfg.lookahead_s),
                 "dh_m": -s[..., 2], "tau_mod_s": wc.tau_mod(s, v, self.th.dthr), "wcv": wc.wcv(s, v, self.th)}
 
@@ -194,22 +199,30 @@ class OnboardCore:
         own0, intr0 = self.own, self.intruders
         turn_est = self.turn_estimator.update(t, intr0)
         cmd, dec, self.memory = self._agent.agent_step(t, own0, intr0, pilot_input, self.memory, self.policy,
-                                                       self.daa_cfg, self.wait_lookup, turn_rate=turn_est)
-        s0, v0 = relative_state(own0, intr0)
-        geom = self.geometry()
+                                                       self.daa_cfg, self.wait_lookup, turn_rate=turn_est,
+                                                       band_record=self.step_log, daa_batches=self.daa_batches)
         alert = np.asarray(dec["alert_level"], dtype=np.int8).reshape(self.n, self.m)
-        telem = Telemetry(t, own0, intr0, alert, band_intervals(dec["bands_trk"], dec["bands_trk_region"]))
-        pen = wc.penetration_rate(s0, v0, self.th).max(axis=1)
+        geom = pen = None
+        if self.step_log:
+            s0, v0 = relative_state(own0, intr0)
+            geom = self.geometry(s0, v0)
+            telem = Telemetry(t, own0, intr0, alert, band_intervals(dec["bands_trk"], dec["bands_trk_region"]))
+            pen = wc.penetration_rate(s0, v0, self.th).max(axis=1)
+        else:
+            s0 = own0.position()[:, None] - intr0.position()  # relative_state's s, without the velocities
+            telem = Telemetry(t, own0, intr0, alert)
         # --- truth advances by dt ----------------------------------------------------------------
         turn, acc, vacc = self.controls(t)
         own1 = fly_command(own0, cmd, self.dt, self.perf)
         intr1 = advance(intr0, turn, acc, vacc, self.dt, self.intruder_perf)
         s1 = own1.position()[:, None, :] - intr1.position()
-        lowc_m, nmac_m = wc.segment_events(s0, s1, self.dt, self.th)
-        t_in, t_out = wc.violation_interval(s0, (s1 - s0) / self.dt, self.th, 0.0, self.dt)
-        in_lowc = np.where(np.isfinite(t_in), np.maximum(t_out - t_in, 0.0), 0.0)
-        # PI on the same segment and LoWC interval that detect the LoWC (issue 14)
+        # LoWC on the segment: its violation interval (what wc.segment_events computes, once)
         v_seg = (s1 - s0) / self.dt
+        t_in, t_out = wc.violation_interval(s0, v_seg, self.th, 0.0, self.dt)
+        lowc_m = np.isfinite(t_in)
+        nmac_m = np.isfinite(wc.nmac_interval(s0, v_seg, self.th, self.dt)[0])
+        in_lowc = np.where(lowc_m, np.maximum(t_out - t_in, 0.0), 0.0)
+        # PI on the same segment and LoWC interval that detect the LoWC (issue 14)
         pi_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.pi_constants(self.th)).max(axis=1)
         pi_paper_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.PAPER_PI_CONSTANTS).max(axis=1)
         rmin, vsep = wc.min_separation_on_segment(s0, s1)

@@ -170,7 +170,11 @@ def _add_run_options(r) -> None:
     r.add_argument("--duration", type=finite_float("--duration", 10.0, 3600.0), default=None, metavar="S",
                    help="encounter length T, s (default 240 as in the paper; CPA at T/2)")
     r.add_argument("--chunk-size", type=int_at_least("--chunk-size", 1), default=None, metavar="C",
-                   help="encounters per task (default 2000, about 0.2 GB per worker; smaller chunks resume at a finer grain but run slower)")
+                   help="encounters per chunk (default 2000): one result file per group and chunk, and the "
+                        "encounters that share a DAA call (so part of the configuration)")
+    r.add_argument("--batch-rows", type=int_at_least("--batch-rows", 1), default=None, metavar="R",
+                   help="encounter rows per task: several chunks of several groups run side by side in one "
+                        "batch (default 10000, about 0.4 GiB per worker; results do not depend on it)")
     r.add_argument("--out", required=True, metavar="DIR", help="output directory (must be empty unless --resume)")
     r.add_argument("--workers", type=int_at_least("--workers", 1), default=None, metavar="K",
                    help="worker processes (1 = in-process; default 1); not with a remote --scheduler")
@@ -227,8 +231,9 @@ def run_cmd(args) -> int:
 
     cfg = _config_from_args(args)
     check_scheduler(args.scheduler, args.workers)
+    batch = {"batch_rows": args.batch_rows} if args.batch_rows is not None else {}
     summary = run_campaign(cfg, args.out, workers=args.workers or 1, scheduler=args.scheduler, resume=args.resume,
-                           progress=not args.no_progress and not args.json)
+                           progress=not args.no_progress and not args.json, **batch)
     rate = summary.encounter_steps / summary.wall_s if summary.wall_s > 0 else float("nan")
     info = {"out": str(summary.out_dir), "groups": list(cfg.group_names), "encounters": cfg.n_encounters,
             "seed": cfg.seed, "preset": cfg.preset, "chunks_total": summary.chunks_total,
@@ -266,7 +271,7 @@ def sweep_cmd(args) -> int:
     check_scheduler(args.scheduler, args.workers)
     quiet = args.no_progress or args.json
     meta = sweep.run_sweep(base, vary, args.out, workers=args.workers or 1, scheduler=args.scheduler,
-                           resume=args.resume, progress=not quiet,
+                           resume=args.resume, progress=not quiet, batch_rows=args.batch_rows,
                            say=None if args.json else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
     if args.json:
         print(json.dumps(to_jsonable({"out": args.out, "vary": meta["vary"], "values": meta["values"]}), sort_keys=True))

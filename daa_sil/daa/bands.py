@@ -173,11 +173,12 @@ def gap_regions(region: np.ndarray) -> np.ndarray:
 
 @dataclass
 class Bands:
-    """Bands of the three axes plus the alert levels ``(N, M)`` they were computed with."""
+    """Bands of the three axes plus the alert levels ``(N, M)`` they were computed with (an axis
+    :func:`compute_bands` was not asked for is None)."""
 
-    trk: AxisBands
-    vs: AxisBands
-    gs: AxisBands
+    trk: "AxisBands | None"
+    vs: "AxisBands | None"
+    gs: "AxisBands | None"
     alert: np.ndarray
     preset: str
 
@@ -193,7 +194,8 @@ class Bands:
         return r >= REGION_MID
 
     def __getitem__(self, idx) -> "Bands":
-        return Bands(self.trk.rows(idx), self.vs.rows(idx), self.gs.rows(idx), self.alert[idx], self.preset)
+        rows = lambda ab: None if ab is None else ab.rows(idx)  # noqa: E731  (an axis not computed stays None)
+        return Bands(rows(self.trk), rows(self.vs), rows(self.gs), self.alert[idx], self.preset)
 
 
 def _side_order(arr, j_lo: int, j_hi: int):
@@ -351,12 +353,14 @@ def resolutions(region, values, delta, side, t_man, k0: int, axis: int, cfg: Daa
 
 def compute_bands(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = None,
                   alert: "np.ndarray | None" = None,
-                  lists: "tuple[np.ndarray, np.ndarray] | None" = None) -> Bands:
+                  lists: "tuple[np.ndarray, np.ndarray] | None" = None, axes: "tuple[int, ...] | None" = None) -> Bands:
     """Kinematic track, vertical-speed and ground-speed bands for ownship ``(N,)`` vs intruders ``(N, M)``.
 
     ``alert`` (N, M) are the current alert levels (computed with :func:`alert_levels` if omitted);
     ``lists`` the (NEAR, MID) conflict-aircraft flags for ``cfg.horizon_from_maneuver`` (computed
     without hysteresis if omitted; :class:`daa_sil.daa.DaaState` passes its early-alerting ones).
+    ``axes`` the AXIS_* codes to compute (default all three; each axis is computed on its own, so
+    an axis's bands do not depend on which others are asked for); an axis left out is None.
     """
     cfg = cfg or DaaConfig()
     if alert is None:
@@ -365,14 +369,16 @@ def compute_bands(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | Non
         lists = conflict_lists(own, intr, cfg)
     n = own.shape[0]
     codes = (AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED)
-    sizes = [_path_sizes(own, a, cfg) for a in codes]
+    wanted = codes if axes is None else tuple(a for a in codes if a in axes)
+    sizes = {a: _path_sizes(own, a, cfg) for a in wanted}
     chunks = []
     for lo in range(0, max(n, 1), CHUNK):
         sl = slice(lo, min(lo + CHUNK, n))
         li = None if lists is None else (lists[0][sl], lists[1][sl])
-        chunks.append([axis_bands(own[sl], intr[sl], a, cfg, alert[sl], sz, li) for a, sz in zip(codes, sizes)])
-    axes = [chunks[0][k] if len(chunks) == 1 else _concat([c[k] for c in chunks]) for k in range(3)]
-    return Bands(*axes, alert=alert, preset=cfg.th.name)
+        chunks.append({a: axis_bands(own[sl], intr[sl], a, cfg, alert[sl], sizes[a], li) for a in wanted})
+    out = [None if a not in wanted else chunks[0][a] if len(chunks) == 1 else _concat([c[a] for c in chunks])
+           for a in codes]
+    return Bands(*out, alert=alert, preset=cfg.th.name)
 
 
 #: encounters per internal chunk (keeps the working arrays cache-sized; results do not depend on it)

@@ -67,7 +67,13 @@ class AircraftState:
         return AircraftState(*(getattr(self, f.name).copy() for f in fields(self)))
 
     def __getitem__(self, idx) -> "AircraftState":
-        return AircraftState(*(getattr(self, f.name)[idx] for f in fields(self)))
+        parts = [getattr(self, name)[idx] for name in _STATE_FIELDS]
+        if isinstance(idx, list) or (isinstance(idx, np.ndarray) and idx.ndim >= 1):
+            # advanced indexing already returned six new float arrays of one shape: no second copy
+            out = object.__new__(AircraftState)
+            out.__dict__.update(zip(_STATE_FIELDS, parts))
+            return out
+        return AircraftState(*parts)  # basic indexing gives views: copy them (no aliasing of the parent)
 
     def where(self, mask, other: "AircraftState") -> "AircraftState":
         """Element-wise choose ``self`` where ``mask`` else ``other``."""
@@ -81,6 +87,9 @@ class AircraftState:
     def from_array(cls, a) -> "AircraftState":
         a = np.asarray(a, float)
         return cls(*(a[..., k] for k in range(6)))
+
+
+_STATE_FIELDS = ("x", "y", "z", "gs", "trk", "vs")
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,21 @@ def guidance_from_bands(bands) -> Guidance:
                     up_level=ul, down_vs=dv, down_level=dl)
 
 
+def display_bands(own: AircraftState, intr: AircraftState, cfg):
+    """The bands a display computes for ownship (R,) and intruders (R, M): only the track and
+    vertical-speed axes, the ones :func:`guidance_from_bands` reads (never ground speed)."""
+    from daa_sil.daa.bands import compute_bands
+    from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_VERTICAL
+
+    return compute_bands(own, intr, cfg, axes=(AXIS_HORIZONTAL, AXIS_VERTICAL))
+
+
+def guidance_values(bands) -> dict:
+    """``{key: (R,)}`` of :attr:`PilotDisplay.KEYS` from bands of R encounters (track and vertical axes)."""
+    g = guidance_from_bands(bands)
+    return {key: getattr(g, key) for key in PilotDisplay.KEYS}
+
+
 class PilotDisplay:
     """What N pilots' displays show, refreshed only for the pilots that see newer telemetry (the GCS
     of the SIL and the fast-time loop both use this, so the pilot reads the same guidance in both).
@@ -46,22 +61,28 @@ class PilotDisplay:
     Per pilot: the vehicle's DAIDALUS alert level sent with that telemetry, well clear violated on
     the observed states and, at or above ``alert_level_min``, the DAA bands' candidates of the
     observed states (``cfg`` a :class:`daa_sil.daa.config.DaaConfig`); below it the last bands stay.
+    ``daa_batches`` (N,): the bands are computed once per DAA batch (:mod:`daa_sil.daa_batches`).
     """
 
-    _KEYS = ("left_trk", "left_level", "right_trk", "right_level", "up_vs", "up_level", "down_vs", "down_level")
+    #: the band fields of :class:`Guidance` the display shows
+    KEYS = ("left_trk", "left_level", "right_trk", "right_level", "up_vs", "up_level", "down_vs", "down_level")
 
-    def __init__(self, n: int, cfg, alert_level_min: int):
+    def __init__(self, n: int, cfg, alert_level_min: int, daa_batches: "np.ndarray | None" = None):
         self.cfg = cfg
+        self.daa_batches = daa_batches  #: (N,) DAA batch of each pilot: bands one call per batch
         self.alert_level_min = int(alert_level_min)
         self.alert = np.zeros(n, np.int64)
         self.wcv = np.zeros(n, bool)
-        self.bands = {k: np.full(n, np.inf if k.endswith("_level") else np.nan) for k in self._KEYS}
+        self.bands = {k: np.full(n, np.inf if k.endswith("_level") else np.nan) for k in self.KEYS}
 
-    def refresh(self, rows: np.ndarray, own: AircraftState, intr: AircraftState, alert: np.ndarray) -> None:
+    def refresh(self, rows: np.ndarray, own: AircraftState, intr: AircraftState, alert: np.ndarray,
+                known: "tuple[np.ndarray, dict] | None" = None) -> None:
         """Pilots ``rows`` (indices) now see ownship ``own`` (R,), intruders ``intr`` (R, M) and the
-        vehicle's alert level ``alert`` (R,) sent with them."""
+        vehicle's alert level ``alert`` (R,) sent with them. ``known = (have (R,) bool, values)``:
+        the guidance of the rows ``have`` is already known -- ``values[key]`` (R,) for each of
+        :attr:`KEYS`, from the very bands this display would compute (the same state, configuration
+        and alert gating; see :func:`guidance_values`) -- and only the others are banded."""
         from daa_sil.daa.alerting import relative_state
-        from daa_sil.daa.bands import compute_bands
         from daa_sil.geometry.wellclear import wcv
 
         rows = np.asarray(rows, np.int64)
@@ -71,10 +92,18 @@ class PilotDisplay:
         self.alert[rows] = alert
         self.wcv[rows] = wcv(*relative_state(own, intr), self.cfg.th).any(axis=1)
         sel = alert >= self.alert_level_min
-        if sel.any():
-            gb = guidance_from_bands(compute_bands(own[sel], intr[sel], self.cfg))
-            for key in self._KEYS:
-                self.bands[key][rows[sel]] = getattr(gb, key)
+        if known is not None:
+            have = np.asarray(known[0], bool) & sel
+            for key in self.KEYS:
+                self.bands[key][rows[have]] = np.asarray(known[1][key])[have]
+            sel = sel & ~have
+        from daa_sil.daa_batches import positions_by_batch
+
+        k = np.flatnonzero(sel)
+        for pos in positions_by_batch(self.daa_batches, rows[k]):
+            got = guidance_values(display_bands(own[k[pos]], intr[k[pos]], self.cfg))
+            for key in self.KEYS:
+                self.bands[key][rows[k[pos]]] = got[key]
 
     def guidance(self) -> Guidance:
         """The current :class:`Guidance` of every pilot (N,)."""
@@ -85,12 +114,11 @@ def guidance_from_daa(own: AircraftState, intr: AircraftState, cfg=None) -> Guid
     """Compute :class:`Guidance` with :mod:`daa_sil.daa` for ownship (N,) and intruders (N, M)
     (``cfg``: a :class:`daa_sil.daa.config.DaaConfig`, default DO-365B); ``wcv`` from the preset."""
     from daa_sil.daa.alerting import relative_state
-    from daa_sil.daa.bands import compute_bands
     from daa_sil.daa.config import DaaConfig
     from daa_sil.geometry.wellclear import wcv
 
     cfg = cfg or DaaConfig()
-    g = guidance_from_bands(compute_bands(own, intr, cfg))
+    g = guidance_from_bands(display_bands(own, intr, cfg))
     s, v = relative_state(own, intr)
     g.wcv = wcv(s, v, cfg.th).any(axis=1)
     return g

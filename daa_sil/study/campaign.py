@@ -1,6 +1,7 @@
 """Fast-time Monte Carlo campaigns over the paper's groups (Table 2), chunked over executors.
 
-One code path for every executor: chunks of encounters are submitted to a
+One code path for every executor: batches of chunks (each task several chunks of several groups
+side by side, :mod:`daa_sil.study.campaign_plan`) are submitted to a
 :class:`concurrent.futures.Executor` and collected with ``as_completed``, whichever executor it is:
 
 * ``workers=1`` -- in-process (one worker thread, so the progress bar stays live);
@@ -13,10 +14,13 @@ One code path for every executor: chunks of encounters are submitted to a
 Determinism: the encounter set is generated once from the campaign seed and saved as
 ``DIR/encounters.parquet``; every random stream of encounter ``i`` (pilot, uplink and downlink delay)
 comes from the encounter's own seed (:func:`encounter_seeds`), the same for every group (common
-random numbers), never from the chunk. Results therefore do not depend on chunking, worker count,
-executor or interruption: a killed campaign resumed with ``resume=True`` skips complete chunks (each
-checked against its checksum file; a damaged one is named in a warning and computed again) and
-ends with exactly the tables of an uninterrupted run.
+random numbers), never from the chunk, and the DAA is called once per chunk of a group on exactly
+that chunk's rows (:mod:`daa_sil.daa_batches`: its last bits depend on the rows of a call). Results
+therefore do not depend on batching, worker count, executor or interruption: a killed campaign
+resumed with ``resume=True`` skips complete chunks (each checked against its checksum file; a
+damaged one is named in a warning and computed again) and ends with exactly the tables of an
+uninterrupted run. The chunk size decides which encounters share a DAA call, so it is part of the
+configuration (``campaign.json``, checked on resume).
 
 Layout of ``DIR``::
 
@@ -52,6 +56,7 @@ from daa_sil.study.campaign_files import (_versions, check_out_dir, chunk_done, 
 from daa_sil.study.executors import make_executor
 from daa_sil.study.campaign_files import CAMPAIGN_FORMAT
 from daa_sil.study.campaign_config import CampaignConfig
+from daa_sil.study.campaign_plan import DEFAULT_BATCH_ROWS, plan_batches
 
 
 # --- configuration --------------------------------------------------------------------------------
@@ -67,10 +72,10 @@ def encounter_seeds(campaign_seed: int, encounter_ids: np.ndarray) -> np.ndarray
     return encounter_seed(int(campaign_seed), encounter_ids)
 
 
-# --- chunk task (runs in a worker) ----------------------------------------------------------------
+# --- tasks (run in a worker) -----------------------------------------------------------------------
 @dataclass
 class ChunkTask:
-    """One chunk of one group: the work unit sent to an executor (small, picklable)."""
+    """One chunk of one group (small, picklable); :class:`BatchTask` batches several."""
 
     group: str
     chunk: int
@@ -80,8 +85,20 @@ class ChunkTask:
 
 
 @dataclass
+class BatchTask:
+    """Chunks of groups simulated side by side in one batch: the work unit sent to an executor.
+    ``units`` are ``(group, chunk)``; ``encounters``/``seeds`` hold each chunk's subset once."""
+
+    units: list
+    config: CampaignConfig
+    encounters: dict  # chunk -> EncounterSet subset for [lo, hi)
+    seeds: dict  # chunk -> (n,) int64 per-encounter seeds
+
+
+@dataclass
 class ChunkResult:
-    """What a worker returns: the two result tables of one chunk and its compute time (s)."""
+    """What a worker returns per unit: the two result tables of one chunk of one group and its
+    compute time (s; a batch's time shared by rows)."""
 
     group: str
     chunk: int
@@ -104,20 +121,31 @@ def campaign_family(config: CampaignConfig):
     return _wait_family(config.map_source, config.preset, config.gamma) if config.uses_map else None
 
 
-def run_chunk(task: ChunkTask) -> ChunkResult:
-    """Simulate one chunk of one group (pure function of the task; safe in any worker)."""
-    from .fasttime import simulate
+def run_batch(task: BatchTask) -> list[ChunkResult]:
+    """Simulate the units of a batch together (pure function of the task; safe in any worker); each
+    unit's tables are those of the unit run alone (:func:`daa_sil.study.fasttime.simulate_parts`)."""
+    from .fasttime import SimPart, simulate_parts
 
     t0 = time.perf_counter()
     cfg = task.config
-    spec = cfg.group(task.group)
-    model = spec.delay_model()
-    fam = campaign_family(cfg) if spec.uses_map else None
-    enc_rows, dec_rows, _ = simulate(task.encounters, cfg.policy(task.group), model, model, cfg.pilot_config(),
-                                     daa_cfg=cfg.daa_config(), wait_family=fam,
-                                     seeds=task.seeds, preset=cfg.preset, duration_s=cfg.duration_s,
-                                     dt=cfg.dt_s, group=task.group, record_steps=False)
-    return ChunkResult(task.group, task.chunk, enc_rows, dec_rows, time.perf_counter() - t0, len(task.seeds))
+    parts = []
+    for g, c in task.units:
+        spec = cfg.group(g)
+        model = spec.delay_model()
+        parts.append(SimPart(task.encounters[c], cfg.policy(g), model, model, task.seeds[c], g))
+    fam = campaign_family(cfg) if any(cfg.group(g).uses_map for g, _ in task.units) else None
+    tables = simulate_parts(parts, cfg.pilot_config(), daa_cfg=cfg.daa_config(), wait_family=fam,
+                            preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s)
+    spent = time.perf_counter() - t0
+    rows = sum(len(p.encounters) for p in parts)
+    return [ChunkResult(g, c, enc, dec, spent * len(p.encounters) / rows, len(p.encounters))
+            for (g, c), p, (enc, dec) in zip(task.units, parts, tables)]
+
+
+def run_chunk(task: ChunkTask) -> ChunkResult:
+    """Simulate one chunk of one group (a batch of one unit)."""
+    return run_batch(BatchTask([(task.group, task.chunk)], task.config, {task.chunk: task.encounters},
+                               {task.chunk: task.seeds}))[0]
 
 
 # --- files ----------------------------------------------------------------------------------------
@@ -213,34 +241,39 @@ def _describe_family(fam) -> dict:
 
 def run_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", *, workers: int = 1,
                  scheduler: "str | None" = None, resume: bool = False, progress: bool = True,
-                 on_chunk: "Callable[[ChunkResult], None] | None" = None) -> CampaignSummary:
-    """Run (or resume) a campaign into ``out_dir``; see the module docstring for the layout."""
+                 on_chunk: "Callable[[ChunkResult], None] | None" = None,
+                 batch_rows: int = DEFAULT_BATCH_ROWS) -> CampaignSummary:
+    """Run (or resume) a campaign into ``out_dir``; see the module docstring for the layout.
+    ``batch_rows``: encounter rows per task (:mod:`daa_sil.study.campaign_plan`; results do not
+    depend on it)."""
     if not isinstance(workers, int) or workers < 1:
         raise UsageError(f"--workers must be a positive integer, got {workers!r}")
+    plan_batches([], workers, batch_rows)  # validates batch_rows before anything starts
     t_start = time.perf_counter()
     config.validate()
     check_out_dir(out_dir, resume)
     # the executor starts before anything is written: a missing or unreachable scheduler leaves no files
     with make_executor(workers, scheduler) as ex:
-        summary = _run_with(ex, config, out_dir, scheduler, resume, progress, on_chunk)
+        summary = _run_with(ex, config, out_dir, scheduler, resume, progress, on_chunk, workers, batch_rows)
     summary.wall_s = time.perf_counter() - t_start
     return summary
 
 
 def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resume: bool, progress: bool,
-              on_chunk) -> CampaignSummary:
+              on_chunk, workers: int, batch_rows: int) -> CampaignSummary:
     out, config, encs = prepare_campaign(config, out_dir, resume)
     if resume:
         remove_stale_temps(out)  # temporaries of a writer killed mid-write
     seeds = np.asarray(encs.seed, dtype=np.int64)
     todo, skipped, damaged, unsummed = [], 0, [], []
-    for g in config.group_names:
-        for c in range(config.n_chunks):
+    for c in range(config.n_chunks):  # (chunk, group) order: every task gets a mix of groups
+        for g in config.group_names:
             why = chunk_problem(out, g, c)
             if why is None:
                 skipped += 1
                 continue
-            todo.append((g, c))
+            lo, hi = config.chunk_range(c)
+            todo.append((g, c, hi - lo))
             if why != "missing":
                 damaged.append(f"{g}/{c}")
                 warn(f"chunk {c} of group {g} in {out} is damaged ({why}); computing it again")
@@ -249,17 +282,23 @@ def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resum
     if unsummed:
         warn(f"{len(unsummed)} chunk(s) have tables but no checksum file (the writer was stopped before it, or an "
              f"older daa-sil wrote them): computing {', '.join(unsummed[:5])}{' ...' if len(unsummed) > 5 else ''} again")
-    if any(config.group(g).uses_map for g, _ in todo) and scheduler is None:
+    if any(config.group(g).uses_map for g, _, _ in todo) and scheduler is None:
         campaign_family(config)  # build/load once here; forked workers inherit it
     summary = CampaignSummary(out, config, config.n_chunks * len(config.group_names), skipped, 0, 0.0, 0.0, 0,
                               chunks_damaged=damaged)
     steps_per_enc = int(round(config.duration_s / config.dt_s))
-    futs: dict[cf.Future, tuple[str, int]] = {}
-    for g, c in todo:
-        lo, hi = config.chunk_range(c)
-        task = ChunkTask(g, c, config, encs.subset(np.arange(lo, hi)), seeds[lo:hi])
-        futs[ex.submit(run_chunk, task)] = (g, c)
-    todo_set = set(todo)
+    futs: dict[cf.Future, list] = {}
+    subsets: dict = {}
+    for units in plan_batches(todo, workers, batch_rows, min_tasks=2 * workers):
+        chunks = sorted({c for _, c, _ in units})
+        for c in chunks:
+            if c not in subsets:
+                lo, hi = config.chunk_range(c)
+                subsets[c] = encs.subset(np.arange(lo, hi))
+        task = BatchTask([(g, c) for g, c, _ in units], config, {c: subsets[c] for c in chunks},
+                         {c: seeds[slice(*config.chunk_range(c))] for c in chunks})
+        futs[ex.submit(run_batch, task)] = task.units
+    todo_set = {(g, c) for g, c, _ in todo}
     with _progress(progress) as prog:
         bars = {}
         for g in config.group_names:
@@ -268,14 +307,14 @@ def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resum
             bars[g] = prog.add_task(f"group {g:5s}", total=config.n_encounters, completed=done)
         for fut in cf.as_completed(list(futs)):
             futs.pop(fut)
-            res: ChunkResult = fut.result()
-            write_chunk(out, res)
-            summary.chunks_run += 1
-            summary.compute_s += res.compute_s
-            summary.encounter_steps += res.n * steps_per_enc
-            prog.advance(bars[res.group], res.n)
-            if on_chunk is not None:
-                on_chunk(res)
+            for res in fut.result():
+                write_chunk(out, res)
+                summary.chunks_run += 1
+                summary.compute_s += res.compute_s
+                summary.encounter_steps += res.n * steps_per_enc
+                prog.advance(bars[res.group], res.n)
+                if on_chunk is not None:
+                    on_chunk(res)
     meta = load_campaign_json(out)
     meta["status"] = "complete"
     atomic_write_json(out / "campaign.json", meta)
@@ -283,6 +322,6 @@ def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resum
 
 
 __all__ = ["GroupSpec", "parse_groups", "campaign_family", "CampaignConfig", "encounter_seeds", "ChunkTask",
-           "ChunkResult", "run_chunk", "chunk_paths", "chunk_done", "write_chunk", "read_results",
+           "BatchTask", "ChunkResult", "run_chunk", "run_batch", "chunk_paths", "chunk_done", "write_chunk", "read_results",
            "load_campaign_json", "check_out_dir", "make_executor", "prepare_campaign", "run_campaign",
            "CampaignSummary", "DASK_HINT"]

@@ -101,8 +101,10 @@ def point_configs(base, vary: Vary) -> list:
 
 
 def run_sweep(base, vary: Vary, out_dir: "str | Path", *, workers: int = 1, scheduler: "str | None" = None,
-              resume: bool = False, progress: bool = True, say: "Callable[[str], None] | None" = None) -> dict:
-    """Run (or resume) every point of a sweep, then write its table and figures. Returns sweep.json."""
+              resume: bool = False, progress: bool = True, say: "Callable[[str], None] | None" = None,
+              batch_rows: "int | None" = None) -> dict:
+    """Run (or resume) every point of a sweep, then write its table and figures. Returns sweep.json.
+    ``batch_rows``: encounter rows per task of each campaign (default the campaign runner's)."""
     from .campaign import run_campaign
     from daa_sil.study.campaign_files import check_out_dir
     from daa_sil.files import atomic_write_json, ensure_dir, to_jsonable
@@ -127,7 +129,8 @@ def run_sweep(base, vary: Vary, out_dir: "str | Path", *, workers: int = 1, sche
         again = d.is_dir() and any(d.iterdir())
         if say:
             say(f"{vary.name} = {point['value']}: {'resuming' if again else 'running'} {d}")
-        run_campaign(cfg, d, workers=workers, scheduler=scheduler, resume=again, progress=progress)
+        run_campaign(cfg, d, workers=workers, scheduler=scheduler, resume=again, progress=progress,
+                     **({"batch_rows": batch_rows} if batch_rows is not None else {}))
     write_summary(out)
     return meta
 

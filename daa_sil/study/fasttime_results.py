@@ -1,0 +1,197 @@
+"""Fast-time results: the per-encounter and per-decision tables of the architecture contract
+("Campaign result tables"), their accumulators over the steps, and the step-log columns of one
+step (:mod:`daa_sil.steplog`). A batch of several parts (:func:`daa_sil.study.fasttime.simulate_parts`)
+accumulates once and cuts one pair of tables per part (a row range of the batch)."""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import pyarrow as pa
+
+from daa_sil.agent import (BY_BOTH, BY_MAP, BY_PROJL, CODE_NAMES, D_BLEND, D_DAA_OVERRIDE, D_LINK_LOST,
+    D_NO_WAIT, D_PILOT, D_STALE, D_WAIT)
+from daa_sil.geometry.kinematics import AircraftState
+from daa_sil.onboard import StepOutput
+
+_I = pa.int64()
+ENCOUNTER_SCHEMA = pa.schema(
+    [("group", pa.string()), ("encounter_id", _I), ("seed", _I), ("duration_s", pa.float64()),
+     ("lowc", pa.bool_()), ("nmac", pa.bool_()), ("lowc_duration_s", pa.float64()), ("pi", pa.float64()),
+     ("pi_paper", pa.float64()), ("min_range_m", pa.float64()), ("vsep_at_min_range_m", pa.float64()), ("dev_h_m", pa.float64()),
+     ("dev_v_m", pa.float64()), ("n_active_steps", _I), ("n_wait", _I), ("n_no_wait", _I),
+     ("n_pilot_received", _I), ("n_pilot_exec", _I), ("n_blend", _I), ("n_blend_exact", _I),
+     ("n_blend_axis", _I), ("n_blend_intent", _I), ("n_daa_override", _I), ("n_stale", _I), ("n_link_lost", _I),
+     ("n_by_map", _I), ("n_by_projl", _I), ("n_by_both", _I), ("n_lookup_in_box", _I),
+     ("n_pilot_received_whole", _I), ("n_pilot_exec_whole", _I),
+     ("intruder_turns", pa.bool_()), ("preset", pa.string())])
+
+DECISION_SCHEMA = pa.schema(
+    [("group", pa.string()), ("encounter_id", _I), ("t", pa.float64()), ("decision", pa.string()),
+     ("rule", pa.string()), ("wait_s", pa.float64()), ("projl", pa.bool_()), ("decided_by", pa.string()),
+     ("wait_p_lowc", pa.float64()), ("wait_in_box", pa.bool_()), ("wait_turn_dps", pa.float64()),
+     ("wait_map_turn_dps", pa.float64()), ("sm_pilot", pa.float64()),
+     ("sm_exec", pa.float64()), ("pilot_axis", pa.string()), ("pilot_dir", pa.string()),
+     ("exec_axis", pa.string()), ("exec_dir", pa.string()), ("exact_match", pa.bool_())])
+
+_DEC_FIELDS = ("decision", "rule", "wait_s", "projl", "decided_by", "wait_p_lowc", "wait_in_box", "wait_turn_dps",
+               "wait_map_turn_dps", "sm_pilot", "sm_exec", "pilot_axis", "pilot_dir", "exec_axis", "exec_dir",
+               "exact_match")
+
+
+class Accumulators:
+    """Per-encounter result accumulators (N,) and the decision rows of the active steps."""
+
+    def __init__(self, n: int, own0: AircraftState):
+        self.lowc = np.zeros(n, bool)
+        self.nmac = np.zeros(n, bool)
+        self.lowc_time = np.zeros(n)
+        self.pi = np.zeros(n)  # PI (s), preset constants, integrated on the LoWC segments
+        self.pi_paper = np.zeros(n)  # PI (s), the paper's Eq. constants (4000 ft / 450 ft / 35 s)
+        self.min_range = np.full(n, np.inf)
+        self.vsep_at_min = np.full(n, np.nan)
+        self.dev_h = np.zeros(n)
+        self.dev_v = np.zeros(n)
+        self.counts = np.zeros((n, len(CODE_NAMES["decision"])), np.int64)
+        self.n_active = np.zeros(n, np.int64)
+        self.n_blend_exact = np.zeros(n, np.int64)
+        self.n_blend_axis = np.zeros(n, np.int64)
+        self.n_blend_intent = np.zeros(n, np.int64)
+        self.by = np.zeros((n, len(CODE_NAMES["decided_by"])), np.int64)
+        self.n_in_box = np.zeros(n, np.int64)
+        self.n_recv_whole = np.zeros(n, np.int64)
+        self.n_exec_whole = np.zeros(n, np.int64)
+        self.p0 = own0.position()
+        self.v0 = own0.velocity()
+        self.dec_parts: list[tuple[np.ndarray, float, dict]] = []
+
+    def deviation(self, own: AircraftState, t: float) -> None:
+        """Max deviation (m) of the ownship from its unperturbed straight path p0 + v0 t."""
+        d = own.position() - (self.p0 + self.v0 * t)
+        self.dev_h = np.maximum(self.dev_h, np.hypot(d[:, 0], d[:, 1]))
+        self.dev_v = np.maximum(self.dev_v, np.abs(d[:, 2]))
+
+    def add(self, out: StepOutput, dt: float) -> None:
+        dec = out.decisions
+        self.lowc |= out.lowc
+        self.nmac |= out.nmac
+        self.lowc_time += out.lowc_time_s
+        self.pi += out.pi_s
+        self.pi_paper += out.pi_paper_s
+        closer = out.seg_min_range_m < self.min_range
+        self.min_range = np.where(closer, out.seg_min_range_m, self.min_range)
+        self.vsep_at_min = np.where(closer, out.seg_vsep_m, self.vsep_at_min)
+        self.deviation(out.own, out.t)
+        active = np.asarray(dec["active"], bool)
+        code = np.asarray(dec["decision"], np.int64)
+        fresh = np.asarray(dec["pilot_cmd_fresh"], bool)
+        self.n_recv_whole += fresh
+        self.n_exec_whole += fresh & (~active | (code == D_PILOT))  # outside the active phase it is flown as sent
+        ia = np.flatnonzero(active)
+        if ia.size:
+            np.add.at(self.counts, (ia, code[ia]), 1)
+            self.n_active[ia] += 1
+            blend = code == D_BLEND
+            exact = blend & np.asarray(dec["exact_match"], bool)
+            intent = blend & (np.asarray(dec["pilot_axis"]) != 0)
+            axis_only = intent & ~exact & (np.asarray(dec["exec_axis"]) == np.asarray(dec["pilot_axis"]))
+            self.n_blend_exact += exact & active
+            self.n_blend_axis += axis_only & active
+            self.n_blend_intent += intent & active
+            np.add.at(self.by, (ia, np.asarray(dec["decided_by"], np.int64)[ia]), 1)
+            self.n_in_box += active & np.asarray(dec["wait_in_box"], bool)
+            self.dec_parts.append((ia, out.t, {k: np.asarray(dec[k])[ia] for k in _DEC_FIELDS}))
+
+    def decisions(self) -> tuple[np.ndarray, np.ndarray, dict]:
+        """Every decision row so far as ``(row, t, fields)``, sorted by row (encounter), then time."""
+        if not self.dec_parts:
+            return np.zeros(0, np.int64), np.zeros(0), {k: np.zeros(0) for k in _DEC_FIELDS}
+        rows = np.concatenate([p[0] for p in self.dec_parts])
+        t = np.concatenate([np.full(p[0].size, p[1]) for p in self.dec_parts])
+        order = np.lexsort((t, rows))  # encounter-major, then time
+        col = {k: np.concatenate([p[2][k] for p in self.dec_parts])[order] for k in _DEC_FIELDS}
+        return rows[order], t[order], col
+
+
+def _strings(codes: np.ndarray, names: Sequence[str]) -> pa.Array:
+    return pa.DictionaryArray.from_arrays(pa.array(np.asarray(codes, np.int32)),
+                                          pa.array(list(names), pa.string())).cast(pa.string())
+
+
+def decision_table(sorted_rows: tuple, lo: int, hi: int, ids: np.ndarray, group: str) -> pa.Table:
+    """The decision table of rows ``[lo, hi)`` of a batch (``sorted_rows`` from
+    :meth:`Accumulators.decisions`; ``ids`` the encounter ids of those rows)."""
+    all_rows, all_t, all_col = sorted_rows
+    a, b = np.searchsorted(all_rows, lo), np.searchsorted(all_rows, hi)
+    if a == b:
+        return DECISION_SCHEMA.empty_table()
+    rows, t = all_rows[a:b] - lo, all_t[a:b]
+    col = {k: v[a:b] for k, v in all_col.items()}
+    arrays = [pa.array(np.full(rows.size, group), pa.string()), pa.array(ids[rows], _I), pa.array(t),
+              _strings(col["decision"], CODE_NAMES["decision"]), _strings(col["rule"], CODE_NAMES["rule"]),
+              pa.array(col["wait_s"].astype(float)), pa.array(col["projl"].astype(bool)),
+              _strings(col["decided_by"], CODE_NAMES["decided_by"]), pa.array(col["wait_p_lowc"].astype(float)),
+              pa.array(col["wait_in_box"].astype(bool), mask=np.isnan(col["wait_p_lowc"].astype(float))),
+              pa.array(col["wait_turn_dps"].astype(float)),
+              pa.array(col["wait_map_turn_dps"].astype(float)),
+              pa.array(col["sm_pilot"].astype(float)), pa.array(col["sm_exec"].astype(float)),
+              _strings(col["pilot_axis"], CODE_NAMES["pilot_axis"]), _strings(col["pilot_dir"], CODE_NAMES["pilot_dir"]),
+              _strings(col["exec_axis"], CODE_NAMES["exec_axis"]), _strings(col["exec_dir"], CODE_NAMES["exec_dir"]),
+              pa.array(col["exact_match"].astype(bool))]
+    return pa.Table.from_arrays(arrays, schema=DECISION_SCHEMA)
+
+
+def encounter_table(acc: Accumulators, lo: int, hi: int, encounters, group: str, preset: str,
+                    duration: float) -> pa.Table:
+    """The per-encounter table of rows ``[lo, hi)`` of a batch (``encounters`` the part's set)."""
+    n = len(encounters)
+    sl = slice(lo, hi)
+    c = acc.counts[sl]
+    received = c[:, D_PILOT] + c[:, D_BLEND] + c[:, D_DAA_OVERRIDE]
+    by = acc.by[sl]
+    g = lambda a: a[sl]  # noqa: E731
+    cols = {
+        "group": pa.array(np.full(n, group), pa.string()), "encounter_id": pa.array(encounters.encounter_id, _I),
+        "seed": pa.array(encounters.seed, _I), "duration_s": pa.array(np.full(n, float(duration))),
+        "lowc": pa.array(g(acc.lowc)), "nmac": pa.array(g(acc.nmac)), "lowc_duration_s": pa.array(g(acc.lowc_time)),
+        "pi": pa.array(g(acc.pi)), "pi_paper": pa.array(g(acc.pi_paper)), "min_range_m": pa.array(g(acc.min_range)), "vsep_at_min_range_m": pa.array(g(acc.vsep_at_min)),
+        "dev_h_m": pa.array(g(acc.dev_h)), "dev_v_m": pa.array(g(acc.dev_v)), "n_active_steps": pa.array(g(acc.n_active), _I),
+        "n_wait": pa.array(c[:, D_WAIT], _I), "n_no_wait": pa.array(c[:, D_NO_WAIT], _I),
+        "n_pilot_received": pa.array(received, _I), "n_pilot_exec": pa.array(c[:, D_PILOT], _I),
+        "n_blend": pa.array(c[:, D_BLEND], _I), "n_blend_exact": pa.array(g(acc.n_blend_exact), _I),
+        "n_blend_axis": pa.array(g(acc.n_blend_axis), _I),
+        "n_blend_intent": pa.array(g(acc.n_blend_intent), _I), "n_daa_override": pa.array(c[:, D_DAA_OVERRIDE], _I),
+        "n_stale": pa.array(c[:, D_STALE], _I), "n_link_lost": pa.array(c[:, D_LINK_LOST], _I),
+        "n_by_map": pa.array(by[:, BY_MAP], _I), "n_by_projl": pa.array(by[:, BY_PROJL], _I),
+        "n_by_both": pa.array(by[:, BY_BOTH], _I), "n_lookup_in_box": pa.array(g(acc.n_in_box), _I),
+        "n_pilot_received_whole": pa.array(g(acc.n_recv_whole), _I), "n_pilot_exec_whole": pa.array(g(acc.n_exec_whole), _I),
+        "intruder_turns": pa.array(np.asarray(encounters.intruder_turns, bool)),
+        "preset": pa.array(np.full(n, preset), pa.string()),
+    }
+    return pa.Table.from_arrays(list(cols.values()), schema=ENCOUNTER_SCHEMA)
+
+
+def step_columns(out: StepOutput, delay_up: np.ndarray, delay_down: np.ndarray) -> dict:
+    """Step-log columns (:mod:`daa_sil.steplog`) of one :class:`StepOutput`."""
+    d, g, own, intr = out.decisions, out.geometry, out.own, out.intruders
+    deg = np.degrees
+    cols = {"step": np.full(own.shape[0], out.step, np.int32), "t": np.full(own.shape[0], out.t),
+            "own_x": own.x, "own_y": own.y, "own_z": own.z, "own_gs": own.gs, "own_trk_deg": deg(own.trk),
+            "own_vs": own.vs, "intr_x": intr.x, "intr_y": intr.y, "intr_z": intr.z, "intr_gs": intr.gs,
+            "intr_trk_deg": deg(intr.trk), "intr_vs": intr.vs, "range_m": g["range_m"], "hmd_m": g["hmd_m"],
+            "dh_m": g["dh_m"], "tau_mod_s": g["tau_mod_s"], "alert_level": out.telemetry.alert_level,
+            "wcv": g["wcv"], "delay_up_s": delay_up, "delay_down_s": delay_down, "lowc": out.lowc, "nmac": out.nmac}
+    for k in ("decision", "rule", "authority", "wait_s", "projl", "decided_by", "wait_p_lowc", "wait_in_box",
+              "wait_map_turn_dps", "pilot_cmd_received", "pilot_cmd_age_s", "sm_pilot", "sm_exec", "pilot_axis",
+              "pilot_dir", "exec_axis", "exec_dir"):
+        cols[k] = d[k]
+    cols["intr_turn_est_dps"] = deg(out.turn_est)
+    for src, dst in (("cmd", "cmd"), ("pilot", "pilot"), ("daa", "daa")):
+        cols[f"{dst}_trk_deg"] = deg(d[f"{src}_trk"])
+        cols[f"{dst}_vs"] = d[f"{src}_vs"]
+        cols[f"{dst}_gs"] = d[f"{src}_gs"]
+    cols.update(out.telemetry.extra)
+    return cols
+
+

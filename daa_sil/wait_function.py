@@ -1,0 +1,94 @@
+"""The wait function w(S(k)) of the allocation agent (paper Eq. 11): a constant, "always wait", none,
+or the MDP wait map read at the current state (:func:`make_wait_lookup`), per row of a batch by each
+row's policy (:func:`wait_values`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from daa_sil.allocation import PolicyRows
+from daa_sil.daa.config import DaaConfig
+from daa_sil.errors import UsageError
+from daa_sil.geometry.frames import to_paper_state
+from daa_sil.geometry.kinematics import AircraftState
+
+
+@dataclass
+class WaitValue:
+    """The wait function's answer for N encounters (arrays ``(N,)``; nan where not applicable)."""
+
+    wait_s: np.ndarray  #: w, s
+    p_lowc: np.ndarray  #: the map's P(LoWC within H while waiting)
+    in_box: np.ndarray  #: bool, the state was inside the map's box (not clamped)
+    turn_dps: np.ndarray  #: estimated turn rate of the intruder read, compass deg/s (+ = right)
+    map_turn_dps: np.ndarray  #: conditioning turn rate of the map read, compass deg/s (+ = right)
+
+    @classmethod
+    def constant(cls, n: int, value: float) -> "WaitValue":
+        nan = np.full(n, np.nan)
+        return cls(np.full(n, float(value)), nan, np.zeros(n, bool), nan.copy(), nan.copy())
+
+
+#: ``lookup(own (N,), intruders (N, M), turn_rate (N, M) compass rad/s) -> WaitValue``
+WaitLookup = Callable[[AircraftState, AircraftState, np.ndarray], WaitValue]
+
+
+def wait_values(own, intr, pol: PolicyRows, lookup: "WaitLookup | None", turn_rate, idx) -> WaitValue:
+    """The wait function of rows ``idx`` (ownship (N,), intruders (N, M), estimated turn rates (N, M)
+    compass rad/s or None = 0), each by its own policy's wait mode (one lookup for all map rows)."""
+    n = len(idx)
+    out = WaitValue.constant(n, 0.0)
+    for mode, pos in pol.modes(idx):
+        if mode == "none":
+            continue
+        if mode == "constant":
+            out.wait_s[pos] = pol.value("constant_wait_s")[idx[pos]]
+        elif mode == "always":
+            out.wait_s[pos] = np.inf
+        else:
+            if lookup is None:
+                raise UsageError("policy wait_mode 'map' needs a wait_lookup (daa_sil.agent.make_wait_lookup)")
+            rows = idx[pos]
+            rate = np.zeros(intr.shape) if turn_rate is None else np.broadcast_to(np.asarray(turn_rate, float),
+                                                                               intr.shape)
+            wv = lookup(own[rows], intr[rows], rate[rows])
+            out.wait_s[pos], out.p_lowc[pos], out.in_box[pos] = wv.wait_s, wv.p_lowc, wv.in_box
+            out.turn_dps[pos], out.map_turn_dps[pos] = wv.turn_dps, wv.map_turn_dps
+    return out
+
+
+def make_wait_lookup(family, cfg: "DaaConfig | None" = None) -> WaitLookup:
+    """Wrap a wait-map family (``family.lookup(paper_states, turn_rate)``) as a :data:`WaitLookup`.
+
+    Each intruder is converted to the paper frame (:func:`daa_sil.geometry.frames.to_paper_state`) and read
+    from the map of its estimated turn rate (compass rad/s, + = right, passed to the family in the
+    paper sense, + = left). The wait of the **most threatening** intruder is used: the one with the
+    earliest straight-line LoWC over the DAA lookahead (ties: the smallest range).
+    """
+    cfg = cfg or DaaConfig()
+    from daa_sil.geometry import wellclear as wc
+    from daa_sil.daa.alerting import relative_state
+
+    def lookup(own: AircraftState, intr: AircraftState, turn_rate: np.ndarray) -> WaitValue:
+        n, m = intr.shape
+        if m == 0:
+            return WaitValue.constant(n, np.inf)
+        paper = to_paper_state(own.position()[:, None], own.velocity()[:, None], intr.position(), intr.velocity())
+        rate = np.broadcast_to(np.asarray(turn_rate, float), (n, m))
+        res = family.lookup(paper, -rate)
+        s, v = relative_state(own, intr)
+        t_in, _ = wc.violation_interval(s, v, cfg.th, 0.0, cfg.lookahead_s)
+        key = np.minimum(t_in, 1e9) * 1e6 + wc.horizontal_range(s)
+        k = np.argmin(key, axis=1)
+        r = np.arange(n)
+        return WaitValue(np.asarray(res.wait_s, float)[r, k], np.asarray(res.p_lowc, float)[r, k],
+                         np.asarray(res.in_box, bool)[r, k], np.degrees(rate[r, k]),
+                         0.0 - np.asarray(res.map_turn_deg, float)[r, k])  # 0.0 - x: no -0.0 for the 0 map
+
+    return lookup
+
+
+__all__ = ["WaitValue", "WaitLookup", "wait_values", "make_wait_lookup"]

@@ -1,0 +1,178 @@
+"""Fast-time batches (issue 21): several groups and chunks in one batch give each part exactly the
+results it has alone; the DAA is called once per part on exactly that part's rows; the display
+takes the agent's bands without changing a result; the lean step and the slot rings change nothing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import daa_sil.agent as agent_mod
+import daa_sil.study.fasttime as ft
+from daa_sil.agent import policy_for_group
+from daa_sil.config.groups import group_spec
+from daa_sil.daa import DaaConfig, compute_bands
+from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_VERTICAL
+from daa_sil.daa_batches import positions_by_batch
+from daa_sil.geometry.kinematics import AircraftState
+from daa_sil.models.encounters import sample_encounters
+from daa_sil.models.latency import Constant, TruncatedGaussian
+from daa_sil.study.campaign_compare import compare_tables
+from daa_sil.study.fasttime import SimPart, simulate, simulate_parts
+
+N = 30
+
+
+def _assert_tables_equal(a, b):
+    assert a.schema.equals(b.schema)
+    diffs = compare_tables("t", a, b)  # bit for bit, NaN == NaN, lists element-wise
+    assert not diffs, diffs
+
+
+@pytest.fixture(scope="module")
+def encs():
+    return sample_encounters(2 * N, seed=21, preset="paper")
+
+
+@pytest.fixture(scope="module")
+def family():
+    from daa_sil.study.campaign import campaign_family
+    from daa_sil.study.campaign_config import CampaignConfig
+
+    return campaign_family(CampaignConfig(groups=("ID-2",)))
+
+
+def _parts(encs):
+    a, b = encs.subset(np.arange(N)), encs.subset(np.arange(N, 2 * N))
+    gauss = TruncatedGaussian(5.0, 3.0)
+    return [SimPart(a, policy_for_group("B-1"), Constant(4.0), Constant(4.0), group="B-1"),
+            SimPart(a, policy_for_group("ID-2"), gauss, gauss, group="ID-2"),
+            SimPart(b, policy_for_group("IC-1"), Constant(5.0), Constant(2.0), group="IC-1"),
+            SimPart(b, policy_for_group("ID-2-projl"), gauss, Constant(4.0), group="ID-2-projl")]
+
+
+def test_a_batch_of_groups_and_chunks_gives_each_part_its_own_results(encs, family):
+    parts = _parts(encs)
+    batched = simulate_parts(parts, wait_family=family)
+    for p, (enc, dec) in zip(parts, batched):
+        alone = simulate(p.encounters, p.policy, p.latency_up, p.latency_down, wait_family=family, group=p.group)
+        _assert_tables_equal(enc, alone[0])
+        _assert_tables_equal(dec, alone[1])
+        assert dec.num_rows > 0  # the agent was active in every part
+
+
+def test_the_daa_is_called_once_per_part_on_exactly_its_rows(encs, family, monkeypatch):
+    # record the rows (as ownship x positions) of every bands / SM call, alone and batched
+    calls: list = []
+    real_bands, real_sm = agent_mod.compute_bands, agent_mod.safety_metric
+
+    def bands(own, intr, *a, **k):
+        calls.append(("bands", tuple(own.x)))
+        return real_bands(own, intr, *a, **k)
+
+    def sm(own, intr, cmd, *a, **k):
+        calls.append(("sm", tuple(own.x), tuple(cmd.trk)))
+        return real_sm(own, intr, cmd, *a, **k)
+
+    monkeypatch.setattr(agent_mod, "compute_bands", bands)
+    monkeypatch.setattr(agent_mod, "safety_metric", sm)
+    parts = _parts(encs)[:2]  # two groups of the same chunk: the same ownship positions until they act
+    simulate_parts(parts, wait_family=family, duration_s=150.0)
+    batched = sorted(calls)
+    calls.clear()
+    for p in parts:
+        simulate(p.encounters, p.policy, p.latency_up, p.latency_down, wait_family=family, duration_s=150.0)
+    assert batched == sorted(calls) and len(calls) > 50
+
+
+def test_display_reusing_the_agents_bands_changes_nothing(encs, monkeypatch):
+    # the display bands every state it shows itself when the agent's bands are not kept
+    sub = encs.subset(np.arange(N))
+    lat = TruncatedGaussian(5.0, 3.0)
+    for pilot_start in ("corrective", "preventive"):  # preventive: the display bands rows the agent did not
+        from daa_sil.config.readings import reading_for
+
+        pcfg = reading_for("literal", pilot_start=pilot_start).pilot_config()
+        reused = simulate(sub, policy_for_group("IC-1"), lat, lat, pcfg, record_steps=True)
+        with monkeypatch.context() as m:
+            m.setattr(ft, "_keep_display_bands", lambda *a, **k: None)
+            computed = simulate(sub, policy_for_group("IC-1"), lat, lat, pcfg, record_steps=True)
+        for x, y in zip(reused, computed):
+            _assert_tables_equal(x, y)
+
+
+def test_display_bands_reuse_happens(encs, monkeypatch):
+    import daa_sil.models.pilot_display as pd
+
+    count = {"rows": 0}
+    real = pd.display_bands
+
+    def spy(own, intr, cfg):
+        count["rows"] += own.shape[0]
+        return real(own, intr, cfg)
+
+    monkeypatch.setattr(pd, "display_bands", spy)
+    lat = Constant(4.0)
+    sub = encs.subset(np.arange(N))
+    simulate(sub, policy_for_group("IC-1"), lat, lat)
+    with_reuse = count["rows"]
+    monkeypatch.setattr(ft, "_keep_display_bands", lambda *a, **k: None)
+    count["rows"] = 0
+    simulate(sub, policy_for_group("IC-1"), lat, lat)
+    assert count["rows"] > 0 and with_reuse == 0  # literal: every state shown was banded by the agent
+
+
+def test_bands_of_some_axes_equal_those_of_all_axes(encs):
+    from daa_sil.geometry.kinematics import advance
+
+    own = advance(encs.own, 0.0, 0.0, 0.0, 100.0)
+    intr = advance(encs.intr, 0.0, 0.0, 0.0, 100.0)
+    cfg = DaaConfig.for_preset("paper")
+    full = compute_bands(own, intr, cfg)
+    two = compute_bands(own, intr, cfg, axes=(AXIS_VERTICAL, AXIS_HORIZONTAL))
+    assert two.gs is None and two[np.arange(3)].gs is None
+    for name in ("trk", "vs"):
+        a, b = getattr(full, name), getattr(two, name)
+        for f in ("values", "region", "t_in", "t_out", "res_lo", "res_hi", "preferred"):
+            np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f"{name}.{f}")
+
+
+def test_lean_step_changes_no_result(encs):
+    # with a step log the core computes geometry and the band summary; without, the same results
+    sub = encs.subset(np.arange(N))
+    lat = Constant(4.0)
+    lean = simulate(sub, policy_for_group("ID-2-projl"), lat, lat)
+    full = simulate(sub, policy_for_group("ID-2-projl"), lat, lat, record_steps=True)
+    _assert_tables_equal(lean[0], full[0])
+    _assert_tables_equal(lean[1], full[1])
+
+
+def test_positions_by_batch():
+    rows = np.array([0, 2, 3, 7, 9])
+    batch_of = np.array([0, 0, 0, 1, 1, 1, 1, 2, 2, 2])
+    got = positions_by_batch(batch_of, rows)
+    assert [p.tolist() for p in got] == [[0, 1], [2], [3, 4]]
+    assert [p.tolist() for p in positions_by_batch(None, rows)] == [[0, 1, 2, 3, 4]]
+    assert positions_by_batch(batch_of, np.array([], int)) == []
+
+
+def test_fancy_indexing_a_state_gives_independent_arrays():
+    s = AircraftState(np.arange(4.0), 1.0, 2.0, 3.0, 4.0, 5.0)
+    sub = s[np.array([1, 3])]
+    sub.x[0] = 99.0
+    view = s[1:3]
+    view.x[0] = 77.0
+    assert s.x.tolist() == [0.0, 1.0, 2.0, 3.0] and sub.shape == (2,) and sub.x.dtype == float
+
+
+def test_a_campaign_with_group_batches_resumes_and_matches(tmp_path):
+    from daa_sil.study.campaign import run_campaign
+    from daa_sil.study.campaign_compare import compare_dirs
+    from daa_sil.study.campaign_config import CampaignConfig
+
+    cfg = CampaignConfig(groups=("B-2", "IC-1", "ID-1"), n_encounters=9, seed=5, chunk_size=3, duration_s=60.0)
+    one_by_one = run_campaign(cfg, tmp_path / "units", batch_rows=3, progress=False)  # one unit per task
+    batched = run_campaign(cfg, tmp_path / "batched", batch_rows=1000, progress=False)
+    assert one_by_one.chunks_run == batched.chunks_run == 9
+    assert compare_dirs(tmp_path / "units", tmp_path / "batched").identical
+    assert group_spec("IC-1").policy() == cfg.policy("IC-1")

@@ -1,0 +1,64 @@
+"""The slot ring of fast-time's links and the campaign's batch plan (issue 21)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from daa_sil.errors import UsageError
+from daa_sil.study.campaign_plan import plan_batches
+from daa_sil.study.slot_ring import SlotRing
+
+
+def test_ring_holds_what_is_still_read_and_grows_when_a_reader_lags():
+    ring = SlotRing(3, {"v": ((), float, np.nan), "p": ((2,), np.int64, -1)}, capacity=4)
+    for k in range(10):
+        slot = ring.open(k)
+        assert np.isnan(slot["v"]).all() and (slot["p"] == -1).all()  # a reused slot starts at its fill
+        slot["v"][:] = k + np.arange(3) / 10
+        slot["p"][:] = k
+        ring.release(k - 2 if k < 6 else 3)  # from k = 6 on the reader lags at slot 3: the ring must grow
+    assert ring.capacity >= 7
+    got = ring.gather("v", np.array([3, 9, -1]))
+    assert got[0] == pytest.approx(3.0) and got[1] == pytest.approx(9.1) and np.isnan(got[2])
+    assert ring.gather("p", np.array([5, 5]), rows=np.array([2, 0])).tolist() == [[5, 5], [5, 5]]
+    assert ring.gather("p", np.array([-1, 4, 8])).tolist() == [[-1, -1], [4, 4], [8, 8]]
+    with pytest.raises(ValueError):
+        ring.open(12)
+    with pytest.raises(IndexError):
+        ring.slot(1)
+
+
+def test_ring_memory_does_not_grow_with_the_number_of_steps():
+    ring = SlotRing(5, {"v": ((), float, 0.0)}, capacity=8)
+    for k in range(1000):
+        ring.open(k)
+        ring.release(k - 5)
+    assert ring.capacity == 8
+
+
+def _units(n_chunks, groups, rows):
+    return [(g, c, rows) for c in range(n_chunks) for g in groups]
+
+
+def test_plan_uses_every_unit_once_and_balances_the_workers():
+    units = _units(5, ["B-1", "B-2", "IC-1", "ID-1", "ID-2"], 2000)
+    tasks = plan_batches(units, workers=2, batch_rows=26_000)  # two tasks of about 25,000 rows
+    assert sorted(u for t in tasks for u in t) == sorted(units)
+    assert len(tasks) == 2
+    loads = [sum(u[2] for u in t) for t in tasks]
+    assert max(loads) - min(loads) <= 2000  # one unit apart at most
+    for t in tasks:  # every task holds every group
+        assert {u[0] for u in t} == {"B-1", "B-2", "IC-1", "ID-1", "ID-2"}
+
+
+def test_plan_bounds_rows_per_task_and_keeps_a_multiple_of_the_workers():
+    units = _units(10, ["B-1", "ID-2"], 1000)
+    tasks = plan_batches(units, workers=2, batch_rows=5000)
+    assert len(tasks) % 2 == 0 and max(sum(u[2] for u in t) for t in tasks) <= 5000
+    assert len(plan_batches(units, workers=1, batch_rows=10**6, min_tasks=4)) == 4
+    assert len(plan_batches(units[:3], workers=8)) == 3  # never more tasks than units
+    assert plan_batches([], workers=2) == []
+    for bad in (0, -1, 2.5, True):
+        with pytest.raises(UsageError, match="--batch-rows"):
+            plan_batches(units, workers=2, batch_rows=bad)
