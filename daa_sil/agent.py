@@ -11,7 +11,10 @@ Semantics follow ``docs/architecture.md`` "Allocation semantics":
   - ``link_lost``: no packet from the GCS for ``link_timeout_s`` -> the onboard DAA resolution.
   - fresh pilot command received -> ``pilot`` if SM(u_p) > 0; else ``blend`` (Algorithm 2,
     :func:`daa_sil.daa.search_maneuver` with the pilot's (axis, direction), closest to u_p) when
-    ``policy.blending``, or ``daa_override`` (DAA resolution) when not (baseline).
+    ``policy.blending``, or ``daa_override`` (DAA resolution) when not (baseline). With
+    ``policy.unsafe_hold = "no-command"`` an unsafe fresh "hold" (a command without a maneuver
+    intent: the pilot has not maneuvered yet) is decided as if no command had arrived (wait / no
+    wait below); it is still stored as the pilot's latest command.
   - no fresh command -> ``wait`` (hold the last pilot command) iff ``w >= W_T`` and no ProjL
     within ``projl_horizon_s``, else ``no_wait`` (DAA resolution). A command older than
     ``stale_command_s`` (by its send time) is never executed nor stored: the step is decided as
@@ -51,6 +54,7 @@ from .daa import (AXIS_NONE, DaaConfig, DaaState, alert_levels, classify_command
 from .daa.config import AXIS_NAMES, DIR_NAMES, RULE_NAMES
 from .daa.resolution import command_deltas
 from .errors import UsageError
+from daa_sil.config.choices import OUTSIDE_BOX, UNSAFE_HOLDS, WAIT_RULES
 from daa_sil.geometry.frames import to_paper_state
 from daa_sil.geometry.kinematics import AircraftState, Command
 
@@ -58,7 +62,6 @@ DECISION_NAMES = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "
 DECIDED_BY_NAMES = ("none", "map", "projl", "both", "neither")
 BY_NONE, BY_MAP, BY_PROJL, BY_BOTH, BY_NEITHER = range(5)
 WAIT_MODES = ("none", "constant", "map", "always")
-WAIT_RULES = ("threshold", "countdown")
 (D_NONE, D_WAIT, D_NO_WAIT, D_PILOT, D_BLEND, D_DAA_OVERRIDE, D_DAA, D_STALE, D_LINK_LOST) = range(9)
 AUTHORITY_NAMES = ("pilot", "daa", "hold")
 A_PILOT, A_DAA, A_HOLD = range(3)
@@ -112,6 +115,9 @@ class AllocationPolicy:
     link_timeout_s: float = 20.0
     wait_rule: str = "threshold"  #: :data:`WAIT_RULES`: w(S(k)) >= W_T every step, or a countdown budget
     name: str = "custom"
+    #: :data:`UNSAFE_HOLDS`: an unsafe fresh "hold" is blended / overridden like any command (``blend``)
+    #: or decided as if no command had arrived (``no-command``)
+    unsafe_hold: str = "blend"
     #: False = the agent never takes authority: the pilot's last command is always flown, the
     #: decision is always ``none`` (alert levels are still computed); the SIL's ``DAA_ENABLE 0``
     enabled: bool = True
@@ -121,6 +127,8 @@ class AllocationPolicy:
             raise UsageError(f"wait_mode must be one of {', '.join(WAIT_MODES)}, got {self.wait_mode!r}")
         if self.wait_rule not in WAIT_RULES:
             raise UsageError(f"wait_rule must be one of {', '.join(WAIT_RULES)}, got {self.wait_rule!r}")
+        if self.unsafe_hold not in UNSAFE_HOLDS:
+            raise UsageError(f"unsafe_hold must be one of {', '.join(UNSAFE_HOLDS)}, got {self.unsafe_hold!r}")
 
 
 def policy_for_group(group: str) -> AllocationPolicy:
@@ -292,15 +300,21 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     p_axis = np.where(fresh, intent_axis, AXIS_NONE).astype(np.int8)
     p_dir = np.where(fresh, intent_dir, 0).astype(np.int8)
 
+    # an unsafe "hold" decided as no command (policy.unsafe_hold): it carries no maneuver to blend
+    as_none = np.zeros(n, bool)
+    if policy.unsafe_hold == "no-command":
+        as_none = active & fresh & (p_axis == AXIS_NONE) & ~(sm_pilot > 0)
+    decide = fresh & ~as_none  #: fresh commands decided as commands
+
     # --- wait / no wait (no fresh command) ------------------------------------------------------
     wait_s, w_pl, w_turn, w_map = nan.copy(), nan.copy(), nan.copy(), nan.copy()
     w_box = np.zeros(n, bool)
     projl = np.zeros(n, bool)
     if ia.size:
         projl[ia] = proj_lowc(own_a, intr_a, cfg, policy.projl_horizon_s).any(axis=1) if intr.shape[1] else False
-    nc = active & ~fresh & ~link_lost
+    nc = active & ~decide & ~link_lost
     inc = np.nonzero(nc)[0]
-    wait_start = np.where(active & ~fresh, memory.wait_start, np.nan)
+    wait_start = np.where(active & ~decide, memory.wait_start, np.nan)
     if inc.size:
         wv = _wait_values(own, intr, policy, wait_lookup, turn_rate, inc)
         w = wv.wait_s
@@ -315,8 +329,8 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     wait_start = np.where(wait & np.isnan(wait_start), t, wait_start)
 
     # --- blend for unsafe fresh pilot commands --------------------------------------------------
-    pilot_ok = active & fresh & ~link_lost & (sm_pilot > 0)
-    unsafe = active & fresh & ~link_lost & ~(sm_pilot > 0)
+    pilot_ok = active & decide & ~link_lost & (sm_pilot > 0)
+    unsafe = active & decide & ~link_lost & ~(sm_pilot > 0)
     rule = np.zeros(n, np.int8)
     blend_cmd = Command(nan.copy(), nan.copy(), nan.copy())
     sm_blend = nan.copy()
@@ -378,7 +392,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
                       pilot_t_sent=np.where(fresh, pilot.t_sent, memory.pilot_t_sent), last_packet_t=link_t,
                       authority=authority, decision=decision, exec_trk=exec_cmd.trk.copy(),
                       exec_vs=exec_cmd.vs.copy(), exec_gs=exec_cmd.gs.copy(), daa_axis=daa_axis, daa_dir=daa_dir,
-                      wait_start=np.where(active & ~fresh, wait_start, np.nan),
+                      wait_start=np.where(active & ~decide, wait_start, np.nan),
                       intent_axis=intent_axis, intent_dir=intent_dir, daa_state=daa_state)
     return exec_cmd, dec, new_mem
 
@@ -392,15 +406,21 @@ def decode(decisions: dict) -> dict:
     return out
 
 
-def make_wait_lookup(family, cfg: "DaaConfig | None" = None) -> WaitLookup:
+def make_wait_lookup(family, cfg: "DaaConfig | None" = None, outside: str = "clamp") -> WaitLookup:
     """Wrap a wait-map family (``family.lookup(paper_states, turn_rate)``) as a :data:`WaitLookup`.
 
     Each intruder is converted to the paper frame (:func:`daa_sil.geometry.frames.to_paper_state`) and read
     from the map of its estimated turn rate (compass rad/s, + = right, passed to the family in the
     paper sense, + = left). The wait of the **most threatening** intruder is used: the one with the
-    earliest straight-line LoWC over the DAA lookahead (ties: the smallest range).
+    earliest straight-line LoWC over the DAA lookahead (ties: the smallest range). ``outside``
+    (:data:`OUTSIDE_BOX`): a state outside the map's box reads the nearest state of the box
+    (``clamp``) or w = H, the map's horizon (``far``: the map does not model that intruder; the
+    ProjL veto still applies, and a LoWC in progress is always within ProjL's look-ahead).
     """
     cfg = cfg or DaaConfig()
+    if outside not in OUTSIDE_BOX:
+        raise UsageError(f"outside must be one of {', '.join(OUTSIDE_BOX)}, got {outside!r}")
+    horizon = float(family.params.horizon) if outside == "far" else None
     from .geometry import wellclear as wc
     from .daa.alerting import relative_state
 
@@ -411,6 +431,8 @@ def make_wait_lookup(family, cfg: "DaaConfig | None" = None) -> WaitLookup:
         paper = to_paper_state(own.position()[:, None], own.velocity()[:, None], intr.position(), intr.velocity())
         rate = np.broadcast_to(np.asarray(turn_rate, float), (n, m))
         res = family.lookup(paper, -rate)
+        if horizon is not None:
+            res.wait_s = np.where(np.asarray(res.in_box, bool), res.wait_s, horizon)
         s, v = relative_state(own, intr)
         t_in, _ = wc.violation_interval(s, v, cfg.th, 0.0, cfg.lookahead_s)
         key = np.minimum(t_in, 1e9) * 1e6 + wc.horizontal_range(s)
@@ -423,5 +445,5 @@ def make_wait_lookup(family, cfg: "DaaConfig | None" = None) -> WaitLookup:
     return lookup
 
 
-__all__ = ["AllocationPolicy", "WaitValue", "WaitLookup", "WAIT_MODES", "WAIT_RULES", "DECIDED_BY_NAMES", "policy_for_group", "PilotInput", "AgentMemory", "agent_step",
+__all__ = ["AllocationPolicy", "WaitValue", "WaitLookup", "WAIT_MODES", "WAIT_RULES", "UNSAFE_HOLDS", "OUTSIDE_BOX", "DECIDED_BY_NAMES", "policy_for_group", "PilotInput", "AgentMemory", "agent_step",
            "make_wait_lookup", "decode", "DECISION_FIELDS", "DECISION_NAMES", "AUTHORITY_NAMES", "CODE_NAMES"]

@@ -100,19 +100,28 @@ def campaign_family(config: CampaignConfig):
     return _wait_family(config.map_source, config.preset, config.gamma) if config.uses_map else None
 
 
-def run_chunk(task: ChunkTask) -> ChunkResult:
-    """Simulate one chunk of one group (pure function of the task; safe in any worker)."""
+def simulate_group(cfg: CampaignConfig, group: str, encounters, seeds: np.ndarray, record_steps: bool = False):
+    """Fly ``encounters`` (with their ``seeds``) as group ``group`` of campaign ``cfg``: the one place a
+    campaign's settings (policy, link legs of the reading's latency rule, pilot, DAA, wait maps and
+    the reading's outside-the-box rule) become a :func:`daa_sil.study.fasttime.simulate` call. Used by
+    the campaign runner and by ``daa-sil viz replay``. Returns ``(encounters, decisions, steplog)``."""
+    from daa_sil.agent import make_wait_lookup
     from .fasttime import simulate
 
+    spec = cfg.group(group)
+    legs = cfg.link_legs(group)
+    daa_cfg = cfg.daa_config()
+    lookup = (make_wait_lookup(campaign_family(cfg), cfg=daa_cfg, outside=cfg.effective_reading.outside)
+              if spec.uses_map else None)
+    return simulate(encounters, cfg.policy(group), legs.up, legs.down, cfg.pilot_config(), daa_cfg=daa_cfg,
+                    wait_lookup=lookup, seeds=seeds, preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s,
+                    group=group, record_steps=record_steps, link_legs=legs)
+
+
+def run_chunk(task: ChunkTask) -> ChunkResult:
+    """Simulate one chunk of one group (pure function of the task; safe in any worker)."""
     t0 = time.perf_counter()
-    cfg = task.config
-    spec = cfg.group(task.group)
-    model = spec.delay_model()
-    fam = campaign_family(cfg) if spec.uses_map else None
-    enc_rows, dec_rows, _ = simulate(task.encounters, cfg.policy(task.group), model, model, cfg.pilot_config(),
-                                     daa_cfg=cfg.daa_config(), wait_family=fam,
-                                     seeds=task.seeds, preset=cfg.preset, duration_s=cfg.duration_s,
-                                     dt=cfg.dt_s, group=task.group, record_steps=False)
+    enc_rows, dec_rows, _ = simulate_group(task.config, task.group, task.encounters, task.seeds)
     return ChunkResult(task.group, task.chunk, enc_rows, dec_rows, time.perf_counter() - t0, len(task.seeds))
 
 
@@ -267,6 +276,6 @@ def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resum
 
 
 __all__ = ["GroupSpec", "parse_groups", "campaign_family", "CampaignConfig", "encounter_seeds", "ChunkTask",
-           "ChunkResult", "run_chunk", "chunk_paths", "chunk_done", "write_chunk", "read_results",
+           "ChunkResult", "run_chunk", "simulate_group", "chunk_paths", "chunk_done", "write_chunk", "read_results",
            "load_campaign_json", "check_out_dir", "make_executor", "prepare_campaign", "run_campaign",
            "CampaignSummary", "DASK_HINT"]

@@ -53,8 +53,8 @@ from daa_sil.agent import (BY_BOTH, BY_MAP, BY_PROJL, CODE_NAMES, D_BLEND, D_DAA
 from daa_sil.daa.config import DaaConfig
 from daa_sil.errors import UsageError
 from daa_sil.geometry.kinematics import AircraftState, Command
-from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel
-from daa_sil.models.delay_process import BatchedDelay
+from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel, LinkLegs
+from daa_sil.models.delay_process import batched_link_delays
 from daa_sil.link.delayline import fifo_release
 from daa_sil.onboard import OnboardCore, StepOutput
 from daa_sil.models.pilot import PilotModel
@@ -265,11 +265,13 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
              pilot_cfg: "PilotConfig | None" = None, daa_cfg: "DaaConfig | None" = None, wait_family=None, *,
              seeds: "np.ndarray | None" = None, preset: "str | None" = None, duration_s: "float | None" = None,
              dt: "float | None" = None, epoch_s: float = DEFAULT_EPOCH_S, group: str = "",
-             record_steps: bool = False, wait_lookup=None) -> tuple[pa.Table, pa.Table, "pa.Table | None"]:
+             record_steps: bool = False, wait_lookup=None,
+             link_legs: "LinkLegs | None" = None) -> tuple[pa.Table, pa.Table, "pa.Table | None"]:
     """Simulate every encounter of ``encounters`` (an :class:`~daa_sil.models.encounters.EncounterSet`).
 
-    ``policy`` the group's allocation policy; ``latency_up``/``latency_down`` one-way delay models
-    (s); ``pilot_cfg`` (default :class:`PilotConfig`); ``daa_cfg`` (default: DO-365B with the
+    ``policy`` the group's allocation policy; ``latency_up``/``latency_down`` each link's delay model
+    (s), from their own streams; ``link_legs`` (a :class:`~daa_sil.models.latency.LinkLegs`, e.g. the
+    round-trip rule's, :func:`~daa_sil.models.latency.link_legs`) replaces both; ``pilot_cfg`` (default :class:`PilotConfig`); ``daa_cfg`` (default: DO-365B with the
     thresholds of ``preset``, default ``"paper"``); ``wait_family`` a wait-map family (needed for
     ``wait_mode="map"``; or pass ``wait_lookup`` directly); ``seeds`` per-encounter seeds (default
     ``encounters.seed``); ``duration_s``/``dt`` (default from the set: 240 s / 1 s); ``epoch_s``
@@ -299,8 +301,9 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
     core = OnboardCore.from_encounters(encounters, policy, cfg, wait_lookup, thresholds=preset_name)
     # the flight plan the pilot returns to: the ownship's initial straight, level course
     pilot = PilotModel(n, [s[STREAM_PILOT] for s in streams], pcfg, plan=core.own, daa_cfg=cfg)
-    up = BatchedDelay(latency_up, [s[STREAM_UP] for s in streams], epoch_s, duration + dt)
-    down = BatchedDelay(latency_down, [s[STREAM_DOWN] for s in streams], epoch_s, duration + dt)
+    legs = link_legs if link_legs is not None else LinkLegs(latency_up, latency_down)
+    up, down = batched_link_delays(legs, [s[STREAM_UP] for s in streams], [s[STREAM_DOWN] for s in streams],
+                                   epoch_s, duration + dt)
     m = core.m
     acc = _Accumulators(n, core.own)
     log = sl.StepLogBuilder(encounters.encounter_id, m) if record_steps else None
