@@ -68,6 +68,9 @@ SWEEP_EXAMPLES = """examples:
   daa-sil campaign sweep --vary grid=paper,alerting --groups ID-2,ID-2-projl --out runs/sweep-grid
   daa-sil campaign sweep --vary intruders=1,2 --groups B-2,ID-2 --out runs/sweep-m --resume
 
+  # the pilot's response time (the paper does not give it): Guendel (~19 s) against a 5 s Rayleigh pilot
+  daa-sil campaign sweep --vary pilot=guendel,nasa_rayleigh5 --groups B-2,ID-2,ID-2-projl --out runs/sweep-pilot
+
   # one page from several sweeps (docs/results/sensitivity.md is made this way)
   daa-sil campaign sweep --collate runs/sweep-wt runs/sweep-lat --out docs/results
 
@@ -114,7 +117,8 @@ def register(sub) -> None:
                                       "encounter-level 95 % CIs.", epilog=SWEEP_EXAMPLES,
                           formatter_class=argparse.RawDescriptionHelpFormatter)
     sw.add_argument("--vary", default=None, metavar="NAME=V1,V2,...",
-                    help="wt, gamma, grid, intruders, latency (values separated by ';'), projl or reading")
+                    help="wt, gamma, grid, intruders, latency (values separated by ';'), projl, reading or "
+                         "pilot (response mode: guendel, nasa_rayleigh5, no_atc, fixed, deterministic)")
     sw.add_argument("--collate", nargs="+", default=None, metavar="SWEEP_DIR",
                     help="instead of running: one sensitivity.md page from these sweep directories into --out")
     _add_run_options(sw)
