@@ -7,6 +7,10 @@ Semantics follow ``docs/architecture.md`` "Allocation semantics":
   reached that command), or while the DAA holds authority and the pilot's course is still unsafe
   (SM <= 0), so that control returns to the pilot only onto a safe course. Outside the active phase the ownship flies the last pilot command and the
   decision is ``none`` (not counted).
+  With ``policy.active_from = "encounter"`` the agent also decides every step from the encounter's
+  start until safe avoidance (no alert, every intruder past its closest point of approach, on the
+  truth it sees), the paper's "During the communication latency, the agent matches the current state
+  with a state in the wait map and makes a decision".
 * One decision per active step:
   - ``link_lost``: no packet from the GCS for ``link_timeout_s`` -> the onboard DAA resolution.
   - fresh pilot command received -> ``pilot`` if SM(u_p) > 0; else ``blend`` (Algorithm 2,
@@ -49,12 +53,13 @@ from typing import Callable
 
 import numpy as np
 
+from .daa.alerting import safe_avoidance
 from .daa import (AXIS_NONE, DaaConfig, DaaState, alert_levels, classify_command, compute_bands, conflict_lists,
                   proj_lowc, resolve, safety_metric, search_maneuver, sm_from_tin)
 from .daa.config import AXIS_NAMES, DIR_NAMES, RULE_NAMES
 from .daa.resolution import command_deltas
 from .errors import UsageError
-from daa_sil.config.choices import OUTSIDE_BOX, UNSAFE_HOLDS, WAIT_RULES
+from daa_sil.config.choices import AGENT_ACTIVE, OUTSIDE_BOX, UNSAFE_HOLDS, WAIT_RULES
 from daa_sil.geometry.frames import to_paper_state
 from daa_sil.geometry.kinematics import AircraftState, Command
 
@@ -118,6 +123,9 @@ class AllocationPolicy:
     #: :data:`UNSAFE_HOLDS`: an unsafe fresh "hold" is blended / overridden like any command (``blend``)
     #: or decided as if no command had arrived (``no-command``)
     unsafe_hold: str = "blend"
+    #: :data:`AGENT_ACTIVE`: the agent decides from the corrective alert (``corrective``) or over the
+    #: whole encounter, from its start until safe avoidance (``encounter``)
+    active_from: str = "corrective"
     #: False = the agent never takes authority: the pilot's last command is always flown, the
     #: decision is always ``none`` (alert levels are still computed); the SIL's ``DAA_ENABLE 0``
     enabled: bool = True
@@ -129,6 +137,8 @@ class AllocationPolicy:
             raise UsageError(f"wait_rule must be one of {', '.join(WAIT_RULES)}, got {self.wait_rule!r}")
         if self.unsafe_hold not in UNSAFE_HOLDS:
             raise UsageError(f"unsafe_hold must be one of {', '.join(UNSAFE_HOLDS)}, got {self.unsafe_hold!r}")
+        if self.active_from not in AGENT_ACTIVE:
+            raise UsageError(f"active_from must be one of {', '.join(AGENT_ACTIVE)}, got {self.active_from!r}")
 
 
 def policy_for_group(group: str) -> AllocationPolicy:
@@ -177,6 +187,7 @@ class AgentMemory:
     intent_axis: "np.ndarray | None" = None  #: the pilot's (axis, direction) preference, AXIS_* / DIR_*
     intent_dir: "np.ndarray | None" = None
     daa_state: "DaaState | None" = None  #: DAA alert/band hysteresis (only with DaaConfig.stateful)
+    encounter_over: "np.ndarray | None" = None  #: bool, safe avoidance reached (``active_from="encounter"``)
 
     def __post_init__(self):
         n = np.shape(self.pilot_trk)
@@ -184,6 +195,8 @@ class AgentMemory:
             self.intent_axis = np.full(n, AXIS_NONE, np.int8)
         if self.intent_dir is None:
             self.intent_dir = np.zeros(n, np.int8)
+        if self.encounter_over is None:
+            self.encounter_over = np.zeros(n, bool)
 
     @classmethod
     def initial(cls, n: int, own: AircraftState, t0: float = 0.0) -> "AgentMemory":
@@ -266,7 +279,12 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     if check.any():
         j = np.nonzero(check)[0]
         unsafe_revert[j] = ~(safety_metric(own[j], intr[j], last_pilot[j], cfg, horizon) > 0)
-    active = ((max_alert >= 2) | in_progress | unsafe_revert) & bool(policy.enabled)
+    encounter_over = memory.encounter_over
+    whole = np.zeros(n, bool)
+    if policy.active_from == "encounter":  # decide every step from the start until safe avoidance
+        encounter_over = encounter_over | safe_avoidance(own, intr, max_alert)
+        whole = ~encounter_over
+    active = ((max_alert >= 2) | in_progress | unsafe_revert | whole) & bool(policy.enabled)
     ia = np.nonzero(active)[0]
     own_a, intr_a = own[ia], intr[ia]
 
@@ -393,7 +411,8 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
                       authority=authority, decision=decision, exec_trk=exec_cmd.trk.copy(),
                       exec_vs=exec_cmd.vs.copy(), exec_gs=exec_cmd.gs.copy(), daa_axis=daa_axis, daa_dir=daa_dir,
                       wait_start=np.where(active & ~decide, wait_start, np.nan),
-                      intent_axis=intent_axis, intent_dir=intent_dir, daa_state=daa_state)
+                      intent_axis=intent_axis, intent_dir=intent_dir, daa_state=daa_state,
+                      encounter_over=encounter_over)
     return exec_cmd, dec, new_mem
 
 

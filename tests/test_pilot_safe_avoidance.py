@@ -6,7 +6,8 @@ import pytest
 
 from daa_sil.errors import UsageError
 from daa_sil.geometry.kinematics import AircraftState
-from daa_sil.models.pilot import PilotModel, safe_avoidance
+from daa_sil.daa.alerting import safe_avoidance
+from daa_sil.models.pilot import PilotModel
 from daa_sil.models.pilot_config import Guidance, PilotConfig
 
 

@@ -17,7 +17,7 @@ from daa_sil.geometry.units import FT
 def test_bundles_and_what_they_change():
     ext = reading_for("extended")
     assert ext.encounter_overrides() == {} and ext.simulation_key() == (
-        "metres", "corrective", "alert", True, "blend", None, "clamp", "one-way", None)
+        "metres", "corrective", None, "alert", True, "blend", None, "clamp", "one-way", None, "corrective")
     p = ext.pilot_config()
     assert (p.alert_level_min, p.stream_level_min, p.stream_hold, p.stream_until) == (2, None, True, "alert")
     feet = reading_for("feet")
@@ -45,18 +45,23 @@ def test_the_paper_reading_and_its_alternatives():
     p = reading_for("paper")
     assert (p.waitmap, p.outside, p.latency, p.pilot_start, p.pilot_stop, p.hold_commands, p.unsafe_hold) == (
         "paper", "clamp", "round-trip", "detection", "safe-avoidance", True, "no-command")
-    assert (p.window, p.received, p.blends, p.units, p.wait_rule) == ("whole", "pilot+blend", "all", "metres", None)
+    assert (p.window, p.received, p.blends, p.units, p.wait_rule, p.agent_active) == (
+        "whole", "pilot+blend", "all", "metres", None, "encounter")
     pc = p.pilot_config()
     assert (pc.stream_level_min, pc.alert_level_min, pc.stream_until) == (0, 2, "safe-avoidance")
-    assert p.policy_overrides() == {"unsafe_hold": "no-command"}
+    assert p.policy_overrides() == {"unsafe_hold": "no-command", "active_from": "encounter"}
     # each alternative changes exactly the setting it is named for
     alt = {"paper-outside-far": {"outside"}, "paper-one-way": {"latency"}, "paper-countdown": {"wait_rule"},
            "paper-hold-blend": {"unsafe_hold", "blends"}, "paper-no-hold": {"hold_commands"},
-           "paper-preventive": {"pilot_start"}, "paper-alerting": {"waitmap"}, "paper-feet": {"units"}}
+           "paper-preventive": {"pilot_engage"}, "paper-alerting": {"waitmap"}, "paper-feet": {"units"},
+           "paper-corrective": {"agent_active"}}
     for name, keys in alt.items():
         d = reading_for(name).to_dict()
         assert {k for k, v in d.items() if v != p.to_dict()[k]} - {"name", "description"} == keys, name
     assert reading_for("paper-countdown").policy_overrides()["wait_rule"] == "countdown"
+    pp = reading_for("paper-preventive").pilot_config()
+    assert (pp.alert_level_min, pp.stream_level_min) == (1, 0)  # hold from the start, maneuvers from preventive
+    assert "active_from" not in reading_for("paper-corrective").policy_overrides()
 
 
 def test_old_names_are_accepted_with_a_notice_and_mean_the_same_reading(capsys):
@@ -84,6 +89,7 @@ def test_campaign_defaults_to_the_paper_reading_and_records_it(tmp_path, capsys)
     assert meta["waitmap"]["source"] == "paper"
     assert meta["resolved_config"]["pilot"]["stream_until"] == "safe-avoidance"
     assert meta["resolved_config"]["policies"]["ID-2"]["unsafe_hold"] == "no-command"
+    assert meta["resolved_config"]["policies"]["B-2"]["active_from"] == "encounter"
     assert "reading paper" in capsys.readouterr().err
     # the old name: a one-line notice, the extended reading recorded
     out2 = tmp_path / "E"

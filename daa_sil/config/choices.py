@@ -17,4 +17,9 @@ OUTSIDE_BOX = ("clamp", "far")
 #: (when its display shows no alert and every intruder past its closest point of approach)
 PILOT_STOPS = ("alert", "safe-avoidance")
 
-__all__ = ["WAIT_RULES", "UNSAFE_HOLDS", "OUTSIDE_BOX", "PILOT_STOPS"]
+#: when the agent decides: from the ``corrective`` alert (its active phase), or over the whole
+#: ``encounter`` -- every step from the start until safe avoidance (no alert, every intruder past
+#: its closest point of approach), and from any later corrective alert
+AGENT_ACTIVE = ("corrective", "encounter")
+
+__all__ = ["WAIT_RULES", "UNSAFE_HOLDS", "OUTSIDE_BOX", "PILOT_STOPS", "AGENT_ACTIVE"]

@@ -15,6 +15,9 @@ Settings that change the **simulation** (one campaign each):
 * ``pilot_start`` -- when the pilot model streams: ``corrective`` (from the corrective alert, the
   agent's active phase), ``preventive`` (from the first, preventive alert: it also maneuvers from
   then) or ``detection`` ("hold" from the first telemetry, maneuvering from the corrective alert);
+* ``pilot_engage`` -- the alert level from which the pilot maneuvers: unset (``preventive`` for the
+  ``preventive`` start, else ``corrective``) or ``corrective`` / ``preventive`` (a ``detection`` pilot
+  streams "hold" from the first telemetry either way);
 * ``pilot_stop`` -- when it stops: ``alert`` (a maneuvering pilot when its alert clears; a
   ``detection`` pilot's "hold" runs to the end of the encounter) or ``safe-avoidance`` (the
   paper's "The model captures pilot response from the beginning of an encounter till safe
@@ -33,7 +36,9 @@ Settings that change the **simulation** (one campaign each):
 * ``latency`` -- :data:`daa_sil.models.latency.LATENCY_RULES`: ``one-way`` (a group's value on each
   link) or ``round-trip`` (the group's value is the round trip, split evenly between the links);
 * ``wait_rule`` -- unset (each group's, ``threshold``: Eq. "W(k)" every step) or ``countdown``
-  (the wait read from the map is a budget counted from the start of a wait, :mod:`daa_sil.agent`).
+  (the wait read from the map is a budget counted from the start of a wait, :mod:`daa_sil.agent`);
+* ``agent_active`` -- when the agent decides: from the ``corrective`` alert (its active phase) or over
+  the whole ``encounter``, from its start until safe avoidance (:data:`daa_sil.config.choices.AGENT_ACTIVE`).
 
 Settings that change only the **counting** (the report recounts the same results):
 
@@ -53,7 +58,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields, replace
 
 from daa_sil.config.choices import OUTSIDE_BOX as OUTSIDE
-from daa_sil.config.choices import PILOT_STOPS, UNSAFE_HOLDS, WAIT_RULES
+from daa_sil.config.choices import AGENT_ACTIVE, PILOT_STOPS, UNSAFE_HOLDS, WAIT_RULES
 from daa_sil.errors import UsageError
 from daa_sil.geometry.units import FT
 from daa_sil.models.latency import LATENCY_RULES as LATENCIES
@@ -76,6 +81,7 @@ class Reading:
     name: str = "extended"
     units: str = "metres"
     pilot_start: str = "corrective"
+    pilot_engage: "str | None" = None
     pilot_stop: str = "alert"
     hold_commands: bool = True
     unsafe_hold: str = "blend"
@@ -83,6 +89,7 @@ class Reading:
     outside: str = "clamp"
     latency: str = "one-way"
     wait_rule: "str | None" = None
+    agent_active: str = "corrective"
     window: str = "active"
     received: str = "arrived"
     blends: str = "all"
@@ -91,10 +98,14 @@ class Reading:
     def __post_init__(self):
         for key, allowed in (("units", UNITS), ("pilot_start", PILOT_STARTS), ("pilot_stop", PILOT_STOPS),
                              ("unsafe_hold", UNSAFE_HOLDS), ("outside", OUTSIDE), ("latency", LATENCIES),
-                             ("window", WINDOWS), ("received", RECEIVED), ("blends", BLENDS)):
+                             ("window", WINDOWS), ("received", RECEIVED), ("blends", BLENDS),
+                             ("agent_active", AGENT_ACTIVE)):
             if getattr(self, key) not in allowed:
                 raise UsageError(f"reading {self.name}: {key} must be one of {', '.join(allowed)}, "
                                  f"got {getattr(self, key)!r}")
+        if self.pilot_engage is not None and self.pilot_engage not in ("corrective", "preventive"):
+            raise UsageError(f"reading {self.name}: pilot_engage must be corrective or preventive, "
+                             f"got {self.pilot_engage!r}")
         if self.wait_rule is not None and self.wait_rule not in WAIT_RULES:
             raise UsageError(f"reading {self.name}: wait_rule must be one of {', '.join(WAIT_RULES)}, "
                              f"got {self.wait_rule!r}")
@@ -113,7 +124,8 @@ class Reading:
         from daa_sil.models.pilot_config import PilotConfig
 
         base = base if base is not None else PilotConfig()
-        level = 1 if self.pilot_start == "preventive" else 2
+        engage = self.pilot_engage or ("preventive" if self.pilot_start == "preventive" else "corrective")
+        level = 1 if engage == "preventive" else 2
         stream = 0 if self.pilot_start == "detection" else None
         return replace(base, alert_level_min=level, stream_level_min=stream, stream_hold=self.hold_commands,
                        stream_until=self.pilot_stop)
@@ -121,14 +133,16 @@ class Reading:
     def policy_overrides(self) -> dict:
         """:class:`daa_sil.agent.AllocationPolicy` fields this reading sets (for groups that wait)."""
         out = {"unsafe_hold": self.unsafe_hold} if self.unsafe_hold != "blend" else {}
+        if self.agent_active != "corrective":
+            out["active_from"] = self.agent_active
         if self.wait_rule is not None:
             out["wait_rule"] = self.wait_rule
         return out
 
     def simulation_key(self) -> tuple:
         """The settings that change what is simulated (two readings with the same key share results)."""
-        return (self.units, self.pilot_start, self.pilot_stop, self.hold_commands, self.unsafe_hold, self.waitmap,
-                self.outside, self.latency, self.wait_rule)
+        return (self.units, self.pilot_start, self.pilot_engage, self.pilot_stop, self.hold_commands,
+                self.unsafe_hold, self.waitmap, self.outside, self.latency, self.wait_rule, self.agent_active)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -143,14 +157,13 @@ class Reading:
 
 
 _PAPER = dict(waitmap="paper", latency="round-trip", pilot_start="detection", pilot_stop="safe-avoidance",
-              unsafe_hold="no-command", window="whole", received="pilot+blend")
+              unsafe_hold="no-command", agent_active="encounter", window="whole", received="pilot+blend")
 
 #: named bundles, ``paper`` first (the default), then its alternatives, then the older readings
 READINGS: dict[str, Reading] = {r.name: r for r in (
     Reading("paper", **_PAPER,
-            description="the paper's method: paper grid (nearest box state outside), round trip split between "
-                        "the links, pilot streams from the start till safe avoidance, unsafe 'hold' = no command, "
-                        "received = pilot + blend over the whole encounter"),
+            description="the paper's method: paper grid, round trip split between the links, pilot streams and agent "
+                        "decides from the start till safe avoidance, unsafe 'hold' = no command, received = pilot + blend"),
     Reading("paper-outside-far", **{**_PAPER, "outside": "far"},
             description="as paper, but a state outside the map's box reads w = H (ProjL still vetoes)"),
     Reading("paper-one-way", **{**_PAPER, "latency": "one-way"},
@@ -162,8 +175,10 @@ READINGS: dict[str, Reading] = {r.name: r for r in (
                         "over maneuvers only"),
     Reading("paper-no-hold", **{**_PAPER, "hold_commands": False},
             description="as paper, but the GCS sends no 'hold' (only the pilot's maneuvers)"),
-    Reading("paper-preventive", **{**_PAPER, "pilot_start": "preventive"},
-            description="as paper, but the pilot streams and maneuvers from the preventive alert"),
+    Reading("paper-preventive", **{**_PAPER, "pilot_engage": "preventive"},
+            description="as paper, but the pilot maneuvers from the preventive alert"),
+    Reading("paper-corrective", **{**_PAPER, "agent_active": "corrective"},
+            description="as paper, but the agent decides only from the corrective alert (its active phase) on"),
     Reading("paper-alerting", **{**_PAPER, "waitmap": None},
             description="as paper, on our alerting-region wait-map grid (the campaign's --waitmap, default alerting)"),
     Reading("paper-feet", **{**_PAPER, "units": "feet"},
@@ -235,5 +250,5 @@ def readings_help() -> str:
 
 
 __all__ = ["Reading", "READINGS", "ALIASES", "DEFAULT_READING", "reading_for", "canonical_name",
-           "parse_reading_settings", "readings_help", "UNITS", "PILOT_STARTS", "PILOT_STOPS", "UNSAFE_HOLDS",
+           "parse_reading_settings", "readings_help", "UNITS", "PILOT_STARTS", "PILOT_STOPS", "UNSAFE_HOLDS", "AGENT_ACTIVE",
            "OUTSIDE", "LATENCIES", "WAIT_RULES", "WINDOWS", "RECEIVED", "BLENDS"]

@@ -85,6 +85,7 @@ from daa_sil.errors import UsageError
 from daa_sil.geometry.frames import wrap_pi
 from daa_sil.geometry.kinematics import AircraftState, Command
 from daa_sil.geometry.units import DEG, FPM
+from daa_sil.daa.alerting import safe_avoidance
 from daa_sil.models.pilot_display import guidance_from_daa
 from daa_sil.models.pilot_choice import _BLOCK_KEYS, _as_rng, _draw_block, choose_maneuver, sample_response_components
 from daa_sil.models.pilot_config import Guidance, PilotConfig, PilotOutput
@@ -331,20 +332,6 @@ class PilotModel:
         self.direction[i] = 0
         self.recovering[i[done]] = False
         return act
-
-
-def safe_avoidance(own: AircraftState, intr: "AircraftState | None", alert_level: np.ndarray) -> np.ndarray:
-    """(N,) bool: the pilot's display shows safe avoidance -- no DAA alert (``alert_level`` 0, the
-    maximum over intruders) and every intruder past its closest point of approach (horizontal relative
-    position . relative velocity > 0). ``own`` (N,) and ``intr`` (N, M) are the states the pilot sees;
-    False where any is unknown (nan) or no intruder is given."""
-    n = own.shape[0]
-    if intr is None or intr.shape[-1] == 0:
-        return np.zeros(n, bool)
-    s = own.position()[:, None, :2] - intr.position()[..., :2]
-    v = own.velocity()[:, None, :2] - intr.velocity()[..., :2]
-    diverging = np.einsum("nmk,nmk->nm", s, v) > 0.0  # nan compares False
-    return (np.broadcast_to(np.asarray(alert_level), (n,)) == 0) & diverging.all(axis=1)
 
 
 __all__ = ["PilotModel", "safe_avoidance"]

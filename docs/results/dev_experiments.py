@@ -5,7 +5,7 @@ which model choice moves the remaining gap -- on a development seed, never the r
 
 Runs (resumable; one campaign directory each, groups B-2 and ID-2 unless noted):
 
-* the readings ``paper`` (the five groups and ID-2-projl), ``paper-hold-blend``, ``paper-no-hold``,
+* the readings ``paper`` and ``paper-corrective`` (the five groups and ID-2-projl), ``paper-hold-blend``, ``paper-no-hold``,
   ``paper-one-way``, ``paper-outside-far``, ``paper-countdown``, ``paper-preventive``, ``paper-feet``,
   ``detection`` and ``extended``;
 * model-choice experiments on the ``paper`` reading (not readings: the text does not allow them):
@@ -43,7 +43,7 @@ def _ic1(wait: float, name: str):
 
 def runs() -> dict:
     """name -> CampaignConfig keyword arguments (without seed / size)."""
-    out = {"paper": dict(groups=ALL, reading="paper")}
+    out = {"paper": dict(groups=ALL, reading="paper"), "paper-corrective": dict(groups=ALL, reading="paper-corrective")}
     for r in ("paper-hold-blend", "paper-no-hold", "paper-one-way", "paper-outside-far", "paper-countdown",
               "paper-preventive", "paper-feet", "detection", "extended"):
         out[r] = dict(groups=PAIR, reading=r)
