@@ -72,3 +72,31 @@ def test_outside_the_box_reads_the_nearest_state_or_the_horizon():
     assert list(far.in_box) == [True, False]
     with pytest.raises(UsageError, match="outside must be one of clamp, far"):
         make_wait_lookup(_Family(), CFG, outside="near")
+
+
+def test_agent_decides_over_the_whole_encounter_until_safe_avoidance():
+    """active_from="encounter": with no alert and no fresh command the agent still decides (B-2: no
+    wait, DAA authority; ID-2 waits); once the intruder is past its closest point of approach and
+    nothing alerts, the encounter is over and the agent stands down for good (unless alerted again)."""
+    own = own_state()
+    far = intruders([[[0.0, 30000.0, 1000.0, 60.0, np.pi, 0.0]]])  # 30 km ahead, closing, no alert
+    behind = intruders([[[0.0, -3000.0, 1000.0, 60.0, np.pi, 0.0]]])  # passed, diverging
+    assert alert_levels(own, far, CFG)[0, 0] == 0
+    nothing = PilotInput.nothing(1, 10.0)
+    mem = AgentMemory.initial(1, own)
+    b2 = policy_for_group("B-2")
+    _, dec, _ = agent_step(10.0, own, far, nothing, mem, b2, CFG)
+    assert not dec["active"][0]  # the default: decisions from the corrective alert only
+    enc = replace(b2, active_from="encounter")
+    _, dec, m1 = agent_step(10.0, own, far, nothing, mem, enc, CFG)
+    assert dec["active"][0] and dec["decision"][0] == D_NO_WAIT and not m1.encounter_over[0]
+    lookup = lambda o, i, t: WaitValue.constant(o.shape[0], 30.0)  # noqa: E731
+    _, dec, _ = agent_step(10.0, own, far, nothing, mem, replace(policy_for_group("ID-2"), active_from="encounter"),
+                           CFG, lookup)
+    assert dec["decision"][0] == D_WAIT
+    _, dec, m2 = agent_step(11.0, own, behind, nothing, m1, enc, CFG)
+    assert not dec["active"][0] and m2.encounter_over[0]
+    _, dec, _ = agent_step(12.0, own, far, nothing, m2, enc, CFG)  # latched: no decision without an alert
+    assert not dec["active"][0]
+    with pytest.raises(UsageError, match="active_from must be one of corrective, encounter"):
+        replace(b2, active_from="always")

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from daa_sil.errors import FileFormatError
-from daa_sil.models.latency import HalfRoundTrip, TruncatedGaussian
+from daa_sil.models.latency import TruncatedGaussian
+from daa_sil.models.link_rule import HalfRoundTrip
 from daa_sil.sil.play import shim_argv
 from daa_sil.sil.scenario import delay_models, encounter_set, link_legs, load_scenario
 from daa_sil.sil.shim_config import ShimConfig, shim_delay_processes

@@ -10,7 +10,8 @@ import signal
 import sys
 
 from ..errors import UsageError
-from daa_sil.models.latency import SPEC_HELP, link_legs, parse_delay_spec
+from daa_sil.models.latency import SPEC_HELP, parse_delay_spec
+from daa_sil.models.link_rule import link_legs
 from ..link.codec import load_key
 from daa_sil.sil.endpoint import format_udp_address
 from daa_sil.sil.shim import run_shim

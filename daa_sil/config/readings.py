@@ -61,7 +61,7 @@ from daa_sil.config.choices import OUTSIDE_BOX as OUTSIDE
 from daa_sil.config.choices import AGENT_ACTIVE, PILOT_STOPS, UNSAFE_HOLDS, WAIT_RULES
 from daa_sil.errors import UsageError
 from daa_sil.geometry.units import FT
-from daa_sil.models.latency import LATENCY_RULES as LATENCIES
+from daa_sil.models.link_rule import LATENCY_RULES as LATENCIES
 
 UNITS = ("metres", "feet")
 PILOT_STARTS = ("corrective", "preventive", "detection")

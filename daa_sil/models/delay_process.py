@@ -15,7 +15,8 @@ from typing import Sequence
 import numpy as np
 
 from daa_sil.errors import UsageError
-from daa_sil.models.latency import BLOCK, DEFAULT_EPOCH_S, DelayModel, LinkLegs, Trace
+from daa_sil.models.latency import BLOCK, DEFAULT_EPOCH_S, DelayModel, Trace
+from daa_sil.models.link_rule import LinkLegs
 
 
 def as_seed_sequence(seed: "int | np.random.SeedSequence | None") -> np.random.SeedSequence:

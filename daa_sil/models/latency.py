@@ -18,8 +18,8 @@ is the caller's rule, :data:`LATENCY_RULES`):
 * :class:`Spike` ``(base, peak, start, length, period)`` -- a trace built from parameters: ``base``
   seconds, raised to ``peak`` over ``[start, start + length)`` and, with ``period > 0``, again every
   ``period`` seconds (link-fault scenarios: delay spikes to 10 s).
-* :class:`HalfRoundTrip` ``(round_trip)`` -- one link's share of a round trip: half of the inner
-  model's value.
+* :class:`daa_sil.models.link_rule.HalfRoundTrip` ``(round_trip)`` -- one link's share of a round trip
+  (spec ``half:...``, YAML ``{type: half, round_trip: ...}``).
 
 **Range.** The paper's only sentence on what its latency measures is "The round-trip latency
 duration can be in the range of 0.2 to 10 seconds" (Problem Formulation). :data:`ROUND_TRIP_MIN_S`
@@ -28,11 +28,8 @@ A model's values are validated within ``[LEG_MIN_S, ROUND_TRIP_MAX_S]`` = [0.1, 
 link's half of the shortest round trip (the ``round-trip`` rule), 10 s the longest value any
 reading applies to one link (the ``one-way`` rule applies the group's value to each link).
 
-**Rules** (:data:`LATENCY_RULES`, :func:`link_legs`): how a group's latency value reaches the two
-links. ``one-way`` -- the value is each link's delay, uplink and downlink drawn from their own
-streams (a round trip of twice the value). ``round-trip`` -- the value is the round trip, split
-evenly: each link gets half of one draw (``HalfRoundTrip``), and both links read the *same* draw
-sequence (the uplink stream), so in every delay epoch uplink + downlink = the round trip drawn for it.
+How a group's latency value reaches the two links (one-way on each, or a round trip split evenly)
+is :mod:`daa_sil.models.link_rule`.
 
 **Why a piecewise-constant delay process.** Drawing an independent delay per packet reorders
 about half of adjacent packets of a 10 Hz stream (48 % measured), and forcing FIFO on top of that
@@ -66,8 +63,6 @@ LEG_MIN_S = ROUND_TRIP_MIN_S / 2.0
 #: names kept for callers: the default Gaussian truncation, and the largest value (s)
 DELAY_MIN_S = ROUND_TRIP_MIN_S
 DELAY_MAX_S = ROUND_TRIP_MAX_S
-#: how a group's latency value reaches the two links (see the module docstring)
-LATENCY_RULES = ("one-way", "round-trip")
 #: default epoch length of the piecewise-constant delay process (s)
 DEFAULT_EPOCH_S = 10.0
 #: epochs (or packets) drawn per child seed; part of the reproducibility contract
@@ -345,70 +340,6 @@ class Spike(Trace):
         return s + (f",{self.period:g}" if self.period else "")
 
 
-class HalfRoundTrip(DelayModel):
-    """One link's share of a round-trip delay model: half of each draw of ``round_trip`` (s).
-
-    Used by the ``round-trip`` rule (:func:`link_legs`): both links apply this model to the same
-    draw sequence, so each gets exactly half of the round trip drawn for the epoch (halving is
-    exact in binary floating point).
-    """
-
-    kind = "half"
-
-    def __init__(self, round_trip: DelayModel):
-        if not isinstance(round_trip, DelayModel) or isinstance(round_trip, HalfRoundTrip):
-            raise UsageError(f"a half round trip needs a round-trip delay model, got {round_trip!r}")
-        self.round_trip = round_trip
-
-    def __eq__(self, other) -> bool:
-        return isinstance(other, HalfRoundTrip) and other.round_trip == self.round_trip
-
-    def __hash__(self) -> int:
-        return hash(("half", self.round_trip.spec()))
-
-    def sample(self, rng, t):
-        return 0.5 * np.asarray(self.round_trip.sample(rng, t), dtype=float)
-
-    def mean(self) -> float:
-        return 0.5 * self.round_trip.mean()
-
-    def to_dict(self) -> dict:
-        return {"type": "half", "round_trip": self.round_trip.to_dict()}
-
-    def spec(self) -> str:
-        return f"half:{self.round_trip.spec()}"
-
-
-@dataclass(frozen=True)
-class LinkLegs:
-    """What each link applies: ``up`` (GCS -> vehicle) and ``down`` (vehicle -> GCS) delay models,
-    and whether the downlink reads the uplink's draw sequence (``shared``: one round trip per epoch)."""
-
-    up: DelayModel
-    down: DelayModel
-    shared: bool = False
-    rule: str = "one-way"
-
-
-def link_legs(model: DelayModel, rule: str = "one-way", down: "DelayModel | None" = None) -> LinkLegs:
-    """The two links' delays for a latency value under ``rule`` (:data:`LATENCY_RULES`).
-
-    ``one-way``: ``model`` on the uplink and ``down`` (default ``model``) on the downlink, each from
-    its own stream. ``round-trip``: ``model`` is the round trip; each link applies
-    :class:`HalfRoundTrip` of it to the uplink stream's draws (``down`` must be None or equal).
-    """
-    if rule not in LATENCY_RULES:
-        raise UsageError(f"latency rule must be one of {', '.join(LATENCY_RULES)}, got {rule!r}")
-    if rule == "one-way":
-        return LinkLegs(model, down if down is not None else model, False, rule)
-    if down is not None and down != model:
-        raise UsageError(f"a round trip is one delay, got {model.spec()} up and {down.spec()} down")
-    if isinstance(model, HalfRoundTrip):
-        return LinkLegs(model, model, True, rule)
-    half = HalfRoundTrip(model)
-    return LinkLegs(half, half, True, rule)
-
-
 SPEC_HELP = ("const:S | gauss:MEAN,SD[,LO,HI] | uniform:LO,HI | trace:FILE.csv | spike:BASE,PEAK,START,LEN[,PERIOD] "
              f"(seconds, within [{LEG_MIN_S:g}, {DELAY_MAX_S:g}])")
 
@@ -473,6 +404,8 @@ def delay_model_from_dict(d: dict, where: str = "latency") -> DelayModel:
     if typ == "spike":
         return Spike(d["base_s"], d["peak_s"], d["start_s"], d["length_s"], d.get("period_s", 0.0))
     if typ == "half":
+        from daa_sil.models.link_rule import HalfRoundTrip
+
         return HalfRoundTrip(delay_model_from_dict(d["round_trip"], where=f"{where}.round_trip"))
     return Trace.from_csv(d["file"])
 

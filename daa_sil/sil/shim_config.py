@@ -15,7 +15,8 @@ import numpy as np
 from daa_sil.errors import UsageError
 from daa_sil.link.codec import mavlink
 from daa_sil.link.delayline import check_outages
-from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel, LinkLegs
+from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel
+from daa_sil.models.link_rule import LinkLegs
 from daa_sil.models.delay_process import as_seed_sequence, child_seed, link_delay_processes
 from daa_sil.sil.endpoint import parse_udp_address
 

@@ -153,7 +153,7 @@ class CampaignConfig:
     def link_legs(self, name: str):
         """What each link of group ``name`` applies (:class:`daa_sil.models.latency.LinkLegs`): the
         group's latency under the reading's rule (``one-way`` or ``round-trip``)."""
-        from daa_sil.models.latency import link_legs
+        from daa_sil.models.link_rule import link_legs
 
         return link_legs(self.group(name).delay_model(), self.effective_reading.latency)
 

@@ -53,7 +53,8 @@ from daa_sil.agent import (BY_BOTH, BY_MAP, BY_PROJL, CODE_NAMES, D_BLEND, D_DAA
 from daa_sil.daa.config import DaaConfig
 from daa_sil.errors import UsageError
 from daa_sil.geometry.kinematics import AircraftState, Command
-from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel, LinkLegs
+from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel
+from daa_sil.models.link_rule import LinkLegs
 from daa_sil.models.delay_process import batched_link_delays
 from daa_sil.link.delayline import fifo_release
 from daa_sil.onboard import OnboardCore, StepOutput
