@@ -69,6 +69,10 @@ def test_scenario_round_trip_form(tmp_path):
     t = np.asarray(steps.column("t").to_numpy())
     up = np.asarray(steps.column("delay_up_s").to_numpy())
     assert np.array_equal(up, [procs["up"].delay(x) for x in t]) and np.array_equal(up, [procs["down"].delay(x) for x in t])
+    from daa_sil.sil.scenario import scenario_from_dict
+
+    again = scenario_from_dict(sc.to_dict())  # the dict form round-trips (bench_sil.py uses it)
+    assert again.link.round_trip == "gauss:5,3" and again.link.up is None and link_legs(again) == legs
     bad = tmp_path / "bad.yaml"
     bad.write_text(SCENARIO.replace('round_trip: "gauss:5,3"', 'round_trip: "gauss:5,3", up: "const:4"'))
     with pytest.raises(FileFormatError, match="either round_trip or up/down"):

@@ -271,8 +271,9 @@ class Scenario:
             for k in ("initial", "cpa"):
                 if intr[k] is None:
                     intr.pop(k)
-        if d["link"]["down"] is None:
-            d["link"].pop("down")
+        for k in ("up", "down", "round_trip"):  # absent (a round trip replaces up / down)
+            if d["link"][k] is None:
+                d["link"].pop(k)
         d["pilot"]["commands"] = [{k: v for k, v in c.items() if not (isinstance(v, float) and math.isnan(v))}
                                   for c in d["pilot"]["commands"]]
         if d["pilot"]["mode"] == "model":
