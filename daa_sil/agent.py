@@ -28,8 +28,8 @@ Semantics follow ``docs/architecture.md`` "Allocation semantics":
   ablation); ``map`` -> the wait map at the current state of the most threatening intruder, read
   from the map of that intruder's estimated turn rate (:func:`make_wait_lookup`). Two readings of
   Eq. 11 (``policy.wait_rule``): ``threshold`` (default, literal) compares ``w(S(k))`` read afresh
-  every step with W_T, so a constant wait (IC-1, 5 s >= W_T) waits until ProjL fires, which is what
-  makes IC-1 the group with the most waits in the paper's Table 3; ``countdown`` reads the paper's
+  every step with W_T, so a constant wait (IC-1, 5 s >= W_T) waits until ProjL fires (any constant
+  >= W_T gives the same runs); ``countdown`` reads the paper's
   "waits for the optimal wait time extracted from the map until the control is being authorized
   to the onboard DAA or a delayed pilot command is received": ``w`` is a budget counted from the
   start of the current waiting streak (``w - elapsed``), reset when a fresh pilot command arrives
