@@ -109,7 +109,7 @@ def _lowc(n_enc):
 
 def test_orderings_of_one_table_are_holm_corrected_together():
     """ID-2 has 0 LoWC encounters; the others 6 each (McNemar p = 2 x 0.5^6 = 0.031 per pair, significant
-    alone): corrected over the 4 pairs (Holm: 4 x 0.031 = 0.125) the ordering is not shown."""
+    alone): corrected over the 3 pairs (Holm: 3 x 0.031 = 0.094) the ordering is consistent (not shown)."""
     f = finding(kind="ordering", metric="p_lowc", ordering={"subject": "ID-2", "relation": "fewest",
                                                             "others": ["B-1", "B-2", "IC-1"]})
     st = study(*(group(g, lowc=_lowc(6)) for g in ("B-1", "B-2", "IC-1")), group("ID-2"))
