@@ -91,6 +91,10 @@ def test_campaign_defaults_to_the_paper_reading_and_records_it(tmp_path, capsys)
     assert meta["resolved_config"]["policies"]["ID-2"]["unsafe_hold"] == "no-command"
     assert meta["resolved_config"]["policies"]["B-2"]["active_from"] == "encounter"
     assert "reading paper" in capsys.readouterr().err
+    # the encounter sampler checked start states with the run's preset, not EncounterConfig's do365 default
+    from daa_sil.models.encounter_files import load_encounters
+
+    assert load_encounters(out / "encounters.parquet").config["preset"] == meta["config"]["preset"] == "paper"
     # the old name: a one-line notice, the extended reading recorded
     out2 = tmp_path / "E"
     assert main(["campaign", "run", "--groups", "B-2", "--encounters", "4", "--out", str(out2), "--reading", "literal",
