@@ -138,7 +138,7 @@ def main() -> int:
     args = ap.parse_args()
 
     from daa_sil.study import report, report_input
-    from daa_sil.study.findings import evaluate_all
+    from daa_sil.study.verdicts import evaluate_all
     from daa_sil.study.analysis import Study
     from daa_sil.study.stats import DEFAULT_REPLICATES
 

@@ -7,11 +7,18 @@ Semantics follow ``docs/architecture.md`` "Allocation semantics":
   reached that command), or while the DAA holds authority and the pilot's course is still unsafe
   (SM <= 0), so that control returns to the pilot only onto a safe course. Outside the active phase the ownship flies the last pilot command and the
   decision is ``none`` (not counted).
+  With ``policy.active_from = "encounter"`` the agent also decides every step from the encounter's
+  start until safe avoidance (no alert, every intruder past its closest point of approach, on the
+  truth it sees), the paper's "During the communication latency, the agent matches the current state
+  with a state in the wait map and makes a decision".
 * One decision per active step:
   - ``link_lost``: no packet from the GCS for ``link_timeout_s`` -> the onboard DAA resolution.
   - fresh pilot command received -> ``pilot`` if SM(u_p) > 0; else ``blend`` (Algorithm 2,
     :func:`daa_sil.daa.search_maneuver` with the pilot's (axis, direction), closest to u_p) when
-    ``policy.blending``, or ``daa_override`` (DAA resolution) when not (baseline).
+    ``policy.blending``, or ``daa_override`` (DAA resolution) when not (baseline). With
+    ``policy.unsafe_hold = "no-command"`` an unsafe fresh "hold" (a command without a maneuver
+    intent: the pilot has not maneuvered yet) is decided as if no command had arrived (wait / no
+    wait below); it is still stored as the pilot's latest command.
   - no fresh command -> ``wait`` (hold the last pilot command) iff ``w >= W_T`` and no ProjL
     within ``projl_horizon_s``, else ``no_wait`` (DAA resolution). A command older than
     ``stale_command_s`` (by its send time) is never executed nor stored: the step is decided as
@@ -21,8 +28,8 @@ Semantics follow ``docs/architecture.md`` "Allocation semantics":
   ablation); ``map`` -> the wait map at the current state of the most threatening intruder, read
   from the map of that intruder's estimated turn rate (:func:`make_wait_lookup`). Two readings of
   Eq. 11 (``policy.wait_rule``): ``threshold`` (default, literal) compares ``w(S(k))`` read afresh
-  every step with W_T, so a constant wait (IC-1, 5 s >= W_T) waits until ProjL fires, which is what
-  makes IC-1 the group with the most waits in the paper's Table 3; ``countdown`` reads the paper's
+  every step with W_T, so a constant wait (IC-1, 5 s >= W_T) waits until ProjL fires (any constant
+  >= W_T gives the same runs); ``countdown`` reads the paper's
   "waits for the optimal wait time extracted from the map until the control is being authorized
   to the onboard DAA or a delayed pilot command is received": ``w`` is a budget counted from the
   start of the current waiting streak (``w - elapsed``), reset when a fresh pilot command arrives
@@ -48,6 +55,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
+from .daa.alerting import safe_avoidance
 from .daa import (AXIS_NONE, DaaConfig, DaaState, alert_levels, classify_command, compute_bands, conflict_lists,
                   proj_lowc, resolve, safety_metric, search_maneuver, sm_from_tin)
 from .daa.config import AXIS_NAMES, DIR_NAMES, RULE_NAMES
@@ -124,6 +132,7 @@ class AgentMemory:
     intent_axis: "np.ndarray | None" = None  #: the pilot's (axis, direction) preference, AXIS_* / DIR_*
     intent_dir: "np.ndarray | None" = None
     daa_state: "DaaState | None" = None  #: DAA alert/band hysteresis (only with DaaConfig.stateful)
+    encounter_over: "np.ndarray | None" = None  #: bool, safe avoidance reached (``active_from="encounter"``)
 
     def __post_init__(self):
         n = np.shape(self.pilot_trk)
@@ -131,6 +140,8 @@ class AgentMemory:
             self.intent_axis = np.full(n, AXIS_NONE, np.int8)
         if self.intent_dir is None:
             self.intent_dir = np.zeros(n, np.int8)
+        if self.encounter_over is None:
+            self.encounter_over = np.zeros(n, bool)
 
     @classmethod
     def initial(cls, n: int, own: AircraftState, t0: float = 0.0) -> "AgentMemory":
@@ -238,7 +249,14 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     if check.any():
         j = np.nonzero(check)[0]
         unsafe_revert[j] = ~(_safety(batch_of, j, own, intr, last_pilot[j], cfg, horizon, sm_calls) > 0)
-    active = ((max_alert >= 2) | in_progress | unsafe_revert) & pol.value("enabled").astype(bool)
+    # active_from "encounter" (per row): decide every step from the start until safe avoidance
+    encounter_over = memory.encounter_over
+    whole = np.zeros(n, bool)
+    from_start = pol.value("active_from") == "encounter"
+    if from_start.any():
+        encounter_over = encounter_over | (from_start & safe_avoidance(own, intr, max_alert))
+        whole = from_start & ~encounter_over
+    active = ((max_alert >= 2) | in_progress | unsafe_revert | whole) & pol.value("enabled").astype(bool)
     ia = np.nonzero(active)[0]
 
     # --- DAA: bands and resolution for the active encounters, per DAA batch (none when none is active)
@@ -283,6 +301,10 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     p_axis = np.where(fresh, intent_axis, AXIS_NONE).astype(np.int8)
     p_dir = np.where(fresh, intent_dir, 0).astype(np.int8)
 
+    # an unsafe "hold" decided as no command (policy.unsafe_hold): it carries no maneuver to blend
+    as_none = (pol.value("unsafe_hold") == "no-command") & active & fresh & (p_axis == AXIS_NONE) & ~(sm_pilot > 0)
+    decide = fresh & ~as_none  #: fresh commands decided as commands
+
     # --- wait / no wait (no fresh command) ------------------------------------------------------
     wait_s, w_pl, w_turn, w_map = nan.copy(), nan.copy(), nan.copy(), nan.copy()
     w_box = np.zeros(n, bool)
@@ -292,9 +314,9 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
         for h in np.unique(horizons):
             r = ia[horizons == h]
             projl[r] = proj_lowc(own[r], intr[r], cfg, float(h)).any(axis=1)
-    nc = active & ~fresh & ~link_lost
+    nc = active & ~decide & ~link_lost
     inc = np.nonzero(nc)[0]
-    wait_start = np.where(active & ~fresh, memory.wait_start, np.nan)
+    wait_start = np.where(active & ~decide, memory.wait_start, np.nan)
     if inc.size:
         wv = wait_values(own, intr, pol, wait_lookup, turn_rate, inc)
         w = wv.wait_s
@@ -310,8 +332,8 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     wait_start = np.where(wait & np.isnan(wait_start), t, wait_start)
 
     # --- blend for unsafe fresh pilot commands (baseline groups: DAA override) ------------------
-    pilot_ok = active & fresh & ~link_lost & (sm_pilot > 0)
-    unsafe = active & fresh & ~link_lost & ~(sm_pilot > 0)
+    pilot_ok = active & decide & ~link_lost & (sm_pilot > 0)
+    unsafe = active & decide & ~link_lost & ~(sm_pilot > 0)
     blend = unsafe & blending
     rule = np.zeros(n, np.int8)
     blend_cmd = Command(nan.copy(), nan.copy(), nan.copy())
@@ -374,8 +396,9 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
                       pilot_t_sent=np.where(fresh, pilot.t_sent, memory.pilot_t_sent), last_packet_t=link_t,
                       authority=authority, decision=decision, exec_trk=exec_cmd.trk.copy(),
                       exec_vs=exec_cmd.vs.copy(), exec_gs=exec_cmd.gs.copy(), daa_axis=daa_axis, daa_dir=daa_dir,
-                      wait_start=np.where(active & ~fresh, wait_start, np.nan),
-                      intent_axis=intent_axis, intent_dir=intent_dir, daa_state=daa_state)
+                      wait_start=np.where(active & ~decide, wait_start, np.nan),
+                      intent_axis=intent_axis, intent_dir=intent_dir, daa_state=daa_state,
+                      encounter_over=encounter_over)
     return exec_cmd, dec, new_mem
 
 

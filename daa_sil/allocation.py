@@ -13,10 +13,10 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from daa_sil.config.choices import AGENT_ACTIVE, UNSAFE_HOLDS, WAIT_RULES
 from daa_sil.errors import UsageError
 
 WAIT_MODES = ("none", "constant", "map", "always")
-WAIT_RULES = ("threshold", "countdown")
 
 
 @dataclass(frozen=True)
@@ -34,6 +34,12 @@ class AllocationPolicy:
     link_timeout_s: float = 20.0
     wait_rule: str = "threshold"  #: :data:`WAIT_RULES`: w(S(k)) >= W_T every step, or a countdown budget
     name: str = "custom"
+    #: :data:`UNSAFE_HOLDS`: an unsafe fresh "hold" is blended / overridden like any command (``blend``)
+    #: or decided as if no command had arrived (``no-command``)
+    unsafe_hold: str = "blend"
+    #: :data:`AGENT_ACTIVE`: the agent decides from the corrective alert (``corrective``) or over the
+    #: whole encounter, from its start until safe avoidance (``encounter``)
+    active_from: str = "corrective"
     #: False = the agent never takes authority: the pilot's last command is always flown, the
     #: decision is always ``none`` (alert levels are still computed); the SIL's ``DAA_ENABLE 0``
     enabled: bool = True
@@ -43,6 +49,10 @@ class AllocationPolicy:
             raise UsageError(f"wait_mode must be one of {', '.join(WAIT_MODES)}, got {self.wait_mode!r}")
         if self.wait_rule not in WAIT_RULES:
             raise UsageError(f"wait_rule must be one of {', '.join(WAIT_RULES)}, got {self.wait_rule!r}")
+        if self.unsafe_hold not in UNSAFE_HOLDS:
+            raise UsageError(f"unsafe_hold must be one of {', '.join(UNSAFE_HOLDS)}, got {self.unsafe_hold!r}")
+        if self.active_from not in AGENT_ACTIVE:
+            raise UsageError(f"active_from must be one of {', '.join(AGENT_ACTIVE)}, got {self.active_from!r}")
 
 
 @dataclass(frozen=True)
@@ -98,4 +108,4 @@ class PolicyRows:
             yield WAIT_MODES[int(code)], np.flatnonzero(mode == code)
 
 
-__all__ = ["AllocationPolicy", "PolicyRows", "WAIT_MODES", "WAIT_RULES"]
+__all__ = ["AllocationPolicy", "PolicyRows", "WAIT_MODES", "WAIT_RULES", "UNSAFE_HOLDS", "AGENT_ACTIVE"]

@@ -10,6 +10,7 @@ from typing import Callable
 import numpy as np
 
 from daa_sil.allocation import PolicyRows
+from daa_sil.config.choices import OUTSIDE_BOX
 from daa_sil.daa.config import DaaConfig
 from daa_sil.errors import UsageError
 from daa_sil.geometry.frames import to_paper_state
@@ -60,15 +61,21 @@ def wait_values(own, intr, pol: PolicyRows, lookup: "WaitLookup | None", turn_ra
     return out
 
 
-def make_wait_lookup(family, cfg: "DaaConfig | None" = None) -> WaitLookup:
+def make_wait_lookup(family, cfg: "DaaConfig | None" = None, outside: str = "clamp") -> WaitLookup:
     """Wrap a wait-map family (``family.lookup(paper_states, turn_rate)``) as a :data:`WaitLookup`.
 
     Each intruder is converted to the paper frame (:func:`daa_sil.geometry.frames.to_paper_state`) and read
     from the map of its estimated turn rate (compass rad/s, + = right, passed to the family in the
     paper sense, + = left). The wait of the **most threatening** intruder is used: the one with the
-    earliest straight-line LoWC over the DAA lookahead (ties: the smallest range).
+    earliest straight-line LoWC over the DAA lookahead (ties: the smallest range). ``outside``
+    (:data:`~daa_sil.config.choices.OUTSIDE_BOX`): a state outside the map's box reads the nearest
+    state of the box (``clamp``) or w = H, the map's horizon (``far``: the map does not model that
+    intruder; the ProjL veto still applies, and a LoWC in progress is always within ProjL's look-ahead).
     """
     cfg = cfg or DaaConfig()
+    if outside not in OUTSIDE_BOX:
+        raise UsageError(f"outside must be one of {', '.join(OUTSIDE_BOX)}, got {outside!r}")
+    horizon = float(family.params.horizon) if outside == "far" else None
     from daa_sil.geometry import wellclear as wc
     from daa_sil.daa.alerting import relative_state
 
@@ -79,6 +86,8 @@ def make_wait_lookup(family, cfg: "DaaConfig | None" = None) -> WaitLookup:
         paper = to_paper_state(own.position()[:, None], own.velocity()[:, None], intr.position(), intr.velocity())
         rate = np.broadcast_to(np.asarray(turn_rate, float), (n, m))
         res = family.lookup(paper, -rate)
+        if horizon is not None:
+            res.wait_s = np.where(np.asarray(res.in_box, bool), res.wait_s, horizon)
         s, v = relative_state(own, intr)
         t_in, _ = wc.violation_interval(s, v, cfg.th, 0.0, cfg.lookahead_s)
         key = np.minimum(t_in, 1e9) * 1e6 + wc.horizontal_range(s)

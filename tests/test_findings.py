@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from daa_sil.study import findings as F
+from daa_sil.study import verdicts as V
 from daa_sil.study import metrics as M
 from daa_sil.study import analysis as A
 from daa_sil.study.stats import zero_upper_bounds
@@ -49,7 +50,7 @@ def test_change_rule(ratio, verdict):
     rng = np.random.default_rng(1)
     base = noisy(rng, 400, 8.0) * 100
     st = study(group("B-2", n_no_wait=base), group("ID-2", n_no_wait=np.rint(base * ratio).astype(int)))
-    o = F.evaluate(one("no-wait-reduction", "ID-2"), st)
+    o = V.evaluate(one("no-wait-reduction", "ID-2"), st)
     assert o.verdict == verdict, o
     assert o.lo <= 100 * (1 - ratio) + 0.1 and o.hi >= 100 * (1 - ratio) - 0.1
 
@@ -61,23 +62,24 @@ def test_value_rule_reads_per_encounter_paper_counts():
     rng = np.random.default_rng(2)
     near = np.where(rng.random(4000) < 0.2, rng.poisson(1.0278 / 0.2, 4000), 0)
     st = study(group("ID-2", 4000, n_no_wait=near))
-    o = F.evaluate(f, st)
+    o = V.evaluate(f, st)
     assert o.lo < 1.0278 < o.hi and o.verdict == F.REPRODUCED
     st = study(group("ID-2", 4000, n_no_wait=near * 3))
-    assert F.evaluate(f, st).verdict == F.NOT_REPRODUCED
+    assert V.evaluate(f, st).verdict == F.NOT_REPRODUCED
 
 
 def test_zero_rule_states_exact_bounds_and_fails_on_one_event():
     f = one("nmac", "ID-2")
     st = study(group("ID-2", 500))
-    o = F.evaluate(f, st)
+    o = V.evaluate(f, st)
     one_sided, two_sided = zero_upper_bounds(500)
     assert o.verdict == F.REPRODUCED and o.hi == pytest.approx(two_sided)
     assert f"{one_sided:.3g}" in o.evidence and f"{two_sided:.3g}" in o.evidence
     nm = np.zeros(500, bool)
     nm[17] = True
-    o = F.evaluate(f, study(group("ID-2", 500, nmac=nm, lowc=nm)))
-    assert o.verdict == F.NOT_REPRODUCED and "1 of 500" in o.text
+    # 1 of 500 against the paper's 0 of 10,000: Fisher's exact two-sided p = 500 / 10,500 = 0.048
+    o = V.evaluate(f, study(group("ID-2", 500, nmac=nm, lowc=nm)))
+    assert o.verdict == F.NOT_REPRODUCED and "1 of 500" in o.text and "p = 0.048" in o.evidence
 
 
 def test_bound_rule_uses_the_upper_limit():
@@ -88,12 +90,15 @@ def test_bound_rule_uses_the_upper_limit():
     lowc = np.arange(n) < 40
     rng = np.random.default_rng(4)
     tight = np.where(lowc, rng.uniform(0.4, 0.6, n), 0.0)
-    o = F.evaluate(f, study(group("B-2", n, lowc=lowc, pi_paper=tight, lowc_duration_s=lowc * 3.0)))
+    o = V.evaluate(f, study(group("B-2", n, lowc=lowc, pi_paper=tight, lowc_duration_s=lowc * 3.0)))
     assert o.verdict == F.REPRODUCED and o.hi < 1
     wide = np.where(lowc, rng.exponential(0.9, n), 0.0)
-    o = F.evaluate(f, study(group("B-2", n, lowc=lowc, pi_paper=wide, lowc_duration_s=lowc * 3.0)))
-    assert o.value < 1 <= o.hi and o.verdict == F.NOT_REPRODUCED
-    o = F.evaluate(f, study(group("B-2", n)))
+    o = V.evaluate(f, study(group("B-2", n, lowc=lowc, pi_paper=wide, lowc_duration_s=lowc * 3.0)))
+    assert o.value < 1 <= o.hi and o.verdict == F.CONSISTENT  # the CI straddles the bound: not shown
+    high = np.where(lowc, rng.uniform(1.4, 1.6, n), 0.0)
+    o = V.evaluate(f, study(group("B-2", n, lowc=lowc, pi_paper=high, lowc_duration_s=lowc * 3.0)))
+    assert o.lo > 1 and o.verdict == F.NOT_REPRODUCED
+    o = V.evaluate(f, study(group("B-2", n)))
     assert o.verdict == F.NOT_TESTABLE  # no LoWC encounter: the mean is undefined
 
 
@@ -105,11 +110,11 @@ def test_category_rule_needs_the_whole_interval_in_the_band():
     lowc = np.arange(n) % 10 == 0
     rng = np.random.default_rng(5)
     dur = np.where(lowc, rng.uniform(1.0, 3.8, n), 0.0)  # mean 2.4 s of 240 s x 10 % = 1e-3
-    o = F.evaluate(f, study(group("B-1", n, lowc=lowc, lowc_duration_s=dur)))
+    o = V.evaluate(f, study(group("B-1", n, lowc=lowc, lowc_duration_s=dur)))
     assert o.value == pytest.approx(dur.sum() / (n * 240) / M.PAPER_FLIGHT_HOURS)
     assert o.verdict == F.REPRODUCED
-    o = F.evaluate(f, study(group("B-1", n, lowc=lowc, lowc_duration_s=dur / 100)))
-    assert o.verdict == F.NOT_REPRODUCED and "Extremely Remote" in o.evidence
+    o = V.evaluate(f, study(group("B-1", n, lowc=lowc, lowc_duration_s=dur / 100)))
+    assert o.verdict == F.NOT_REPRODUCED and "Extremely Remote" in o.evidence and o.hi < 1e-7
 
 
 def test_ordering_rule_is_a_paired_test():
@@ -120,20 +125,23 @@ def test_ordering_rule_is_a_paired_test():
     n = 300
     lo = np.arange(n) < 30
     others = [group(g, n, lowc=lo) for g in ("B-1", "B-2", "IC-1", "ID-1")]
-    o = F.evaluate(f, study(*others, group("ID-2", n)))
+    o = V.evaluate(f, study(*others, group("ID-2", n)))
     assert o.verdict == F.REPRODUCED and "0/30" in o.text
-    o = F.evaluate(f, study(*[group(g, n) for g in ("B-1", "B-2", "IC-1", "ID-1")], group("ID-2", n, lowc=lo)))
+    o = V.evaluate(f, study(*[group(g, n) for g in ("B-1", "B-2", "IC-1", "ID-1")], group("ID-2", n, lowc=lo)))
     assert o.verdict == F.NOT_REPRODUCED
-    o = F.evaluate(f, study(*others, group("ID-2", n, lowc=np.arange(n) < 29)))
-    assert o.verdict == F.NOT_SHOWN
+    o = V.evaluate(f, study(*others, group("ID-2", n, lowc=np.arange(n) < 29)))
+    assert o.verdict == F.CONSISTENT
     # a missing group is stated, the others are still tested
-    o = F.evaluate(f, study(group("B-2", n, lowc=lo), group("ID-2", n)))
+    o = V.evaluate(f, study(group("B-2", n, lowc=lo), group("ID-2", n)))
     assert o.verdict == F.REPRODUCED and "not run: B-1, IC-1, ID-1" in o.evidence
 
 
 def test_every_finding_is_data_with_a_kind_and_the_papers_value():
     fs = F.load_findings()
     assert {f.kind for f in fs} == set(F.KINDS)
+    # checks true by construction are marked, with why
+    marked = {f.id for f in fs if f.by_construction}
+    assert marked == {"wait-baseline", "override-integrated", "blend-baseline"}
     ids = {f.id for f in fs}
     # the paper's §V statements, each present
     for must in ("no-wait-reduction", "no-wait-reduction-average", "received-increase", "received-increase-average",
@@ -158,5 +166,5 @@ def test_pooled_average_matches_the_papers_arithmetic():
     n = 200
     mk = lambda g, k: group(g, n, n_no_wait=np.full(n, k))  # noqa: E731
     st = study(mk("B-1", 8), mk("B-2", 10), mk("IC-1", 1), mk("ID-1", 2), mk("ID-2", 3))
-    o = F.evaluate(one("no-wait-reduction-average"), st)
+    o = V.evaluate(one("no-wait-reduction-average"), st)
     assert o.value == pytest.approx(100 * (1 - 2 / 9))

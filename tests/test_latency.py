@@ -58,7 +58,7 @@ def test_parse_delay_spec(spec, expected):
     assert parse_delay_spec(m.spec()) == m  # spec() round-trips
 
 
-@pytest.mark.parametrize("spec", ["const:0.1", "const:11", "gauss:5", "gauss:5,0", "uniform:8,1", "nope:1",
+@pytest.mark.parametrize("spec", ["const:0.05", "const:11", "gauss:5", "gauss:5,0", "uniform:8,1", "nope:1",
                                   "const", "const:x", "gauss:50,1", ""])
 def test_bad_delay_spec_is_one_line_usage_error(spec):
     with pytest.raises(UsageError) as ei:

@@ -10,30 +10,110 @@ from daa_sil.study.campaign_config import CampaignConfig
 from daa_sil.study.campaign_files import read_results
 from daa_sil.cli import main
 from daa_sil.errors import UsageError
-from daa_sil.config.readings import READINGS, parse_reading_settings, reading_for
+from daa_sil.config.readings import READINGS, canonical_name, parse_reading_settings, reading_for
 from daa_sil.geometry.units import FT
 
 
 def test_bundles_and_what_they_change():
-    lit = reading_for("literal")
-    assert lit.encounter_overrides() == {} and lit.simulation_key() == ("metres", "corrective", True, None)
-    p = lit.pilot_config()
-    assert (p.alert_level_min, p.stream_level_min, p.stream_hold) == (2, None, True)
+    ext = reading_for("extended")
+    assert ext.encounter_overrides() == {} and ext.simulation_key() == (
+        "metres", "corrective", None, "alert", True, "blend", None, "clamp", "one-way", None, "corrective")
+    p = ext.pilot_config()
+    assert (p.alert_level_min, p.stream_level_min, p.stream_hold, p.stream_until) == (2, None, True, "alert")
     feet = reading_for("feet")
     assert feet.encounter_overrides() == {"hmd_max_m": pytest.approx(838.2), "vmd_max_m": pytest.approx(278.892)}
     assert feet.pilot_config().alert_level_min == 1 and (feet.window, feet.received) == ("whole", "pilot+blend")
+    # feet and preventive differ in the unit alone (the unit's effect, separated from the pilot start)
+    assert {k for k, v in feet.to_dict().items() if v != reading_for("preventive").to_dict()[k]} == {
+        "name", "units", "description"}
     assert reading_for("detection").pilot_config().stream_level_min == 0
     assert reading_for("no-hold").pilot_config().stream_hold is False
-    # counting-only readings share the literal simulation
-    assert reading_for("paper-counts").simulation_key() == lit.simulation_key()
-    assert set(READINGS) >= {"literal", "paper-counts", "feet", "preventive", "detection", "no-hold"}
+    # counting-only readings share the extended simulation
+    assert reading_for("paper-counts").simulation_key() == ext.simulation_key()
+    assert set(READINGS) >= {"paper", "extended", "paper-counts", "feet", "preventive", "detection", "no-hold",
+                             "paper-grid"}
     with pytest.raises(UsageError, match="unknown reading 'x'"):
         reading_for("x")
     with pytest.raises(UsageError, match="units must be one of metres, feet"):
-        reading_for("literal", units="yards")
+        reading_for("extended", units="yards")
     assert parse_reading_settings("units=feet, hold_commands=false") == {"units": "feet", "hold_commands": False}
     with pytest.raises(UsageError, match="KEY=VALUE"):
         parse_reading_settings("colour=blue")
+
+
+def test_the_paper_reading_and_its_alternatives():
+    p = reading_for("paper")
+    assert (p.waitmap, p.outside, p.latency, p.pilot_start, p.pilot_stop, p.hold_commands, p.unsafe_hold) == (
+        "paper", "clamp", "round-trip", "detection", "safe-avoidance", True, "no-command")
+    assert (p.window, p.received, p.blends, p.units, p.wait_rule, p.agent_active) == (
+        "whole", "pilot+blend", "all", "metres", None, "encounter")
+    pc = p.pilot_config()
+    assert (pc.stream_level_min, pc.alert_level_min, pc.stream_until) == (0, 2, "safe-avoidance")
+    assert p.policy_overrides() == {"unsafe_hold": "no-command", "active_from": "encounter"}
+    # each alternative changes exactly the setting it is named for
+    alt = {"paper-outside-far": {"outside"}, "paper-one-way": {"latency"}, "paper-countdown": {"wait_rule"},
+           "paper-hold-blend": {"unsafe_hold", "blends"}, "paper-no-hold": {"hold_commands"},
+           "paper-preventive": {"pilot_engage"}, "paper-alerting": {"waitmap"}, "paper-feet": {"units"},
+           "paper-corrective": {"agent_active"}}
+    for name, keys in alt.items():
+        d = reading_for(name).to_dict()
+        assert {k for k, v in d.items() if v != p.to_dict()[k]} - {"name", "description"} == keys, name
+    assert reading_for("paper-countdown").policy_overrides()["wait_rule"] == "countdown"
+    pp = reading_for("paper-preventive").pilot_config()
+    assert (pp.alert_level_min, pp.stream_level_min) == (1, 0)  # hold from the start, maneuvers from preventive
+    assert "active_from" not in reading_for("paper-corrective").policy_overrides()
+
+
+def test_old_names_are_accepted_with_a_notice_and_mean_the_same_reading(capsys):
+    assert reading_for("literal") is READINGS["extended"]
+    assert canonical_name("literal") == ("extended", "reading 'literal' is now called 'extended' (same settings, "
+                                                     "same results)")
+    assert CampaignConfig(groups=("B-2",), reading="literal").reading == "extended"
+    # campaign.json of an old campaign (no 'reading' key was written before readings existed) -> extended
+    assert CampaignConfig.from_dict({**CampaignConfig(groups=("B-2",)).to_dict(), "reading": "literal"}).reading == \
+        "extended"
+    assert CampaignConfig().reading == "paper"  # the default
+
+
+def test_campaign_defaults_to_the_paper_reading_and_records_it(tmp_path, capsys):
+    """daa-sil campaign run --groups B-2,ID-2 --encounters N --out D runs the paper's method and says so."""
+    out = tmp_path / "D"
+    assert main(["campaign", "run", "--groups", "B-2,ID-2", "--encounters", "12", "--seed", "5", "--out", str(out),
+                 "--no-progress"]) == 0
+    meta = json.loads((out / "campaign.json").read_text())
+    r = meta["config"]["readings"]
+    assert meta["config"]["reading"] == "paper"
+    assert (r["waitmap"], r["latency"], r["pilot_start"], r["pilot_stop"]) == (
+        "paper", "round-trip", "detection", "safe-avoidance")
+    assert (r["window"], r["received"], r["unsafe_hold"]) == ("whole", "pilot+blend", "no-command")
+    assert meta["waitmap"]["source"] == "paper"
+    assert meta["resolved_config"]["pilot"]["stream_until"] == "safe-avoidance"
+    assert meta["resolved_config"]["policies"]["ID-2"]["unsafe_hold"] == "no-command"
+    assert meta["resolved_config"]["policies"]["B-2"]["active_from"] == "encounter"
+    assert "reading paper" in capsys.readouterr().err
+    # the encounter sampler checked start states with the run's preset, not EncounterConfig's do365 default
+    from daa_sil.models.encounter_files import load_encounters
+
+    assert load_encounters(out / "encounters.parquet").config["preset"] == meta["config"]["preset"] == "paper"
+    # the old name: a one-line notice, the extended reading recorded
+    out2 = tmp_path / "E"
+    assert main(["campaign", "run", "--groups", "B-2", "--encounters", "4", "--out", str(out2), "--reading", "literal",
+                 "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "reading 'literal' is now called 'extended'" in err
+    assert json.loads((out2 / "campaign.json").read_text())["config"]["reading"] == "extended"
+
+
+def test_waitmap_under_a_reading_with_its_own_grid_sets_the_readings_grid(tmp_path):
+    from daa_sil.commands.campaign import _waitmap_into_reading
+
+    f = _waitmap_into_reading({"reading": "paper", "reading_set": {}, "waitmap": "fine"}, "fine")
+    assert f["reading_set"] == {"waitmap": "fine"} and f["waitmap"] == "alerting"
+    assert CampaignConfig(groups=("ID-2",), reading="paper", reading_set={"waitmap": "fine"}).map_source == "fine"
+    f = _waitmap_into_reading({"reading": "extended", "reading_set": {}, "waitmap": "fine"}, "fine")
+    assert f["waitmap"] == "fine" and f["reading_set"] == {}
+    with pytest.raises(UsageError, match="--reading-set waitmap=fine"):
+        CampaignConfig(groups=("ID-2",), reading="paper", waitmap="fine").validate()
 
 
 def test_feet_reading_draws_cpas_inside_dmod_and_is_recorded(tmp_path):
@@ -48,14 +128,14 @@ def test_feet_reading_draws_cpas_inside_dmod_and_is_recorded(tmp_path):
     assert hmd.max() <= 2750 * FT and np.abs(vmd).max() <= 915 * FT
     assert hmd.max() > 0.5 * 2750 * FT  # drawn over the whole (feet) range, not squeezed
     # --resume with another reading is refused, naming the setting
-    rc = main(["campaign", "run", "--out", str(tmp_path / "c"), "--resume", "--reading", "literal", "--no-progress"])
+    rc = main(["campaign", "run", "--out", str(tmp_path / "c"), "--resume", "--reading", "extended", "--no-progress"])
     assert rc == 2
 
 
 def test_whole_encounter_counts_and_no_hold_reading(tmp_path):
     """Whole-encounter counts contain the active-phase ones; without 'hold' fewer commands arrive."""
     base = dict(groups=("ID-2",), n_encounters=60, seed=8, chunk_size=60, duration_s=240.0)
-    run_campaign(CampaignConfig(**base), tmp_path / "hold", progress=False)
+    run_campaign(CampaignConfig(**base, reading="extended"), tmp_path / "hold", progress=False)
     run_campaign(CampaignConfig(**base, reading="no-hold"), tmp_path / "nohold", progress=False)
     a = read_results(tmp_path / "hold", "encounters")
     b = read_results(tmp_path / "nohold", "encounters")
@@ -65,3 +145,25 @@ def test_whole_encounter_counts_and_no_hold_reading(tmp_path):
     assert np.all(col(a, "n_pilot_exec_whole") <= col(a, "n_pilot_received_whole"))
     assert col(a, "n_pilot_received_whole").sum() > col(a, "n_pilot_received").sum()  # arrivals outside the phase
     assert col(b, "n_pilot_received_whole").sum() < col(a, "n_pilot_received_whole").sum()
+
+
+def test_ic1_wait_time_under_both_rules(tmp_path):
+    """IC-1's "wait time 5 s": under the threshold rule any constant >= W_T (4 s) gives identical runs;
+    under the countdown rule (reading paper-countdown) 5 s and 50 s differ."""
+    from daa_sil.config.groups import group_spec
+
+    ic = (group_spec("IC-1"), group_spec("IC-1").with_(name="IC-1-w50", wait=50.0))
+    res = {}
+    for rule in ("extended", "countdown"):
+        cfg = CampaignConfig(groups=ic, n_encounters=40, seed=3, chunk_size=40, reading="extended",
+                             reading_set={} if rule == "extended" else {"wait_rule": "countdown"})
+        run_campaign(cfg, tmp_path / rule, progress=False)
+        t = read_results(tmp_path / rule, "encounters")
+        g = np.asarray(t.column("group").to_pylist())
+        cols = ("n_wait", "n_no_wait", "n_blend", "n_pilot_exec", "lowc_duration_s", "dev_h_m")
+        res[rule] = {name: np.stack([np.asarray(t.column(c).to_numpy())[g == name] for c in cols])
+                     for name in ("IC-1", "IC-1-w50")}
+        assert res[rule]["IC-1"][0].sum() > 0  # IC-1 waits
+    assert np.array_equal(res["extended"]["IC-1"], res["extended"]["IC-1-w50"])
+    assert not np.array_equal(res["countdown"]["IC-1"], res["countdown"]["IC-1-w50"])
+    assert res["countdown"]["IC-1"][0].sum() < res["countdown"]["IC-1-w50"][0].sum()  # the 5 s budget runs out

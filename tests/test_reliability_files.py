@@ -140,7 +140,7 @@ SCENARIOS = {
     "bad-choice": (BASE.replace("group: ID-1", "group: ID-7"), ["allocation.group", "one of B-1", "'ID-7'"]),
     "duplicate-key": (BASE.replace("duration_s: 180\n", "duration_s: 180\nduration_s: 200\n"),
                       [":8:", "duration_s: duplicate key"]),
-    "bad-delay": (BASE.replace('up: "const:4"', 'up: "const:-4"'), ["link.up", "within [0.2, 10]"]),
+    "bad-delay": (BASE.replace('up: "const:4"', 'up: "const:-4"'), ["link.up", "within [0.1, 10]"]),
     "no-intruders": ("name: x\nownship: {alt_m: 1000, gs_mps: 55, track_deg: 0}\nintruders: []\n",
                      [":3:", "intruders: must have 1..8 items, got 0"]),
     "empty": ("", ["empty scenario file"]),

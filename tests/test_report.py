@@ -75,7 +75,11 @@ def test_report_renders_findings_tables_and_figures(tmp_path):
     by = {(f["id"], f["group"]): f["outcomes"]["default"] for f in data["findings"]}
     assert by[("nmac", "B-1")]["verdict"] == "not reproduced"  # we planted one NMAC in B-1
     assert by[("nmac", "B-2")]["verdict"] == "reproduced"
-    assert by[("override-integrated", "ID-2")]["verdict"] == "reproduced"
+    assert by[("override-integrated", "ID-2")]["verdict"] == "by construction"  # counted apart
+    # the sections a reviewer needs: signatures, the verdict classes, the paper's inconsistencies
+    for title in ("## Signatures", "Headline tally: empirical findings only", "### Verdict words",
+                  "consistent (not shown)", "## Where the paper contradicts itself", "16.51 %"):
+        assert title in text, title
     # the paper's no-wait count in ID-2 (10,278 in 10,000) is shown per encounter
     assert "1.03" in text
     # no decision provenance columns: skipped with a note, not an error

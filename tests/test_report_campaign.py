@@ -14,7 +14,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from daa_sil.cli import main
-from daa_sil.study.findings import NOT_TESTABLE, VERDICTS, load_findings
+from daa_sil.study.findings import BY_CONSTRUCTION, NOT_TESTABLE, VERDICTS, load_findings
 
 N = 80
 GROUPS = ("B-2", "IC-1", "ID-2")
@@ -59,8 +59,8 @@ def test_every_row_has_a_ci_and_a_verdict(campaign, tmp_path, capsys):
     tested = 0
     for row, f in zip(rows, data["findings"]):
         ours, verdict = row[5], row[6].strip("*")
-        o = f["outcomes"]["literal"]
-        assert o["verdict"] in VERDICTS and verdict.startswith(o["verdict"]), (row, o)
+        o = f["outcomes"]["paper"]  # the default reading
+        assert o["verdict"] in VERDICTS + (NOT_TESTABLE,) and verdict.startswith(o["verdict"]), (row, o)
         assert ours, row
         if o["verdict"] == NOT_TESTABLE:
             reason = o["evidence"]
@@ -73,17 +73,17 @@ def test_every_row_has_a_ci_and_a_verdict(campaign, tmp_path, capsys):
                 assert "not in this reading" in reason, (f, reason)
             continue
         tested += 1
-        if f["kind"] in ("value", "change", "bound", "category"):
+        if f["kind"] in ("value", "change", "equivalence", "bound", "category"):
             assert o["lo"] is not None and o["hi"] is not None and o["lo"] <= o["value"] <= o["hi"], (f["id"], o)
             assert re.search(r"\[.+, .+\]", ours), row
         elif f["kind"] == "zero":
-            assert ("≤" in ours) if o["verdict"] == "reproduced" else ("[" in ours), row
+            assert ("≤" in ours) if o["verdict"] in ("reproduced", BY_CONSTRUCTION) else ("[" in ours), row
         else:
             assert "vs " in ours and ("McNemar" in ours or "per enc." in ours), row
     assert tested >= 40  # the three groups run give most findings a verdict
     # one value by hand from the Parquet tables: ID-2's no-wait decisions per encounter
     no_wait = pc.sum(_enc(campaign, "ID-2")["n_no_wait"]).as_py() / N
-    f = next(x for x in data["findings"] if x["id"] == "no-wait" and x["group"] == "ID-2")["outcomes"]["literal"]
+    f = next(x for x in data["findings"] if x["id"] == "no-wait" and x["group"] == "ID-2")["outcomes"]["paper"]
     assert f["value"] == pytest.approx(no_wait) and f["lo"] <= no_wait <= f["hi"]
     # a LoWC of positive duration always has a positive PI (integrated on the LoWC segment)
     for g in GROUPS:
@@ -102,7 +102,7 @@ def _groups_of(f):
 def test_a_planted_override_is_not_reproduced(campaign, tmp_path):
     """Copy the campaign, give one ID-2 encounter a DAA override, name the copy's reading
     'planted', and report both side by side: "no DAA override with the allocation agent — ID-2"
-    is reproduced on the real results and not reproduced on the planted ones."""
+    holds by construction on the real results and is not reproduced (a defect) on the planted ones."""
     planted = tmp_path / "planted"
     shutil.copytree(campaign, planted, ignore=shutil.ignore_patterns("report"))
     meta = json.loads((planted / "campaign.json").read_text())
@@ -122,9 +122,10 @@ def test_a_planted_override_is_not_reproduced(campaign, tmp_path):
                "--replicates", "300"])
     assert rc == 0
     data = json.loads((tmp_path / "rep" / "findings.json").read_text())
-    assert [r["label"] for r in data["readings"]] == ["literal", "planted"]
+    assert [r["label"] for r in data["readings"]] == ["paper", "planted"]
     o = next(x for x in data["findings"] if x["id"] == "override-integrated" and x["group"] == "ID-2")["outcomes"]
-    assert o["literal"]["verdict"] == "reproduced"
+    assert o["paper"]["verdict"] == "by construction"
     assert o["planted"]["verdict"] == "not reproduced" and "2 in 1 of 80" in o["planted"]["text"]
+    assert "a defect" in o["planted"]["evidence"]
     header, _ = _table_rows((tmp_path / "rep" / "report.md").read_text())
-    assert "planted: verdict" in header and "literal: verdict" in header
+    assert "planted: verdict" in header and "paper: verdict" in header

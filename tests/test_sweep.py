@@ -57,3 +57,20 @@ def test_sweep_runs_each_value_on_the_same_encounters_and_resumes(tmp_path, caps
 def test_sweep_refuses_a_fixed_value_of_the_varied_setting(tmp_path, capsys):
     rc = main(["campaign", "sweep", "--vary", "wt=2,4", "--wt", "4", "--out", str(tmp_path / "x")])
     assert rc == 2 and "drop --wt" in capsys.readouterr().err and not (tmp_path / "x").exists()
+
+
+def test_pilot_and_grid_sweeps_set_the_pilot_mode_and_the_readings_grid():
+    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.sweep import point_configs
+
+    base = CampaignConfig(groups=("B-2", "ID-2", "ID-2-projl"), pilot={"prob_turn": 0.5})
+    pts = point_configs(base, parse_vary("pilot=guendel,nasa_rayleigh5"))
+    assert [p.pilot_config().mode for p in pts] == ["guendel", "nasa_rayleigh5"]
+    assert all(p.pilot_config().prob_turn == 0.5 for p in pts)  # the base's other pilot settings stay
+    assert pts[1].pilot_config().stream_until == "safe-avoidance"  # and the reading's
+    with pytest.raises(UsageError, match="pilot=fast.*pilot mode must be one of"):
+        point_configs(base, parse_vary("pilot=guendel,fast"))
+    grid = point_configs(base, parse_vary("grid=paper,alerting"))  # the paper reading sets its own grid
+    assert [g.map_source for g in grid] == ["paper", "alerting"]
+    ext = point_configs(CampaignConfig(groups=("ID-2",), reading="extended"), parse_vary("grid=paper,alerting"))
+    assert [g.map_source for g in ext] == ["paper", "alerting"] and ext[0].reading_set == {}

@@ -87,16 +87,14 @@ def link_delay_processes(sc: Scenario) -> "dict | None":
     (s), i.e. the *configured* one-way delay of a packet sent at ``t`` before the FIFO rule, not a
     measurement. With ``link.epoch_s = 0`` (a draw per datagram) there is no per-step value: None.
     """
-    from daa_sil.models.delay_process import DelayProcess
+    from daa_sil.models.delay_process import link_delay_processes
     from daa_sil.sil.shim_config import delay_stream_seeds
-    from daa_sil.sil.scenario import delay_models
+    from daa_sil.sil.scenario import link_legs
 
     if sc.link.epoch_s <= 0:
         return None
-    up, down = delay_models(sc)
     seeds = delay_stream_seeds(sc.seed)
-    return {"up": DelayProcess(up, seeds["up"], epoch_s=sc.link.epoch_s),
-            "down": DelayProcess(down, seeds["down"], epoch_s=sc.link.epoch_s)}
+    return link_delay_processes(link_legs(sc), seeds["up"], seeds["down"], epoch_s=sc.link.epoch_s)
 
 
 def track_intervals(values_deg: np.ndarray, regions: np.ndarray) -> tuple[list, list, list]:

@@ -12,13 +12,16 @@ from ..errors import UsageError
 from daa_sil.config.limits import WT_RANGE_S
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.files import to_jsonable
-from daa_sil.config.readings import READINGS, parse_reading_settings
+from daa_sil.config.readings import DEFAULT_READING, READINGS, parse_reading_settings, readings_help
 from daa_sil.geometry.thresholds import PRESETS
 from ._args import finite_float, int_at_least
 
 RUN_EXAMPLES = """examples:
-  # the paper's study: 10,000 encounters x 5 groups (B-1, B-2, IC-1, ID-1, ID-2), T = 240 s
+  # the paper's study (reading 'paper'): 10,000 encounters x 5 groups (B-1, B-2, IC-1, ID-1, ID-2), T = 240 s
   daa-sil campaign run --out runs/paper --workers 2
+
+  # the same under our extension (alerting-region wait maps, one-way delays; formerly 'literal')
+  daa-sil campaign run --reading extended --out runs/extended --workers 2
 
   # a quick look: 200 encounters of two groups, in-process
   daa-sil campaign run --groups B-2,ID-2 --encounters 200 --seed 7 --out runs/quick
@@ -49,8 +52,9 @@ or a directory from 'daa-sil waitmap build'. Built once and cached in ~/.cache/d
 Results: DIR/<group>/encounters-<chunk>.parquet, DIR/<group>/decisions-<chunk>.parquet,
 DIR/encounters.parquet (the shared encounter set) and DIR/campaign.json.
 
-Readings (--reading; what the paper leaves open about its simulator, daa_sil/config/readings.py):
-""" + "\n".join(f"  {r.name:13s} {r.description}" for r in READINGS.values()) + """
+Readings (--reading, default paper; docs/results/paper-study.md quotes the sentence each setting of
+'paper' rests on; daa_sil/config/readings.py):
+""" + readings_help() + """
 """
 
 SWEEP_EXAMPLES = """examples:
@@ -64,6 +68,9 @@ SWEEP_EXAMPLES = """examples:
   daa-sil campaign sweep --vary gamma=0.9,0.95,0.99 --groups ID-2 --out runs/sweep-gamma
   daa-sil campaign sweep --vary grid=paper,alerting --groups ID-2,ID-2-projl --out runs/sweep-grid
   daa-sil campaign sweep --vary intruders=1,2 --groups B-2,ID-2 --out runs/sweep-m --resume
+
+  # the pilot's response time (the paper does not give it): Guendel (~19 s) against a 5 s Rayleigh pilot
+  daa-sil campaign sweep --vary pilot=guendel,nasa_rayleigh5 --groups B-2,ID-2,ID-2-projl --out runs/sweep-pilot
 
   # one page from several sweeps (docs/results/sensitivity.md is made this way)
   daa-sil campaign sweep --collate runs/sweep-wt runs/sweep-lat --out docs/results
@@ -111,7 +118,8 @@ def register(sub) -> None:
                                       "encounter-level 95 % CIs.", epilog=SWEEP_EXAMPLES,
                           formatter_class=argparse.RawDescriptionHelpFormatter)
     sw.add_argument("--vary", default=None, metavar="NAME=V1,V2,...",
-                    help="wt, gamma, grid, intruders, latency (values separated by ';'), projl or reading")
+                    help="wt, gamma, grid, intruders, latency (values separated by ';'), projl, reading or "
+                         "pilot (response mode: guendel, nasa_rayleigh5, no_atc, fixed, deterministic)")
     sw.add_argument("--collate", nargs="+", default=None, metavar="SWEEP_DIR",
                     help="instead of running: one sensitivity.md page from these sweep directories into --out")
     _add_run_options(sw)
@@ -154,16 +162,20 @@ def _add_run_options(r) -> None:
     r.add_argument("--projl-lookahead", type=finite_float("--projl-lookahead", 0.0, 600.0), default=None,
                    metavar="S", help="ProjL look-ahead N of every group (default: each group's, 25 s)")
     r.add_argument("--latency", default=None, metavar="SPEC",
-                   help="one-way delay of every group's links: const:4, gauss:5,3, uniform:1,8 "
-                        "(default: each group's)")
+                   help="latency of every group: const:4, gauss:5,3, uniform:1,8 (default: each group's); "
+                        "the reading's rule applies it (paper: the round trip, half on each link; extended: "
+                        "one-way on both links)")
     r.add_argument("--intruders", type=int_at_least("--intruders", 1), default=None, metavar="M",
                    help="intruders per encounter (default 1)")
     r.add_argument("--reading", default=None, metavar="NAME",
-                   help=f"a named reading of the paper's simulator: {', '.join(READINGS)} (default literal; "
-                        f"see 'Readings' below)")
+                   help=f"a named reading of the paper's simulator (default {DEFAULT_READING}; see 'Readings' "
+                        f"below): {', '.join(READINGS)}")
     r.add_argument("--reading-set", default=None, metavar="KEY=VALUE,...",
                    help="override settings of the reading: units=metres|feet, pilot_start=corrective|preventive|"
-                        "detection, hold_commands=true|false, window=active|whole, received=arrived|pilot+blend|executed")
+                        "detection, pilot_stop=alert|safe-avoidance, hold_commands=true|false, "
+                        "unsafe_hold=blend|no-command, waitmap=paper|alerting|..., outside=clamp|far, "
+                        "latency=one-way|round-trip, wait_rule=threshold|countdown, window=active|whole, "
+                        "received=arrived|pilot+blend|executed, blends=all|maneuvers")
     r.add_argument("--encounters", type=int_at_least("--encounters", 1), default=None, metavar="N",
                    help="encounters per group (default 10000)")
     r.add_argument("--seed", type=int_at_least("--seed", 0), default=None, metavar="S", help="campaign seed (default 0)")
@@ -207,8 +219,30 @@ def _config_from_args(args):
             raise UsageError("--config does not go with --resume: the campaign's configuration is in "
                              f"{out / 'campaign.json'} (drop --config)")
         base = CampaignConfig.from_dict(load_campaign_json(out)["config"], str(out / "campaign.json"))
+    if args.reading is not None:
+        from daa_sil.config.readings import canonical_name
+
+        _, notice = canonical_name(args.reading)
+        if notice:
+            print(f"daa-sil: note: {notice}", file=sys.stderr)
     fields = {k: (v if v is not None else getattr(base, k)) for k, v in given.items()}
+    fields = _waitmap_into_reading(fields, args.waitmap)
     return CampaignConfig(dt_s=base.dt_s, daa=base.daa, pilot=base.pilot, link=base.link, **fields).validate()
+
+
+def _waitmap_into_reading(fields: dict, given: "str | None") -> dict:
+    """An explicit ``--waitmap`` under a reading that sets its own grid (e.g. ``paper``) sets the
+    reading's grid (recorded as ``reading_set.waitmap``); otherwise it is the campaign's."""
+    from daa_sil.config.readings import reading_for
+    from daa_sil.waitmap.build import DEFAULT_MAP
+
+    if given is None:
+        return fields
+    rset = dict(fields.get("reading_set") or {})
+    if reading_for(fields["reading"], **rset).waitmap is None:
+        return fields
+    rset["waitmap"] = given
+    return {**fields, "reading_set": rset, "waitmap": DEFAULT_MAP}
 
 
 _SCHEDULER = re.compile(r"^([a-z][a-z0-9+]*://)?[^\s:/]+:\d{1,5}$")

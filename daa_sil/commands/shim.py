@@ -15,6 +15,7 @@ import sys
 
 from ..errors import UsageError
 from daa_sil.models.latency import SPEC_HELP, parse_delay_spec
+from daa_sil.models.link_rule import link_legs
 from daa_sil.sil.endpoint import format_udp_address
 from daa_sil.sil.shim import run_shim
 from daa_sil.sil.shim_config import CLOCKS, ShimConfig
@@ -27,6 +28,9 @@ EXAMPLES = """examples:
   # asymmetric constant delays, 1 % loss, a 20 s outage, stats to a file
   daa-sil shim --vehicle udp:127.0.0.1:14600 --gcs udp:127.0.0.1:14550 \\
       --delay-up const:4 --delay-down const:2 --loss 0.01 --outage 60:80 --stats-json shim.json
+
+  # the paper reading's rule: a Gaussian round trip (5 s, 3 s), each direction half of one draw
+  daa-sil shim --delay-round-trip gauss:5,3 --seed 7
 
   # lockstep with the vehicle's SIM_TICK clock (CI runs), OS-chosen ports printed on stderr
   daa-sil shim --delay const:4 --clock lockstep --listen-vehicle udp:127.0.0.1:0 --listen-gcs udp:127.0.0.1:0
@@ -86,6 +90,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--delay", metavar="SPEC", help="one-way delay model for both directions")
     p.add_argument("--delay-up", metavar="SPEC", help="GCS -> vehicle delay (overrides --delay)")
     p.add_argument("--delay-down", metavar="SPEC", help="vehicle -> GCS delay (overrides --delay)")
+    p.add_argument("--delay-round-trip", metavar="SPEC",
+                   help="instead of --delay*: the round trip, split evenly (each direction half of one draw per "
+                        "epoch; the paper reading's rule)")
     p.add_argument("--epoch", type=finite_float("--epoch", 0.0, 3600.0), default=10.0, metavar="S",
                    help="delay-process epoch, sim s (default 10; 0 = per-datagram draws)")
     p.add_argument("--loss", type=finite_float("--loss", 0.0, 1.0), default=0.0, metavar="P", help="loss probability")
@@ -112,13 +119,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def config_from_args(args) -> ShimConfig:
     """Build and validate a :class:`ShimConfig` from parsed arguments."""
+    rt = getattr(args, "delay_round_trip", None)
+    if rt and (args.delay or args.delay_up or args.delay_down):
+        raise UsageError("--delay-round-trip replaces --delay / --delay-up / --delay-down; give one form")
     up_spec = args.delay_up or args.delay
     down_spec = args.delay_down or args.delay
-    if not up_spec or not down_spec:
-        raise UsageError("give --delay SPEC (or both --delay-up and --delay-down); e.g. --delay const:4")
+    if not rt and (not up_spec or not down_spec):
+        raise UsageError("give --delay SPEC (or both --delay-up and --delay-down, or --delay-round-trip SPEC); "
+                         "e.g. --delay const:4")
     if args.seed < 0:
         raise UsageError(f"--seed must be >= 0, got {args.seed}")
-    cfg = ShimConfig(delay_down=parse_delay_spec(down_spec), delay_up=parse_delay_spec(up_spec),
+    if rt:
+        legs = link_legs(parse_delay_spec(rt), "round-trip")
+        up_model, down_model = legs.up, legs.down
+    else:
+        up_model, down_model = parse_delay_spec(up_spec), parse_delay_spec(down_spec)
+    cfg = ShimConfig(delay_down=down_model, delay_up=up_model, round_trip=bool(rt),
                      listen_vehicle=args.listen_vehicle, listen_gcs=args.listen_gcs, vehicle=args.vehicle,
                      gcs=args.gcs, epoch_s=args.epoch, loss=args.loss, dup=args.dup, reorder=args.reorder,
                      outages=args.outage, seed=args.seed, clock=args.clock, speed=args.speed,

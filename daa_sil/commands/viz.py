@@ -187,7 +187,7 @@ def campaign_group(results, name: str) -> str:
 
 def replay_steplog(results, group: str, encounter_id: int):
     """Re-simulate one encounter of a campaign with step logging; returns (steplog, encounter row, config)."""
-    from daa_sil.study import campaign, campaign_files, fasttime
+    from daa_sil.study import campaign, campaign_files
     from daa_sil.models.encounter_files import load_encounters
 
     out = Path(results)
@@ -199,13 +199,9 @@ def replay_steplog(results, group: str, encounter_id: int):
     if pos.size == 0:
         raise UsageError(f"encounter {encounter_id} is not in {out / 'encounters.parquet'}")
     one = encs.subset(pos[:1])
-    spec = cfg.group(group)
-    model = spec.delay_model()
-    fam = campaign.campaign_family(cfg) if spec.uses_map else None
     seeds = campaign.encounter_seeds(cfg.seed, np.array([encounter_id]))
-    enc_rows, _, steps = fasttime.simulate(one, spec.policy(), model, model, wait_family=fam, seeds=seeds,
-                                           preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s, group=group,
-                                           record_steps=True)
+    # the campaign's own settings (reading, pilot, DAA, link legs): the replay flies what the campaign flew
+    enc_rows, _, steps = campaign.simulate_group(cfg, group, one, seeds, record_steps=True)
     return steps, enc_rows.to_pylist()[0], cfg
 
 

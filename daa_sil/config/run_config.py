@@ -85,7 +85,7 @@ class RunConfig:
     pilot: dict = field(default_factory=dict)
     latency: "str | None" = None
     link: dict = field(default_factory=lambda: {"stale_command_s": None, "link_timeout_s": None})
-    reading: dict = field(default_factory=lambda: {"name": "literal", "set": {}})
+    reading: dict = field(default_factory=lambda: {"name": "paper", "set": {}})
     study: dict = field(default_factory=lambda: {"encounters": 10_000, "seed": 0, "duration_s": 240.0,
                                                  "intruders": 1, "chunk_size": 2000})
     source: str = field(default="<preset>", compare=False)

@@ -14,6 +14,20 @@ def relative_state(own: AircraftState, intr: AircraftState) -> tuple[np.ndarray,
     return wc.relative(own.position()[:, None], own.velocity()[:, None], intr.position(), intr.velocity())
 
 
+def safe_avoidance(own: AircraftState, intr: "AircraftState | None", alert_level) -> np.ndarray:
+    """(N,) bool: the encounter has been safely avoided as seen from ``own`` (N,) and ``intr`` (N, M):
+    no DAA alert (``alert_level``, the maximum over intruders, is 0) and every intruder past its
+    closest point of approach (horizontal relative position . relative velocity > 0: diverging).
+    False where a state is unknown (nan) or no intruder is given."""
+    n = own.shape[0]
+    if intr is None or intr.shape[-1] == 0:
+        return np.zeros(n, bool)
+    s, v = relative_state(own, intr)
+    with np.errstate(invalid="ignore"):
+        diverging = (s[..., 0] * v[..., 0] + s[..., 1] * v[..., 1]) > 0.0  # nan compares False
+    return (np.broadcast_to(np.asarray(alert_level), (n,)) == 0) & diverging.all(axis=1)
+
+
 def _alerting_times(cfg: DaaConfig, early_level, shape) -> np.ndarray:
     """Alerting time (s) of levels 1..3 per intruder ``(3, N, M)``: a level's early alerting time where
     ``early_level`` (N, M) equals that level (DAIDALUS hysteresis), else its alerting time."""

@@ -1,6 +1,11 @@
 """Delay processes: a delay model drawn once per epoch from its own seeded stream, as a function of
 send time (s). :class:`DelayProcess` serves one link (the shim, N = 1); :class:`BatchedDelay` makes
-the same draws for N encounters at once (fast-time): the same seed gives the same values."""
+the same draws for N encounters at once (fast-time): the same seed gives the same values.
+
+:func:`link_delay_processes` (SIL) and :func:`batched_link_delays` (fast-time) build both links'
+processes from :class:`daa_sil.models.latency.LinkLegs`: under the ``round-trip`` rule the downlink
+reads the uplink's seed stream, so both links see the same epoch grid (``t0 + e * epoch_s``) and
+the same draw per epoch, halved: uplink + downlink delay of any epoch = that epoch's round trip."""
 
 from __future__ import annotations
 
@@ -11,6 +16,7 @@ import numpy as np
 
 from daa_sil.errors import UsageError
 from daa_sil.models.latency import BLOCK, DEFAULT_EPOCH_S, DelayModel, Trace
+from daa_sil.models.link_rule import LinkLegs
 
 
 def as_seed_sequence(seed: "int | np.random.SeedSequence | None") -> np.random.SeedSequence:
@@ -145,3 +151,27 @@ class BatchedDelay:
         if e.ndim == 0:
             return self.table[:, int(e)].copy()
         return self.table[np.arange(self.n), np.broadcast_to(e, (self.n,))]
+
+
+def link_delay_processes(legs: LinkLegs, up_seed, down_seed, epoch_s: float = DEFAULT_EPOCH_S,
+                         t0: float = 0.0) -> dict:
+    """``{"up": DelayProcess, "down": DelayProcess}`` of one link pair (the SIL shim and vehicle).
+
+    ``up_seed`` / ``down_seed`` are the two links' streams; with ``legs.shared`` (the round-trip
+    rule) the downlink reads ``up_seed`` too, so each epoch's two delays are halves of one draw.
+    """
+    up = DelayProcess(legs.up, up_seed, epoch_s=epoch_s, t0=t0)
+    down = DelayProcess(legs.down, up_seed if legs.shared else down_seed, epoch_s=epoch_s, t0=t0)
+    return {"up": up, "down": down}
+
+
+def batched_link_delays(legs: LinkLegs, up_seeds: Sequence, down_seeds: Sequence,
+                        epoch_s: float = DEFAULT_EPOCH_S, duration_s: float = 240.0,
+                        t0: float = 0.0) -> "tuple[BatchedDelay, BatchedDelay]":
+    """``(uplink, downlink)`` :class:`BatchedDelay` of N encounters (fast-time); see
+    :func:`link_delay_processes` for the streams. Row ``n`` equals its ``DelayProcess`` draw for draw."""
+    up = BatchedDelay(legs.up, up_seeds, epoch_s, duration_s, t0)
+    if legs.shared and legs.down == legs.up:
+        return up, up
+    down = BatchedDelay(legs.down, up_seeds if legs.shared else down_seeds, epoch_s, duration_s, t0)
+    return up, down

@@ -4,7 +4,8 @@ Used by the fast-time study (batched, :class:`BatchedDelay`) and by the UDP dela
 (:class:`DelayProcess` inside :class:`daa_sil.link.delayline.DelayLine`), so both see the same
 delays for the same seed. All times and delays are seconds.
 
-Models (one-way delay distributions, paper range 0.2-10 s, validated):
+Models (delay distributions in seconds; what a value means -- one link's delay or a round trip --
+is the caller's rule, :data:`LATENCY_RULES`):
 
 * :class:`Constant` ``(s)``                         -- groups B-1 (4 s), IC-1 (5 s), ID-1 (4 s)
 * :class:`TruncatedGaussian` ``(mean, sd, lo, hi)`` -- groups B-2/ID-2: N(5, 3) restricted to
@@ -17,6 +18,18 @@ Models (one-way delay distributions, paper range 0.2-10 s, validated):
 * :class:`Spike` ``(base, peak, start, length, period)`` -- a trace built from parameters: ``base``
   seconds, raised to ``peak`` over ``[start, start + length)`` and, with ``period > 0``, again every
   ``period`` seconds (link-fault scenarios: delay spikes to 10 s).
+* :class:`daa_sil.models.link_rule.HalfRoundTrip` ``(round_trip)`` -- one link's share of a round trip
+  (spec ``half:...``, YAML ``{type: half, round_trip: ...}``).
+
+**Range.** The paper's only sentence on what its latency measures is "The round-trip latency
+duration can be in the range of 0.2 to 10 seconds" (Problem Formulation). :data:`ROUND_TRIP_MIN_S`
+and :data:`ROUND_TRIP_MAX_S` are that range and the default truncation of :class:`TruncatedGaussian`.
+A model's values are validated within ``[LEG_MIN_S, ROUND_TRIP_MAX_S]`` = [0.1, 10] s: 0.1 s is one
+link's half of the shortest round trip (the ``round-trip`` rule), 10 s the longest value any
+reading applies to one link (the ``one-way`` rule applies the group's value to each link).
+
+How a group's latency value reaches the two links (one-way on each, or a round trip split evenly)
+is :mod:`daa_sil.models.link_rule`.
 
 **Why a piecewise-constant delay process.** Drawing an independent delay per packet reorders
 about half of adjacent packets of a 10 Hz stream (48 % measured), and forcing FIFO on top of that
@@ -41,9 +54,15 @@ import numpy as np
 
 from daa_sil.errors import FileFormatError, UsageError
 
-#: paper delay range (s); every model must stay within it
-DELAY_MIN_S = 0.2
-DELAY_MAX_S = 10.0
+#: the paper's round-trip latency range (s): "The round-trip latency duration can be in the range of
+#: 0.2 to 10 seconds" (Problem Formulation); the default truncation of a Gaussian delay
+ROUND_TRIP_MIN_S = 0.2
+ROUND_TRIP_MAX_S = 10.0
+#: one link's share of the shortest round trip (s): the smallest value a model may take
+LEG_MIN_S = ROUND_TRIP_MIN_S / 2.0
+#: names kept for callers: the default Gaussian truncation, and the largest value (s)
+DELAY_MIN_S = ROUND_TRIP_MIN_S
+DELAY_MAX_S = ROUND_TRIP_MAX_S
 #: default epoch length of the piecewise-constant delay process (s)
 DEFAULT_EPOCH_S = 10.0
 #: epochs (or packets) drawn per child seed; part of the reproducibility contract
@@ -55,8 +74,8 @@ def _check_delay(name: str, val: float) -> float:
         v = float(val)
     except (TypeError, ValueError):
         raise UsageError(f"{name} must be a number of seconds, got {val!r}") from None
-    if not math.isfinite(v) or v < DELAY_MIN_S or v > DELAY_MAX_S:
-        raise UsageError(f"{name} must be within [{DELAY_MIN_S:g}, {DELAY_MAX_S:g}] s, got {val!r}")
+    if not math.isfinite(v) or v < LEG_MIN_S or v > DELAY_MAX_S:
+        raise UsageError(f"{name} must be within [{LEG_MIN_S:g}, {DELAY_MAX_S:g}] s, got {val!r}")
     return v
 
 
@@ -219,11 +238,11 @@ class Trace(DelayModel):
                              f"(got {t.size} and {d.size})")
         if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
             raise UsageError(f"delay trace {source}: times must be finite and strictly increasing")
-        bad = ~np.isfinite(d) | (d < DELAY_MIN_S) | (d > DELAY_MAX_S)
+        bad = ~np.isfinite(d) | (d < LEG_MIN_S) | (d > DELAY_MAX_S)
         if bad.any():
             i = int(np.argmax(bad))
             raise UsageError(f"delay trace {source}: delay at t={t[i]:g} s is {d[i]:g}; "
-                             f"allowed [{DELAY_MIN_S:g}, {DELAY_MAX_S:g}] s")
+                             f"allowed [{LEG_MIN_S:g}, {DELAY_MAX_S:g}] s")
         self.times, self.delays, self.source = t, d, source
 
     @classmethod
@@ -322,7 +341,7 @@ class Spike(Trace):
 
 
 SPEC_HELP = ("const:S | gauss:MEAN,SD[,LO,HI] | uniform:LO,HI | trace:FILE.csv | spike:BASE,PEAK,START,LEN[,PERIOD] "
-             f"(seconds, within [{DELAY_MIN_S:g}, {DELAY_MAX_S:g}])")
+             f"(seconds, within [{LEG_MIN_S:g}, {DELAY_MAX_S:g}])")
 
 
 def parse_delay_spec(spec: str) -> DelayModel:
@@ -355,14 +374,17 @@ def delay_model_from_dict(d: dict, where: str = "latency") -> DelayModel:
     """Build a model from the YAML form, e.g. ``{"type": "gaussian", "mean_s": 5, "sd_s": 3}``.
 
     Types and keys: ``constant`` (``seconds``); ``gaussian`` (``mean_s``, ``sd_s``, optional
-    ``lo_s``, ``hi_s``); ``uniform`` (``lo_s``, ``hi_s``); ``trace`` (``file``).
+    ``lo_s``, ``hi_s``); ``uniform`` (``lo_s``, ``hi_s``); ``trace`` (``file``); ``spike``
+    (``base_s``, ``peak_s``, ``start_s``, ``length_s``, optional ``period_s``); ``half``
+    (``round_trip``: one of the above, :class:`HalfRoundTrip`).
     ``where`` names the location in error messages.
     """
     if not isinstance(d, dict):
         raise UsageError(f"{where} must be a mapping with a 'type', got {d!r}")
     allowed = {"constant": ({"seconds"}, set()), "gaussian": ({"mean_s", "sd_s"}, {"lo_s", "hi_s"}),
                "uniform": ({"lo_s", "hi_s"}, set()), "trace": ({"file"}, set()),
-               "spike": ({"base_s", "peak_s", "start_s", "length_s"}, {"period_s"})}
+               "spike": ({"base_s", "peak_s", "start_s", "length_s"}, {"period_s"}),
+               "half": ({"round_trip"}, set())}
     typ = str(d.get("type", "")).lower()
     if typ not in allowed:
         raise UsageError(f"{where}.type must be one of {', '.join(allowed)}, got {d.get('type')!r}")
@@ -381,6 +403,10 @@ def delay_model_from_dict(d: dict, where: str = "latency") -> DelayModel:
         return Uniform(d["lo_s"], d["hi_s"])
     if typ == "spike":
         return Spike(d["base_s"], d["peak_s"], d["start_s"], d["length_s"], d.get("period_s", 0.0))
+    if typ == "half":
+        from daa_sil.models.link_rule import HalfRoundTrip
+
+        return HalfRoundTrip(delay_model_from_dict(d["round_trip"], where=f"{where}.round_trip"))
     return Trace.from_csv(d["file"])
 
 

@@ -11,7 +11,19 @@ first "hold" (track/vs/gs of the telemetry seen at alert onset), then its maneuv
 each follow-up decision. Two readings of the paper's simulator are options (``daa_sil.config.readings``):
 ``stream_hold=False`` sends no "hold" (only maneuvers and the return to plan), and
 ``stream_level_min`` < ``alert_level_min`` streams "hold" of the seen state from a lower alert level
-(0: from the first telemetry) until the pilot first engages. Timeline of the first engagement: response delay
+(0: from the first telemetry) until the pilot first engages.
+
+**Till safe avoidance** (``stream_until="safe-avoidance"``, the paper's "The model captures pilot
+response from the beginning of an encounter till safe avoidance"): the pilot sends one command per
+step -- "hold" before it engages, its maneuver while alerted, then, once the alert has cleared, the
+command it is flying (level-off, the maneuver's track, or the return to plan) -- until **safe
+avoidance**: the first step at which its display (the delayed telemetry it sees) shows no DAA alert
+of any level *and* every intruder past its closest point of approach (the horizontal range rate,
+relative position . relative velocity, is positive: the two are diverging). From then it sends
+nothing until a new corrective alert restarts the stream (safe avoidance is then judged afresh);
+a return to plan already under way keeps sending its commands. Safe avoidance is judged on what the
+pilot sees, straight-line: an intruder seen diverging before it turns toward the ownship ends the
+stream early, and its later alert restarts it. Timeline of the first engagement: response delay
 ``T_p = T_init + T_coord + T_exec`` drawn at the trigger; the maneuver is *decided* at
 ``t_trigger + T_p - T_exec`` from the guidance seen then and *sent* from ``t_trigger + T_p``.
 Follow-ups: ``min[L] + extra[L]`` s after a maneuver is sent (``L`` = pilot alert level =
@@ -73,6 +85,7 @@ from daa_sil.errors import UsageError
 from daa_sil.geometry.frames import wrap_pi
 from daa_sil.geometry.kinematics import AircraftState, Command
 from daa_sil.geometry.units import DEG, FPM
+from daa_sil.daa.alerting import safe_avoidance
 from daa_sil.models.pilot_display import guidance_from_daa
 from daa_sil.models.pilot_choice import _BLOCK_KEYS, _as_rng, _draw_block, choose_maneuver, sample_response_components
 from daa_sil.models.pilot_config import Guidance, PilotConfig, PilotOutput
@@ -146,6 +159,8 @@ class PilotModel:
                                                plan.z.astype(float).copy())
         self.recovering = np.zeros(n, bool)
         self.t_recover = np.full(n, np.inf)
+        self.safe = np.zeros(n, bool)  #: safe avoidance seen since the stream last (re)started
+        self.t_safe = np.full(n, np.nan)  #: when (s; nan = not yet)
         self.daa_cfg = daa_cfg  #: DaaConfig of the display the pilot reads (checks the way back is clear)
 
     @property
@@ -231,6 +246,8 @@ class PilotModel:
             self.holding[s] = True
             self.recovering[s] = False
             self.t_recover[s] = np.inf
+            self.safe[s] = False
+            self.t_safe[s] = np.nan
         # decisions due
         dec = self.streaming & (t >= self.t_decide - 1e-9)
         if dec.any():
@@ -260,7 +277,15 @@ class PilotModel:
         pre = np.zeros(n, bool)
         if c.stream_level_min is not None and c.stream_level_min < c.alert_level_min and c.stream_hold:
             pre = valid & ~self.engaged & ~self.streaming & (lvl_daa >= c.stream_level_min)
-        send = streamed | rec | level_off | pre
+        post = np.zeros(n, bool)
+        if c.stream_until == "safe-avoidance":
+            now = ~self.safe & ~self.streaming & safe_avoidance(own, observed_intr, lvl_daa)
+            self.safe |= now
+            self.t_safe[now] = t
+            pre &= ~self.safe
+            # an engaged pilot whose alert cleared keeps sending the command it flies until safe avoidance
+            post = valid & self.engaged & ~self.streaming & ~self.safe & ~rec & ~level_off
+        send = streamed | rec | level_off | pre | post
         self.seq = np.where(send, self.seq + 1, self.seq)
         nan = np.full(n, np.nan)
         cur = Command(np.where(pre, own.trk, self.cmd.trk), np.where(pre, own.vs, self.cmd.vs),
@@ -317,4 +342,4 @@ class PilotModel:
         return act
 
 
-__all__ = ["PilotModel"]
+__all__ = ["PilotModel", "safe_avoidance"]

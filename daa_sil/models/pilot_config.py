@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from daa_sil.config.choices import PILOT_STOPS
 from daa_sil.errors import UsageError
 from daa_sil.geometry.kinematics import Command
 
@@ -35,6 +36,11 @@ class PilotConfig:
     #: "the model captures pilot response from the beginning of an encounter")
     stream_level_min: "int | None" = None
     stream_hold: bool = True  #: the GCS sends "hold" as a pilot command (False: only maneuvers)
+    #: when streaming ends (:data:`daa_sil.config.choices.PILOT_STOPS`): ``alert`` -- when the alert
+    #: clears (a "hold" streamed from ``stream_level_min`` runs on while that level holds);
+    #: ``safe-avoidance`` -- one command per step until the pilot's display shows safe avoidance (no
+    #: alert, every intruder past its closest point of approach), see :mod:`daa_sil.models.pilot`
+    stream_until: str = "alert"
     init_mean_s: float = 5.0
     coord_k: float = 5.5
     coord_theta_s: float = 2.0
@@ -67,6 +73,8 @@ class PilotConfig:
     def validate(self) -> "PilotConfig":
         if self.mode not in MODES:
             raise UsageError(f"pilot mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        if self.stream_until not in PILOT_STOPS:
+            raise UsageError(f"pilot stream_until must be one of {', '.join(PILOT_STOPS)}, got {self.stream_until!r}")
         for name in ("prob_turn", "prob_follow_min_dev", "prob_left", "prob_descend"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:

@@ -43,11 +43,12 @@ def shim_argv(sc, clock_args: list, key_args: list, stats_json: Path, vehicle_po
     from daa_sil.sil.scenario import delay_spec_string
 
     link = sc.link
+    delays = (["--delay-round-trip", delay_spec_string(link.round_trip)] if link.round_trip is not None else
+              ["--delay-up", delay_spec_string(link.up),
+               "--delay-down", delay_spec_string(link.down if link.down is not None else link.up)])
     argv = python_module_argv("daa_sil.commands.shim") + [
         "--listen-vehicle", f"udp:127.0.0.1:{vehicle_port}", "--listen-gcs", f"udp:127.0.0.1:{gcs_port}",
-        "--delay-up", delay_spec_string(link.up),
-        "--delay-down", delay_spec_string(link.down if link.down is not None else link.up),
-        "--epoch", f"{link.epoch_s:g}", "--loss", f"{link.loss:g}", "--seed", str(sc.seed),
+        *delays, "--epoch", f"{link.epoch_s:g}", "--loss", f"{link.loss:g}", "--seed", str(sc.seed),
         "--dup", f"{link.dup:g}", "--reorder", f"{link.reorder:g}",
         "--stats-json", str(stats_json)]
     for o in link.outages:

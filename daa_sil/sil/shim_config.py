@@ -16,7 +16,8 @@ from daa_sil.errors import UsageError
 from daa_sil.link.codec import mavlink
 from daa_sil.link.delayline import check_outages
 from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel
-from daa_sil.models.delay_process import DelayProcess, as_seed_sequence, child_seed
+from daa_sil.models.link_rule import LinkLegs
+from daa_sil.models.delay_process import as_seed_sequence, child_seed, link_delay_processes
 from daa_sil.sil.endpoint import parse_udp_address
 
 CLOCKS = ("realtime", "lockstep")
@@ -49,8 +50,9 @@ def shim_delay_processes(config: "ShimConfig", seed: "int | np.random.SeedSequen
     ``seed``: a resolved seed (default ``config.seed``; None there = fresh entropy).
     """
     seeds = delay_stream_seeds(config.seed if seed is None else seed)
-    return {"down": DelayProcess(config.delay_down, seeds["down"], epoch_s=config.epoch_s),
-            "up": DelayProcess(config.delay_up, seeds["up"], epoch_s=config.epoch_s)}
+    legs = LinkLegs(config.delay_up, config.delay_down, shared=config.round_trip,
+                    rule="round-trip" if config.round_trip else "one-way")
+    return link_delay_processes(legs, seeds["up"], seeds["down"], epoch_s=config.epoch_s)
 
 
 def control_ids(data: bytes) -> "set[int]":
@@ -84,8 +86,9 @@ class ShimConfig:
 
     ``listen_vehicle`` / ``listen_gcs``: the shim's sockets (``udp:HOST:PORT``; port 0 = OS-chosen).
     ``vehicle`` / ``gcs``: peer addresses, or None to learn them from the first datagram.
-    ``delay_down`` (vehicle -> GCS), ``delay_up`` (GCS -> vehicle); ``epoch_s`` of the delay
-    process (0 = per-datagram draws). ``loss``/``dup``/``reorder`` probabilities and ``outages``
+    ``delay_down`` (vehicle -> GCS), ``delay_up`` (GCS -> vehicle); ``round_trip``: the two are the
+    halves of one round trip (:func:`daa_sil.models.latency.link_legs`): the downlink reads the
+    uplink's draws; ``epoch_s`` of the delay process (0 = per-datagram draws). ``loss``/``dup``/``reorder`` probabilities and ``outages``
     (``[(t_start, t_end), ...]`` sim s) apply to both directions. ``speed``: sim seconds per wall
     second in realtime mode. ``key``: signing key used to verify control messages in lockstep and the first datagram of a peer.
     ``timing`` (realtime only): ``"precise"`` (default) stamps every datagram with its kernel
@@ -98,6 +101,7 @@ class ShimConfig:
 
     delay_down: DelayModel
     delay_up: DelayModel
+    round_trip: bool = False
     listen_vehicle: str = "udp:127.0.0.1:14601"
     listen_gcs: str = "udp:127.0.0.1:14602"
     vehicle: "str | None" = None
@@ -130,6 +134,8 @@ class ShimConfig:
         for name in ("delay_down", "delay_up"):
             if not isinstance(getattr(self, name), DelayModel):
                 raise UsageError(f"{name} must be a delay model (see daa_sil.models.latency), got {getattr(self, name)!r}")
+        if self.round_trip and self.delay_up != self.delay_down:
+            raise UsageError("a round trip is one delay: delay_up and delay_down must be its two equal halves")
         parse_udp_address(self.listen_vehicle, "--listen-vehicle")
         parse_udp_address(self.listen_gcs, "--listen-gcs")
         for name in ("vehicle", "gcs"):

@@ -101,6 +101,9 @@ class Study:
             if "intruder_turns" in cols:
                 e["lowc_turning"] = (lowc & col("intruder_turns", bool, False)).astype(float)
             e["dev_h_m"], e["dev_v_m"] = col("dev_h_m"), col("dev_v_m")
+            if "n_active_steps" in cols:
+                e["active_steps"] = col("n_active_steps")
+                e["active_any"] = (e["active_steps"] > 0).astype(float)
             for q in self.quantities:
                 e[q] = sum((col(c) for c in self.columns_used[q]), np.zeros(self.n))
                 e[f"{q}_any"] = (e[q] > 0).astype(float)
@@ -318,6 +321,23 @@ def _build_metrics() -> dict:
         ("n_dec_map", "n_dec_both", "n_dec"), "ratio estimator over wait/no-wait decisions")
     m["in_box_share"] = MetricSpec(_ratio("n_in_box", "n_lookup"), ("n_in_box", "n_lookup"),
                                    "ratio estimator over wait-map lookups")
+    # --- signatures of the simulator (daa_sil/study/signatures.py) and LoWC time -------------------
+    m["unsafe_share"] = MetricSpec(
+        lambda st, g: ((st.sum(g, "daa_override") + st.sum(g, "blend"))
+                       / (st.sum(g, "pilot_exec") + st.sum(g, "daa_override") + st.sum(g, "blend"))),
+        ("daa_override", "blend", "pilot_exec"), "ratio estimator over arriving commands (pilot + override + blend)")
+    m["no_wait_per_received"] = MetricSpec(_ratio("no_wait", "received"), ("no_wait", "received"),
+                                           "ratio estimator (DAA allocations without a command / received)")
+    m["wait_per_received"] = MetricSpec(_ratio("wait", "received"), ("wait", "received"),
+                                        "ratio estimator (waits / received)")
+    m["active_share"] = MetricSpec(_ratio("active_any", "present"), ("active_any",), "Clopper-Pearson",
+                                   exact=_cp("active_any", "present"))
+    m["active_steps_mean"] = MetricSpec(_ratio("active_steps", "active_any"), ("active_steps", "active_any"),
+                                        "ratio estimator over encounters ever active", "steps")
+    m["lowc_duration_mean"] = MetricSpec(_ratio("lowc_duration_s", "lowc"), ("lowc_duration_s",),
+                                         "ratio estimator over LoWC encounters", "s")
+    m["lowc_s_per_hr"] = MetricSpec(_ratio("lowc_duration_s", "duration_s", 3600.0), ("lowc_duration_s",),
+                                    "ratio estimator (seconds in LoWC per flight hour)", "s/h")
     return m
 
 

@@ -52,7 +52,7 @@ class CampaignConfig:
     projl_lookahead: "float | None" = None
     latency: "str | None" = None
     n_intruders: int = 1
-    reading: str = "literal"  #: a named reading of :mod:`daa_sil.config.readings`
+    reading: str = "paper"  #: a named reading of :mod:`daa_sil.config.readings` (old names accepted)
     reading_set: dict = field(default_factory=dict)  #: overrides of the reading's settings
     daa: dict = field(default_factory=dict)  #: DaaConfig field changes on top of the preset's
     pilot: dict = field(default_factory=dict)  #: PilotConfig field changes (the reading's then apply)
@@ -68,6 +68,9 @@ class CampaignConfig:
             object.__setattr__(self, "groups", tuple(specs.get(p.name, p) for p in parsed))
         else:
             object.__setattr__(self, "groups", tuple(g))
+        from daa_sil.config.readings import canonical_name
+
+        object.__setattr__(self, "reading", canonical_name(self.reading)[0])  # old names -> current
 
     def validate(self) -> "CampaignConfig":
         """Raise UsageError (one line) on a bad value; returns self."""
@@ -104,7 +107,8 @@ class CampaignConfig:
                 raise UsageError(f"{what}: {exc}") from None
         r = self.effective_reading
         if r.waitmap is not None and self.waitmap not in (DEFAULT_MAP, r.waitmap):
-            raise UsageError(f"reading {r.name!r} sets the wait maps to {r.waitmap!r}; drop --waitmap {self.waitmap}")
+            raise UsageError(f"reading {r.name!r} sets the wait maps to {r.waitmap!r}; to read {self.waitmap!r} "
+                             f"instead, set the reading's grid (--reading-set waitmap={self.waitmap})")
         if self.uses_map:
             from daa_sil.waitmap.build import check_source
 
@@ -141,8 +145,18 @@ class CampaignConfig:
                 from daa_sil.models.latency import parse_delay_spec
 
                 ch["latency"] = parse_delay_spec(self.latency).to_dict()
+            rule = self.effective_reading.wait_rule
+            if rule is not None and g.wait_mode != "none" and rule != g.wait_rule:
+                ch["wait_rule"] = rule
             out.append(g.with_(**ch) if ch else g)
         return tuple(out)
+
+    def link_legs(self, name: str):
+        """What each link of group ``name`` applies (:class:`daa_sil.models.latency.LinkLegs`): the
+        group's latency under the reading's rule (``one-way`` or ``round-trip``)."""
+        from daa_sil.models.link_rule import link_legs
+
+        return link_legs(self.group(name).delay_model(), self.effective_reading.latency)
 
     def group(self, name: str) -> GroupSpec:
         """The effective definition of one of the campaign's groups."""
@@ -179,7 +193,9 @@ class CampaignConfig:
     def policy(self, name: str):
         """The agent's :class:`~daa_sil.agent.AllocationPolicy` of group ``name`` (with :attr:`link`)."""
         pol = self.group(name).policy()
-        return replace(pol, **self.link) if self.link else pol
+        changes = {**self.effective_reading.policy_overrides(), **self.link}
+        changes.pop("wait_rule", None)  # applied to the group definition (effective_groups)
+        return replace(pol, **changes) if changes else pol
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -214,7 +230,7 @@ class CampaignConfig:
             return cls(groups=groups, n_encounters=int(d["n_encounters"]), seed=int(d["seed"]),
                        chunk_size=int(d["chunk_size"]), preset=str(d["preset"]),
                        duration_s=float(d["duration_s"]), dt_s=float(d["dt_s"]), waitmap=str(d["waitmap"]),
-                       n_intruders=int(d.get("n_intruders", 1)), reading=str(d.get("reading", "literal")),
+                       n_intruders=int(d.get("n_intruders", 1)), reading=str(d.get("reading", "extended")),
                        reading_set=dict(d.get("reading_set") or {}),
                        daa={k: (tuple(v) if isinstance(v, list) else v) for k, v in (d.get("daa") or {}).items()},
                        pilot={k: (tuple(v) if isinstance(v, list) else v) for k, v in (d.get("pilot") or {}).items()},

@@ -19,7 +19,7 @@ from daa_sil.study.metrics import paper_results
 # The encounter-level study
 # ==================================================================================================
 #: counting settings of a reading (``campaign.json`` ``config.readings`` keys) and their defaults
-COUNTING_DEFAULTS = {"received": "arrived", "window": "active"}
+COUNTING_DEFAULTS = {"received": "arrived", "window": "active", "blends": "all"}
 
 
 #: allowed values of each counting setting, as documented for readers of a report
@@ -27,7 +27,10 @@ COUNTING_HELP = {
     "received": {"arrived": "every fresh pilot command that arrived during the window (incl. those the DAA overrode)",
                  "pilot+blend": "executed as sent + blended (the paper's Table 5 arithmetic: received = pilot + blend)",
                  "executed": "executed as sent only"},
-    "window": {"active": "steps where the agent decides (corrective alert, a wait or blend in progress, DAA holding)"},
+    "window": {"active": "steps where the agent decides (corrective alert, a wait or blend in progress, DAA holding)",
+               "whole": "the whole encounter (commands arrive outside the agent's active phase too)"},
+    "blends": {"all": "every blend", "maneuvers": "blends of a command carrying a maneuver intent only (a blended "
+                                                  "'hold' counts in no column)"},
 }
 
 
@@ -38,17 +41,27 @@ def _decisions(col: str) -> tuple:
     return (("window",), {("active",): (col,), ("whole",): (col,)})
 
 
+def _received() -> tuple:
+    """received = every arrival, pilot (executed as sent) + blend, or executed only, per window and
+    blend counting (the blend counting matters only to ``pilot+blend``)."""
+    exec_col = {"active": "n_pilot_exec", "whole": "n_pilot_exec_whole"}
+    arrived = {"active": "n_pilot_received", "whole": "n_pilot_received_whole"}
+    blend_col = {"all": "n_blend", "maneuvers": "n_blend_intent"}
+    table = {}
+    for w in ("active", "whole"):
+        for b in ("all", "maneuvers"):
+            table[("arrived", w, b)] = (arrived[w],)
+            table[("pilot+blend", w, b)] = (exec_col[w], blend_col[b])
+            table[("executed", w, b)] = (exec_col[w],)
+    return (("received", "window", "blends"), table)
+
+
 COUNT_SOURCES: dict[str, tuple[tuple[str, ...], dict[tuple[str, ...], tuple[str, ...]]]] = {
     "wait": _decisions("n_wait"),
     "no_wait": _decisions("n_no_wait"),
-    "received": (("received", "window"), {("arrived", "active"): ("n_pilot_received",),
-                                          ("pilot+blend", "active"): ("n_pilot_exec", "n_blend"),
-                                          ("executed", "active"): ("n_pilot_exec",),
-                                          ("arrived", "whole"): ("n_pilot_received_whole",),
-                                          ("pilot+blend", "whole"): ("n_pilot_exec_whole", "n_blend"),
-                                          ("executed", "whole"): ("n_pilot_exec_whole",)}),
+    "received": _received(),
     "pilot_exec": (("window",), {("active",): ("n_pilot_exec",), ("whole",): ("n_pilot_exec_whole",)}),
-    "blend": _decisions("n_blend"),
+    "blend": (("blends",), {("all",): ("n_blend",), ("maneuvers",): ("n_blend_intent",)}),
     "daa_override": _decisions("n_daa_override"),
     "blend_intent": _decisions("n_blend_intent"),
     "blend_exact": _decisions("n_blend_exact"),

@@ -62,6 +62,7 @@ from daa_sil.allocation import AllocationPolicy, PolicyRows
 from daa_sil.daa.config import DaaConfig
 from daa_sil.errors import UsageError
 from daa_sil.geometry.kinematics import AircraftState, Command
+from daa_sil.models.link_rule import LinkLegs
 from daa_sil.geometry.thresholds import get_thresholds
 # the encounter's random streams (defined with the models: the SIL's GCS and shim use them too)
 from daa_sil.models.streams import STREAM_DOWN, STREAM_PILOT, STREAM_UP, encounter_streams
@@ -102,7 +103,7 @@ def _release_pointer(ptr: np.ndarray, release, upto: int, t: float) -> np.ndarra
 @dataclass
 class SimPart:
     """One part of a fast-time batch (:func:`simulate_parts`): encounters flown under one policy
-    and one pair of one-way delay models (s), labelled ``group`` in its result tables."""
+    and one pair of link delay models (s), labelled ``group`` in its result tables."""
 
     encounters: object  #: an :class:`~daa_sil.models.encounters.EncounterSet`
     policy: AllocationPolicy
@@ -110,6 +111,9 @@ class SimPart:
     latency_down: DelayModel
     seeds: "np.ndarray | None" = None  #: per-encounter seeds (default ``encounters.seed``)
     group: str = ""
+    #: the two links' delays under a latency rule (replaces ``latency_up``/``latency_down``; e.g. the
+    #: round-trip rule's, :func:`daa_sil.models.link_rule.link_legs`)
+    link_legs: "LinkLegs | None" = None
 
 
 class _LinkDelays:
@@ -129,17 +133,19 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
              pilot_cfg: "PilotConfig | None" = None, daa_cfg: "DaaConfig | None" = None, wait_family=None, *,
              seeds: "np.ndarray | None" = None, preset: "str | None" = None, duration_s: "float | None" = None,
              dt: "float | None" = None, epoch_s: float = DEFAULT_EPOCH_S, group: str = "",
-             record_steps: bool = False, wait_lookup=None) -> tuple[pa.Table, pa.Table, "pa.Table | None"]:
+             record_steps: bool = False, wait_lookup=None,
+             link_legs: "LinkLegs | None" = None) -> tuple[pa.Table, pa.Table, "pa.Table | None"]:
     """Simulate every encounter of ``encounters`` (an :class:`~daa_sil.models.encounters.EncounterSet`).
 
-    ``policy`` the group's allocation policy; ``latency_up``/``latency_down`` one-way delay models
-    (s); ``pilot_cfg`` (default :class:`PilotConfig`); ``daa_cfg`` (default: DO-365B with the
+    ``policy`` the group's allocation policy; ``latency_up``/``latency_down`` each link's delay model
+    (s), from their own streams; ``link_legs`` (a :class:`~daa_sil.models.latency.LinkLegs`, e.g. the
+    round-trip rule's, :func:`~daa_sil.models.latency.link_legs`) replaces both; ``pilot_cfg`` (default :class:`PilotConfig`); ``daa_cfg`` (default: DO-365B with the
     thresholds of ``preset``, default ``"paper"``); ``wait_family`` a wait-map family (needed for
     ``wait_mode="map"``; or pass ``wait_lookup`` directly); ``seeds`` per-encounter seeds (default
     ``encounters.seed``); ``duration_s``/``dt`` (default from the set: 240 s / 1 s); ``epoch_s``
     delay-process epoch (s). Returns ``(encounter_table, decision_table, steplog or None)``.
     """
-    part = SimPart(encounters, policy, latency_up, latency_down, seeds, group)
+    part = SimPart(encounters, policy, latency_up, latency_down, seeds, group, link_legs)
     (enc, dec), log = _run([part], pilot_cfg, daa_cfg, wait_family, preset=preset, duration_s=duration_s, dt=dt,
                            epoch_s=epoch_s, record_steps=record_steps, wait_lookup=wait_lookup)
     return enc, dec, log
@@ -199,10 +205,13 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     # the flight plan the pilot returns to: the ownship's initial straight, level course
     pilot = PilotModel(n, [x[STREAM_PILOT] for st in streams for x in st], pcfg, plan=core.own, daa_cfg=cfg,
                        daa_batches=batches)
-    up = _LinkDelays([p.latency_up for p in parts], [[x[STREAM_UP] for x in st] for st in streams], epoch_s,
-                     duration + dt)
-    down = _LinkDelays([p.latency_down for p in parts], [[x[STREAM_DOWN] for x in st] for st in streams], epoch_s,
-                       duration + dt)
+    # each part's link legs: one-way (each link its own stream) or a shared round trip (both links
+    # read the uplink stream's draws: models/link_rule.py)
+    legs = [p.link_legs if p.link_legs is not None else LinkLegs(p.latency_up, p.latency_down) for p in parts]
+    up = _LinkDelays([lg.up for lg in legs], [[x[STREAM_UP] for x in st] for st in streams], epoch_s, duration + dt)
+    down = _LinkDelays([lg.down for lg in legs],
+                       [[x[STREAM_UP if lg.shared else STREAM_DOWN] for x in st] for lg, st in zip(legs, streams)],
+                       epoch_s, duration + dt)
     m = core.m
     acc = Accumulators(n, core.own)
     log = sl.StepLogBuilder(encounters.encounter_id, m) if record_steps else None

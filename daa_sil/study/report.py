@@ -22,7 +22,8 @@ from typing import Sequence
 import numpy as np
 
 from daa_sil.errors import FileFormatError, UsageError
-from .findings import NOT_TESTABLE, RULES, VERDICTS, evaluate_all, fmt, untestable_statements
+from .findings import fmt
+from .verdicts import evaluate_all, finding_sample
 from daa_sil.files import atomic_write_text, ensure_dir
 from .metrics import BASELINE_GROUP, CONF, compute_metrics
 from daa_sil.study.analysis import Study
@@ -31,6 +32,9 @@ from .stats import DEFAULT_REPLICATES, DEFAULT_SEED, independent_difference
 from daa_sil.study.report_input import Block, build_blocks
 from daa_sil.study.report_figures import _figures, _slug
 from daa_sil.study.report_format import GROUP_TABLES, _all_groups, _cell, _ci, _table
+from daa_sil.study.report_findings import findings_section
+from daa_sil.study.paper_checks import inconsistency_section
+from daa_sil.study.signatures import signature_section
 
 #: the wait-map ablation: (group with the map and ProjL, ablation group, what the difference measures)
 ABLATIONS = (("ID-2", "ID-2-projl", "what the map adds to ProjL (ID-2 minus ID-2-projl)"),
@@ -57,40 +61,6 @@ def _sources(blocks: Sequence[Block], studies: dict) -> list[str]:
         L.append(f"- `{k}` (default `{COUNTING_DEFAULTS.get(k, '–')}`): "
                  + "; ".join(f"`{o}` = {helps.get(o, 'see daa_sil/study/counting.py COUNT_SOURCES')}" for o in opts))
     L.append("")
-    return L
-
-
-def _findings_section(blocks, rows) -> list[str]:
-    labels = [b.label for b in blocks]
-    header = ["#", "finding", "source", "kind", "paper"]
-    for lab in labels:
-        header += [f"{lab}: ours [95 % CI]", f"{lab}: verdict"]
-    body = []
-    for i, (f, outs) in enumerate(rows, 1):
-        r = [str(i), f.label, f.source, f.kind, f.paper_text()]
-        for lab in labels:
-            o = outs[lab]
-            verdict = f"**{o.verdict}**" if o.verdict != NOT_TESTABLE else f"{o.verdict} ({o.evidence})"
-            r += [o.text, verdict]
-        body.append(r)
-    L = ["## Findings of the paper under each reading", "",
-         "Every finding the paper states (`daa_sil/data/paper_findings.yaml`), our value with its encounter-level "
-         "95 % confidence interval, and the verdict of its kind's rule (below). Counts are per encounter (the "
-         "paper's totals divided by its 10,000 encounters); changes in %.", "", _table(header, body), ""]
-    summ = []
-    for lab in labels:
-        c = {v: sum(1 for _, o in rows if o[lab].verdict == v) for v in VERDICTS}
-        summ.append([lab] + [str(c[v]) for v in VERDICTS])
-    L += ["Verdicts per reading:", "", _table(["reading"] + list(VERDICTS), summ), ""]
-    L += ["### Verdict rules (one per kind of finding; 95 % throughout, no other threshold)", ""]
-    L += [f"- **{k}**: {v}." for k, v in RULES.items()]
-    L += ["- **not testable**: only when a group the finding needs was not run in that reading, or its statistic "
-          "is undefined there (reason given).", ""]
-    un = untestable_statements()
-    if un:
-        L += ["Statements of the paper without a quantity to test (no verdict):", ""]
-        L += [f"- \"{u['claim']}\" — {u['why']}" for u in un]
-        L.append("")
     return L
 
 
@@ -247,7 +217,7 @@ def _seed_section(blocks, studies, rows) -> list[str]:
             if f.kind in ("ordering", "zero") or any(g not in sa.groups or g not in sb.groups for g in f.groups_needed):
                 continue
             try:
-                xa, xb = _finding_sample(f, sa), _finding_sample(f, sb)
+                xa, xb = finding_sample(f, sa), finding_sample(f, sb)
             except (UsageError, KeyError):
                 continue
             d = independent_difference(xa, xb, sa.boot.seed)
@@ -263,19 +233,6 @@ def _seed_section(blocks, studies, rows) -> list[str]:
                                                           body), "",
               f"{len(body) - disagree} of {len(body)} findings agree within the CI; {disagree} do not.", ""]
     return L
-
-
-def _finding_sample(f, st: Study):
-    from .findings import _pooled_mean
-
-    if f.kind == "change":
-        ck = f.change.get("kind", "ratio")
-        if f.group:
-            return st.change_sample(f.group, f.metric, f.change["vs"], ck)
-        return st.pooled_change_sample(f.metric, f.pooled, f.over, "reduction" if ck == "reduction" else "ratio")
-    if f.group:
-        return st.sample(f.group, f.metric)
-    return _pooled_mean(st, f.metric, f.pooled)
 
 
 def _width_section(blocks, studies) -> list[str]:
@@ -345,7 +302,9 @@ def render_markdown(blocks: Sequence[Block], studies: dict, rows, *, replicates:
     for note in notes:
         L += [str(note), ""]
     L += _sources(blocks, studies)
-    L += _findings_section(blocks, rows)
+    L += findings_section(blocks, rows)
+    L += signature_section(studies)
+    L += inconsistency_section(studies)
     L += _ablation_section(studies)
     L += _provenance_section(studies)
     L += _paired_section(studies)

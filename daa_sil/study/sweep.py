@@ -14,7 +14,10 @@ campaign seed, so every point flies the same encounters, and writes
 Variables (:data:`VARIABLES`): ``wt`` (W_T, s), ``gamma`` (MDP discount), ``grid`` (a map preset or
 grid spec for ``--waitmap``), ``intruders`` (per encounter), ``latency`` (a delay spec; values
 that contain commas are separated by ``;``, e.g. ``latency=const:0.2;const:1;gauss:5,3``),
-``projl`` (the ProjL look-ahead, s) and ``reading`` (a named reading).
+``projl`` (the ProjL look-ahead, s), ``reading`` (a named reading) and ``pilot`` (the pilot model's
+response mode, :data:`daa_sil.models.pilot_config.MODES`, e.g. ``pilot=guendel,nasa_rayleigh5``: the
+paper does not give its pilot's response time). Under a reading that sets its own wait-map grid (such
+as ``paper``), ``grid`` sets the reading's grid.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ VARIABLES: dict[str, tuple[str, Callable[[str], object], bool]] = {
     "latency": ("latency", str, False),
     "projl": ("projl_lookahead", float, True),
     "reading": ("reading", str, False),
+    "pilot": ("pilot", str, False),
 }
 #: (metric of daa_sil.study.metrics, axis label, scale for display)
 METRICS = (("no_wait", "DAA allocations (no-wait decisions) per encounter", 1.0),
@@ -94,10 +98,24 @@ def point_configs(base, vary: Vary) -> list:
     out = []
     for v in vary.values:
         try:
-            out.append(replace(base, **{vary.field: v}).validate())
+            out.append(_point(base, vary, v).validate())
         except UsageError as exc:
             raise UsageError(f"--vary {vary.name}={v}: {exc}") from None
     return out
+
+
+def _point(base, vary: Vary, value):
+    """The configuration of one sweep point: ``pilot`` sets the pilot's response mode (keeping the
+    base's other pilot settings); ``grid`` under a reading with its own grid sets the reading's grid."""
+    if vary.name == "pilot":
+        from daa_sil.models.pilot_config import PilotConfig
+
+        pilot = {**base.pilot, "mode": value}
+        PilotConfig(**pilot).validate()
+        return replace(base, pilot=pilot)
+    if vary.name == "grid" and base.effective_reading.waitmap is not None:
+        return replace(base, reading_set={**base.reading_set, "waitmap": value})
+    return replace(base, **{vary.field: value})
 
 
 def run_sweep(base, vary: Vary, out_dir: "str | Path", *, workers: int = 1, scheduler: "str | None" = None,

@@ -2,20 +2,26 @@
 
     python docs/results/regenerate.py --runs runs/results [--encounters 10000] [--seed 20261201]
                                       [--sweep-encounters 2000] [--workers 2] [--skip-sweeps] [--skip-readings]
+    python docs/results/regenerate.py --smoke --runs /tmp/smoke     # every step at a few encounters
 
 Runs, each resumable (an interrupted call picks up where it stopped):
 
 1. the seven groups (the paper's five and the two wait-map ablations) under every simulation
-   reading of ``daa_sil/config/readings.py`` on the fresh report seed ``--seed``;
-2. the literal reading again on seed 0, the seed the models were developed against, so that the
-   report can test whether the two seeds agree;
-3. ``campaign report`` of all of them (plus the paper's counting of the literal simulation as an
-   extra reading) into ``docs/results/paper-10k/``;
-4. the sensitivity sweeps (latency, W_T, gamma, wait-map grid, one vs two intruders) for B-2, ID-2
-   and ID-2-projl, collated into ``docs/results/sensitivity.md``;
+   reading of ``daa_sil/config/readings.py`` on the report seed ``--seed``, the ``paper`` reading
+   first (it is the reference: every setting rests on a sentence of the paper), then its
+   alternatives, then our extension (``extended``, formerly ``literal``) and the older readings;
+2. the ``paper`` reading again on the development seed 99991 (the seed the paper reading was
+   developed against), so that the report can test whether the two seeds agree;
+3. ``campaign report`` of all of them, ``paper`` the first column (plus the paper's counting of the
+   extension as an extra reading) into ``docs/results/paper-10k/``;
+4. the sensitivity sweeps (latency, W_T, gamma, wait-map grid, one vs two intruders, the pilot's
+   response model) for B-2, ID-2 and ID-2-projl under the ``paper`` reading, collated into
+   ``docs/results/sensitivity.md``;
 5. the wait-map figures of both production grids into ``docs/results/waitmap/``.
 
-``docs/results/paper-study.md`` is written by hand from these outputs: it explains every difference.
+``--smoke`` runs every step at a few encounters on a development seed into ``--runs`` and writes the
+pages under ``--runs``/docs (never over the committed ones): a check that the whole chain works
+before the long run. ``docs/results/paper-study.md`` is written by hand from the real outputs.
 """
 
 from __future__ import annotations
@@ -29,13 +35,21 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 GROUPS = "B-1,B-2,IC-1,ID-1,ID-2,ID-2-projl,ID-2-map"
 SWEEP_GROUPS = "B-2,ID-2,ID-2-projl"
-#: simulation readings (one campaign each); counting-only readings are recounts in the report
-READINGS = ("literal", "paper-grid", "no-hold", "preventive", "detection", "feet")
+#: simulation readings (one campaign each), the paper's first; counting-only readings are recounts
+READINGS = ("paper", "paper-outside-far", "paper-one-way", "paper-countdown", "paper-hold-blend", "paper-no-hold",
+            "paper-preventive", "paper-alerting", "paper-feet", "extended", "paper-grid", "no-hold", "preventive",
+            "detection", "feet")
 SWEEPS = (("latency", "latency=const:0.2;const:1;const:2;const:5;const:10;gauss:5,3"),
           ("wt", "wt=2,4,8,16"), ("gamma", "gamma=0.9,0.95,0.99"), ("grid", "grid=paper,fine,alerting"),
-          ("intruders", "intruders=1,2"))
+          ("intruders", "intruders=1,2"), ("pilot", "pilot=guendel,nasa_rayleigh5"))
+#: the development seed the paper reading was developed against (its second column in the report)
+PAPER_DEV_SEED = 99991
+#: the seed of the --smoke run
+SMOKE_SEED = PAPER_DEV_SEED + 1
 #: seeds used while developing the models and the analysis (never the report seed)
-DEV_SEEDS = (0, 3, 5, 7, 8, 11, 13, 99, 101, 123, 2024)
+DEV_SEEDS = (0, 3, 5, 7, 8, 11, 13, 99, 101, 123, 2024, PAPER_DEV_SEED, SMOKE_SEED)
+#: the report seed, reserved for the final regeneration
+REPORT_SEED = 20261201
 
 
 def _run(argv: list, what: str) -> None:
@@ -56,16 +70,31 @@ def _campaign(out: Path, extra: list, args) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=Path, default=Path("runs/results"), help="where the campaigns go")
-    ap.add_argument("--encounters", type=int, default=10000)
-    ap.add_argument("--seed", type=int, default=20261201, help="the report seed (fresh: nothing was tuned on it)")
-    ap.add_argument("--sweep-encounters", type=int, default=2000,
-                    help="encounters per sweep point (3 groups each; 18 points)")
+    ap.add_argument("--encounters", type=int, default=None, help="encounters per group (default 10000; smoke 30)")
+    ap.add_argument("--seed", type=int, default=None,
+                    help=f"the report seed (default {REPORT_SEED}, fresh: nothing was tuned on it; smoke: "
+                         f"{PAPER_DEV_SEED + 1})")
+    ap.add_argument("--sweep-encounters", type=int, default=None,
+                    help="encounters per sweep point (default 2000; smoke 20; 3 groups each, 20 points)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--skip-sweeps", action="store_true")
     ap.add_argument("--skip-readings", action="store_true", help="only the sweeps and the wait-map figures")
-    ap.add_argument("--docs", type=Path, default=ROOT / "docs" / "results")
+    ap.add_argument("--smoke", action="store_true",
+                    help="every step at a few encounters on a development seed; pages under RUNS/docs")
+    ap.add_argument("--docs", type=Path, default=None, help="where the pages go (default docs/results; smoke RUNS/docs)")
     args = ap.parse_args()
-    if args.seed in DEV_SEEDS:
+    if args.smoke:
+        args.encounters = args.encounters or 30
+        args.sweep_encounters = args.sweep_encounters or 20
+        args.seed = SMOKE_SEED if args.seed is None else args.seed
+        args.docs = args.docs or args.runs / "docs"
+        if args.seed == REPORT_SEED:
+            ap.error("--smoke never runs the report seed")
+    args.encounters = args.encounters or 10000
+    args.sweep_encounters = args.sweep_encounters or 2000
+    args.seed = REPORT_SEED if args.seed is None else args.seed
+    args.docs = args.docs or ROOT / "docs" / "results"
+    if not args.smoke and args.seed in DEV_SEEDS:
         ap.error(f"--seed {args.seed} was used while developing; the report needs a fresh seed")
     runs = args.runs
     dirs = []
@@ -74,12 +103,15 @@ def main() -> int:
             d = runs / r
             _campaign(d, ["--reading", r, "--seed", str(args.seed)], args)
             dirs.append(d)
-        seed0 = runs / "literal-seed0"
-        _campaign(seed0, ["--reading", "literal", "--seed", "0"], args)
-        dirs.append(seed0)
+        dev = runs / f"paper-seed{PAPER_DEV_SEED}"
+        _campaign(dev, ["--reading", "paper", "--seed", str(PAPER_DEV_SEED)], args)
+        dirs.insert(1, dev)
         note = (f"Report seed {args.seed} (nothing was tuned on it). Seeds used while developing the models and "
-                f"this analysis: {', '.join(map(str, DEV_SEEDS))}; the literal reading on seed 0 is shown as a second "
-                f"column so that the seed-agreement section can test whether the two seeds agree.")
+                f"this analysis: {', '.join(map(str, DEV_SEEDS))}; the paper reading was developed on seed "
+                f"{PAPER_DEV_SEED} and is shown on it as a second column, so that the seed-agreement section can "
+                f"test whether the two seeds agree.")
+        if args.smoke:
+            note = f"SMOKE RUN ({args.encounters} encounters per group): checks the chain, not the paper. " + note
         _run(["campaign", "report", *map(str, dirs), "--recount", "paper-counts:window=whole,received=pilot+blend",
               "--out", str(args.docs / "paper-10k"), "--note", note], "report")
     if not args.skip_sweeps:
@@ -87,8 +119,8 @@ def main() -> int:
         for name, vary in SWEEPS:
             d = runs / f"sweep-{name}-{args.sweep_encounters}"  # one directory per size: --resume checks it
             argv = ["campaign", "sweep", "--vary", vary, "--groups", SWEEP_GROUPS, "--encounters",
-                    str(args.sweep_encounters), "--seed", str(args.seed), "--out", str(d), "--workers",
-                    str(args.workers), "--no-progress"]
+                    str(args.sweep_encounters), "--seed", str(args.seed), "--reading", "paper", "--out", str(d),
+                    "--workers", str(args.workers), "--no-progress"]
             if d.is_dir() and any(d.iterdir()):
                 argv.append("--resume")
             _run(argv, f"sweep {name}")

@@ -2,7 +2,7 @@
 errors (:mod:`.loader`), the conversion to the core's inputs (:mod:`.convert`) and the expectation
 checker (:mod:`.expect`). The schema itself is documented in :mod:`daa_sil.sil.scenario.schema`."""
 
-from .convert import delay_models, delay_spec_string, encounter_set, ownship_state
+from .convert import delay_models, delay_spec_string, encounter_set, link_legs, ownship_state
 from .expect import check_expectation
 from .loader import dump_scenario, load_scenario, parse_scenario, save_scenario, scenario_from_dict
 from .schema import (DECISIONS, FAULT_PROCESSES, AllocationSpec, CpaGeometry, Expectation, InitialState, IntruderSpec,
@@ -13,4 +13,4 @@ __all__ = ["Scenario", "InitialState", "CpaGeometry", "Maneuver", "IntruderSpec"
            "PilotSpec", "ScriptedCommand", "AllocationSpec", "Expectation", "Origin", "DECISIONS",
            "ProcessFault", "FAULT_PROCESSES",
            "parse_scenario", "load_scenario", "scenario_from_dict", "dump_scenario", "save_scenario",
-           "delay_models", "delay_spec_string", "check_expectation", "encounter_set", "ownship_state"]
+           "delay_models", "delay_spec_string", "link_legs", "check_expectation", "encounter_set", "ownship_state"]

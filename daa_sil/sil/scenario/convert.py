@@ -18,15 +18,25 @@ def delay_spec_string(spec) -> str:
     return spec if isinstance(spec, str) else latency.delay_model_from_dict(spec).spec()
 
 
-def delay_models(sc: Scenario):
-    """``(up, down)`` :class:`daa_sil.models.latency.DelayModel` objects of the scenario's link."""
-    from daa_sil.models import latency
+def link_legs(sc: Scenario):
+    """The scenario link's :class:`daa_sil.models.latency.LinkLegs`: ``up`` / ``down`` one-way, or the
+    ``round_trip`` split evenly (each link half of one draw per epoch, from the uplink stream)."""
+    from daa_sil.models import latency, link_rule
 
     def build(spec):
         return latency.parse_delay_spec(spec) if isinstance(spec, str) else latency.delay_model_from_dict(spec)
 
+    if sc.link.round_trip is not None:
+        return link_rule.link_legs(build(sc.link.round_trip), "round-trip")
     up = build(sc.link.up)
-    return up, (build(sc.link.down) if sc.link.down is not None else up)
+    return link_rule.link_legs(up, "one-way", build(sc.link.down) if sc.link.down is not None else up)
+
+
+def delay_models(sc: Scenario):
+    """``(up, down)`` :class:`daa_sil.models.latency.DelayModel` each link applies (a round trip's
+    halves for ``link.round_trip``; :func:`link_legs` also says whether they share one stream)."""
+    legs = link_legs(sc)
+    return legs.up, legs.down
 
 
 def ownship_state(sc: Scenario):

@@ -187,9 +187,12 @@ def _delay(v: _V, node, path):
 
 
 def _link(v: _V, node, path, dur) -> LinkSpec:
-    m = v.mapping(node, path, set(), {"up", "down", "epoch_s", "loss", "outages", "dup", "reorder"})
-    ls = LinkSpec(up=_delay(v, m["up"], f"{path}.up") if "up" in m else "const:4",
+    m = v.mapping(node, path, set(), {"up", "down", "round_trip", "epoch_s", "loss", "outages", "dup", "reorder"})
+    if "round_trip" in m and ("up" in m or "down" in m):
+        v.fail(m["round_trip"], f"{path}.round_trip", "give either round_trip or up/down, not both")
+    ls = LinkSpec(up=_delay(v, m["up"], f"{path}.up") if "up" in m else (None if "round_trip" in m else "const:4"),
                   down=_delay(v, m["down"], f"{path}.down") if "down" in m else None,
+                  round_trip=_delay(v, m["round_trip"], f"{path}.round_trip") if "round_trip" in m else None,
                   epoch_s=v.opt(m, "epoch_s", path, v.number, 10.0, lo=0, hi=600),
                   loss=v.opt(m, "loss", path, v.number, 0.0, lo=0, hi=1, hi_open=True),
                   dup=v.opt(m, "dup", path, v.number, 0.0, lo=0, hi=1, hi_open=True),

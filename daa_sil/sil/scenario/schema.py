@@ -45,6 +45,9 @@ Schema (``*`` = required; defaults in brackets)::
     link:                                   delay shim per direction
       up: delay spec                [const:4] uplink (GCS -> vehicle): "const:4", "gauss:5,3",
       down: delay spec              [= up]    "uniform:1,8" or {type: constant, seconds: 4} ...
+      round_trip: delay spec        [-]       instead of up/down: the round trip, split evenly (each
+                                              link half of one draw per epoch, the uplink's stream;
+                                              the paper reading's rule, docs/models.md "Link delay")
       epoch_s: float [0, 600]       [10]      piecewise-constant delay epoch (0 = per packet)
       loss: [0, 1)                  [0]       Bernoulli loss probability (each direction)
       dup: [0, 1)                   [0]       duplication probability (SIL shim only; fast-time ignores it)
@@ -167,6 +170,7 @@ class LinkSpec:
 
     up: Any = "const:4"
     down: Any = None
+    round_trip: Any = None  #: instead of up/down: the round trip, split evenly between the links
     epoch_s: float = 10.0
     loss: float = 0.0
     outages: list = field(default_factory=list)
@@ -267,8 +271,9 @@ class Scenario:
             for k in ("initial", "cpa"):
                 if intr[k] is None:
                     intr.pop(k)
-        if d["link"]["down"] is None:
-            d["link"].pop("down")
+        for k in ("up", "down", "round_trip"):  # absent (a round trip replaces up / down)
+            if d["link"][k] is None:
+                d["link"].pop(k)
         d["pilot"]["commands"] = [{k: v for k, v in c.items() if not (isinstance(v, float) and math.isnan(v))}
                                   for c in d["pilot"]["commands"]]
         if d["pilot"]["mode"] == "model":
