@@ -171,7 +171,8 @@ def test_every_knob_is_recorded_and_checked_on_resume(tmp_path, capsys):
     assert main(argv) == 0
     meta = json.loads((out / "campaign.json").read_text())
     c = meta["config"]
-    assert (c["wt"], c["projl_lookahead"], c["latency"], c["waitmap"]) == (7.0, 12.0, "const:0.5", "paper")
+    # the default reading (paper) sets its own grid, so an explicit --waitmap is recorded as the reading's grid
+    assert (c["wt"], c["projl_lookahead"], c["latency"], c["reading_set"]["waitmap"]) == (7.0, 12.0, "const:0.5", "paper")
     assert meta["groups"]["ID-2-projl"]["wait_threshold_s"] == 7.0 and meta["groups"]["B-2"]["wait_threshold_s"] == 4.0
     assert meta["groups"]["B-2"]["latency"] == {"type": "constant", "seconds": 0.5}
     assert meta["seeds"]["campaign"] == 0 and meta["waitmap"] is None  # neither group reads the map

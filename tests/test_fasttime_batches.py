@@ -4,6 +4,8 @@ takes the agent's bands without changing a result; the lean step and the slot ri
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -175,4 +177,5 @@ def test_a_campaign_with_group_batches_resumes_and_matches(tmp_path):
     batched = run_campaign(cfg, tmp_path / "batched", batch_rows=1000, progress=False)
     assert one_by_one.chunks_run == batched.chunks_run == 9
     assert compare_dirs(tmp_path / "units", tmp_path / "batched").identical
-    assert group_spec("IC-1").policy() == cfg.policy("IC-1")
+    # the group's own policy with the reading's settings on top (the default reading: paper)
+    assert replace(group_spec("IC-1").policy(), **cfg.effective_reading.policy_overrides()) == cfg.policy("IC-1")

@@ -85,11 +85,14 @@ def test_every_row_has_a_ci_and_a_verdict(campaign, tmp_path, capsys):
     no_wait = pc.sum(_enc(campaign, "ID-2")["n_no_wait"]).as_py() / N
     f = next(x for x in data["findings"] if x["id"] == "no-wait" and x["group"] == "ID-2")["outcomes"]["paper"]
     assert f["value"] == pytest.approx(no_wait) and f["lo"] <= no_wait <= f["hi"]
-    # a LoWC of positive duration always has a positive PI (integrated on the LoWC segment)
+    # a LoWC of positive duration always has a positive PI with the constants of the volume it violated
+    # (the preset's, integrated on the LoWC segment); with the paper's Eq. constants (4000 ft = 1219.2 m,
+    # not the preset's 1220 m) a LoWC that stays just outside that smaller disc may have none (seed 3:
+    # ID-2 encounter 52, 1 s of LoWC, closest 1220.5 m, PI 4e-4 s), never a negative one
     for g in GROUPS:
         t = _enc(campaign, g)
         lo = np.asarray(t["lowc"]) & (np.asarray(t["lowc_duration_s"]) > 0)
-        assert np.all(np.asarray(t["pi"])[lo] > 0) and np.all(np.asarray(t["pi_paper"])[lo] > 0)
+        assert lo.any() and np.all(np.asarray(t["pi"])[lo] > 0) and np.all(np.asarray(t["pi_paper"])[lo] >= 0)
 
 
 def _groups_of(f):

@@ -80,7 +80,9 @@ def _children_of(pid: int) -> dict[int, float]:
 
 def _role(pid: int) -> str:
     cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-    return "shim" if " shim " in cmd else "gcs" if "-m gcs" in cmd else "vehicle" if "-m vehicle" in cmd else cmd
+    # daa-sil run starts its shim as python -m daa_sil.commands.shim (daa-sil shim by hand)
+    shim = " shim " in cmd or "-m daa_sil.commands.shim" in cmd
+    return "shim" if shim else "gcs" if "-m gcs" in cmd else "vehicle" if "-m vehicle" in cmd else cmd
 
 
 def _wait_gone(pids: dict[int, float], deadline_s: float) -> dict[int, float]:

@@ -14,6 +14,7 @@ from daa_sil.geometry.thresholds import PRESETS
 from ._args import finite_float
 from daa_sil.sil.children import interruptible
 from daa_sil.viz.warning import one_line_warnings
+from daa_sil.web_ports import add_web_viewer_arguments, check_web_viewer_arguments
 
 STEPLOG_EX = """examples:
   daa-sil viz steplog runs/headon/steps.parquet --rrd headon.rrd
@@ -45,30 +46,6 @@ def _sink_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--connect", metavar="URL", help="stream to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
     add_web_viewer_arguments(g, "serve the web viewer until Ctrl-C")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
-
-
-def add_web_viewer_arguments(g, serve_help: str) -> None:
-    """``--serve-web``, ``--bind``, ``--web-port``, ``--grpc-port`` (``viz steplog|replay`` and ``run``)."""
-    from daa_sil.viz.sinks import WEB_GRPC_PORT, WEB_HTTP_PORT
-
-    g.add_argument("--serve-web", action="store_true", help=serve_help)
-    g.add_argument("--bind", default="127.0.0.1", help="address of the web viewer (default 127.0.0.1)")
-    g.add_argument("--web-port", type=int, default=WEB_HTTP_PORT,
-                   help=f"web viewer HTTP port (default {WEB_HTTP_PORT})")
-    g.add_argument("--grpc-port", type=int, default=WEB_GRPC_PORT,
-                   help=f"web viewer gRPC port (default {WEB_GRPC_PORT})")
-
-
-def check_web_viewer_arguments(args) -> None:
-    """The ports are TCP ports and, with ``--serve-web``, free on ``--bind`` (UsageError, one line)."""
-    for name in ("web_port", "grpc_port"):
-        port = getattr(args, name)
-        if not 1 <= port <= 65535:
-            raise UsageError(f"--{name.replace('_', '-')} must be a TCP port 1..65535, got {port}")
-    if args.serve_web:
-        from daa_sil.viz.sinks import check_web_ports
-
-        check_web_ports(args.bind, {"--grpc-port": args.grpc_port, "--web-port": args.web_port})
 
 
 def register(sub) -> None:

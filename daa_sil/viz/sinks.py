@@ -17,11 +17,11 @@ from pathlib import Path
 
 from ..errors import OutputError, UsageError
 from ..sil.children import spawn
+from ..web_ports import SPAWN_PORT, WEB_GRPC_PORT, WEB_HTTP_PORT, check_web_ports  # noqa: F401 (re-exported)
 from .warning import _warn
 
 APP_ID = "daa_sil"
 #: default ports: spawned native viewer (Rerun's default), web viewer's gRPC proxy, web viewer HTTP
-SPAWN_PORT, WEB_GRPC_PORT, WEB_HTTP_PORT = 9876, 9877, 9090
 
 
 @dataclass
@@ -76,20 +76,6 @@ def rerun_binary() -> str:
 
     exe = "rerun.exe" if os.name == "nt" else "rerun"
     return str(Path(rerun_cli.__file__).parent / exe)
-
-
-def check_web_ports(bind: str, ports: "dict[str, int]") -> None:
-    """UsageError (one line, naming the flag) if one of ``ports`` (flag -> TCP port) cannot be bound on
-    ``bind`` now, as the web viewer will (SO_REUSEADDR, like its server)."""
-    family = socket.AF_INET6 if ":" in bind else socket.AF_INET
-    for flag, port in ports.items():
-        with socket.socket(family, socket.SOCK_STREAM) as sk:
-            sk.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            try:
-                sk.bind((bind, int(port)))
-            except OSError as exc:
-                raise UsageError(f"{flag} {port}: cannot serve the web viewer on {bind}:{port} "
-                                 f"({exc.strerror or exc}); choose a free port with {flag}") from None
 
 
 class WebServer:
