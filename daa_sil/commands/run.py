@@ -106,7 +106,7 @@ def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
                             "the recorder over loopback, fire-and-forget); lockstep runs are shown when the "
                             "vehicle exits, so nothing runs next to the SIL. on: live in lockstep too; off: "
                             "never. The --rrd file is always made from the step log (the same either way)")
-        from daa_sil.web_ports import add_web_viewer_arguments
+        from daa_sil.sil.web_ports import add_web_viewer_arguments
 
         add_web_viewer_arguments(p, "when the run ends, serve its recording in the Rerun web viewer until "
                                     "Ctrl-C (as 'viz steplog --serve-web'; no display needed)")
@@ -152,7 +152,7 @@ def _check_args(args) -> None:
 
         _url_host_port(args.connect)  # a malformed URL is a usage error; a missing viewer only a warning
     if hasattr(args, "serve_web"):
-        from daa_sil.web_ports import check_web_viewer_arguments
+        from daa_sil.sil.web_ports import check_web_viewer_arguments
 
         check_web_viewer_arguments(args)  # a taken port fails before the run
     rrd = getattr(args, "rrd", None)

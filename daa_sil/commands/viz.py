@@ -14,7 +14,7 @@ from daa_sil.geometry.thresholds import PRESETS
 from ._args import finite_float
 from daa_sil.sil.children import interruptible
 from daa_sil.viz.warning import one_line_warnings
-from daa_sil.web_ports import add_web_viewer_arguments, check_web_viewer_arguments
+from daa_sil.sil.web_ports import add_web_viewer_arguments, check_web_viewer_arguments
 
 STEPLOG_EX = """examples:
   daa-sil viz steplog runs/headon/steps.parquet --rrd headon.rrd

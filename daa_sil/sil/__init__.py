@@ -8,6 +8,7 @@
 * :mod:`daa_sil.sil.live`     -- the live step feed (UDP, fire-and-forget) to the Rerun recorder
 * :mod:`daa_sil.sil.supervise`, :mod:`daa_sil.sil.play`, :mod:`daa_sil.sil.summary` -- the
   three-process run of ``daa-sil run``: supervision, orchestration, result
+* :mod:`daa_sil.sil.web_ports` -- the Rerun web viewer's ports and their ``--serve-web`` options
 * :mod:`daa_sil.sil.children` -- how every child process is started (dies with its parent, even on
   SIGKILL; named for ps/pgrep) and SIGTERM/SIGHUP taken as Ctrl-C
 * :mod:`daa_sil.sil.scenario` -- scenario files: schema, loader/validator, conversion, expectations

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ..errors import OutputError, UsageError
 from ..sil.children import spawn
-from ..web_ports import SPAWN_PORT, WEB_GRPC_PORT, WEB_HTTP_PORT, check_web_ports  # noqa: F401 (re-exported)
+from ..sil.web_ports import SPAWN_PORT, WEB_GRPC_PORT, WEB_HTTP_PORT, check_web_ports  # noqa: F401 (re-exported)
 from .warning import _warn
 
 APP_ID = "daa_sil"
