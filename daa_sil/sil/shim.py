@@ -158,6 +158,10 @@ class DelayShim(ShimTicks):
         #: lockstep: the vehicle's next tick, held until the GCS acknowledges its pending one (shim_ticks)
         self._held_tick: "tuple | None" = None
         self._gcs_acks = False  # the GCS acknowledges ticks (so its data can be stamped by them)
+        #: fault-draw keys (shim_ticks): start-up datagrams per line, datagrams per (line, stamp ms), held GCS step
+        self._start_count = {"down": 0, "up": 0}
+        self._stamp_count: dict[str, dict[int, int]] = {"down": {}, "up": {}}
+        self._gcs_batch: list[tuple[float, bytes]] = []
         self._tick_log: list[tuple[float, float, float, int]] = []  # realtime ticks: (t_k, rx, done, released)
         self._seen_ticks: set[int] = set()
         self.warn = _stderr_warn
