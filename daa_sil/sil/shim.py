@@ -18,7 +18,9 @@ delay streams, ``DelayProcess(model, encounter_streams(seed)[STREAM_UP], epoch_s
 and ``[STREAM_DOWN]`` for the down line (:func:`daa_sil.models.streams.encounter_streams`), so a SIL run
 of a scenario sees draw for draw the delays fast-time gives the same encounter. The *impairment*
 draws (loss, duplication, reordering) come from ``child_seed(SeedSequence(seed), 0)`` (down) /
-``1`` (up) (:func:`direction_seeds`); fast-time has no impairments.
+``1`` (up) (:func:`direction_seeds`), keyed on each datagram's simulation step when ticks drive the
+clock (:mod:`daa_sil.sil.shim_ticks`), so wall-clock traffic (greetings) does not shift them;
+fast-time has no impairments.
 
 Parity with fast-time: a packet sent at sim time ``t`` on direction ``dir`` is released at
 ``fifo_release(t, d)`` with ``d = DelayProcess(model, encounter_streams(seed)[STREAM_<DIR>],
