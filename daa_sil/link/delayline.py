@@ -9,7 +9,10 @@ that are not dropped, where ``d_i`` is the delay process value at ``t_i``. The s
 available vectorised as :func:`fifo_release` for batched fast-time code.
 
 Impairments, each drawn from the line's own seeded generator (three uniforms per pushed packet,
-whatever is enabled, so switching one knob does not shift the others' draws):
+whatever is enabled, so switching one knob does not shift the others' draws). ``push(..., key=K)``
+takes the three uniforms from the key instead (:meth:`DelayLine.fault_uniforms`): a pure function
+of the line's seed and ``K``, so a packet's fate does not depend on how many packets came before
+it (the SIL shim keys each datagram on its simulation step, :mod:`daa_sil.sil.shim_ticks`).
 
 * ``loss`` P: Bernoulli drop.
 * ``outages``: list of ``(t_start, t_end)`` sim-time windows; a packet *entering* the line in
@@ -37,6 +40,10 @@ import numpy as np
 from ..errors import UsageError
 from daa_sil.models.latency import DelayModel
 from daa_sil.models.delay_process import DelayProcess, as_seed_sequence, child_seed
+
+
+#: spawn-key branch (below the impairment seed) of the keyed draws; the sequential stream uses the seed itself
+KEYED_BRANCH = 1
 
 
 def fifo_release(t_in: np.ndarray, delay: np.ndarray, keep: "np.ndarray | None" = None,
@@ -157,6 +164,7 @@ class DelayLine:
         self.reorder_fraction = float(reorder_fraction)
         self.outages = check_outages(outages)
         self.max_queue = max_queue
+        self._imp_ss = imp_ss
         self._rng = np.random.default_rng(imp_ss)
         self._heap: list[tuple[float, int, Any]] = []  # (release, order, item)
         self._order = 0
@@ -171,12 +179,28 @@ class DelayLine:
         """True if sim time ``t`` (s) falls in an outage window."""
         return any(a <= t < b for a, b in self.outages)
 
-    def push(self, t_in: float, item: Any) -> list[LinkRecord]:
-        """Enter ``item`` at sim time ``t_in`` (s); returns the record(s) (two if duplicated)."""
+    def fault_uniforms(self, key: Sequence[int]) -> tuple[float, float, float]:
+        """The (loss, dup, reorder) uniforms in [0, 1) of the packet keyed ``key`` (non-negative ints).
+
+        Each is the top 53 bits of a word of ``SeedSequence(seed entropy, spawn_key=impairment
+        spawn key + (KEYED_BRANCH, *key)).generate_state(3)``: independent across keys and of the
+        sequential stream, with the same distribution, so the rates stay ``loss`` / ``dup`` / ``reorder``.
+        """
+        ss = np.random.SeedSequence(self._imp_ss.entropy, pool_size=self._imp_ss.pool_size,
+                                    spawn_key=tuple(self._imp_ss.spawn_key) + (KEYED_BRANCH,) + tuple(int(k) for k in key))
+        words = ss.generate_state(3, np.uint64) >> np.uint64(11)
+        return tuple(float(w) * 2.0 ** -53 for w in words)
+
+    def push(self, t_in: float, item: Any, key: "Sequence[int] | None" = None) -> list[LinkRecord]:
+        """Enter ``item`` at sim time ``t_in`` (s); returns the record(s) (two if duplicated).
+
+        ``key``: draw the packet's impairments from :meth:`fault_uniforms` (``key``) instead of the
+        line's sequential stream.
+        """
         seq = self._seq
         self._seq += 1
         self.counters.pushed += 1
-        u_loss, u_dup, u_reo = self._rng.random(3)
+        u_loss, u_dup, u_reo = self._rng.random(3) if key is None else self.fault_uniforms(key)
         d = float(self._delay(t_in, seq))
         drop = ""
         if self.in_outage(t_in):

@@ -18,7 +18,9 @@ delay streams, ``DelayProcess(model, encounter_streams(seed)[STREAM_UP], epoch_s
 and ``[STREAM_DOWN]`` for the down line (:func:`daa_sil.models.streams.encounter_streams`), so a SIL run
 of a scenario sees draw for draw the delays fast-time gives the same encounter. The *impairment*
 draws (loss, duplication, reordering) come from ``child_seed(SeedSequence(seed), 0)`` (down) /
-``1`` (up) (:func:`direction_seeds`); fast-time has no impairments.
+``1`` (up) (:func:`direction_seeds`), keyed on each datagram's simulation step when ticks drive the
+clock (:mod:`daa_sil.sil.shim_ticks`), so wall-clock traffic (greetings) does not shift them;
+fast-time has no impairments.
 
 Parity with fast-time: a packet sent at sim time ``t`` on direction ``dir`` is released at
 ``fifo_release(t, d)`` with ``d = DelayProcess(model, encounter_streams(seed)[STREAM_<DIR>],
@@ -158,6 +160,10 @@ class DelayShim(ShimTicks):
         #: lockstep: the vehicle's next tick, held until the GCS acknowledges its pending one (shim_ticks)
         self._held_tick: "tuple | None" = None
         self._gcs_acks = False  # the GCS acknowledges ticks (so its data can be stamped by them)
+        #: fault-draw keys (shim_ticks): start-up datagrams per line, datagrams per (line, stamp ms), held GCS step
+        self._start_count = {"down": 0, "up": 0}
+        self._stamp_count: dict[str, dict[int, int]] = {"down": {}, "up": {}}
+        self._gcs_batch: list[tuple[float, bytes]] = []
         self._tick_log: list[tuple[float, float, float, int]] = []  # realtime ticks: (t_k, rx, done, released)
         self._seen_ticks: set[int] = set()
         self.warn = _stderr_warn

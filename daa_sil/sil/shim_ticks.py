@@ -10,7 +10,22 @@ its step ``k - 1`` while the GCS runs its own, on the shim's echo. Neither needs
 of the same tick: the shim releases packets only when it processes a tick, so what either side
 sends during tick ``k`` reaches the other at tick ``k + 1`` at the earliest. (A vehicle whose tick
 is held past its retry interval re-sends tick ``k - 1`` before tick ``k``: a repeated tick is
-forwarded again, so a lost one is recovered, signed or not.)"""
+forwarded again, so a lost one is recovered, signed or not.)
+
+Fault draws (loss, duplication, reordering) are keyed on what a datagram is in the simulation, not
+on how many datagrams came before it (:meth:`daa_sil.link.delayline.DelayLine.fault_uniforms`), so
+traffic whose amount depends on the wall clock -- the GCS's greetings before the first tick, a
+repeated tick -- cannot shift the faults of the simulation's own datagrams:
+
+* before the first tick: ``(KEY_START, 0, n)``, ``n`` = the line's n-th start-up datagram;
+* lockstep, from the GCS while a tick forwarded to it awaits its ack (its step's datagrams): held
+  until that ack (or the next tick) and keyed ``(KEY_BACK, t_ms, n)``, ``n`` counted back from the
+  ack, so a greeting sent before the GCS saw its first tick but read after it comes first and does
+  not move the keys of the step's datagrams; they enter the line before the next tick releases
+  anything, as before;
+* otherwise ``(KEY_STEP, t_ms, n)``: the n-th datagram stamped ``t_ms`` (ms) on that line.
+
+Free-running realtime (no ticks) keeps the line's sequential stream."""
 
 from __future__ import annotations
 
@@ -22,6 +37,10 @@ from daa_sil.sil.shim_config import _ACK_ID, _TICK_ID, control_ids
 
 #: a GCS that has not acknowledged this many forwarded ticks is taken as gone (stamps fall back to the last tick)
 MAX_GCS_LAG_TICKS = 8
+#: first element of a fault-draw key (module docstring)
+KEY_START, KEY_STEP, KEY_BACK = 0, 1, 2
+#: per line, stamps whose datagram counts are kept (the oldest is forgotten past this)
+MAX_COUNTED_STAMPS = 64
 
 
 class ShimTicks:
@@ -44,12 +63,43 @@ class ShimTicks:
                 return
             c["bad_control"] += 1
         if side == "vehicle":
-            self.lines["down"].push(self.sim_time, data)
+            self.lines["down"].push(self.sim_time, data, key=self._fault_key("down", self.sim_time))
             return
         stamp = self._gcs_stamp()
-        recs = self.lines["up"].push(stamp, data)
+        if self.config.clock == "lockstep" and self._unacked:
+            self._gcs_batch.append((stamp, data))  # the GCS's step: keyed back from its ack
+            return
+        self._push_up(stamp, data, self._fault_key("up", stamp))
+
+    def _push_up(self, stamp: float, data: bytes, key: tuple) -> None:
+        recs = self.lines["up"].push(stamp, data, key=key)
         if stamp < self.sim_time and any(not r.dropped and r.t_out <= self.sim_time for r in recs):
-            c["released_late"] += 1  # lockstep would have released it at a tick already processed
+            self.counters["released_late"] += 1  # lockstep would have released it at a tick already processed
+
+    def _fault_key(self, direction: str, stamp: float) -> tuple:
+        """Fault-draw key of the next datagram stamped ``stamp`` (s) on ``direction`` (module docstring)."""
+        if self.last_tick is None:
+            n = self._start_count[direction]
+            self._start_count[direction] = n + 1
+            return (KEY_START, 0, n)
+        ms, counts = _ms(stamp), self._stamp_count[direction]
+        n = counts.get(ms, 0)
+        counts[ms] = n + 1
+        if len(counts) > MAX_COUNTED_STAMPS:
+            del counts[min(counts)]
+        return (KEY_STEP, ms, n)
+
+    def _flush_gcs_batch(self) -> None:
+        """Lockstep: push the GCS datagrams held since the last tick forwarded to it, keyed back from now."""
+        batch, self._gcs_batch = self._gcs_batch, []
+        after: dict[int, int] = {}
+        keys = []
+        for stamp, _ in reversed(batch):
+            ms = _ms(stamp)
+            keys.append((KEY_BACK, ms, after.get(ms, 0)))
+            after[ms] = after.get(ms, 0) + 1
+        for (stamp, data), key in zip(batch, reversed(keys)):
+            self._push_up(stamp, data, key)
 
     def _gcs_stamp(self) -> float:
         """Sim time a GCS datagram is sent at: the oldest tick it has not acknowledged (module docstring)."""
@@ -78,6 +128,7 @@ class ShimTicks:
 
     def _process_tick(self, msg, data: bytes, t_rx: "float | None") -> None:
         c = self.counters
+        self._flush_gcs_batch()
         rx = (t_rx if t_rx is not None else self._loop.time()) if self.config.clock == "realtime" else 0.0
         t_k = msg.time_ms / 1000.0
         k = int(msg.tick)
@@ -107,6 +158,7 @@ class ShimTicks:
 
     def _on_ack(self, msg, data: bytes) -> None:
         self.counters["acks"] += 1
+        self._flush_gcs_batch()
         self._gcs_acks = True
         k = int(msg.tick)
         while self._unacked and self._unacked[0][0] <= k:
@@ -148,3 +200,8 @@ class ShimTicks:
         late = np.array([rx - (w0 + t / self.config.speed) for t, rx, _, _ in self._tick_log if t > 0]) * 1000.0
         return {"ticks": int(late.size), "arrival_late_p50_ms": float(np.percentile(late, 50)),
                 "arrival_late_p99_ms": float(np.percentile(late, 99)), "arrival_late_max_ms": float(late.max())}
+
+
+def _ms(t: float) -> int:
+    """Sim time ``t`` (s) in whole milliseconds (>= 0), the unit of SIM_TICK times."""
+    return max(0, int(round(t * 1000.0)))
