@@ -132,3 +132,15 @@ def test_a_planted_override_is_not_reproduced(campaign, tmp_path):
     assert "a defect" in o["planted"]["evidence"]
     header, _ = _table_rows((tmp_path / "rep" / "report.md").read_text())
     assert "planted: verdict" in header and "paper: verdict" in header
+
+
+def test_report_labels_tell_apart_one_reading_on_two_sizes_of_one_seed():
+    from daa_sil.study.report_input import Block, Reading, unique_labels
+
+    def block(seed, n):
+        return Block("paper", Reading("paper", {}, ""), {}, meta={"seed": seed, "n_encounters": n})
+
+    got = [b.label for b in unique_labels([block(20261201, 10000), block(20261201, 2000), block(99991, 2000),
+                                          Block("extended", Reading("extended", {}, ""), {}, meta={"seed": 1})])]
+    assert got == ["paper (seed 20261201, 10,000 enc.)", "paper (seed 20261201, 2,000 enc.)", "paper (seed 99991)",
+                   "extended"]

@@ -174,13 +174,22 @@ def build_blocks(sources, recount: Sequence[str] = ()) -> list[Block]:
             st["description"] = f"{b.reading.settings.get('description', b.reading.name)}; recounted with {how}"
             derived.append(replace(b, label=f"{b.label}+{name}", reading=Reading(f"{b.reading.name}+{name}", st,
                                                                               b.reading.source)))
-    blocks += derived
+    return unique_labels(blocks + derived)
+
+
+def unique_labels(blocks: "list[Block]") -> "list[Block]":
+    """The blocks with unique labels: on a clash the campaign seed is added, and the number of
+    encounters too when one reading was run on two sizes of one seed; ``#k`` as a last resort."""
     labels = [b.label for b in blocks]
     out = []
     for b in blocks:
         lab = b.label
         if labels.count(lab) > 1 and b.seed is not None:
-            lab = f"{lab} (seed {b.seed})"
+            same_seed = [o for o in blocks if o.label == b.label and o.seed == b.seed]
+            if len(same_seed) > 1 and b.n_config is not None:  # e.g. one reading on two sizes of one seed
+                lab = f"{lab} (seed {b.seed}, {b.n_config:,} enc.)"
+            else:
+                lab = f"{lab} (seed {b.seed})"
         k = 2
         base = lab
         while lab in [o.label for o in out]:
@@ -188,3 +197,4 @@ def build_blocks(sources, recount: Sequence[str] = ()) -> list[Block]:
             k += 1
         out.append(replace(b, label=lab))
     return out
+

@@ -12,7 +12,9 @@ Runs, each resumable (an interrupted call picks up where it stopped):
    first (it is the reference: every setting rests on a sentence of the paper), then its
    alternatives, then our extension (``extended``, formerly ``literal``) and the older readings
    (``--alt-encounters`` per group for every reading but ``paper``: default the same as
-   ``--encounters``; a smaller number buys time and widens only those readings' intervals);
+   ``--encounters``; a smaller number buys time and widens only those readings' intervals; then
+   ``paper`` is run at that size too, the like-for-like column: a *value* verdict tests the paper's
+   number against our interval, which narrows as N grows);
 2. the ``paper`` reading again (``--alt-encounters``) on the development seed 99991 (the seed the paper reading was
    developed against), so that the report can test whether the two seeds agree;
 3. ``campaign report`` of all of them, ``paper`` the first column (plus the paper's counting of the
@@ -111,9 +113,15 @@ def main() -> int:
             _campaign(d, ["--reading", r, "--seed", str(args.seed)], args,
                       args.encounters if r == "paper" else args.alt_encounters)
             dirs.append(d)
+        if args.alt_encounters != args.encounters:
+            # the paper reading on the report seed at the other columns' size: the like-for-like column (a
+            # 'value' verdict tests the paper's number against our CI, which narrows with N)
+            small = runs / f"paper-{args.alt_encounters}"
+            _campaign(small, ["--reading", "paper", "--seed", str(args.seed)], args, args.alt_encounters)
+            dirs.insert(1, small)
         dev = runs / f"paper-seed{PAPER_DEV_SEED}"
         _campaign(dev, ["--reading", "paper", "--seed", str(PAPER_DEV_SEED)], args, args.alt_encounters)
-        dirs.insert(1, dev)
+        dirs.insert(2 if args.alt_encounters != args.encounters else 1, dev)
         note = (f"Report seed {args.seed} (nothing was tuned on it). Seeds used while developing the models and "
                 f"this analysis: {', '.join(map(str, DEV_SEEDS))}; the paper reading was developed on seed "
                 f"{PAPER_DEV_SEED} and is shown on it as a second column, so that the seed-agreement section can "
@@ -121,7 +129,8 @@ def main() -> int:
         if args.alt_encounters != args.encounters:
             note += (f" The reading paper on the report seed has {args.encounters:,} encounters per group; every "
                      f"other column {args.alt_encounters:,} (same first encounters: the set is drawn from the seed), "
-                     f"so their intervals are wider.")
+                     f"so their intervals are wider; 'paper ({args.alt_encounters:,})' is the paper reading on the same "
+                     f"first {args.alt_encounters:,} encounters, the column to compare the others' verdicts with.")
         if args.smoke:
             note = f"SMOKE RUN ({args.encounters} encounters per group): checks the chain, not the paper. " + note
         _run(["campaign", "report", *map(str, dirs), "--recount", "paper-counts:window=whole,received=pilot+blend",
