@@ -4,11 +4,13 @@ import json
 import math
 import shutil
 import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
-EXE = shutil.which("daa-sil")
-pytestmark = pytest.mark.skipif(EXE is None, reason="daa-sil console script not installed (pip install -e .)")
+# the console script of the environment running the tests (its bin directory need not be on PATH)
+EXE = shutil.which("daa-sil", path=str(Path(sys.executable).parent)) or shutil.which("daa-sil")
 
 
 def run(*args):
@@ -57,3 +59,7 @@ def test_bad_input_one_line_exit_2(args, needle):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and needle in lines[0]
     assert "Traceback" not in r.stderr
+
+
+def test_the_console_script_is_installed():
+    assert EXE is not None, "the daa-sil console script is missing: install the package (pip install -e .)"

@@ -3,11 +3,13 @@
 import json
 import shutil
 import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
-EXE = shutil.which("daa-sil")
-pytestmark = pytest.mark.skipif(EXE is None, reason="daa-sil console script not installed")
+# the console script of the environment running the tests (its bin directory need not be on PATH)
+EXE = shutil.which("daa-sil", path=str(Path(sys.executable).parent)) or shutil.which("daa-sil")
 
 
 def run(*args, cwd=None):
@@ -109,3 +111,7 @@ def test_build_options_reach_the_map_metadata(tmp_path):
 
     fam = waitmap.load_family(tmp_path / "m")
     assert fam.params.wait_definition == "until_evade" and fam.params.p_min == 0.01 and fam.params.horizon == 60.0
+
+
+def test_the_console_script_is_installed():
+    assert EXE is not None, "the daa-sil console script is missing: install the package (pip install -e .)"
