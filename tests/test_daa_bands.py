@@ -7,7 +7,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from daa_sil.geometry import wellclear as wc
 from daa_sil.daa import (AXIS_HORIZONTAL, REGION_MID, REGION_NEAR, REGION_NONE, DaaConfig, alert_levels,
                          compute_bands, proj_lowc, safety_metric)
-from daa_sil.daa.axis_paths import _axis_paths, _path_sizes
+from daa_sil.daa.axis_paths import candidate_counts, maneuver_paths
 from daa_sil.geometry.kinematics import Command, advance
 from daa_sil.geometry.units import DEG, FT
 
@@ -68,8 +68,10 @@ def test_head_on_bands_hand_worked():
 def test_fast_paths_match_core_kinematics():
     own = own_state(3, gs=[55.0, 80.0, 30.0], trk=[0.3, 2.0, 5.5], vs=[0.0, 3.0, -2.0])
     for axis, kw in ((1, "turn_rate"), (2, "vertical_accel"), (3, "accel")):
-        j = max(_path_sizes(own, axis, CFG))
-        pos, vel, value, t = _axis_paths(own, axis, CFG, j)
+        j = max(candidate_counts(own, axis, CFG))
+        paths, _ = maneuver_paths(own, axis, CFG, j)
+        pos, vel = paths.stacked()
+        t = paths.knot_times()[0, 0]
         perf = CFG.performance()
         rate = {1: CFG.turn_rate, 2: CFG.vertical_accel, 3: CFG.horizontal_accel}[axis]
         ref = advance(own[:, None, None], dt=t, perf=perf, **{kw: np.array([[-rate], [rate]])})

@@ -233,7 +233,7 @@ def test_kernel_outcomes_are_not_trivial():
 # the evaluator's compiled passes against its numpy reference, on real maneuver paths
 # --------------------------------------------------------------------------------------------------
 from daa_sil.daa import DaaConfig  # noqa: E402
-from daa_sil.daa.axis_paths import _maneuver_paths, _path_sizes  # noqa: E402
+from daa_sil.daa.axis_paths import maneuver_paths, candidate_counts  # noqa: E402
 from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_SPEED, AXIS_VERTICAL  # noqa: E402
 from daa_sil.daa.kernels.motion import command_rel_states_into, rel_states_into  # noqa: E402
 from daa_sil.daa.safety import command_paths  # noqa: E402
@@ -273,8 +273,8 @@ def test_band_paths_evaluate_identical(preset, axis):
     cfg = DaaConfig.for_preset(preset)
     rng = np.random.default_rng(zlib.crc32(f"{preset}/{axis}".encode()))
     own, intr = _encounters(rng, 400, 2, cfg)
-    j_lo, j_hi = _path_sizes(own, axis, cfg)
-    paths, _ = _maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
+    j_lo, j_hi = candidate_counts(own, axis, cfg)
+    paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
     cyl = cfg.th.with_(name="cylinder", dthr=1000.0, zthr=100.0, tthr=0.0, tcoa=0.0)
     for th in (cfg.th, cfg.th_preventive, cyl):
         got = PathEvaluator(paths, intr, cfg.lookahead_s).evaluate(th)
@@ -313,7 +313,7 @@ def test_axis_state_kernel_identical(axis):
         cfg = DaaConfig.for_preset(preset)
         rng = np.random.default_rng(axis)
         own, _ = _encounters(rng, 2000, 1, cfg)
-        paths, _ = _maneuver_paths(own, axis, cfg, 10, with_values=False)
+        paths, _ = maneuver_paths(own, axis, cfg, 10, with_values=False)
         n_idx, p_idx = rng.integers(0, 2000, 20_000), rng.integers(0, 2, 20_000)
         t = np.concatenate([rng.uniform(-5, 200, 19_000), rng.choice([0.0, 1e-9, 1e6, np.inf, np.nan], 1000)])
         ref = _ref(lambda: paths.state_at(n_idx, p_idx)(t))

@@ -26,8 +26,8 @@ def speed_limits(vertical: bool, cfg: DaaConfig, sgn) -> tuple:
     return acc, np.where(sgn < 0, -cfg.max_vs if vertical else cfg.min_gs, cfg.max_vs if vertical else cfg.max_gs)
 
 
-def _path_sizes(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[int, int]:
-    """Number of candidates on the low and high side of an axis for this batch (>= 0)."""
+def candidate_counts(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[int, int]:
+    """Number of candidates on the low and high side of ``axis`` for this batch of ownships (>= 0 each)."""
     if axis == AXIS_HORIZONTAL:
         j_lo = int(round(cfg.trk_range / cfg.trk_step))
         full_circle = np.isclose(cfg.trk_range, np.pi)
@@ -99,18 +99,10 @@ def _kin_table(axis: int, cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, sgn) -> 
     return "axis", axis, float(rate), kin
 
 
-def _axis_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Ownship on the low-side and high-side maneuver paths at knots 0..j: position and velocity
-    ``(N, 2, j+1, 3)``, the axis value ``(N, 2, j+1)`` and the knot times ``(j+1,)``."""
-    paths, value = _maneuver_paths(own, axis, cfg, j)
-    return *paths.stacked(), value, paths.knot_times()[0, 0] if own.shape[0] else np.asarray(paths.t)[0, 0]
-
-
-def _maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int,
+def maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int,
                     with_values: bool = True) -> tuple[ManeuverPaths, "np.ndarray | None"]:
-    """Low-side and high-side maneuver paths of ``axis`` at knots 0..j (P = 2) and the axis value at
-    each knot ``(N, 2, j+1)`` (None without ``with_values``)."""
+    """Low-side and high-side maneuver paths of ``axis`` at knots 0..j (P = 2; knot spacing from
+    ``cfg``, s) and the axis value at each knot ``(N, 2, j+1)`` (rad, m/s; None without ``with_values``)."""
     knot = {AXIS_HORIZONTAL: cfg.knot_trk, AXIS_VERTICAL: cfg.knot_vs, AXIS_SPEED: cfg.knot_gs}[axis]
     t = np.arange(j + 1) * knot
     sgn = np.array([-1.0, 1.0])

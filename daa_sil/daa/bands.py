@@ -60,8 +60,8 @@ from .alerting import alert_levels, conflict_lists
 from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_SPEED, AXIS_VERTICAL, REGION_MID, REGION_NAMES, REGION_NEAR,
                      REGION_NONE, REGION_RECOVERY, DaaConfig)
 from .trajectory import PathConflicts, PathEvaluator
-from daa_sil.daa.recovery import _Recovery, _runs2
-from daa_sil.daa.axis_paths import _maneuver_paths, _path_sizes, speed_limits
+from daa_sil.daa.recovery import CylinderRecovery, drop_isolated
+from daa_sil.daa.axis_paths import maneuver_paths, candidate_counts, speed_limits
 
 
 @dataclass
@@ -244,9 +244,9 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     """Bands of one axis (AXIS_* code) for ownship ``(N,)`` and intruders ``(N, M)``; ``sizes`` = candidates
     per side (default from this batch); ``lists`` = (NEAR, MID) conflict-aircraft flags ``(N, M)`` used
     with ``cfg.horizon_from_maneuver`` (default :func:`daa_sil.daa.alerting.conflict_lists`)."""
-    j_lo, j_hi = sizes if sizes is not None else _path_sizes(own, axis, cfg)
+    j_lo, j_hi = sizes if sizes is not None else candidate_counts(own, axis, cfg)
     n, m = intr.shape
-    paths, _ = _maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
+    paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
     t = np.asarray(paths.t, float)[0, 0]
     ev = PathEvaluator(paths, intr, cfg.lookahead_s)
     pc = ev.evaluate(cfg.th)
@@ -265,7 +265,7 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
         red_near_i = t_in < cfg.alert_time_warning_s
         mid_list = None
     order = lambda a: _side_order(a, j_lo, j_hi)  # noqa: E731
-    runs = _runs2 if cfg.daidalus_grid else (lambda g: g)
+    runs = drop_isolated if cfg.daidalus_grid else (lambda g: g)
     red_near = order(_over_intruders(red_near_i, np.any)) if m else np.zeros((n, j_lo + j_hi + 1), bool)
     red_mid = order(_over_intruders((red_near_i | red_mid_i) if not cfg.horizon_from_maneuver else red_mid_i, np.any)) \
         if m else np.zeros((n, j_lo + j_hi + 1), bool)
@@ -307,7 +307,7 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
             horizon = np.where(mid_flag, L, min(L, cfg.alert_time_corrective_s))
             corr = PathConflicts(pc.seg_in[rows], pc.seg_out[rows], pc.tail_in[rows], pc.tail_out[rows],
                                  pc.t[rows], pc.t_end)
-            g, rt, nf, hh, vv = _Recovery(paths.subset(rows), intr[rows], corr, listed, horizon, cfg, order,
+            g, rt, nf, hh, vv = CylinderRecovery(paths.subset(rows), intr[rows], corr, listed, horizon, cfg, order,
                                           runs).run()
             rec_green[rows] = g
             rec_time[rows], rec_n[rows], rec_h[rows], rec_v[rows] = rt, nf, hh, vv
@@ -370,7 +370,7 @@ def compute_bands(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | Non
     n = own.shape[0]
     codes = (AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED)
     wanted = codes if axes is None else tuple(a for a in codes if a in axes)
-    sizes = {a: _path_sizes(own, a, cfg) for a in wanted}
+    sizes = {a: candidate_counts(own, a, cfg) for a in wanted}
     chunks = []
     for lo in range(0, max(n, 1), CHUNK):
         sl = slice(lo, min(lo + CHUNK, n))

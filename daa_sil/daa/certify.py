@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from daa_sil.daa.intervals import _in_blocks, as_vector
+from daa_sil.daa.intervals import in_cache_blocks, as_vector
 from daa_sil.daa import kernels
 from daa_sil.geometry import wellclear as wc
 from daa_sil.geometry.thresholds import Thresholds
@@ -40,7 +40,7 @@ def classify_pieces(x0, y0, z0, x1, y1, z1, h, th: Thresholds, e_p, e_v, e_z=0.0
     return out
 
 
-@_in_blocks
+@in_cache_blocks
 def classify_pieces_reference(x0, y0, z0, x1, y1, z1, h, th: Thresholds, e_p, e_v, e_z=0.0, window=None) -> np.ndarray:
     """CLEAR / INSIDE / UNDECIDED code (int8) of pieces of a true relative path.
 
@@ -144,7 +144,7 @@ def clear_second_order(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, th: Thresh
     return out
 
 
-@_in_blocks
+@in_cache_blocks
 def clear_second_order_reference(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, th: Thresholds, e_p, e_v,
                                  e_z=0.0) -> np.ndarray:
     """True where a piece is certified CLEAR with a second-order model: the chord for position and the
@@ -185,8 +185,9 @@ def clear_second_order_reference(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, 
     return ~vert | ~(near_d | (near_tau & ~wide & ~opening))
 
 
-def _settle_time(acc_h, acc_v) -> np.ndarray:
-    """Longest piece duration (s) whose chord is within V_TOL / P_TOL of the true path."""
+def settle_time(acc_h, acc_v) -> np.ndarray:
+    """Longest piece duration (s) whose chord is within V_TOL / P_TOL of the true path, for horizontal
+    and vertical accelerations ``acc_h``, ``acc_v`` (m/s^2)."""
     with np.errstate(divide="ignore"):
         t_v = np.where(acc_h > 0, 2.0 * V_TOL / np.where(acc_h > 0, acc_h, 1.0), np.inf)
         a = np.maximum(acc_h, acc_v)

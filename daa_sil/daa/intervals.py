@@ -18,7 +18,7 @@ from daa_sil.geometry.thresholds import Thresholds
 KERNEL_BLOCK = 16384
 
 
-def _in_blocks(fn):
+def in_cache_blocks(fn):
     """Run an elementwise kernel of 1-D arrays in pieces of KERNEL_BLOCK elements (its temporaries then
     stay in the CPU cache; the kernels are memory-bound and about 3x faster so). Array arguments (also
     inside tuples) of the length of the first one are sliced, others passed as they are."""
@@ -42,8 +42,8 @@ def _in_blocks(fn):
     return run
 
 
-def _row_blocks(n: int, per_row: int):
-    """Slices of encounter rows holding about KERNEL_BLOCK elements of ``per_row`` each."""
+def row_blocks(n: int, per_row: int):
+    """Slices of ``n`` encounter rows, each slice holding about KERNEL_BLOCK elements (``per_row`` per row)."""
     step = max(1, KERNEL_BLOCK // max(per_row, 1))
     return [slice(i, min(i + step, n)) for i in range(0, n, step)]
 
@@ -68,7 +68,7 @@ def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) ->
     return t_in, t_out
 
 
-@_in_blocks
+@in_cache_blocks
 def interval_soa_reference(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`daa_sil.geometry.wellclear.violation_interval` over ``[0, length]`` for 1-D component arrays.
 
@@ -140,7 +140,7 @@ def wcv_soa(sx, sy, sz, vx, vy, vz, th: Thresholds) -> np.ndarray:
     return out
 
 
-@_in_blocks
+@in_cache_blocks
 def wcv_soa_reference(sx, sy, sz, vx, vy, vz, th: Thresholds) -> np.ndarray:
     """:func:`daa_sil.geometry.wellclear.wcv` on component arrays (relative position and velocity)."""
     D, TT = th.dthr, th.tthr

@@ -14,8 +14,8 @@ from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.geometry.thresholds import Thresholds
 
 
-def _runs2(green: np.ndarray) -> np.ndarray:
-    """``green`` without isolated candidates (a run of one is not a band)."""
+def drop_isolated(green: np.ndarray) -> np.ndarray:
+    """``green`` (N, K) without isolated candidates (a run of one is not a band; DAIDALUS grid)."""
     left = np.zeros_like(green)
     right = np.zeros_like(green)
     left[:, 1:] = green[:, :-1]
@@ -27,7 +27,7 @@ def _cylinder(h: float, v: float) -> Thresholds:
     return Thresholds(name=f"cylinder {h:.1f} m / {v:.1f} m", dthr=h, zthr=v, tthr=0.0, tcoa=0.0)
 
 
-class _Recovery:
+class CylinderRecovery:
     """DAIDALUS's shrinking-cylinder recovery search for the rows of one axis that saturate (module doc).
 
     ``paths``/``intr``: the saturated rows' maneuver paths and intruders; ``corrective``: their

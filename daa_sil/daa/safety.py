@@ -12,7 +12,8 @@ import numpy as np
 from daa_sil.daa.config import DaaConfig
 from daa_sil.daa.trajectory import ManeuverPaths, path_conflicts
 from daa_sil.geometry.frames import wrap_2pi, wrap_pi
-from daa_sil.geometry.kinematics import _W_EPS, AircraftState, Command, _horizontal_segment, _vertical, fly_command
+from daa_sil.geometry.kinematics import (STRAIGHT_TURN_RATE, AircraftState, Command, fly_command, horizontal_segment,
+                                         vertical_toward)
 
 
 def maneuver_times(own: AircraftState, cmd: Command, cfg: DaaConfig) -> tuple[np.ndarray, ...]:
@@ -49,13 +50,13 @@ class _CommandMotion:
             w_p, a_p = np.where(t_turn > lo, w, 0.0), np.where(t_spd > lo, acc, 0.0)
             params.append((w_p, a_p))
             if hi is not None:
-                starts.append(_horizontal_segment(*starts[-1], w_p, a_p, np.maximum(hi - lo, 0.0)))
+                starts.append(horizontal_segment(*starts[-1], w_p, a_p, np.maximum(hi - lo, 0.0)))
         #: (3, N) phase start times, x, y, gs, trk, turn rate, acceleration, and sin / cos of the start track
         self.t0 = np.stack([np.zeros_like(b1), b1, b2])
         self.x, self.y, self.gs, self.trk = (np.stack([st[i] for st in starts]) for i in range(4))
         self.w, self.acc = (np.stack([pr[i] for pr in params]) for i in range(2))
         self.sin0, self.cos0 = np.sin(self.trk), np.cos(self.trk)
-        self.exotic = bool(np.any((self.w != 0.0) & (np.abs(self.w) < _W_EPS)))  # (as _arc's "small" branch)
+        self.exotic = bool(np.any((self.w != 0.0) & (np.abs(self.w) < STRAIGHT_TURN_RATE)))  # (as _arc's "small" branch)
 
     def kin(self) -> "tuple | None":
         """The motion as data for the compiled kernels (:attr:`ManeuverPaths.kin`), None when exotic."""
@@ -93,7 +94,7 @@ class _CommandMotion:
         trk = np.where(np.abs(self.dpsi[n]) <= perf.max_turn_rate * tau, self.trk_cmd[n], trk)
         gs = np.where(np.abs(self.dgs[n]) <= perf.horizontal_accel * tau, self.tgt_gs[n], gs)
         o = self.own
-        z, vs = _vertical(o.z[n], o.vs[n], self.tgt_vs[n], perf.vertical_accel, tau)
+        z, vs = vertical_toward(o.z[n], o.vs[n], self.tgt_vs[n], perf.vertical_accel, tau)
         trk = wrap_2pi(trk)
         return x, y, z, gs * np.sin(trk), gs * np.cos(trk), vs
 

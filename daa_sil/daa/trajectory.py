@@ -41,7 +41,7 @@ import numpy as np
 from daa_sil.geometry import wellclear as wc
 from daa_sil.geometry.kinematics import (AircraftState)
 from daa_sil.geometry.thresholds import Thresholds
-from daa_sil.daa.intervals import _row_blocks, interval_soa
+from daa_sil.daa.intervals import row_blocks, interval_soa
 from daa_sil.daa.certify import CLEAR, INSIDE, UNDECIDED, classify_pieces
 from daa_sil.daa import kernels
 from daa_sil.daa.undecided import UndecidedPieces
@@ -277,7 +277,7 @@ class PathEvaluator(UndecidedPieces):
         if want is None:  # every knot, in cache-sized blocks of encounters
             n, m, p, k = self.shape
             tt_all = np.broadcast_to(self.t, self.shape)
-            for sl in _row_blocks(n, m * p * k):
+            for sl in row_blocks(n, m * p * k):
                 tt = tt_all[sl]
                 tk = tt.reshape(-1)
                 win = None

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from daa_sil.daa.certify import CLEAR, _settle_time, classify_pieces, clear_second_order
+from daa_sil.daa.certify import CLEAR, settle_time, classify_pieces, clear_second_order
 from daa_sil.daa.intervals import as_vector, wcv_soa
 from daa_sil.daa import kernels
 
@@ -122,7 +122,7 @@ class UndecidedPieces:
                 _update(seg_in, seg_out, sid[both], ta[both], tb[both])
             split = np.zeros(sid.size, bool)
             last = depth == MAX_DEPTH - 1
-            settled = ((tb - ta) <= _settle_time(tab["acc_h"][pth], tab["acc_v"][pth]) * (1.0 + 1e-9)) | last
+            settled = ((tb - ta) <= settle_time(tab["acc_h"][pth], tab["acc_v"][pth]) * (1.0 + 1e-9)) | last
             cross = np.flatnonzero(fa != fb)  # entries (start clear, end violating) and exits (start violating)
             if cross.size and not self.exits:  # an exit: first entry at the start; the last exit is not needed
                 ex = cross[fa[cross]]
@@ -188,7 +188,7 @@ class UndecidedPieces:
         """Split pieces into the fewest equal parts that settle (at least 2, at most MAX_SPLIT), with
         exact states and flags at the new ends."""
         tab = self._path_tables()
-        settle = _settle_time(tab["acc_h"][pth], tab["acc_v"][pth])
+        settle = settle_time(tab["acc_h"][pth], tab["acc_v"][pth])
         q = int(min(MAX_SPLIT, max(2, np.ceil(np.max((tb - ta) / settle) - 1e-9))))
         L = sid.size
         ts = ta[:, None] + (tb - ta)[:, None] * (np.arange(1, q) / q)[None, :]  # (L, q-1)

@@ -25,7 +25,8 @@ import numpy as np
 from .frames import TWO_PI, track_from_velocity, wrap_2pi, wrap_pi
 from .units import DEG, FPM, G0, KT
 
-_W_EPS = 1e-6
+#: |turn rate| (rad/s) below which a path is flown as a straight line (the closed-form arc divides by it)
+STRAIGHT_TURN_RATE = 1e-6
 
 
 @dataclass
@@ -162,7 +163,7 @@ class Command:
 
 def _arc(gs0, acc, trk0, w, t):
     """Displacement (dx, dy) after time t with speed gs0 + acc*t and compass track trk0 + w*t."""
-    small = np.abs(w) < _W_EPS
+    small = np.abs(w) < STRAIGHT_TURN_RATE
     ws = np.where(small, 1.0, w)
     th1 = trk0 + w * t
     # x: int (gs0 + a t) sin(trk0 + w t) dt ; y: int (gs0 + a t) cos(trk0 + w t) dt
@@ -176,13 +177,16 @@ def _arc(gs0, acc, trk0, w, t):
     return np.where(small, dx_str, dx_turn), np.where(small, dy_str, dy_turn)
 
 
-def _horizontal_segment(x, y, gs, trk, w, acc, t):
+def horizontal_segment(x, y, gs, trk, w, acc, t):
+    """Position ``x, y`` (m), ground speed (m/s) and track (rad) after ``t`` s at turn rate ``w``
+    (rad/s, + = right) and along-track acceleration ``acc`` (m/s^2); exact (closed-form arc)."""
     dx, dy = _arc(gs, acc, trk, w, t)
     return x + dx, y + dy, gs + acc * t, trk + w * t
 
 
-def _vertical(z, vs, target_vs, v_accel, dt):
-    """Exact vertical motion toward ``target_vs`` with |acceleration| = v_accel over dt."""
+def vertical_toward(z, vs, target_vs, v_accel, dt):
+    """Altitude (m) and vertical speed (m/s) after ``dt`` s moving toward ``target_vs`` (m/s) with
+    |acceleration| = ``v_accel`` (m/s^2); exact."""
     dv = target_vs - vs
     t1 = np.minimum(np.abs(dv) / v_accel, dt) if v_accel > 0 else np.where(dv == 0, 0.0, dt)
     a = np.sign(dv) * v_accel
@@ -206,8 +210,8 @@ def advance(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, 
     with np.errstate(all="ignore"):
         t_sat = np.where(acc != 0, (limit - s.gs) / np.where(acc != 0, acc, 1.0), np.inf)
     t_sat = np.clip(t_sat, 0.0, dt)
-    x, y, gs, trk = _horizontal_segment(s.x, s.y, s.gs, s.trk, w, acc, t_sat)
-    x, y, gs, trk = _horizontal_segment(x, y, gs, trk, w, 0.0, dt - t_sat)
+    x, y, gs, trk = horizontal_segment(s.x, s.y, s.gs, s.trk, w, acc, t_sat)
+    x, y, gs, trk = horizontal_segment(x, y, gs, trk, w, 0.0, dt - t_sat)
     # vertical: constant acceleration toward the limit
     av = np.asarray(vertical_accel, float)
     vs_target = np.where(av > 0, perf.max_vs, np.where(av < 0, -perf.max_vs, s.vs))
@@ -246,12 +250,12 @@ def fly_command(state: AircraftState, cmd: Command, dt: float = 1.0,
         seg = np.maximum(hi - lo, 0.0)
         w_seg = np.where(t_turn > lo, w, 0.0)
         a_seg = np.where(t_spd > lo, acc, 0.0)
-        x, y, gs, trk = _horizontal_segment(x, y, gs, trk, w_seg, a_seg, seg)
+        x, y, gs, trk = horizontal_segment(x, y, gs, trk, w_seg, a_seg, seg)
     reached_trk = np.abs(dpsi) <= perf.max_turn_rate * dt
     reached_gs = np.abs(dgs) <= perf.horizontal_accel * dt
     trk = np.where(reached_trk, c.trk, trk)
     gs = np.where(reached_gs, tgt_gs, gs)
-    z, vs = _vertical(s.z, s.vs, tgt_vs, perf.vertical_accel, dt)
+    z, vs = vertical_toward(s.z, s.vs, tgt_vs, perf.vertical_accel, dt)
     return AircraftState(x, y, z, gs, wrap_2pi(trk), vs)
 
 
@@ -261,4 +265,5 @@ def turn_direction(from_trk, to_trk) -> np.ndarray:
 
 
 __all__ = ["AircraftState", "Performance", "DEFAULT_PERFORMANCE", "Command", "advance", "fly_command",
-           "turn_direction", "TWO_PI"]
+           "turn_direction", "TWO_PI",
+           "horizontal_segment", "vertical_toward", "STRAIGHT_TURN_RATE"]

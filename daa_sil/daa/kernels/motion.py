@@ -124,7 +124,7 @@ def command_state(ph_rows, enc, i, tau, max_turn, h_acc, v_acc):
         trk = enc[i, 1]
     if abs(enc[i, 2]) <= h_acc * tau:
         gs = enc[i, 3]
-    # kinematics._vertical(z, vs, tgt_vs, v_acc, tau)
+    # kinematics.vertical_toward(z, vs, tgt_vs, v_acc, tau)
     z0, vs0, tgt = enc[i, 4], enc[i, 5], enc[i, 6]
     dv = tgt - vs0
     if v_acc > 0:
