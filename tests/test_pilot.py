@@ -68,10 +68,10 @@ def test_turn_direction_never_reverses_minimum_suggestion(seed):
     g = Guidance(alert_level=np.full(n, 2), left_trk=cur - dl, left_level=rng.integers(0, 4, n),
                  right_trk=cur + dr, right_level=rng.integers(0, 4, n), up_vs=np.full(n, np.nan),
                  up_level=np.full(n, np.inf), down_vs=np.full(n, np.nan), down_level=np.full(n, np.inf))
-    from daa_sil.models.pilot_choice import _draw_block
+    from daa_sil.models.pilot_choice import draw_decisions
 
     cfg = PilotConfig()
-    draws = {k: v for k, v in _draw_block(rng, cfg, n).items()}
+    draws = {k: v for k, v in draw_decisions(rng, cfg, n).items()}
     cmd, axis, direction = choose_maneuver(cur, np.zeros(n), np.full(n, 55.0), g, draws, cfg)
     assert np.all(axis == 1)
     turn = ((cmd.trk - cur + np.pi) % (2 * np.pi)) - np.pi

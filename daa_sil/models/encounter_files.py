@@ -12,7 +12,7 @@ import numpy as np
 from daa_sil.errors import FileFormatError
 from daa_sil.files import atomic_path
 from daa_sil.geometry.kinematics import AircraftState
-from daa_sil.models.encounters import _SEG_NAMES, FORMAT_NAME, FORMAT_VERSION, PARAM_NAMES, EncounterSet
+from daa_sil.models.encounters import SEGMENT_FIELDS, FORMAT_NAME, FORMAT_VERSION, PARAM_NAMES, EncounterSet
 
 _STATE = ("x", "y", "z", "gs", "trk", "vs")
 
@@ -36,7 +36,7 @@ def save_encounters(es: EncounterSet, path: "str | os.PathLike") -> Path:
         cols[f"own_{f}"] = pa.array(getattr(es.own, f).astype(np.float64))
     for f in _STATE:
         cols[f"intr_{f}"] = lst(getattr(es.intr, f), m)
-    for k in _SEG_NAMES:
+    for k in SEGMENT_FIELDS:
         cols[k] = lst(getattr(es, k), m * s)
     for k in PARAM_NAMES:
         cols[f"p_{k}"] = lst(es.params.get(k, np.full((n, m), np.nan)), m)
@@ -100,7 +100,7 @@ def load_encounters(path: "str | os.PathLike") -> EncounterSet:
 
     own = AircraftState(*(scalar(f"own_{f}", float) for f in _STATE))
     intr = AircraftState(*(lst(f"intr_{f}", m) for f in _STATE))
-    segs = {k: lst(k, m * s).reshape(n, m, s) for k in _SEG_NAMES}
+    segs = {k: lst(k, m * s).reshape(n, m, s) for k in SEGMENT_FIELDS}
     params = {k: lst(f"p_{k}", m) for k in PARAM_NAMES}
     return EncounterSet(own=own, intr=intr, **segs, encounter_id=scalar("encounter_id", np.int64),
                         seed=scalar("seed", np.int64), params=params, root_seed=meta.get("root_seed"),

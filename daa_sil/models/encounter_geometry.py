@@ -12,8 +12,8 @@ from daa_sil.errors import UsageError
 from daa_sil.geometry.frames import wrap_2pi, wrap_pi
 from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.geometry.units import DEG
-from daa_sil.models.encounters import (PARAM_NAMES, EncounterConfig, EncounterSet, _integrate, _own_initial, _place,
-                                        _realised_cpa)
+from daa_sil.models.encounters import (PARAM_NAMES, EncounterConfig, EncounterSet, fly_segments, initial_ownships,
+                                        place_intruders, realised_cpa)
 
 
 @dataclass
@@ -51,7 +51,7 @@ def encounter_from_geometry(intruders: "Sequence[IntruderGeometry] | IntruderGeo
     geoms = [intruders] if isinstance(intruders, IntruderGeometry) else list(intruders)
     if not geoms:
         raise UsageError("encounter_from_geometry needs at least one intruder")
-    own0 = own if own is not None else _own_initial(1, EncounterConfig())
+    own0 = own if own is not None else initial_ownships(1, EncounterConfig())
     own0 = AircraftState(*(np.atleast_1d(getattr(own0, f)).astype(float) for f in "x y z gs trk vs".split()))
     m = len(geoms)
     s_max = max(1, max(len(g.maneuvers) for g in geoms))
@@ -85,16 +85,16 @@ def encounter_from_geometry(intruders: "Sequence[IntruderGeometry] | IntruderGeo
         t0j = trk0[:, j:j + 1]
         if g.angle_at == "cpa":
             z = np.zeros((1, 1))
-            probe = _integrate(AircraftState(z, z, z, gs[:, j:j + 1], z, vs[:, j:j + 1]), sj, g.t_cpa_s, dt_s, dt_s)
+            probe = fly_segments(AircraftState(z, z, z, gs[:, j:j + 1], z, vs[:, j:j + 1]), sj, g.t_cpa_s, dt_s, dt_s)
             t0j = wrap_2pi(t0j - wrap_pi(probe.trk))
         hint = np.full((1, 1), 90.0 * DEG if g.hmd_m >= 0 else -90.0 * DEG)
-        init, b = _place(own0, gs[:, j:j + 1], vs[:, j:j + 1], t0j, sj, g.t_cpa_s, abs(g.hmd_m),
+        init, b = place_intruders(own0, gs[:, j:j + 1], vs[:, j:j + 1], t0j, sj, g.t_cpa_s, abs(g.hmd_m),
                          g.vmd_m, hint, dt_s)
         inits.append(init)
         bearings.append(b)
     intr = AircraftState(*(np.concatenate([getattr(s, f) for s in inits], axis=1) for f in "x y z gs trk vs".split()))
     if realised:
-        r_h, r_v, r_t = _realised_cpa(own0, intr, segt, duration_s, dt_s, check_dt_s)
+        r_h, r_v, r_t = realised_cpa(own0, intr, segt, duration_s, dt_s, check_dt_s)
     else:
         r_h = r_v = r_t = np.full((1, m), np.nan)
     params = {k: np.full((1, m), np.nan) for k in PARAM_NAMES}

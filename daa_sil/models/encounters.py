@@ -75,7 +75,8 @@ INTRUDER_PERFORMANCE = Performance(max_turn_rate=10.0 * DEG, horizontal_accel=5.
 PARAM_NAMES = ("speed_mps", "vs_mps", "ia_deg", "ia_sign", "hma_deg", "hmd_m", "vmd_m", "turn_rate_dps",
                "advance", "t_cpa_s", "hmd_real_m", "vmd_real_m", "t_cpa_real_s", "cpa_bearing_deg",
                "n_rejected")
-_SEG_NAMES = ("seg_start_s", "seg_end_s", "seg_turn_rate", "seg_accel", "seg_vaccel")
+#: the fields of an :class:`EncounterSet` that hold the intruders' maneuver segments
+SEGMENT_FIELDS = ("seg_start_s", "seg_end_s", "seg_turn_rate", "seg_accel", "seg_vaccel")
 
 
 @dataclass(frozen=True)
@@ -190,7 +191,7 @@ class EncounterSet:
         idx = np.arange(len(self))[idx] if not isinstance(idx, np.ndarray) or idx.dtype == bool else idx
         idx = np.asarray(idx, dtype=np.int64)
         return replace(self, own=self.own[idx], intr=self.intr[idx],
-                       **{k: getattr(self, k)[idx] for k in _SEG_NAMES},
+                       **{k: getattr(self, k)[idx] for k in SEGMENT_FIELDS},
                        encounter_id=self.encounter_id[idx], seed=self.seed[idx],
                        params={k: v[idx] for k, v in self.params.items()})
 
@@ -215,7 +216,7 @@ def concat_encounters(sets: Sequence[EncounterSet]) -> EncounterSet:
     cat = np.concatenate
     return replace(a, own=AircraftState(*(cat([getattr(s.own, f) for s in sets]) for f in "x y z gs trk vs".split())),
                    intr=AircraftState(*(cat([getattr(s.intr, f) for s in sets]) for f in "x y z gs trk vs".split())),
-                   **{k: cat([getattr(s, k) for s in sets]) for k in _SEG_NAMES},
+                   **{k: cat([getattr(s, k) for s in sets]) for k in SEGMENT_FIELDS},
                    encounter_id=cat([s.encounter_id for s in sets]), seed=cat([s.seed for s in sets]),
                    params={k: cat([s.params[k] for s in sets]) for k in a.params})
 
@@ -227,9 +228,10 @@ def _controls(seg, t):
     return (np.where(act, w, 0.0).sum(-1), np.where(act, a, 0.0).sum(-1), np.where(act, av, 0.0).sum(-1))
 
 
-def _integrate(state: AircraftState, seg, t_end: float, dt: float, sub: float, on_sample=None) -> AircraftState:
-    """Advance ``state`` from 0 to ``t_end`` on the step grid ``dt`` (controls fixed per step),
-    in sub-steps ``sub``; ``on_sample(t, state)`` is called at every sub-step time (incl. 0)."""
+def fly_segments(state: AircraftState, seg, t_end: float, dt: float, sub: float, on_sample=None) -> AircraftState:
+    """Fly ``state`` along the maneuver segments ``seg`` from 0 to ``t_end`` (s) on the step grid
+    ``dt`` (s; controls fixed per step), in sub-steps ``sub`` (s); ``on_sample(t, state)`` is called
+    at every sub-step time (incl. 0)."""
     n_sub = max(1, int(round(dt / sub)))
     h = dt / n_sub
     s = state
@@ -250,7 +252,7 @@ def _integrate(state: AircraftState, seg, t_end: float, dt: float, sub: float, o
     return s
 
 
-def _place(own0: AircraftState, intr_gs, intr_vs, intr_trk0, seg, t_c, hmd_abs, vmd, hint_bearing,
+def place_intruders(own0: AircraftState, intr_gs, intr_vs, intr_trk0, seg, t_c, hmd_abs, vmd, hint_bearing,
            dt: float) -> tuple[AircraftState, np.ndarray]:
     """Intruder initial states so that at ``t_c`` (s) the horizontal offset from the straight
     ownship is ``hmd_abs`` perpendicular to the relative velocity (side nearest ``hint_bearing``,
@@ -260,7 +262,7 @@ def _place(own0: AircraftState, intr_gs, intr_vs, intr_trk0, seg, t_c, hmd_abs, 
     zero = np.zeros(shape)
     tmpl0 = AircraftState(zero, zero, zero, intr_gs, intr_trk0, intr_vs)
     tc = float(t_c)
-    tmpl_c = _integrate(tmpl0, seg, tc, dt, dt)
+    tmpl_c = fly_segments(tmpl0, seg, tc, dt, dt)
     ov = own0.velocity()
     own_c = own0.position() + ov * tc
     own_c = np.broadcast_to(own_c[:, None, :], shape + (3,)) if len(shape) == 2 else own_c
@@ -281,8 +283,9 @@ def _place(own0: AircraftState, intr_gs, intr_vs, intr_trk0, seg, t_c, hmd_abs, 
     return init, np.where(use_pos, b_pos, b_neg)
 
 
-def _realised_cpa(own0: AircraftState, init: AircraftState, seg, duration: float, dt: float, sub: float):
-    """Minimum horizontal range over [0, duration] on a ``sub`` grid: (hmd, vmd, t) arrays."""
+def realised_cpa(own0: AircraftState, init: AircraftState, seg, duration: float, dt: float, sub: float):
+    """The intruders' closest approach to the straight ownship over [0, duration] (s), sampled on a
+    ``sub`` (s) grid: arrays of horizontal miss distance (m), vertical offset at it (m) and its time (s)."""
     ov = own0.velocity()
     op = own0.position()
     two_d = init.x.ndim == 2
@@ -299,7 +302,7 @@ def _realised_cpa(own0: AircraftState, init: AircraftState, seg, duration: float
         best["t"] = np.where(better, t, best["t"])
         best["dz"] = np.where(better, dz, best["dz"])
 
-    _integrate(init, seg, duration, dt, sub, sample)
+    fly_segments(init, seg, duration, dt, sub, sample)
     return best["r"], best["dz"], best["t"]
 
 
@@ -357,7 +360,8 @@ def _segments_from_params(p: dict, cfg: EncounterConfig) -> tuple:
     return tuple(a[..., None] for a in (t1, t2, rate, z, z))
 
 
-def _own_initial(n: int, cfg: EncounterConfig) -> AircraftState:
+def initial_ownships(n: int, cfg: EncounterConfig) -> AircraftState:
+    """``n`` ownships at the origin, flying north level at ``cfg``'s altitude (m) and speed (m/s)."""
     z = np.zeros(n)
     return AircraftState(z, z, z + cfg.own_alt_m, z + cfg.own_speed_mps, z, z)
 
@@ -378,7 +382,7 @@ def sample_encounters(n: int, seed: int = 0, start: int = 0, config: "EncounterC
     ids = np.arange(start, start + n, dtype=np.int64)
     rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(int(seed), spawn_key=(int(i),))))
             for i in ids]
-    own0 = _own_initial(n, cfg)
+    own0 = initial_ownships(n, cfg)
     out = {k: np.full((n, m), np.nan) for k in PARAM_NAMES}
     out["n_rejected"] = np.zeros((n, m))
     init = AircraftState(*(np.full((n, m), np.nan) for _ in range(6)))
@@ -395,9 +399,9 @@ def sample_encounters(n: int, seed: int = 0, start: int = 0, config: "EncounterC
         seg = _segments_from_params(p, cfg)
         trk0 = wrap_2pi(own_e.trk[:, None] - p["ia_sign"] * p["ia_deg"] * DEG)
         hint = -p["hma_deg"] * DEG  # hma is counter-clockwise; bearings here are clockwise
-        cand, bearing = _place(own_e, p["speed_mps"], p["vs_mps"], trk0, seg, cfg.t_cpa_s, p["hmd_m"],
+        cand, bearing = place_intruders(own_e, p["speed_mps"], p["vs_mps"], trk0, seg, cfg.t_cpa_s, p["hmd_m"],
                                p["vmd_m"], hint, cfg.dt_s)
-        r_h, r_v, r_t = _realised_cpa(own_e, cand, seg, cfg.duration_s, cfg.dt_s, cfg.check_dt_s)
+        r_h, r_v, r_t = realised_cpa(own_e, cand, seg, cfg.duration_s, cfg.dt_s, cfg.check_dt_s)
         ok &= (np.abs(r_t - cfg.t_cpa_s) <= cfg.cpa_tol_s) & (r_h >= p["hmd_m"] - cfg.cpa_tol_m)
         ok &= _start_ok(own_e, cand, cfg)
         take = ok & pending[enc]

@@ -71,7 +71,7 @@ never reversing the direction.
 
 Randomness: every encounter has its own generator (``seeds``); at construction it draws, in this
 order, the response components (T_init, T_coord, T_exec, Rayleigh) and then blocks of
-``_K`` per-decision values (see :func:`_draw_block`), so the stream does not depend on N or on
+``_K`` per-decision values (see :func:`draw_decisions`), so the stream does not depend on N or on
 other encounters.
 """
 
@@ -87,7 +87,7 @@ from daa_sil.geometry.kinematics import AircraftState, Command
 from daa_sil.geometry.units import DEG, FPM
 from daa_sil.daa.alerting import safe_avoidance
 from daa_sil.models.pilot_display import guidance_from_daa
-from daa_sil.models.pilot_choice import _BLOCK_KEYS, _as_rng, _draw_block, choose_maneuver, sample_response_components
+from daa_sil.models.pilot_choice import DRAW_KEYS, as_generator, draw_decisions, choose_maneuver, sample_response_components
 from daa_sil.models.pilot_config import Guidance, PilotConfig, PilotOutput
 
 
@@ -118,12 +118,12 @@ class PilotModel:
         seeds = list(seeds) if not isinstance(seeds, (int, np.integer)) else [seeds]
         if len(seeds) != self.n:
             raise UsageError(f"pilot model needs {self.n} seeds, got {len(seeds)}")
-        self._rngs = [_as_rng(s) for s in seeds]
+        self._rngs = [as_generator(s) for s in seeds]
         c = self.cfg
         comps = [sample_response_components(r, None, c) for r in self._rngs]
         first = {k: np.array([d[k] for d in comps], float) for k in ("init", "coord", "exec", "rayleigh")}
-        blocks = [_draw_block(r, c) for r in self._rngs]
-        self._buf = {k: np.stack([b[k] for b in blocks]) for k in _BLOCK_KEYS}
+        blocks = [draw_decisions(r, c) for r in self._rngs]
+        self._buf = {k: np.stack([b[k] for b in blocks]) for k in DRAW_KEYS}
         if c.mode == "guendel":
             self._resp, self._exec0 = first["init"] + first["coord"] + first["exec"], first["exec"]
         elif c.mode == "no_atc":
@@ -171,10 +171,10 @@ class PilotModel:
     def _draws(self, idx: np.ndarray) -> dict:
         need = self.k_dec[idx].max(initial=-1) + 1
         while need > self._buf["exec"].shape[1]:
-            more = [_draw_block(self._rngs[i], self.cfg) for i in range(self.n)]
-            for k in _BLOCK_KEYS:
+            more = [draw_decisions(self._rngs[i], self.cfg) for i in range(self.n)]
+            for k in DRAW_KEYS:
                 self._buf[k] = np.concatenate([self._buf[k], np.stack([b[k] for b in more])], axis=1)
-        return {k: self._buf[k][idx, self.k_dec[idx]] for k in _BLOCK_KEYS}
+        return {k: self._buf[k][idx, self.k_dec[idx]] for k in DRAW_KEYS}
 
     def _schedule_next(self, idx: np.ndarray, t: float) -> None:
         c = self.cfg

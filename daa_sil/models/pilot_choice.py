@@ -22,12 +22,13 @@ def sample_response_components(rng: np.random.Generator, size, cfg: PilotConfig)
 _K = 32
 
 
-_BLOCK_KEYS = ("exec", "update", "u_turn", "u_follow_h", "u_tie_h", "u_follow_v", "u_tie_v", "g_primary",
+#: the pilot's per-decision random draws, in the order they are drawn
+DRAW_KEYS = ("exec", "update", "u_turn", "u_follow_h", "u_tie_h", "u_follow_v", "u_tie_v", "g_primary",
                "g_opposite", "g_vertical")
 
 
-def _draw_block(rng: np.random.Generator, cfg: PilotConfig, k: int = _K) -> dict:
-    """Per-decision draws for ``k`` decisions (fixed order: :data:`_BLOCK_KEYS`). ``update`` is
+def draw_decisions(rng: np.random.Generator, cfg: PilotConfig, k: int = _K) -> dict:
+    """Per-decision draws for ``k`` decisions (fixed order: :data:`DRAW_KEYS`). ``update`` is
     a unit-mean exponential scaled by the level's mean at use; gammas are in deg / ft with the
     offset already subtracted."""
     return {"exec": rng.exponential(cfg.exec_mean_s, k), "update": rng.exponential(1.0, k),
@@ -38,7 +39,8 @@ def _draw_block(rng: np.random.Generator, cfg: PilotConfig, k: int = _K) -> dict
             "g_vertical": rng.gamma(cfg.vertical[0], cfg.vertical[1], k) - cfg.vertical[2]}
 
 
-def _as_rng(s) -> np.random.Generator:
+def as_generator(s) -> np.random.Generator:
+    """A pilot's generator from a seed (non-negative int), a ``SeedSequence`` or a ``Generator`` (as is)."""
     if isinstance(s, np.random.Generator):
         return s
     if isinstance(s, np.random.SeedSequence):
@@ -55,7 +57,7 @@ def _as_rng(s) -> np.random.Generator:
 def choose_maneuver(cur_trk, cur_vs, cur_gs, g: Guidance, draws: dict, cfg: PilotConfig
                     ) -> tuple[Command, np.ndarray, np.ndarray]:
     """The maneuver decided from guidance ``g`` (all (n,) arrays; ``draws`` one value per pilot of
-    each :data:`_BLOCK_KEYS` entry). Returns ``(cmd, axis, direction)`` codes; axis 0 (hold the
+    each :data:`DRAW_KEYS` entry). Returns ``(cmd, axis, direction)`` codes; axis 0 (hold the
     current state) when no candidate exists. Pure and vectorised."""
     det = cfg.deterministic
     cur_trk, cur_vs, cur_gs = (np.asarray(a, float) for a in (cur_trk, cur_vs, cur_gs))
