@@ -14,8 +14,8 @@ import numpy as np
 
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.study.metrics import (BASELINE_GROUP, CONF, PAPER_FLIGHT_HOURS, PAPER_MAX_PI, PI_SIGNIFICANT, Estimate,
-                                  _check, as_columns, groups_of)
-from daa_sil.study.counting import COUNT_SOURCES, OPTIONAL_QUANTITIES, Reading, _decision_columns, normalise_decisions
+                                  check_columns, as_columns, groups_of)
+from daa_sil.study.counting import COUNT_SOURCES, OPTIONAL_QUANTITIES, Reading, provenance_columns, normalise_decisions
 from daa_sil.study.stats import (
     DEFAULT_REPLICATES,
     DEFAULT_SEED,
@@ -39,7 +39,7 @@ class Study:
                  seed: int = DEFAULT_SEED, conf: float = CONF, baseline: str = BASELINE_GROUP, dt_s: float = 1.0):
         cols = enc if isinstance(enc, dict) else as_columns(enc)
         cols = {k: np.asarray(v) for k, v in cols.items()}
-        _check(cols)
+        check_columns(cols)
         self.reading = reading if reading is not None else Reading()
         self.conf = conf
         self.baseline = baseline
@@ -111,7 +111,7 @@ class Study:
                 # blends of a pilot maneuver matching neither its direction nor its axis
                 e["blend_neither"] = np.maximum(e["blend_intent"] - e["blend_exact"] - e["blend_axis"], 0.0)
                 e["blend_neither_any"] = (e["blend_neither"] > 0).astype(float)
-            prov = _decision_columns(dec_cols, g, self.ids)
+            prov = provenance_columns(dec_cols, g, self.ids)
             self.provenance[g] = prov is not None
             if prov:
                 e.update(prov)

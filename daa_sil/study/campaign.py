@@ -51,7 +51,7 @@ import pyarrow as pa
 from daa_sil.errors import FileFormatError, UsageError, warn
 from daa_sil.files import atomic_write_json, ensure_dir, remove_stale_temps
 from daa_sil.config.groups import GroupSpec, parse_groups
-from daa_sil.study.campaign_files import (_versions, check_out_dir, chunk_done, chunk_paths, chunk_problem,
+from daa_sil.study.campaign_files import (software_versions, check_out_dir, chunk_done, chunk_paths, chunk_problem,
                                          load_campaign_json, write_chunk)
 from daa_sil.study.executors import make_executor
 from daa_sil.study.campaign_files import CAMPAIGN_FORMAT
@@ -241,7 +241,7 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
                                      **config.effective_reading.encounter_overrides())
     save_encounters(encs, enc_path)  # atomic
     meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "resolved_config": config.resolved(),
-            "versions": _versions(),
+            "versions": software_versions(),
             "preset": config.preset, "seed": config.seed, "status": "running",
             "seeds": {"campaign": config.seed,
                       "encounters": "encounter i: SeedSequence(campaign, spawn_key=(i,)); its 'seed' column in "

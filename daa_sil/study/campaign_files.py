@@ -166,7 +166,8 @@ def load_campaign_json(out_dir: Path) -> dict:
     return meta
 
 
-def _versions() -> dict:
+def software_versions() -> dict:
+    """The versions of daa-sil, Python and the libraries whose numbers a campaign's results depend on."""
     import llvmlite
     import numba
 

@@ -189,7 +189,7 @@ def normalise_decisions(dec) -> "dict | None":
     return out
 
 
-def _decision_columns(dec: "dict | None", group: str, ids: np.ndarray) -> "dict | None":
+def provenance_columns(dec: "dict | None", group: str, ids: np.ndarray) -> "dict | None":
     """Per-encounter provenance counts of ``group`` from a normalised decision table (or None):
     wait/no-wait decisions with a ``decided_by``, those decided by the map, by both and by ProjL;
     map lookups (``in_box`` given) and those inside the box."""

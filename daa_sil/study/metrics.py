@@ -161,7 +161,8 @@ def as_columns(table) -> dict:
     raise UsageError(f"result table must be a pyarrow Table or a dict of arrays, got {type(table).__name__}")
 
 
-def _check(cols: dict, where: str = "encounter table") -> None:
+def check_columns(cols: dict, where: str = "encounter table") -> None:
+    """Raise :class:`FileFormatError` naming ``where`` if a required column is missing or the columns differ in length."""
     missing = [c for c in REQUIRED_COLUMNS if c not in cols]
     if missing:
         raise FileFormatError(f"{where} lacks column(s) {', '.join(missing)}")
@@ -196,7 +197,7 @@ def group_metrics(enc, group: "str | None" = None, conf: float = CONF, dt_s: flo
     flight hours, means Student t. Kept as the baseline of ``benchmarks/bench_report.py`` and for the
     interval-width comparison; :class:`Study` is the encounter-level replacement."""
     cols = as_columns(enc) if not isinstance(enc, dict) else {k: np.asarray(v) for k, v in enc.items()}
-    _check(cols)
+    check_columns(cols)
     if group is None:
         gs = groups_of(cols)
         if len(gs) != 1:
@@ -272,7 +273,7 @@ def compute_metrics(enc, baseline: str = BASELINE_GROUP, conf: float = CONF, dt_
     """``{group: group_metrics}`` for every group, plus the changes vs ``baseline``
     (``no_wait_reduction_pct``, ``received_change_pct``) where the baseline is present."""
     cols = as_columns(enc) if not isinstance(enc, dict) else {k: np.asarray(v) for k, v in enc.items()}
-    _check(cols)
+    check_columns(cols)
     groups = groups_of(cols)
     if not groups:
         raise UsageError("the results hold no encounters")

@@ -106,7 +106,7 @@ def _faa(rate: float) -> str:
 def inconsistency_section(studies: "Mapping | None" = None) -> list[str]:
     """The report section (the two run checks on every study that has B-2 and ID-2)."""
     from daa_sil.study.findings import fmt
-    from daa_sil.study.report_format import _ci, _table
+    from daa_sil.study.report_format import estimate_text, markdown_table
 
     pr = _pr()
     L = ["## Where the paper contradicts itself", "",
@@ -115,7 +115,7 @@ def inconsistency_section(studies: "Mapping | None" = None) -> list[str]:
     rows = [[r["group"], f"{_n(r['received'])} / {_n(r['b2'])} − 1 = {r['computed']:.2f} %", f"{r['printed']:.2f} %",
              "yes" if r["agrees"] else "**no**"] for r in reception_rows()]
     L += ["**1. The pilot-command reception table against its own counts.**", "",
-          _table(["group", "recomputed", "printed", "agree?"], rows), ""]
+          markdown_table(["group", "recomputed", "printed", "agree?"], rows), ""]
     a = averages()
     rc, rd = a["reception"], a["reduction"]
     L += ["**2. The averages of the text are pooled ratios against the mean of both baselines, not means of the "
@@ -138,7 +138,7 @@ def inconsistency_section(studies: "Mapping | None" = None) -> list[str]:
           f"LoWC encounters (the LoWC figure) but a P(LoWC)/h {ratio:.2f} times B-2's (2.81 / 2.36 × 10⁻⁷). P(LoWC) is a "
           "share of time steps, so P = (LoWC encounters × their mean LoWC duration) / all steps: both statements hold "
           f"only if ID-2's LoWCs last at least {ratio:.2f} times as long as B-2's.", ""]
-    L += _duration_check(studies or {}, fmt, _ci, _table)
+    L += _duration_check(studies or {}, fmt, estimate_text, markdown_table)
     rows = [[r["group"], f"{r['p_per_hr']:.2e}", f"{r['share']:.2e}", f"{r['s_per_hr']:.2f}",
              f"≥ {r['events_per_hr_min']:.1e} ({_faa(r['events_per_hr_min'])})"] for r in lt]
     L += ["**5. P(LoWC) per flight hour shrinks as 1/N.** The paper's Eq. divides the share of time in LoWC by the "
@@ -146,11 +146,11 @@ def inconsistency_section(studies: "Mapping | None" = None) -> list[str]:
           "times the encounters: the \"Remote\" category is an artefact of N. The N-free quantities implied by its own "
           "numbers: the share of time in LoWC (× 666.67 h), the seconds of LoWC per flight hour (× 3,600 s), and, "
           "since one LoWC lasts at most one 240 s encounter, a lower bound on LoWC events per flight hour:", "",
-          _table(["group", "P(LoWC)/h printed", "share of time in LoWC", "LoWC s per flight hour",
+          markdown_table(["group", "P(LoWC)/h printed", "share of time in LoWC", "LoWC s per flight hour",
                   "LoWC events per flight hour"], rows), "",
           "So by the paper's own numbers LoWC events occur at least a few times per thousand flight hours, which the "
           "FAA table calls \"Frequent\", not \"Remote\". Ours, per reading (N-free, encounter-level 95 % CIs):", ""]
-    L += _rate_table(studies or {}, _ci, _table)
+    L += _rate_table(studies or {}, estimate_text, markdown_table)
     L += ["**6. The wait-versus-speed text contradicts itself.** Of the two top views at +5 °/s, the map at "
           "v_i = 155 m/s \"has a higher wait time than the map\" at 300 m/s, \"since the horizontal speed in the "
           "latter plot is higher\" (a faster, turning intruder waits less), then \"In the case of a non-turning intruder, the wait time also "
@@ -163,7 +163,7 @@ def inconsistency_section(studies: "Mapping | None" = None) -> list[str]:
     return L
 
 
-def _duration_check(studies: Mapping, fmt, _ci, _table) -> list[str]:
+def _duration_check(studies: Mapping, fmt, estimate_text, markdown_table) -> list[str]:
     rows = []
     for lab, st in studies.items():
         if not {"B-2", "ID-2"} <= set(st.groups):
@@ -173,28 +173,28 @@ def _duration_check(studies: Mapping, fmt, _ci, _table) -> list[str]:
         p = st._boot_estimate(st.change_sample("ID-2", "p_lowc_step", "B-2", "ratio"), "paired bootstrap")
         rows.append([lab, f"{int(st.sum('ID-2', 'lowc').value)} / {int(st.sum('B-2', 'lowc').value)} "
                           f"(McNemar p = {m.p_value:.2g})",
-                     _ci(st.estimate("ID-2", "lowc_duration_mean"), "f1") + " / "
-                     + _ci(st.estimate("B-2", "lowc_duration_mean"), "f1"),
-                     _ci(d, "pctv"), _ci(p, "pctv")])
+                     estimate_text(st.estimate("ID-2", "lowc_duration_mean"), "f1") + " / "
+                     + estimate_text(st.estimate("B-2", "lowc_duration_mean"), "f1"),
+                     estimate_text(d, "pctv"), estimate_text(p, "pctv")])
     if not rows:
         return ["(No reading here ran both B-2 and ID-2: the check needs both.)", ""]
     return ["Checked on our runs (paired over the same encounters):", "",
-            _table(["reading", "LoWC encounters ID-2 / B-2", "mean LoWC duration of a LoWC encounter, s: ID-2 / B-2",
+            markdown_table(["reading", "LoWC encounters ID-2 / B-2", "mean LoWC duration of a LoWC encounter, s: ID-2 / B-2",
                     "ID-2 vs B-2: mean LoWC duration", "ID-2 vs B-2: P(LoWC) (share of time)"], rows), ""]
 
 
-def _rate_table(studies: Mapping, _ci, _table) -> list[str]:
+def _rate_table(studies: Mapping, estimate_text, markdown_table) -> list[str]:
     rows = []
     for lab, st in studies.items():
         for g in st.groups:
             if not st.available(g, "lowc_s_per_hr"):
                 continue
-            rows.append([lab, g, _ci(st.estimate(g, "lowc_s_per_hr"), "g3"),
-                         _ci(st.estimate(g, "lowc_rate_per_hr"), "sci"),
-                         _ci(st.estimate(g, "p_lowc_per_hr"), "sci") + f" (at {st.flight_hours(g):,.1f} h)"])
+            rows.append([lab, g, estimate_text(st.estimate(g, "lowc_s_per_hr"), "g3"),
+                         estimate_text(st.estimate(g, "lowc_rate_per_hr"), "sci"),
+                         estimate_text(st.estimate(g, "p_lowc_per_hr"), "sci") + f" (at {st.flight_hours(g):,.1f} h)"])
     if not rows:
         return ["(no results)", ""]
-    return [_table(["reading", "group", "LoWC s per flight hour", "LoWC encounters per flight hour",
+    return [markdown_table(["reading", "group", "LoWC s per flight hour", "LoWC encounters per flight hour",
                     "paper's Eq. at our flight hours"], rows), ""]
 
 

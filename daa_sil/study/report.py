@@ -30,8 +30,8 @@ from daa_sil.study.analysis import Study
 from daa_sil.study.counting import COUNTING_DEFAULTS, COUNTING_HELP, counting_options
 from .stats import DEFAULT_REPLICATES, DEFAULT_SEED, independent_difference
 from daa_sil.study.report_input import Block, build_blocks
-from daa_sil.study.report_figures import _figures, _slug
-from daa_sil.study.report_format import GROUP_TABLES, _all_groups, _cell, _ci, _table
+from daa_sil.study.report_figures import group_figures, file_slug
+from daa_sil.study.report_format import GROUP_TABLES, groups_in_order, group_cell, estimate_text, markdown_table
 from daa_sil.study.report_findings import findings_section
 from daa_sil.study.paper_checks import inconsistency_section
 from daa_sil.study.signatures import signature_section
@@ -54,7 +54,7 @@ def _sources(blocks: Sequence[Block], studies: dict) -> list[str]:
                      "–" if b.seed is None else str(b.seed), f"{st.n:,}", ", ".join(st.groups),
                      (b.meta or {}).get("preset") or "–", b.reading.describe()])
     L = ["## Readings and sources", "",
-         _table(["reading", "results", "campaign seed", "encounters", "groups", "preset", "settings"], rows), ""]
+         markdown_table(["reading", "results", "campaign seed", "encounters", "groups", "preset", "settings"], rows), ""]
     L += ["Counting settings (the same simulation can be counted several ways; `--recount` adds a reading):", ""]
     for k, opts in counting_options().items():
         helps = COUNTING_HELP.get(k, {})
@@ -65,7 +65,7 @@ def _sources(blocks: Sequence[Block], studies: dict) -> list[str]:
 
 
 def _group_tables(studies: dict) -> list[str]:
-    groups = _all_groups(studies)
+    groups = groups_in_order(studies)
     labels = list(studies)
     L = ["## Per-group tables", "",
          "Value [95 % CI] per reading; counts per encounter with the total in brackets. Zeros carry exact "
@@ -80,14 +80,14 @@ def _group_tables(studies: dict) -> list[str]:
                     r = [g, pv]
                 else:
                     r = [g, fmt(pv, kind) if pv is not None and math.isfinite(pv) else "–"]
-                r += [_cell(studies[lab], g, metric, kind, total) for lab in labels]
+                r += [group_cell(studies[lab], g, metric, kind, total) for lab in labels]
                 rows.append(r)
-            L += [f"**{label}**", "", _table(["group", "paper"] + labels, rows), ""]
+            L += [f"**{label}**", "", markdown_table(["group", "paper"] + labels, rows), ""]
         if title.startswith("Penetration"):
             rows = [[g] + [fmt(studies[lab].pi_max(g), "f2") if g in studies[lab].groups else "–" for lab in labels]
                     for g in groups]
             L += ["**maximum PI (preset's constants; the paper: 3.79 in ID-1)**", "",
-                  _table(["group"] + labels, rows), ""]
+                  markdown_table(["group"] + labels, rows), ""]
     return L
 
 
@@ -105,8 +105,8 @@ def _paired_section(studies: dict) -> list[str]:
                 continue
             m = st.mcnemar(g, st.baseline)
             d = st._boot_estimate(st.change_sample(g, "p_lowc", st.baseline, "difference"), "paired bootstrap")
-            rows.append([g, f"{m.a_only} / {m.b_only}", f"{m.p_value:.3g}", _ci(d, "pct")])
-        L += [f"*{lab}*", "", _table(["group", f"LoWC only in group / only in {st.baseline}", "McNemar p",
+            rows.append([g, f"{m.a_only} / {m.b_only}", f"{m.p_value:.3g}", estimate_text(d, "pct")])
+        L += [f"*{lab}*", "", markdown_table(["group", f"LoWC only in group / only in {st.baseline}", "McNemar p",
                                       "ΔP(LoWC) [95 % CI]"], rows), ""]
     return L
 
@@ -151,16 +151,16 @@ def _ablation_section(studies: dict) -> list[str]:
             for r in rows:
                 m = r.get("mcnemar")
                 test = (f"McNemar {m.a_only}/{m.b_only} discordant, p = {m.p_value:.3g}" if m else "paired bootstrap")
-                body.append([r["label"], _ci(r["full"], r["kind"]), _ci(r["ablation"], r["kind"]),
-                             _ci(r["diff"], r["kind"]), test, "yes" if r["measurable"] else "no"])
+                body.append([r["label"], estimate_text(r["full"], r["kind"]), estimate_text(r["ablation"], r["kind"]),
+                             estimate_text(r["diff"], r["kind"]), test, "yes" if r["measurable"] else "no"])
             L += [f"### {lab}: {what}", "",
-                  _table(["metric", full, abl, f"{full} − {abl} [95 % CI]", "test", "measurable?"], body), ""]
+                  markdown_table(["metric", full, abl, f"{full} − {abl} [95 % CI]", "test", "measurable?"], body), ""]
             nothing = [r for r in rows if not r["measurable"]]
             why = ""
             if st.provenance.get(full):
-                why = (f" In {full} the map decided {_cell(st, full, 'map_decided_share', 'pct', False)} of the "
+                why = (f" In {full} the map decided {group_cell(st, full, 'map_decided_share', 'pct', False)} of the "
                        f"wait/no-wait decisions (the rest would be the same with \"always wait\"), and "
-                       f"{_cell(st, full, 'in_box_share', 'pct', False)} of its lookups fell inside the map's box.")
+                       f"{group_cell(st, full, 'in_box_share', 'pct', False)} of its lookups fell inside the map's box.")
             if rows and len(nothing) == len(rows):
                 L += [f"**The difference is not measurable on any metric**: every paired 95 % CI of {full} − {abl} "
                       f"includes 0 (and McNemar p ≥ 0.05 for LoWC encounters) over {st.n:,} encounters. "
@@ -190,11 +190,11 @@ def _provenance_section(studies: dict) -> list[str]:
             continue
         rows = []
         for g in have:
-            rows.append([g, _cell(st, g, "map_decided_share", "pct", False),
-                         _cell(st, g, "map_or_both_share", "pct", False), _cell(st, g, "in_box_share", "pct", False),
+            rows.append([g, group_cell(st, g, "map_decided_share", "pct", False),
+                         group_cell(st, g, "map_or_both_share", "pct", False), group_cell(st, g, "in_box_share", "pct", False),
                          fmt(st.sum(g, "n_dec").value, "int") if st.has(g, "n_dec") else "–",
                          fmt(st.sum(g, "n_lookup").value, "int") if st.has(g, "n_lookup") else "–"])
-        L += [f"*{lab}*", "", _table(["group", "decided by the wait function (map)", "map or both", "lookups inside the box",
+        L += [f"*{lab}*", "", markdown_table(["group", "decided by the wait function (map)", "map or both", "lookups inside the box",
                                       "decisions", "lookups"], rows), ""]
     return L
 
@@ -229,7 +229,7 @@ def _seed_section(blocks, studies, rows) -> list[str]:
             k = f.value_format
             body.append([f.label, fmt(xa.value, k), fmt(xb.value, k),
                          f"{fmt(d.value, k)} [{fmt(lo, k)}, {fmt(hi, k)}]", "yes" if ok else "**no**"])
-        L += [f"### {a.label} vs {b.label}", "", _table(["finding", a.label, b.label, "difference [95 % CI]", "agree?"],
+        L += [f"### {a.label} vs {b.label}", "", markdown_table(["finding", a.label, b.label, "difference [95 % CI]", "agree?"],
                                                           body), "",
               f"{len(body) - disagree} of {len(body)} findings agree within the CI; {disagree} do not.", ""]
     return L
@@ -259,7 +259,7 @@ def _width_section(blocks, studies) -> list[str]:
             f"Width of our 95 % CI divided by the width of the per-step interval the report used before ({b.label}): "
             "counts (Garwood Poisson), exact match (Clopper-Pearson over blends), P(LoWC)/flight hour (Clopper-Pearson "
             "over steps). Values above 1 mean the per-step interval was too narrow.", "",
-            _table(["group", "no-wait", "received", "exact match", "P(LoWC)/flight hr"], rows), ""]
+            markdown_table(["group", "no-wait", "received", "exact match", "P(LoWC)/flight hr"], rows), ""]
 
 
 def _methods(blocks, studies, replicates: int, seed: int, conf: float) -> list[str]:
@@ -346,7 +346,7 @@ def write_report(src, out_dir: "str | os.PathLike", baseline: str = BASELINE_GRO
     out = ensure_dir(out_dir)
     figures = {}
     for i, b in enumerate(blocks):
-        figures[b.label] = _figures(studies[b.label], out, "" if i == 0 else f"-{_slug(b.label)}")
+        figures[b.label] = group_figures(studies[b.label], out, "" if i == 0 else f"-{file_slug(b.label)}")
     text = render_markdown(blocks, studies, rows, replicates=replicates, seed=seed, conf=conf, figures=figures,
                            notes=notes)
     from daa_sil.files import atomic_write_json

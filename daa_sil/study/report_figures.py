@@ -19,7 +19,8 @@ def _save(fig, path: Path) -> None:
         fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
 
 
-def _figures(st: Study, out: Path, suffix: str = "") -> list[Path]:
+def group_figures(st: Study, out: Path, suffix: str = "") -> list[Path]:
+    """Draw the report's figures of ``st`` into ``out`` (names end in ``suffix``); the paths written."""
     import matplotlib
 
     matplotlib.use("Agg", force=True)
@@ -123,5 +124,6 @@ def _figures(st: Study, out: Path, suffix: str = "") -> list[Path]:
     return paths
 
 
-def _slug(label: str) -> str:
+def file_slug(label: str) -> str:
+    """``label`` made safe for a file name (letters, digits, ``-`` and ``_``)."""
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in label)

@@ -8,7 +8,7 @@ from typing import Sequence
 
 from daa_sil.study.findings import (BY_CONSTRUCTION, CONSISTENT, DIRECTION, EMPIRICAL, NOT_REPRODUCED, NOT_TESTABLE,
                                     REPRODUCED, untestable_statements)
-from daa_sil.study.report_format import _table
+from daa_sil.study.report_format import markdown_table
 from daa_sil.study.verdicts import RULES, tally
 
 #: what each verdict word means, whatever the kind of finding (the kinds' rules follow in the report)
@@ -43,7 +43,7 @@ def findings_section(blocks: Sequence, rows) -> list[str]:
     L = ["## Findings of the paper under each reading", "",
          "Every finding the paper states (`daa_sil/data/paper_findings.yaml`), our value with its encounter-level "
          "95 % confidence interval, and the verdict of its kind's rule (below). Counts are per encounter (the "
-         "paper's totals divided by its 10,000 encounters); changes in %.", "", _table(header, body), ""]
+         "paper's totals divided by its 10,000 encounters); changes in %.", "", markdown_table(header, body), ""]
     summ = []
     for lab in labels:
         c = tally(rows, lab)
@@ -52,7 +52,7 @@ def findings_section(blocks: Sequence, rows) -> list[str]:
                                                                           str(c[NOT_TESTABLE])])
     L += ["**Headline tally: empirical findings only.** Checks true by construction are counted apart; *not "
           "testable* means a group the finding needs was not run.", "",
-          _table(["reading", "empirical findings"] + list(EMPIRICAL) + [BY_CONSTRUCTION, NOT_TESTABLE], summ), ""]
+          markdown_table(["reading", "empirical findings"] + list(EMPIRICAL) + [BY_CONSTRUCTION, NOT_TESTABLE], summ), ""]
     L += ["### Verdict words", ""]
     L += [f"- **{k}**: {v}." for k, v in VERDICT_MEANING.items()]
     L += ["- *not testable* is no verdict: a group the finding needs was not run in that reading, or its statistic "

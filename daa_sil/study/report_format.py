@@ -12,13 +12,15 @@ from daa_sil.study.findings import fmt
 from daa_sil.study.metrics import PAPER_FLIGHT_HOURS, Estimate, paper_results
 
 
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """A Markdown table of ``rows`` under ``header`` (a ``|`` inside a cell becomes ``/``)."""
     out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     out += ["| " + " | ".join(str(c).replace("|", "/") for c in r) + " |" for r in rows]
     return "\n".join(out)
 
 
-def _ci(e: Estimate, kind: str = "g3") -> str:
+def estimate_text(e: Estimate, kind: str = "g3") -> str:
+    """An estimate as text, ``value [lo, hi]`` in the number format ``kind`` (a note when it has one; – when undefined)."""
     if e is None or not math.isfinite(e.value):
         return "–" if e is None or e.note in ("", "undefined on these results") else f"– ({e.note})"
     if math.isfinite(e.lo) and math.isfinite(e.hi):
@@ -94,24 +96,27 @@ GROUP_TABLES = (
 )
 
 
-def _cell(st: Study, g: str, metric, kind: str, total: bool) -> str:
+def group_cell(st: Study, g: str, metric, kind: str, total: bool) -> str:
+    """The report's cell of ``metric`` for group ``g``: its estimate, or its change from the baseline when ``metric``
+    is a tuple; with ``total``, the sum over encounters too."""
     if g not in st.groups:
         return "–"
     if isinstance(metric, tuple):
         _, m, ck = metric
         if g == st.baseline or st.baseline not in st.groups:
             return "–"
-        return _ci(st.change(g, m, kind=ck), kind)
+        return estimate_text(st.change(g, m, kind=ck), kind)
     if not st.available(g, metric):
         return "– (not in these results)"
     e = st.estimate(g, metric)
-    txt = _ci(e, kind)
+    txt = estimate_text(e, kind)
     if total and math.isfinite(e.value) and e.value != 0:
         txt += f" (total {fmt(st.sum(g, metric).value, 'int')})"
     return txt
 
 
-def _all_groups(studies: dict) -> list[str]:
+def groups_in_order(studies: dict) -> list[str]:
+    """Every group of the ``studies``, the paper's groups first in the paper's order."""
     seen = []
     for st in studies.values():
         for g in st.groups:

@@ -95,16 +95,16 @@ def paper_cell(sig: Signature, group: str) -> str:
 
 def our_cell(st, sig: Signature, group: str) -> str:
     """Our value [95 % CI] on a :class:`daa_sil.study.analysis.Study`."""
-    from daa_sil.study.report_format import _ci
+    from daa_sil.study.report_format import estimate_text
 
     if group not in st.groups or not st.available(group, sig.metric):
         return "–"
-    return _ci(st.estimate(group, sig.metric), sig.kind)
+    return estimate_text(st.estimate(group, sig.metric), sig.kind)
 
 
 def signature_section(studies: Mapping) -> list[str]:
     """The report section: one table per group, the paper's value (with arithmetic) and each reading's."""
-    from daa_sil.study.report_format import _all_groups, _table
+    from daa_sil.study.report_format import groups_in_order, markdown_table
 
     labels = list(studies)
     L = ["## Signatures: does our simulator behave like the paper's?", "",
@@ -113,11 +113,11 @@ def signature_section(studies: Mapping) -> list[str]:
          "arrival* is the share of arriving pilot commands not executed as sent (overridden in the baselines, "
          "blended in the integrated groups); *DAA allocations per received command* divides the waiting-status "
          "table's no-wait decisions by the reception table.", ""]
-    for g in _all_groups(studies):
+    for g in groups_in_order(studies):
         rows = [[s.label, paper_cell(s, g)] + [our_cell(studies[lab], s, g) for lab in labels] for s in SIGNATURES]
         if all(all(c == "–" for c in r[2:]) for r in rows):
             continue
-        L += [f"**{g}**", "", _table(["signature", "paper's value = its arithmetic"] + labels, rows), ""]
+        L += [f"**{g}**", "", markdown_table(["signature", "paper's value = its arithmetic"] + labels, rows), ""]
     return L
 
 
@@ -125,7 +125,7 @@ def signature_table(dirs: Mapping[str, "str | Path"], replicates: int = 400) -> 
     """A compact Markdown table (run x group x signature, value [95 % CI]) of campaign directories:
     the development experiments' summary (``docs/results/dev_experiments.py``)."""
     from daa_sil.study.analysis import Study
-    from daa_sil.study.report_format import _table
+    from daa_sil.study.report_format import markdown_table
     from daa_sil.study.report_input import load_block
 
     rows = []
@@ -136,7 +136,7 @@ def signature_table(dirs: Mapping[str, "str | Path"], replicates: int = 400) -> 
             rows.append([name, g] + [our_cell(st, s, g) for s in SIGNATURES])
     paper = [["paper", g] + [paper_cell(s, g).split(" = ")[0] for s in SIGNATURES]
              for g in ("B-1", "B-2", "IC-1", "ID-1", "ID-2")]
-    return _table(["run", "group"] + [s.key for s in SIGNATURES], paper + rows)
+    return markdown_table(["run", "group"] + [s.key for s in SIGNATURES], paper + rows)
 
 
 __all__ = ["Signature", "SIGNATURES", "paper_cell", "our_cell", "signature_section", "signature_table"]
