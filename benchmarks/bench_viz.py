@@ -204,7 +204,7 @@ def bench_realtime_live(scenario: Path, repeat: int, tmp: Path, speed: float = 2
                            start_new_session=True)
     try:
         for _ in range(500):
-            if viz._port_open("127.0.0.1", port, 0.1):
+            if viz.port_open("127.0.0.1", port, 0.1):
                 break
             time.sleep(0.02)
         _realtime_pairs(scenario, repeat, tmp, speed, f"rerun+http://127.0.0.1:{port}/proxy")

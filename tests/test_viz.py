@@ -139,11 +139,11 @@ def test_decisions_bands_and_well_clear_colour(tmp_path, table):
 
 def test_band_arc_geometry():
     th = get_thresholds("do365")
-    arc = viz._arc(350.0, 20.0, 1000.0)
+    arc = viz.track_arc(350.0, 20.0, 1000.0)
     trk = np.degrees(np.arctan2(arc[:, 0], arc[:, 1])) % 360.0
     assert np.isclose(trk[0], 350.0) and np.isclose(trk[-1], 20.0, atol=1e-3)
     assert np.allclose(np.hypot(arc[:, 0], arc[:, 1]), 1000.0, rtol=1e-5)
-    full = viz._arc(0.0, 360.0, th.dthr)
+    full = viz.track_arc(0.0, 360.0, th.dthr)
     assert len(full) > 100 and np.allclose(full[0], full[-1], atol=1e-2)
 
 

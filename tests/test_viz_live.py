@@ -147,7 +147,7 @@ def viewer(tmp_path):
                            stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         for _ in range(300):
-            if viz._port_open("127.0.0.1", port, 0.1) or srv.poll() is not None:
+            if viz.port_open("127.0.0.1", port, 0.1) or srv.poll() is not None:
                 break
             time.sleep(0.02)
         assert srv.poll() is None, "the headless viewer started"

@@ -148,9 +148,9 @@ def _check_args(args) -> None:
         # the shim's side is the vehicle's first --out; these follow it (a malformed one: one line, exit 2)
         output_specs(["udp:127.0.0.1:1", *args.vehicle_outs], args.tap, option_of_extra="--vehicle-out")
     if getattr(args, "connect", None):
-        from ..viz import _url_host_port
+        from ..viz import url_host_port
 
-        _url_host_port(args.connect)  # a malformed URL is a usage error; a missing viewer only a warning
+        url_host_port(args.connect)  # a malformed URL is a usage error; a missing viewer only a warning
     if hasattr(args, "serve_web"):
         from daa_sil.sil.web_ports import check_web_viewer_arguments
 

@@ -55,15 +55,15 @@ from __future__ import annotations
 
 from ..errors import OutputError, UsageError
 from daa_sil.geometry.thresholds import Thresholds, get_thresholds
-from .draw import DECISION_LEVEL, _arc, _fmt, _unit_enu, decision_text
-from .emitter import _Emitter, _rr
+from .draw import DECISION_LEVEL, track_arc, fmt_value, track_unit_enu, decision_text
+from .emitter import StepEmitter, rerun_module
 from .layout import blueprint
 from .logger import EncounterLogger
-from .records import BANDS, PER_INTRUDER, STRINGS, StepColumns, _bands_from_lists, _normalise, _pad_lists
-from .sinks import (APP_ID, SPAWN_PORT, WEB_GRPC_PORT, WEB_HTTP_PORT, Recording, SinkOptions, WebServer, _port_open,
-                    _url_host_port, check_rrd_path, has_display, rerun_binary)
+from .records import BANDS, PER_INTRUDER, STRINGS, StepColumns, bands_from_lists, normalise_row, pad_lists
+from .sinks import (APP_ID, SPAWN_PORT, WEB_GRPC_PORT, WEB_HTTP_PORT, Recording, SinkOptions, WebServer, port_open,
+                    url_host_port, check_rrd_path, has_display, rerun_binary)
 from .replay import focus, log_steplog, predicted_focus, select_encounter
 from .style import (ALERT_COLORS, BAND_RADIUS_FACTOR, DAA_COLOR, EXEC_COLOR, LEAD_S, OWN_COLOR, PILOT_COLOR,
                     REGION_COLORS, REGION_WIDTH, TRAIL_S, WC_OK, WC_VIOLATED)
 from .waitmap import log_waitmap, log_waitmap_points, wait_colors, waitmap_slice, write_waitmap
-from .warning import VizWarning, _warn
+from .warning import VizWarning, warn_viz

@@ -1,4 +1,4 @@
-"""Step-log columns into Rerun ``send_columns`` calls (:class:`_Emitter`); positions in m (ENU), times in s.
+"""Step-log columns into Rerun ``send_columns`` calls (:class:`StepEmitter`); positions in m (ENU), times in s.
 
 Entities (ENU, ``rr.ViewCoordinates.RIGHT_HAND_Z_UP``; timelines ``sim_time`` (duration) and ``step``)
 -------------------------------------------------------------------------------------------------
@@ -22,12 +22,12 @@ from typing import Callable
 import numpy as np
 
 from daa_sil.geometry.thresholds import Thresholds
-from .draw import _arc, _fmt, _unit_enu, decision_text
+from .draw import track_arc, fmt_value, track_unit_enu, decision_text
 from .records import StepColumns
 from .style import (ALERT_COLORS, BAND_RADIUS_FACTOR, DAA_COLOR, EXEC_COLOR, LEAD_S, OWN_COLOR, PILOT_COLOR,
                     REGION_COLORS, REGION_WIDTH, TRAIL_S, WC_OK, WC_VIOLATED)
 
-class _Emitter:
+class StepEmitter:
     """Turns :class:`StepColumns` batches into ``send_columns`` calls; keeps trails across batches."""
 
     def __init__(self, rec, th: Thresholds, wait_lookup: "Callable[[np.ndarray], np.ndarray] | None" = None,
@@ -46,7 +46,7 @@ class _Emitter:
 
     # static -----------------------------------------------------------------------------
     def _static(self) -> None:
-        rr = _rr()
+        rr = rerun_module()
         r, th = self.rec, self.th
         r.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         r.log("world/ownship/well_clear",
@@ -72,7 +72,7 @@ class _Emitter:
             r.log(path, rr.SeriesLines(names=name, colors=[color], widths=2), static=True)
 
     def _intruder_static(self, j: int) -> None:
-        rr = _rr()
+        rr = rerun_module()
         r = self.rec
         color = [(255, 80, 80), (255, 160, 60), (200, 100, 255), (80, 200, 255)][j % 4]
         r.log(f"world/intruders/{j}/trail", rr.LineStrips3D.from_fields(colors=[color], radii=[-1.5]), static=True)
@@ -85,7 +85,7 @@ class _Emitter:
 
     # per batch -----------------------------------------------------------------------------
     def _send(self, path: str, mask: "np.ndarray | None", columns) -> None:
-        rr = _rr()
+        rr = rerun_module()
         t, step = self._t, self._step
         if mask is not None:
             t, step = t[mask], step[mask]
@@ -95,21 +95,21 @@ class _Emitter:
                                              rr.TimeColumn("step", sequence=step)], columns=columns)
 
     def _scalar(self, path: str, values: np.ndarray) -> None:
-        rr = _rr()
+        rr = rerun_module()
         ok = np.isfinite(values)
         if ok.any():
             self._send(path, ok, rr.Scalars.columns(scalars=values[ok]))
 
     def _arrows(self, path: str, origins: np.ndarray, vectors: np.ndarray) -> None:
         """Arrows with an empty row (nothing shown) where the vector is not finite."""
-        rr = _rr()
+        rr = rerun_module()
         ok = np.all(np.isfinite(vectors), axis=-1) & np.all(np.isfinite(origins), axis=-1)
         lengths = ok.astype(np.int64)
         self._send(path, None, rr.Arrows3D.columns(origins=origins[ok], vectors=vectors[ok]).partition(lengths))
 
     def emit(self, c: StepColumns) -> None:
         """Log one batch of rows (consecutive steps of one encounter)."""
-        rr = _rr()
+        rr = rerun_module()
         n, th = c.n, self.th
         if n == 0:
             return
@@ -122,7 +122,7 @@ class _Emitter:
         self._t, self._step = t, step.astype(np.int64)
         own = np.stack([c.f("own_x"), c.f("own_y"), c.f("own_z")], axis=-1)
         gs, trk, vs = c.f("own_gs"), c.f("own_trk_deg"), c.f("own_vs")
-        own_v = _unit_enu(trk) * gs[:, None]
+        own_v = track_unit_enu(trk) * gs[:, None]
         own_v[:, 2] = vs
 
         # ownship
@@ -134,7 +134,7 @@ class _Emitter:
             ctrk, cvs, cgs = c.f(f"{name}_trk_deg"), c.f(f"{name}_vs"), c.f(f"{name}_gs")
             cgs = np.where(np.isfinite(cgs), cgs, gs)
             cvs = np.where(np.isfinite(cvs), cvs, vs)
-            vec = _unit_enu(ctrk) * self.cmd_len
+            vec = track_unit_enu(ctrk) * self.cmd_len
             with np.errstate(invalid="ignore", divide="ignore"):
                 vec[:, 2] = np.where(cgs > 0, cvs * self.cmd_len / cgs, 0.0)
             self._arrows(f"world/ownship/cmd/{'exec' if name == 'cmd' else name}", np.zeros((n, 3)), vec)
@@ -143,7 +143,7 @@ class _Emitter:
         m = c.m
         ipos = np.stack([c.i("intr_x"), c.i("intr_y"), c.i("intr_z")], axis=-1)  # (n, M, 3)
         igs, itrk, ivs = c.i("intr_gs"), c.i("intr_trk_deg"), c.i("intr_vs")
-        ivel = _unit_enu(itrk) * igs[..., None]
+        ivel = track_unit_enu(itrk) * igs[..., None]
         ivel[..., 2] = ivs
         alert = np.nan_to_num(c.i("alert_level")).astype(np.int64).clip(0, 3)
         wcv = np.nan_to_num(c.i("wcv")).astype(bool)
@@ -153,7 +153,7 @@ class _Emitter:
                 self._intruder_static(j)
             ok = np.all(np.isfinite(ipos[:, j]), axis=-1)
             colors = np.where(wcv[:, j, None], ALERT_COLORS[3], ALERT_COLORS[alert[:, j]])
-            labels = [f"#{j} {_fmt(x / 1000.0, ' km')}" for x in rng[:, j]]
+            labels = [f"#{j} {fmt_value(x / 1000.0, ' km')}" for x in rng[:, j]]
             self._send(f"world/intruders/{j}", None,
                        rr.Points3D.columns(positions=ipos[ok, j], colors=colors[ok], radii=np.full(ok.sum(), -7.0),
                                            labels=[lb for lb, o in zip(labels, ok) if o]).partition(ok.astype(np.int64)))
@@ -200,7 +200,7 @@ class _Emitter:
         self._scalar(f"plots/wait/map/{j}", w)
 
     def _trails(self, t: np.ndarray, own: np.ndarray, ipos: np.ndarray) -> None:
-        rr = _rr()
+        rr = rerun_module()
         n, m = ipos.shape[0], ipos.shape[1]
         own_strips, intr_strips = [], [[] for _ in range(m)]
         for k in range(n):
@@ -221,12 +221,12 @@ class _Emitter:
             self._send(f"world/intruders/{j}/trail", None, rr.LineStrips3D.columns(strips=intr_strips[j]))
 
     def _bands(self, c: StepColumns) -> None:
-        rr = _rr()
+        rr = rerun_module()
         strips, colors, radii, lengths = [], [], [], []
         for row in c.bands:
             lengths.append(len(row))
             for lo, hi, region in row:
-                strips.append(_arc(lo, hi, self.band_radius))
+                strips.append(track_arc(lo, hi, self.band_radius))
                 colors.append(REGION_COLORS.get(region, REGION_COLORS["none"]))
                 radii.append(REGION_WIDTH.get(region, -1.5))
         cols = rr.LineStrips3D.columns(strips=strips, colors=np.array(colors, np.uint8).reshape(-1, 4),
@@ -234,7 +234,7 @@ class _Emitter:
         self._send("world/ownship/bands", None, cols.partition(np.array(lengths, np.int64)))
 
     def _decisions(self, c: StepColumns, t: np.ndarray) -> None:
-        rr = _rr()
+        rr = rerun_module()
         texts, levels, idx = [], [], []
         seg_lowc, seg_nmac = c.b("lowc"), c.b("nmac")
         for k in range(c.n):
@@ -257,7 +257,8 @@ class _Emitter:
                                   columns=rr.TextLog.columns(text=texts, level=levels))
 
 
-def _rr():
+def rerun_module():
+    """The ``rerun`` module, imported on first use (so that importing the viewer code does not load Rerun)."""
     import rerun as rr
 
     return rr

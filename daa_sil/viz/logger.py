@@ -13,11 +13,11 @@ import numpy as np
 import pyarrow as pa
 
 from daa_sil.geometry.thresholds import Thresholds, get_thresholds
-from .emitter import _Emitter
+from .emitter import StepEmitter
 from .layout import blueprint
 from .records import StepColumns
 from .sinks import Recording, SinkOptions, WebServer
-from .warning import _warn
+from .warning import warn_viz
 
 class EncounterLogger:
     """One Rerun recording of one encounter; see the :mod:`daa_sil.viz` docstring."""
@@ -29,7 +29,7 @@ class EncounterLogger:
         self.th = get_thresholds(preset)
         self.encounter_id = encounter_id
         self.flush_interval_s = flush_interval_s
-        self._emitter: "_Emitter | None" = None
+        self._emitter: "StepEmitter | None" = None
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
         self._stop = False
@@ -47,7 +47,7 @@ class EncounterLogger:
         self._recording = Recording(sinks, rid, bp)
         if self._recording.rec is not None:
             try:
-                self._emitter = _Emitter(self._recording.rec, self.th, wait_lookup)
+                self._emitter = StepEmitter(self._recording.rec, self.th, wait_lookup)
             except Exception as exc:
                 self._disable(f"Rerun logging disabled: {type(exc).__name__}: {exc}")
 
@@ -71,7 +71,7 @@ class EncounterLogger:
 
     def _disable(self, msg: str) -> None:
         if not self._failed:
-            _warn(msg)
+            warn_viz(msg)
         self._failed = True
 
     # incremental ----------------------------------------------------------------------------

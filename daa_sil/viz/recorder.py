@@ -62,9 +62,9 @@ from pathlib import Path
 from typing import IO
 
 from daa_sil.geometry.thresholds import PRESETS, Thresholds, get_thresholds
-from . import (SinkOptions, _url_host_port, _warn, check_rrd_path)
+from . import (SinkOptions, url_host_port, warn_viz, check_rrd_path)
 from daa_sil.sil.children import die_with_parent, set_process_name, spawn
-from daa_sil.viz.recorder_helper import _serve
+from daa_sil.viz.recorder_helper import serve_requests
 
 #: the helper's process name (ps/pgrep)
 RECORDER_NAME = "daa-recorder"
@@ -120,7 +120,7 @@ class BackgroundRecorder:
         self.sinks = sinks
         self.rrd_path = check_rrd_path(sinks.rrd, sinks.overwrite) if sinks.rrd else None
         if sinks.connect:
-            _url_host_port(sinks.connect)
+            url_host_port(sinks.connect)
         self.tmp_path: "Path | None" = None
         if self.rrd_path is not None:
             self.tmp_path = self.rrd_path.parent / f".{self.rrd_path.name}.{os.getpid()}.{os.urandom(4).hex()}.tmp"
@@ -196,7 +196,7 @@ class BackgroundRecorder:
                 os.close(req_w)
                 os.close(rep_r)
                 _set_idle_priority(0, self._args["nice"])
-                status = _serve(self._args, os.fdopen(req_r, "r"), os.fdopen(rep_w, "w"))
+                status = serve_requests(self._args, os.fdopen(req_r, "r"), os.fdopen(rep_w, "w"))
             finally:
                 os._exit(status)
         os.close(req_r)
@@ -258,10 +258,10 @@ class BackgroundRecorder:
                 try:
                     line = self._lines.get(timeout=max(0.01, deadline - time.monotonic()))
                 except queue.Empty:
-                    _warn(f"the Rerun recorder did not finish within {timeout_s:g} s; no recording written")
+                    warn_viz(f"the Rerun recorder did not finish within {timeout_s:g} s; no recording written")
                     break
                 if line is None:
-                    _warn("the Rerun recorder stopped without writing the recording")
+                    warn_viz("the Rerun recorder stopped without writing the recording")
                     break
                 if line.startswith("DONE "):
                     self.result = json.loads(line[5:])

@@ -19,7 +19,7 @@ from daa_sil.viz import (
     EncounterLogger,
     SinkOptions,
     VizWarning,
-    _warn,
+    warn_viz,
     focus,
     log_steplog,
     predicted_focus,
@@ -112,7 +112,7 @@ class _LiveIn:
         self.sock.close()
 
 
-def _serve(args: dict, requests: IO[str], replies: IO[str]) -> int:
+def serve_requests(args: dict, requests: IO[str], replies: IO[str]) -> int:
     """The helper's work (see the module docstring); returns its exit status. Never raises."""
     sinks = SinkOptions(**args["sinks"])
     tmp = Path(sinks.rrd_tmp) if sinks.rrd_tmp else None
@@ -178,7 +178,7 @@ def _serve(args: dict, requests: IO[str], replies: IO[str]) -> int:
             break
         status = 0
     except Exception as exc:
-        _warn(f"Rerun recording failed: {type(exc).__name__}: {exc}")
+        warn_viz(f"Rerun recording failed: {type(exc).__name__}: {exc}")
     finally:
         if live is not None:
             live.close()
@@ -198,5 +198,5 @@ def main(argv: "list[str] | None" = None) -> int:
 
     adopt()  # the name and the parent watch spawn() handed over
     args = json.loads((sys.argv[1:] if argv is None else argv)[0])
-    status = _serve(args, sys.stdin, sys.stdout)
+    status = serve_requests(args, sys.stdin, sys.stdout)
     os._exit(status)  # skip Rerun's atexit work: everything is flushed and the file is in place

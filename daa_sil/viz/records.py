@@ -60,7 +60,7 @@ class StepColumns:
                 continue
             if pa.types.is_list(col.type) or pa.types.is_large_list(col.type):
                 if name in PER_INTRUDER:
-                    intruders[name] = _pad_lists(col, n)
+                    intruders[name] = pad_lists(col, n)
                 continue
             if pa.types.is_string(col.type) or pa.types.is_large_string(col.type) or pa.types.is_dictionary(col.type):
                 scalars[name] = np.array(col.to_pylist(), dtype=object)
@@ -68,14 +68,14 @@ class StepColumns:
                 scalars[name] = np.array(col.fill_null(False).to_numpy(zero_copy_only=False), bool)
             else:
                 scalars[name] = np.asarray(col.cast(pa.float64()).fill_null(np.nan).to_numpy(zero_copy_only=False))
-        bands = _bands_from_lists(*(table.column(b).to_pylist() if b in table.column_names else [[]] * n
+        bands = bands_from_lists(*(table.column(b).to_pylist() if b in table.column_names else [[]] * n
                                     for b in BANDS))
         return cls(scalars, intruders, bands)
 
     @classmethod
     def from_records(cls, records: "list[Mapping[str, Any]]") -> "StepColumns":
         """Columns of step-log row dicts (values: scalars, lists, or N = 1 arrays)."""
-        rows = [_normalise(r) for r in records]
+        rows = [normalise_row(r) for r in records]
         n = len(rows)
         keys: dict[str, None] = {}
         for r in rows:
@@ -97,11 +97,11 @@ class StepColumns:
                 scalars[name] = np.array(vals, dtype=object)
             else:
                 scalars[name] = np.array([np.nan if v is None else float(v) for v in vals])
-        bands = _bands_from_lists(*([r.get(b, []) for r in rows] for b in BANDS))
+        bands = bands_from_lists(*([r.get(b, []) for r in rows] for b in BANDS))
         return cls(scalars, intruders, bands)
 
 
-def _pad_lists(col: pa.Array, n: int) -> np.ndarray:
+def pad_lists(col: pa.Array, n: int) -> np.ndarray:
     """A list column as an ``(n, M)`` float array padded with nan."""
     lens = np.asarray(col.value_lengths().fill_null(0).to_numpy(zero_copy_only=False), np.int64)
     m = int(lens.max(initial=0))
@@ -117,7 +117,8 @@ def _pad_lists(col: pa.Array, n: int) -> np.ndarray:
     return out
 
 
-def _bands_from_lists(lo, hi, region) -> list[list[tuple[float, float, str]]]:
+def bands_from_lists(lo, hi, region) -> list[list[tuple[float, float, str]]]:
+    """Per row, the bands as ``(lo, hi, region)`` tuples from three list columns (a missing list is no band)."""
     out = []
     for a, b, c in zip(lo, hi, region):
         a, b, c = a or [], b or [], c or []
@@ -125,7 +126,7 @@ def _bands_from_lists(lo, hi, region) -> list[list[tuple[float, float, str]]]:
     return out
 
 
-def _normalise(record: Mapping[str, Any]) -> dict[str, Any]:
+def normalise_row(record: Mapping[str, Any]) -> dict[str, Any]:
     """One row from a dict whose values may be N = 1 arrays (StepLogBuilder step dicts)."""
     out: dict[str, Any] = {}
     count = record.get("bands_count")

@@ -10,9 +10,9 @@ import pyarrow as pa
 
 from daa_sil.errors import UsageError
 from daa_sil.geometry.thresholds import Thresholds
-from .draw import _unit_enu
+from .draw import track_unit_enu
 from .logger import EncounterLogger
-from .records import StepColumns, _normalise
+from .records import StepColumns, normalise_row
 from .sinks import SinkOptions
 
 def select_encounter(table: pa.Table, encounter_id: "int | None" = None) -> tuple[pa.Table, "int | None"]:
@@ -60,7 +60,7 @@ def focus(table: pa.Table) -> tuple[list[float], float]:
 def predicted_focus(row: Mapping[str, Any], horizon_s: float = 600.0) -> tuple[list[float], float]:
     """Camera target for a live view from the first step-log row: :func:`focus` at the straight-line
     closest approach of the nearest intruder (predicted from the row's positions and velocities)."""
-    r = _normalise(row)
+    r = normalise_row(row)
 
     def g(k):
         v = r.get(k)
@@ -69,14 +69,14 @@ def predicted_focus(row: Mapping[str, Any], horizon_s: float = 600.0) -> tuple[l
     own = np.array([g("own_x"), g("own_y"), g("own_z")])
     if not np.all(np.isfinite(own)):
         return [0.0, 0.0, 0.0], 8000.0
-    own_v = np.append(_unit_enu(np.array(g("own_trk_deg")))[:2] * g("own_gs"), g("own_vs"))
+    own_v = np.append(track_unit_enu(np.array(g("own_trk_deg")))[:2] * g("own_gs"), g("own_vs"))
     best = None
     for j in range(len(r.get("intr_x") or [])):
         p = np.array([float(r[k][j]) if r.get(k) and r[k][j] is not None else np.nan
                       for k in ("intr_x", "intr_y", "intr_z")])
         gs, trk, vs = (float(r[k][j]) if r.get(k) and r[k][j] is not None else np.nan
                        for k in ("intr_gs", "intr_trk_deg", "intr_vs"))
-        v = np.append(_unit_enu(np.array(trk))[:2] * gs, vs)
+        v = np.append(track_unit_enu(np.array(trk))[:2] * gs, vs)
         s, dv = p - own, v - own_v
         if not (np.all(np.isfinite(s)) and np.all(np.isfinite(dv))):
             continue

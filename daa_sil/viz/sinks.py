@@ -18,7 +18,7 @@ from pathlib import Path
 from ..errors import OutputError, UsageError
 from ..sil.children import spawn
 from ..sil.web_ports import SPAWN_PORT, WEB_GRPC_PORT, WEB_HTTP_PORT, check_web_ports  # noqa: F401 (re-exported)
-from .warning import _warn
+from .warning import warn_viz
 
 APP_ID = "daa_sil"
 #: default ports: spawned native viewer (Rerun's default), web viewer's gRPC proxy, web viewer HTTP
@@ -55,14 +55,16 @@ def has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or os.environ.get("WAYLAND_SOCKET"))
 
 
-def _url_host_port(url: str) -> tuple[str, int]:
+def url_host_port(url: str) -> tuple[str, int]:
+    """Host and port of a Rerun gRPC URL (the spawn port if it has none); :class:`UsageError` if it is not one."""
     u = urllib.parse.urlparse(url)
     if not u.scheme.startswith("rerun") or not u.hostname:
         raise UsageError(f"--connect URL {url!r} is not a Rerun gRPC URL like rerun+http://127.0.0.1:9876/proxy")
     return u.hostname, u.port or SPAWN_PORT
 
 
-def _port_open(host: str, port: int, timeout: float = 0.5) -> bool:
+def port_open(host: str, port: int, timeout: float = 0.5) -> bool:
+    """True if a TCP connection to ``host:port`` succeeds within ``timeout`` s."""
     try:
         with socket.create_connection((host, port), timeout=timeout):
             return True
@@ -89,7 +91,7 @@ class WebServer:
         self.grpc_url = f"rerun+http://{host}:{grpc_port}/proxy"
         self.url = f"http://{host}:{web_port}/?url={urllib.parse.quote(self.grpc_url, safe='')}"
         for port in (grpc_port, web_port):
-            if _port_open(host, port, 0.2):
+            if port_open(host, port, 0.2):
                 raise OSError(f"port {port} on {host} is already in use")
         cmd = [rerun_binary(), "--serve-web", "--bind", bind, "--port", str(grpc_port),
                "--web-viewer-port", str(web_port)] + ([str(rrd)] if rrd else [])
@@ -98,7 +100,7 @@ class WebServer:
                           stderr=subprocess.DEVNULL, start_new_session=True)
         atexit.register(self.stop)
         deadline = time.monotonic() + startup_s
-        while not (_port_open(host, grpc_port) and _port_open(host, web_port)):
+        while not (port_open(host, grpc_port) and port_open(host, web_port)):
             if self.proc.poll() is not None or time.monotonic() > deadline:
                 self.stop()
                 raise OSError(f"the rerun web viewer did not start on {host}:{grpc_port}/{web_port}")
@@ -152,13 +154,13 @@ class Recording:
         if self.sinks.rrd:
             self.rrd_path = check_rrd_path(self.sinks.rrd, self.sinks.overwrite)
         if self.sinks.connect:
-            _url_host_port(self.sinks.connect)  # a malformed URL is a usage error, not a missing viewer
+            url_host_port(self.sinks.connect)  # a malformed URL is a usage error, not a missing viewer
         if not self.sinks.enabled:
             return
         try:
             self._open(recording_id, blueprint_)
         except Exception as exc:  # visualisation must never stop the caller
-            _warn(f"Rerun logging disabled: {type(exc).__name__}: {exc}")
+            warn_viz(f"Rerun logging disabled: {type(exc).__name__}: {exc}")
             self._discard()
 
     def _open(self, recording_id, blueprint_) -> None:
@@ -168,7 +170,7 @@ class Recording:
         batcher = rr.ChunkBatcherConfig.NEVER() if o.deterministic else None
         rec = rr.RecordingStream(o.app_id, recording_id=recording_id, batcher_config=batcher)
         if not rec.is_enabled():
-            _warn("Rerun is disabled in the environment (RERUN=off); no visualisation is written")
+            warn_viz("Rerun is disabled in the environment (RERUN=off); no visualisation is written")
             return
         rec.set_log_time_enabled(False)
         sinks: list = []
@@ -181,27 +183,27 @@ class Recording:
                 self._tmp = Path(tmp)
             sinks.append(rr.FileSink(str(self._tmp)))
         if o.connect:
-            host, port = _url_host_port(o.connect)
-            if _port_open(host, port):
+            host, port = url_host_port(o.connect)
+            if port_open(host, port):
                 sinks.append(rr.GrpcSink(o.connect))
             else:
-                _warn(f"no Rerun viewer at {o.connect}; live view disabled")
+                warn_viz(f"no Rerun viewer at {o.connect}; live view disabled")
         if o.spawn:
             if not has_display():
-                _warn("--spawn-viewer needs a display (DISPLAY/WAYLAND_DISPLAY unset); live view skipped "
+                warn_viz("--spawn-viewer needs a display (DISPLAY/WAYLAND_DISPLAY unset); live view skipped "
                       "(use --serve-web or --rrd instead)")
             else:
                 try:
                     rec.spawn(port=o.spawn_port, connect=False)
                     sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{o.spawn_port}/proxy"))
                 except Exception as exc:
-                    _warn(f"could not spawn the Rerun viewer: {exc}")
+                    warn_viz(f"could not spawn the Rerun viewer: {exc}")
         if o.serve_web:
             try:
                 self.web = WebServer(o.bind, o.grpc_port, o.web_port)
                 sinks.append(rr.GrpcSink(self.web.grpc_url))
             except Exception as exc:
-                _warn(f"could not start the Rerun web viewer: {exc}")
+                warn_viz(f"could not start the Rerun web viewer: {exc}")
         if not sinks:
             return
         rec.set_sinks(*sinks, default_blueprint=blueprint_)
@@ -225,7 +227,7 @@ class Recording:
                 self.rec.flush()
                 self.rec.disconnect()
             except Exception as exc:
-                _warn(f"Rerun flush failed: {exc}")
+                warn_viz(f"Rerun flush failed: {exc}")
                 commit = False
             if commit and self._tmp is not None and self._tmp.exists() and self._tmp.stat().st_size > 0:
                 try:
@@ -237,7 +239,7 @@ class Recording:
                     os.replace(self._tmp, self.rrd_path)
                     written = self.rrd_path
                 except OSError as exc:
-                    _warn(f"cannot write {self.rrd_path}: {exc.strerror or exc}")
+                    warn_viz(f"cannot write {self.rrd_path}: {exc.strerror or exc}")
         if self._tmp is not None:
             self._tmp.unlink(missing_ok=True)
         if not keep_serving and self.web is not None:

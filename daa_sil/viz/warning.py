@@ -12,7 +12,8 @@ class VizWarning(UserWarning):
     """Visualisation problem that does not stop the simulation (no viewer, no display, ...)."""
 
 
-def _warn(msg: str) -> None:
+def warn_viz(msg: str) -> None:
+    """Issue ``msg`` as a :class:`VizWarning`, attributed to the caller's caller."""
     warnings.warn(msg, VizWarning, stacklevel=3)
 
 
