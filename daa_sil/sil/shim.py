@@ -110,8 +110,8 @@ from daa_sil.link.delayline import DelayLine
 from .endpoint import Address, DropReporter, format_udp_address, parse_udp_address
 from .msgguard import MessageGuard
 from .rtclock import (PreciseTimer, request_short_slice, set_timer_slack)
-from .shim_config import _TICK_ID, ShimConfig, control_ids, direction_seeds, shim_delay_processes
-from daa_sil.sil.shim_socket import _Side, _bind_udp
+from .shim_config import TICK_ID, ShimConfig, control_ids, direction_seeds, shim_delay_processes
+from daa_sil.sil.shim_socket import ShimSocket, bind_udp
 from daa_sil.sil.shim_ticks import ShimTicks
 
 #: realtime: datagrams from the GCS held until the vehicle side's first datagram decides the mode
@@ -136,7 +136,7 @@ class DelayShim(ShimTicks):
         self.peers: dict[str, "Address | None"] = {
             "vehicle": parse_udp_address(config.vehicle, "--vehicle") if config.vehicle else None,
             "gcs": parse_udp_address(config.gcs, "--gcs") if config.gcs else None}
-        self.sides: dict[str, _Side] = {}
+        self.sides: dict[str, ShimSocket] = {}
         self.counters = {k: 0 for k in (
             "datagrams_from_vehicle", "datagrams_from_gcs", "forwarded_to_vehicle", "forwarded_to_gcs",
             "rejected_peer", "rejected_claim", "no_peer", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards",
@@ -194,11 +194,11 @@ class DelayShim(ShimTicks):
                                  ("gcs", self.config.listen_gcs, "--listen-gcs")):
             addr = parse_udp_address(spec, flag)
             try:
-                sock = _bind_udp(addr)
+                sock = bind_udp(addr)
             except OSError as exc:
                 await self.close()
                 raise UsageError(f"{flag}: cannot bind {format_udp_address(addr)}: {exc.strerror or exc}") from None
-            self.sides[name] = _Side(self, name, sock, stamped=precise)
+            self.sides[name] = ShimSocket(self, name, sock, stamped=precise)
         if realtime:
             info = {"timing": self.config.timing, "rx_kernel_stamps": all(sd.stamped for sd in self.sides.values())}
             if precise:
@@ -309,8 +309,8 @@ class DelayShim(ShimTicks):
     def _decide_mode(self, first_vehicle_datagram: bytes) -> None:
         """Realtime: tick-driven if the vehicle's first datagram is a valid SIM_TICK; then replay held GCS data."""
         tick = False
-        if _TICK_ID in control_ids(first_vehicle_datagram):
-            tick = any(m.get_msgId() == _TICK_ID for m in self.codec.decode(first_vehicle_datagram, commit=False))
+        if TICK_ID in control_ids(first_vehicle_datagram):
+            tick = any(m.get_msgId() == TICK_ID for m in self.codec.decode(first_vehicle_datagram, commit=False))
         self.tick_mode = tick
         if self._timing_info:
             self._timing_info["release"] = "ticks" if tick else "timer"

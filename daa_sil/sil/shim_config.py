@@ -22,8 +22,9 @@ from daa_sil.sil.endpoint import parse_udp_address
 
 CLOCKS = ("realtime", "lockstep")
 TIMINGS = ("precise", "poll")
-_TICK_ID = mavlink.MAVLINK_MSG_ID_SIM_TICK
-_ACK_ID = mavlink.MAVLINK_MSG_ID_SIM_TICK_ACK
+#: MAVLink ids of the lockstep clock's tick and its acknowledgement
+TICK_ID = mavlink.MAVLINK_MSG_ID_SIM_TICK
+ACK_ID = mavlink.MAVLINK_MSG_ID_SIM_TICK_ACK
 
 
 def direction_seeds(seed: "int | np.random.SeedSequence | None") -> dict:
@@ -75,7 +76,7 @@ def control_ids(data: bytes) -> "set[int]":
         else:
             found.add(-1)
             break
-        found.add(mid if mid in (_TICK_ID, _ACK_ID) else -1)
+        found.add(mid if mid in (TICK_ID, ACK_ID) else -1)
         i += size
     return found
 

@@ -13,7 +13,7 @@ if TYPE_CHECKING:
     from daa_sil.sil.shim import DelayShim
 
 
-class _Side:
+class ShimSocket:
     """One shim socket, read with ``recvmsg`` from a loop reader (kernel arrival stamps if enabled)."""
 
     #: datagrams read per reader callback before timers get their turn
@@ -66,7 +66,7 @@ class _Side:
             self.sock.close()
 
 
-def _bind_udp(addr: Address) -> socket.socket:
+def bind_udp(addr: Address) -> socket.socket:
     """A non-blocking UDP socket bound to ``addr`` with a large receive buffer."""
     family, _, _, _, sockaddr = socket.getaddrinfo(addr[0], addr[1], type=socket.SOCK_DGRAM)[0]
     sock = socket.socket(family, socket.SOCK_DGRAM)

@@ -33,7 +33,7 @@ import asyncio
 
 import numpy as np
 
-from daa_sil.sil.shim_config import _ACK_ID, _TICK_ID, control_ids
+from daa_sil.sil.shim_config import ACK_ID, TICK_ID, control_ids
 
 #: a GCS that has not acknowledged this many forwarded ticks is taken as gone (stamps fall back to the last tick)
 MAX_GCS_LAG_TICKS = 8
@@ -50,7 +50,7 @@ class ShimTicks:
         """Lockstep rules (module docstring): control messages move the clock, data is stamped by ticks."""
         c = self.counters
         ids = control_ids(data)
-        want = _TICK_ID if side == "vehicle" else _ACK_ID
+        want = TICK_ID if side == "vehicle" else ACK_ID
         if want in ids:
             msg = self._decode_control(data, want)
             if msg is not None:
