@@ -13,7 +13,7 @@ import os
 import sys
 
 from . import __version__
-from .commands._args import OneLineParser as _Parser
+from .commands.common_args import OneLineParser as _Parser
 from .errors import DaaSilError
 
 #: modules providing ``register(subparsers)``; order = order in ``--help``

@@ -14,7 +14,7 @@ import signal
 from pathlib import Path
 
 from daa_sil.cli import run_guarded
-from daa_sil.commands._args import OneLineParser as _Parser, check_speed, load_key_option
+from daa_sil.commands.common_args import OneLineParser as _Parser, check_speed, load_key_option
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.errors import UsageError
 

@@ -14,7 +14,7 @@ from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.files import to_jsonable
 from daa_sil.config.readings import DEFAULT_READING, READINGS, parse_reading_settings, readings_help
 from daa_sil.geometry.thresholds import PRESETS
-from ._args import finite_float, int_at_least
+from .common_args import finite_float, int_at_least
 
 RUN_EXAMPLES = """examples:
   # the paper's study (reading 'paper'): 10,000 encounters x 5 groups (B-1, B-2, IC-1, ID-1, ID-2), T = 240 s

@@ -12,7 +12,7 @@ from ..errors import UsageError
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.files import to_jsonable
 from daa_sil.geometry.thresholds import PRESETS
-from ._args import int_at_least
+from .common_args import int_at_least
 
 EXAMPLES = """examples:
   # the project's DAIDALUS v2.0.4 reference set (1,000 encounters), with the daidalus preset

@@ -12,7 +12,7 @@ from ..errors import UsageError
 from daa_sil.files import to_jsonable
 from daa_sil.geometry.kinematics import STATE_BOUNDS  # physical bounds of a state: (component, lo, hi, unit)
 from daa_sil.geometry.thresholds import PRESETS, get_thresholds
-from ._args import finite_float, parse_vector
+from .common_args import finite_float, parse_vector
 
 EXAMPLES = """examples:
   # head-on, 6 km apart, co-altitude, ownship 55 m/s north, intruder 100 m/s south

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.errors import OutputError, UsageError
-from ._args import check_speed, load_key_option
+from .common_args import check_speed, load_key_option
 from daa_sil.sil.children import interruptible
 from daa_sil.sil.summary import PROGRESS_EVERY_S, demo_legend, human_summary, pilot_story
 from daa_sil.sil.play import RunOptions, check_faults_allowed, prepare_waitmap, run_sil

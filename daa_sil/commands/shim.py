@@ -19,7 +19,7 @@ from daa_sil.models.link_rule import link_legs
 from daa_sil.sil.endpoint import format_udp_address
 from daa_sil.sil.shim import run_shim
 from daa_sil.sil.shim_config import CLOCKS, ShimConfig
-from ._args import finite_float, load_key_option
+from .common_args import finite_float, load_key_option
 
 EXAMPLES = """examples:
   # paper group B-2/ID-2 delays, vehicle sends to 14601, GCS to 14602, peers learned
@@ -71,7 +71,7 @@ def register(sub) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The shim's own parser (``python -m daa_sil.commands.shim``): the arguments of ``daa-sil shim``."""
-    from ._args import OneLineParser
+    from .common_args import OneLineParser
 
     p = OneLineParser(prog="daa-sil shim", description=DESCRIPTION, epilog=EXAMPLES,
                       formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import FileFormatError, OutputError, UsageError
 from daa_sil.geometry.thresholds import PRESETS
-from ._args import finite_float
+from .common_args import finite_float
 from daa_sil.sil.children import interruptible
 from daa_sil.viz.warning import one_line_warnings
 from daa_sil.sil.web_ports import add_web_viewer_arguments, check_web_viewer_arguments

@@ -14,7 +14,7 @@ from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.files import to_jsonable
 from daa_sil.geometry.thresholds import PRESETS
 from ..waitmap.model import WAIT_DEFINITIONS
-from ._args import finite_float, int_at_least
+from .common_args import finite_float, int_at_least
 
 BUILD_EX = """examples:
   daa-sil waitmap build --out maps/paper                      # the paper grid, 5 turn-rate maps
