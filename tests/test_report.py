@@ -114,6 +114,17 @@ def test_seeds_of_one_reading_are_compared(tmp_path):
     assert "## Agreement between campaign seeds" in text and "findings agree within the CI" in text
 
 
+def test_a_smaller_run_of_the_same_seed_is_not_compared_as_another_seed(tmp_path):
+    """Its encounters are the first of the larger run's: not an independent sample."""
+    big = _campaign(tmp_path / "big", PAPER5, n=60, reading="literal", seed=0)
+    small = _campaign(tmp_path / "small", PAPER5, n=30, reading="literal", seed=0)
+    other = _campaign(tmp_path / "other", PAPER5, n=30, reading="literal", seed=7)
+    text = write_report([big, small, other], tmp_path / "rep", replicates=200).read_text()
+    heads = [line for line in text.splitlines() if line.startswith("### literal") and " vs " in line]
+    assert "literal (seed 0, 60 enc.)" in text and "literal (seed 0, 30 enc.)" in text
+    assert heads == ["### literal (seed 0, 60 enc.) vs literal (seed 7)"], heads
+
+
 def _decisions(map_share):
     def make(g, n):
         rng = np.random.default_rng(zlib.crc32(g.encode()))

@@ -204,7 +204,9 @@ def _seed_section(blocks, studies, rows) -> list[str]:
     by_name: dict = {}
     for b in blocks:
         by_name.setdefault((b.reading.name, json.dumps(b.reading.settings, sort_keys=True, default=str)), []).append(b)
-    pairs = [(v[0], w) for v in by_name.values() if len(v) > 1 for w in v[1:]]
+    # only different seeds: one seed's smaller run is the first encounters of its larger one, not an
+    # independent sample, so an independent-bootstrap difference would not mean anything there
+    pairs = [(v[0], w) for v in by_name.values() if len(v) > 1 for w in v[1:] if w.seed != v[0].seed]
     if not pairs:
         return []
     L = ["## Agreement between campaign seeds", "",
