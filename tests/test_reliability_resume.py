@@ -160,13 +160,17 @@ def _kill_resume_cycle(tmp_path: Path, groups: str, n: int, chunk: int, duration
             figures["random_finished_first"] += 1
         _wait(proc)
 
-    # 3. the status write itself
-    proc = _start("before-complete", argv + ["--resume"])
-    figures["resumes"] += 1
+    # 3. the status write itself, on a directory of its own: a random kill above may come after the
+    #    run finished the campaign (more likely the faster the simulation), whose status is then written
+    at_status = tmp_path / "killed-at-status"
+    proc = _start("before-complete", _argv(at_status, groups, n, chunk, duration))
     assert _wait(proc) == -signal.SIGKILL
     figures["scripted_kills"] += 1
-    assert _chunks_done(killed) == n_chunks
-    assert b'"status": "running"' in (killed / "campaign.json").read_bytes()
+    assert _chunks_done(at_status) == n_chunks
+    assert b'"status": "running"' in (at_status / "campaign.json").read_bytes()
+    proc = _start("none", ["campaign", "run", "--out", str(at_status), "--resume", "--no-progress"])
+    figures["resumes"] += 1
+    assert _wait(proc) == 0, proc.stderr.read()
 
     # 4. the last resume: only --out and --resume (the stored settings are used)
     proc = _start("none", ["campaign", "run", "--out", str(killed), "--resume", "--no-progress"])
@@ -176,10 +180,12 @@ def _kill_resume_cycle(tmp_path: Path, groups: str, n: int, chunk: int, duration
     # the uninterrupted run, same options
     rc = main(_argv(ref, groups, n, chunk, duration))
     assert rc == 0
-    a, b = snapshot(killed), snapshot(ref)
-    assert sorted(a) == sorted(b)  # same files (no temporary left behind) ...
-    for name in b:
-        assert a[name] == b[name], f"{name} differs after kill + resume"  # ... byte for byte
+    b = snapshot(ref)
+    for d in (killed, at_status):
+        a = snapshot(d)
+        assert sorted(a) == sorted(b)  # same files (no temporary left behind) ...
+        for name in b:
+            assert a[name] == b[name], f"{d.name}: {name} differs after kill + resume"  # ... byte for byte
     for kind in ("encounters", "decisions"):
         assert _merged_bytes(killed, kind) == _merged_bytes(ref, kind)
     enc = read_results(ref, "encounters")
