@@ -38,6 +38,7 @@ def test_sweep_runs_each_value_on_the_same_encounters_and_resumes(tmp_path, caps
     assert nw[1] > nw[0]
     md = (out / "sweep.md").read_text()
     assert "| 30.0 |" in md and "[" in md and (out / "sensitivity_no_wait.png").stat().st_size > 5000
+    assert "wait maps `paper`, reading `paper`" in md  # the maps the points read, not the campaign's default
     rows = (out / "sweep.csv").read_text().splitlines()
     assert rows[0].startswith("vary,value,group,metric,estimate,lo,hi")
     # again without --resume: refused; with --resume: nothing to do, same tables

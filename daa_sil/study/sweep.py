@@ -214,12 +214,16 @@ def write_summary(out: "str | Path") -> list[Path]:
 def render(meta: dict, rows: Sequence[dict], image_prefix: str = "") -> str:
     """The sweep as Markdown: one table per metric (value x group, estimate [95 % CI]) and its figure."""
     base = meta["base"]
+    from daa_sil.study.campaign_config import CampaignConfig
+
+    # the maps the points read: a reading with its own grid (e.g. paper) overrides the campaign's --waitmap
+    maps = CampaignConfig.from_dict(base, "sweep base").map_source
     groups = list(dict.fromkeys(r["group"] for r in rows))
     n = {r["group"]: r["n_encounters"] for r in rows}
     L = [f"## Sensitivity to `{meta['vary']}`", "",
          f"Values {', '.join(str(v) for v in meta['values'])}; groups {', '.join(groups)}; "
          f"{', '.join(f'{g}: {n[g]:,}' for g in groups)} encounters per point, campaign seed {base['seed']} "
-         f"(every point flies the same encounters); wait maps `{base['waitmap']}`, reading `{base['reading']}`. "
+         f"(every point flies the same encounters); wait maps `{maps}`, reading `{base['reading']}`. "
          "Each cell: our value [encounter-level 95 % CI].", ""]
     for metric, label, _ in METRICS:
         sel = [r for r in rows if r["metric"] == metric]
