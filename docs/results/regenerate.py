@@ -42,7 +42,7 @@ GROUPS = "B-1,B-2,IC-1,ID-1,ID-2,ID-2-projl,ID-2-map"
 SWEEP_GROUPS = "B-2,ID-2,ID-2-projl"
 #: simulation readings (one campaign each), the paper's first; counting-only readings are recounts
 READINGS = ("paper", "paper-outside-far", "paper-one-way", "paper-countdown", "paper-hold-blend", "paper-no-hold",
-            "paper-preventive", "paper-alerting", "paper-feet", "extended", "paper-grid", "no-hold", "preventive",
+            "paper-preventive", "paper-corrective", "paper-alerting", "paper-feet", "extended", "paper-grid", "no-hold", "preventive",
             "detection", "feet")
 SWEEPS = (("latency", "latency=const:0.2;const:1;const:2;const:5;const:10;gauss:5,3"),
           ("wt", "wt=2,4,8,16"), ("gamma", "gamma=0.9,0.95,0.99"), ("grid", "grid=paper,fine,alerting"),
