@@ -124,7 +124,7 @@ def main() -> int:
         dirs.insert(2 if args.alt_encounters != args.encounters else 1, dev)
         note = (f"Report seed {args.seed} (nothing was tuned on it). Seeds used while developing the models and "
                 f"this analysis: {', '.join(map(str, DEV_SEEDS))}; the paper reading was developed on seed "
-                f"{PAPER_DEV_SEED} and is shown on it as a second column, so that the seed-agreement section can "
+                f"{PAPER_DEV_SEED} and is shown on it too, so that the seed-agreement section can "
                 f"test whether the two seeds agree.")
         if args.alt_encounters != args.encounters:
             note += (f" The reading paper on the report seed has {args.encounters:,} encounters per group; every "
