@@ -103,34 +103,31 @@ def read_yaml_text(path: "str | os.PathLike", what: str) -> str:
                               f"{exc.start})") from None
 
 
-def compose_yaml(text: str, source: str, what: str = "YAML document") -> "yaml.Node | None":
-    """The node tree of one YAML document (with line marks), bounded as the module says; None for
-    an empty document. One-line FileFormatError naming ``source`` and the line."""
+def _read_bounded(text: str, source: str, what: str, read: str):
+    """``_BoundedLoader(text).<read>()`` (``get_single_node`` or ``get_single_data``) under the module's
+    bounds; a YAML error or a bound reached becomes one FileFormatError line naming ``source``."""
     _check_size(text, source, what)
     loader = None
     try:
         loader = _BoundedLoader(text)  # checks for control characters already
-        return loader.get_single_node()
+        return getattr(loader, read)()
     except (yaml.YAMLError, _Limit, RecursionError) as exc:
         raise FileFormatError(_describe(exc, text, source, what)) from None
     finally:
         if loader is not None:
             loader.dispose()
+
+
+def compose_yaml(text: str, source: str, what: str = "YAML document") -> "yaml.Node | None":
+    """The node tree of one YAML document (with line marks), bounded as the module says; None for
+    an empty document. One-line FileFormatError naming ``source`` and the line."""
+    return _read_bounded(text, source, what, "get_single_node")
 
 
 def load_yaml(text: str, source: str, what: str = "YAML document") -> Any:
     """The plain data (dicts, lists, str, int, float, bool, None, dates) of one YAML document,
     bounded as the module says. One-line FileFormatError naming ``source`` and the line."""
-    _check_size(text, source, what)
-    loader = None
-    try:
-        loader = _BoundedLoader(text)  # checks for control characters already
-        return loader.get_single_data()
-    except (yaml.YAMLError, _Limit, RecursionError) as exc:
-        raise FileFormatError(_describe(exc, text, source, what)) from None
-    finally:
-        if loader is not None:
-            loader.dispose()
+    return _read_bounded(text, source, what, "get_single_data")
 
 
 def load_yaml_file(path: "str | os.PathLike", what: str) -> Any:
