@@ -72,7 +72,7 @@ from daa_sil.models.encounters import concat_encounters
 from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel
 from daa_sil.models.pilot import PilotModel
 from daa_sil.models.pilot_config import PilotConfig
-from daa_sil.models.pilot_display import PilotDisplay, guidance_values
+from daa_sil.models.pilot_display import PilotDisplay
 from daa_sil.onboard import OnboardCore
 from daa_sil.study.fasttime_results import (DECISION_SCHEMA, ENCOUNTER_SCHEMA, Accumulators, decision_table,
                                             encounter_table, step_columns)
@@ -217,11 +217,9 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     log = sl.StepLogBuilder(encounters.encounter_id, m) if record_steps else None
     rows = np.arange(n)
 
-    # link state, one slot per step, kept until read: telemetry (and the display's bands of it) down,
-    # GCS packets up
+    # link state, one slot per step, kept until read: telemetry down, GCS packets up
     downlink = SlotRing(n, {"own": ((6,), float, np.nan), "intr": ((m, 6), float, np.nan), "alert": ((), np.int64, 0),
-                            "release": ((), float, np.inf), "guided": ((), bool, False),
-                            "guidance": ((len(PilotDisplay.KEYS),), float, np.nan)})
+                            "release": ((), float, np.inf)})
     uplink = SlotRing(n, {"release": ((), float, np.inf), "newest_sent": ((), np.int64, -1),
                           "cmd": ((3,), float, np.nan)})
     down_ptr = np.zeros(n, np.int64)
@@ -245,9 +243,11 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         i = np.flatnonzero(new & (obs >= 0))
         if i.size:
             o = obs[i]
-            known = dict(zip(PilotDisplay.KEYS, downlink.gather("guidance", o, i).T))
-            display.refresh(i, obs_own[i], obs_intr[i], downlink.gather("alert", o, i),
-                            known=(downlink.gather("guided", o, i), known))
+            # the display bands the states it shows itself, all in one call per DAA batch: taking the
+            # agent's bands of the same state would give the numbers of a call on other rows (the
+            # agent's active rows of that step), which differ in the DAA's last bits and, rarely, in a
+            # candidate's region -- the pilot then chose another maneuver (bba2fd8 identity, issue 21)
+            display.refresh(i, obs_own[i], obs_intr[i], downlink.gather("alert", o, i))
         downlink.release(max(int(down_ptr.min()) - 1, 0))
         pout = pilot.step(t, obs_own, display.guidance(), obs_intr)
         # GCS packet of step k (heartbeat + command if streaming), FIFO-released on the vehicle side
@@ -277,7 +277,7 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         uplink.release(max(int(up_ptr.min()) - 1, 0))
         out = core.step(t, pin)
         acc.add(out, dt)
-        # telemetry for t_k enters the downlink, with the display's bands where the agent banded that state
+        # telemetry for t_k enters the downlink
         d_down = down.delay_at(t)
         rel_down = fifo_release(np.full((n, 1), t), d_down[:, None], prev_release=last_down)[:, 0]
         last_down = rel_down
@@ -286,7 +286,6 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         slot_down["own"][:] = out.own.as_array()
         slot_down["intr"][:] = out.intruders.as_array()
         slot_down["alert"][:] = out.telemetry.alert_level.max(axis=1) if m else 0
-        _keep_display_bands(slot_down, out.decisions.get("active_bands") or (), pcfg.alert_level_min)
         if log is not None:
             log.append(step_columns(out, d_up, d_down))
     acc.deviation(core.own, n_steps * dt)
@@ -295,22 +294,6 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
                decision_table(decisions, lo, hi, np.asarray(p.encounters.encounter_id, np.int64), p.group))
               for p, lo, hi in zip(parts, bounds[:-1], bounds[1:])]
     return (tables[0] if len(parts) == 1 else tables), (log.finish() if log is not None else None)
-
-
-def _keep_display_bands(slot: dict, active_bands, alert_level_min: int) -> None:
-    """Store in a telemetry slot the display's guidance of the states the agent banded this step.
-
-    The display (:class:`~daa_sil.models.pilot_display.PilotDisplay`) bands the state of a telemetry
-    it receives when the alert sent with it reaches ``alert_level_min``; the agent banded that very
-    state (same step, same DAA configuration, stateless: :class:`~daa_sil.agent.ActiveBands`), so
-    the display takes these bands instead of computing them again."""
-    for ab in active_bands:
-        shown = slot["alert"][ab.rows] >= alert_level_min  # the display's alert gating
-        if shown.any():
-            r = ab.rows[shown]
-            slot["guided"][r] = True
-            vals = guidance_values(ab.bands if shown.all() else ab.bands[shown])
-            slot["guidance"][r] = np.stack([vals[key] for key in PilotDisplay.KEYS], axis=-1)
 
 
 __all__ = ["simulate", "simulate_parts", "SimPart", "encounter_streams", "ENCOUNTER_SCHEMA", "DECISION_SCHEMA",
