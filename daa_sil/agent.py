@@ -160,16 +160,6 @@ def _reached(own: AircraftState, cmd: Command) -> np.ndarray:
     return (np.abs(dtrk) < np.radians(0.5)) & (np.abs(dvs) < 0.25) & (np.abs(dgs) < 0.5)
 
 
-@dataclass
-class ActiveBands:
-    """Bands the agent computed this step from the state alone (no hysteresis, not passed in):
-    ``bands`` of the encounters ``rows`` (one DAA batch). Anyone who needs the bands of the same
-    state, configuration and batch can reuse them (fast-time's pilot display)."""
-
-    rows: np.ndarray
-    bands: object  #: :class:`daa_sil.daa.bands.Bands` of ``rows``
-
-
 def _safety(batch_of, rows: np.ndarray, own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
             horizon: float, known: "dict | None" = None) -> np.ndarray:
     """SM(u) of ``cmd`` (one per row of ``rows``), one :func:`safety_metric` call per DAA batch.
@@ -195,8 +185,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     """One allocation step at sim time ``t`` (s) for ownship ``(N,)`` and intruders ``(N, M)``.
 
     Returns ``(command to fly, decision record, new memory)``; the record has the keys
-    :data:`DECISION_FIELDS` (codes in :data:`CODE_NAMES`; nan where not applicable), plus
-    ``active_bands`` (a list of :class:`ActiveBands`). ``policy`` one
+    :data:`DECISION_FIELDS` (codes in :data:`CODE_NAMES`; nan where not applicable),. ``policy`` one
     :class:`~daa_sil.allocation.AllocationPolicy` for every row, or a
     :class:`~daa_sil.allocation.PolicyRows` (each row its own). ``bands`` (a
     :class:`~daa_sil.daa.Bands` for the whole batch) may be passed to avoid recomputing them.
@@ -265,7 +254,6 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     daa_axis = np.zeros(n, np.int8)
     daa_dir = np.zeros(n, np.int8)
     parts: list = []  # (rows, Bands) per DAA batch
-    active_bands: list = []
     for pos in positions_by_batch(batch_of, ia):
         r = ia[pos]
         o, i_ = own[r], intr[r]
@@ -274,8 +262,6 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
         else:
             lists = conflict_lists(o, i_, cfg, daa_state.band_early_level(t)[r]) if cfg.stateful else None
             b = compute_bands(o, i_, cfg, alert[r], lists)
-            if not cfg.stateful:
-                active_bands.append(ActiveBands(r, b))
         if cfg.stateful:  # band, resolution and preferred-direction hysteresis
             b = daa_state.update_bands(t, b, cfg, r)
         cmd_b, ax_b, dir_b, tin_b = resolve(o, i_, cfg, (memory.daa_axis[r], memory.daa_dir[r]), b, return_t_in=True)
@@ -390,7 +376,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
         "cmd_trk": exec_cmd.trk, "cmd_vs": exec_cmd.vs, "cmd_gs": exec_cmd.gs,
         "pilot_trk": p_trk, "pilot_vs": p_vs, "pilot_gs": p_gs,
         "daa_trk": daa_cmd.trk, "daa_vs": daa_cmd.vs, "daa_gs": daa_cmd.gs,
-        "bands_trk": bt, "bands_trk_region": br_, "active_bands": active_bands,
+        "bands_trk": bt, "bands_trk_region": br_,
     }
     new_mem = replace(memory, pilot_trk=p_trk, pilot_vs=p_vs, pilot_gs=p_gs,
                       pilot_t_sent=np.where(fresh, pilot.t_sent, memory.pilot_t_sent), last_packet_t=link_t,

@@ -75,13 +75,9 @@ class PilotDisplay:
         self.wcv = np.zeros(n, bool)
         self.bands = {k: np.full(n, np.inf if k.endswith("_level") else np.nan) for k in self.KEYS}
 
-    def refresh(self, rows: np.ndarray, own: AircraftState, intr: AircraftState, alert: np.ndarray,
-                known: "tuple[np.ndarray, dict] | None" = None) -> None:
+    def refresh(self, rows: np.ndarray, own: AircraftState, intr: AircraftState, alert: np.ndarray) -> None:
         """Pilots ``rows`` (indices) now see ownship ``own`` (R,), intruders ``intr`` (R, M) and the
-        vehicle's alert level ``alert`` (R,) sent with them. ``known = (have (R,) bool, values)``:
-        the guidance of the rows ``have`` is already known -- ``values[key]`` (R,) for each of
-        :attr:`KEYS`, from the very bands this display would compute (the same state, configuration
-        and alert gating; see :func:`guidance_values`) -- and only the others are banded."""
+        vehicle's alert level ``alert`` (R,) sent with them."""
         from daa_sil.daa.alerting import relative_state
         from daa_sil.geometry.wellclear import wcv
 
@@ -92,11 +88,6 @@ class PilotDisplay:
         self.alert[rows] = alert
         self.wcv[rows] = wcv(*relative_state(own, intr), self.cfg.th).any(axis=1)
         sel = alert >= self.alert_level_min
-        if known is not None:
-            have = np.asarray(known[0], bool) & sel
-            for key in self.KEYS:
-                self.bands[key][rows[have]] = np.asarray(known[1][key])[have]
-            sel = sel & ~have
         from daa_sil.daa_batches import positions_by_batch
 
         k = np.flatnonzero(sel)

@@ -215,7 +215,6 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     m = core.m
     acc = Accumulators(n, core.own)
     log = sl.StepLogBuilder(encounters.encounter_id, m) if record_steps else None
-    rows = np.arange(n)
 
     # link state, one slot per step, kept until read: telemetry down, GCS packets up
     downlink = SlotRing(n, {"own": ((6,), float, np.nan), "intr": ((m, 6), float, np.nan), "alert": ((), np.int64, 0),
