@@ -74,19 +74,9 @@ def encounter_seeds(campaign_seed: int, encounter_ids: np.ndarray) -> np.ndarray
 
 # --- tasks (run in a worker) -----------------------------------------------------------------------
 @dataclass
-class ChunkTask:
-    """One chunk of one group (small, picklable); :class:`BatchTask` batches several."""
-
-    group: str
-    chunk: int
-    config: CampaignConfig
-    encounters: object  # EncounterSet subset for [lo, hi)
-    seeds: np.ndarray  # (n,) int64 per-encounter seeds
-
-
-@dataclass
 class BatchTask:
-    """Chunks of groups simulated side by side in one batch: the work unit sent to an executor.
+    """Chunks of groups simulated side by side in one batch: the work unit sent to an executor (small,
+    picklable).
     ``units`` are ``(group, chunk)``; ``encounters``/``seeds`` hold each chunk's subset once."""
 
     units: list
@@ -121,36 +111,33 @@ def campaign_family(config: CampaignConfig):
     return _wait_family(config.map_source, config.preset, config.gamma) if config.uses_map else None
 
 
+def campaign_wait_lookup(cfg: CampaignConfig, daa_cfg):
+    """The wait function a campaign's map groups read: its family under the reading's outside-the-box
+    rule (:func:`daa_sil.wait_function.make_wait_lookup`)."""
+    from daa_sil.wait_function import make_wait_lookup
+
+    return make_wait_lookup(campaign_family(cfg), cfg=daa_cfg, outside=cfg.effective_reading.outside)
+
+
 def simulate_group(cfg: CampaignConfig, group: str, encounters, seeds: np.ndarray, record_steps: bool = False):
     """Fly ``encounters`` (with their ``seeds``) as group ``group`` of campaign ``cfg``: the one place a
     campaign's settings (policy, link legs of the reading's latency rule, pilot, DAA, wait maps and
     the reading's outside-the-box rule) become a :func:`daa_sil.study.fasttime.simulate` call. Used by
     the campaign runner and by ``daa-sil viz replay``. Returns ``(encounters, decisions, steplog)``."""
-    from daa_sil.wait_function import make_wait_lookup
     from .fasttime import simulate
 
-    spec = cfg.group(group)
     legs = cfg.link_legs(group)
     daa_cfg = cfg.daa_config()
-    lookup = (make_wait_lookup(campaign_family(cfg), cfg=daa_cfg, outside=cfg.effective_reading.outside)
-              if spec.uses_map else None)
+    lookup = campaign_wait_lookup(cfg, daa_cfg) if cfg.group(group).uses_map else None
     return simulate(encounters, cfg.policy(group), legs.up, legs.down, cfg.pilot_config(), daa_cfg=daa_cfg,
                     wait_lookup=lookup, seeds=seeds, preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s,
                     group=group, record_steps=record_steps, link_legs=legs)
-
-
-def run_chunk(task: ChunkTask) -> ChunkResult:
-    """Simulate one chunk of one group (pure function of the task; safe in any worker)."""
-    t0 = time.perf_counter()
-    enc_rows, dec_rows, _ = simulate_group(task.config, task.group, task.encounters, task.seeds)
-    return ChunkResult(task.group, task.chunk, enc_rows, dec_rows, time.perf_counter() - t0, len(task.seeds))
 
 
 def run_batch(task: BatchTask) -> list[ChunkResult]:
     """Simulate the units of a batch together (pure function of the task; safe in any worker); each
     unit's tables are those of :func:`simulate_group` of the unit alone
     (:func:`daa_sil.study.fasttime.simulate_parts`)."""
-    from daa_sil.wait_function import make_wait_lookup
     from .fasttime import SimPart, simulate_parts
 
     t0 = time.perf_counter()
@@ -160,8 +147,7 @@ def run_batch(task: BatchTask) -> list[ChunkResult]:
         legs = cfg.link_legs(g)
         parts.append(SimPart(task.encounters[c], cfg.policy(g), legs.up, legs.down, task.seeds[c], g, link_legs=legs))
     daa_cfg = cfg.daa_config()
-    lookup = (make_wait_lookup(campaign_family(cfg), cfg=daa_cfg, outside=cfg.effective_reading.outside)
-              if any(cfg.group(g).uses_map for g, _ in task.units) else None)
+    lookup = campaign_wait_lookup(cfg, daa_cfg) if any(cfg.group(g).uses_map for g, _ in task.units) else None
     tables = simulate_parts(parts, cfg.pilot_config(), daa_cfg=daa_cfg, wait_lookup=lookup,
                             preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s)
     spent = time.perf_counter() - t0
@@ -343,7 +329,7 @@ def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resum
     return summary
 
 
-__all__ = ["GroupSpec", "parse_groups", "campaign_family", "CampaignConfig", "encounter_seeds", "ChunkTask",
-           "BatchTask", "ChunkResult", "run_chunk", "run_batch", "simulate_group", "chunk_paths", "chunk_done", "write_chunk", "read_results",
+__all__ = ["GroupSpec", "parse_groups", "campaign_family", "CampaignConfig", "encounter_seeds", "campaign_wait_lookup",
+           "BatchTask", "ChunkResult", "run_batch", "simulate_group", "chunk_paths", "chunk_done", "write_chunk",
            "load_campaign_json", "check_out_dir", "make_executor", "prepare_campaign", "run_campaign",
-           "CampaignSummary", "DASK_HINT"]
+           "CampaignSummary"]
