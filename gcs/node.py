@@ -24,7 +24,8 @@ datagram is still handled); telemetry the pilot would see is taken only if its v
 not older than what the pilot already sees and, when ticks drive the GCS, not stamped after the
 newest tick (``View.rejected`` counts the rest).
 
-Pilot: ``model`` = :class:`daa_sil.models.pilot.PilotModel` (N = 1) on the observed ownship
+Pilot: ``model`` = :class:`daa_sil.ground.GroundCore` (N = 1; step 1, the same code fast-time runs: the
+pilot's display and :class:`daa_sil.models.pilot.PilotModel`) on the observed ownship
 (LOCAL_POSITION_NED, float) and intruders (ADSB_VEHICLE), streaming per the allocation semantics;
 ``scripted`` = the scenario's ``pilot.commands`` (each sent once per step over ``[t_s, until_s)``).
 Commands go out as ``PILOT_MANEUVER`` (absolute setpoint, send time in ``time_boot_ms``, ``cmd_seq``
@@ -101,11 +102,10 @@ class GcsNode:
             self.daa_cfg = rc.daa_config(scenario.thresholds) if rc is not None else DaaConfig.for_preset(scenario.thresholds)
         else:
             self.daa_cfg = rc.daa_config() if rc is not None else DaaConfig()
-        self.pilot = None
+        self.ground = None  #: with the pilot model: step 1, a :class:`daa_sil.ground.GroundCore` of one encounter
         if self.mode == "model":
+            from daa_sil.ground import GroundCore
             from daa_sil.models.streams import STREAM_PILOT, encounter_streams
-            from daa_sil.models.pilot import PilotModel
-            from daa_sil.models.pilot_display import PilotDisplay
             from daa_sil.models.pilot_config import PilotConfig
             from daa_sil.sil.scenario import ownship_state
 
@@ -113,10 +113,9 @@ class GcsNode:
             # the plan the pilot returns to after the conflict: the scenario ownship's initial course
             mode = scenario.pilot.response if scenario else "guendel"
             pcfg = rc.pilot_config(mode=mode) if rc is not None else PilotConfig(mode=mode)
-            self.pilot = PilotModel(1, [seed], pcfg,
-                                    plan=ownship_state(scenario) if scenario is not None else None,
-                                    daa_cfg=self.daa_cfg)
-            self.pilot_display = PilotDisplay(1, self.daa_cfg, self.pilot.cfg.alert_level_min)
+            # the same step-1 object fast-time runs for N encounters
+            self.ground = GroundCore(1, [seed], pcfg, self.daa_cfg,
+                                     plan=ownship_state(scenario) if scenario is not None else None)
             from daa_sil.daa import kernels
 
             kernels.get()  # load the compiled DAA before READY, not at the first conflict in realtime
@@ -207,12 +206,21 @@ class GcsNode:
                     out.append({"track_deg": c.track_deg, "vs_mps": c.vs_mps, "gs_mps": c.gs_mps, "kind": "scripted"})
             return out[-1:]
         obs = self.observed()
+        none = np.zeros(0, np.int64)
         if obs is None:  # nothing seen yet: the pilot steps on an unknown (nan) state, as in fast-time
             nan = np.full(1, np.nan)
-            self.pilot.step(t, AircraftState(nan, nan, nan, nan, nan, nan), self.pilot_display.guidance())
+            self.ground.step(t, AircraftState(nan, nan, nan, nan, nan, nan), None, none, none)
             return []
         own, intr = obs
-        po = self.pilot.step(t, own, self._guidance(own, intr), intr)
+        # the display is refreshed only when newer telemetry is seen (as in fast-time), with the alert
+        # level the vehicle sent with that telemetry (DAA_ALERT)
+        t_seen = self.view.own[0]
+        fresh, alert = none, none
+        if t_seen != self._g_seen:
+            self._g_seen = t_seen
+            level = self.view.alert[1] if self.view.alert[0] == t_seen else self.ground.display.alert[0]
+            fresh, alert = np.array([0]), np.array([int(level)])
+        po = self.ground.step(t, own, intr, fresh, alert)
         if not bool(po.send[0]):
             return []
         kind = "hold" if int(po.maneuver[0]) == 0 else f"maneuver{int(po.maneuver[0])}"
@@ -220,17 +228,6 @@ class GcsNode:
         return [{"track_deg": math.degrees(trk) % 360.0 if math.isfinite(trk) else math.nan,
                  "vs_mps": float(po.cmd.vs[0]), "gs_mps": float(po.cmd.gs[0]), "kind": kind,
                  "axis": str(po.axis_names()[0]), "dir": str(po.direction_names()[0])}]
-
-    def _guidance(self, own: AircraftState, intr: AircraftState):
-        """The pilot's display guidance, refreshed only when newer telemetry is seen (as fast-time,
-        with the same :class:`daa_sil.models.pilot_display.PilotDisplay`): the vehicle's alert level (DAA_ALERT) sent
-        with that telemetry, well clear on the observed states and the DAA bands of the observed states."""
-        t_seen = self.view.own[0]
-        if t_seen != self._g_seen:
-            self._g_seen = t_seen
-            alert = int(self.view.alert[1]) if self.view.alert[0] == t_seen else int(self.pilot_display.alert[0])
-            self.pilot_display.refresh(np.array([0]), own, intr, np.array([alert]))
-        return self.pilot_display.guidance()
 
     def _heartbeat(self):
         return M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE, 3)

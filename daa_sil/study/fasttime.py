@@ -4,10 +4,10 @@ At step ``k`` (``t_k = k dt``, ``dt = 1 s``, ``T = 240 s``; ``docs/architecture.
 
 1. **GCS / pilot** -- the pilot observes the newest telemetry whose downlink release time is
    ``<= t_k`` (per-encounter telemetry history + FIFO release rule of
-   :func:`daa_sil.link.delayline.fifo_release`), its display (:class:`daa_sil.models.pilot_display.PilotDisplay`,
-   the same one the SIL GCS uses) is refreshed from that view where it changed (DAA bands only
-   where the observed alert reaches ``PilotConfig.alert_level_min``), and
-   :meth:`daa_sil.models.pilot.PilotModel.step` decides. The GCS sends a packet every step (a heartbeat,
+   :func:`daa_sil.link.delayline.fifo_release`), and :meth:`daa_sil.ground.GroundCore.step` (the same
+   step-1 code the SIL GCS runs) refreshes the pilot's display from that view where it changed (DAA
+   bands only where the observed alert reaches ``PilotConfig.alert_level_min``) and the pilot model
+   decides. The GCS sends a packet every step (a heartbeat,
    plus the streamed command when the pilot has one) stamped ``t_k``; packets are released on the
    vehicle side at ``max(t_k + d_up(t_k), previous release)``.
 2. **Vehicle** -- :meth:`daa_sil.onboard.OnboardCore.step` with the newest command released at or
@@ -70,9 +70,8 @@ from daa_sil.link.delayline import fifo_release
 from daa_sil.models.delay_process import BatchedDelay
 from daa_sil.models.encounters import concat_encounters
 from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel
-from daa_sil.models.pilot import PilotModel
 from daa_sil.models.pilot_config import PilotConfig
-from daa_sil.models.pilot_display import PilotDisplay
+from daa_sil.ground import GroundCore
 from daa_sil.onboard import OnboardCore
 from daa_sil.study.fasttime_results import (DECISION_SCHEMA, ENCOUNTER_SCHEMA, Accumulators, decision_table,
                                             encounter_table, step_columns)
@@ -203,8 +202,8 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     core = OnboardCore.from_encounters(encounters, policy, cfg, wait_lookup, thresholds=preset_name,
                                        step_log=record_steps, daa_batches=batches)
     # the flight plan the pilot returns to: the ownship's initial straight, level course
-    pilot = PilotModel(n, [x[STREAM_PILOT] for st in streams for x in st], pcfg, plan=core.own, daa_cfg=cfg,
-                       daa_batches=batches)
+    ground = GroundCore(n, [x[STREAM_PILOT] for st in streams for x in st], pcfg, cfg, plan=core.own,
+                        daa_batches=batches)
     # each part's link legs: one-way (each link its own stream) or a shared round trip (both links
     # read the uplink stream's draws: models/link_rule.py)
     legs = [p.link_legs if p.link_legs is not None else LinkLegs(p.latency_up, p.latency_down) for p in parts]
@@ -226,7 +225,6 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     up_ptr = np.zeros(n, np.int64)
     last_cmd_slot = np.full(n, -1, np.int64)  # newest command slot delivered to the vehicle
     last_down, last_up = np.full(n, -np.inf), np.full(n, -np.inf)
-    display = PilotDisplay(n, cfg, pcfg.alert_level_min, daa_batches=batches)
     down_release = lambda s, r: downlink.gather("release", s, r)  # noqa: E731
     up_release = lambda s, r: uplink.gather("release", s, r)  # noqa: E731
 
@@ -239,16 +237,13 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         seen = obs
         obs_own = AircraftState.from_array(downlink.gather("own", obs))
         obs_intr = AircraftState.from_array(downlink.gather("intr", obs))
-        i = np.flatnonzero(new & (obs >= 0))
-        if i.size:
-            o = obs[i]
-            # the display bands the states it shows itself, all in one call per DAA batch: taking the
-            # agent's bands of the same state would give the numbers of a call on other rows (the
-            # agent's active rows of that step), which differ in the DAA's last bits and, rarely, in a
-            # candidate's region -- the pilot then chose another maneuver (bba2fd8 identity, issue 21)
-            display.refresh(i, obs_own[i], obs_intr[i], downlink.gather("alert", o, i))
+        fresh = np.flatnonzero(new & (obs >= 0))
+        # the display bands the states it shows itself, all in one call per DAA batch: taking the
+        # agent's bands of the same state would give the numbers of a call on other rows (the
+        # agent's active rows of that step), which differ in the DAA's last bits and, rarely, in a
+        # candidate's region -- the pilot then chose another maneuver (bba2fd8 identity, issue 21)
+        pout = ground.step(t, obs_own, obs_intr, fresh, downlink.gather("alert", obs[fresh], fresh))
         downlink.release(max(int(down_ptr.min()) - 1, 0))
-        pout = pilot.step(t, obs_own, display.guidance(), obs_intr)
         # GCS packet of step k (heartbeat + command if streaming), FIFO-released on the vehicle side
         d_up = up.delay_at(t)
         rel_up = fifo_release(np.full((n, 1), t), d_up[:, None], prev_release=last_up)[:, 0]
