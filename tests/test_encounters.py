@@ -7,6 +7,7 @@ from scipy import stats
 from daa_sil.models import encounter_files as EF
 from daa_sil.models import encounter_geometry as EG
 from daa_sil.models import encounters as E
+from daa_sil.models.intruder_flight import INTRUDER_PERFORMANCE
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.geometry.kinematics import advance
 from daa_sil.geometry.units import DEG
@@ -81,7 +82,7 @@ def test_turning_intruders_pass_cpa_check_with_simulator_dynamics(sample):
         w, a, av = es.intruder_controls(float(k))
         for _ in range(10):  # 0.1 s sub-samples of the same exact arcs
             own = advance(own, dt=0.1)
-            intr = advance(intr, w, a, av, 0.1, E.INTRUDER_PERFORMANCE)
+            intr = advance(intr, w, a, av, 0.1, INTRUDER_PERFORMANCE)
             r = np.hypot(own.x - intr.x[:, 0], own.y - intr.y[:, 0])
             better = r < best
             best, t_best = np.where(better, r, best), np.where(better, k + 0.1 * (_ + 1), t_best)

@@ -12,8 +12,8 @@ from daa_sil.errors import UsageError
 from daa_sil.geometry.frames import wrap_2pi, wrap_pi
 from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.geometry.units import DEG
-from daa_sil.models.encounters import (PARAM_NAMES, EncounterConfig, EncounterSet, fly_segments, initial_ownships,
-                                        place_intruders, realised_cpa)
+from daa_sil.models.encounters import PARAM_NAMES, EncounterConfig, EncounterSet, initial_ownships
+from daa_sil.models.intruder_flight import fly_segments, place_intruders, realised_cpa
 
 
 @dataclass
