@@ -2,7 +2,7 @@
 
 * :mod:`daa_sil.sil.endpoint` -- asyncio UDP endpoint around the codec, address parsing
 * :mod:`daa_sil.sil.connstr`  -- ``udp:``/``udpin:``/``udpout:`` connection strings
-* :mod:`daa_sil.sil.shim`     -- the delay shim (with ``shim_config``, ``shim_socket``, ``shim_ticks``)
+* :mod:`daa_sil.sil.shim`     -- the delay shim (its sans-IO ``shim_core``, with ``shim_config``, ``shim_socket``)
 * :mod:`daa_sil.sil.rtclock`  -- realtime clocks: kernel receive stamps, precise timers
 * :mod:`daa_sil.sil.lockstep` -- SIM_TICK / SIM_TICK_ACK handshake helpers for vehicle and GCS
 * :mod:`daa_sil.sil.live`     -- the live step feed (UDP, fire-and-forget) to the Rerun recorder
