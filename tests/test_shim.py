@@ -18,7 +18,7 @@ from daa_sil.errors import UsageError
 from daa_sil.models.latency import Constant, TruncatedGaussian
 from daa_sil.models.delay_process import DelayProcess
 from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec, mavlink as d
-from daa_sil.study.fasttime import STREAM_DOWN, STREAM_UP, encounter_streams
+from daa_sil.models.streams import STREAM_DOWN, STREAM_UP, encounter_streams
 from daa_sil.link.delayline import fifo_release
 from daa_sil.sil.endpoint import open_endpoint
 from daa_sil.sil.shim import DelayShim, run_shim
