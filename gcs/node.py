@@ -122,7 +122,7 @@ class GcsNode:
         self._g_seen = math.nan
         self.seq = 0
         self.sent: list[dict] = []
-        self.ticks = TickPeer("gcs", self.codec)  #: the tick protocol: ticks seen, skipped, acked, silence
+        self.ticks = TickPeer("gcs", self.codec)  #: the tick protocol: ticks seen, skipped, acked (done), silence
         self.steps = 0
         self.stop = asyncio.Event()
         self._wall0: "float | None" = None
@@ -289,7 +289,7 @@ class GcsNode:
     def _check_silence(self) -> None:
         """Report (once until they come back) ticks that stopped for the role's SILENT_AFTER_S."""
         for _, quiet in self.ticks.check_silence(asyncio.get_running_loop().time()):
-            done = self.ticks.newest["vehicle"]
+            done = self.ticks.sent
             self._say(f"warning: no SIM_TICK from {self._peer_text()} for {quiet:.1f} s (last: tick "
                       f"{done}, t = {done:g} s): has the vehicle (or the shim) stopped?")
 
@@ -311,7 +311,7 @@ class GcsNode:
                 try:
                     r = await asyncio.wait_for(inbox.get(), 0.1)
                 except asyncio.TimeoutError:
-                    if self.ticks.newest["vehicle"] < 0:  # nothing yet: greet again (a shim may have started after us)
+                    if self.ticks.sent < 0:  # nothing yet: greet again (a shim may have started after us)
                         self.ep.send(self._heartbeat())
                     self._check_silence()
                     continue

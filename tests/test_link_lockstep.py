@@ -43,12 +43,15 @@ def test_tick_zero_waits_for_the_gcs_even_behind_a_shim():
 def test_gcs_end_steps_each_new_tick_once_and_counts_skipped_ones():
     gcs = TickPeer("gcs", MavCodec(255, 190))
     assert gcs.on_tick(0, 0.0, now=0.0) == (True, None)
+    gcs.ack(0, 0)
     assert gcs.on_tick(0, 0.0, now=0.1) == (False, None)  # repeated: ack again, no second step
     assert gcs.on_tick(3, 3.0, now=0.2) == (True, None)
-    assert gcs.skipped == 2 and gcs.heard["vehicle"] == 3 and gcs.newest_t == 3.0
-    assert gcs.on_tick(2, 2.0, now=0.3) == (False, None) and gcs.newest_t == 3.0
+    assert gcs.on_tick(3, 3.0, now=0.25) == (True, None)  # its step did not finish (no ack): run it again
     ack = _decode(MavCodec(1, 1), gcs.ack(3, 3000, sent=70000))
     assert (ack.get_type(), ack.tick, ack.time_ms, ack.sent) == ("SIM_TICK_ACK", 3, 3000, 65535)
+    assert gcs.sent == 3 and gcs.heard["vehicle"] == 4 and gcs.newest_t == 3.0
+    assert gcs.on_tick(2, 2.0, now=0.3) == (False, None) and gcs.newest_t == 3.0
+    assert gcs.skipped == 4  # ticks 1 and 2, counted at each of the two tries of tick 3
 
 
 @pytest.mark.parametrize("role,who", [("vehicle", "shim"), ("gcs", "vehicle")])

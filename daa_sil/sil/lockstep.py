@@ -35,7 +35,7 @@ PARTNERS = {"vehicle": ("shim", "gcs"), "gcs": ("vehicle",)}
 class TickPeer:
     """One end of the tick protocol: ``role`` ``"vehicle"`` (sends ticks) or ``"gcs"`` (acknowledges them).
 
-    ``sent``: the newest tick this end sent (vehicle: SIM_TICK) or acknowledged (GCS).
+    ``sent``: the newest tick this end sent (vehicle: SIM_TICK) or acknowledged (GCS: its step done).
     ``newest[who]``: the newest tick ``who`` confirmed (vehicle: echoed / acknowledged one it sent)
     or sent (GCS: the vehicle side's newest tick). ``partner`` (vehicle): who confirms its ticks --
     ``"shim"`` once one echoes, ``"gcs"`` wired straight to a GCS, ``"none"`` for a peer that
@@ -94,17 +94,19 @@ class TickPeer:
 
     # -- the GCS's end ---------------------------------------------------------------------------
     def on_tick(self, k: int, t: float, now: float) -> "tuple[bool, float | None]":
-        """``SIM_TICK(k, t)`` from the vehicle side at wall time ``now`` (s): ``(step, back)``, ``step``
-        True if ``k`` is new (run its step), ``back`` the seconds the ticks had been reported silent."""
+        """``SIM_TICK(k, t)`` from the vehicle side at wall time ``now`` (s): ``(step, back)``. ``step``: ``k``
+        is newer than every tick acknowledged so far, so run its step, then :meth:`ack` it (a step that
+        failed is not acknowledged and runs again on the repeated tick); ``back``: the seconds the ticks
+        had been reported silent, if this one ends that."""
         self.newest_t = max(self.newest_t, float(t))
+        self.newest["vehicle"] = max(self.newest["vehicle"], int(k))
         self.heard["vehicle"] += 1
         back = self.silence["vehicle"].heard(now)
-        last = self.newest["vehicle"]
-        if k <= last:
+        done = self.sent
+        if k <= done:
             return False, back
-        if last >= 0 and k > last + 1:
-            self.skipped += k - last - 1  # missed ticks: steps lockstep would have run
-        self.newest["vehicle"] = int(k)
+        if done >= 0 and k > done + 1:
+            self.skipped += k - done - 1  # missed ticks: steps lockstep would have run
         return True, back
 
     def ack(self, k: int, time_ms: int, sent: int = 0) -> bytes:
