@@ -136,3 +136,20 @@ def test_faults_are_keyed_on_the_step_not_on_wall_clock_traffic():
     assert a == c  # greetings before the first tick move no fault of the simulation's datagrams
     released = [s for row in a for s in row if s.data[7] == d.MAVLINK_MSG_ID_SYSTEM_TIME]
     assert 0 < len(released) < 2 * 40 * 1.3  # some were lost, some duplicated: the faults ran
+
+
+def test_realtime_ticks_stamp_a_late_gcs_with_the_tick_it_works_on():
+    core = _core(clock="realtime")  # delays: 2 s down, 1 s up
+    tick0 = _tick(0, 0.0)
+    assert core.receive("vehicle", tick0, 0.0) == [Send("gcs", tick0), Send("vehicle", tick0)]
+    assert core.tick_mode is True  # the vehicle's first datagram was a tick
+    core.receive("gcs", _ack(0, 0.0))
+    core.receive("vehicle", _tick(1, 1.0))
+    assert core.counters["ticks_held"] == 0  # realtime: the vehicle's wall clock paces ticks, nothing is held
+    core.receive("vehicle", _tick(2, 2.0))
+    cmd = _hb(GCS)  # the GCS's step-1 command, read after tick 2: stamped t_1 = 1 s, due at 2 s
+    assert core.receive("gcs", cmd) == []
+    assert core.counters["gcs_lagged"] == 1 and core.counters["released_late"] == 1
+    core.receive("gcs", _ack(2, 2.0))
+    sends = core.receive("vehicle", _tick(3, 3.0))
+    assert sends[0] == Send("vehicle", cmd)  # released at the next tick processed
