@@ -67,7 +67,7 @@ def parse_setting(text: str) -> "tuple[float, str, float]":
     import math
     import re
 
-    from vehicle.identity import PLANE_MODES
+    from daa_sil.link.plane import PLANE_MODES
 
     m = re.fullmatch(r"\s*([^:]+):([A-Za-z0-9_]{1,16})=(\S+)\s*", str(text))
     if m is None:
@@ -129,7 +129,7 @@ async def _amain(args) -> int:
         st = node.ep.stats()
         node.close()
     print(f"daa-gcs: done, {node.steps} steps, {len(node.sent)} commands sent, packets dropped {st['dropped']}, "
-          f"telemetry rejected {node.view.rejected}, ticks {node.ticks_seen} (ticks skipped {node.ticks_skipped})"
+          f"telemetry rejected {node.view.rejected}, ticks {node.ticks.heard['vehicle']} (ticks skipped {node.ticks.skipped})"
           + (f"; log {path}" if path else ""), flush=True)
     print("daa-gcs: link stats " + json.dumps(st, sort_keys=True), flush=True)
     for line in (node.ep.drops.summary(), node.ep.guard.summary()):

@@ -14,7 +14,9 @@ Per step ``k`` at sim time ``t_k`` (``docs/architecture.md`` step 1):
   clock x ``speed``, stepping at every whole sim second (that clock is off by the difference
   between the first packet's delay and the assumed one: no lockstep parity).
 
-Ticks that stop for 3 s after they came are reported (stderr), naming the address they came from.
+Ticks that stop after they came (``SILENT_AFTER_S["gcs"]``, :mod:`daa_sil.sil.silence`) are reported
+(stderr), naming the address they came from; the tick protocol's state is a
+:class:`daa_sil.sil.lockstep.TickPeer`.
 
 Hostile input: only the vehicle side's address and system id are accepted (``--vehicle udpin:``: the
 first sender, any other is dropped with a warning); every message is handled under the endpoint's
@@ -45,19 +47,16 @@ import numpy as np
 
 from daa_sil.geometry.frames import geodetic_to_enu
 from daa_sil.geometry.kinematics import AircraftState
-from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec
+from daa_sil.link.codec import MavCodec
 from daa_sil.link.codec import mavlink as M
 from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
 from daa_sil.sil.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint
+from daa_sil.sil.lockstep import TickPeer
 
 from .view import View
 
 GCS_SYSID, GCS_COMPID = 255, 190
 VEHICLE_SYSID = 1
-
-#: wall seconds without a SIM_TICK (after ticks came) before the vehicle side is reported silent
-SILENT_AFTER_S = 3.0
-
 
 
 @dataclass
@@ -122,17 +121,11 @@ class GcsNode:
         self._g_seen = math.nan
         self.seq = 0
         self.sent: list[dict] = []
-        self.done_tick = -1
+        self.ticks = TickPeer("gcs", self.codec)  #: the tick protocol: ticks seen, skipped, acked (done), silence
         self.steps = 0
         self.stop = asyncio.Event()
         self._wall0: "float | None" = None
         self._t_sync = 0.0
-        self.ticks_skipped = 0  #: ticks never received between two received ones (no step ran for them)
-        self.ticks_seen = 0  #: SIM_TICKs received (realtime: > 0 means steps follow the vehicle's ticks)
-        self._last_tick_wall: "float | None" = None
-        self._tick_silent = False
-        self.silence_warnings = 0
-        self._tick_t = -math.inf  #: sim time of the newest SIM_TICK (s): no genuine telemetry is newer
 
     async def start(self) -> None:
         """Bind, then greet the vehicle side with a HEARTBEAT (a shim learns our address from it).
@@ -177,8 +170,9 @@ class GcsNode:
 
     def handle(self, r: Received) -> None:
         """Take in one telemetry message (:meth:`gcs.view.View.take`); run it under ``self.ep.guard``."""
+        ticks = self.ticks  # no genuine telemetry is newer than the newest tick
         self.view.take(r.msg, self._enu, origin_known=self.origin is not None,
-                       newest_tick=self._tick_t if self.ticks_seen else None)
+                       newest_tick=ticks.newest_t if ticks.heard["vehicle"] else None)
 
     def take(self, r: Received) -> None:
         """One message from the vehicle side, under the guard: a tick steps the pilot, the rest is telemetry."""
@@ -262,7 +256,7 @@ class GcsNode:
             self.sent.append({"t": t, "kind": "mode" if name == "MODE" else "param", "name": name,
                               "value": float(value), "wall_s": round(time.time(), 3)})
         if out:
-            from vehicle.telemetry import system_time
+            from daa_sil.link.plane import system_time
 
             out.insert(0, system_time(t))
         return out
@@ -283,34 +277,18 @@ class GcsNode:
     def _on_tick(self, r: Received) -> None:
         """``SIM_TICK(k, t_k)``: run step ``t_k`` if ``k`` is new (a repeated tick is only re-acked), then ack."""
         k, t = int(r.msg.tick), r.msg.time_ms / 1000.0
-        now = asyncio.get_running_loop().time()
-        self._tick_t = max(self._tick_t, t)
-        if self._tick_silent:
-            self._tick_silent = False
-            self._say(f"ticks from {self._peer_text()} are back at t = {t:g} s "
-                      f"(silent for {now - self._last_tick_wall:.1f} s)")
-        self.ticks_seen += 1
-        self._last_tick_wall = now
-        n = 0
-        if k > self.done_tick:
-            if self.done_tick >= 0 and k > self.done_tick + 1:
-                self.ticks_skipped += k - self.done_tick - 1  # missed ticks: steps lockstep would have run
-            n = self.step(t)
-            self.done_tick = k
-        ack = self.codec.encode(M.MAVLink_sim_tick_ack_message(k, r.msg.time_ms, min(n, 65535)),
-                                link_id=CONTROL_LINK_ID if self.codec.signed else None)
-        self.ep.transport.sendto(ack, self.peer)
+        step, back = self.ticks.on_tick(k, t, asyncio.get_running_loop().time())
+        if back is not None:
+            self._say(f"ticks from {self._peer_text()} are back at t = {t:g} s (silent for {back:.1f} s)")
+        n = self.step(t) if step else 0
+        self.ep.transport.sendto(self.ticks.ack(k, r.msg.time_ms, min(n, 65535)), self.peer)
 
     def _check_silence(self) -> None:
-        """Report (once until they come back) ticks that stopped for SILENT_AFTER_S wall seconds."""
-        if self._last_tick_wall is None or self._tick_silent:
-            return
-        quiet = asyncio.get_running_loop().time() - self._last_tick_wall
-        if quiet >= SILENT_AFTER_S:
-            self._tick_silent = True
-            self.silence_warnings += 1
+        """Report (once until they come back) ticks that stopped for the role's SILENT_AFTER_S."""
+        for _, quiet in self.ticks.check_silence(asyncio.get_running_loop().time()):
+            done = self.ticks.sent
             self._say(f"warning: no SIM_TICK from {self._peer_text()} for {quiet:.1f} s (last: tick "
-                      f"{self.done_tick}, t = {self.done_tick:g} s): has the vehicle (or the shim) stopped?")
+                      f"{done}, t = {done:g} s): has the vehicle (or the shim) stopped?")
 
     def _peer_text(self) -> str:
         return format_udp_address(self.peer) if self.peer is not None else self.vehicle_conn.text
@@ -330,7 +308,7 @@ class GcsNode:
                 try:
                     r = await asyncio.wait_for(inbox.get(), 0.1)
                 except asyncio.TimeoutError:
-                    if self.done_tick < 0:  # nothing yet: greet again (a shim may have started after us)
+                    if self.ticks.sent < 0:  # nothing yet: greet again (a shim may have started after us)
                         self.ep.send(self._heartbeat())
                     self._check_silence()
                     continue
@@ -348,7 +326,7 @@ class GcsNode:
         assumed_down = delay_models(self.sc)[1].mean() if self.sc is not None else 0.0
         next_t = None
         while not self.stop.is_set():
-            free = not self.ticks_seen  # no ticks (yet): our own clock, synchronised on telemetry
+            free = not self.ticks.heard["vehicle"]  # no ticks (yet): our own clock, synchronised on telemetry
             now = self.sim_now(loop) if free else None
             timeout = 0.2 if now is None or next_t is None else max(0.0, (next_t - now) / self.opts.speed)
             try:
@@ -363,9 +341,9 @@ class GcsNode:
                 continue
             except asyncio.TimeoutError:
                 self._check_silence()
-                if self.ticks_seen == 0 and now is None:  # nothing yet: greet again (the shim may have started
+                if not self.ticks.heard["vehicle"] and now is None:  # nothing yet: greet again (the shim may have started
                     self.ep.send(self._heartbeat())  # after us, or we were restarted and it must relearn us)
-            if self.ticks_seen:
+            if self.ticks.heard["vehicle"]:
                 continue
             now = self.sim_now(loop)
             if now is not None and next_t is not None and now >= next_t - 1e-6:

@@ -91,7 +91,7 @@ class View:
         elif t == "COMMAND_ACK":
             self.acks += 1
         elif t == "HEARTBEAT" and m.get_srcComponent() == 1:
-            from vehicle.identity import mode_name
+            from daa_sil.link.plane import mode_name
 
             self.mode = mode_name(m.custom_mode)
         elif t == "PARAM_VALUE":

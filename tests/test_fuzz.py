@@ -222,7 +222,7 @@ def run_and_check(total: int, seed: int = 9) -> dict:
     sh_c, sh_f = clean["shim"], fz["shim"]
     d_rej = sh_f.counters["rejected_peer"] - sh_c.counters["rejected_peer"]
     assert d_rej == plan.sent[("shim_vehicle_side", "stranger")] + plan.sent[("shim_gcs_side", "stranger")]
-    pushed = {d: sh_f.lines[d].counters.pushed - sh_c.lines[d].counters.pushed for d in ("down", "up")}
+    pushed = {d: sh_f.core.lines[d].counters.pushed - sh_c.core.lines[d].counters.pushed for d in ("down", "up")}
     assert pushed["down"] == plan.sent[("shim_vehicle_side", "spoofed")]
     assert pushed["up"] == plan.sent[("shim_gcs_side", "spoofed")]
     figures["shim"] = {"rejected_peer": d_rej, "relayed_spoofed": pushed,

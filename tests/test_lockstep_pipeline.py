@@ -68,7 +68,7 @@ async def test_shim_holds_a_tick_until_the_gcs_acked_the_previous_one():
             veh.send(d.MAVLink_sim_tick_message(1, 1000))
             await _nothing(veh, ("SIM_TICK",))  # held: no echo ...
             await _nothing(gcs, ("SIM_TICK",))  # ... nor forwarded ...
-            assert shim.sim_time == 0.0 and shim.counters["ticks_held"] == 1  # ... nor released anything
+            assert shim.core.sim_time == 0.0 and shim.counters["ticks_held"] == 1  # ... nor released anything
             # the vehicle's retry (tick 0 again, then tick 1): the repeated tick reaches the GCS again,
             # tick 1 stays held
             veh.send(d.MAVLink_sim_tick_message(0, 0))
@@ -77,7 +77,7 @@ async def test_shim_holds_a_tick_until_the_gcs_acked_the_previous_one():
             assert (await _next(veh, ("SIM_TICK",))).tick == 0  # a repeated tick is echoed again
             await _nothing(gcs, ("SIM_TICK",))
             await _nothing(veh, ("SIM_TICK",))
-            assert shim.sim_time == 0.0 and shim.counters["ticks_held"] == 2
+            assert shim.core.sim_time == 0.0 and shim.counters["ticks_held"] == 2
             # the GCS's step 0: a command stamped t = 0 (due at 0.5 s), then its ack
             gcs.send(d.MAVLink_pilot_maneuver_message(0, 1, 1, 1, 90.0, 0.0, 55.0))
             gcs.send(d.MAVLink_sim_tick_ack_message(0, 0, 1))
@@ -88,7 +88,7 @@ async def test_shim_holds_a_tick_until_the_gcs_acked_the_previous_one():
             assert [m.get_type() for m in got] == ["SIM_TICK_ACK", "PILOT_MANEUVER", "SIM_TICK"]
             assert got[0].tick == 0 and got[-1].tick == 1
             assert (await _next(gcs, ("GLOBAL_POSITION_INT", "SIM_TICK"))).get_type() == "GLOBAL_POSITION_INT"
-            assert shim.sim_time == 1.0
+            assert shim.core.sim_time == 1.0
         st = shim.stats()
         assert st["counters"]["released_late"] == 0 and st["counters"]["gcs_lagged"] == 0
         assert st["up"]["released"] == 2 and st["down"]["released"] == 1  # up: the greeting and the command

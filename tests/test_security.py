@@ -170,7 +170,7 @@ async def test_keyed_shim_cannot_be_claimed_by_a_forger():
             await _until(lambda: shim.counters["rejected_peer"] == 1, "the stranger")
         # only the genuine one entered (held until the vehicle side speaks: realtime mode not decided yet)
         assert shim.counters["datagrams_from_gcs"] == 4
-        assert len(shim.lines["up"]) + shim.counters["held_for_vehicle"] == 1
+        assert len(shim.core.lines["up"]) + shim.counters["held_for_vehicle"] == 1
     finally:
         atk.close()
         await shim.close()

@@ -18,7 +18,7 @@ from daa_sil.errors import UsageError
 from daa_sil.models.latency import Constant, TruncatedGaussian
 from daa_sil.models.delay_process import DelayProcess
 from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec, mavlink as d
-from daa_sil.study.fasttime import STREAM_DOWN, STREAM_UP, encounter_streams
+from daa_sil.models.streams import STREAM_DOWN, STREAM_UP, encounter_streams
 from daa_sil.link.delayline import fifo_release
 from daa_sil.sil.endpoint import open_endpoint
 from daa_sil.sil.shim import DelayShim, run_shim
@@ -121,7 +121,7 @@ async def test_lockstep_signed_link_no_replay_rejections():
     assert seen_by_gcs[7] == list(range(6)) and seen_by_veh[7] == list(range(5))
     for side in ("veh", "gcs"):
         assert st[side]["dropped"] == 0 and st[side]["received"] > 8
-    assert shim.codec.counters.messages_in == 16  # 8 ticks + 8 acks verified by the shim
+    assert shim.core.codec.counters.messages_in == 16  # 8 ticks + 8 acks verified by the shim
 
 
 @pytest.mark.asyncio
@@ -158,8 +158,8 @@ async def test_lockstep_forged_tick_does_not_move_the_clock():
             veh.transport.sendto(bytes(tick), shim.vehicle_side)
             veh.send(d.MAVLink_sim_tick_message(1, 1000))
             await shim.wait_tick(1, timeout=5)
-        assert shim.sim_time == 1.0 and shim.counters["bad_control"] == 1 and shim.counters["rejected_claim"] == 1
-        assert len(shim.lines["down"]) == 2  # heartbeat + the corrupt datagram (just data: delayed, not dropped)
+        assert shim.core.sim_time == 1.0 and shim.counters["bad_control"] == 1 and shim.counters["rejected_claim"] == 1
+        assert len(shim.core.lines["down"]) == 2  # heartbeat + the corrupt datagram (just data: delayed, not dropped)
     finally:
         await shim.close()
 

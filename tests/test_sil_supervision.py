@@ -185,16 +185,15 @@ def test_a_dead_vehicle_is_named(tmp_path):
 async def test_standalone_vehicle_and_gcs_report_a_shim_that_stops(monkeypatch, capsys):
     """Vehicle, shim and GCS in one loop, realtime at 20x; the shim is closed at t = 6 s. The vehicle
     says the shim stopped echoing ticks (naming its address) and the GCS that ticks stopped."""
-    import gcs.node as gnode
-    import vehicle.ticks as vticks
+    from daa_sil.sil import silence
     from daa_sil.sil.shim import DelayShim
     from daa_sil.sil.shim_config import ShimConfig
     from daa_sil.sil.scenario import delay_models
     from gcs.node import GcsNode, GcsOptions
     from vehicle.node import VehicleNode, VehicleOptions
 
-    monkeypatch.setattr(vticks, "SILENT_AFTER_S", 0.5)
-    monkeypatch.setattr(gnode, "SILENT_AFTER_S", 0.5)
+    monkeypatch.setitem(silence.SILENT_AFTER_S, "vehicle", 0.5)
+    monkeypatch.setitem(silence.SILENT_AFTER_S, "gcs", 0.5)
     sc = load_scenario(HEAD_ON)
     up, down = delay_models(sc)
     shim = DelayShim(ShimConfig(delay_down=down, delay_up=up, listen_vehicle="udp:127.0.0.1:0",
@@ -228,7 +227,7 @@ async def test_standalone_vehicle_and_gcs_report_a_shim_that_stops(monkeypatch, 
     assert f"daa-vehicle: warning: the shim at {v_side} has not echoed a tick " in err, err
     assert "the GCS behind the shim" not in err  # the silent shim is the news, not the GCS behind it
     assert v.stats.steps_unconfirmed >= 1 and v.stats.steps == 40  # it flew on
-    assert g.silence_warnings == 1
+    assert g.ticks.silence_warnings == 1
     assert f"daa-gcs: warning: no SIM_TICK from {g_side} for" in err
     # before the shim went away every step was confirmed in time
     assert v.stats.tick_echoes >= 7

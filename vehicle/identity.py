@@ -38,15 +38,11 @@ DISARM fails.
 from __future__ import annotations
 
 from daa_sil.link.codec import mavlink as M
+from daa_sil.link.plane import AVOID_ADSB, CRUISE, GUIDED, PLANE_MODES, mode_name  # noqa: F401 (names of this interface)
 
 AUTOPILOT = M.MAV_AUTOPILOT_ARDUPILOTMEGA
 VEHICLE_TYPE = M.MAV_TYPE_FIXED_WING
 
-#: ArduPlane mode numbers (ArduPlane's ``Mode::Number``) -> names, as MAVProxy / pymavlink spell them
-PLANE_MODES = {0: "MANUAL", 1: "CIRCLE", 2: "STABILIZE", 3: "TRAINING", 4: "ACRO", 5: "FBWA", 6: "FBWB",
-               7: "CRUISE", 8: "AUTOTUNE", 10: "AUTO", 11: "RTL", 12: "LOITER", 13: "TAKEOFF", 14: "AVOID_ADSB",
-               15: "GUIDED", 16: "INITIALISING"}
-GUIDED, AVOID_ADSB, CRUISE = 15, 14, 7
 #: authority -> ArduPlane mode number
 AUTHORITY_MODE = {"pilot": GUIDED, "daa": AVOID_ADSB, "waiting": CRUISE}
 #: capabilities actually served (AUTOPILOT_VERSION): MAVLink 2, COMMAND_INT (DO_REPOSITION, modes),
@@ -70,10 +66,6 @@ def base_mode(mode: int) -> int:
     if mode in (GUIDED, AVOID_ADSB):
         b |= M.MAV_MODE_FLAG_GUIDED_ENABLED
     return b
-
-
-def mode_name(mode: int) -> str:
-    return PLANE_MODES.get(int(mode), f"MODE{int(mode)}")
 
 
 def mode_request(base: int, custom: int, current: int) -> "tuple[int, str]":

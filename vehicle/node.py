@@ -1,30 +1,9 @@
 """The asyncio vehicle node: one :class:`daa_sil.onboard.OnboardCore` (N = 1) behind a MAVLink endpoint.
 
-Per step ``k`` (``t_k = k`` s, ``docs/architecture.md`` "The step order"):
-
-* **lockstep**: send ``SIM_TICK(k, t_k)`` alone in its datagram to the peer (the shim), then
-  receive until the shim echoes it: the shim processes tick ``k`` (releases every packet due at
-  ``t_k``, forwards the tick to the GCS, echoes it) only once the GCS acknowledged tick ``k - 1``,
-  so the GCS's step ``k`` and this step ``k`` run in parallel -- neither reads the other's output
-  of the same tick, which the shim releases at tick ``k + 1`` at the earliest
-  (:meth:`vehicle.ticks.TickClock._lockstep_ready`).
-  Tick 0 and the end of the run wait for the GCS's ``SIM_TICK_ACK``; wired straight to a GCS (no
-  shim, no echo) every tick does. No answer within ``tick_timeout_s`` wall seconds ->
-  :class:`vehicle.ticks.TickTimeout` (one clear line). The tick is re-sent every ``tick_retry_s``
-  in case a datagram was lost (the GCS re-acks a tick it already did).
-* **realtime**: the same ticks, paced by the wall clock instead of waiting for the GCS (see
-  ``docs/sil.md``, "Realtime and lockstep"). ``SIM_TICK(k)`` goes out a lead of half a step
-  (at most 0.25 s) before the step's deadline ``W_k = t0 + t_k / speed``; the shim releases
-  everything due at ``t_k``, forwards the tick to the GCS (which steps on it) and echoes it back.
-  Once the echo is in, every input of step ``k`` is there (uplink is released only at ticks), so
-  the vehicle computes the step then and publishes it at ``W_k``; it waits at most half a step
-  past ``W_k`` for a late echo, so every step sees exactly what the lockstep step sees. Partner = the shim (it echoes) or, wired straight to a GCS, the GCS (it acks); a
-  peer that answers no tick (a stock GCS) gives free-running realtime with no waiting.
-  ``tick_sync="wait"`` (what ``daa-sil run`` uses) starts the clock only once tick 0 is
-  acknowledged, so the GCS plays from step 0 as in lockstep. A partner silent for 3 s is
-  reported (stderr) and no longer waited for until it answers again; steps that ran without
-  their confirmation are counted (``steps_unconfirmed``: 0 means lockstep-equivalent input).
-
+Per step ``k`` (``t_k = k`` s, ``docs/architecture.md`` "The step order") the node's
+:class:`vehicle.ticks.VehicleClock` sends ``SIM_TICK(k, t_k)`` and waits until the step may run:
+lockstep on the shim's echo (the GCS's ack for tick 0 and the last one), realtime by the wall clock
+with the echo as confirmation (its module docstring has the rules).
 Then ``OnboardCore.step(t_k, pilot input)`` decides, the telemetry for ``t_k`` is published (one
 datagram to the peer, and the same undelayed to the observer ``tap`` if set), a step-log row is
 kept (and, with ``live``, sent at once to the Rerun recorder's loopback feed, fire-and-forget:
@@ -48,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import time
 from functools import partial
+from pathlib import Path
 
 from daa_sil.link.codec import MavCodec
 from daa_sil.link.codec import mavlink as M
@@ -62,15 +42,16 @@ from .core import VehicleCore
 from .params import ParamTable
 from .services import GcsServices
 from .streams import STREAMED
-from vehicle.ticks import TickClock
-from vehicle.node_steplog import StepLogWriter
+from daa_sil.sil.lockstep import TickPeer
+from vehicle.ticks import VehicleClock
+from vehicle.node_steplog import StepTiming, steplog_meta
 from vehicle.node_options import VehicleOptions, VehicleStats
 
 VEHICLE_SYSID, VEHICLE_COMPID = 1, 1
 PILOT_MANEUVER_ID = M.MAVLINK_MSG_ID_PILOT_MANEUVER
 
 
-class VehicleNode(StepLogWriter, TickClock):
+class VehicleNode:
     """The vehicle process logic around a :class:`vehicle.core.VehicleCore`.
 
     ``await node.start()`` binds the socket; ``await node.run()`` plays every step;
@@ -94,19 +75,15 @@ class VehicleNode(StepLogWriter, TickClock):
         self.k = 0
         self.t = 0.0
         self.authority = "pilot"
-        self._acked = -1
-        self._echoed = -1  # highest tick the shim echoed back
-        self._tick_sent_k = -1
-        self._last_answer = {"shim": None, "gcs": None}  # wall time (loop clock) of the last echo / ack
-        self._silent = {"shim": False, "gcs": False}
-        self._steplog_written = False
+        #: the tick protocol (:class:`daa_sil.sil.lockstep.TickPeer`) and the waiting on it
+        self.clock = VehicleClock(TickPeer("vehicle", self.codec), opts, self.core.dt, self.stats, self.out.text,
+                                  ep=lambda: self.ep, dest=lambda: self.peer, take=self.take, drain=self._drain,
+                                  check_stop=self._check_stop)
         #: set by :meth:`request_stop` (SIGINT / SIGTERM): the loop stops at the next step or wait even if
         #: the task's cancellation was lost (Python 3.11's ``asyncio.wait_for`` can swallow a cancel that
         #: arrives together with the awaited message)
         self.stop_requested = False
-        self._late_sum_ms = 0.0
-        self._lates: list = []  # realtime: per-step lateness (ms)
-        self._ready: list = []  # realtime: when each step's computation was done, ms after its deadline
+        self.timing = StepTiming()  #: realtime: per-step lateness and readiness (ms)
         self._step_t, self._step_wall = 0.0, None  # sim and monotonic time of the last publish
         self._stamp = None  # (addr, datagram time, t_sent) of the GCS's last SYSTEM_TIME
         self.home: "T.Kin | None" = None
@@ -247,17 +224,12 @@ class VehicleNode(StepLogWriter, TickClock):
         mtype = msg.get_type()
         link = self._link_of(r.addr, ep)
         if mtype == "SIM_TICK_ACK":
-            if link == PILOT_LINK and int(msg.tick) <= self._tick_sent_k:
-                if int(msg.tick) > self._acked:
-                    self._acked = int(msg.tick)
-                    self._answered("gcs")
+            if link == PILOT_LINK:
+                self.clock.answered("gcs", int(msg.tick), self.t)
             return
         if mtype == "SIM_TICK" and msg.get_srcSystem() == VEHICLE_SYSID and link == PILOT_LINK:
             self.stats.tick_echoes += 1  # our own tick, echoed by the shim (one we never sent changes nothing)
-            if int(msg.tick) <= self._tick_sent_k:
-                if int(msg.tick) > self._echoed:
-                    self._echoed = int(msg.tick)
-                    self._answered("shim")
+            self.clock.answered("shim", int(msg.tick), self.t)
             return
         if msg.get_srcSystem() == VEHICLE_SYSID:
             self.stats.foreign_messages_ignored += 1  # our own sysid echoed back / spoofed
@@ -344,11 +316,6 @@ class VehicleNode(StepLogWriter, TickClock):
                 self.take(r, ep if ep is not self.ep else None)
 
     # -- sending ---------------------------------------------------------------------------------
-    def _send(self, msgs: list, addr=None) -> None:
-        dest = addr or self.peer
-        if dest is not None:  # --out udpin: nobody to send to before a GCS has spoken
-            self.ep.send_many(msgs, dest)
-
     def publish(self, t: float, out) -> None:
         """Telemetry for ``t`` (s): per output, one datagram of the messages due on that output's stream."""
         pol = self.core.core.policy
@@ -378,30 +345,21 @@ class VehicleNode(StepLogWriter, TickClock):
         n = self.core.n_steps
         lockstep = self.opts.clock == "lockstep"
         period = self.core.dt / self.opts.speed
-        self._wall0 = loop.time()
+        self.clock.wall0 = loop.time()
         if not lockstep:
-            # like the shim: wake at the deadline without timer coalescing, and ask for a short EEVDF
-            # slice so a woken vehicle preempts sooner on a busy machine (unprivileged; no-op elsewhere)
-            import os
-
-            from daa_sil.sil.rtclock import request_short_slice, set_timer_slack
-
-            self.stats.extra["timer_slack_1us"] = set_timer_slack(1000)
-            # DAA_SIL_VEHICLE_SLICE_US: the slice asked for (0 = keep the default; benchmarks compare both)
-            slice_us = float(os.environ.get("DAA_SIL_VEHICLE_SLICE_US", "100") or 0)
-            self.stats.extra["short_slice"] = request_short_slice(slice_us * 1e-6) if slice_us > 0 else False
+            self.clock.sharpen()
         for k in range(n):
             self._check_stop()
             self.k, self.t = k, float(k) * self.core.dt
             if lockstep:
                 self._drain()
-                await self._await_ack(k, self.t)
+                await self.clock.await_ready(k, self.t)
             else:
-                due = await self._realtime_tick(k, self.t, period)
+                due = await self.clock.realtime_tick(k, self.t, period)
             self._drain()
             out = self.core.step(self.t)
             if not lockstep:  # computed ahead (inputs complete once the tick is echoed): out at the deadline
-                self._ready.append(1000.0 * (loop.time() - due))
+                self.timing.ready(1000.0 * (loop.time() - due))
                 wait = due - loop.time()
                 if wait > 0:
                     await asyncio.sleep(wait)
@@ -411,16 +369,24 @@ class VehicleNode(StepLogWriter, TickClock):
                 self.live.send(self.core.rows[-1])  # non-blocking; failures are counted, never raised
             self.stats.steps = k + 1
             if not lockstep:
-                late = 1000.0 * (loop.time() - due)
-                self.stats.late_max_ms = round(max(self.stats.late_max_ms, late), 3)
-                self._late_sum_ms += late
-                self.stats.late_mean_ms = round(self._late_sum_ms / (k + 1), 3)
-                self._lates.append(late)
+                self.timing.published(1000.0 * (loop.time() - due), self.stats)
             if on_step is not None:
                 on_step(self, out)
             await asyncio.sleep(0)
         if lockstep and n:
             # the GCS ran its last step in parallel: done once it acknowledged it (as every other tick)
-            await self._await_ack(n - 1, (n - 1) * self.core.dt, need_ack=True, send=False)
+            await self.clock.await_ready(n - 1, (n - 1) * self.core.dt, need_ack=True, send=False)
+
+    def write_steplog(self) -> "Path | None":
+        """Write the step log so far (atomic Parquet; only the steps published); returns its path or None."""
+        if self.opts.steplog is None or self.stats.steps == 0:
+            return None
+        if self.timing.late_ms:
+            self.stats.late_p99_ms = self.timing.p99_ms()
+        meta = steplog_meta(self.sc, self.opts, self.core, self.stats, signed=self.codec.signed,
+                            gate=self.gate.counters.__dict__, link=self.ep.stats() if self.ep else {},
+                            live=self.live.stats.__dict__ if self.live is not None else None,
+                            timing=self.timing, wall0=self.clock.wall0, events=self.services.events)
+        return self.core.write_steplog(self.opts.steplog, meta, n_rows=self.stats.steps)
 
 

@@ -1,56 +1,76 @@
-"""The vehicle node's step log: the Parquet log of the steps flown, with the run's metadata
-(scenario, clock, counters, settings events and the full configuration)."""
+"""The vehicle node's step-log metadata (scenario, clock, counters, settings events, the full
+configuration) as a pure function of what the node hands it, and the realtime step timing it records."""
 
 from __future__ import annotations
 
-from pathlib import Path
+import json
+from dataclasses import asdict
 
 
-class StepLogWriter:
-    """Part of :class:`vehicle.node.VehicleNode` (a mixin: it uses the node's attributes)."""
+class StepTiming:
+    """Realtime: per step, how late its telemetry went out after its deadline and when its computation
+    was done (ms after the deadline); keeps the running mean and max in the node's stats."""
 
-    def _config_record(self) -> dict:
-        """The full configuration the vehicle flew: the run configuration (if any) with the scenario's
-        threshold preset, the DAA configuration and the agent's policy actually used."""
-        from dataclasses import asdict
+    def __init__(self) -> None:
+        self.late_ms: list[float] = []
+        self.ready_ms: list[float] = []
+        self._late_sum_ms = 0.0
 
-        from daa_sil.config.run_config import preset
+    def ready(self, ms: float) -> None:
+        """Step computed ``ms`` after its deadline (negative: ahead of it)."""
+        self.ready_ms.append(ms)
 
-        rc = self.opts.config if self.opts.config is not None else preset("paper")
-        rec = rc.with_(thresholds=self.sc.thresholds).to_dict(full=True)
-        rec["given"] = self.opts.config is not None
-        rec["resolved"]["policy"] = asdict(self.core.core.policy)
-        rec["resolved"]["daa"] = {k: v for k, v in asdict(self.core.core.daa_cfg).items() if k != "thresholds"}
-        rec["waitmap"]["source"] = self.opts.waitmap or rc.waitmap["source"]
-        return rec
+    def published(self, ms: float, stats) -> None:
+        """Step published ``ms`` after its deadline; updates ``stats.late_max_ms`` / ``late_mean_ms``."""
+        stats.late_max_ms = round(max(stats.late_max_ms, ms), 3)
+        self._late_sum_ms += ms
+        self.late_ms.append(ms)
+        stats.late_mean_ms = round(self._late_sum_ms / len(self.late_ms), 3)
 
-    def write_steplog(self) -> "Path | None":
-        """Write the step log so far (atomic Parquet); returns its path or None."""
-        if self.opts.steplog is None or self.stats.steps == 0:
-            return None
-        import json
+    def p99_ms(self) -> float:
+        """99th percentile of the lateness (ms); only when steps were published in realtime."""
+        import numpy as np
 
-        if self._lates:
-            import numpy as np
+        return round(float(np.percentile(self.late_ms, 99)), 3)
 
-            self.stats.late_p99_ms = round(float(np.percentile(self._lates, 99)), 3)
-        meta = {"scenario": self.sc.name, "seed": str(self.sc.seed), "preset": self.sc.thresholds,
-                "clock": self.opts.clock, "complete": str(self.stats.steps >= self.core.n_steps).lower(),
-                "signed": str(self.codec.signed).lower(),
-                "gate": json.dumps(self.gate.counters.__dict__, sort_keys=True),
-                "link": json.dumps(self.ep.stats() if self.ep else {}, sort_keys=True),
-                "vehicle": json.dumps({k: v for k, v in self.stats.__dict__.items() if k != "extra"}, sort_keys=True)}
-        if self.live is not None:
-            meta["live"] = json.dumps(self.live.stats.__dict__, sort_keys=True)
-        if self._lates:  # realtime: per-step lateness (ms) and the wall origin, for timing analyses
-            meta["realtime_timing"] = json.dumps({"t0_monotonic": round(self._wall0, 6), "speed": self.opts.speed,
-                                                  "late_ms": [round(x, 2) for x in self._lates],
-                                                  "ready_ms": [round(x, 2) for x in self._ready],
-                                                  **self.stats.extra})
-        # parameter / mode writes: kind, name, old, new, status, link, source, t_received, t_applied, t_sent
-        meta["settings"] = json.dumps([e.as_dict() for e in self.services.events], sort_keys=True)
-        meta["config"] = json.dumps(self._config_record(), sort_keys=True, default=str)
-        if self.core.waitmap_record is not None:  # what `daa-sil run` records, without loading the maps again
-            meta["waitmap"] = json.dumps(self.core.waitmap_record, sort_keys=True)
-        # only the steps flown: a step computed but stopped before it was published is not in the log
-        return self.core.write_steplog(self.opts.steplog, meta, n_rows=self.stats.steps)
+
+def config_record(sc, opts, core) -> dict:
+    """The full configuration the vehicle flew: the run configuration (if any) with the scenario's
+    threshold preset, the DAA configuration and the agent's policy actually used (``core``: the
+    :class:`vehicle.core.VehicleCore`)."""
+    from daa_sil.config.run_config import preset
+
+    rc = opts.config if opts.config is not None else preset("paper")
+    rec = rc.with_(thresholds=sc.thresholds).to_dict(full=True)
+    rec["given"] = opts.config is not None
+    rec["resolved"]["policy"] = asdict(core.core.policy)
+    rec["resolved"]["daa"] = {k: v for k, v in asdict(core.core.daa_cfg).items() if k != "thresholds"}
+    rec["waitmap"]["source"] = opts.waitmap or rc.waitmap["source"]
+    return rec
+
+
+def steplog_meta(sc, opts, core, stats, *, signed: bool, gate: dict, link: dict, live: "dict | None",
+                 timing: StepTiming, wall0: float, events: list) -> "dict[str, str]":
+    """Step-log metadata of a vehicle run: ``sc`` the scenario, ``opts`` / ``stats`` the node's options
+    and counters, ``core`` its :class:`vehicle.core.VehicleCore`; ``gate`` the command gate's counters,
+    ``link`` the main endpoint's stats, ``live`` the live feed's (None without one), ``timing`` the
+    realtime step timing with ``wall0`` (loop s of step 0's deadline), ``events`` the settings writes."""
+    meta = {"scenario": sc.name, "seed": str(sc.seed), "preset": sc.thresholds,
+            "clock": opts.clock, "complete": str(stats.steps >= core.n_steps).lower(),
+            "signed": str(signed).lower(),
+            "gate": json.dumps(gate, sort_keys=True),
+            "link": json.dumps(link, sort_keys=True),
+            "vehicle": json.dumps({k: v for k, v in stats.__dict__.items() if k != "extra"}, sort_keys=True)}
+    if live is not None:
+        meta["live"] = json.dumps(live, sort_keys=True)
+    if timing.late_ms:  # realtime: per-step lateness (ms) and the wall origin, for timing analyses
+        meta["realtime_timing"] = json.dumps({"t0_monotonic": round(wall0, 6), "speed": opts.speed,
+                                              "late_ms": [round(x, 2) for x in timing.late_ms],
+                                              "ready_ms": [round(x, 2) for x in timing.ready_ms],
+                                              **stats.extra})
+    # parameter / mode writes: kind, name, old, new, status, link, source, t_received, t_applied, t_sent
+    meta["settings"] = json.dumps([e.as_dict() for e in events], sort_keys=True)
+    meta["config"] = json.dumps(config_record(sc, opts, core), sort_keys=True, default=str)
+    if core.waitmap_record is not None:  # what `daa-sil run` records, without loading the maps again
+        meta["waitmap"] = json.dumps(core.waitmap_record, sort_keys=True)
+    return meta

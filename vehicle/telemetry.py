@@ -29,12 +29,11 @@ import numpy as np
 
 from daa_sil.geometry.frames import enu_to_geodetic
 from daa_sil.link.codec import mavlink as M
+from daa_sil.link.plane import system_time, time_ms
 from daa_sil.geometry.units import G0
 
 from . import identity as ident
 
-#: scenario epoch published in SYSTEM_TIME (UNIX s): 2024-01-01T00:00:00Z
-SCENARIO_EPOCH_UNIX = 1_704_067_200
 ADSB_FLAGS = (M.ADSB_FLAGS_VALID_COORDS | M.ADSB_FLAGS_VALID_ALTITUDE | M.ADSB_FLAGS_VALID_HEADING
               | M.ADSB_FLAGS_VALID_VELOCITY | M.ADSB_FLAGS_VALID_CALLSIGN | M.ADSB_FLAGS_SIMULATED
               | M.ADSB_FLAGS_VERTICAL_VELOCITY_VALID)
@@ -72,11 +71,6 @@ def cdeg_u16(deg: float) -> int:
     return int(round((deg % 360.0) * 100.0)) % 36000
 
 
-def time_ms(t: float) -> int:
-    """Sim seconds -> uint32 ms."""
-    return _clamp_int(t * 1000.0, 0, 2**32 - 1)
-
-
 def _f(x) -> float:
     """Float for a MAVLink float field (None -> NaN)."""
     return float("nan") if x is None else float(x)
@@ -100,10 +94,6 @@ def heartbeat(authority: str, agent_enabled: bool = True) -> "M.MAVLink_message"
     mode = ident.mode_of(authority, agent_enabled)
     return M.MAVLink_heartbeat_message(ident.VEHICLE_TYPE, ident.AUTOPILOT, ident.base_mode(mode), mode,
                                        M.MAV_STATE_ACTIVE, 3)
-
-
-def system_time(t: float) -> "M.MAVLink_message":
-    return M.MAVLink_system_time_message(int((SCENARIO_EPOCH_UNIX + t) * 1e6), time_ms(t))
 
 
 def _geo(k: Kin, origin, geo):

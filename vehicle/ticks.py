@@ -1,24 +1,51 @@
-"""The vehicle node's clock handshake: sending SIM_TICK, waiting for its answer (lockstep: the shim's
-echo -- the GCS's ack for tick 0, after the last step and without a shim; realtime: the shim's echo,
-within a grace past the deadline), recording who answered and naming a partner that went silent
-(docs/sil.md, "Realtime and lockstep")."""
+"""The vehicle node's clock: sending SIM_TICK and waiting until each step may run.
+
+The protocol state (ticks sent, echoes and acks heard, silence) is a
+:class:`daa_sil.sil.lockstep.TickPeer`; :class:`VehicleClock` adds the waiting, which needs the
+node's socket and message handling (given to it as callables).
+
+* **lockstep**: send ``SIM_TICK(k, t_k)`` alone in its datagram to the peer (the shim), then
+  receive until the shim echoes it: the shim processes tick ``k`` (releases every packet due at
+  ``t_k``, forwards the tick to the GCS, echoes it) only once the GCS acknowledged tick ``k - 1``,
+  so the GCS's step ``k`` and this step ``k`` run in parallel -- neither reads the other's output
+  of the same tick, which the shim releases at tick ``k + 1`` at the earliest
+  (:meth:`daa_sil.sil.lockstep.TickPeer.ready`). Tick 0 and the end of the run wait for the GCS's
+  ``SIM_TICK_ACK``; wired straight to a GCS (no shim, no echo) every tick does. No answer within
+  ``tick_timeout_s`` wall seconds -> :class:`TickTimeout` (one clear line naming who is silent).
+  The tick is re-sent every ``tick_retry_s`` in case a datagram was lost (the GCS re-acks a tick
+  it already did).
+* **realtime** (docs/sil.md, "Realtime and lockstep"): the same ticks, paced by the wall clock.
+  ``SIM_TICK(k)`` goes out a lead of half a step (at most 0.25 s) before the step's deadline
+  ``W_k = t0 + t_k / speed``; the shim releases everything due at ``t_k``, forwards the tick to
+  the GCS (which steps on it) and echoes it back. Once the echo is in, every input of step ``k``
+  is there (uplink is released only at ticks), so the node computes the step then and publishes
+  it at ``W_k``; it waits at most half a step past ``W_k`` for a late echo, so every step sees
+  what the lockstep step sees. Partner = the shim (it echoes) or, wired straight to a GCS, the
+  GCS (it acks); a peer that answers no tick (a stock GCS) gives free-running realtime.
+  ``tick_sync="wait"`` (what ``daa-sil run`` uses) starts the clock only once tick 0 is
+  acknowledged. A partner silent for the vehicle's ``SILENT_AFTER_S`` (:mod:`daa_sil.sil.silence`)
+  is reported (stderr) and not waited for until it answers again; steps that ran without their
+  confirmation are counted (``steps_unconfirmed``: 0 means lockstep-equivalent input).
+"""
 
 from __future__ import annotations
 
 import asyncio
+import os
+import sys
+import time
+from typing import Callable
 
 from daa_sil.errors import DaaSilError
-from daa_sil.link.codec import CONTROL_LINK_ID
-from daa_sil.link.codec import mavlink as M
-from vehicle import telemetry as T
+from daa_sil.sil.endpoint import MavEndpoint, Received
+from daa_sil.sil.lockstep import TickPeer
 
 #: realtime: SIM_TICK(k) is sent this fraction of a step before step k's deadline (at most TICK_LEAD_MAX_S)
 TICK_LEAD_FRACTION = 0.5
 TICK_LEAD_MAX_S = 0.25
 #: realtime: wait at most this fraction of a step past the deadline for the partner's answer to the tick
 CONFIRM_GRACE_FRACTION = 0.5
-#: wall seconds without an answer to ticks before the partner is reported silent (and not waited for)
-SILENT_AFTER_S = 3.0
+#: a partner is also silent after this many steps without an answer if that is shorter (fast runs), >= 1 s
 SILENT_AFTER_STEPS = 10
 
 
@@ -26,94 +53,86 @@ class TickTimeout(DaaSilError):
     """The lockstep partner did not acknowledge a tick in time."""
 
 
-class TickClock:
-    """Part of :class:`vehicle.node.VehicleNode` (a mixin: it uses the node's attributes)."""
+def say(text: str) -> None:
+    """One ``daa-vehicle:`` line on stderr."""
+    print(f"daa-vehicle: {text}", file=sys.stderr, flush=True)
 
-    def _send_tick(self, k: int, t: float) -> None:
-        if self.peer is None:  # --out udpin: no GCS yet; the retry sends it once one has spoken
+
+class VehicleClock:
+    """Ticks of one vehicle node. ``peer``: the protocol state; ``opts``: the node's
+    :class:`vehicle.node_options.VehicleOptions`; ``dt``: the step (sim s); ``stats``: the node's
+    :class:`vehicle.node_options.VehicleStats` (tick counters); ``out_text``: the pilot link's address
+    as given. From the node: ``ep()`` its main endpoint, ``dest()`` the pilot link's address (None
+    before a ``udpin:`` GCS spoke), ``take(r)`` handles one message, ``drain()`` handles what every
+    socket received so far, ``check_stop()`` raises when a stop was requested."""
+
+    def __init__(self, peer: TickPeer, opts, dt: float, stats, out_text: str, *,
+                 ep: "Callable[[], MavEndpoint]", dest: Callable, take: "Callable[[Received], None]",
+                 drain: Callable[[], None], check_stop: Callable[[], None]):
+        self.peer, self.opts, self.dt, self.stats, self.out_text = peer, opts, dt, stats, out_text
+        self.ep, self.dest, self.take, self.drain, self.check_stop = ep, dest, take, drain, check_stop
+        self.wall0 = 0.0  #: loop time of step 0's deadline (realtime)
+
+    def sharpen(self) -> None:
+        """Realtime: like the shim, wake at deadlines without timer coalescing, and ask for a short EEVDF
+        slice so a woken vehicle preempts sooner on a busy machine (unprivileged; no-op elsewhere).
+        ``DAA_SIL_VEHICLE_SLICE_US``: the slice asked for (0 = keep the default; benchmarks compare both)."""
+        from daa_sil.sil.rtclock import request_short_slice, set_timer_slack
+
+        self.stats.extra["timer_slack_1us"] = set_timer_slack(1000)
+        slice_us = float(os.environ.get("DAA_SIL_VEHICLE_SLICE_US", "100") or 0)
+        self.stats.extra["short_slice"] = request_short_slice(slice_us * 1e-6) if slice_us > 0 else False
+
+    def send_tick(self, k: int, t: float) -> None:
+        dest = self.dest()
+        if dest is None:  # --out udpin: no GCS yet; the retry sends it once one has spoken
             return
-        data = self.codec.encode(M.MAVLink_sim_tick_message(k, T.time_ms(t)),
-                                 link_id=CONTROL_LINK_ID if self.codec.signed else None)
-        self._tick_sent_k = max(self._tick_sent_k, k)
-        self.ep.transport.sendto(data, self.peer)
+        self.ep().transport.sendto(self.peer.tick(k, t), dest)
         self.stats.ticks_sent += 1
 
-    # -- tick answers: who is alive ----------------------------------------------------------------
-    def _answered(self, who: str) -> None:
-        """An echo (``who="shim"``) or an ack (``"gcs"``) of one of our ticks arrived."""
-        now = asyncio.get_running_loop().time()
-        if self._silent[who]:
-            self._silent[who] = False
-            self._say(f"the {'shim' if who == 'shim' else 'GCS'} answers ticks again at t = {self.t:g} s "
-                      f"(silent for {now - self._last_answer[who]:.1f} s)")
-        self._last_answer[who] = now
-        if who == "shim":
-            self.stats.sync_partner = "shim"
-        elif self.stats.sync_partner == "none":
-            self.stats.sync_partner = "gcs"
+    def answered(self, who: str, k: int, t: float) -> None:
+        """An echo (``who="shim"``) or an ack (``"gcs"``) of tick ``k`` arrived during the step at ``t`` (sim s)."""
+        back = self.peer.answered(who, k, asyncio.get_running_loop().time())
+        self.stats.sync_partner = self.peer.partner
+        if back is not None:
+            say(f"the {'shim' if who == 'shim' else 'GCS'} answers ticks again at t = {t:g} s "
+                f"(silent for {back:.1f} s)")
 
-    def _check_silence(self) -> None:
-        """Report (once, until it answers again) a shim or GCS that answered ticks and then stopped.
-
-        Silent = no answer for SILENT_AFTER_S wall seconds, or for SILENT_AFTER_STEPS steps if that is
-        shorter (fast runs), but never less than 1 s."""
-        now = asyncio.get_running_loop().time()
-        limit = max(1.0, min(SILENT_AFTER_S, SILENT_AFTER_STEPS * self.core.dt / self.opts.speed))
-        for who in ("shim", "gcs"):
-            last = self._last_answer[who]
-            if last is None or self._silent[who] or now - last < limit:
-                continue
-            self._silent[who] = True
-            if who == "gcs" and self._silent["shim"]:
-                continue  # the shim between us is silent: that is the news, not the GCS behind it
+    def check_silence(self) -> None:
+        """Report (once, until it answers again) a shim or GCS that answered ticks and then stopped:
+        no answer for the role's SILENT_AFTER_S, or SILENT_AFTER_STEPS steps if that is shorter, >= 1 s."""
+        watch = self.peer.silence["shim"]
+        limit = max(1.0, min(watch.after_s, SILENT_AFTER_STEPS * self.dt / self.opts.speed))
+        for who, quiet in self.peer.check_silence(asyncio.get_running_loop().time(), limit):
             self.stats.silence_warnings += 1
-            peer = self.out.text
             if who == "shim":
-                why = f"the shim at {peer} has not echoed a tick for {now - last:.1f} s: has it stopped?"
-            elif self.stats.sync_partner == "shim":
-                why = (f"the GCS behind the shim at {peer} has not acknowledged a tick for {now - last:.1f} s "
-                       f"(last tick acked: {self._acked}): has it stopped?")
+                why = f"the shim at {self.out_text} has not echoed a tick for {quiet:.1f} s: has it stopped?"
+            elif self.peer.partner == "shim":
+                why = (f"the GCS behind the shim at {self.out_text} has not acknowledged a tick for {quiet:.1f} s "
+                       f"(last tick acked: {self.peer.newest['gcs']}): has it stopped?")
             else:
-                why = f"the GCS at {peer} has not acknowledged a tick for {now - last:.1f} s: has it stopped?"
-            self._say(f"warning: {why} Flying on; the agent hands over to the onboard DAA when the link "
-                      f"times out")
+                why = f"the GCS at {self.out_text} has not acknowledged a tick for {quiet:.1f} s: has it stopped?"
+            say(f"warning: {why} Flying on; the agent hands over to the onboard DAA when the link times out")
 
-    def _say(self, text: str) -> None:
-        import sys
-
-        print(f"daa-vehicle: {text}", file=sys.stderr, flush=True)
-
-    def _who_is_silent(self, k: int) -> str:
+    def who_is_silent(self, k: int) -> str:
         """Why tick ``k`` got no ack: which of shim and GCS is not there (for the one-line error)."""
-        import time
-
-        peer = self.out.text
-        if k > 0 and self._echoed == k - 1 and self._acked < k - 1:
+        peer, echoed, acked = self.out_text, self.peer.newest["shim"], self.peer.newest["gcs"]
+        if k > 0 and echoed == k - 1 and acked < k - 1:
             return (f"the shim at {peer} holds tick {k} until the GCS behind it acknowledges tick {k - 1}, which "
                     f"it has not: is daa-gcs still running (with --clock lockstep), pointed at the shim's GCS side?")
-        if self._echoed >= k:
+        if echoed >= k:
             return (f"the shim at {peer} relays tick {k} but the GCS behind it does not acknowledge it: is daa-gcs "
                     f"running (with --clock lockstep) and pointed at the shim's GCS side?")
-        refused = self.ep.last_refused is not None and time.monotonic() - self.ep.last_refused < 5.0
-        if refused:
+        refused = self.ep().last_refused
+        if refused is not None and time.monotonic() - refused < 5.0:
             return (f"nothing is listening at {peer} (ICMP port unreachable): is the shim (or the GCS) running "
                     f"there?")
         return (f"no answer at all from {peer} (no tick echo, no ack): is a lockstep shim or GCS running there "
                 f"with --clock lockstep?")
 
-    def _lockstep_ready(self, k: int, need_ack: bool = False) -> bool:
-        """May lockstep step ``k`` run? Once the GCS acknowledged tick ``k``; behind a shim (it echoes
-        ticks) already on its echo of tick ``k >= 1``: the shim processes tick ``k`` only after the
-        GCS acknowledged tick ``k - 1`` (:mod:`daa_sil.sil.shim_ticks`), so every uplink packet due at
-        ``t_k`` has been sent to us; what the GCS sends at ``t_k`` is released at a later tick at the
-        earliest (the shim releases only when it processes a tick): the two steps of a tick run in
-        parallel. Tick 0 waits for the ack (the GCS may still be starting and must run its step 0),
-        and so does ``need_ack``."""
-        return self._acked >= k or (k > 0 and not need_ack and self._echoed >= k)
-
-    async def _await_ack(self, k: int, t: float, need_ack: bool = False, send: bool = True) -> None:
-        """Send SIM_TICK(k) (unless ``send`` is False: already sent) and wait until step ``k`` may run
-        (:meth:`_lockstep_ready`), re-sending it every ``tick_retry_s``; TickTimeout after the limit."""
+    async def await_ready(self, k: int, t: float, need_ack: bool = False, send: bool = True) -> None:
+        """Send SIM_TICK(k) (unless ``send`` is False: already sent) and handle messages until step ``k``
+        may run (:meth:`TickPeer.ready`), re-sending it every ``tick_retry_s``; TickTimeout after the limit."""
         loop = asyncio.get_running_loop()
         limit = self.opts.tick_timeout_s
         if k == 0 and self.opts.start_timeout_s is not None:
@@ -122,84 +141,78 @@ class TickClock:
         retry = self.opts.tick_retry_s if k > 0 else min(0.2, self.opts.tick_retry_s)  # GCS may still start
         next_retry = loop.time() + retry
         if send:
-            self._send_tick(k, t)
-        while not self._lockstep_ready(k, need_ack):
-            self._check_stop()
+            self.send_tick(k, t)
+        inbox = self.ep().inbox
+        while not self.peer.ready(k, need_ack):
+            self.check_stop()
             now = loop.time()
             if now >= deadline:
-                what = "SIM_TICK_ACK" if need_ack or k == 0 or self.stats.sync_partner != "shim" else "echo"
-                raise TickTimeout(f"no {what} for tick {k} (t = {t:g} s) within {limit:g} s: "
-                                  + self._who_is_silent(k))
+                what = "SIM_TICK_ACK" if need_ack or k == 0 or self.peer.partner != "shim" else "echo"
+                raise TickTimeout(f"no {what} for tick {k} (t = {t:g} s) within {limit:g} s: " + self.who_is_silent(k))
             try:  # what already arrived first (one wait per burst of datagrams, not per message)
-                r = self.ep.inbox.get_nowait()
+                r = inbox.get_nowait()
             except asyncio.QueueEmpty:
                 try:
-                    r = await asyncio.wait_for(self.ep.inbox.get(), min(deadline, next_retry) - now)
+                    r = await asyncio.wait_for(inbox.get(), min(deadline, next_retry) - now)
                 except asyncio.TimeoutError:
                     if loop.time() >= next_retry and loop.time() < deadline:
-                        if k > 0 and not need_ack and self._acked < k - 1:
+                        if k > 0 and not need_ack and self.peer.newest["gcs"] < k - 1:
                             # a shim holds tick k until the GCS acknowledges tick k - 1: send that one
                             # again too (the shim forwards a repeated tick), in case it was lost
-                            self._send_tick(k - 1, t - self.core.dt)
-                        self._send_tick(k, t)
+                            self.send_tick(k - 1, t - self.dt)
+                        self.send_tick(k, t)
                         self.stats.tick_retries += 1
                         next_retry = loop.time() + retry
                     continue
             self.take(r)
 
-    def _confirmed(self, k: int) -> bool:
-        """Realtime: has the partner answered tick ``k`` (shim: echo; GCS wired directly: ack)?"""
-        if self.stats.sync_partner == "shim":
-            return self._echoed >= k
-        if self.stats.sync_partner == "gcs":
-            return self._acked >= k
-        return True  # a partner that answers no tick (stock GCS): free-running
-
-    async def _receive_until(self, when: float, until=None) -> None:
+    async def receive_until(self, when: float, until=None) -> None:
         """Handle messages until loop time ``when`` (or until ``until()`` is true)."""
         loop = asyncio.get_running_loop()
+        inbox = self.ep().inbox
         while until is None or not until():
-            self._check_stop()
+            self.check_stop()
             left = when - loop.time()
             if left <= 0:
                 return
             try:
-                r = await asyncio.wait_for(self.ep.inbox.get(), left)
+                r = await asyncio.wait_for(inbox.get(), left)
             except asyncio.TimeoutError:
                 return
             self.take(r)
 
-    async def _realtime_tick(self, k: int, t: float, period: float) -> float:
+    async def realtime_tick(self, k: int, t: float, period: float) -> float:
         """Realtime step ``k``: send its tick a lead before the deadline, then wait for the partner's
         answer (at most a grace past the deadline; without a partner, until the deadline). Once the
         shim has echoed tick ``k`` every input of step ``k`` is in (uplink is released only at ticks),
-        so the step may be computed before its deadline; :meth:`run` publishes it at the deadline.
+        so the step may be computed before its deadline; the node publishes it at the deadline.
         Returns the step's deadline (loop time)."""
         loop = asyncio.get_running_loop()
+        peer = self.peer
         lead = min(TICK_LEAD_FRACTION * period, TICK_LEAD_MAX_S)
         if k == 0:
             if self.opts.tick_sync == "wait":
-                await self._await_ack(0, t)  # (re-)sends tick 0 until the GCS (behind the shim) answers
+                await self.await_ready(0, t)  # (re-)sends tick 0 until the GCS (behind the shim) answers
             else:
-                self._send_tick(0, t)
-            self._wall0 = loop.time() + lead
+                self.send_tick(0, t)
+            self.wall0 = loop.time() + lead
             if callable(self.opts.on_clock_start):
-                self.opts.on_clock_start(self._wall0)
+                self.opts.on_clock_start(self.wall0)
         else:
-            if (self._acked < k - 1 and self._last_answer["gcs"] is not None and not self._silent["gcs"]
-                    and not self._silent["shim"]):
+            gcs, shim = peer.silence["gcs"], peer.silence["shim"]
+            if peer.newest["gcs"] < k - 1 and gcs.last is not None and not gcs.silent and not shim.silent:
                 self.stats.acks_late += 1
-            await self._receive_until(self._wall0 + t / self.opts.speed - lead)
-            self._drain()
-            self._send_tick(k, t)
-        due = self._wall0 + t / self.opts.speed
-        self._check_silence()
-        partner = self.stats.sync_partner
-        if partner == "none" or self._silent["shim" if partner == "shim" else "gcs"]:
-            await self._receive_until(due)  # nobody to wait for: take what arrived by the deadline
+            await self.receive_until(self.wall0 + t / self.opts.speed - lead)
+            self.drain()
+            self.send_tick(k, t)
+        due = self.wall0 + t / self.opts.speed
+        self.check_silence()
+        partner = peer.partner
+        if partner == "none" or peer.silence[partner].silent:
+            await self.receive_until(due)  # nobody to wait for: take what arrived by the deadline
         else:
-            await self._receive_until(due + CONFIRM_GRACE_FRACTION * period, until=lambda: self._confirmed(k))
-        if not self._confirmed(k):
+            await self.receive_until(due + CONFIRM_GRACE_FRACTION * period, until=lambda: peer.confirmed(k))
+        if not peer.confirmed(k):
             self.stats.steps_unconfirmed += 1
-        self._check_silence()
+        self.check_silence()
         return due

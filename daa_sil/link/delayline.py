@@ -12,7 +12,7 @@ Impairments, each drawn from the line's own seeded generator (three uniforms per
 whatever is enabled, so switching one knob does not shift the others' draws). ``push(..., key=K)``
 takes the three uniforms from the key instead (:meth:`DelayLine.fault_uniforms`): a pure function
 of the line's seed and ``K``, so a packet's fate does not depend on how many packets came before
-it (the SIL shim keys each datagram on its simulation step, :mod:`daa_sil.sil.shim_ticks`).
+it (the SIL shim keys each datagram on its simulation step, :mod:`daa_sil.sil.shim_core`).
 
 * ``loss`` P: Bernoulli drop.
 * ``outages``: list of ``(t_start, t_end)`` sim-time windows; a packet *entering* the line in

@@ -1,117 +1,129 @@
-"""Lockstep clock protocol helpers for the vehicle and GCS nodes (``docs/architecture.md``).
+"""The tick protocol, one end of it, sans-IO: :class:`TickPeer`, used by the vehicle and the GCS.
 
-Per step ``k`` (sim time ``t_k``)::
+Per step ``k`` (sim time ``t_k``; ``docs/architecture.md``, "The step order")::
 
     vehicle                      shim                                   GCS
     SIM_TICK(k, t_k)  ───────▶  clock := t_k, release due packets  ───▶ (telemetry due, then the tick)
-                                                                        step 1: pilot decides, sends cmds
+    (the shim's echo) ◀────────  echo of the tick                        step 1: pilot decides, sends cmds
     (cmds due, then the ack) ◀── cmds queued at t_k, ack forwarded ◀─── SIM_TICK_ACK(k)
-    step 2: OnboardCore.step(t_k, commands received so far), publish telemetry, advance truth
 
-:class:`LockstepVehicle` sends the tick and collects every message that arrives before the ack;
-:class:`LockstepGcs` waits for the next tick (collecting what arrived before it) and acks. Ticks
-are re-sent after ``timeout`` s (``retries`` times); the GCS re-acks a repeated tick without
-running the step again. With signing, control messages go on their own signing stream
+The vehicle sends ticks and hears two partners: the shim, which echoes each tick it processed
+(it is alive, and every uplink packet due at ``t_k`` has been sent), and the GCS, which
+acknowledges each tick once its step is done (cumulative). The GCS hears one partner, the
+vehicle side, whose ticks step it; a repeated tick is acknowledged again without a second step.
+With signing, ticks and acks travel on their own signing stream
 (:data:`~daa_sil.link.codec.CONTROL_LINK_ID`) because they overtake delayed data in the shim.
-Control datagrams bypass the shim's delay, loss and outages. The shim echoes every tick back to
-the vehicle (it is alive, and the uplink due at that tick has been sent); :class:`LockstepVehicle`
-counts the echoes (``echoes``) and does not hand them on.
 
-Realtime runs use the same messages, paced by the vehicle's wall clock (``vehicle/node.py``,
-``docs/sil.md`` "Realtime and lockstep"). ``daa-vehicle`` itself steps on the shim's echo (the
-shim holds a tick until the GCS acknowledged the previous one, :mod:`daa_sil.sil.shim_ticks`);
-:class:`LockstepVehicle` waits for the ack, which that shim rule never delays.
+A :class:`TickPeer` encodes its own control messages and keeps, per partner, the newest tick it
+confirmed and a :class:`daa_sil.sil.silence.Silence` watch (``SILENT_AFTER_S`` of the role). It
+reads no clock and owns no socket: the caller passes wall times in and sends the bytes.
 """
 
 from __future__ import annotations
 
-import asyncio
+import math
 
-from daa_sil.errors import DaaSilError
-from daa_sil.link.codec import CONTROL_LINK_ID
-from .endpoint import MavEndpoint, Received
+from daa_sil.link.codec import CONTROL_LINK_ID, MavCodec
 from daa_sil.link.messages import sim_tick, sim_tick_ack
+from .silence import SILENT_AFTER_S, Silence
+
+#: who each role hears tick-protocol messages from: the vehicle the shim's echoes and the GCS's acks,
+#: the GCS the ticks of the vehicle side (the vehicle, through a shim or not)
+PARTNERS = {"vehicle": ("shim", "gcs"), "gcs": ("vehicle",)}
 
 
-class LockstepTimeout(DaaSilError):
-    """The peer did not answer a tick (exit 1)."""
+class TickPeer:
+    """One end of the tick protocol: ``role`` ``"vehicle"`` (sends ticks) or ``"gcs"`` (acknowledges them).
 
-    exit_code = 1
+    ``sent``: the newest tick this end sent (vehicle: SIM_TICK) or acknowledged (GCS: its step done).
+    ``newest[who]``: the newest tick ``who`` confirmed (vehicle: echoed / acknowledged one it sent)
+    or sent (GCS: the vehicle side's newest tick). ``partner`` (vehicle): who confirms its ticks --
+    ``"shim"`` once one echoes, ``"gcs"`` wired straight to a GCS, ``"none"`` for a peer that
+    answers no tick (free-running realtime).
+    """
 
+    def __init__(self, role: str, codec: MavCodec):
+        if role not in PARTNERS:
+            raise ValueError(f"role must be one of {', '.join(PARTNERS)}, got {role!r}")
+        self.role = role
+        self.codec = codec
+        self.link_id = CONTROL_LINK_ID if codec.signed else None
+        self.sent = -1
+        self.newest = dict.fromkeys(PARTNERS[role], -1)
+        self.heard = dict.fromkeys(PARTNERS[role], 0)  #: tick-protocol messages taken from each partner
+        self.newest_t = -math.inf  #: GCS: sim time of the newest tick (s)
+        self.skipped = 0  #: GCS: ticks never received between two received ones (no step ran for them)
+        self.partner = "none"
+        self.silence = {who: Silence(SILENT_AFTER_S[role]) for who in PARTNERS[role]}
+        self.silence_warnings = 0
 
-class LockstepVehicle:
-    """Vehicle side: ``msgs = await clock.step(k, t_s)`` sends SIM_TICK and returns what arrived before the ack."""
+    # -- the vehicle's end -----------------------------------------------------------------------
+    def tick(self, k: int, t: float) -> bytes:
+        """The datagram of ``SIM_TICK(k, t)`` (``t`` sim s), alone; noted as sent."""
+        data = self.codec.encode(sim_tick(k, t), link_id=self.link_id)
+        self.sent = max(self.sent, int(k))
+        return data
 
-    def __init__(self, ep: MavEndpoint, timeout: float = 5.0, retries: int = 3):
-        self.ep, self.timeout, self.retries = ep, float(timeout), int(retries)
-        self.link_id = CONTROL_LINK_ID if ep.codec.signed else None
-        self.resent = 0
-        self.echoes = 0
+    def answered(self, who: str, k: int, now: float) -> "float | None":
+        """An echo (``who="shim"``) or an ack (``"gcs"``) of tick ``k`` at wall time ``now`` (s).
 
-    async def step(self, k: int, t_s: float) -> list[Received]:
-        """Run the tick handshake of step ``k`` at sim time ``t_s`` (s)."""
-        got: list[Received] = []
-        loop = asyncio.get_running_loop()
-        for attempt in range(self.retries + 1):
-            if attempt:
-                self.resent += 1
-            if not self.ep.send(sim_tick(k, t_s), link_id=self.link_id):
-                raise LockstepTimeout("lockstep: no peer to send SIM_TICK to (is the shim address right?)")
-            deadline = loop.time() + self.timeout
-            while True:
-                left = deadline - loop.time()
-                if left <= 0:
-                    break
-                try:
-                    r = await self.ep.recv(left)
-                except asyncio.TimeoutError:
-                    break
-                if r.msg.get_type() == "SIM_TICK_ACK":
-                    if r.msg.tick == k:
-                        return got
-                    continue  # an ack of an earlier (re-sent) tick
-                if r.msg.get_type() == "SIM_TICK" and r.msg.get_srcSystem() == self.ep.codec.mav.srcSystem:
-                    self.echoes += 1  # the shim echoes our tick: it is alive (not a message for the step)
-                    continue
-                got.append(r)
-        raise LockstepTimeout(f"lockstep: no SIM_TICK_ACK for tick {k} after {self.retries + 1} tries "
-                              f"of {self.timeout:g} s (is the GCS running?)")
+        One of a tick never sent changes nothing. Returns the seconds ``who`` had been reported
+        silent, if this answer ends that, else None."""
+        if k > self.sent:
+            return None
+        self.heard[who] += 1
+        self.newest[who] = max(self.newest[who], int(k))
+        if who == "shim":
+            self.partner = "shim"
+        elif self.partner == "none":
+            self.partner = "gcs"
+        return self.silence[who].heard(now)
 
+    def ready(self, k: int, need_ack: bool = False) -> bool:
+        """Lockstep: may step ``k`` run? Once the GCS acknowledged tick ``k``; behind a shim already on
+        its echo of tick ``k >= 1`` (the shim processes tick ``k`` only after the GCS acknowledged
+        tick ``k - 1``, so every uplink packet due at ``t_k`` has been sent; what the GCS sends at
+        ``t_k`` is released at tick ``k + 1`` at the earliest). Tick 0 and ``need_ack`` wait for the ack."""
+        return self.newest["gcs"] >= k or (k > 0 and not need_ack and self.newest["shim"] >= k)
 
-class LockstepGcs:
-    """GCS side: ``k, t_s, msgs = await clock.next_tick()``; run step 1; then ``clock.ack(k, t_s, sent)``."""
+    def confirmed(self, k: int) -> bool:
+        """Realtime: has the partner answered tick ``k``? (True without a partner: free-running.)"""
+        if self.partner == "none":
+            return True
+        return self.newest[self.partner] >= k
 
-    def __init__(self, ep: MavEndpoint):
-        self.ep = ep
-        self.link_id = CONTROL_LINK_ID if ep.codec.signed else None
-        self.last_acked: "tuple[int, float, int] | None" = None
-        self.reacked = 0
+    # -- the GCS's end ---------------------------------------------------------------------------
+    def on_tick(self, k: int, t: float, now: float) -> "tuple[bool, float | None]":
+        """``SIM_TICK(k, t)`` from the vehicle side at wall time ``now`` (s): ``(step, back)``. ``step``: ``k``
+        is newer than every tick acknowledged so far, so run its step, then :meth:`ack` it (a step that
+        failed is not acknowledged and runs again on the repeated tick); ``back``: the seconds the ticks
+        had been reported silent, if this one ends that."""
+        self.newest_t = max(self.newest_t, float(t))
+        self.newest["vehicle"] = max(self.newest["vehicle"], int(k))
+        self.heard["vehicle"] += 1
+        back = self.silence["vehicle"].heard(now)
+        done = self.sent
+        if k <= done:
+            return False, back
+        if done >= 0 and k > done + 1:
+            self.skipped += k - done - 1  # missed ticks: steps lockstep would have run
+        return True, back
 
-    async def next_tick(self, timeout: "float | None" = None) -> tuple[int, float, list[Received]]:
-        """Wait for a new SIM_TICK; returns ``(k, t_k s, messages that arrived before it)``."""
-        got: list[Received] = []
-        loop = asyncio.get_running_loop()
-        deadline = None if timeout is None else loop.time() + timeout
-        while True:
-            left = None if deadline is None else deadline - loop.time()
-            if left is not None and left <= 0:
-                raise LockstepTimeout(f"lockstep: no SIM_TICK within {timeout:g} s")
-            try:
-                r = await self.ep.recv(left)
-            except asyncio.TimeoutError:
-                raise LockstepTimeout(f"lockstep: no SIM_TICK within {timeout:g} s") from None
-            if r.msg.get_type() != "SIM_TICK":
-                got.append(r)
+    def ack(self, k: int, time_ms: int, sent: int = 0) -> bytes:
+        """The datagram of ``SIM_TICK_ACK(k)`` echoing the tick's ``time_ms``; ``sent``: messages of the step."""
+        data = self.codec.encode(sim_tick_ack(k, time_ms / 1000.0, sent), link_id=self.link_id)
+        self.sent = max(self.sent, int(k))
+        return data
+
+    # -- both ------------------------------------------------------------------------------------
+    def check_silence(self, now: float, after_s: "float | None" = None) -> "list[tuple[str, float]]":
+        """Partners that become silent at wall time ``now`` (s): ``[(who, quiet s)]``, each reported once
+        until heard again. The GCS behind a silent shim is not reported: the shim is the news."""
+        out = []
+        for who, watch in self.silence.items():
+            quiet = watch.check(now, after_s)
+            if quiet is None or (who == "gcs" and self.silence["shim"].silent):
                 continue
-            k = int(r.msg.tick)
-            if self.last_acked is not None and k <= self.last_acked[0]:
-                if k == self.last_acked[0]:  # the vehicle re-sent: our ack was late or lost
-                    self.ep.send(sim_tick_ack(*self.last_acked), link_id=self.link_id)
-                    self.reacked += 1
-                continue
-            return k, r.msg.time_ms / 1000.0, got
-
-    def ack(self, k: int, t_s: float, sent: int = 0) -> None:
-        """Acknowledge step ``k`` after sending this step's commands."""
-        self.last_acked = (int(k), float(t_s), int(sent))
-        self.ep.send(sim_tick_ack(k, t_s, sent), link_id=self.link_id)
+            out.append((who, quiet))
+        self.silence_warnings += len(out)
+        return out

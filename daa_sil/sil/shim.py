@@ -1,95 +1,47 @@
-"""The delay shim: a UDP relay between the vehicle and the GCS with one seeded DelayLine per direction.
+"""The delay shim: a UDP relay between the vehicle and the GCS, around a sans-IO :class:`ShimCore`.
 
 ::
 
     vehicle  --datagrams-->  [vehicle side socket]  --down line-->  [gcs side socket]  -->  GCS
     vehicle  <------------   [vehicle side socket]  <--up line----  [gcs side socket]  <--  GCS
 
-*down* = vehicle -> GCS (telemetry the pilot sees), *up* = GCS -> vehicle (pilot commands).
-The unit of delay is the datagram; forwarded bytes are never modified (signatures stay valid).
+:class:`DelayShim` owns the two sockets (:mod:`daa_sil.sil.shim_socket`), the release timer of the
+free-running clock and the silence watcher; everything else -- both delay lines, the tick clock,
+stamping, fault keys and the protocol's counters -- is :class:`daa_sil.sil.shim_core.ShimCore`
+(read its docstring for the rules). Per datagram: check the sender against the side's peer, hand
+the bytes to ``core.receive(side, data, t)``, send what it returns.
+
 Peers are the configured ``vehicle`` / ``gcs`` addresses or learned from the first datagram on
 each side that holds a good MAVLink packet (with ``key``: a validly signed one; checked without
-changing any signing state) -- garbage and forged packets cannot claim a side (``rejected_claim``);
-datagrams from other addresses are counted (``rejected_peer``) and dropped. A
-datagram that is due while its destination is still unknown is counted as ``no_peer`` and dropped.
+changing any signing state, :meth:`ShimCore.claim`) -- garbage and forged packets cannot claim a
+side (``rejected_claim``); datagrams from other addresses are counted (``rejected_peer``) and
+dropped. A datagram due while its destination is still unknown is counted as ``no_peer`` and
+dropped. In lockstep the GCS must be known before the first tick: give ``gcs`` or let the GCS send
+any datagram (e.g. a HEARTBEAT) to the shim first.
 
-Seeds (:func:`shim_seeds`): the *delays* of a shim seeded ``seed`` are the encounter's fast-time
-delay streams, ``DelayProcess(model, encounter_streams(seed)[STREAM_UP], epoch_s)`` for the up line
-and ``[STREAM_DOWN]`` for the down line (:func:`daa_sil.models.streams.encounter_streams`), so a SIL run
-of a scenario sees draw for draw the delays fast-time gives the same encounter. The *impairment*
-draws (loss, duplication, reordering) come from ``child_seed(SeedSequence(seed), 0)`` (down) /
-``1`` (up) (:func:`direction_seeds`), keyed on each datagram's simulation step when ticks drive the
-clock (:mod:`daa_sil.sil.shim_ticks`), so wall-clock traffic (greetings) does not shift them;
-fast-time has no impairments.
+Seeds (:func:`daa_sil.sil.shim_config.shim_delay_processes`): the delays of a shim seeded ``seed``
+are the encounter's fast-time delay streams (:func:`daa_sil.models.streams.encounter_streams`), so
+a SIL run sees draw for draw the delays fast-time gives the same encounter: a packet sent at sim
+time ``t`` is released at ``fifo_release(t, d)`` and, with ticks, delivered at the first tick
+``t_k >= release`` (fast-time: the first step with ``release <= t_k``). This needs ``epoch_s > 0``
+(per-datagram draws would count heartbeats too). The impairment draws come from
+:func:`daa_sil.sil.shim_config.direction_seeds`; fast-time has no impairments.
 
-Parity with fast-time: a packet sent at sim time ``t`` on direction ``dir`` is released at
-``fifo_release(t, d)`` with ``d = DelayProcess(model, encounter_streams(seed)[STREAM_<DIR>],
-epoch_s).delay(t)`` -- what :func:`daa_sil.study.fasttime.simulate` computes with
-``BatchedDelay(model, [streams[STREAM_<DIR>]], epoch_s, duration_s)``; in lockstep it is delivered
-at the first tick ``t_k >= release`` (fast-time: the first step with ``release <= t_k``). This
-needs ``epoch_s > 0``: with per-datagram draws the index counts every datagram (heartbeats too),
-which fast-time does not model.
+``realtime`` with a vehicle that sends ticks (what ``daa-vehicle`` does) follows the same tick
+rules as lockstep, the ticks paced by the vehicle's wall clock, so it releases every packet at the
+same step as the lockstep run. ``release_lateness_ms`` is then measured against the tick schedule
+(the earliest-arriving tick defines its origin). ``realtime`` with a vehicle that sends no ticks:
+sim time = (loop time - start) x ``speed``; a datagram enters its line at its kernel arrival time
+(``SO_TIMESTAMPNS``) and one timer (a Linux ``timerfd``, :mod:`daa_sil.sil.rtclock`; ``timing="poll"``
+or non-Linux: ``call_at`` + poll) is armed for the core's :meth:`ShimCore.next_release`.
 
-Clocks
-------
-``lockstep`` (``docs/architecture.md``, "The step order"): the shim's clock only moves on ticks.
-
-1. A datagram from the vehicle containing a valid ``SIM_TICK(k, t_k)`` sets the clock to ``t_k``
-   (never backwards), releases every packet due at or before ``t_k`` in both directions (each line
-   in release order), then forwards the tick datagram to the GCS at once (not delayed) and echoes
-   it back to the vehicle (``tick_echoes``): the echo tells the vehicle that the shim is alive and
-   that every uplink packet due at ``t_k`` has been sent to it.
-2. Other datagrams from the vehicle enter their line stamped with the current clock (the time of
-   the last tick). Datagrams from the GCS are stamped with the time of the **oldest tick forwarded
-   to the GCS that it has not acknowledged yet** (the tick it is working on; the last tick if it
-   never acknowledges ticks, or after it ignored ``MAX_GCS_LAG_TICKS`` (:mod:`daa_sil.sil.shim_ticks`) of them:
-   ``gcs_unresponsive``). In lockstep that is always the last tick; in realtime it keeps a GCS that
-   answers late from stamping its step-k commands with a later step (``gcs_lagged`` counts them).
-3. A datagram from the GCS containing a valid ``SIM_TICK_ACK(k)`` (cumulative: every tick <= k)
-   is forwarded to the vehicle at once.
-4. A new tick that arrives while the GCS has not acknowledged the last tick forwarded to it is
-   held and processed (rule 1) as soon as that ack arrives (``ticks_held``). The vehicle runs its
-   step on the echo, in parallel with the GCS's step of the same tick; the hold keeps the GCS's
-   datagrams of that step ahead of the next tick's releases (:mod:`daa_sil.sil.shim_ticks`).
-
-``realtime`` with a vehicle that sends ticks (what ``daa-vehicle`` does): **the same tick-driven
-rules as lockstep**, only the ticks are paced by the vehicle's wall clock instead of by the GCS's
-acks. So a realtime run releases every packet at the same step as the lockstep run of the same
-scenario and seed: delays are quantised to the step exactly as lockstep does (a packet released at
-sim ``r`` is delivered at the first tick ``t_k >= r``), never by racing a wall-clock release
-against a step deadline. Packets that could not keep to that (stamped with an older tick but due at
-a tick already processed: a GCS more than the link delay late) are counted as ``released_late``.
-``release_lateness_ms`` is then measured against the tick schedule: how long after its ideal wall
-instant (the earliest-arriving tick defines the schedule's origin) each packet was released.
-
-The mode is decided by the first datagram from the vehicle side: a ``SIM_TICK`` selects ticks,
-anything else the free-running timer mode below. Until then datagrams from the GCS are held
-(``held_for_vehicle``, bounded) and then stamped as the mode says, so nothing is lost because the
-GCS started first.
-
-``realtime`` with a vehicle that sends no ticks (free-running): sim time = (loop monotonic time -
-start) x ``speed``. A datagram enters its line at its *kernel arrival time* (``SO_TIMESTAMPNS``),
-not when the loop got round to reading it; each line keeps a heap and one timer (a Linux
-``timerfd``, nanosecond absolute expiry, no polling) armed for its earliest pending release
-(:mod:`daa_sil.sil.rtclock`; ``timing="poll"`` or non-Linux: the ``call_at`` + poll fallback).
-Sockets are read with ``recvmsg`` in bursts from a loop reader.
-
-Send ticks and acks *alone* in their datagram (a mixed datagram is treated as control and its
-other messages skip the delay; counted as ``mixed_control``). Control messages are recognised by
-a header walk and then fully decoded (CRC and, with ``key``, signature checked), so a forged or
-corrupt tick cannot move the clock (``bad_control``). With signing, send control messages on
-their own signing stream (``MavCodec.encode(msg, link_id=CONTROL_LINK_ID)``) because they
-overtake delayed data. In lockstep the GCS must be known before the first tick: give ``gcs`` or
-let the GCS send any datagram (e.g. a HEARTBEAT) to the shim first.
-
-Hostile input: each datagram's handling (control messages included) runs under a
-:class:`daa_sil.sil.msgguard.MessageGuard`: one that raises is counted (``malformed_content``) and
-reported, and the next datagram is handled; the shim never stops on content.
+Hostile input: each datagram's handling runs under a :class:`daa_sil.sil.msgguard.MessageGuard`:
+one that raises is counted (``malformed_content``) and reported, and the next datagram is handled.
 
 Never silent: datagrams from an address that is not the learned peer are dropped with a warning
 (first one per address at once, then with counts at most every 10 s), datagrams due for a side
 nobody has claimed yet likewise, and a side that has talked and then falls silent for
-``SILENCE_WARN_S`` is reported (stderr, ``daa-sil shim: warning: ...``).
+``SILENT_AFTER_S["shim"]`` (:mod:`daa_sil.sil.silence`) is reported (stderr, ``daa-sil shim: warning: ...``).
 """
 
 from __future__ import annotations
@@ -97,95 +49,74 @@ from __future__ import annotations
 import asyncio
 import inspect
 import sys
-from collections import deque
 from typing import Callable
 
 import numpy as np
 
 from daa_sil.errors import UsageError
 from daa_sil.files import atomic_write_json, to_jsonable
-from daa_sil.models.delay_process import as_seed_sequence
-from daa_sil.link.codec import MavCodec
-from daa_sil.link.delayline import DelayLine
 from .endpoint import Address, DropReporter, format_udp_address, parse_udp_address
 from .msgguard import MessageGuard
-from .rtclock import (PreciseTimer, request_short_slice, set_timer_slack)
-from .shim_config import TICK_ID, ShimConfig, control_ids, direction_seeds, shim_delay_processes
-from daa_sil.sil.shim_socket import ShimSocket, bind_udp
-from daa_sil.sil.shim_ticks import ShimTicks
+from .rtclock import PreciseTimer, request_short_slice, set_timer_slack
+from .shim_config import ShimConfig
+from .shim_core import Send, ShimCore
+from .shim_socket import ShimSocket, bind_udp
+from .silence import SILENT_AFTER_S, Silence
 
-#: realtime: datagrams from the GCS held until the vehicle side's first datagram decides the mode
-MAX_HELD = 10_000
-#: wall seconds of silence from a side that has talked before it is reported
-SILENCE_WARN_S = 5.0
+#: the socket side's counters (the protocol's are :data:`daa_sil.sil.shim_core.COUNTERS`)
+IO_COUNTERS = ("datagrams_from_vehicle", "datagrams_from_gcs", "forwarded_to_vehicle", "forwarded_to_gcs",
+               "rejected_peer", "no_peer")
+SIDES = ("vehicle", "gcs")
+LABELS = {"vehicle": "vehicle", "gcs": "GCS"}
 
 
-class DelayShim(ShimTicks):
+class DelayShim:
     """The relay. ``await start()``, then ``vehicle_side`` / ``gcs_side`` addresses; ``await close()``."""
 
     def __init__(self, config: ShimConfig):
-        config.validate()
+        self.core = ShimCore(config)  # validates the configuration
         self.config = config
-        root = as_seed_sequence(config.seed)  # resolved once: seed None = fresh entropy shared by both
-        seeds = direction_seeds(root)
-        procs = shim_delay_processes(config, root)
-        common = dict(fifo=config.fifo, loss=config.loss, dup=config.dup,
-                      reorder=config.reorder, outages=config.outages, max_log=config.max_log)
-        self.lines = {"down": DelayLine(procs["down"], seed=seeds["down"], **common),
-                      "up": DelayLine(procs["up"], seed=seeds["up"], **common)}
         self.peers: dict[str, "Address | None"] = {
             "vehicle": parse_udp_address(config.vehicle, "--vehicle") if config.vehicle else None,
             "gcs": parse_udp_address(config.gcs, "--gcs") if config.gcs else None}
         self.sides: dict[str, ShimSocket] = {}
-        self.counters = {k: 0 for k in (
-            "datagrams_from_vehicle", "datagrams_from_gcs", "forwarded_to_vehicle", "forwarded_to_gcs",
-            "rejected_peer", "rejected_claim", "no_peer", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards",
-            "socket_errors", "send_would_block", "tick_echoes", "held_for_vehicle", "held_dropped", "gcs_lagged",
-            "gcs_unresponsive", "released_late", "ticks_held")}
-        self.codec = MavCodec(0, 0, key=config.key, sign_outgoing=False)  # verifies control messages only
-        self.sim_time = 0.0  # lockstep clock (s)
-        self.last_tick: "int | None" = None
+        self.io_counters = {k: 0 for k in IO_COUNTERS}
         self._loop: "asyncio.AbstractEventLoop | None" = None
         self._t0 = 0.0
-        self._timers: dict[str, "PreciseTimer | None"] = {"down": None, "up": None}
-        self._scheduled: dict[str, "float | None"] = {"down": None, "up": None}  # sim s the timer is armed for
-        self._lateness: list[float] = []  # realtime: wall s between scheduled and actual release
+        self._timer: "PreciseTimer | None" = None  # free-running clock: armed for the core's next release
+        self._scheduled: "float | None" = None  # sim s the timer is armed for
+        self._lateness: list[float] = []  # free-running: wall s between scheduled and actual release
         self._tick_waiters: list[tuple[int, asyncio.Future]] = []
         self._timing_info: dict = {}
         self.closed = False
-        #: releases driven by ticks (lockstep always; realtime once the vehicle's first datagram is a tick)
-        self.tick_mode: "bool | None" = True if config.clock == "lockstep" else None
-        self._held: list[tuple["float | None", bytes]] = []  # realtime, mode undecided: GCS datagrams
-        self._unacked: "deque[tuple[int, float]]" = deque()  # ticks forwarded to the GCS, not yet acked
-        #: lockstep: the vehicle's next tick, held until the GCS acknowledges its pending one (shim_ticks)
-        self._held_tick: "tuple | None" = None
-        self._gcs_acks = False  # the GCS acknowledges ticks (so its data can be stamped by them)
-        #: fault-draw keys (shim_ticks): start-up datagrams per line, datagrams per (line, stamp ms), held GCS step
-        self._start_count = {"down": 0, "up": 0}
-        self._stamp_count: dict[str, dict[int, int]] = {"down": {}, "up": {}}
-        self._gcs_batch: list[tuple[float, bytes]] = []
         self._tick_log: list[tuple[float, float, float, int]] = []  # realtime ticks: (t_k, rx, done, released)
         self._seen_ticks: set[int] = set()
         self.warn = _stderr_warn
-        labels = {"vehicle": "vehicle", "gcs": "GCS"}
         self.drops = {side: DropReporter("daa-sil shim", lambda side=side: self._peer_text(side),
-                                         hint=f"the shim keeps the first {labels[side]} it heard from",
+                                         hint=f"the shim keeps the first {LABELS[side]} it heard from",
                                          emit=lambda text: self.warn(text))
-                      for side in ("vehicle", "gcs")}
-        self._last_rx: dict[str, "float | None"] = {"vehicle": None, "gcs": None}
-        self._silent: dict[str, "float | None"] = {"vehicle": None, "gcs": None}
+                      for side in SIDES}
+        self.silence = {side: Silence(SILENT_AFTER_S["shim"]) for side in SIDES}
         self._no_peer_warned: set[str] = set()
-        #: every datagram's handling runs under it (:mod:`daa_sil.sil.shim_socket`)
+        #: every datagram's handling runs under it
         self.guard = MessageGuard("daa-sil shim", emit=lambda text: self.warn(text))
         self._watch: "asyncio.TimerHandle | None" = None
 
+    @property
+    def counters(self) -> dict:
+        """Every counter: the socket side's, the sockets' errors and the core's (a fresh dict)."""
+        io = dict(self.io_counters)
+        io["socket_errors"] = sum(s.socket_errors for s in self.sides.values())
+        io["send_would_block"] = sum(s.send_would_block for s in self.sides.values())
+        return {**io, **self.core.counters}
+
     def _peer_text(self, side: str) -> str:
         p = self.peers[side]
-        return f"{format_udp_address(p) if p else '(none yet)'} ({'vehicle' if side == 'vehicle' else 'GCS'} side)"
+        return f"{format_udp_address(p) if p else '(none yet)'} ({LABELS[side]} side)"
 
     # -- lifecycle -----------------------------------------------------------------------------
     async def start(self) -> None:
-        """Bind both sockets (and, realtime, set up the release timers)."""
+        """Bind both sockets (and, realtime, set up the release timer)."""
         self._loop = asyncio.get_running_loop()
         self._t0 = self._loop.time()
         realtime = self.config.clock == "realtime"
@@ -198,32 +129,30 @@ class DelayShim(ShimTicks):
             except OSError as exc:
                 await self.close()
                 raise UsageError(f"{flag}: cannot bind {format_udp_address(addr)}: {exc.strerror or exc}") from None
-            self.sides[name] = ShimSocket(self, name, sock, stamped=precise)
+            # under the guard: a datagram whose handling raises is counted as malformed, the burst goes on
+            on_datagram = (lambda data, src, t_rx, name=name: self.guard.call(
+                self._on_datagram, name, data, src, t_rx, what=f"datagram from the {name} side", source=src))
+            self.sides[name] = ShimSocket(self._loop, sock, precise, on_datagram)
         if realtime:
             info = {"timing": self.config.timing, "rx_kernel_stamps": all(sd.stamped for sd in self.sides.values())}
             if precise:
                 info["timer_slack_1us"] = set_timer_slack(1000)
                 info["short_slice"] = request_short_slice(0.0001)
-            for direction in ("down", "up"):
-                self._timers[direction] = PreciseTimer(self._loop, lambda d=direction: self._fire(d),
-                                                       spin_s=self.config.spin_s, use_timerfd=precise)
-            info["timer"] = self._timers["down"].kind
+            self._timer = PreciseTimer(self._loop, self._fire, spin_s=self.config.spin_s, use_timerfd=precise)
+            info["timer"] = self._timer.kind
             self._timing_info = info
         self._watch = self._loop.call_later(1.0, self._watch_silence)
 
     def _watch_silence(self) -> None:
-        """Once a second: report a side that talked and has been silent for SILENCE_WARN_S (and its return)."""
+        """Once a second: report a side that talked and has been silent too long (and its return, :meth:`_heard`)."""
         if self.closed:
             return
-        now = self._loop.time()
-        for side, what in (("vehicle", "the vehicle"), ("gcs", "the GCS")):
-            last = self._last_rx[side]
-            if last is None or self._silent[side] is not None:
-                continue
-            if now - last >= SILENCE_WARN_S:
-                self._silent[side] = last
-                self.warn(f"no datagram from {what} ({self._peer_text(side)}) for {now - last:.0f} s"
-                          f"{f' (last tick {self.last_tick}, t = {self.sim_time:g} s)' if self.last_tick is not None else ''}"
+        core = self.core
+        for side in SIDES:
+            quiet = self.silence[side].check(self._loop.time())
+            if quiet is not None:
+                self.warn(f"no datagram from the {LABELS[side]} ({self._peer_text(side)}) for {quiet:.0f} s"
+                          f"{f' (last tick {core.last_tick}, t = {core.sim_time:g} s)' if core.last_tick is not None else ''}"
                           f": has it stopped?")
         self._watch = self._loop.call_later(1.0, self._watch_silence)
 
@@ -246,10 +175,9 @@ class DelayShim(ShimTicks):
         self.closed = True
         if self._watch is not None:
             self._watch.cancel()
-        for d, tm in self._timers.items():
-            if tm is not None:
-                tm.close()
-            self._timers[d] = None
+        if self._timer is not None:
+            self._timer.close()
+            self._timer = None
         for side in self.sides.values():
             side.close()
         await asyncio.sleep(0)
@@ -257,8 +185,8 @@ class DelayShim(ShimTicks):
     # -- clock ---------------------------------------------------------------------------------
     def now(self) -> float:
         """Current sim time (s) of the shim's clock."""
-        if self.config.clock == "lockstep" or self.tick_mode:
-            return self.sim_time
+        if self.core.tick_mode:
+            return self.core.sim_time
         return (self._loop.time() - self._t0) * self.config.speed
 
     def _wall_of(self, sim_t: float) -> float:
@@ -269,137 +197,141 @@ class DelayShim(ShimTicks):
         """One datagram from ``side``; ``t_rx``: kernel arrival time (loop clock, s) if known."""
         if self.closed:
             return
-        c = self.counters
-        c["datagrams_from_" + side] += 1
+        self.io_counters["datagrams_from_" + side] += 1
         peer = self.peers[side]
         if peer is None:
-            # garbage or (with a key) unsigned / forged packets cannot claim a side of the link
-            if not self.codec.decode(data, commit=False):
-                c["rejected_claim"] += 1
+            if not self.core.claim(side, data):
                 return
             self.peers[side] = addr
         elif peer != addr:
-            c["rejected_peer"] += 1
+            self.io_counters["rejected_peer"] += 1
             self.drops[side].note(addr)
             return
-        self._heard(side)
-        if self.tick_mode is None:  # realtime: the vehicle side's first datagram decides the mode
-            if side == "gcs":
-                if len(self._held) < MAX_HELD:
-                    self._held.append((t_rx, data))
-                    c["held_for_vehicle"] += 1
-                else:
-                    c["held_dropped"] += 1
-                return
-            self._decide_mode(data)
-        if self.tick_mode:
-            self._tick_datapath(side, data, t_rx)
-        else:
-            self._timer_datapath(side, data, t_rx)
-
-    def _heard(self, side: str) -> None:
         now = self._loop.time() if self._loop is not None else 0.0
-        quiet_since = self._silent[side]
-        if quiet_since is not None:
-            self._silent[side] = None
-            self.warn(f"{'the vehicle' if side == 'vehicle' else 'the GCS'} is back after {now - quiet_since:.0f} s "
-                      f"of silence ({self._peer_text(side)})")
-        self._last_rx[side] = now
+        back = self.silence[side].heard(now)
+        if back is not None:
+            self.warn(f"the {LABELS[side]} is back after {back:.0f} s of silence ({self._peer_text(side)})")
+        core = self.core
+        t_in = 0.0
+        if not core.tick_mode and self._loop is not None:  # the free-running clock: kernel arrival time
+            t_in = self.now() if t_rx is None else min(self.now(), (t_rx - self._t0) * self.config.speed)
+        self._send_all(core.receive(side, data, t_in))
+        if core.processed:
+            self._ticks_done(core.processed, t_rx)
+        elif core.tick_mode is False:
+            self._arm()
 
-    def _decide_mode(self, first_vehicle_datagram: bytes) -> None:
-        """Realtime: tick-driven if the vehicle's first datagram is a valid SIM_TICK; then replay held GCS data."""
-        tick = False
-        if TICK_ID in control_ids(first_vehicle_datagram):
-            tick = any(m.get_msgId() == TICK_ID for m in self.codec.decode(first_vehicle_datagram, commit=False))
-        self.tick_mode = tick
-        if self._timing_info:
-            self._timing_info["release"] = "ticks" if tick else "timer"
-        held, self._held = self._held, []
-        for t_rx, data in held:
-            (self._tick_datapath if tick else self._timer_datapath)("gcs", data, t_rx)
+    def _send_all(self, sends: "list[Send]") -> None:
+        for dest, data in sends:
+            peer = self.peers[dest]
+            sock = self.sides.get(dest)
+            if peer is None or sock is None or sock.closed:
+                self.io_counters["no_peer"] += 1
+                if dest not in self._no_peer_warned and not self.closed:
+                    self._no_peer_warned.add(dest)
+                    self.warn(f"dropping datagrams due for the {LABELS[dest]}: nothing has sent to the shim's "
+                              f"{dest} side yet, so it does not know where to (the shim learns each side from "
+                              f"its first datagram; counted as no_peer)")
+            elif sock.sendto(data, peer):
+                self.io_counters["forwarded_to_" + dest] += 1
 
-    def _timer_datapath(self, side: str, data: bytes, t_rx: "float | None") -> None:
-        """Free-running realtime: stamp with the kernel arrival time, release by the line's timer."""
-        direction = "down" if side == "vehicle" else "up"
-        t_in = self.now() if t_rx is None else min(self.now(), (t_rx - self._t0) * self.config.speed)
-        self.lines[direction].push(t_in, data)
-        self._arm(direction)
+    def _ticks_done(self, processed: list, t_rx: "float | None") -> None:
+        """After the core processed ticks: log them (realtime tick schedule), wake :meth:`wait_tick`."""
+        if self.config.clock == "realtime":
+            done = self._loop.time()
+            rx = t_rx if t_rx is not None else done
+            for k, t_k, n in processed:
+                if k not in self._seen_ticks and len(self._tick_log) < 1_000_000:
+                    self._seen_ticks.add(k)
+                    self._tick_log.append((t_k, rx, done, n))
+        last = self.core.last_tick
+        for tick, fut in self._tick_waiters:
+            if tick <= last and not fut.done():
+                fut.set_result(last)
+        self._tick_waiters = [w for w in self._tick_waiters if not w[1].done()]
 
-    def _send(self, dest: str, data: bytes) -> bool:
-        peer = self.peers[dest]
-        side = self.sides.get("gcs" if dest == "gcs" else "vehicle")
-        if peer is None or side is None or side.closed:
-            self.counters["no_peer"] += 1
-            if dest not in self._no_peer_warned and not self.closed:
-                self._no_peer_warned.add(dest)
-                self.warn(f"dropping datagrams due for the {'GCS' if dest == 'gcs' else 'vehicle'}: nothing has sent "
-                          f"to the shim's {dest} side yet, so it does not know where to (the shim learns each side "
-                          f"from its first datagram; counted as no_peer)")
-            return False
-        if side.sendto(data, peer):
-            self.counters["forwarded_to_" + dest] += 1
-            return True
-        return False
-
-    def _release(self, direction: str, t_now: float) -> int:
-        dest = "gcs" if direction == "down" else "vehicle"
-        items = self.lines[direction].pop_due(t_now)
-        for data in items:
-            self._send(dest, data)
-        return len(items)
-
-    # -- realtime scheduling ---------------------------------------------------------------------
-    def _arm(self, direction: str) -> None:
-        """Make sure the direction's timer fires at its earliest pending release."""
-        nxt = self.lines[direction].next_release()
-        timer = self._timers[direction]
-        if nxt is None or timer is None:
+    # -- free-running release timer --------------------------------------------------------------
+    def _arm(self) -> None:
+        """Make sure the timer fires at the core's earliest pending release."""
+        nxt = self.core.next_release()
+        if nxt is None or self._timer is None:
             return
-        cur = self._scheduled[direction]
-        if cur is not None and cur <= nxt:
+        if self._scheduled is not None and self._scheduled <= nxt:
             return
-        self._scheduled[direction] = nxt
-        timer.arm(self._wall_of(nxt))
+        self._scheduled = nxt
+        self._timer.arm(self._wall_of(nxt))
 
-    def _fire(self, direction: str) -> None:
-        scheduled = self._scheduled[direction]
-        self._scheduled[direction] = None
+    def _fire(self) -> None:
+        scheduled, self._scheduled = self._scheduled, None
         if self.closed or scheduled is None:
             return
         if len(self._lateness) < 1_000_000:
             self._lateness.append(self._loop.time() - self._wall_of(scheduled))
-        self._release(direction, max(self.now(), scheduled))
-        self._arm(direction)
+        self._send_all(self.core.release(max(self.now(), scheduled)))
+        self._arm()
+
+    # -- observability -----------------------------------------------------------------------------
+    async def wait_tick(self, tick: int, timeout: float) -> int:
+        """Wait until a tick >= ``tick`` has been processed; returns the last tick."""
+        last = self.core.last_tick
+        if last is not None and last >= tick:
+            return last
+        fut = asyncio.get_running_loop().create_future()
+        self._tick_waiters.append((tick, fut))
+        return await asyncio.wait_for(fut, timeout)
+
+    def _tick_origin(self) -> "float | None":
+        """Wall origin of the tick schedule: min over ticks k >= 1 of (arrival - t_k / speed) (s)."""
+        rows = [(t, rx) for t, rx, _, _ in self._tick_log if t > 0]
+        if not rows:
+            return None
+        return min(rx - t / self.config.speed for t, rx in rows)
+
+    def _tick_lateness(self) -> "np.ndarray | None":
+        """Per released packet: wall s from its tick's ideal instant to the end of that tick's releases."""
+        w0 = self._tick_origin()
+        if w0 is None:
+            return None
+        out = [done - (w0 + t / self.config.speed) for t, _, done, n in self._tick_log if t > 0 for _ in range(n)]
+        return np.array(out, float)
+
+    def _tick_schedule_stats(self) -> dict:
+        """How late ticks arrived against their schedule (ms): the vehicle's pacing plus the transit."""
+        w0 = self._tick_origin()
+        if w0 is None:
+            return {"ticks": len(self._tick_log)}
+        late = np.array([rx - (w0 + t / self.config.speed) for t, rx, _, _ in self._tick_log if t > 0]) * 1000.0
+        return {"ticks": int(late.size), "arrival_late_p50_ms": float(np.percentile(late, 50)),
+                "arrival_late_p99_ms": float(np.percentile(late, 99)), "arrival_late_max_ms": float(late.max())}
 
     def stats(self) -> dict:
         """Counters, per-direction line stats (delays in sim s) and realtime release lateness (ms)."""
+        core = self.core
+        ticks_rt = bool(core.tick_mode) and self.config.clock == "realtime"
         out = {"clock": self.config.clock, "speed": self.config.speed, "sim_time_s": self.now() if self._loop else 0.0,
-               "last_tick": self.last_tick, "seed": self.config.seed, "epoch_s": self.config.epoch_s,
+               "last_tick": core.last_tick, "seed": self.config.seed, "epoch_s": self.config.epoch_s,
                "peers": {k: (format_udp_address(v) if v else None) for k, v in self.peers.items()},
                "counters": {**self.counters, "malformed_content": self.guard.total},
-               "control_codec": {k: v for k, v in self.codec.counters.as_dict().items() if v},
-               "down": self.lines["down"].stats(), "up": self.lines["up"].stats()}
+               "control_codec": {k: v for k, v in core.codec.counters.as_dict().items() if v},
+               "down": core.lines["down"].stats(), "up": core.lines["up"].stats()}
         if self._timing_info:
-            out["realtime_timing"] = self.timing_info()
+            out["realtime_timing"] = {**self.timing_info(), **(
+                {"release": "ticks" if core.tick_mode else "timer"} if core.tick_mode is not None else {})}
         if self.config.clock == "realtime":
-            out["release"] = {None: "undecided", True: "ticks", False: "timer"}[self.tick_mode]
-        lat = self._tick_lateness() if self.tick_mode and self.config.clock == "realtime" else (
-            np.array(self._lateness) if self._lateness else None)
+            out["release"] = {None: "undecided", True: "ticks", False: "timer"}[core.tick_mode]
+        lat = self._tick_lateness() if ticks_rt else (np.array(self._lateness) if self._lateness else None)
         if lat is not None and lat.size:
             lat = lat * 1000.0
             out["release_lateness_ms"] = {"n": int(lat.size), "p50": float(np.percentile(lat, 50)),
                                           "p99": float(np.percentile(lat, 99)), "max": float(lat.max()),
-                                          "reference": "tick schedule" if self.tick_mode else "release time"}
-        if self.config.clock == "realtime" and self.tick_mode:
+                                          "reference": "tick schedule" if core.tick_mode else "release time"}
+        if ticks_rt:
             out["tick_schedule"] = self._tick_schedule_stats()
-        for side in ("vehicle", "gcs"):
+        for side in SIDES:
             if self.drops[side].total:
                 out.setdefault("unexpected_peers", {})[side] = {
                     format_udp_address(a): n for a, n in self.drops[side].by_addr.most_common(10)}
         return to_jsonable(out)
-
-
-
 
 
 def _stderr_warn(text: str) -> None:

@@ -18,6 +18,7 @@ from daa_sil.link.delayline import check_outages
 from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel
 from daa_sil.models.link_rule import LinkLegs
 from daa_sil.models.delay_process import as_seed_sequence, child_seed, link_delay_processes
+from daa_sil.models.streams import STREAM_DOWN, STREAM_UP
 from daa_sil.sil.endpoint import parse_udp_address
 
 CLOCKS = ("realtime", "lockstep")
@@ -39,8 +40,6 @@ def delay_stream_seeds(seed: "int | np.random.SeedSequence | None") -> dict:
     Equal to ``encounter_streams(seed)[STREAM_DOWN]`` / ``[STREAM_UP]`` for an int seed (the
     children ``(2,)`` / ``(1,)`` of ``SeedSequence(seed)``; for a SeedSequence, its children).
     """
-    from daa_sil.models.streams import STREAM_DOWN, STREAM_UP
-
     ss = as_seed_sequence(seed)
     return {"down": child_seed(ss, STREAM_DOWN), "up": child_seed(ss, STREAM_UP)}
 

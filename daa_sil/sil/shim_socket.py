@@ -3,28 +3,36 @@ default, with kernel receive timestamps where the platform has them."""
 
 from __future__ import annotations
 
+import asyncio
 import socket
-from typing import TYPE_CHECKING
+from typing import Callable
 
 from daa_sil.sil.endpoint import RCVBUF_BYTES, Address
 from daa_sil.sil.rtclock import enable_rx_timestamps, rx_buffer_size, rx_time
 
-if TYPE_CHECKING:
-    from daa_sil.sil.shim import DelayShim
+#: ``on_datagram(data, addr, t_rx)``: ``t_rx`` the kernel arrival time (loop clock, s) or None
+OnDatagram = Callable[[bytes, Address, "float | None"], None]
 
 
 class ShimSocket:
-    """One shim socket, read with ``recvmsg`` from a loop reader (kernel arrival stamps if enabled)."""
+    """One shim socket, read with ``recvmsg`` from a loop reader (kernel arrival stamps if enabled).
+
+    Each datagram read goes to ``on_datagram``, which must not raise (the shim runs it under its
+    message guard). Socket errors are counted here (``socket_errors``, ``send_would_block``).
+    """
 
     #: datagrams read per reader callback before timers get their turn
     BURST = 64
 
-    def __init__(self, shim: "DelayShim", name: str, sock: socket.socket, stamped: bool):
-        self.shim, self.name, self.sock = shim, name, sock
+    def __init__(self, loop: asyncio.AbstractEventLoop, sock: socket.socket, stamped: bool,
+                 on_datagram: OnDatagram):
+        self.loop, self.sock, self.on_datagram = loop, sock, on_datagram
         self.stamped = stamped and enable_rx_timestamps(sock)
         self._anc = rx_buffer_size() if self.stamped else 0
         self.closed = False
-        shim._loop.add_reader(sock.fileno(), self._readable)
+        self.socket_errors = 0
+        self.send_would_block = 0
+        loop.add_reader(sock.fileno(), self._readable)
 
     @property
     def sockname(self) -> Address:
@@ -32,35 +40,32 @@ class ShimSocket:
         return a[0], a[1]
 
     def _readable(self) -> None:
-        shim, counters = self.shim, self.shim.counters
         for _ in range(self.BURST):
             try:
                 data, anc, _flags, addr = self.sock.recvmsg(65535, self._anc)
             except (BlockingIOError, InterruptedError):
                 return
             except OSError:  # e.g. ICMP port unreachable reported on this socket
-                counters["socket_errors"] += 1
+                self.socket_errors += 1
                 continue
-            # under the guard: a datagram whose handling raises is counted as malformed, the burst goes on
-            shim.guard.call(shim._on_datagram, self.name, data, (addr[0], addr[1]),
-                            rx_time(anc) if self.stamped else None, what=f"datagram from the {self.name} side",
-                            source=addr)
+            self.on_datagram(data, (addr[0], addr[1]), rx_time(anc) if self.stamped else None)
 
     def sendto(self, data: bytes, addr: Address) -> bool:
+        """Send one datagram; False (counted) if the socket refused it."""
         try:
             self.sock.sendto(data, addr)
             return True
         except (BlockingIOError, InterruptedError):
-            self.shim.counters["send_would_block"] += 1
+            self.send_would_block += 1
         except OSError:
-            self.shim.counters["socket_errors"] += 1
+            self.socket_errors += 1
         return False
 
     def close(self) -> None:
         if not self.closed:
             self.closed = True
             try:
-                self.shim._loop.remove_reader(self.sock.fileno())
+                self.loop.remove_reader(self.sock.fileno())
             except (RuntimeError, ValueError):
                 pass
             self.sock.close()
