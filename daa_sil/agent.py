@@ -60,7 +60,10 @@ from .daa import (AXIS_NONE, DaaConfig, DaaState, alert_levels, classify_command
                   proj_lowc, resolve, safety_metric, search_maneuver, sm_from_tin)
 from .daa.config import AXIS_NAMES, DIR_NAMES, RULE_NAMES
 from .daa.resolution import command_deltas
-from daa_sil.allocation import WAIT_MODES, WAIT_RULES, AllocationPolicy, PolicyRows
+from daa_sil.allocation import PolicyRows
+from daa_sil.config.choices import WAIT_RULES
+from daa_sil.config.groups import policy_for_group
+from daa_sil.config.policy import WAIT_MODES, AllocationPolicy
 from daa_sil.wait_function import WaitLookup, WaitValue, make_wait_lookup, wait_values
 from daa_sil.daa_batches import check_batches, positions_by_batch
 from daa_sil.geometry.kinematics import AircraftState, Command
@@ -85,13 +88,6 @@ DECISION_FIELDS = (
 #: name tables for the integer-coded fields
 CODE_NAMES = {"decision": DECISION_NAMES, "rule": RULE_NAMES, "authority": AUTHORITY_NAMES, "decided_by": DECIDED_BY_NAMES,
               "pilot_axis": AXIS_NAMES, "exec_axis": AXIS_NAMES, "pilot_dir": DIR_NAMES, "exec_dir": DIR_NAMES}
-
-def policy_for_group(group: str) -> AllocationPolicy:
-    """The policy of a named group of the group table (:mod:`daa_sil.config.groups`: B-1, ..., ID-2-map)."""
-    from daa_sil.config.groups import group_spec
-
-    return group_spec(group).policy()
-
 
 @dataclass
 class PilotInput:
@@ -186,7 +182,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
 
     Returns ``(command to fly, decision record, new memory)``; the record has the keys
     :data:`DECISION_FIELDS` (codes in :data:`CODE_NAMES`; nan where not applicable),. ``policy`` one
-    :class:`~daa_sil.allocation.AllocationPolicy` for every row, or a
+    :class:`~daa_sil.config.policy.AllocationPolicy` for every row, or a
     :class:`~daa_sil.allocation.PolicyRows` (each row its own). ``bands`` (a
     :class:`~daa_sil.daa.Bands` for the whole batch) may be passed to avoid recomputing them.
     ``turn_rate`` ``(N, M)`` is each intruder's estimated turn rate (compass rad/s, + = right;

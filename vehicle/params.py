@@ -42,7 +42,7 @@ import struct
 from dataclasses import dataclass, replace
 from typing import Callable
 
-from daa_sil.config.limits import WT_RANGE_S
+from daa_sil.config.settings import PROJL_HORIZON, WAIT_THRESHOLD
 from daa_sil.link.codec import mavlink as M
 
 REAL32, INT8 = M.MAV_PARAM_TYPE_REAL32, M.MAV_PARAM_TYPE_INT8
@@ -99,7 +99,7 @@ class ParamTable:
     """The parameter list over a policy (``preset``: the scenario's threshold preset, read-only)."""
 
     def __init__(self, preset: str):
-        from daa_sil.agent import WAIT_MODES
+        from daa_sil.config.policy import WAIT_MODES
         from daa_sil.geometry.thresholds import PRESETS
 
         presets = tuple(PRESETS)
@@ -108,9 +108,9 @@ class ParamTable:
             ParamSpec("DAA_ENABLE", INT8, "onboard allocation agent on (1) / off (0)",
                       lambda p: float(bool(p.enabled)), "enabled", 0, 1, integer=True),
             ParamSpec("DAA_WT", REAL32, "wait threshold W_T (s)", lambda p: float(p.wait_threshold_s),
-                      "wait_threshold_s", *WT_RANGE_S),
+                      WAIT_THRESHOLD.name, *WAIT_THRESHOLD.range),
             ParamSpec("DAA_PROJL_S", REAL32, "ProjL look-ahead (s)", lambda p: float(p.projl_horizon_s),
-                      "projl_horizon_s", 0.0, 120.0),
+                      PROJL_HORIZON.name, *PROJL_HORIZON.range),
             ParamSpec("DAA_STALE_S", REAL32, "stale pilot command limit (s)", lambda p: float(p.stale_command_s),
                       "stale_command_s", MIN_TIMEOUT_S, 120.0),
             ParamSpec("DAA_LINK_TO", REAL32, "link-lost timeout (s)", lambda p: float(p.link_timeout_s),

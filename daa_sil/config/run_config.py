@@ -48,7 +48,7 @@ from typing import Any
 
 import yaml
 
-from daa_sil.config.limits import WT_RANGE_S
+from daa_sil.config.settings import DURATION, PRESET, PROJL_HORIZON, WAIT_THRESHOLD
 from daa_sil.config.yaml_input import load_yaml_file
 from daa_sil.errors import UsageError
 from daa_sil.geometry.thresholds import PRESETS as THRESHOLD_PRESETS
@@ -76,8 +76,8 @@ def _default_groups() -> tuple:
 class RunConfig:
     """Every parameter of a run (see the module docstring for the sections and their units)."""
 
-    base: str = "paper"  #: the preset it started from
-    thresholds: str = "paper"
+    base: str = PRESET.default  #: the preset it started from
+    thresholds: str = PRESET.default
     daa: dict = field(default_factory=dict)
     waitmap: dict = field(default_factory=lambda: {"source": "alerting", "gamma": None})
     allocation: dict = field(default_factory=lambda: {"wt": None, "projl_lookahead": None})
@@ -86,7 +86,7 @@ class RunConfig:
     latency: "str | None" = None
     link: dict = field(default_factory=lambda: {"stale_command_s": None, "link_timeout_s": None})
     reading: dict = field(default_factory=lambda: {"name": "paper", "set": {}})
-    study: dict = field(default_factory=lambda: {"encounters": 10_000, "seed": 0, "duration_s": 240.0,
+    study: dict = field(default_factory=lambda: {"encounters": 10_000, "seed": 0, "duration_s": DURATION.default,
                                                  "intruders": 1, "chunk_size": 2000})
     source: str = field(default="<preset>", compare=False)
 
@@ -157,9 +157,9 @@ def preset(name: str) -> RunConfig:
 
 
 def load_config(spec: "str | Path | None") -> RunConfig:
-    """A preset name or a YAML file (None = the ``paper`` preset); one-line UsageError on any problem."""
+    """A preset name or a YAML file (None = the default preset, ``paper``); one-line UsageError on any problem."""
     if spec is None:
-        return preset("paper")
+        return preset(PRESET.default)
     if str(spec).lower() in PRESET_NAMES:
         return preset(str(spec))
     p = Path(spec)
@@ -179,7 +179,7 @@ def config_from_dict(data: Any, where: str = "<config>") -> RunConfig:
     unknown = [k for k in data if k not in TOP_KEYS and k != "resolved"]
     if unknown:
         raise UsageError(f"{where}: unknown key {unknown[0]!r}; allowed: {', '.join(TOP_KEYS)}")
-    cfg = preset(data.get("base", "paper"))
+    cfg = preset(data.get("base", PRESET.default))
     changes: dict = {"base": cfg.base, "source": where}
     if "thresholds" in data:
         th = str(data["thresholds"]).lower()
@@ -279,14 +279,14 @@ def _check(cfg: RunConfig, where: str) -> None:
         _number(where, "waitmap.gamma", w["gamma"], 1e-6, 0.999999)
     for k, v in cfg.allocation.items():
         if v is not None:
-            _number(where, f"allocation.{k}", v, *(WT_RANGE_S if k == "wt" else (0.0, 600.0)))
+            _number(where, f"allocation.{k}", v, *(WAIT_THRESHOLD if k == "wt" else PROJL_HORIZON).range)
     for k, v in cfg.link.items():
         if v is not None:
             _number(where, f"link.{k}", v, 0.0, 3600.0)
     s = cfg.study
     _number(where, "study.encounters", s["encounters"], 1, 10_000_000, integer=True)
     _number(where, "study.seed", s["seed"], 0, 2**63 - 1, integer=True)
-    _number(where, "study.duration_s", s["duration_s"], 10.0, 3600.0)
+    _number(where, "study.duration_s", s["duration_s"], *DURATION.range)
     _number(where, "study.intruders", s["intruders"], 1, 8, integer=True)
     _number(where, "study.chunk_size", s["chunk_size"], 1, 10_000_000, integer=True)
     from daa_sil.config.readings import reading_for
@@ -309,7 +309,7 @@ def _check(cfg: RunConfig, where: str) -> None:
             raise UsageError(f"{where}: {what}: bad value ({exc})") from None
 
 
-def add_config_argument(p, default_help: str = "paper") -> None:
+def add_config_argument(p, default_help: str = PRESET.default) -> None:
     """The ``--config PRESET|FILE`` option of a command."""
     p.add_argument("--config", default=None, metavar="PRESET|FILE",
                    help=f"run configuration: a preset ({', '.join(PRESET_NAMES)}) or a YAML file "

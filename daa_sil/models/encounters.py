@@ -57,6 +57,7 @@ from typing import Sequence
 
 import numpy as np
 
+from daa_sil.config.settings import DURATION
 from daa_sil.errors import UsageError
 from daa_sil.geometry.frames import wrap_2pi, wrap_pi
 from daa_sil.geometry.kinematics import AircraftState, Performance, advance
@@ -84,7 +85,7 @@ class EncounterConfig:
     """Encounter-model parameters (paper Table 6 defaults). Speeds m/s, angles deg, times s."""
 
     n_intruders: int = 1
-    duration_s: float = 240.0
+    duration_s: float = DURATION.default
     dt_s: float = 1.0
     own_speed_mps: float = 55.0
     own_alt_m: float = 1500.0
@@ -156,7 +157,7 @@ class EncounterSet:
     seed: np.ndarray
     params: dict = field(default_factory=dict)
     root_seed: "int | None" = None
-    duration_s: float = 240.0
+    duration_s: float = DURATION.default
     dt_s: float = 1.0
     config: dict = field(default_factory=dict)
 

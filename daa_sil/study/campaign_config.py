@@ -11,15 +11,12 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from daa_sil.config.groups import GroupSpec, parse_groups
-from daa_sil.config.limits import WT_RANGE_S
+from daa_sil.config.settings import DURATION, PRESET, PROJL_HORIZON, WAIT_THRESHOLD
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.geometry.thresholds import PRESETS
 from daa_sil.waitmap.build import DEFAULT_MAP
 
-#: default encounter duration T (s) and step dt (s), paper §IV
-DEFAULT_DURATION_S = 240.0
-
-
+#: default step dt (s), paper §IV (the duration T: :data:`daa_sil.config.settings.DURATION`)
 DEFAULT_DT_S = 1.0
 
 
@@ -43,8 +40,8 @@ class CampaignConfig:
     n_encounters: int = 10_000
     seed: int = 0
     chunk_size: int = DEFAULT_CHUNK
-    preset: str = "paper"
-    duration_s: float = DEFAULT_DURATION_S
+    preset: str = PRESET.default
+    duration_s: float = DURATION.default
     dt_s: float = DEFAULT_DT_S
     waitmap: str = DEFAULT_MAP
     gamma: "float | None" = None
@@ -88,7 +85,7 @@ class CampaignConfig:
             raise UsageError(f"duration must be > 0 s, got {self.duration_s!r}")
         if not (math.isfinite(self.dt_s) and self.dt_s > 0):
             raise UsageError(f"dt must be > 0 s, got {self.dt_s!r}")
-        for name, val, lo, hi in (("--wt", self.wt, *WT_RANGE_S), ("--projl-lookahead", self.projl_lookahead, 0.0, 600.0),
+        for name, val, lo, hi in (("--wt", self.wt, *WAIT_THRESHOLD.range), ("--projl-lookahead", self.projl_lookahead, *PROJL_HORIZON.range),
                                   ("--gamma", self.gamma, 1e-6, 0.999999)):
             if val is not None and not (isinstance(val, (int, float)) and math.isfinite(val) and lo <= val <= hi):
                 raise UsageError(f"{name} must be within [{lo:g}, {hi:g}], got {val!r}")

@@ -97,6 +97,9 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from daa_sil.config.settings import (CONSTANT_WAIT, DELAY_EPOCH, DURATION, SCENARIO_GROUP, SCENARIO_LINK,
+                                     SCENARIO_PRESET, WAIT_THRESHOLD)
+
 DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
 PILOT_RESPONSES = ("deterministic", "fixed", "guendel", "no_atc", "nasa_rayleigh5")
 MAX_INTRUDERS = 8
@@ -168,10 +171,10 @@ class Outage:
 class LinkSpec:
     """Delay specs are kept as given (str or dict); :func:`delay_model` builds the model."""
 
-    up: Any = "const:4"
+    up: Any = SCENARIO_LINK.default
     down: Any = None
     round_trip: Any = None  #: instead of up/down: the round trip, split evenly between the links
-    epoch_s: float = 10.0
+    epoch_s: float = DELAY_EPOCH.field()
     loss: float = 0.0
     outages: list = field(default_factory=list)
     dup: float = 0.0
@@ -202,11 +205,11 @@ class PilotSpec:
 
 @dataclass
 class AllocationSpec:
-    group: str = "ID-1"
+    group: str = SCENARIO_GROUP.default
     wait: str = "map"
-    wait_constant_s: float = 5.0
+    wait_constant_s: float = CONSTANT_WAIT.default
     blending: bool = True
-    wait_threshold_s: float = 4.0
+    wait_threshold_s: float = WAIT_THRESHOLD.field()
     projl: bool = True
     link_timeout_s: "float | None" = None
     stale_command_s: "float | None" = None
@@ -248,8 +251,8 @@ class Scenario:
     intruders: list
     description: str = ""
     seed: int = 1
-    duration_s: float = 240.0
-    thresholds: str = "do365"
+    duration_s: float = DURATION.field()
+    thresholds: str = SCENARIO_PRESET.default
     origin: Origin = field(default_factory=Origin)
     link: LinkSpec = field(default_factory=LinkSpec)
     pilot: PilotSpec = field(default_factory=PilotSpec)
