@@ -36,7 +36,9 @@ def test_a_file_changes_only_what_it_names(tmp_path):
     assert cfg.allocation == {"wt": 8, "projl_lookahead": None}
     assert cfg.waitmap == {"source": "alerting", "gamma": 0.9}
     assert cfg.groups == ("B-2", "ID-2")
-    cc = cfg.campaign_config()
+    from daa_sil.study.campaign_config import CampaignConfig
+
+    cc = CampaignConfig.from_run_config(cfg)
     assert (cc.wt, cc.gamma, cc.preset, cc.group_names) == (8, 0.9, "do365", ("B-2", "ID-2"))
     # W_T applies to the groups with a wait function only (B-2 has none: it keeps the table's 4 s)
     assert cc.group("ID-2").wait_threshold_s == 8.0 and cc.group("B-2").wait_threshold_s == 4.0
@@ -139,7 +141,7 @@ def test_no_config_keeps_the_campaign_defaults():
     """The default campaign (no --config) is the paper preset: same groups, thresholds, maps."""
     from daa_sil.study.campaign_config import CampaignConfig
 
-    assert preset("paper").campaign_config().to_dict() == CampaignConfig().to_dict()
+    assert CampaignConfig.from_run_config(preset("paper")).to_dict() == CampaignConfig().to_dict()
 
 
 def test_a_section_is_checked_by_building_it():

@@ -214,7 +214,7 @@ def _config_from_args(args):
              "reading_set": parse_reading_settings(args.reading_set) if args.reading_set else None}
     if args.preset and args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
-    base = load_config(args.config).campaign_config() if args.config else CampaignConfig()
+    base = CampaignConfig.from_run_config(load_config(args.config)) if args.config else CampaignConfig()
     out = Path(args.out)
     if args.resume and (out / "campaign.json").is_file():
         if args.config:

@@ -5,7 +5,8 @@ Defaults and ranges of its numeric fields are the :mod:`daa_sil.config.settings`
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Mapping, TypeVar
 
 from daa_sil.config.choices import AGENT_ACTIVE, UNSAFE_HOLDS, WAIT_RULES
 from daa_sil.config.settings import CONSTANT_WAIT, LINK_TIMEOUT, PROJL_HORIZON, STALE_COMMAND, WAIT_THRESHOLD
@@ -50,4 +51,27 @@ class AllocationPolicy:
             raise UsageError(f"active_from must be one of {', '.join(AGENT_ACTIVE)}, got {self.active_from!r}")
 
 
-__all__ = ["AllocationPolicy", "WAIT_MODES"]
+T = TypeVar("T")
+
+
+def apply_overrides(target: T, *, wt: "float | None" = None, projl_lookahead: "float | None" = None,
+                    wait_rule: "str | None" = None, link: "Mapping | None" = None) -> T:
+    """``target`` (a :class:`~daa_sil.config.groups.GroupSpec` or an :class:`AllocationPolicy`) with a
+    run's overrides: the one rule fast-time (``CampaignConfig.effective_groups``) and the vehicle
+    (``vehicle.core.build_onboard``) share. ``wt`` (W_T, s) applies to a group with a wait function
+    only, ``projl_lookahead`` (N, s) to every group, ``wait_rule`` (a reading's) to a group that
+    waits, ``link`` (``stale_command_s`` / ``link_timeout_s``, s) as given. None = keep the group's."""
+    changes: dict = {}
+    waits = target.wait_mode != "none"
+    if link:
+        changes.update(link)
+    if wt is not None and waits:
+        changes["wait_threshold_s"] = float(wt)
+    if projl_lookahead is not None:
+        changes["projl_horizon_s"] = float(projl_lookahead)
+    if wait_rule is not None and waits and wait_rule != target.wait_rule:
+        changes["wait_rule"] = wait_rule
+    return replace(target, **changes) if changes else target
+
+
+__all__ = ["AllocationPolicy", "WAIT_MODES", "apply_overrides"]

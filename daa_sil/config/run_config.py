@@ -17,6 +17,7 @@
 ``link``       ``stale_command_s`` and ``link_timeout_s`` of the agent (null = the policy's 15 / 20 s)
 ``reading``    ``name`` (a named reading of :mod:`daa_sil.config.readings`) and ``set`` (its overrides)
 ``study``      ``encounters``, ``seed``, ``duration_s``, ``intruders``, ``chunk_size`` of a campaign
+               (:meth:`daa_sil.study.campaign_config.CampaignConfig.from_run_config` reads them)
 ============== ===================================================================================
 
 What each command reads (the rest of a configuration does not apply to it; the record in its
@@ -102,21 +103,6 @@ class RunConfig:
         from daa_sil.models.pilot_config import PilotConfig
 
         return PilotConfig(**{**self.pilot, **changes})
-
-    def campaign_config(self):
-        """The :class:`~daa_sil.study.campaign_config.CampaignConfig` of this configuration."""
-        from daa_sil.config.groups import parse_groups
-        from daa_sil.study.campaign_config import CampaignConfig
-
-        s = self.study
-        return CampaignConfig(groups=parse_groups(list(self.groups)), n_encounters=int(s["encounters"]),
-                              seed=int(s["seed"]), chunk_size=int(s["chunk_size"]), preset=self.thresholds,
-                              duration_s=float(s["duration_s"]), waitmap=str(self.waitmap["source"]),
-                              gamma=self.waitmap["gamma"], wt=self.allocation["wt"],
-                              projl_lookahead=self.allocation["projl_lookahead"], latency=self.latency,
-                              n_intruders=int(s["intruders"]), reading=str(self.reading["name"]),
-                              reading_set=dict(self.reading["set"]), daa=dict(self.daa), pilot=dict(self.pilot),
-                              link={k: v for k, v in self.link.items() if v is not None})
 
     # --- YAML -------------------------------------------------------------------------------------
     def to_dict(self, full: bool = False) -> dict:

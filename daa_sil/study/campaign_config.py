@@ -11,6 +11,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from daa_sil.config.groups import GroupSpec, parse_groups
+from daa_sil.config.policy import apply_overrides
 from daa_sil.config.settings import DURATION, PRESET, PROJL_HORIZON, WAIT_THRESHOLD
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.geometry.thresholds import PRESETS
@@ -131,21 +132,16 @@ class CampaignConfig:
     @property
     def effective_groups(self) -> tuple[GroupSpec, ...]:
         """The groups with the campaign's overrides applied (what is flown)."""
+        latency = None
+        if self.latency is not None:
+            from daa_sil.models.latency import parse_delay_spec
+
+            latency = parse_delay_spec(self.latency).to_dict()
+        rule = self.effective_reading.wait_rule
         out = []
         for g in self.groups:
-            ch: dict = {}
-            if self.wt is not None and g.wait_mode != "none":
-                ch["wait_threshold_s"] = float(self.wt)
-            if self.projl_lookahead is not None:
-                ch["projl_horizon_s"] = float(self.projl_lookahead)
-            if self.latency is not None:
-                from daa_sil.models.latency import parse_delay_spec
-
-                ch["latency"] = parse_delay_spec(self.latency).to_dict()
-            rule = self.effective_reading.wait_rule
-            if rule is not None and g.wait_mode != "none" and rule != g.wait_rule:
-                ch["wait_rule"] = rule
-            out.append(g.with_(**ch) if ch else g)
+            g = apply_overrides(g, wt=self.wt, projl_lookahead=self.projl_lookahead, wait_rule=rule)
+            out.append(g.with_(latency=dict(latency)) if latency is not None else g)
         return tuple(out)
 
     def link_legs(self, name: str):
@@ -217,6 +213,20 @@ class CampaignConfig:
         return {"thresholds": asdict(get_thresholds(self.preset)), "daa": daa, "pilot": plain(self.pilot_config()),
                 "policies": {g.name: plain(self.policy(g.name)) for g in self.groups},
                 "reading": self.effective_reading.to_dict()}
+
+    @classmethod
+    def from_run_config(cls, run) -> "CampaignConfig":
+        """The campaign a :class:`~daa_sil.config.run_config.RunConfig` describes (built here, in study,
+        so that config/ never imports study)."""
+        s = run.study
+        return cls(groups=parse_groups(list(run.groups)), n_encounters=int(s["encounters"]),
+                   seed=int(s["seed"]), chunk_size=int(s["chunk_size"]), preset=run.thresholds,
+                   duration_s=float(s["duration_s"]), waitmap=str(run.waitmap["source"]),
+                   gamma=run.waitmap["gamma"], wt=run.allocation["wt"],
+                   projl_lookahead=run.allocation["projl_lookahead"], latency=run.latency,
+                   n_intruders=int(s["intruders"]), reading=str(run.reading["name"]),
+                   reading_set=dict(run.reading["set"]), daa=dict(run.daa), pilot=dict(run.pilot),
+                   link={k: v for k, v in run.link.items() if v is not None})
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "campaign.json") -> "CampaignConfig":
