@@ -93,6 +93,21 @@ def test_config_show_prints_a_loadable_file(tmp_path, capsys):
     assert full["resolved"]["groups"]["ID-2"]["wait"] == "map"
 
 
+def test_config_show_full_lists_each_shared_setting_once_and_loads_back(tmp_path, capsys):
+    assert main(["config", "show", "do365", "--full"]) == 0
+    text = capsys.readouterr().out
+    shown = yaml.safe_load(text)["settings"]
+    # the numbers the paper and the SIL use, written here by hand
+    assert shown["allocation.wait_threshold_s"] == {"default": 4.0, "unit": "s", "range": [0.0, 120.0],
+                                                   "help": shown["allocation.wait_threshold_s"]["help"]}
+    assert (shown["allocation.projl_horizon_s"]["default"], shown["allocation.constant_wait_s"]["default"],
+            shown["link.epoch_s"]["default"], shown["study.duration_s"]["default"]) == (25.0, 5.0, 10.0, 240.0)
+    assert (shown["thresholds"]["default"], shown["scenario.thresholds"]["default"]) == ("paper", "do365")
+    f = tmp_path / "full.yaml"
+    f.write_text(text)
+    assert load_config(f) == preset("do365")  # the derived sections are ignored when read back
+
+
 def test_the_daa_section_reaches_the_daa_command(tmp_path, capsys):
     """Ownship 55 m/s north, intruder 13 km ahead at 100 m/s south, co-altitude (paper thresholds:
     DMOD 1220 m, TTHR 35 s). tau_mod <= 35 s once r^2 - 155*35 r - 1220^2 <= 0, i.e. r <= 5686.7 m,

@@ -63,6 +63,8 @@ _FIXED = {
     "reading": ("name", "set"),
     "study": ("encounters", "seed", "duration_s", "intruders", "chunk_size"),
 }
+#: keys ``config show --full`` adds (derived values, ignored when a file is read back)
+DERIVED_KEYS = ("resolved", "settings")
 TOP_KEYS = ("base", "thresholds", "daa", "waitmap", "allocation", "groups", "pilot", "latency", "link",
             "reading", "study")
 
@@ -162,7 +164,7 @@ def config_from_dict(data: Any, where: str = "<config>") -> RunConfig:
     """Validate a mapping (the YAML form) into a :class:`RunConfig`; errors name ``where`` and the key."""
     if not isinstance(data, dict):
         raise UsageError(f"{where}: a configuration is a mapping of sections ({', '.join(TOP_KEYS)})")
-    unknown = [k for k in data if k not in TOP_KEYS and k != "resolved"]
+    unknown = [k for k in data if k not in TOP_KEYS and k not in DERIVED_KEYS]
     if unknown:
         raise UsageError(f"{where}: unknown key {unknown[0]!r}; allowed: {', '.join(TOP_KEYS)}")
     cfg = preset(data.get("base", PRESET.default))

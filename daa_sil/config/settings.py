@@ -92,19 +92,18 @@ SCENARIO_PRESET = Setting("thresholds", "do365", help="a scenario's well-clear t
 SCENARIO_GROUP = Setting("group", "ID-1", help="the experiment group a scenario flies")
 SCENARIO_LINK = Setting("up", "const:4", help="uplink delay spec (GCS -> vehicle)")
 
-#: every setting above, for ``config show --full`` and the docs
-ALL = (WAIT_THRESHOLD, PROJL_HORIZON, CONSTANT_WAIT, STALE_COMMAND, LINK_TIMEOUT, DELAY_EPOCH, DURATION,
-       PRESET, SCENARIO_PRESET, SCENARIO_GROUP, SCENARIO_LINK)
+#: every setting above by where it is set (the key ``config show --full`` lists it under)
+ALL = {"allocation.wait_threshold_s": WAIT_THRESHOLD, "allocation.projl_horizon_s": PROJL_HORIZON,
+       "allocation.constant_wait_s": CONSTANT_WAIT, "link.stale_command_s": STALE_COMMAND,
+       "link.link_timeout_s": LINK_TIMEOUT, "link.epoch_s": DELAY_EPOCH, "study.duration_s": DURATION,
+       "thresholds": PRESET, "scenario.thresholds": SCENARIO_PRESET, "scenario.allocation.group": SCENARIO_GROUP,
+       "scenario.link.up": SCENARIO_LINK}
 
 
 def describe() -> dict:
-    """``{name: {default, range, unit, help}}`` of :data:`ALL` (``config show --full``)."""
-    out = {}
-    for s in ALL:
-        key = s.name if s.name not in out else f"scenario.{s.name}"
-        out[key] = {"default": s.default, "unit": s.unit or None,
-                    "range": None if s.lo is None else [s.lo, s.hi], "help": s.help}
-    return out
+    """``{key: {default, unit, range, help}}`` of :data:`ALL` (``config show --full``)."""
+    return {key: {"default": s.default, "unit": s.unit or None, "range": None if s.lo is None else [s.lo, s.hi],
+                  "help": s.help} for key, s in ALL.items()}
 
 
 __all__ = ["Setting", "WAIT_THRESHOLD", "PROJL_HORIZON", "CONSTANT_WAIT", "STALE_COMMAND", "LINK_TIMEOUT",

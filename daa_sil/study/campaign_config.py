@@ -152,8 +152,13 @@ class CampaignConfig:
         return link_legs(self.group(name).delay_model(), self.effective_reading.latency)
 
     def group(self, name: str) -> GroupSpec:
-        """The effective definition of one of the campaign's groups."""
-        for g in self.effective_groups:
+        """The effective definition of one of the campaign's groups (what ``campaign.json`` records)."""
+        self.given_group(name)
+        return next(g for g in self.effective_groups if g.name == name)
+
+    def given_group(self, name: str) -> GroupSpec:
+        """One of the campaign's groups as given, before the campaign's overrides."""
+        for g in self.groups:
             if g.name == name:
                 return g
         raise UsageError(f"group {name!r} is not part of this campaign ({', '.join(self.group_names)})")
@@ -184,10 +189,15 @@ class CampaignConfig:
         return self.effective_reading.pilot_config(PilotConfig(**self.pilot))
 
     def policy(self, name: str):
-        """The agent's :class:`~daa_sil.agent.AllocationPolicy` of group ``name`` (with :attr:`link`)."""
-        pol = self.group(name).policy()
-        changes = {**self.effective_reading.policy_overrides(), **self.link}
-        changes.pop("wait_rule", None)  # applied to the group definition (effective_groups)
+        """The agent's :class:`~daa_sil.config.policy.AllocationPolicy` of group ``name``: the group as
+        given with the campaign's overrides (:func:`~daa_sil.config.policy.apply_overrides`, the rule
+        :attr:`effective_groups` records) and :attr:`link`. W_T thus travels ``--wt`` ->
+        :attr:`wt` -> the policy, two objects."""
+        reading = self.effective_reading
+        pol = apply_overrides(self.given_group(name).policy(), wt=self.wt, projl_lookahead=self.projl_lookahead,
+                              wait_rule=reading.wait_rule)
+        changes = {**reading.policy_overrides(), **self.link}
+        changes.pop("wait_rule", None)  # applied above, to groups that wait
         return replace(pol, **changes) if changes else pol
 
     def to_dict(self) -> dict:
