@@ -12,7 +12,7 @@ Schema (``*`` = required; defaults in brackets)::
     name*: str                      short identifier (used in result files)
     description: str                [""]
     seed: int >= 0                  [1]     root of every random stream (pilot, link up/down)
-    duration_s: float (0, 3600]     [240]   sim length; steps are dt = 1 s
+    duration_s: float [1, 3600]     [240]   sim length; steps are dt = 1 s
     thresholds: do365 | paper | daidalus   [do365] well-clear / NMAC / DAA preset
     origin:                                 geodetic reference of the ENU frame (MAVLink output)
       lat_deg: [-80, 80]            [37.4]
@@ -89,6 +89,9 @@ Schema (``*`` = required; defaults in brackets)::
                                               a fault that could not be carried out fails the run.
 
 Decision names: none, wait, no_wait, pilot, blend, daa_override, daa, stale, link_lost.
+
+The defaults and ranges shown for ``duration_s``, ``thresholds``, ``link.up``, ``link.epoch_s`` and the
+allocation keys are those of :mod:`daa_sil.config.settings`, which the loader and the dataclasses read.
 """
 
 from __future__ import annotations
