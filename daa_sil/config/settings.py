@@ -39,25 +39,37 @@ class Setting:
         """``(lo, hi)``, both inclusive."""
         if self.lo is None or self.hi is None:
             raise TypeError(f"setting {self.name} has no numeric range")
-        return (float(self.lo), float(self.hi))
+        return (self.lo, self.hi) if self.integer else (float(self.lo), float(self.hi))
 
     def contains(self, value: Any) -> bool:
-        """True when ``value`` is a finite number (not a bool) within the range."""
+        """True when ``value`` is a finite number (not a bool) within the range (a whole one for a count)."""
         lo, hi = self.range
-        return (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-                and lo <= value <= hi)
+        ok = (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+              and lo <= value <= hi)
+        return ok and (not self.integer or float(value).is_integer())
 
     def check(self, value: Any, where: str = "", key: "str | None" = None) -> float:
         """``value`` as a float, or a one-line :class:`UsageError` naming ``where`` and ``key``."""
         if not self.contains(value):
             at = f"{where}: " if where else ""
             lo, hi = self.range
-            raise UsageError(f"{at}{key or self.name} must be a number within [{lo:g}, {hi:g}], got {value!r}")
-        return float(value)
+            kind = "an integer" if self.integer else "a number"
+            raise UsageError(f"{at}{key or self.name} must be {kind} within [{lo:g}, {hi:g}], got {value!r}")
+        return int(value) if self.integer else float(value)
 
     def field(self, **kw) -> Any:
         """A dataclass field with this default, the setting in its metadata (``metadata["setting"]``)."""
         return dataclasses.field(default=self.default, metadata={"setting": self}, **kw)
+
+    def override_field(self) -> Any:
+        """A dataclass field that overrides this setting: default None (keep each group's), the
+        setting (its range, help) in the metadata."""
+        return dataclasses.field(default=None, metadata={"setting": self})
+
+    @property
+    def integer(self) -> bool:
+        """True for a count (the default is an int)."""
+        return isinstance(self.default, int) and not isinstance(self.default, bool)
 
     def flag_help(self, what: str = "") -> str:
         """Help text of a command-line flag: the help (or ``what``), unit, range and default."""
@@ -77,13 +89,27 @@ PROJL_HORIZON = Setting("projl_horizon_s", 25.0, "s", 0.0, 120.0,
                         "ProjL look-ahead N: no wait while a LoWC is projected within N")
 #: the wait of the ``constant`` wait function (IC-1); capped like W_T, above which it means "always"
 CONSTANT_WAIT = Setting("constant_wait_s", 5.0, "s", 0.0, 120.0, "the constant wait function's value w")
-#: the agent's stale-command limit and link-lost timeout (by a command's send time / the last packet)
-STALE_COMMAND = Setting("stale_command_s", 15.0, "s", help="a pilot command older than this is never flown")
-LINK_TIMEOUT = Setting("link_timeout_s", 20.0, "s", help="no packet from the GCS for this long: link lost")
+#: the agent's stale-command limit and link-lost timeout (by a command's send time / the last packet).
+#: At least one sim step: the GCS sends at most once per step, so a shorter link timeout declares
+#: the link lost between any two packets, and a shorter stale limit makes every command stale.
+STALE_COMMAND = Setting("stale_command_s", 15.0, "s", 1.0, 120.0, "a pilot command older than this is never flown")
+LINK_TIMEOUT = Setting("link_timeout_s", 20.0, "s", 1.0, 120.0, "no packet from the GCS for this long: link lost")
 #: a link delay process keeps one drawn delay for an epoch (0 = a draw per datagram)
 DELAY_EPOCH = Setting("epoch_s", 10.0, "s", 0.0, 600.0, "delay epoch: one drawn delay holds this long (0 = per datagram)")
 #: the encounter length T (paper Sec. IV); the closest point of approach is at T/2
 DURATION = Setting("duration_s", 240.0, "s", 1.0, 3600.0, "encounter length T (CPA at T/2)")
+#: a campaign's size and seeds (``study`` section, ``campaign run`` flags)
+ENCOUNTERS = Setting("encounters", 10_000, "", 1, 10_000_000, "encounters per group")
+SEED = Setting("seed", 0, "", 0, 2**63 - 1, "campaign seed (every encounter's streams derive from it)")
+INTRUDERS = Setting("intruders", 1, "", 1, 8, "intruders per encounter")
+#: encounters per task: the per-step numpy overhead is paid once per chunk, so bigger chunks are
+#: faster (500 -> 2000 about 1.9x per core); one 2000-encounter chunk peaks at about 0.2 GB RSS
+CHUNK_SIZE = Setting("chunk_size", 2000, "", 1, 10_000_000, "encounters per chunk (they share a DAA call)")
+#: the wait maps the map groups read: a map preset (``alerting``: the box covers the DAA alerting
+#: region, horizon 120 s), a grid spec or a ``waitmap build`` directory
+WAITMAP = Setting("source", "alerting", help="wait maps of the map groups: a map preset, a grid spec or a directory")
+#: the wait map's MDP discount (None = the map preset's)
+GAMMA = Setting("gamma", None, "", 1e-6, 0.999999, "MDP discount of the wait maps (default: the map preset's)")
 #: the well-clear threshold preset a run configuration and a campaign fly when none is named
 PRESET = Setting("thresholds", "paper", help="well-clear threshold preset")
 #: a scenario file's threshold preset when it names none (the SIL flies the standard's volume)
@@ -95,7 +121,9 @@ SCENARIO_LINK = Setting("up", "const:4", help="uplink delay spec (GCS -> vehicle
 #: every setting above by where it is set (the key ``config show --full`` lists it under)
 ALL = {"allocation.wait_threshold_s": WAIT_THRESHOLD, "allocation.projl_horizon_s": PROJL_HORIZON,
        "allocation.constant_wait_s": CONSTANT_WAIT, "link.stale_command_s": STALE_COMMAND,
-       "link.link_timeout_s": LINK_TIMEOUT, "link.epoch_s": DELAY_EPOCH, "study.duration_s": DURATION,
+       "link.link_timeout_s": LINK_TIMEOUT, "link.epoch_s": DELAY_EPOCH, "waitmap.source": WAITMAP, "waitmap.gamma": GAMMA,
+       "study.encounters": ENCOUNTERS, "study.seed": SEED, "study.duration_s": DURATION,
+       "study.intruders": INTRUDERS, "study.chunk_size": CHUNK_SIZE,
        "thresholds": PRESET, "scenario.thresholds": SCENARIO_PRESET, "scenario.allocation.group": SCENARIO_GROUP,
        "scenario.link.up": SCENARIO_LINK}
 
@@ -107,5 +135,5 @@ def describe() -> dict:
 
 
 __all__ = ["Setting", "WAIT_THRESHOLD", "PROJL_HORIZON", "CONSTANT_WAIT", "STALE_COMMAND", "LINK_TIMEOUT",
-           "DELAY_EPOCH", "DURATION", "PRESET", "SCENARIO_PRESET", "SCENARIO_GROUP", "SCENARIO_LINK", "ALL",
+           "DELAY_EPOCH", "DURATION", "ENCOUNTERS", "SEED", "INTRUDERS", "CHUNK_SIZE", "WAITMAP", "GAMMA", "PRESET", "SCENARIO_PRESET", "SCENARIO_GROUP", "SCENARIO_LINK", "ALL",
            "describe"]

@@ -12,7 +12,9 @@ import numpy as np
 
 from daa_sil.config.groups import GroupSpec, parse_groups
 from daa_sil.config.policy import apply_overrides
-from daa_sil.config.settings import DURATION, PRESET, PROJL_HORIZON, WAIT_THRESHOLD
+from daa_sil.config.readings import DEFAULT_READING
+from daa_sil.config.settings import (CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA, INTRUDERS, PRESET, PROJL_HORIZON, SEED,
+                                     WAIT_THRESHOLD)
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.geometry.thresholds import PRESETS
 from daa_sil.waitmap.build import DEFAULT_MAP
@@ -21,9 +23,8 @@ from daa_sil.waitmap.build import DEFAULT_MAP
 DEFAULT_DT_S = 1.0
 
 
-#: encounters per task: the per-step numpy overhead is paid once per chunk, so bigger chunks are
-#: faster (500 -> 2000 about 1.9x per core); one 2000-encounter chunk peaks at about 0.2 GB RSS
-DEFAULT_CHUNK = 2000
+#: encounters per task (:data:`daa_sil.config.settings.CHUNK_SIZE`, which says why 2000)
+DEFAULT_CHUNK = CHUNK_SIZE.default
 
 
 @dataclass(frozen=True)
@@ -38,8 +39,8 @@ class CampaignConfig:
     """
 
     groups: tuple = field(default_factory=lambda: parse_groups(None))
-    n_encounters: int = 10_000
-    seed: int = 0
+    n_encounters: int = ENCOUNTERS.default
+    seed: int = SEED.default
     chunk_size: int = DEFAULT_CHUNK
     preset: str = PRESET.default
     duration_s: float = DURATION.default
@@ -49,8 +50,8 @@ class CampaignConfig:
     wt: "float | None" = None
     projl_lookahead: "float | None" = None
     latency: "str | None" = None
-    n_intruders: int = 1
-    reading: str = "paper"  #: a named reading of :mod:`daa_sil.config.readings` (old names accepted)
+    n_intruders: int = INTRUDERS.default
+    reading: str = DEFAULT_READING  #: a named reading of :mod:`daa_sil.config.readings` (old names accepted)
     reading_set: dict = field(default_factory=dict)  #: overrides of the reading's settings
     daa: dict = field(default_factory=dict)  #: DaaConfig field changes on top of the preset's
     pilot: dict = field(default_factory=dict)  #: PilotConfig field changes (the reading's then apply)
@@ -87,7 +88,7 @@ class CampaignConfig:
         if not (math.isfinite(self.dt_s) and self.dt_s > 0):
             raise UsageError(f"dt must be > 0 s, got {self.dt_s!r}")
         for name, val, lo, hi in (("--wt", self.wt, *WAIT_THRESHOLD.range), ("--projl-lookahead", self.projl_lookahead, *PROJL_HORIZON.range),
-                                  ("--gamma", self.gamma, 1e-6, 0.999999)):
+                                  ("--gamma", self.gamma, *GAMMA.range)):
             if val is not None and not (isinstance(val, (int, float)) and math.isfinite(val) and lo <= val <= hi):
                 raise UsageError(f"{name} must be within [{lo:g}, {hi:g}], got {val!r}")
         if self.latency is not None:

@@ -18,6 +18,7 @@ import types
 from pathlib import Path
 from typing import Callable, Sequence
 
+from ..config.settings import WAITMAP
 from ..errors import DaaSilError, error_class
 from .grid import Grid, resolve_grid
 from .lookup import WaitMap, WaitMapFamily
@@ -229,7 +230,7 @@ def _die_with_parent(parent_pid: int) -> None:
 #: the paper grid most decisions read a clamped edge value; the alerting grid covers the DO-365
 #: alerting region, and its horizon is long enough to reach LoWC from the edge of the box.
 MAP_PRESETS = {"paper": ("paper", 60.0), "alerting": ("alerting", 120.0), "fine": ("fine", 60.0)}
-DEFAULT_MAP = "alerting"
+DEFAULT_MAP = WAITMAP.default
 
 
 def map_params(grid: "str | None", preset: str = "paper", **overrides) -> tuple[Grid, MdpParams]:

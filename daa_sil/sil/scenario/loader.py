@@ -14,8 +14,8 @@ from typing import Callable
 
 import yaml
 
-from daa_sil.config.settings import (CONSTANT_WAIT, DELAY_EPOCH, DURATION, SCENARIO_GROUP, SCENARIO_LINK,
-                                     SCENARIO_PRESET, WAIT_THRESHOLD)
+from daa_sil.config.settings import (CONSTANT_WAIT, DELAY_EPOCH, DURATION, LINK_TIMEOUT, SCENARIO_GROUP, SCENARIO_LINK,
+                                     SCENARIO_PRESET, STALE_COMMAND, WAIT_THRESHOLD)
 from daa_sil.config.yaml_input import compose_yaml, read_yaml_text
 
 from daa_sil.errors import FileFormatError, UsageError
@@ -263,8 +263,8 @@ def _allocation(v: _V, node, path) -> AllocationSpec:
         wait_threshold_s=v.opt(m, "wait_threshold_s", path, v.number, g.wait_threshold_s, lo=WAIT_THRESHOLD.lo,
                                hi=WAIT_THRESHOLD.hi),
         projl=v.opt(m, "projl", path, v.boolean, g.projl),
-        link_timeout_s=v.opt(m, "link_timeout_s", path, v.number, None, lo=0, hi=120, lo_open=True),
-        stale_command_s=v.opt(m, "stale_command_s", path, v.number, None, lo=0, hi=120, lo_open=True))
+        link_timeout_s=v.opt(m, "link_timeout_s", path, v.number, None, lo=LINK_TIMEOUT.lo, hi=LINK_TIMEOUT.hi),
+        stale_command_s=v.opt(m, "stale_command_s", path, v.number, None, lo=STALE_COMMAND.lo, hi=STALE_COMMAND.hi))
 
 
 def _expect(v: _V, node, path, dur) -> Expectation:

@@ -70,8 +70,8 @@ Schema (``*`` = required; defaults in brackets)::
       blending: bool                  [from group]
       projl: bool                     [from group]  ProjL veto
       wait_threshold_s: [0, 120]      [from group]  W_T
-      link_timeout_s: (0, 120]        [agent default]
-      stale_command_s: (0, 120]       [agent default]
+      link_timeout_s: [1, 120]        [agent default, 20]
+      stale_command_s: [1, 120]       [agent default, 15]
     expect:                                   checked by ``daa-sil run`` (exit 1 if violated)
       lowc: bool                      LoWC must (true) / must not (false) occur
       nmac: bool
