@@ -112,8 +112,9 @@ WAITMAP = Setting("source", "alerting", help="wait maps of the map groups: a map
 GAMMA = Setting("gamma", None, "", 1e-6, 0.999999, "MDP discount of the wait maps (default: the map preset's)")
 #: the well-clear threshold preset a run configuration and a campaign fly when none is named
 PRESET = Setting("thresholds", "paper", help="well-clear threshold preset")
-#: a scenario file's threshold preset when it names none (the SIL flies the standard's volume)
-SCENARIO_PRESET = Setting("thresholds", "do365", help="a scenario's well-clear threshold preset")
+#: the standard's well-clear volume (DO-365): what a scenario file that names no preset flies, and
+#: the default of ``daa-sil geometry`` (a calculator of the standard's quantities)
+STANDARD_PRESET = Setting("thresholds", "do365", help="well-clear threshold preset of a scenario and of 'geometry'")
 #: a scenario's group when it names none, and its uplink delay when its link names none
 SCENARIO_GROUP = Setting("group", "ID-1", help="the experiment group a scenario flies")
 SCENARIO_LINK = Setting("up", "const:4", help="uplink delay spec (GCS -> vehicle)")
@@ -124,7 +125,7 @@ ALL = {"allocation.wait_threshold_s": WAIT_THRESHOLD, "allocation.projl_horizon_
        "link.link_timeout_s": LINK_TIMEOUT, "link.epoch_s": DELAY_EPOCH, "waitmap.source": WAITMAP, "waitmap.gamma": GAMMA,
        "study.encounters": ENCOUNTERS, "study.seed": SEED, "study.duration_s": DURATION,
        "study.intruders": INTRUDERS, "study.chunk_size": CHUNK_SIZE,
-       "thresholds": PRESET, "scenario.thresholds": SCENARIO_PRESET, "scenario.allocation.group": SCENARIO_GROUP,
+       "thresholds": PRESET, "scenario.thresholds": STANDARD_PRESET, "scenario.allocation.group": SCENARIO_GROUP,
        "scenario.link.up": SCENARIO_LINK}
 
 
@@ -135,5 +136,5 @@ def describe() -> dict:
 
 
 __all__ = ["Setting", "WAIT_THRESHOLD", "PROJL_HORIZON", "CONSTANT_WAIT", "STALE_COMMAND", "LINK_TIMEOUT",
-           "DELAY_EPOCH", "DURATION", "ENCOUNTERS", "SEED", "INTRUDERS", "CHUNK_SIZE", "WAITMAP", "GAMMA", "PRESET", "SCENARIO_PRESET", "SCENARIO_GROUP", "SCENARIO_LINK", "ALL",
+           "DELAY_EPOCH", "DURATION", "ENCOUNTERS", "SEED", "INTRUDERS", "CHUNK_SIZE", "WAITMAP", "GAMMA", "PRESET", "STANDARD_PRESET", "SCENARIO_GROUP", "SCENARIO_LINK", "ALL",
            "describe"]

@@ -15,7 +15,7 @@ from typing import Callable
 import yaml
 
 from daa_sil.config.settings import (CONSTANT_WAIT, DELAY_EPOCH, DURATION, LINK_TIMEOUT, SCENARIO_GROUP, SCENARIO_LINK,
-                                     SCENARIO_PRESET, STALE_COMMAND, WAIT_THRESHOLD)
+                                     STANDARD_PRESET, STALE_COMMAND, WAIT_THRESHOLD)
 from daa_sil.config.yaml_input import compose_yaml, read_yaml_text
 
 from daa_sil.errors import FileFormatError, UsageError
@@ -312,7 +312,7 @@ def _scenario(v: _V, root) -> Scenario:
         description=v.opt(m, "description", "", v.string, ""),
         seed=v.opt(m, "seed", "", v.integer, 1, lo=0, hi=2 ** 63 - 1),
         duration_s=dur,
-        thresholds=v.opt(m, "thresholds", "", v.string, SCENARIO_PRESET.default, choices=("do365", "paper", "daidalus")),
+        thresholds=v.opt(m, "thresholds", "", v.string, STANDARD_PRESET.default, choices=("do365", "paper", "daidalus")),
         ownship=_state(v, m["ownship"], "ownship", dur),
         intruders=[_intruder(v, n, f"intruders[{i}]", i, dur)
                    for i, n in enumerate(v.seq(m["intruders"], "intruders", 1, MAX_INTRUDERS))],

@@ -101,7 +101,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from daa_sil.config.settings import (CONSTANT_WAIT, DELAY_EPOCH, DURATION, SCENARIO_GROUP, SCENARIO_LINK,
-                                     SCENARIO_PRESET, WAIT_THRESHOLD)
+                                     STANDARD_PRESET, WAIT_THRESHOLD)
 
 DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
 PILOT_RESPONSES = ("deterministic", "fixed", "guendel", "no_atc", "nasa_rayleigh5")
@@ -255,7 +255,7 @@ class Scenario:
     description: str = ""
     seed: int = 1
     duration_s: float = DURATION.field()
-    thresholds: str = SCENARIO_PRESET.default
+    thresholds: str = STANDARD_PRESET.default
     origin: Origin = field(default_factory=Origin)
     link: LinkSpec = field(default_factory=LinkSpec)
     pilot: PilotSpec = field(default_factory=PilotSpec)
