@@ -30,12 +30,12 @@ from typing import Callable
 
 import numpy as np
 
+from daa_sil.decision import Decision
 from .geometry import wellclear as wc
 from daa_sil.geometry.frames import wrap_pi
 from daa_sil.geometry.kinematics import AircraftState, Command, Performance, advance, fly_command
 from .daa.alerting import relative_state
 from daa_sil.models.encounters import INTRUDER_PERFORMANCE
-from daa_sil.decision import Decision
 from daa_sil.geometry.thresholds import Thresholds, get_thresholds
 
 #: ``controls(t) -> (turn_rate rad/s compass +right, accel m/s^2, vertical_accel m/s^2)``, each (N, M)
