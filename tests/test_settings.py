@@ -33,7 +33,7 @@ def test_the_defaults_every_consumer_holds():
     from daa_sil.models.latency import DEFAULT_EPOCH_S
     from daa_sil.sil.scenario.schema import AllocationSpec, LinkSpec, Scenario
     from daa_sil.study.campaign_config import CampaignConfig
-    from daa_sil.waitmap.build import DEFAULT_MAP
+    from daa_sil.waitmap.source import DEFAULT_MAP
 
     pol = AllocationPolicy("map")
     assert (pol.wait_threshold_s, pol.projl_horizon_s, pol.constant_wait_s, pol.stale_command_s,

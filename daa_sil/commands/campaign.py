@@ -238,7 +238,7 @@ def _waitmap_into_reading(fields: dict, given: "str | None") -> dict:
     """An explicit ``--waitmap`` under a reading that sets its own grid (e.g. ``paper``) sets the
     reading's grid (recorded as ``reading_set.waitmap``); otherwise it is the campaign's."""
     from daa_sil.config.readings import reading_for
-    from daa_sil.waitmap.build import DEFAULT_MAP
+    from daa_sil.waitmap.source import DEFAULT_MAP
 
     if given is None:
         return fields

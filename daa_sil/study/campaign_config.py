@@ -17,7 +17,7 @@ from daa_sil.config.settings import (CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA, IN
                                      WAIT_THRESHOLD)
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.geometry.thresholds import PRESETS
-from daa_sil.waitmap.build import DEFAULT_MAP
+from daa_sil.waitmap.source import DEFAULT_MAP
 
 #: default step dt (s), paper §IV (the duration T: :data:`daa_sil.config.settings.DURATION`)
 DEFAULT_DT_S = 1.0
@@ -109,7 +109,7 @@ class CampaignConfig:
             raise UsageError(f"reading {r.name!r} sets the wait maps to {r.waitmap!r}; to read {self.waitmap!r} "
                              f"instead, set the reading's grid (--reading-set waitmap={self.waitmap})")
         if self.uses_map:
-            from daa_sil.waitmap.build import check_source
+            from daa_sil.waitmap.source import check_source
 
             check_source(self.map_source, self.preset, self.gamma)
         return self
