@@ -50,7 +50,7 @@ def test_the_defaults_every_consumer_holds():
         240.0, "paper", 10_000, 0, 1, 2000, "alerting")
     assert dict(rc.study) == {"encounters": 10_000, "seed": 0, "duration_s": 240.0, "intruders": 1, "chunk_size": 2000}
     assert (rc.thresholds, rc.waitmap["source"], DEFAULT_PRESET, DEFAULT_MAP) == ("paper", "alerting", "paper", "alerting")
-    assert EncounterConfig().duration_s == 240.0
+    assert (EncounterConfig().duration_s, EncounterConfig().preset) == (240.0, "do365")
 
 
 def test_the_fields_name_their_setting():

@@ -112,8 +112,9 @@ WAITMAP = Setting("source", "alerting", help="wait maps of the map groups: a map
 GAMMA = Setting("gamma", None, "", 1e-6, 0.999999, "MDP discount of the wait maps (default: the map preset's)")
 #: the well-clear threshold preset a run configuration and a campaign fly when none is named
 PRESET = Setting("thresholds", "paper", help="well-clear threshold preset")
-#: the standard's well-clear volume (DO-365): what a scenario file that names no preset flies, and
-#: the default of ``daa-sil geometry`` (a calculator of the standard's quantities)
+#: the standard's well-clear volume (DO-365): what a scenario file that names no preset flies, the
+#: encounter model's default (``EncounterConfig``), and the default of ``daa-sil geometry`` and of
+#: ``daa-sil viz steplog`` for a log that records none
 STANDARD_PRESET = Setting("thresholds", "do365", help="well-clear threshold preset of a scenario and of 'geometry'")
 #: a scenario's group when it names none, and its uplink delay when its link names none
 SCENARIO_GROUP = Setting("group", "ID-1", help="the experiment group a scenario flies")

@@ -57,7 +57,7 @@ from typing import Sequence
 
 import numpy as np
 
-from daa_sil.config.settings import DURATION
+from daa_sil.config.settings import DURATION, STANDARD_PRESET
 from daa_sil.errors import UsageError
 from daa_sil.geometry.frames import wrap_2pi, wrap_pi
 from daa_sil.geometry.kinematics import AircraftState, Performance, advance
@@ -100,7 +100,7 @@ class EncounterConfig:
     advance: tuple = (0.5, 0.5, 0.0, 0.8)
     t_cpa_s: float = 120.0
     max_turn_deg: float = 90.0
-    preset: str = "do365"
+    preset: str = STANDARD_PRESET.default
     warning_time_s: float = 25.0
     check_dt_s: float = 0.1
     cpa_tol_s: float = 1.0
