@@ -1,5 +1,12 @@
 """The allocation agent (paper Algorithm 1 + Algorithm 2) as a pure, batched step function.
 
+:func:`agent_step` reads in the order of the algorithms: the alert levels, then three named
+sub-steps (:mod:`daa_sil.agent_steps`) -- :func:`link_step` (is the link alive, did a fresh pilot
+command arrive), :func:`wait_step` (no fresh command: wait or not, Eq. 11, with the wait function
+picked by name from :data:`daa_sil.wait_function.WAIT_FUNCTIONS`) and :func:`blend_step` (a fresh
+command: fly it, blend it, or override it) -- then the decision code, the command flown and the
+authority, returned as a :class:`~daa_sil.decision.Decision` record.
+
 Semantics follow ``docs/architecture.md`` "Allocation semantics":
 
 * **Active** while any intruder has alert level >= 2 (corrective), or while a wait / blend is in
@@ -51,108 +58,27 @@ Semantics follow ``docs/architecture.md`` "Allocation semantics":
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, fields, replace
+from dataclasses import replace
 
 import numpy as np
 
 from .daa.alerting import safe_avoidance
 from .daa import (AXIS_NONE, DaaConfig, DaaState, alert_levels, classify_command, compute_bands, conflict_lists,
-                  proj_lowc, resolve, safety_metric, search_maneuver, sm_from_tin)
-from .daa.config import AXIS_NAMES, DIR_NAMES, RULE_NAMES
+                  resolve, safety_metric, sm_from_tin)
 from .daa.resolution import command_deltas
-from daa_sil.allocation import WAIT_MODES, WAIT_RULES, AllocationPolicy, PolicyRows
-from daa_sil.wait_function import WaitLookup, WaitValue, make_wait_lookup, wait_values
+from daa_sil.allocation import PolicyRows
+from daa_sil.config.choices import WAIT_RULES
+from daa_sil.config.groups import policy_for_group
+from daa_sil.config.policy import WAIT_MODES, AllocationPolicy
+from daa_sil.decision import (A_DAA, A_PILOT, A_WAITING, AUTHORITY_NAMES, BY_BOTH, BY_MAP, BY_NEITHER, BY_NONE,
+                              BY_PROJL, CODE_NAMES, D_BLEND, D_DAA_OVERRIDE, D_LINK_LOST, D_NO_WAIT, D_NONE,
+                              D_PILOT, D_STALE, D_WAIT, DECIDED_BY_NAMES, DECISION_FIELDS, DECISION_NAMES, Decision,
+                              decode)
+from daa_sil.agent_memory import AgentMemory, PilotInput
+from daa_sil.agent_steps import BlendStep, LinkStep, WaitStep, blend_step, link_step, wait_step
+from daa_sil.wait_function import WaitLookup, WaitValue, make_wait_lookup
 from daa_sil.daa_batches import check_batches, positions_by_batch
 from daa_sil.geometry.kinematics import AircraftState, Command
-
-DECISION_NAMES = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
-DECIDED_BY_NAMES = ("none", "map", "projl", "both", "neither")
-BY_NONE, BY_MAP, BY_PROJL, BY_BOTH, BY_NEITHER = range(5)
-(D_NONE, D_WAIT, D_NO_WAIT, D_PILOT, D_BLEND, D_DAA_OVERRIDE, D_DAA, D_STALE, D_LINK_LOST) = range(9)
-AUTHORITY_NAMES = ("pilot", "daa", "waiting")
-A_PILOT, A_DAA, A_WAITING = range(3)
-
-#: keys of the decision record (every value is an array with leading axis N)
-DECISION_FIELDS = (
-    "active", "decision", "rule", "authority", "wait_s", "projl", "decided_by", "wait_p_lowc", "wait_in_box",
-    "wait_turn_dps", "wait_map_turn_dps", "link_lost", "max_alert", "alert_level",
-    "pilot_cmd_received", "pilot_cmd_fresh", "pilot_cmd_age_s", "sm_pilot", "sm_exec",
-    "pilot_axis", "pilot_dir", "exec_axis", "exec_dir", "exact_match",
-    "cmd_trk", "cmd_vs", "cmd_gs", "pilot_trk", "pilot_vs", "pilot_gs", "daa_trk", "daa_vs", "daa_gs",
-    "bands_trk", "bands_trk_region",
-)
-
-#: name tables for the integer-coded fields
-CODE_NAMES = {"decision": DECISION_NAMES, "rule": RULE_NAMES, "authority": AUTHORITY_NAMES, "decided_by": DECIDED_BY_NAMES,
-              "pilot_axis": AXIS_NAMES, "exec_axis": AXIS_NAMES, "pilot_dir": DIR_NAMES, "exec_dir": DIR_NAMES}
-
-def policy_for_group(group: str) -> AllocationPolicy:
-    """The policy of a named group of the group table (:mod:`daa_sil.config.groups`: B-1, ..., ID-2-map)."""
-    from daa_sil.config.groups import group_spec
-
-    return group_spec(group).policy()
-
-
-@dataclass
-class PilotInput:
-    """Pilot data at the vehicle this step, arrays (N,): ``received`` a command arrived this step,
-    ``cmd`` the newest one (nan fields = keep current), ``t_sent``/``t_recv`` its send/arrival time (s),
-    ``link_alive_t`` arrival time of the last packet of any kind from the GCS (s; nan = unknown)."""
-
-    received: np.ndarray
-    cmd: Command
-    t_sent: np.ndarray
-    t_recv: np.ndarray
-    link_alive_t: np.ndarray
-
-    @classmethod
-    def nothing(cls, n: int, link_alive_t=np.nan) -> "PilotInput":
-        """No command this step."""
-        nan = np.full(n, np.nan)
-        return cls(np.zeros(n, bool), Command(nan, nan, nan), nan.copy(), nan.copy(), np.full(n, link_alive_t, float))
-
-
-@dataclass
-class AgentMemory:
-    """Batched agent state carried between steps (arrays (N,)). Times in s, angles rad."""
-
-    pilot_trk: np.ndarray  #: last fresh pilot command (resolved at reception)
-    pilot_vs: np.ndarray
-    pilot_gs: np.ndarray
-    pilot_t_sent: np.ndarray  #: its send time (nan = none yet)
-    last_packet_t: np.ndarray  #: arrival time of the last GCS packet
-    authority: np.ndarray  #: A_* code of the last step
-    decision: np.ndarray  #: D_* code of the last step
-    exec_trk: np.ndarray  #: command executed last step
-    exec_vs: np.ndarray
-    exec_gs: np.ndarray
-    daa_axis: np.ndarray  #: last DAA resolution (axis, direction) codes, for persistence
-    daa_dir: np.ndarray
-    wait_start: np.ndarray  #: start of the current waiting streak (nan = none)
-    intent_axis: "np.ndarray | None" = None  #: the pilot's (axis, direction) preference, AXIS_* / DIR_*
-    intent_dir: "np.ndarray | None" = None
-    daa_state: "DaaState | None" = None  #: DAA alert/band hysteresis (only with DaaConfig.stateful)
-    encounter_over: "np.ndarray | None" = None  #: bool, safe avoidance reached (``active_from="encounter"``)
-
-    def __post_init__(self):
-        n = np.shape(self.pilot_trk)
-        if self.intent_axis is None:
-            self.intent_axis = np.full(n, AXIS_NONE, np.int8)
-        if self.intent_dir is None:
-            self.intent_dir = np.zeros(n, np.int8)
-        if self.encounter_over is None:
-            self.encounter_over = np.zeros(n, bool)
-
-    @classmethod
-    def initial(cls, n: int, own: AircraftState, t0: float = 0.0) -> "AgentMemory":
-        """Start: the 'last pilot command' is the current course; the link counts as alive at ``t0``."""
-        z = np.zeros(n, np.int8)
-        return cls(own.trk.copy(), own.vs.copy(), own.gs.copy(), np.full(n, np.nan), np.full(n, float(t0)),
-                   z.copy(), z.copy(), own.trk.copy(), own.vs.copy(), own.gs.copy(), z.copy(), z.copy(),
-                   np.full(n, np.nan))
-
-    def __getitem__(self, idx) -> "AgentMemory":
-        return AgentMemory(*(None if getattr(self, f.name) is None else getattr(self, f.name)[idx] for f in fields(self)))
 
 
 def _reached(own: AircraftState, cmd: Command) -> np.ndarray:
@@ -178,15 +104,58 @@ def _safety(batch_of, rows: np.ndarray, own: AircraftState, intr: AircraftState,
     return out
 
 
+def _alerting(t: float, own: AircraftState, intr: AircraftState, memory: AgentMemory, cfg: DaaConfig):
+    """``(alert (N, M), max alert (N,), DaaState or None)``: stateless, or with DAIDALUS hysteresis /
+    M-of-N / persistence (``cfg.stateful``)."""
+    n = own.shape[0]
+    daa_state = memory.daa_state
+    if cfg.stateful:
+        daa_state = daa_state.copy() if daa_state is not None else DaaState.initial(n, intr.shape[1], cfg)
+        alert = daa_state.update_alerts(t, alert_levels(own, intr, cfg, prev=daa_state.early_alert_level(t)), cfg)
+    else:
+        alert = alert_levels(own, intr, cfg)
+    max_alert = alert.max(axis=1) if alert.shape[1] else np.zeros(n, np.int8)
+    return alert, max_alert, daa_state
+
+
+def _daa_resolutions(t: float, own: AircraftState, intr: AircraftState, cfg: DaaConfig, memory: AgentMemory,
+                     ia: np.ndarray, batch_of, alert, daa_state, bands):
+    """Bands and the DAA resolution of the active rows ``ia``, one call per DAA batch: ``(command,
+    SM (s), axis, direction, [(rows, Bands)] per batch)``; nan / 0 on inactive rows."""
+    n = own.shape[0]
+    nan = np.full(n, np.nan)
+    sm_daa = nan.copy()
+    daa_cmd = Command(nan.copy(), nan.copy(), nan.copy())
+    daa_axis = np.zeros(n, np.int8)
+    daa_dir = np.zeros(n, np.int8)
+    parts: list = []
+    for pos in positions_by_batch(batch_of, ia):
+        r = ia[pos]
+        o, i_ = own[r], intr[r]
+        if bands is not None:
+            b = bands if r.size == n else bands[r]
+        else:
+            lists = conflict_lists(o, i_, cfg, daa_state.band_early_level(t)[r]) if cfg.stateful else None
+            b = compute_bands(o, i_, cfg, alert[r], lists)
+        if cfg.stateful:  # band, resolution and preferred-direction hysteresis
+            b = daa_state.update_bands(t, b, cfg, r)
+        cmd_b, ax_b, dir_b, tin_b = resolve(o, i_, cfg, (memory.daa_axis[r], memory.daa_dir[r]), b, return_t_in=True)
+        sm_daa[r] = sm_from_tin(tin_b, cfg.sm_horizon_s, cfg)
+        daa_cmd.trk[r], daa_cmd.vs[r], daa_cmd.gs[r] = cmd_b.trk, cmd_b.vs, cmd_b.gs
+        daa_axis[r], daa_dir[r] = ax_b, dir_b
+        parts.append((r, b))
+    return daa_cmd, sm_daa, daa_axis, daa_dir, parts
+
+
 def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotInput, memory: AgentMemory,
                policy: "AllocationPolicy | PolicyRows", daa_cfg: "DaaConfig | None" = None,
                wait_lookup: "WaitLookup | None" = None, bands=None, turn_rate: "np.ndarray | None" = None,
-               *, band_record: bool = True, daa_batches: "np.ndarray | None" = None) -> tuple[Command, dict, AgentMemory]:
+               *, band_record: bool = True, daa_batches: "np.ndarray | None" = None) -> tuple[Command, Decision, AgentMemory]:
     """One allocation step at sim time ``t`` (s) for ownship ``(N,)`` and intruders ``(N, M)``.
 
-    Returns ``(command to fly, decision record, new memory)``; the record has the keys
-    :data:`DECISION_FIELDS` (codes in :data:`CODE_NAMES`; nan where not applicable),. ``policy`` one
-    :class:`~daa_sil.allocation.AllocationPolicy` for every row, or a
+    Returns ``(command to fly, decision record, new memory)``; the record is a
+    :class:`~daa_sil.decision.Decision` (codes in :data:`CODE_NAMES`; nan where not applicable).
+    ``policy`` one :class:`~daa_sil.config.policy.AllocationPolicy` for every row, or a
     :class:`~daa_sil.allocation.PolicyRows` (each row its own). ``bands`` (a
     :class:`~daa_sil.daa.Bands` for the whole batch) may be passed to avoid recomputing them.
     ``turn_rate`` ``(N, M)`` is each intruder's estimated turn rate (compass rad/s, + = right;
@@ -198,31 +167,10 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     n = own.shape[0]
     pol = PolicyRows.of(policy, n)
     batch_of = check_batches(daa_batches, n)
-    blending = pol.value("blending").astype(bool)
-    nan = np.full(n, np.nan)
     horizon = cfg.sm_horizon_s
-    # --- DAA alerting: stateless, or with DAIDALUS hysteresis / M-of-N / persistence (cfg.stateful) ----
-    daa_state = memory.daa_state
-    if cfg.stateful:
-        daa_state = daa_state.copy() if daa_state is not None else DaaState.initial(n, intr.shape[1], cfg)
-        alert = daa_state.update_alerts(t, alert_levels(own, intr, cfg, prev=daa_state.early_alert_level(t)), cfg)
-    else:
-        alert = alert_levels(own, intr, cfg)
-    max_alert = alert.max(axis=1) if alert.shape[1] else np.zeros(n, np.int8)
-
-    # --- link and pilot input -----------------------------------------------------------------
-    received = np.asarray(pilot.received, bool)
-    link_t = np.fmax(memory.last_packet_t, np.asarray(pilot.link_alive_t, float))
-    link_t = np.where(received, np.fmax(link_t, pilot.t_recv), link_t)
-    link_lost = (t - link_t) > pol.value("link_timeout_s")
-    age = np.where(received, t - np.asarray(pilot.t_sent, float), np.nan)
-    fresh = received & (age <= pol.value("stale_command_s"))
-    stale = received & ~fresh
-    pcmd = pilot.cmd.resolved(own)
-    p_trk = np.where(fresh, pcmd.trk, memory.pilot_trk)
-    p_vs = np.where(fresh, pcmd.vs, memory.pilot_vs)
-    p_gs = np.where(fresh, pcmd.gs, memory.pilot_gs)
-    last_pilot = Command(p_trk, p_vs, p_gs)
+    alert, max_alert, daa_state = _alerting(t, own, intr, memory, cfg)
+    lk = link_step(t, own, pilot, memory, pol)  # sub-step 1: the link
+    fresh, link_lost, pcmd = lk.fresh, lk.link_lost, lk.pcmd
 
     # --- active phase -------------------------------------------------------------------------
     prev_exec = Command(memory.exec_trk, memory.exec_vs, memory.exec_gs)
@@ -237,7 +185,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     check = (memory.authority == A_DAA) & ~((max_alert >= 2) | in_progress)
     if check.any():
         j = np.nonzero(check)[0]
-        unsafe_revert[j] = ~(_safety(batch_of, j, own, intr, last_pilot[j], cfg, horizon, sm_calls) > 0)
+        unsafe_revert[j] = ~(_safety(batch_of, j, own, intr, lk.last_pilot[j], cfg, horizon, sm_calls) > 0)
     # active_from "encounter" (per row): decide every step from the start until safe avoidance
     encounter_over = memory.encounter_over
     whole = np.zeros(n, bool)
@@ -247,31 +195,11 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
         whole = from_start & ~encounter_over
     active = ((max_alert >= 2) | in_progress | unsafe_revert | whole) & pol.value("enabled").astype(bool)
     ia = np.nonzero(active)[0]
+    daa_cmd, sm_daa, daa_axis, daa_dir, parts = _daa_resolutions(t, own, intr, cfg, memory, ia, batch_of, alert,
+                                                                  daa_state, bands)
 
-    # --- DAA: bands and resolution for the active encounters, per DAA batch (none when none is active)
-    sm_daa = nan.copy()
-    daa_cmd = Command(nan.copy(), nan.copy(), nan.copy())
-    daa_axis = np.zeros(n, np.int8)
-    daa_dir = np.zeros(n, np.int8)
-    parts: list = []  # (rows, Bands) per DAA batch
-    for pos in positions_by_batch(batch_of, ia):
-        r = ia[pos]
-        o, i_ = own[r], intr[r]
-        if bands is not None:
-            b = bands if r.size == n else bands[r]
-        else:
-            lists = conflict_lists(o, i_, cfg, daa_state.band_early_level(t)[r]) if cfg.stateful else None
-            b = compute_bands(o, i_, cfg, alert[r], lists)
-        if cfg.stateful:  # band, resolution and preferred-direction hysteresis
-            b = daa_state.update_bands(t, b, cfg, r)
-        cmd_b, ax_b, dir_b, tin_b = resolve(o, i_, cfg, (memory.daa_axis[r], memory.daa_dir[r]), b, return_t_in=True)
-        sm_daa[r] = sm_from_tin(tin_b, horizon, cfg)
-        daa_cmd.trk[r], daa_cmd.vs[r], daa_cmd.gs[r] = cmd_b.trk, cmd_b.vs, cmd_b.gs
-        daa_axis[r], daa_dir[r] = ax_b, dir_b
-        parts.append((r, b))
-
-    # --- pilot command safety (a fresh command is the last pilot command) ----------------------
-    sm_pilot = nan.copy()
+    # --- the pilot's command: its safety and its (axis, direction) ------------------------------
+    sm_pilot = np.full(n, np.nan)
     fa = fresh & active
     if fa.any():
         j = np.nonzero(fa)[0]
@@ -286,106 +214,68 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     intent_dir = np.where(changed, n_dir, memory.intent_dir).astype(np.int8)
     p_axis = np.where(fresh, intent_axis, AXIS_NONE).astype(np.int8)
     p_dir = np.where(fresh, intent_dir, 0).astype(np.int8)
-
     # an unsafe "hold" decided as no command (policy.unsafe_hold): it carries no maneuver to blend
     as_none = (pol.value("unsafe_hold") == "no-command") & active & fresh & (p_axis == AXIS_NONE) & ~(sm_pilot > 0)
     decide = fresh & ~as_none  #: fresh commands decided as commands
 
-    # --- wait / no wait (no fresh command) ------------------------------------------------------
-    wait_s, w_pl, w_turn, w_map = nan.copy(), nan.copy(), nan.copy(), nan.copy()
-    w_box = np.zeros(n, bool)
-    projl = np.zeros(n, bool)
-    if ia.size and intr.shape[1]:  # element-wise per encounter: one call per look-ahead present
-        horizons = pol.value("projl_horizon_s")[ia]
-        for h in np.unique(horizons):
-            r = ia[horizons == h]
-            projl[r] = proj_lowc(own[r], intr[r], cfg, float(h)).any(axis=1)
-    nc = active & ~decide & ~link_lost
-    inc = np.nonzero(nc)[0]
-    wait_start = np.where(active & ~decide, memory.wait_start, np.nan)
-    if inc.size:
-        wv = wait_values(own, intr, pol, wait_lookup, turn_rate, inc)
-        w = wv.wait_s
-        countdown = pol.value("wait_rule")[inc] == "countdown"
-        if countdown.any():
-            w = np.where(countdown, w - np.where(np.isfinite(wait_start[inc]), t - wait_start[inc], 0.0), w)
-        wait_s[inc], w_pl[inc], w_box[inc], w_turn[inc], w_map[inc] = w, wv.p_lowc, wv.in_box, wv.turn_dps, wv.map_turn_dps
-    veto_map = nc & ~(np.nan_to_num(wait_s, nan=-np.inf) >= pol.value("wait_threshold_s"))
-    veto_projl = nc & projl & pol.value("projl").astype(bool)
-    wait = nc & ~veto_map & ~veto_projl
-    decided_by = np.select([~nc, veto_map & veto_projl, veto_map, veto_projl], [BY_NONE, BY_BOTH, BY_MAP, BY_PROJL],
-                           BY_NEITHER).astype(np.int8)
-    wait_start = np.where(wait & np.isnan(wait_start), t, wait_start)
+    ws = wait_step(t, own, intr, cfg, pol, memory, active, decide, link_lost, wait_lookup, turn_rate)  # sub-step 2
+    wait = ws.wait
+    bl = blend_step(own, intr, cfg, active, decide, link_lost, sm_pilot, pol.value("blending").astype(bool),
+                    p_axis, p_dir, pcmd, parts)  # sub-step 3
+    pilot_ok, blend = bl.pilot_ok, bl.blend
 
-    # --- blend for unsafe fresh pilot commands (baseline groups: DAA override) ------------------
-    pilot_ok = active & decide & ~link_lost & (sm_pilot > 0)
-    unsafe = active & decide & ~link_lost & ~(sm_pilot > 0)
-    blend = unsafe & blending
-    rule = np.zeros(n, np.int8)
-    blend_cmd = Command(nan.copy(), nan.copy(), nan.copy())
-    sm_blend = nan.copy()
-    for r, b in parts:
-        sel = blend[r]
-        if sel.any():
-            j = r[sel]
-            bc, br, bt_in = search_maneuver(own[j], intr[j], p_axis[j], p_dir[j], cfg, ref=pcmd[j], horizon_s=horizon,
-                                            bands=b[sel], return_t_in=True)
-            blend_cmd.trk[j], blend_cmd.vs[j], blend_cmd.gs[j] = bc.trk, bc.vs, bc.gs
-            rule[j] = br
-            sm_blend[j] = sm_from_tin(bt_in, horizon, cfg)
-
-    # --- decision codes -----------------------------------------------------------------------
+    # --- decision, command flown and authority ----------------------------------------------------
     decision = np.full(n, D_NONE, np.int8)
     decision = np.where(active & link_lost, D_LINK_LOST, decision)
     decision = np.where(pilot_ok, D_PILOT, decision)
-    decision = np.where(blend, D_BLEND, np.where(unsafe, D_DAA_OVERRIDE, decision))
-    decision = np.where(nc & wait, D_WAIT, decision)
-    decision = np.where(nc & ~wait, D_NO_WAIT, decision)
-    decision = np.where(active & stale & ~link_lost, D_STALE, decision).astype(np.int8)
-
+    decision = np.where(blend, D_BLEND, np.where(bl.unsafe, D_DAA_OVERRIDE, decision))
+    decision = np.where(ws.nc & wait, D_WAIT, decision)
+    decision = np.where(ws.nc & ~wait, D_NO_WAIT, decision)
+    decision = np.where(active & lk.stale & ~link_lost, D_STALE, decision).astype(np.int8)
     use_daa = active & ~pilot_ok & ~wait & ~blend
-    exec_cmd = last_pilot.where(~active | pilot_ok | wait, blend_cmd.where(blend, daa_cmd))
+    exec_cmd = lk.last_pilot.where(~active | pilot_ok | wait, bl.command.where(blend, daa_cmd))
     exec_cmd = exec_cmd.where(~use_daa, daa_cmd)
     authority = np.where(~active | pilot_ok, A_PILOT, np.where(wait, A_WAITING, A_DAA)).astype(np.int8)
 
     # --- safety of what is executed -------------------------------------------------------------
     # pilot: its SM; blend / DAA: the chosen band candidate's SM (same trajectory model); hold: the
     # last pilot command's SM (computed, or taken from a call on exactly these rows)
-    sm_exec = np.where(pilot_ok, sm_pilot, np.where(blend, sm_blend, np.where(use_daa, sm_daa, np.nan)))
+    sm_exec = np.where(pilot_ok, sm_pilot, np.where(blend, bl.sm, np.where(use_daa, sm_daa, np.nan)))
     other = active & np.isnan(sm_exec)
     if other.any():
         j = np.nonzero(other)[0]
         sm_exec[j] = _safety(batch_of, j, own, intr, exec_cmd[j], cfg, horizon, sm_calls if wait[j].all() else None)
     e_axis, e_dir = classify_command(own, exec_cmd, cfg)
     exact = (decision == D_BLEND) & (p_axis != AXIS_NONE) & (e_axis == p_axis) & (e_dir == p_dir)
+    bt, br_ = _band_record(cfg, n, parts) if band_record else (None, None)
 
-    bt = br_ = None
-    if band_record:
-        k_trk = (parts[0][1] if parts else _empty_bands(cfg)).trk.values.shape[1]
-        bt = np.full((n, k_trk), np.nan)
-        br_ = np.full((n, k_trk), -1, np.int8)
-        for r, b in parts:
-            bt[r], br_[r] = np.degrees(b.trk.values), b.trk.region
-
-    dec = {
-        "active": active, "decision": decision, "rule": rule, "authority": authority, "wait_s": wait_s,
-        "projl": projl, "decided_by": decided_by, "wait_p_lowc": w_pl, "wait_in_box": w_box, "wait_turn_dps": w_turn,
-        "wait_map_turn_dps": w_map, "link_lost": link_lost, "max_alert": max_alert.astype(np.int8), "alert_level": alert,
-        "pilot_cmd_received": received, "pilot_cmd_fresh": fresh, "pilot_cmd_age_s": age, "sm_pilot": sm_pilot, "sm_exec": sm_exec,
-        "pilot_axis": p_axis, "pilot_dir": p_dir, "exec_axis": e_axis, "exec_dir": e_dir, "exact_match": exact,
-        "cmd_trk": exec_cmd.trk, "cmd_vs": exec_cmd.vs, "cmd_gs": exec_cmd.gs,
-        "pilot_trk": p_trk, "pilot_vs": p_vs, "pilot_gs": p_gs,
-        "daa_trk": daa_cmd.trk, "daa_vs": daa_cmd.vs, "daa_gs": daa_cmd.gs,
-        "bands_trk": bt, "bands_trk_region": br_,
-    }
-    new_mem = replace(memory, pilot_trk=p_trk, pilot_vs=p_vs, pilot_gs=p_gs,
-                      pilot_t_sent=np.where(fresh, pilot.t_sent, memory.pilot_t_sent), last_packet_t=link_t,
+    wv, p = ws.value, lk.last_pilot
+    dec = Decision(
+        active=active, decision=decision, rule=bl.rule, authority=authority, wait_s=wv.wait_s, projl=ws.projl,
+        decided_by=ws.decided_by, wait_p_lowc=wv.p_lowc, wait_in_box=wv.in_box, wait_turn_dps=wv.turn_dps,
+        wait_map_turn_dps=wv.map_turn_dps, link_lost=link_lost, max_alert=max_alert.astype(np.int8), alert_level=alert,
+        pilot_cmd_received=lk.received, pilot_cmd_fresh=fresh, pilot_cmd_age_s=lk.age, sm_pilot=sm_pilot,
+        sm_exec=sm_exec, pilot_axis=p_axis, pilot_dir=p_dir, exec_axis=e_axis, exec_dir=e_dir, exact_match=exact,
+        cmd_trk=exec_cmd.trk, cmd_vs=exec_cmd.vs, cmd_gs=exec_cmd.gs, pilot_trk=p.trk, pilot_vs=p.vs, pilot_gs=p.gs,
+        daa_trk=daa_cmd.trk, daa_vs=daa_cmd.vs, daa_gs=daa_cmd.gs, bands_trk=bt, bands_trk_region=br_)
+    new_mem = replace(memory, pilot_trk=p.trk, pilot_vs=p.vs, pilot_gs=p.gs,
+                      pilot_t_sent=np.where(fresh, pilot.t_sent, memory.pilot_t_sent), last_packet_t=lk.link_t,
                       authority=authority, decision=decision, exec_trk=exec_cmd.trk.copy(),
                       exec_vs=exec_cmd.vs.copy(), exec_gs=exec_cmd.gs.copy(), daa_axis=daa_axis, daa_dir=daa_dir,
-                      wait_start=np.where(active & ~decide, wait_start, np.nan),
+                      wait_start=np.where(active & ~decide, ws.wait_start, np.nan),
                       intent_axis=intent_axis, intent_dir=intent_dir, daa_state=daa_state,
                       encounter_over=encounter_over)
     return exec_cmd, dec, new_mem
+
+
+def _band_record(cfg: DaaConfig, n: int, parts: list) -> tuple[np.ndarray, np.ndarray]:
+    """The track bands of the record, ``(N, K)`` deg and region codes (nan / -1 on inactive rows)."""
+    k_trk = (parts[0][1] if parts else _empty_bands(cfg)).trk.values.shape[1]
+    bt = np.full((n, k_trk), np.nan)
+    br_ = np.full((n, k_trk), -1, np.int8)
+    for r, b in parts:
+        bt[r], br_[r] = np.degrees(b.trk.values), b.trk.region
+    return bt, br_
 
 
 @functools.lru_cache(maxsize=8)
@@ -395,14 +285,11 @@ def _empty_bands(cfg: DaaConfig):
     return compute_bands(e, AircraftState(*(np.zeros((0, 1)) for _ in range(6))), cfg)
 
 
-def decode(decisions: dict) -> dict:
-    """Copy of a decision record with the integer-coded fields as string arrays."""
-    out = dict(decisions)
-    for key, names in CODE_NAMES.items():
-        if key in out:
-            out[key] = np.asarray(names, dtype=object)[np.asarray(out[key], int)]
-    return out
 
-
-__all__ = ["AllocationPolicy", "WaitValue", "WaitLookup", "WAIT_MODES", "WAIT_RULES", "DECIDED_BY_NAMES", "policy_for_group", "PilotInput", "AgentMemory", "agent_step",
-           "make_wait_lookup", "decode", "DECISION_FIELDS", "DECISION_NAMES", "AUTHORITY_NAMES", "CODE_NAMES"]
+#: the decision codes are :mod:`daa_sil.decision`'s; the agent's namespace offers them to its callers
+__all__ = ["AllocationPolicy", "WaitValue", "WaitLookup", "WAIT_MODES", "WAIT_RULES", "policy_for_group", "PilotInput",
+           "AgentMemory", "LinkStep", "WaitStep", "BlendStep", "link_step", "wait_step", "blend_step", "agent_step",
+           "make_wait_lookup", "decode", "Decision", "DECISION_FIELDS", "DECISION_NAMES", "DECIDED_BY_NAMES",
+           "AUTHORITY_NAMES", "CODE_NAMES", "D_NONE", "D_WAIT", "D_NO_WAIT", "D_PILOT", "D_BLEND", "D_DAA_OVERRIDE",
+           "D_STALE", "D_LINK_LOST", "BY_NONE", "BY_MAP", "BY_PROJL", "BY_BOTH", "BY_NEITHER", "A_PILOT", "A_DAA",
+           "A_WAITING"]

@@ -30,6 +30,7 @@ from typing import Callable
 
 import numpy as np
 
+from daa_sil.decision import Decision
 from .geometry import wellclear as wc
 from daa_sil.geometry.frames import wrap_pi
 from daa_sil.geometry.kinematics import AircraftState, Command, Performance, advance, fly_command
@@ -61,7 +62,7 @@ class StepOutput:
     own: AircraftState  #: (N,) truth at t
     intruders: AircraftState  #: (N, M) truth at t
     command: Command  #: (N,) command flown over [t, t + dt]
-    decisions: dict  #: the agent's decision record (fields ``agent.DECISION_FIELDS``)
+    decisions: "Decision"  #: the agent's decision record (:class:`daa_sil.decision.Decision`)
     telemetry: Telemetry  #: downlink payload for t
     geometry: "dict | None"  #: (N, M) range_m, hmd_m, dh_m, tau_mod_s, wcv at t (None without a step log)
     lowc: np.ndarray  #: (N,) LoWC with any intruder on [t, t + dt]
@@ -139,7 +140,7 @@ class OnboardCore:
     """Batched vehicle logic: truth, DAA, wait map, agent. See the module docstring.
 
     Parameters: ``own`` (N,) and ``intruders`` (N, M) initial truth states; ``controls`` the
-    intruder scripts; ``policy`` an :class:`~daa_sil.agent.AllocationPolicy`; ``daa_cfg`` a
+    intruder scripts; ``policy`` an :class:`~daa_sil.config.policy.AllocationPolicy`; ``daa_cfg`` a
     :class:`~daa_sil.daa.config.DaaConfig` (its thresholds are the LoWC volume unless
     ``thresholds`` is given); ``wait_lookup`` from :func:`daa_sil.agent.make_wait_lookup` (None when
     the policy needs no map); ``t0`` start time (s); ``dt`` step (s); ``perf`` ownship limits

@@ -37,27 +37,52 @@ class WaitValue:
 WaitLookup = Callable[[AircraftState, AircraftState, np.ndarray], WaitValue]
 
 
+def wait_none(constant_s: np.ndarray, lookup: "WaitLookup | None" = None) -> WaitLookup:
+    """``none``: w = 0, the agent never waits (B-1, B-2: the DAA decides at once)."""
+    return lambda own, intr, turn_rate: WaitValue.constant(intr.shape[0], 0.0)
+
+
+def wait_constant(constant_s: np.ndarray, lookup: "WaitLookup | None" = None) -> WaitLookup:
+    """``constant``: w = each row's ``constant_wait_s`` (s; IC-1)."""
+
+    def constant(own: AircraftState, intr: AircraftState, turn_rate: np.ndarray) -> WaitValue:
+        out = WaitValue.constant(intr.shape[0], 0.0)
+        out.wait_s[:] = constant_s
+        return out
+
+    return constant
+
+
+def wait_always(constant_s: np.ndarray, lookup: "WaitLookup | None" = None) -> WaitLookup:
+    """``always``: w = +inf, the map ignored: wait unless ProjL (the ``ID-2-projl`` ablation)."""
+    return lambda own, intr, turn_rate: WaitValue.constant(intr.shape[0], np.inf)
+
+
+def wait_map(constant_s: np.ndarray, lookup: "WaitLookup | None" = None) -> WaitLookup:
+    """``map``: the MDP wait map read at the current state (``lookup``, :func:`make_wait_lookup`)."""
+    if lookup is None:
+        raise UsageError("policy wait_mode 'map' needs a wait_lookup (daa_sil.agent.make_wait_lookup)")
+    return lookup
+
+
+#: the wait functions by name (:data:`daa_sil.config.policy.WAIT_MODES`): each makes a
+#: :data:`WaitLookup` from the rows' constant waits (s) and the map lookup (None when no map is read)
+WAIT_FUNCTIONS: dict[str, Callable[..., WaitLookup]] = {
+    "none": wait_none, "constant": wait_constant, "map": wait_map, "always": wait_always}
+
+
 def wait_values(own, intr, pol: PolicyRows, lookup: "WaitLookup | None", turn_rate, idx) -> WaitValue:
     """The wait function of rows ``idx`` (ownship (N,), intruders (N, M), estimated turn rates (N, M)
-    compass rad/s or None = 0), each by its own policy's wait mode (one lookup for all map rows)."""
-    n = len(idx)
-    out = WaitValue.constant(n, 0.0)
+    compass rad/s or None = 0), each by its own policy's wait mode (:data:`WAIT_FUNCTIONS`; one call
+    per mode present)."""
+    out = WaitValue.constant(len(idx), 0.0)
+    rate = np.zeros(intr.shape) if turn_rate is None else np.broadcast_to(np.asarray(turn_rate, float), intr.shape)
     for mode, pos in pol.modes(idx):
-        if mode == "none":
-            continue
-        if mode == "constant":
-            out.wait_s[pos] = pol.value("constant_wait_s")[idx[pos]]
-        elif mode == "always":
-            out.wait_s[pos] = np.inf
-        else:
-            if lookup is None:
-                raise UsageError("policy wait_mode 'map' needs a wait_lookup (daa_sil.agent.make_wait_lookup)")
-            rows = idx[pos]
-            rate = np.zeros(intr.shape) if turn_rate is None else np.broadcast_to(np.asarray(turn_rate, float),
-                                                                               intr.shape)
-            wv = lookup(own[rows], intr[rows], rate[rows])
-            out.wait_s[pos], out.p_lowc[pos], out.in_box[pos] = wv.wait_s, wv.p_lowc, wv.in_box
-            out.turn_dps[pos], out.map_turn_dps[pos] = wv.turn_dps, wv.map_turn_dps
+        rows = idx[pos]
+        w = WAIT_FUNCTIONS[mode](pol.value("constant_wait_s")[rows], lookup)
+        wv = w(own[rows], intr[rows], rate[rows])
+        out.wait_s[pos], out.p_lowc[pos], out.in_box[pos] = wv.wait_s, wv.p_lowc, wv.in_box
+        out.turn_dps[pos], out.map_turn_dps[pos] = wv.turn_dps, wv.map_turn_dps
     return out
 
 
@@ -100,4 +125,5 @@ def make_wait_lookup(family, cfg: "DaaConfig | None" = None, outside: str = "cla
     return lookup
 
 
-__all__ = ["WaitValue", "WaitLookup", "wait_values", "make_wait_lookup"]
+__all__ = ["WaitValue", "WaitLookup", "WAIT_FUNCTIONS", "wait_none", "wait_constant", "wait_always", "wait_map",
+           "wait_values", "make_wait_lookup"]

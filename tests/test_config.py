@@ -36,7 +36,9 @@ def test_a_file_changes_only_what_it_names(tmp_path):
     assert cfg.allocation == {"wt": 8, "projl_lookahead": None}
     assert cfg.waitmap == {"source": "alerting", "gamma": 0.9}
     assert cfg.groups == ("B-2", "ID-2")
-    cc = cfg.campaign_config()
+    from daa_sil.study.campaign_config import CampaignConfig
+
+    cc = CampaignConfig.from_run_config(cfg)
     assert (cc.wt, cc.gamma, cc.preset, cc.group_names) == (8, 0.9, "do365", ("B-2", "ID-2"))
     # W_T applies to the groups with a wait function only (B-2 has none: it keeps the table's 4 s)
     assert cc.group("ID-2").wait_threshold_s == 8.0 and cc.group("B-2").wait_threshold_s == 4.0
@@ -91,6 +93,21 @@ def test_config_show_prints_a_loadable_file(tmp_path, capsys):
     assert full["resolved"]["groups"]["ID-2"]["wait"] == "map"
 
 
+def test_config_show_full_lists_each_shared_setting_once_and_loads_back(tmp_path, capsys):
+    assert main(["config", "show", "do365", "--full"]) == 0
+    text = capsys.readouterr().out
+    shown = yaml.safe_load(text)["settings"]
+    # the numbers the paper and the SIL use, written here by hand
+    assert shown["allocation.wait_threshold_s"] == {"default": 4.0, "unit": "s", "range": [0.0, 120.0],
+                                                   "help": shown["allocation.wait_threshold_s"]["help"]}
+    assert (shown["allocation.projl_horizon_s"]["default"], shown["allocation.constant_wait_s"]["default"],
+            shown["link.epoch_s"]["default"], shown["study.duration_s"]["default"]) == (25.0, 5.0, 10.0, 240.0)
+    assert (shown["thresholds"]["default"], shown["scenario.thresholds"]["default"]) == ("paper", "do365")
+    f = tmp_path / "full.yaml"
+    f.write_text(text)
+    assert load_config(f) == preset("do365")  # the derived sections are ignored when read back
+
+
 def test_the_daa_section_reaches_the_daa_command(tmp_path, capsys):
     """Ownship 55 m/s north, intruder 13 km ahead at 100 m/s south, co-altitude (paper thresholds:
     DMOD 1220 m, TTHR 35 s). tau_mod <= 35 s once r^2 - 155*35 r - 1220^2 <= 0, i.e. r <= 5686.7 m,
@@ -139,7 +156,7 @@ def test_no_config_keeps_the_campaign_defaults():
     """The default campaign (no --config) is the paper preset: same groups, thresholds, maps."""
     from daa_sil.study.campaign_config import CampaignConfig
 
-    assert preset("paper").campaign_config().to_dict() == CampaignConfig().to_dict()
+    assert CampaignConfig.from_run_config(preset("paper")).to_dict() == CampaignConfig().to_dict()
 
 
 def test_a_section_is_checked_by_building_it():

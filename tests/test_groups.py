@@ -4,7 +4,7 @@ import pytest
 
 from daa_sil.study.campaign_config import CampaignConfig
 from daa_sil.errors import UsageError
-from daa_sil.config.groups import PAPER_GROUPS, group_spec, group_table, load_group_file, parse_groups
+from daa_sil.config.groups import PAPER_GROUPS, group_spec, group_table, load_group_file, parse_groups, policy_for_group
 
 
 def test_table_holds_the_papers_groups_and_the_ablations():
@@ -72,3 +72,22 @@ def test_campaign_overrides_apply_to_the_right_groups():
     # the definitions as given stay as they were (campaign.json records both)
     assert {g.name: g.wait_threshold_s for g in cfg.groups}["ID-2"] == 4.0
     assert CampaignConfig.from_dict(cfg.to_dict()) == cfg
+
+
+def test_one_override_rule_for_fast_time_and_the_vehicle():
+    """``apply_overrides`` is the rule both routes use: W_T only where a group waits, N everywhere,
+    the reading's wait rule where a group waits; the flown policy matches the recorded group."""
+    from daa_sil.config.policy import apply_overrides
+
+    cfg = CampaignConfig(groups="B-2,IC-1,ID-2", wt=7.0, projl_lookahead=12.0,
+                         reading_set={"wait_rule": "countdown"}, link={"link_timeout_s": 9.0})
+    want = {"B-2": (4.0, "threshold"), "IC-1": (7.0, "countdown"), "ID-2": (7.0, "countdown")}
+    for name, (wt, rule) in want.items():
+        pol = cfg.policy(name)
+        assert (pol.wait_threshold_s, pol.projl_horizon_s, pol.wait_rule, pol.link_timeout_s) == (wt, 12.0, rule, 9.0)
+        rec = cfg.group(name)  # what campaign.json records
+        assert (rec.wait_threshold_s, rec.projl_horizon_s, rec.wait_rule) == (wt, 12.0, rule)
+    # the vehicle's route: a policy, not a group definition, through the same function
+    b2 = apply_overrides(policy_for_group("B-2"), wt=7.0, projl_lookahead=12.0, link={"stale_command_s": 3.0})
+    assert (b2.wait_threshold_s, b2.projl_horizon_s, b2.stale_command_s) == (4.0, 12.0, 3.0)
+    assert apply_overrides(policy_for_group("ID-2")) == policy_for_group("ID-2")  # nothing given: unchanged

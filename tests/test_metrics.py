@@ -162,19 +162,19 @@ def test_counting_readings_pick_columns():
     n = 10
     t = table("ID-2", n, lowc_idx=(), n_pilot_received=np.full(n, 10), n_pilot_exec=np.full(n, 1),
               n_blend=np.full(n, 6), n_daa_override=np.full(n, 3))
-    got = {r: _study(t, reading=C.Reading("x", {"received": r})).estimate("ID-2", "received").value
+    got = {r: _study(t, reading=C.CountingRules("x", {"received": r})).estimate("ID-2", "received").value
            for r in ("arrived", "pilot+blend", "executed")}
     assert got == {"arrived": 10.0, "pilot+blend": 7.0, "executed": 1.0}
-    direct = C.Reading("y", {"columns": {"received": ["n_blend", "n_daa_override"]}})
+    direct = C.CountingRules("y", {"columns": {"received": ["n_blend", "n_daa_override"]}})
     assert _study(t, reading=direct).estimate("ID-2", "received").value == 9.0
     with pytest.raises(UsageError, match="allowed: window=active"):
-        _study(t, reading=C.Reading("z", {"received": "arrived", "window": "season"}))
+        _study(t, reading=C.CountingRules("z", {"received": "arrived", "window": "season"}))
     with pytest.raises(FileFormatError, match="n_pilot_received_whole"):  # whole-encounter columns missing
-        _study(t, reading=C.Reading("w", {"received": "arrived", "window": "whole"}))
+        _study(t, reading=C.CountingRules("w", {"received": "arrived", "window": "whole"}))
     whole = table("ID-2", n, lowc_idx=(), n_pilot_received=np.full(n, 10), n_pilot_exec=np.full(n, 1),
                   n_blend=np.full(n, 6), n_daa_override=np.full(n, 3), n_pilot_received_whole=np.full(n, 25),
                   n_pilot_exec_whole=np.full(n, 14))
-    got = {r: _study(whole, reading=C.Reading("v", {"received": r, "window": "whole"})).estimate("ID-2", "received").value
+    got = {r: _study(whole, reading=C.CountingRules("v", {"received": r, "window": "whole"})).estimate("ID-2", "received").value
            for r in ("arrived", "pilot+blend", "executed")}
     assert got == {"arrived": 25.0, "pilot+blend": 20.0, "executed": 14.0}
 
@@ -245,5 +245,5 @@ def test_a_new_counting_is_one_table_entry(monkeypatch):
     assert "overridden" in C.counting_options()["received"]
     assert parse_recount("ov:received=overridden") == ("ov", {"received": "overridden"})
     t = table("B-2", 4, lowc_idx=(), n_daa_override=np.array([1, 2, 3, 6]))
-    st = _study(t, reading=C.Reading("ov", {"received": "overridden"}))
+    st = _study(t, reading=C.CountingRules("ov", {"received": "overridden"}))
     assert st.estimate("B-2", "received").value == 3.0

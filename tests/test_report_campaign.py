@@ -135,12 +135,12 @@ def test_a_planted_override_is_not_reproduced(campaign, tmp_path):
 
 
 def test_report_labels_tell_apart_one_reading_on_two_sizes_of_one_seed():
-    from daa_sil.study.report_input import Block, Reading, unique_labels
+    from daa_sil.study.report_input import Block, CountingRules, unique_labels
 
     def block(seed, n):
-        return Block("paper", Reading("paper", {}, ""), {}, meta={"seed": seed, "n_encounters": n})
+        return Block("paper", CountingRules("paper", {}, ""), {}, meta={"seed": seed, "n_encounters": n})
 
     got = [b.label for b in unique_labels([block(20261201, 10000), block(20261201, 2000), block(99991, 2000),
-                                          Block("extended", Reading("extended", {}, ""), {}, meta={"seed": 1})])]
+                                          Block("extended", CountingRules("extended", {}, ""), {}, meta={"seed": 1})])]
     assert got == ["paper (seed 20261201, 10,000 enc.)", "paper (seed 20261201, 2,000 enc.)", "paper (seed 99991)",
                    "extended"]

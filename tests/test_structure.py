@@ -222,3 +222,117 @@ if __name__ == "__main__":
     found = all_crossings()
     print("\n".join(found))
     print(f"{len(found)} crossings", file=sys.stderr)
+
+
+# --- no import circle among our modules -----------------------------------------------------------
+# An arrow A -> B is an import of B written at A's module level, including inside a top-level ``if``
+# (``if TYPE_CHECKING:``) or ``try``: a class a module only annotates with still makes the module
+# depend on the one that defines it, so the class belongs below (issue 23). An import inside a
+# function is a deliberate deferral and is not an arrow here. Importing one's own parent package is
+# not an arrow either (Python runs a package's ``__init__`` first whatever one writes).
+
+
+def module_imports(source: str, module: str, is_package: bool, ours: set[str]) -> set[str]:
+    """Our modules that ``module`` imports at module level (``from pkg import sub`` -> ``pkg.sub``)."""
+
+    def top_level(body):
+        for node in body:
+            yield node
+            if isinstance(node, (ast.If, ast.Try)):
+                yield from top_level(node.body)
+                yield from top_level(node.orelse)
+                for h in getattr(node, "handlers", ()):
+                    yield from top_level(h.body)
+                yield from top_level(getattr(node, "finalbody", ()))
+
+    names = []
+    for node in top_level(ast.parse(source).body):
+        if isinstance(node, ast.Import):
+            names.extend(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            target = resolve(node, module, is_package)
+            names.append(target)
+            names.extend(f"{target}.{a.name}" for a in node.names)
+    out = set()
+    for name in names:
+        parts = name.split(".")
+        hit = next((".".join(parts[:k]) for k in range(len(parts), 0, -1) if ".".join(parts[:k]) in ours), None)
+        if hit and hit != module and not module.startswith(hit + "."):
+            out.add(hit)
+    return out
+
+
+def import_circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan, iterative), sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    circles = []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            v, it = work[-1]
+            w = next(it, None)
+            if w is not None:
+                if w not in graph:
+                    continue
+                if w not in index:
+                    index[w] = low[w] = len(index)
+                    stack.append(w)
+                    on_stack.add(w)
+                    work.append((w, iter(sorted(graph[w]))))
+                elif w in on_stack:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    x = stack.pop()
+                    on_stack.discard(x)
+                    comp.append(x)
+                    if x == v:
+                        break
+                if len(comp) > 1:
+                    circles.append(sorted(comp))
+    return sorted(circles)
+
+
+def our_import_graph() -> dict[str, set[str]]:
+    mods = our_modules()
+    ours = set(mods)
+    return {m: module_imports(p.read_text(), m, p.name == "__init__.py", ours)
+            for m, p in mods.items() if not is_generated(m)}
+
+
+def test_the_circle_finder_on_hand_written_modules():
+    ours = {"daa_sil", "daa_sil.pkg", "daa_sil.pkg.a", "daa_sil.pkg.b", "daa_sil.pkg.c"}
+    a = "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from daa_sil.pkg.b import Thing\n"
+    b = "from . import a\nimport numpy\n"
+    c = "def f():\n    from daa_sil.pkg import a\nfrom daa_sil import pkg\n"
+    graph = {"daa_sil.pkg.a": module_imports(a, "daa_sil.pkg.a", False, ours),
+             "daa_sil.pkg.b": module_imports(b, "daa_sil.pkg.b", False, ours),
+             "daa_sil.pkg.c": module_imports(c, "daa_sil.pkg.c", False, ours)}
+    # a type-only import is an arrow; a function-level one and the parent package are not
+    assert graph == {"daa_sil.pkg.a": {"daa_sil.pkg.b"}, "daa_sil.pkg.b": {"daa_sil.pkg.a"}, "daa_sil.pkg.c": set()}
+    assert import_circles(graph) == [["daa_sil.pkg.a", "daa_sil.pkg.b"]]
+    assert import_circles({"x": {"y"}, "y": {"z"}, "z": {"x"}, "w": {"x"}}) == [["x", "y", "z"]]
+    assert import_circles({"x": {"y"}, "y": set()}) == []
+
+
+def test_no_import_circle_among_our_modules():
+    graph = our_import_graph()
+    # the population: the walker sees the arrows it should
+    assert "daa_sil.config.policy" in graph["daa_sil.config.groups"]
+    assert "daa_sil.study.campaign_files" in graph["daa_sil.study.campaign"]
+    circles = import_circles(graph)
+    assert not circles, "import circles (module-level imports, TYPE_CHECKING included):\n" + "\n".join(
+        " <-> ".join(c) for c in circles)

@@ -1,4 +1,4 @@
-"""W_T has one range everywhere (issue 20 item 8): [0, 120] s, ``daa_sil.config.limits.WT_RANGE_S``.
+"""W_T has one range everywhere (issue 20 item 8): [0, 120] s, ``daa_sil.config.settings.WAIT_THRESHOLD``.
 
 On bba2fd8 the campaign side (``campaign run --wt``, groups, run configurations) accepted up to
 600 s while the SIL (scenarios, the vehicle's DAA_WT) accepted up to 120 s. A W_T of 200 s is now
@@ -71,12 +71,12 @@ def test_wt_200_is_refused_by_every_input(tmp_path):
 
 def test_wt_120_is_accepted_by_every_input(tmp_path):
     from daa_sil.config.groups import load_group_file
-    from daa_sil.config.limits import WT_RANGE_S
+    from daa_sil.config.settings import WAIT_THRESHOLD
     from daa_sil.config.run_config import config_from_dict
     from daa_sil.sil.scenario import load_scenario
     from daa_sil.study.campaign_config import CampaignConfig
 
-    assert WT_RANGE_S == (0.0, 120.0)
+    assert WAIT_THRESHOLD.range == (0.0, 120.0)
     CampaignConfig(wt=120.0).validate()
     groups = tmp_path / "g.yaml"
     groups.write_text("IC-9: {base: IC-1, wait_threshold_s: 120}\n")

@@ -16,16 +16,18 @@ from pathlib import Path
 import numpy as np
 
 from daa_sil import agent as A
+from daa_sil.config.groups import policy_for_group
+from daa_sil.config.policy import AllocationPolicy, apply_overrides
 from daa_sil.geometry.kinematics import Command
 from daa_sil.sil.scenario import Scenario, encounter_set
 
 from .commands import PilotCommand
 
 
-def build_policy(sc: Scenario) -> "A.AllocationPolicy":
+def build_policy(sc: Scenario) -> AllocationPolicy:
     """The group's policy with the scenario's explicit overrides (wait mode, W_T, timeouts, blending)."""
     al = sc.allocation
-    pol = A.policy_for_group(al.group)
+    pol = policy_for_group(al.group)
     changes = {"wait_mode": al.wait, "blending": al.blending, "wait_threshold_s": al.wait_threshold_s,
                "constant_wait_s": al.wait_constant_s, "projl": al.projl}
     if al.link_timeout_s is not None:
@@ -49,18 +51,10 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
     kernels.get()  # load the compiled DAA now, not at the first conflict (a realtime run would stall)
     es = encounter_set(sc)
     policy = policy or build_policy(sc)
-    if config is not None:
-        link = {k: v for k, v in config.link.items() if v is not None}
-        if sc.allocation.link_timeout_s is not None:
-            link.pop("link_timeout_s", None)
-        if sc.allocation.stale_command_s is not None:
-            link.pop("stale_command_s", None)
-        al = config.allocation
-        if al["wt"] is not None and policy.wait_mode != "none":
-            link["wait_threshold_s"] = float(al["wt"])
-        if al["projl_lookahead"] is not None:
-            link["projl_horizon_s"] = float(al["projl_lookahead"])
-        policy = replace(policy, **link) if link else policy
+    if config is not None:  # the scenario's own timeouts win over the configuration's
+        link = {k: v for k, v in config.link.items() if v is not None and getattr(sc.allocation, k) is None}
+        policy = apply_overrides(policy, wt=config.allocation["wt"], projl_lookahead=config.allocation["projl_lookahead"],
+                                 link=link)
         waitmap = waitmap if waitmap is not None else config.waitmap["source"]
     daa_cfg = config.daa_config(sc.thresholds) if config is not None else _preset_daa(sc.thresholds)
     lookup = family = None

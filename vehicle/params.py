@@ -23,7 +23,7 @@ DAA_WAIT_CONST REAL32  constant wait, s (``constant_wait_s``)   --           rea
 DAA_PRESET     INT8    threshold preset: 0 do365, 1 paper       --           read-only
 =============  ======  =====================================  ===========  ==========
 
-Ranges are the scenario file's (``daa_sil/sil/scenario/schema.py``), except that DAA_STALE_S and
+Ranges are those of every other input (:mod:`daa_sil.config.settings`); DAA_STALE_S and
 DAA_LINK_TO start at :data:`MIN_TIMEOUT_S` (one sim step, 1 s): the GCS sends at most once per step,
 so a link timeout shorter than a step declares the link lost between any two packets, and a stale
 limit shorter than a step makes every command that crossed the link stale; a value like 1.4e-45 s
@@ -42,12 +42,12 @@ import struct
 from dataclasses import dataclass, replace
 from typing import Callable
 
-from daa_sil.config.limits import WT_RANGE_S
+from daa_sil.config.settings import LINK_TIMEOUT, PROJL_HORIZON, STALE_COMMAND, WAIT_THRESHOLD
 from daa_sil.link.codec import mavlink as M
 
 REAL32, INT8 = M.MAV_PARAM_TYPE_REAL32, M.MAV_PARAM_TYPE_INT8
 #: smallest DAA_STALE_S / DAA_LINK_TO a PARAM_SET may give (s): one sim step (see the module docstring)
-MIN_TIMEOUT_S = 1.0
+MIN_TIMEOUT_S = STALE_COMMAND.lo
 
 
 @dataclass(frozen=True)
@@ -99,7 +99,7 @@ class ParamTable:
     """The parameter list over a policy (``preset``: the scenario's threshold preset, read-only)."""
 
     def __init__(self, preset: str):
-        from daa_sil.agent import WAIT_MODES
+        from daa_sil.config.policy import WAIT_MODES
         from daa_sil.geometry.thresholds import PRESETS
 
         presets = tuple(PRESETS)
@@ -108,13 +108,13 @@ class ParamTable:
             ParamSpec("DAA_ENABLE", INT8, "onboard allocation agent on (1) / off (0)",
                       lambda p: float(bool(p.enabled)), "enabled", 0, 1, integer=True),
             ParamSpec("DAA_WT", REAL32, "wait threshold W_T (s)", lambda p: float(p.wait_threshold_s),
-                      "wait_threshold_s", *WT_RANGE_S),
+                      WAIT_THRESHOLD.name, *WAIT_THRESHOLD.range),
             ParamSpec("DAA_PROJL_S", REAL32, "ProjL look-ahead (s)", lambda p: float(p.projl_horizon_s),
-                      "projl_horizon_s", 0.0, 120.0),
+                      PROJL_HORIZON.name, *PROJL_HORIZON.range),
             ParamSpec("DAA_STALE_S", REAL32, "stale pilot command limit (s)", lambda p: float(p.stale_command_s),
-                      "stale_command_s", MIN_TIMEOUT_S, 120.0),
+                      STALE_COMMAND.name, *STALE_COMMAND.range),
             ParamSpec("DAA_LINK_TO", REAL32, "link-lost timeout (s)", lambda p: float(p.link_timeout_s),
-                      "link_timeout_s", MIN_TIMEOUT_S, 120.0),
+                      LINK_TIMEOUT.name, *LINK_TIMEOUT.range),
             ParamSpec("DAA_WAIT_MODE", INT8, f"wait function: {', '.join(f'{i} {n}' for i, n in enumerate(WAIT_MODES))}"
                       " (read-only)", lambda p: float(WAIT_MODES.index(p.wait_mode))),
             ParamSpec("DAA_WAIT_CONST", REAL32, "constant wait (s, read-only)", lambda p: float(p.constant_wait_s)),

@@ -9,7 +9,8 @@ import sys
 from pathlib import Path
 
 from ..errors import UsageError
-from daa_sil.config.limits import WT_RANGE_S
+from daa_sil.config.settings import (CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA, INTRUDERS, PRESET, PROJL_HORIZON, SEED,
+                                     WAIT_THRESHOLD)
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.files import to_jsonable
 from daa_sil.config.readings import DEFAULT_READING, READINGS, parse_reading_settings, readings_help
@@ -155,18 +156,20 @@ def _add_run_options(r) -> None:
     r.add_argument("--waitmap", default=None, metavar="PRESET|GRID|DIR",
                    help="wait maps of the map groups: alerting (default), paper, fine, a grid spec or a "
                         "'waitmap build' directory")
-    r.add_argument("--gamma", type=finite_float("--gamma", 1e-6, 0.999999), default=None,
+    r.add_argument("--gamma", type=finite_float("--gamma", *GAMMA.range), default=None,
                    help="MDP discount of the wait maps (default: the map preset's, 0.95)")
-    r.add_argument("--wt", type=finite_float("--wt", *WT_RANGE_S), default=None, metavar="S",
-                   help="wait threshold W_T of every group with a wait function (default: each group's, 4 s)")
-    r.add_argument("--projl-lookahead", type=finite_float("--projl-lookahead", 0.0, 600.0), default=None,
-                   metavar="S", help="ProjL look-ahead N of every group (default: each group's, 25 s)")
+    r.add_argument("--wt", type=finite_float("--wt", *WAIT_THRESHOLD.range), default=None, metavar="S",
+                   help=WAIT_THRESHOLD.flag_help("wait threshold W_T of every group with a wait function")
+                   .replace("(default", "(default: each group's,"))
+    r.add_argument("--projl-lookahead", type=finite_float("--projl-lookahead", *PROJL_HORIZON.range), default=None,
+                   metavar="S", help=PROJL_HORIZON.flag_help("ProjL look-ahead N of every group")
+                   .replace("(default", "(default: each group's,"))
     r.add_argument("--latency", default=None, metavar="SPEC",
                    help="latency of every group: const:4, gauss:5,3, uniform:1,8 (default: each group's); "
                         "the reading's rule applies it (paper: the round trip, half on each link; extended: "
                         "one-way on both links)")
-    r.add_argument("--intruders", type=int_at_least("--intruders", 1), default=None, metavar="M",
-                   help="intruders per encounter (default 1)")
+    r.add_argument("--intruders", type=int_at_least("--intruders", INTRUDERS.lo), default=None, metavar="M",
+                   help=INTRUDERS.flag_help())
     r.add_argument("--reading", default=None, metavar="NAME",
                    help=f"a named reading of the paper's simulator (default {DEFAULT_READING}; see 'Readings' "
                         f"below): {', '.join(READINGS)}")
@@ -176,13 +179,14 @@ def _add_run_options(r) -> None:
                         "unsafe_hold=blend|no-command, waitmap=paper|alerting|..., outside=clamp|far, "
                         "latency=one-way|round-trip, wait_rule=threshold|countdown, window=active|whole, "
                         "received=arrived|pilot+blend|executed, blends=all|maneuvers")
-    r.add_argument("--encounters", type=int_at_least("--encounters", 1), default=None, metavar="N",
-                   help="encounters per group (default 10000)")
-    r.add_argument("--seed", type=int_at_least("--seed", 0), default=None, metavar="S", help="campaign seed (default 0)")
-    r.add_argument("--duration", type=finite_float("--duration", 10.0, 3600.0), default=None, metavar="S",
-                   help="encounter length T, s (default 240 as in the paper; CPA at T/2)")
-    r.add_argument("--chunk-size", type=int_at_least("--chunk-size", 1), default=None, metavar="C",
-                   help="encounters per chunk (default 2000): one result file per group and chunk, and the "
+    r.add_argument("--encounters", type=int_at_least("--encounters", ENCOUNTERS.lo), default=None, metavar="N",
+                   help=f"encounters per group (default {ENCOUNTERS.default})")
+    r.add_argument("--seed", type=int_at_least("--seed", SEED.lo), default=None, metavar="S",
+                   help=f"campaign seed (default {SEED.default})")
+    r.add_argument("--duration", type=finite_float("--duration", *DURATION.range), default=None, metavar="S",
+                   help=DURATION.flag_help())
+    r.add_argument("--chunk-size", type=int_at_least("--chunk-size", CHUNK_SIZE.lo), default=None, metavar="C",
+                   help=f"encounters per chunk (default {CHUNK_SIZE.default}): one result file per group and chunk, and the "
                         "encounters that share a DAA call (so part of the configuration)")
     r.add_argument("--batch-rows", type=int_at_least("--batch-rows", 1), default=None, metavar="R",
                    help="encounter rows per task: several chunks of several groups run side by side in one "
@@ -193,7 +197,7 @@ def _add_run_options(r) -> None:
     r.add_argument("--scheduler", default=None, metavar="ADDRESS|local-dask",
                    help="run on a Dask cluster at ADDRESS (tcp://host:8786) or a local one (local-dask)")
     r.add_argument("--resume", action="store_true", help="continue the campaign in DIR (skips complete chunks)")
-    r.add_argument("--preset", default=None, help=f"threshold preset: {', '.join(PRESETS)} (default paper)")
+    r.add_argument("--preset", default=None, help=f"threshold preset: {', '.join(PRESETS)} (default {PRESET.default})")
     add_config_argument(r)
     r.add_argument("--no-progress", action="store_true", help="no progress bars")
     r.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
@@ -212,7 +216,7 @@ def _config_from_args(args):
              "reading_set": parse_reading_settings(args.reading_set) if args.reading_set else None}
     if args.preset and args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
-    base = load_config(args.config).campaign_config() if args.config else CampaignConfig()
+    base = CampaignConfig.from_run_config(load_config(args.config)) if args.config else CampaignConfig()
     out = Path(args.out)
     if args.resume and (out / "campaign.json").is_file():
         if args.config:
@@ -234,7 +238,7 @@ def _waitmap_into_reading(fields: dict, given: "str | None") -> dict:
     """An explicit ``--waitmap`` under a reading that sets its own grid (e.g. ``paper``) sets the
     reading's grid (recorded as ``reading_set.waitmap``); otherwise it is the campaign's."""
     from daa_sil.config.readings import reading_for
-    from daa_sil.waitmap.build import DEFAULT_MAP
+    from daa_sil.waitmap.source import DEFAULT_MAP
 
     if given is None:
         return fields

@@ -5,7 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 
+import yaml
+
 from daa_sil.config.run_config import PRESET_NAMES, load_config
+from daa_sil.config.settings import describe
 from daa_sil.files import to_jsonable
 
 EXAMPLES = """examples:
@@ -34,15 +37,19 @@ def register(sub) -> None:
     s = verbs.add_parser("show", help="print a configuration", epilog=EXAMPLES,
                          formatter_class=argparse.RawDescriptionHelpFormatter)
     s.add_argument("config", metavar="PRESET|FILE", help=f"a preset ({', '.join(PRESET_NAMES)}) or a YAML file")
-    s.add_argument("--full", action="store_true", help="add every resolved value (what outputs record)")
+    s.add_argument("--full", action="store_true", help="add every resolved value (what outputs record) and the "
+                   "default, range and help of each shared setting")
     s.add_argument("--json", action="store_true", help="print JSON instead of YAML")
     s.set_defaults(func=show)
 
 
 def show(args) -> int:
     cfg = load_config(args.config)
+    d = cfg.to_dict(full=args.full)
+    if args.full:  # the defaults, ranges and help of the settings several inputs share (one definition each)
+        d["settings"] = describe()
     if args.json:
-        print(json.dumps(to_jsonable(cfg.to_dict(full=args.full)), indent=2))
+        print(json.dumps(to_jsonable(d), indent=2))
     else:
-        print(cfg.to_yaml(full=args.full), end="")
+        print(yaml.safe_dump(d, sort_keys=False), end="")
     return 0

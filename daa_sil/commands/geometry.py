@@ -9,6 +9,7 @@ import numpy as np
 
 from daa_sil.geometry import wellclear as wc
 from ..errors import UsageError
+from daa_sil.config.settings import STANDARD_PRESET
 from daa_sil.files import to_jsonable
 from daa_sil.geometry.kinematics import STATE_BOUNDS  # physical bounds of a state: (component, lo, hi, unit)
 from daa_sil.geometry.thresholds import PRESETS, get_thresholds
@@ -45,7 +46,8 @@ def register(sub) -> None:
                        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--own", required=True, metavar="X,Y,Z,VX,VY,VZ", help="ownship ENU state (m, m/s)")
     p.add_argument("--intruder", required=True, metavar="X,Y,Z,VX,VY,VZ", help="intruder ENU state (m, m/s)")
-    p.add_argument("--preset", default="do365", help=f"threshold preset: {', '.join(PRESETS)} (default do365)")
+    p.add_argument("--preset", default=STANDARD_PRESET.default,
+                   help=f"threshold preset: {', '.join(PRESETS)} (default {STANDARD_PRESET.default})")
     p.add_argument("--lookahead", type=finite_float("--lookahead", 0.0, 3600.0), default=180.0, metavar="S",
                    help="look-ahead time for HMD and the violation interval, s (default 180)")
     p.add_argument("--json", action="store_true", help="print one JSON object")

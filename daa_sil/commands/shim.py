@@ -14,6 +14,7 @@ import signal
 import sys
 
 from ..errors import UsageError
+from daa_sil.config.settings import DELAY_EPOCH
 from daa_sil.models.latency import SPEC_HELP, parse_delay_spec
 from daa_sil.models.link_rule import link_legs
 from daa_sil.sil.endpoint import format_udp_address
@@ -93,8 +94,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--delay-round-trip", metavar="SPEC",
                    help="instead of --delay*: the round trip, split evenly (each direction half of one draw per "
                         "epoch; the paper reading's rule)")
-    p.add_argument("--epoch", type=finite_float("--epoch", 0.0, 3600.0), default=10.0, metavar="S",
-                   help="delay-process epoch, sim s (default 10; 0 = per-datagram draws)")
+    p.add_argument("--epoch", type=finite_float("--epoch", *DELAY_EPOCH.range), default=DELAY_EPOCH.default,
+                   metavar="S", help=DELAY_EPOCH.flag_help())
     p.add_argument("--loss", type=finite_float("--loss", 0.0, 1.0), default=0.0, metavar="P", help="loss probability")
     p.add_argument("--dup", type=finite_float("--dup", 0.0, 1.0), default=0.0, metavar="P", help="duplication probability")
     p.add_argument("--reorder", type=finite_float("--reorder", 0.0, 1.0), default=0.0, metavar="P",

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FileFormatError, OutputError, UsageError
+from daa_sil.config.settings import STANDARD_PRESET
 from daa_sil.geometry.thresholds import PRESETS
 from .common_args import finite_float
 from daa_sil.sil.children import interruptible
@@ -58,7 +59,7 @@ def register(sub) -> None:
     s.add_argument("steplog", metavar="STEPLOG.parquet")
     s.add_argument("--encounter", type=int, metavar="ID", help="encounter id (needed if the log holds several)")
     s.add_argument("--preset", help=f"threshold preset for the well-clear volume: {', '.join(PRESETS)} "
-                                    "(default: the log's metadata, else do365)")
+                                    f"(default: the log's metadata, else {STANDARD_PRESET.default})")
     s.add_argument("--until", type=finite_float("--until", 0.0), metavar="S", help="keep steps with t <= S")
     _sink_args(s)
     s.set_defaults(func=interruptible(run_steplog))
@@ -115,7 +116,7 @@ def run_steplog(args) -> int:
     opts = sink_options(args)
     table = steplog.read_steplog(args.steplog)
     meta = steplog.steplog_metadata(args.steplog)
-    preset = args.preset or meta.get("preset") or "do365"
+    preset = args.preset or meta.get("preset") or STANDARD_PRESET.default
     if preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {preset!r}; allowed: {', '.join(PRESETS)}")
     if table.num_rows == 0:

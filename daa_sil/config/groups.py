@@ -5,7 +5,7 @@ wait function (none / a constant / the MDP map / always), W_T, the ProjL veto an
 blending and the wait rule. The paper's five groups (Tabassum & Bai Table 2: B-1, B-2, IC-1, ID-1,
 ID-2) and the ablations ``ID-2-projl`` (the map ignored: wait unless ProjL) and ``ID-2-map`` (the
 map alone, no ProjL) are rows of the table; :meth:`GroupSpec.policy` turns a row into the agent's
-:class:`~daa_sil.agent.AllocationPolicy`. Nothing in the agent knows group names.
+:class:`~daa_sil.config.policy.AllocationPolicy`. Nothing in the agent knows group names.
 
 ``--groups`` takes names from the table (``B-2,ID-2,ID-2-projl``) or a YAML file of definitions::
 
@@ -19,14 +19,14 @@ from __future__ import annotations
 
 import functools
 import json
-import math
 import re
 from dataclasses import asdict, dataclass, fields, replace
 from importlib import resources
 from pathlib import Path
 from typing import Sequence
 
-from daa_sil.config.limits import WT_RANGE_S
+from daa_sil.config.policy import AllocationPolicy
+from daa_sil.config.settings import CONSTANT_WAIT, PROJL_HORIZON, WAIT_THRESHOLD, Setting
 from daa_sil.errors import FileFormatError, UsageError
 
 #: the paper's groups (Table 2), in the paper's order
@@ -43,9 +43,9 @@ class GroupSpec:
     setup: str
     latency: dict  #: the YAML form of a :mod:`daa_sil.models.latency` model, used on uplink and downlink
     wait: "str | float"  #: ``none`` | ``map`` | ``always`` | a constant wait in s
-    wait_threshold_s: float = 4.0
+    wait_threshold_s: float = WAIT_THRESHOLD.field()
     projl: bool = True
-    projl_horizon_s: float = 25.0
+    projl_horizon_s: float = PROJL_HORIZON.field()
     blending: bool = True
     wait_rule: str = "threshold"
     description: str = ""
@@ -68,11 +68,10 @@ class GroupSpec:
 
         return delay_model_from_dict(dict(self.latency), where=f"group {self.name} latency")
 
-    def policy(self):
-        """The agent's :class:`~daa_sil.agent.AllocationPolicy` for this group."""
-        from daa_sil.agent import AllocationPolicy
-
-        return AllocationPolicy(self.wait_mode, constant_wait_s=float(self.wait) if self.wait_mode == "constant" else 5.0,
+    def policy(self) -> AllocationPolicy:
+        """The agent's :class:`~daa_sil.config.policy.AllocationPolicy` for this group."""
+        return AllocationPolicy(self.wait_mode, constant_wait_s=float(self.wait) if self.wait_mode == "constant"
+                                else CONSTANT_WAIT.default,
                                 wait_threshold_s=self.wait_threshold_s, projl=self.projl,
                                 projl_horizon_s=self.projl_horizon_s, blending=self.blending,
                                 wait_rule=self.wait_rule, name=self.name)
@@ -105,13 +104,11 @@ class GroupSpec:
         if isinstance(wait, bool) or not (wait in WAITS or isinstance(wait, (int, float))):
             raise UsageError(f"{at}: wait must be none, map, always or a number of seconds, got {wait!r}")
         if isinstance(wait, (int, float)):
-            if not (math.isfinite(wait) and 0 <= wait <= 600):
-                raise UsageError(f"{at}: a constant wait must be within [0, 600] s, got {wait!r}")
-            wait = float(wait)
+            wait = CONSTANT_WAIT.check(wait, at, "a constant wait")
         spec = cls(name=name, setup=str(d["setup"]), latency=dict(d["latency"]) if isinstance(d["latency"], dict)
                    else d["latency"], wait=wait,
-                   wait_threshold_s=_number(d, "wait_threshold_s", 4.0, *WT_RANGE_S, at),
-                   projl=_flag(d, "projl", True, at), projl_horizon_s=_number(d, "projl_horizon_s", 25.0, 0.0, 600.0, at),
+                   wait_threshold_s=_number(d, WAIT_THRESHOLD, at),
+                   projl=_flag(d, "projl", True, at), projl_horizon_s=_number(d, PROJL_HORIZON, at),
                    blending=_flag(d, "blending", True, at), wait_rule=str(d.get("wait_rule", "threshold")),
                    description=str(d.get("description", "")))
         spec.delay_model()  # validates latency
@@ -119,11 +116,8 @@ class GroupSpec:
         return spec
 
 
-def _number(d: dict, key: str, default: float, lo: float, hi: float, where: str) -> float:
-    v = d.get(key, default)
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and lo <= v <= hi):
-        raise UsageError(f"{where}: {key} must be a number within [{lo:g}, {hi:g}], got {v!r}")
-    return float(v)
+def _number(d: dict, setting: Setting, where: str) -> float:
+    return setting.check(d.get(setting.name, setting.default), where)
 
 
 def _flag(d: dict, key: str, default: bool, where: str) -> bool:
@@ -196,4 +190,9 @@ def parse_groups(text: "str | Sequence[str] | None") -> tuple[GroupSpec, ...]:
     return specs
 
 
-__all__ = ["GroupSpec", "PAPER_GROUPS", "group_table", "group_spec", "load_group_file", "parse_groups"]
+def policy_for_group(group: str) -> AllocationPolicy:
+    """The policy of a named group of the group table (B-1, ..., ID-2-map)."""
+    return group_spec(group).policy()
+
+
+__all__ = ["GroupSpec", "policy_for_group", "PAPER_GROUPS", "group_table", "group_spec", "load_group_file", "parse_groups"]

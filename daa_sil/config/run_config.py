@@ -17,6 +17,7 @@
 ``link``       ``stale_command_s`` and ``link_timeout_s`` of the agent (null = the policy's 15 / 20 s)
 ``reading``    ``name`` (a named reading of :mod:`daa_sil.config.readings`) and ``set`` (its overrides)
 ``study``      ``encounters``, ``seed``, ``duration_s``, ``intruders``, ``chunk_size`` of a campaign
+               (:meth:`daa_sil.study.campaign_config.CampaignConfig.from_run_config` reads them)
 ============== ===================================================================================
 
 What each command reads (the rest of a configuration does not apply to it; the record in its
@@ -30,6 +31,10 @@ output shows what was flown):
   ``allocation`` (over the scenario's, as ``--wt`` over a campaign's groups), ``link`` (where the
   scenario sets none) and ``pilot``.
 
+The fixed sections (``waitmap``, ``allocation``, ``link``, ``reading``, ``study``) are the typed
+dataclasses of :mod:`daa_sil.config.sections`; their defaults and ranges are those of
+:mod:`daa_sil.config.settings`.
+
 Presets: ``paper`` (the paper's thresholds, HMD* 1220 m / d_h* 122 m; what ``campaign run`` flew
 before this object existed), ``do365`` (DO-365B thresholds) and ``daidalus`` (NASA DAIDALUS v2.0.4
 ``DO_365B_no_SUM.conf``: thresholds and band settings). A YAML file names a preset under ``base``
@@ -41,27 +46,22 @@ flags override the configuration; every output records the full configuration
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import yaml
 
-from daa_sil.config.limits import WT_RANGE_S
+from daa_sil.config.sections import (SECTIONS, AllocationSection, LinkSection, ReadingSection, StudySection,
+                                     WaitmapSection)
+from daa_sil.config.settings import PRESET
 from daa_sil.config.yaml_input import load_yaml_file
 from daa_sil.errors import UsageError
 from daa_sil.geometry.thresholds import PRESETS as THRESHOLD_PRESETS
 
 PRESET_NAMES = ("paper", "do365", "daidalus")
-#: keys of the sections that are mappings with a fixed set of keys
-_FIXED = {
-    "waitmap": ("source", "gamma"),
-    "allocation": ("wt", "projl_lookahead"),
-    "link": ("stale_command_s", "link_timeout_s"),
-    "reading": ("name", "set"),
-    "study": ("encounters", "seed", "duration_s", "intruders", "chunk_size"),
-}
+#: keys ``config show --full`` adds (derived values, ignored when a file is read back)
+DERIVED_KEYS = ("resolved", "settings")
 TOP_KEYS = ("base", "thresholds", "daa", "waitmap", "allocation", "groups", "pilot", "latency", "link",
             "reading", "study")
 
@@ -76,18 +76,17 @@ def _default_groups() -> tuple:
 class RunConfig:
     """Every parameter of a run (see the module docstring for the sections and their units)."""
 
-    base: str = "paper"  #: the preset it started from
-    thresholds: str = "paper"
+    base: str = PRESET.default  #: the preset it started from
+    thresholds: str = PRESET.default
     daa: dict = field(default_factory=dict)
-    waitmap: dict = field(default_factory=lambda: {"source": "alerting", "gamma": None})
-    allocation: dict = field(default_factory=lambda: {"wt": None, "projl_lookahead": None})
+    waitmap: WaitmapSection = field(default_factory=WaitmapSection)
+    allocation: AllocationSection = field(default_factory=AllocationSection)
     groups: tuple = field(default_factory=_default_groups)
     pilot: dict = field(default_factory=dict)
     latency: "str | None" = None
-    link: dict = field(default_factory=lambda: {"stale_command_s": None, "link_timeout_s": None})
-    reading: dict = field(default_factory=lambda: {"name": "paper", "set": {}})
-    study: dict = field(default_factory=lambda: {"encounters": 10_000, "seed": 0, "duration_s": 240.0,
-                                                 "intruders": 1, "chunk_size": 2000})
+    link: LinkSection = field(default_factory=LinkSection)
+    reading: ReadingSection = field(default_factory=ReadingSection)
+    study: StudySection = field(default_factory=StudySection)
     source: str = field(default="<preset>", compare=False)
 
     # --- the objects of the core --------------------------------------------------------------------
@@ -103,26 +102,11 @@ class RunConfig:
 
         return PilotConfig(**{**self.pilot, **changes})
 
-    def campaign_config(self):
-        """The :class:`~daa_sil.study.campaign_config.CampaignConfig` of this configuration."""
-        from daa_sil.config.groups import parse_groups
-        from daa_sil.study.campaign_config import CampaignConfig
-
-        s = self.study
-        return CampaignConfig(groups=parse_groups(list(self.groups)), n_encounters=int(s["encounters"]),
-                              seed=int(s["seed"]), chunk_size=int(s["chunk_size"]), preset=self.thresholds,
-                              duration_s=float(s["duration_s"]), waitmap=str(self.waitmap["source"]),
-                              gamma=self.waitmap["gamma"], wt=self.allocation["wt"],
-                              projl_lookahead=self.allocation["projl_lookahead"], latency=self.latency,
-                              n_intruders=int(s["intruders"]), reading=str(self.reading["name"]),
-                              reading_set=dict(self.reading["set"]), daa=dict(self.daa), pilot=dict(self.pilot),
-                              link={k: v for k, v in self.link.items() if v is not None})
-
     # --- YAML -------------------------------------------------------------------------------------
     def to_dict(self, full: bool = False) -> dict:
         """Plain data. ``full=True`` adds every resolved value (threshold numbers, every DAA and pilot
         field, the group definitions, the reading's settings): what outputs record."""
-        d = {k: (list(v) if isinstance(v, tuple) else (dict(v) if isinstance(v, dict) else v))
+        d = {k: (list(v) if isinstance(v, tuple) else (dict(v) if isinstance(v, Mapping) else v))
              for k, v in ((f.name, getattr(self, f.name)) for f in fields(self) if f.name != "source")}
         d["reading"] = {"name": self.reading["name"], "set": dict(self.reading["set"])}
         if full:
@@ -157,9 +141,9 @@ def preset(name: str) -> RunConfig:
 
 
 def load_config(spec: "str | Path | None") -> RunConfig:
-    """A preset name or a YAML file (None = the ``paper`` preset); one-line UsageError on any problem."""
+    """A preset name or a YAML file (None = the default preset, ``paper``); one-line UsageError on any problem."""
     if spec is None:
-        return preset("paper")
+        return preset(PRESET.default)
     if str(spec).lower() in PRESET_NAMES:
         return preset(str(spec))
     p = Path(spec)
@@ -176,19 +160,19 @@ def config_from_dict(data: Any, where: str = "<config>") -> RunConfig:
     """Validate a mapping (the YAML form) into a :class:`RunConfig`; errors name ``where`` and the key."""
     if not isinstance(data, dict):
         raise UsageError(f"{where}: a configuration is a mapping of sections ({', '.join(TOP_KEYS)})")
-    unknown = [k for k in data if k not in TOP_KEYS and k != "resolved"]
+    unknown = [k for k in data if k not in TOP_KEYS and k not in DERIVED_KEYS]
     if unknown:
         raise UsageError(f"{where}: unknown key {unknown[0]!r}; allowed: {', '.join(TOP_KEYS)}")
-    cfg = preset(data.get("base", "paper"))
+    cfg = preset(data.get("base", PRESET.default))
     changes: dict = {"base": cfg.base, "source": where}
     if "thresholds" in data:
         th = str(data["thresholds"]).lower()
         if th not in THRESHOLD_PRESETS:
             raise UsageError(f"{where}: thresholds must be one of {', '.join(THRESHOLD_PRESETS)}, got {data['thresholds']!r}")
         changes["thresholds"] = th
-    for key in _FIXED:
+    for key in SECTIONS:
         if key in data:
-            changes[key] = _section(data[key], key, getattr(cfg, key), where)
+            changes[key] = getattr(cfg, key).updated(data[key], key, where)
     if "daa" in data:
         changes["daa"] = _field_changes(data["daa"], "daa", _dataclass_fields("daa"), where)
     if "pilot" in data:
@@ -210,15 +194,6 @@ def save_config(cfg: RunConfig, path: "str | Path", overwrite: bool = False) -> 
 
 
 # --- validation ---------------------------------------------------------------------------------------
-def _section(node, key: str, default: dict, where: str) -> dict:
-    if not isinstance(node, dict):
-        raise UsageError(f"{where}: {key} must be a mapping with keys {', '.join(_FIXED[key])}")
-    bad = [k for k in node if k not in _FIXED[key]]
-    if bad:
-        raise UsageError(f"{where}: unknown key '{key}.{bad[0]}'; allowed: {', '.join(_FIXED[key])}")
-    return {**default, **node}
-
-
 def _dataclass_fields(which: str) -> dict:
     if which == "daa":
         from daa_sil.daa.config import DaaConfig as cls
@@ -261,34 +236,14 @@ def _latency(node, where: str) -> "str | None":
     return str(node)
 
 
-def _number(where: str, key: str, v, lo: float, hi: float, integer: bool = False) -> None:
-    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and lo <= v <= hi
-    if integer:
-        ok = ok and float(v).is_integer()
-    if not ok:
-        kind = "an integer" if integer else "a number"
-        raise UsageError(f"{where}: {key} must be {kind} within [{lo:g}, {hi:g}], got {v!r}")
-
-
 def _check(cfg: RunConfig, where: str) -> None:
-    """Values of the sections (ranges as on the command line); builds the objects they feed."""
+    """Values of the sections (each field's setting's range, as on the command line); builds the
+    objects they feed."""
     w = cfg.waitmap
     if not isinstance(w["source"], str) or not w["source"]:
         raise UsageError(f"{where}: waitmap.source must be a map preset, grid spec or directory, got {w['source']!r}")
-    if w["gamma"] is not None:
-        _number(where, "waitmap.gamma", w["gamma"], 1e-6, 0.999999)
-    for k, v in cfg.allocation.items():
-        if v is not None:
-            _number(where, f"allocation.{k}", v, *(WT_RANGE_S if k == "wt" else (0.0, 600.0)))
-    for k, v in cfg.link.items():
-        if v is not None:
-            _number(where, f"link.{k}", v, 0.0, 3600.0)
-    s = cfg.study
-    _number(where, "study.encounters", s["encounters"], 1, 10_000_000, integer=True)
-    _number(where, "study.seed", s["seed"], 0, 2**63 - 1, integer=True)
-    _number(where, "study.duration_s", s["duration_s"], 10.0, 3600.0)
-    _number(where, "study.intruders", s["intruders"], 1, 8, integer=True)
-    _number(where, "study.chunk_size", s["chunk_size"], 1, 10_000_000, integer=True)
+    for key in SECTIONS:
+        getattr(cfg, key).check(key, where)
     from daa_sil.config.readings import reading_for
 
     r = cfg.reading
@@ -309,7 +264,7 @@ def _check(cfg: RunConfig, where: str) -> None:
             raise UsageError(f"{where}: {what}: bad value ({exc})") from None
 
 
-def add_config_argument(p, default_help: str = "paper") -> None:
+def add_config_argument(p, default_help: str = PRESET.default) -> None:
     """The ``--config PRESET|FILE`` option of a command."""
     p.add_argument("--config", default=None, metavar="PRESET|FILE",
                    help=f"run configuration: a preset ({', '.join(PRESET_NAMES)}) or a YAML file "

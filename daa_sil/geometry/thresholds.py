@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
 
+from daa_sil.config.settings import PRESET
 from daa_sil.errors import UsageError
 from .units import FT, NMI
 
@@ -57,11 +58,12 @@ DAIDALUS = Thresholds(name="daidalus", dthr=0.66 * NMI, zthr=450.0 * FT, tthr=35
                       nmac_h=500.0 * FT, nmac_v=100.0 * FT)
 
 PRESETS: dict[str, Thresholds] = {"do365": DO365, "paper": PAPER, "daidalus": DAIDALUS}
-DEFAULT_PRESET = "do365"
+#: the preset a run flies when none is named (defined in :mod:`daa_sil.config.settings`)
+DEFAULT_PRESET = PRESET.default
 
 
 def get_thresholds(preset: "str | Thresholds | None" = None) -> Thresholds:
-    """Return the named preset (``do365`` when None); a Thresholds passes through unchanged."""
+    """Return the named preset (:data:`DEFAULT_PRESET`, ``paper``, when None); a Thresholds passes through unchanged."""
     if preset is None:
         return PRESETS[DEFAULT_PRESET]
     if isinstance(preset, Thresholds):

@@ -14,6 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
+from daa_sil.config.settings import DURATION
 from daa_sil.errors import UsageError
 from daa_sil.models.latency import BLOCK, DEFAULT_EPOCH_S, DelayModel, Trace
 from daa_sil.models.link_rule import LinkLegs
@@ -120,7 +121,7 @@ class BatchedDelay:
     """
 
     def __init__(self, model: DelayModel, seeds: Sequence, epoch_s: float = DEFAULT_EPOCH_S,
-                 duration_s: float = 240.0, t0: float = 0.0):
+                 duration_s: float = DURATION.default, t0: float = 0.0):
         if not (math.isfinite(epoch_s) and epoch_s > 0):
             raise UsageError(f"BatchedDelay needs epoch_s > 0 s, got {epoch_s!r}")
         if not (math.isfinite(duration_s) and duration_s >= 0):
@@ -166,7 +167,7 @@ def link_delay_processes(legs: LinkLegs, up_seed, down_seed, epoch_s: float = DE
 
 
 def batched_link_delays(legs: LinkLegs, up_seeds: Sequence, down_seeds: Sequence,
-                        epoch_s: float = DEFAULT_EPOCH_S, duration_s: float = 240.0,
+                        epoch_s: float = DEFAULT_EPOCH_S, duration_s: float = DURATION.default,
                         t0: float = 0.0) -> "tuple[BatchedDelay, BatchedDelay]":
     """``(uplink, downlink)`` :class:`BatchedDelay` of N encounters (fast-time); see
     :func:`link_delay_processes` for the streams. Row ``n`` equals its ``DelayProcess`` draw for draw."""

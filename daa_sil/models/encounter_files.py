@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from daa_sil.config.settings import DURATION
 from daa_sil.errors import FileFormatError
 from daa_sil.files import atomic_path
 from daa_sil.geometry.kinematics import AircraftState
@@ -104,5 +105,5 @@ def load_encounters(path: "str | os.PathLike") -> EncounterSet:
     params = {k: lst(f"p_{k}", m) for k in PARAM_NAMES}
     return EncounterSet(own=own, intr=intr, **segs, encounter_id=scalar("encounter_id", np.int64),
                         seed=scalar("seed", np.int64), params=params, root_seed=meta.get("root_seed"),
-                        duration_s=float(meta.get("duration_s", 240.0)), dt_s=float(meta.get("dt_s", 1.0)),
+                        duration_s=float(meta.get("duration_s", DURATION.default)), dt_s=float(meta.get("dt_s", 1.0)),
                         config=meta.get("config", {}))

@@ -57,6 +57,7 @@ from typing import Sequence
 
 import numpy as np
 
+from daa_sil.config.settings import DURATION, STANDARD_PRESET
 from daa_sil.errors import UsageError
 from daa_sil.geometry.frames import wrap_2pi
 from daa_sil.geometry.kinematics import AircraftState
@@ -81,7 +82,7 @@ class EncounterConfig:
     """Encounter-model parameters (paper Table 6 defaults). Speeds m/s, angles deg, times s."""
 
     n_intruders: int = 1
-    duration_s: float = 240.0
+    duration_s: float = DURATION.default
     dt_s: float = 1.0
     own_speed_mps: float = 55.0
     own_alt_m: float = 1500.0
@@ -96,7 +97,7 @@ class EncounterConfig:
     advance: tuple = (0.5, 0.5, 0.0, 0.8)
     t_cpa_s: float = 120.0
     max_turn_deg: float = 90.0
-    preset: str = "do365"
+    preset: str = STANDARD_PRESET.default
     warning_time_s: float = 25.0
     check_dt_s: float = 0.1
     cpa_tol_s: float = 1.0
@@ -153,7 +154,7 @@ class EncounterSet:
     seed: np.ndarray
     params: dict = field(default_factory=dict)
     root_seed: "int | None" = None
-    duration_s: float = 240.0
+    duration_s: float = DURATION.default
     dt_s: float = 1.0
     config: dict = field(default_factory=dict)
 

@@ -52,6 +52,7 @@ from typing import Sequence
 
 import numpy as np
 
+from daa_sil.config.settings import DELAY_EPOCH
 from daa_sil.errors import FileFormatError, UsageError
 
 #: the paper's round-trip latency range (s): "The round-trip latency duration can be in the range of
@@ -64,7 +65,7 @@ LEG_MIN_S = ROUND_TRIP_MIN_S / 2.0
 DELAY_MIN_S = ROUND_TRIP_MIN_S
 DELAY_MAX_S = ROUND_TRIP_MAX_S
 #: default epoch length of the piecewise-constant delay process (s)
-DEFAULT_EPOCH_S = 10.0
+DEFAULT_EPOCH_S = DELAY_EPOCH.default
 #: epochs (or packets) drawn per child seed; part of the reproducibility contract
 BLOCK = 256
 

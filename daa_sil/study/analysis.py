@@ -15,7 +15,7 @@ import numpy as np
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.study.metrics import (BASELINE_GROUP, CONF, PAPER_FLIGHT_HOURS, PAPER_MAX_PI, PI_SIGNIFICANT, Estimate,
                                   check_columns, as_columns, groups_of)
-from daa_sil.study.counting import COUNT_SOURCES, OPTIONAL_QUANTITIES, Reading, provenance_columns, normalise_decisions
+from daa_sil.study.counting import COUNT_SOURCES, OPTIONAL_QUANTITIES, CountingRules, provenance_columns, normalise_decisions
 from daa_sil.study.stats import (
     DEFAULT_REPLICATES,
     DEFAULT_SEED,
@@ -30,17 +30,17 @@ from daa_sil.study.stats import (
 class Study:
     """Encounter-level metrics of every group of one reading (see the module docstring).
 
-    ``enc`` the per-encounter table (Table or dict of arrays), ``reading`` a :class:`Reading`,
+    ``enc`` the per-encounter table (Table or dict of arrays), ``reading`` a :class:`CountingRules`,
     ``dec`` the per-decision table (optional; for decision provenance), ``replicates``/``seed`` of
     the bootstrap, ``conf`` the interval level, ``dt_s`` the simulation step (s; bounds the
     instances one encounter can count)."""
 
-    def __init__(self, enc, reading: "Reading | None" = None, *, dec=None, replicates: int = DEFAULT_REPLICATES,
+    def __init__(self, enc, reading: "CountingRules | None" = None, *, dec=None, replicates: int = DEFAULT_REPLICATES,
                  seed: int = DEFAULT_SEED, conf: float = CONF, baseline: str = BASELINE_GROUP, dt_s: float = 1.0):
         cols = enc if isinstance(enc, dict) else as_columns(enc)
         cols = {k: np.asarray(v) for k, v in cols.items()}
         check_columns(cols)
-        self.reading = reading if reading is not None else Reading()
+        self.reading = reading if reading is not None else CountingRules()
         self.conf = conf
         self.baseline = baseline
         if not (math.isfinite(dt_s) and dt_s > 0):

@@ -54,7 +54,7 @@ from daa_sil.config.groups import GroupSpec, parse_groups
 from daa_sil.study.campaign_files import (software_versions, check_out_dir, chunk_done, chunk_paths, chunk_problem,
                                          load_campaign_json, write_chunk)
 from daa_sil.study.executors import make_executor
-from daa_sil.study.campaign_files import CAMPAIGN_FORMAT
+from daa_sil.study.campaign_files import CAMPAIGN_FORMAT, ChunkResult
 from daa_sil.study.campaign_config import CampaignConfig
 from daa_sil.study.campaign_plan import DEFAULT_BATCH_ROWS, plan_batches
 
@@ -83,19 +83,6 @@ class BatchTask:
     config: CampaignConfig
     encounters: dict  # chunk -> EncounterSet subset for [lo, hi)
     seeds: dict  # chunk -> (n,) int64 per-encounter seeds
-
-
-@dataclass
-class ChunkResult:
-    """What a worker returns per unit: the two result tables of one chunk of one group and its
-    compute time (s; a batch's time shared by rows)."""
-
-    group: str
-    chunk: int
-    encounters: pa.Table
-    decisions: pa.Table
-    compute_s: float
-    n: int
 
 
 @functools.lru_cache(maxsize=4)

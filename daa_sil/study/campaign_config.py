@@ -11,21 +11,20 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from daa_sil.config.groups import GroupSpec, parse_groups
-from daa_sil.config.limits import WT_RANGE_S
+from daa_sil.config.policy import apply_overrides
+from daa_sil.config.readings import DEFAULT_READING
+from daa_sil.config.settings import (CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA, INTRUDERS, PRESET, PROJL_HORIZON, SEED,
+                                     WAIT_THRESHOLD)
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.geometry.thresholds import PRESETS
-from daa_sil.waitmap.build import DEFAULT_MAP
+from daa_sil.waitmap.source import DEFAULT_MAP
 
-#: default encounter duration T (s) and step dt (s), paper §IV
-DEFAULT_DURATION_S = 240.0
-
-
+#: default step dt (s), paper §IV (the duration T: :data:`daa_sil.config.settings.DURATION`)
 DEFAULT_DT_S = 1.0
 
 
-#: encounters per task: the per-step numpy overhead is paid once per chunk, so bigger chunks are
-#: faster (500 -> 2000 about 1.9x per core); one 2000-encounter chunk peaks at about 0.2 GB RSS
-DEFAULT_CHUNK = 2000
+#: encounters per task (:data:`daa_sil.config.settings.CHUNK_SIZE`, which says why 2000)
+DEFAULT_CHUNK = CHUNK_SIZE.default
 
 
 @dataclass(frozen=True)
@@ -40,19 +39,19 @@ class CampaignConfig:
     """
 
     groups: tuple = field(default_factory=lambda: parse_groups(None))
-    n_encounters: int = 10_000
-    seed: int = 0
+    n_encounters: int = ENCOUNTERS.default
+    seed: int = SEED.default
     chunk_size: int = DEFAULT_CHUNK
-    preset: str = "paper"
-    duration_s: float = DEFAULT_DURATION_S
+    preset: str = PRESET.default
+    duration_s: float = DURATION.default
     dt_s: float = DEFAULT_DT_S
     waitmap: str = DEFAULT_MAP
     gamma: "float | None" = None
     wt: "float | None" = None
     projl_lookahead: "float | None" = None
     latency: "str | None" = None
-    n_intruders: int = 1
-    reading: str = "paper"  #: a named reading of :mod:`daa_sil.config.readings` (old names accepted)
+    n_intruders: int = INTRUDERS.default
+    reading: str = DEFAULT_READING  #: a named reading of :mod:`daa_sil.config.readings` (old names accepted)
     reading_set: dict = field(default_factory=dict)  #: overrides of the reading's settings
     daa: dict = field(default_factory=dict)  #: DaaConfig field changes on top of the preset's
     pilot: dict = field(default_factory=dict)  #: PilotConfig field changes (the reading's then apply)
@@ -88,8 +87,8 @@ class CampaignConfig:
             raise UsageError(f"duration must be > 0 s, got {self.duration_s!r}")
         if not (math.isfinite(self.dt_s) and self.dt_s > 0):
             raise UsageError(f"dt must be > 0 s, got {self.dt_s!r}")
-        for name, val, lo, hi in (("--wt", self.wt, *WT_RANGE_S), ("--projl-lookahead", self.projl_lookahead, 0.0, 600.0),
-                                  ("--gamma", self.gamma, 1e-6, 0.999999)):
+        for name, val, lo, hi in (("--wt", self.wt, *WAIT_THRESHOLD.range), ("--projl-lookahead", self.projl_lookahead, *PROJL_HORIZON.range),
+                                  ("--gamma", self.gamma, *GAMMA.range)):
             if val is not None and not (isinstance(val, (int, float)) and math.isfinite(val) and lo <= val <= hi):
                 raise UsageError(f"{name} must be within [{lo:g}, {hi:g}], got {val!r}")
         if self.latency is not None:
@@ -110,7 +109,7 @@ class CampaignConfig:
             raise UsageError(f"reading {r.name!r} sets the wait maps to {r.waitmap!r}; to read {self.waitmap!r} "
                              f"instead, set the reading's grid (--reading-set waitmap={self.waitmap})")
         if self.uses_map:
-            from daa_sil.waitmap.build import check_source
+            from daa_sil.waitmap.source import check_source
 
             check_source(self.map_source, self.preset, self.gamma)
         return self
@@ -134,21 +133,16 @@ class CampaignConfig:
     @property
     def effective_groups(self) -> tuple[GroupSpec, ...]:
         """The groups with the campaign's overrides applied (what is flown)."""
+        latency = None
+        if self.latency is not None:
+            from daa_sil.models.latency import parse_delay_spec
+
+            latency = parse_delay_spec(self.latency).to_dict()
+        rule = self.effective_reading.wait_rule
         out = []
         for g in self.groups:
-            ch: dict = {}
-            if self.wt is not None and g.wait_mode != "none":
-                ch["wait_threshold_s"] = float(self.wt)
-            if self.projl_lookahead is not None:
-                ch["projl_horizon_s"] = float(self.projl_lookahead)
-            if self.latency is not None:
-                from daa_sil.models.latency import parse_delay_spec
-
-                ch["latency"] = parse_delay_spec(self.latency).to_dict()
-            rule = self.effective_reading.wait_rule
-            if rule is not None and g.wait_mode != "none" and rule != g.wait_rule:
-                ch["wait_rule"] = rule
-            out.append(g.with_(**ch) if ch else g)
+            g = apply_overrides(g, wt=self.wt, projl_lookahead=self.projl_lookahead, wait_rule=rule)
+            out.append(g.with_(latency=dict(latency)) if latency is not None else g)
         return tuple(out)
 
     def link_legs(self, name: str):
@@ -159,8 +153,13 @@ class CampaignConfig:
         return link_legs(self.group(name).delay_model(), self.effective_reading.latency)
 
     def group(self, name: str) -> GroupSpec:
-        """The effective definition of one of the campaign's groups."""
-        for g in self.effective_groups:
+        """The effective definition of one of the campaign's groups (what ``campaign.json`` records)."""
+        self.given_group(name)
+        return next(g for g in self.effective_groups if g.name == name)
+
+    def given_group(self, name: str) -> GroupSpec:
+        """One of the campaign's groups as given, before the campaign's overrides."""
+        for g in self.groups:
             if g.name == name:
                 return g
         raise UsageError(f"group {name!r} is not part of this campaign ({', '.join(self.group_names)})")
@@ -191,10 +190,15 @@ class CampaignConfig:
         return self.effective_reading.pilot_config(PilotConfig(**self.pilot))
 
     def policy(self, name: str):
-        """The agent's :class:`~daa_sil.agent.AllocationPolicy` of group ``name`` (with :attr:`link`)."""
-        pol = self.group(name).policy()
-        changes = {**self.effective_reading.policy_overrides(), **self.link}
-        changes.pop("wait_rule", None)  # applied to the group definition (effective_groups)
+        """The agent's :class:`~daa_sil.config.policy.AllocationPolicy` of group ``name``: the group as
+        given with the campaign's overrides (:func:`~daa_sil.config.policy.apply_overrides`, the rule
+        :attr:`effective_groups` records) and :attr:`link`. W_T thus travels ``--wt`` ->
+        :attr:`wt` -> the policy, two objects."""
+        reading = self.effective_reading
+        pol = apply_overrides(self.given_group(name).policy(), wt=self.wt, projl_lookahead=self.projl_lookahead,
+                              wait_rule=reading.wait_rule)
+        changes = {**reading.policy_overrides(), **self.link}
+        changes.pop("wait_rule", None)  # applied above, to groups that wait
         return replace(pol, **changes) if changes else pol
 
     def to_dict(self) -> dict:
@@ -220,6 +224,20 @@ class CampaignConfig:
         return {"thresholds": asdict(get_thresholds(self.preset)), "daa": daa, "pilot": plain(self.pilot_config()),
                 "policies": {g.name: plain(self.policy(g.name)) for g in self.groups},
                 "reading": self.effective_reading.to_dict()}
+
+    @classmethod
+    def from_run_config(cls, run) -> "CampaignConfig":
+        """The campaign a :class:`~daa_sil.config.run_config.RunConfig` describes (built here, in study,
+        so that config/ never imports study)."""
+        s = run.study
+        return cls(groups=parse_groups(list(run.groups)), n_encounters=int(s["encounters"]),
+                   seed=int(s["seed"]), chunk_size=int(s["chunk_size"]), preset=run.thresholds,
+                   duration_s=float(s["duration_s"]), waitmap=str(run.waitmap["source"]),
+                   gamma=run.waitmap["gamma"], wt=run.allocation["wt"],
+                   projl_lookahead=run.allocation["projl_lookahead"], latency=run.latency,
+                   n_intruders=int(s["intruders"]), reading=str(run.reading["name"]),
+                   reading_set=dict(run.reading["set"]), daa=dict(run.daa), pilot=dict(run.pilot),
+                   link={k: v for k, v in run.link.items() if v is not None})
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "campaign.json") -> "CampaignConfig":

@@ -10,7 +10,8 @@ import os
 import platform
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 import pyarrow as pa
@@ -19,9 +20,6 @@ import pyarrow.parquet as pq
 from daa_sil import __version__
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.files import atomic_write_bytes, atomic_write_text
-
-if TYPE_CHECKING:
-    from daa_sil.study.campaign import ChunkResult
 
 #: campaign.json format version
 CAMPAIGN_FORMAT = 1
@@ -96,6 +94,19 @@ def _table_bytes(table: pa.Table) -> bytes:
     buf = pa.BufferOutputStream()
     pq.write_table(table, buf, compression="zstd")
     return buf.getvalue().to_pybytes()
+
+
+@dataclass
+class ChunkResult:
+    """What a worker returns per unit: the two result tables of one chunk of one group and its
+    compute time (s; a batch's time shared by rows)."""
+
+    group: str
+    chunk: int
+    encounters: pa.Table
+    decisions: pa.Table
+    compute_s: float
+    n: int
 
 
 def write_chunk(out_dir: Path, res: ChunkResult) -> None:

@@ -88,8 +88,9 @@ OPTIONAL_QUANTITIES = ("blend_intent", "stale", "link_lost")
 
 
 @dataclass(frozen=True)
-class Reading:
-    """One named reading of the paper: its ``name``, its ``settings`` (``config.readings``; the
+class CountingRules:
+    """How one named reading of the paper counts (not :class:`daa_sil.config.readings.Reading`, the
+    reading's full bundle of settings, which also drives the simulation): its ``name``, its ``settings`` (``config.readings``; the
     counting keys of :data:`COUNTING_DEFAULTS` are used here, the rest is recorded) and where its
     results come from (``source``)."""
 

@@ -58,7 +58,8 @@ import pyarrow as pa
 
 from daa_sil import steplog as sl
 from daa_sil.agent import PilotInput, make_wait_lookup
-from daa_sil.allocation import AllocationPolicy, PolicyRows
+from daa_sil.allocation import PolicyRows
+from daa_sil.config.policy import AllocationPolicy
 from daa_sil.daa.config import DaaConfig
 from daa_sil.errors import UsageError
 from daa_sil.geometry.kinematics import AircraftState, Command

@@ -10,7 +10,7 @@ from typing import Sequence
 import numpy as np
 import pyarrow as pa
 
-from daa_sil.agent import (BY_BOTH, BY_MAP, BY_PROJL, CODE_NAMES, D_BLEND, D_DAA_OVERRIDE, D_LINK_LOST,
+from daa_sil.decision import (BY_BOTH, BY_MAP, BY_PROJL, CODE_NAMES, D_BLEND, D_DAA_OVERRIDE, D_LINK_LOST,
     D_NO_WAIT, D_PILOT, D_STALE, D_WAIT)
 from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.onboard import StepOutput

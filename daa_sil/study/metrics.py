@@ -31,7 +31,7 @@ Every metric is a function of per-encounter sums (:data:`METRICS`):
 Changes vs the baseline group (B-2) and between any two groups are ratios/differences of the same
 resampled sums (paired). Zeros get exact upper bounds (:func:`daa_sil.study.stats.zero_upper_bounds`).
 
-**Readings** (:class:`Reading`): a campaign directory is one named reading of the paper
+**Readings** (:class:`~daa_sil.study.counting.CountingRules`): a campaign directory is one named reading of the paper
 (``campaign.json`` ``config.reading`` / ``config.readings``, missing = ``default``). What a reading
 changes in the simulation is the campaign's business; what it changes in *counting* is here, as
 data: :data:`COUNT_SOURCES` maps each counted quantity and the values of the counting settings it

@@ -11,7 +11,7 @@ from typing import Sequence
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.study.counting import (
     DECISION_COLUMNS,
-    Reading,
+    CountingRules,
     counting_options,
 )
 from daa_sil.study.metrics import (
@@ -90,7 +90,7 @@ class Block:
     """One column block of the report: a reading and its results."""
 
     label: str
-    reading: Reading
+    reading: CountingRules
     enc: dict
     dec: object = None
     meta: "dict | None" = None
@@ -129,7 +129,7 @@ def load_block(src) -> Block:
     enc = load_results(src)
     if not enc or len(next(iter(enc.values()))) == 0:
         raise FileFormatError(f"{src if isinstance(src, (str, os.PathLike)) else 'results'}: no encounters")
-    return Block(name, Reading(name, dict(settings), source), enc, dec, meta)
+    return Block(name, CountingRules(name, dict(settings), source), enc, dec, meta)
 
 
 def parse_recount(text: str) -> tuple[str, dict]:
@@ -172,7 +172,7 @@ def build_blocks(sources, recount: Sequence[str] = ()) -> list[Block]:
                 continue
             how = ", ".join(f"{k}={v}" for k, v in settings.items())
             st["description"] = f"{b.reading.settings.get('description', b.reading.name)}; recounted with {how}"
-            derived.append(replace(b, label=f"{b.label}+{name}", reading=Reading(f"{b.reading.name}+{name}", st,
+            derived.append(replace(b, label=f"{b.label}+{name}", reading=CountingRules(f"{b.reading.name}+{name}", st,
                                                                               b.reading.source)))
     return unique_labels(blocks + derived)
 

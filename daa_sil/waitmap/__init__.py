@@ -30,8 +30,8 @@ API::
     res.wait_s, res.p_lowc, res.evade, res.in_box, res.map_turn_deg
 """
 
-from .build import (DEFAULT_MAP, MAP_PRESETS, build_family, build_map, build_members, default_family, describe,
-                    family_for, is_cached, map_params)
+from .build import build_family, build_map, build_members
+from .source import DEFAULT_MAP, MAP_PRESETS, default_family, describe, family_for, is_cached, map_params
 from .cache import cache_dir
 from .grid import GRID_PRESETS, Axis, Grid, alerting_grid, fine_grid, paper_grid, resolve_grid
 from .lookup import LookupResult, WaitMap, WaitMapFamily

@@ -29,6 +29,7 @@ from ..files import remove_stale_temps
 from .grid import Grid
 from .lookup import WaitMapFamily
 from .model import MdpParams, params_hash
+from .build import build_members
 from .store import FAMILY_INDEX, check_family, load, load_family, map_filename, read_meta, write_family_index
 
 
@@ -84,7 +85,6 @@ def cached_family(grid: Grid, params: MdpParams, turn_rates: Sequence[float],
         elif kept:
             warn(f"wait-map cache entry {entry} was left by an interrupted build: keeping its {len(kept)} "
                  f"finished maps, building the other {len(todo)}")
-        from .build import build_members
 
         build_members(grid, params, todo, entry, workers=workers, progress=progress)
         members = [(r, entry / map_filename(r), read_meta(entry / map_filename(r))["content_hash"]) for r in rates]

@@ -169,6 +169,12 @@ def outcomes(params: MdpParams, turn_rate_deg: float) -> Outcome:
                    prob=np.concatenate([hp.ravel(), vp]))
 
 
+#: the wait-map file format (:mod:`daa_sil.waitmap.store` writes and checks it); part of every
+#: settings hash, so a format change invalidates cached maps. Defined here, below the store, because
+#: the hash needs it.
+FORMAT_VERSION = "daa-sil-waitmap/2"
+
+
 def params_hash(grid_dict: dict, params: MdpParams, turn_rates) -> str:
     """Content hash (hex) of everything that determines a family of maps."""
     return settings_hash(grid_dict["axes"], params.to_dict(), turn_rates)
@@ -177,8 +183,6 @@ def params_hash(grid_dict: dict, params: MdpParams, turn_rates) -> str:
 def settings_hash(grid_axes, params_dict: dict, turn_rates) -> str:
     """:func:`params_hash` from the plain forms a map file's metadata stores (``grid.axes``,
     ``params``), so that a family index can be checked against its maps' metadata."""
-    from .store import FORMAT_VERSION
-
     blob = json.dumps({"grid": grid_axes, "params": params_dict,
                        "turn_rates": [float(t) for t in turn_rates], "format": FORMAT_VERSION},
                       sort_keys=True)

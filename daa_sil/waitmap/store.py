@@ -34,9 +34,8 @@ from ..errors import FileFormatError, UsageError
 from daa_sil.files import atomic_path, atomic_write_json, to_jsonable
 from .grid import grid_from_dict
 from .lookup import WaitMap, WaitMapFamily
-from .model import MdpParams, settings_hash
+from .model import FORMAT_VERSION, MdpParams, settings_hash
 
-FORMAT_VERSION = "daa-sil-waitmap/2"
 ARRAYS = ("wait_s", "p_lowc", "t_lowc", "q_wait", "lowc")
 FAMILY_INDEX = "family.json"
 #: first bytes of a zip archive (an .npz is one); anything else is not a wait map

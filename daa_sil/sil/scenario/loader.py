@@ -14,7 +14,8 @@ from typing import Callable
 
 import yaml
 
-from daa_sil.config.limits import WT_RANGE_S
+from daa_sil.config.settings import (CONSTANT_WAIT, DELAY_EPOCH, DURATION, LINK_TIMEOUT, SCENARIO_GROUP, SCENARIO_LINK,
+                                     STANDARD_PRESET, STALE_COMMAND, WAIT_THRESHOLD)
 from daa_sil.config.yaml_input import compose_yaml, read_yaml_text
 
 from daa_sil.errors import FileFormatError, UsageError
@@ -190,10 +191,10 @@ def _link(v: _V, node, path, dur) -> LinkSpec:
     m = v.mapping(node, path, set(), {"up", "down", "round_trip", "epoch_s", "loss", "outages", "dup", "reorder"})
     if "round_trip" in m and ("up" in m or "down" in m):
         v.fail(m["round_trip"], f"{path}.round_trip", "give either round_trip or up/down, not both")
-    ls = LinkSpec(up=_delay(v, m["up"], f"{path}.up") if "up" in m else (None if "round_trip" in m else "const:4"),
+    ls = LinkSpec(up=_delay(v, m["up"], f"{path}.up") if "up" in m else (None if "round_trip" in m else SCENARIO_LINK.default),
                   down=_delay(v, m["down"], f"{path}.down") if "down" in m else None,
                   round_trip=_delay(v, m["round_trip"], f"{path}.round_trip") if "round_trip" in m else None,
-                  epoch_s=v.opt(m, "epoch_s", path, v.number, 10.0, lo=0, hi=600),
+                  epoch_s=v.opt(m, "epoch_s", path, v.number, DELAY_EPOCH.default, lo=DELAY_EPOCH.lo, hi=DELAY_EPOCH.hi),
                   loss=v.opt(m, "loss", path, v.number, 0.0, lo=0, hi=1, hi_open=True),
                   dup=v.opt(m, "dup", path, v.number, 0.0, lo=0, hi=1, hi_open=True),
                   reorder=v.opt(m, "reorder", path, v.number, 0.0, lo=0, hi=1, hi_open=True))
@@ -246,23 +247,24 @@ def _pilot(v: _V, node, path, dur) -> PilotSpec:
 
 
 def _allocation(v: _V, node, path) -> AllocationSpec:
-    from daa_sil.agent import WAIT_MODES
+    from daa_sil.config.policy import WAIT_MODES
     from daa_sil.config.groups import group_spec, group_table
 
     m = v.mapping(node, path, set(), {"group", "wait", "wait_constant_s", "blending", "wait_threshold_s", "projl",
                                       "link_timeout_s", "stale_command_s"})
-    group = v.opt(m, "group", path, v.string, "ID-1", choices=tuple(group_table()))
+    group = v.opt(m, "group", path, v.string, SCENARIO_GROUP.default, choices=tuple(group_table()))
     g = group_spec(group).policy()
     return AllocationSpec(
         group=group,
         wait=v.opt(m, "wait", path, v.string, g.wait_mode, choices=WAIT_MODES),
-        wait_constant_s=v.opt(m, "wait_constant_s", path, v.number, g.constant_wait_s, lo=0, hi=120),
+        wait_constant_s=v.opt(m, "wait_constant_s", path, v.number, g.constant_wait_s, lo=CONSTANT_WAIT.lo,
+                              hi=CONSTANT_WAIT.hi),
         blending=v.opt(m, "blending", path, v.boolean, g.blending),
-        wait_threshold_s=v.opt(m, "wait_threshold_s", path, v.number, g.wait_threshold_s, lo=WT_RANGE_S[0],
-                               hi=WT_RANGE_S[1]),
+        wait_threshold_s=v.opt(m, "wait_threshold_s", path, v.number, g.wait_threshold_s, lo=WAIT_THRESHOLD.lo,
+                               hi=WAIT_THRESHOLD.hi),
         projl=v.opt(m, "projl", path, v.boolean, g.projl),
-        link_timeout_s=v.opt(m, "link_timeout_s", path, v.number, None, lo=0, hi=120, lo_open=True),
-        stale_command_s=v.opt(m, "stale_command_s", path, v.number, None, lo=0, hi=120, lo_open=True))
+        link_timeout_s=v.opt(m, "link_timeout_s", path, v.number, None, lo=LINK_TIMEOUT.lo, hi=LINK_TIMEOUT.hi),
+        stale_command_s=v.opt(m, "stale_command_s", path, v.number, None, lo=STALE_COMMAND.lo, hi=STALE_COMMAND.hi))
 
 
 def _expect(v: _V, node, path, dur) -> Expectation:
@@ -304,13 +306,13 @@ TOP_OPTIONAL = {"description", "seed", "duration_s", "thresholds", "origin", "li
 
 def _scenario(v: _V, root) -> Scenario:
     m = v.mapping(root, "", TOP_REQUIRED, TOP_OPTIONAL)
-    dur = v.opt(m, "duration_s", "", v.number, 240.0, lo=1, hi=3600)
+    dur = v.opt(m, "duration_s", "", v.number, DURATION.default, lo=DURATION.lo, hi=DURATION.hi)
     sc = Scenario(
         name=v.opt(m, "name", "", v.string, maxlen=64),
         description=v.opt(m, "description", "", v.string, ""),
         seed=v.opt(m, "seed", "", v.integer, 1, lo=0, hi=2 ** 63 - 1),
         duration_s=dur,
-        thresholds=v.opt(m, "thresholds", "", v.string, "do365", choices=("do365", "paper", "daidalus")),
+        thresholds=v.opt(m, "thresholds", "", v.string, STANDARD_PRESET.default, choices=("do365", "paper", "daidalus")),
         ownship=_state(v, m["ownship"], "ownship", dur),
         intruders=[_intruder(v, n, f"intruders[{i}]", i, dur)
                    for i, n in enumerate(v.seq(m["intruders"], "intruders", 1, MAX_INTRUDERS))],

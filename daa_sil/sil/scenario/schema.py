@@ -12,7 +12,7 @@ Schema (``*`` = required; defaults in brackets)::
     name*: str                      short identifier (used in result files)
     description: str                [""]
     seed: int >= 0                  [1]     root of every random stream (pilot, link up/down)
-    duration_s: float (0, 3600]     [240]   sim length; steps are dt = 1 s
+    duration_s: float [1, 3600]     [240]   sim length; steps are dt = 1 s
     thresholds: do365 | paper | daidalus   [do365] well-clear / NMAC / DAA preset
     origin:                                 geodetic reference of the ENU frame (MAVLink output)
       lat_deg: [-80, 80]            [37.4]
@@ -70,8 +70,8 @@ Schema (``*`` = required; defaults in brackets)::
       blending: bool                  [from group]
       projl: bool                     [from group]  ProjL veto
       wait_threshold_s: [0, 120]      [from group]  W_T
-      link_timeout_s: (0, 120]        [agent default]
-      stale_command_s: (0, 120]       [agent default]
+      link_timeout_s: [1, 120]        [agent default, 20]
+      stale_command_s: [1, 120]       [agent default, 15]
     expect:                                   checked by ``daa-sil run`` (exit 1 if violated)
       lowc: bool                      LoWC must (true) / must not (false) occur
       nmac: bool
@@ -89,6 +89,9 @@ Schema (``*`` = required; defaults in brackets)::
                                               a fault that could not be carried out fails the run.
 
 Decision names: none, wait, no_wait, pilot, blend, daa_override, daa, stale, link_lost.
+
+The defaults and ranges shown for ``duration_s``, ``thresholds``, ``link.up``, ``link.epoch_s`` and the
+allocation keys are those of :mod:`daa_sil.config.settings`, which the loader and the dataclasses read.
 """
 
 from __future__ import annotations
@@ -96,6 +99,9 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
+
+from daa_sil.config.settings import (CONSTANT_WAIT, DELAY_EPOCH, DURATION, SCENARIO_GROUP, SCENARIO_LINK,
+                                     STANDARD_PRESET, WAIT_THRESHOLD)
 
 DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
 PILOT_RESPONSES = ("deterministic", "fixed", "guendel", "no_atc", "nasa_rayleigh5")
@@ -168,10 +174,10 @@ class Outage:
 class LinkSpec:
     """Delay specs are kept as given (str or dict); :func:`delay_model` builds the model."""
 
-    up: Any = "const:4"
+    up: Any = SCENARIO_LINK.default
     down: Any = None
     round_trip: Any = None  #: instead of up/down: the round trip, split evenly between the links
-    epoch_s: float = 10.0
+    epoch_s: float = DELAY_EPOCH.field()
     loss: float = 0.0
     outages: list = field(default_factory=list)
     dup: float = 0.0
@@ -202,11 +208,11 @@ class PilotSpec:
 
 @dataclass
 class AllocationSpec:
-    group: str = "ID-1"
+    group: str = SCENARIO_GROUP.default
     wait: str = "map"
-    wait_constant_s: float = 5.0
+    wait_constant_s: float = CONSTANT_WAIT.default
     blending: bool = True
-    wait_threshold_s: float = 4.0
+    wait_threshold_s: float = WAIT_THRESHOLD.field()
     projl: bool = True
     link_timeout_s: "float | None" = None
     stale_command_s: "float | None" = None
@@ -248,8 +254,8 @@ class Scenario:
     intruders: list
     description: str = ""
     seed: int = 1
-    duration_s: float = 240.0
-    thresholds: str = "do365"
+    duration_s: float = DURATION.field()
+    thresholds: str = STANDARD_PRESET.default
     origin: Origin = field(default_factory=Origin)
     link: LinkSpec = field(default_factory=LinkSpec)
     pilot: PilotSpec = field(default_factory=PilotSpec)

@@ -1,0 +1,77 @@
+"""One experimental group's allocation settings (:class:`AllocationPolicy`): what the agent
+(:func:`daa_sil.agent.agent_step`) reads per row. It sits in config/ because the group table
+(:mod:`daa_sil.config.groups`) builds it and the agent reads it: both import it from here, downward.
+Defaults and ranges of its numeric fields are the :mod:`daa_sil.config.settings` ones."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Mapping, TypeVar
+
+from daa_sil.config.choices import AGENT_ACTIVE, UNSAFE_HOLDS, WAIT_RULES
+from daa_sil.config.settings import CONSTANT_WAIT, LINK_TIMEOUT, PROJL_HORIZON, STALE_COMMAND, WAIT_THRESHOLD
+from daa_sil.errors import UsageError
+
+WAIT_MODES = ("none", "constant", "map", "always")
+
+
+@dataclass(frozen=True)
+class AllocationPolicy:
+    """One experimental group's allocation settings (groups are data, not code paths: see
+    :mod:`daa_sil.config.groups`). Times in s."""
+
+    wait_mode: str  #: :data:`WAIT_MODES`: none (w = 0, always DAA), constant, map, always (w = inf)
+    constant_wait_s: float = CONSTANT_WAIT.field()
+    wait_threshold_s: float = WAIT_THRESHOLD.field()  #: W_T
+    projl: bool = True  #: ProjL veto on (the paper) or off (the map alone decides)
+    projl_horizon_s: float = PROJL_HORIZON.field()  #: the paper's N
+    blending: bool = True  #: False = baseline: unsafe pilot command -> DAA override
+    stale_command_s: float = STALE_COMMAND.field()
+    link_timeout_s: float = LINK_TIMEOUT.field()
+    wait_rule: str = "threshold"  #: :data:`WAIT_RULES`: w(S(k)) >= W_T every step, or a countdown budget
+    name: str = "custom"
+    #: :data:`UNSAFE_HOLDS`: an unsafe fresh "hold" is blended / overridden like any command (``blend``)
+    #: or decided as if no command had arrived (``no-command``)
+    unsafe_hold: str = "blend"
+    #: :data:`AGENT_ACTIVE`: the agent decides from the corrective alert (``corrective``) or over the
+    #: whole encounter, from its start until safe avoidance (``encounter``)
+    active_from: str = "corrective"
+    #: False = the agent never takes authority: the pilot's last command is always flown, the
+    #: decision is always ``none`` (alert levels are still computed); the SIL's ``DAA_ENABLE 0``
+    enabled: bool = True
+
+    def __post_init__(self):
+        if self.wait_mode not in WAIT_MODES:
+            raise UsageError(f"wait_mode must be one of {', '.join(WAIT_MODES)}, got {self.wait_mode!r}")
+        if self.wait_rule not in WAIT_RULES:
+            raise UsageError(f"wait_rule must be one of {', '.join(WAIT_RULES)}, got {self.wait_rule!r}")
+        if self.unsafe_hold not in UNSAFE_HOLDS:
+            raise UsageError(f"unsafe_hold must be one of {', '.join(UNSAFE_HOLDS)}, got {self.unsafe_hold!r}")
+        if self.active_from not in AGENT_ACTIVE:
+            raise UsageError(f"active_from must be one of {', '.join(AGENT_ACTIVE)}, got {self.active_from!r}")
+
+
+T = TypeVar("T")
+
+
+def apply_overrides(target: T, *, wt: "float | None" = None, projl_lookahead: "float | None" = None,
+                    wait_rule: "str | None" = None, link: "Mapping | None" = None) -> T:
+    """``target`` (a :class:`~daa_sil.config.groups.GroupSpec` or an :class:`AllocationPolicy`) with a
+    run's overrides: the one rule fast-time (``CampaignConfig.effective_groups``) and the vehicle
+    (``vehicle.core.build_onboard``) share. ``wt`` (W_T, s) applies to a group with a wait function
+    only, ``projl_lookahead`` (N, s) to every group, ``wait_rule`` (a reading's) to a group that
+    waits, ``link`` (``stale_command_s`` / ``link_timeout_s``, s) as given. None = keep the group's."""
+    changes: dict = {}
+    waits = target.wait_mode != "none"
+    if link:
+        changes.update(link)
+    if wt is not None and waits:
+        changes["wait_threshold_s"] = float(wt)
+    if projl_lookahead is not None:
+        changes["projl_horizon_s"] = float(projl_lookahead)
+    if wait_rule is not None and waits and wait_rule != target.wait_rule:
+        changes["wait_rule"] = wait_rule
+    return replace(target, **changes) if changes else target
+
+
+__all__ = ["AllocationPolicy", "WAIT_MODES", "apply_overrides"]

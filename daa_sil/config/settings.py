@@ -1,0 +1,141 @@
+"""Every setting that more than one input reads, defined once: its default, its allowed range, its
+unit and its help.
+
+A :class:`Setting` is a value, not a parser. The inputs read it:
+
+* a dataclass field takes its default from it (:meth:`Setting.field`, which also records the
+  setting in the field's metadata, so ``config show --full`` and the docs can list it);
+* a command-line flag takes its range and help (:meth:`Setting.flag_help`, :attr:`Setting.range`);
+* a YAML key (scenario, group file, run configuration) and a MAVLink parameter check the same range
+  (:meth:`Setting.check`, :meth:`Setting.contains`).
+
+This module imports nothing of ours but :mod:`daa_sil.errors`, so any layer may read it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from daa_sil.errors import UsageError
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One setting: ``name`` (the field / YAML key), ``default``, the closed range ``[lo, hi]`` in
+    ``unit`` (None = not a number), and a one-sentence ``help``."""
+
+    name: str
+    default: Any
+    unit: str = ""
+    lo: "float | None" = None
+    hi: "float | None" = None
+    help: str = ""
+
+    @property
+    def range(self) -> tuple[float, float]:
+        """``(lo, hi)``, both inclusive."""
+        if self.lo is None or self.hi is None:
+            raise TypeError(f"setting {self.name} has no numeric range")
+        return (self.lo, self.hi) if self.integer else (float(self.lo), float(self.hi))
+
+    def contains(self, value: Any) -> bool:
+        """True when ``value`` is a finite number (not a bool) within the range (a whole one for a count)."""
+        lo, hi = self.range
+        ok = (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+              and lo <= value <= hi)
+        return ok and (not self.integer or float(value).is_integer())
+
+    def check(self, value: Any, where: str = "", key: "str | None" = None) -> float:
+        """``value`` as a float, or a one-line :class:`UsageError` naming ``where`` and ``key``."""
+        if not self.contains(value):
+            at = f"{where}: " if where else ""
+            lo, hi = self.range
+            kind = "an integer" if self.integer else "a number"
+            raise UsageError(f"{at}{key or self.name} must be {kind} within [{lo:g}, {hi:g}], got {value!r}")
+        return int(value) if self.integer else float(value)
+
+    def field(self, **kw) -> Any:
+        """A dataclass field with this default, the setting in its metadata (``metadata["setting"]``)."""
+        return dataclasses.field(default=self.default, metadata={"setting": self}, **kw)
+
+    def override_field(self) -> Any:
+        """A dataclass field that overrides this setting: default None (keep each group's), the
+        setting (its range, help) in the metadata."""
+        return dataclasses.field(default=None, metadata={"setting": self})
+
+    @property
+    def integer(self) -> bool:
+        """True for a count (the default is an int)."""
+        return isinstance(self.default, int) and not isinstance(self.default, bool)
+
+    def flag_help(self, what: str = "") -> str:
+        """Help text of a command-line flag: the help (or ``what``), unit, range and default."""
+        unit = f", {self.unit}" if self.unit else ""
+        rng = f" within [{self.lo:g}, {self.hi:g}]" if self.lo is not None and self.hi is not None else ""
+        return f"{what or self.help}{unit}{rng} (default {self.default})"
+
+
+#: W_T, the wait threshold of paper Eq. 11. 120 s loses nothing: the largest W_T the study sweeps is
+#: 16 s, and no map value exceeds its horizon (60 s for the paper grid, 120 s for the alerting grid),
+#: so a larger W_T could never be met and would mean "never wait".
+WAIT_THRESHOLD = Setting("wait_threshold_s", 4.0, "s", 0.0, 120.0,
+                         "W_T: the agent waits only while the wait function w(S) >= W_T")
+#: N, the ProjL look-ahead: 25 s is the DO-365 warning alerting time, a LoWC predicted that soon leaves
+#: no time to wait for a command delayed by up to 10 s plus a 5-10 s maneuver
+PROJL_HORIZON = Setting("projl_horizon_s", 25.0, "s", 0.0, 120.0,
+                        "ProjL look-ahead N: no wait while a LoWC is projected within N")
+#: the wait of the ``constant`` wait function (IC-1); capped like W_T, above which it means "always"
+CONSTANT_WAIT = Setting("constant_wait_s", 5.0, "s", 0.0, 120.0, "the constant wait function's value w")
+#: the agent's stale-command limit and link-lost timeout (by a command's send time / the last packet).
+#: At least one sim step: the GCS sends at most once per step, so a shorter link timeout declares
+#: the link lost between any two packets, and a shorter stale limit makes every command stale.
+STALE_COMMAND = Setting("stale_command_s", 15.0, "s", 1.0, 120.0, "a pilot command older than this is never flown")
+LINK_TIMEOUT = Setting("link_timeout_s", 20.0, "s", 1.0, 120.0, "no packet from the GCS for this long: link lost")
+#: a link delay process keeps one drawn delay for an epoch (0 = a draw per datagram)
+DELAY_EPOCH = Setting("epoch_s", 10.0, "s", 0.0, 600.0, "delay epoch: one drawn delay holds this long (0 = per datagram)")
+#: the encounter length T (paper Sec. IV); the closest point of approach is at T/2
+DURATION = Setting("duration_s", 240.0, "s", 1.0, 3600.0, "encounter length T (CPA at T/2)")
+#: a campaign's size and seeds (``study`` section, ``campaign run`` flags)
+ENCOUNTERS = Setting("encounters", 10_000, "", 1, 10_000_000, "encounters per group")
+SEED = Setting("seed", 0, "", 0, 2**63 - 1, "campaign seed (every encounter's streams derive from it)")
+INTRUDERS = Setting("intruders", 1, "", 1, 8, "intruders per encounter")
+#: encounters per task: the per-step numpy overhead is paid once per chunk, so bigger chunks are
+#: faster (500 -> 2000 about 1.9x per core); one 2000-encounter chunk peaks at about 0.2 GB RSS
+CHUNK_SIZE = Setting("chunk_size", 2000, "", 1, 10_000_000, "encounters per chunk (they share a DAA call)")
+#: the wait maps the map groups read: a map preset (``alerting``: the box covers the DAA alerting
+#: region, horizon 120 s), a grid spec or a ``waitmap build`` directory
+WAITMAP = Setting("source", "alerting", help="wait maps of the map groups: a map preset, a grid spec or a directory")
+#: the wait map's MDP discount (None = the map preset's)
+GAMMA = Setting("gamma", None, "", 1e-6, 0.999999, "MDP discount of the wait maps (default: the map preset's)")
+#: the well-clear threshold preset a run configuration and a campaign fly when none is named
+PRESET = Setting("thresholds", "paper", help="well-clear threshold preset")
+#: the standard's well-clear volume (DO-365): what a scenario file that names no preset flies, the
+#: encounter model's default (``EncounterConfig``), and the default of ``daa-sil geometry`` and of
+#: ``daa-sil viz steplog`` for a log that records none
+STANDARD_PRESET = Setting("thresholds", "do365", help="well-clear threshold preset of a scenario and of 'geometry'")
+#: a scenario's group when it names none, and its uplink delay when its link names none
+SCENARIO_GROUP = Setting("group", "ID-1", help="the experiment group a scenario flies")
+SCENARIO_LINK = Setting("up", "const:4", help="uplink delay spec (GCS -> vehicle)")
+
+#: every setting above by where it is set (the key ``config show --full`` lists it under)
+ALL = {"allocation.wait_threshold_s": WAIT_THRESHOLD, "allocation.projl_horizon_s": PROJL_HORIZON,
+       "allocation.constant_wait_s": CONSTANT_WAIT, "link.stale_command_s": STALE_COMMAND,
+       "link.link_timeout_s": LINK_TIMEOUT, "link.epoch_s": DELAY_EPOCH, "waitmap.source": WAITMAP, "waitmap.gamma": GAMMA,
+       "study.encounters": ENCOUNTERS, "study.seed": SEED, "study.duration_s": DURATION,
+       "study.intruders": INTRUDERS, "study.chunk_size": CHUNK_SIZE,
+       "thresholds": PRESET, "scenario.thresholds": STANDARD_PRESET, "scenario.allocation.group": SCENARIO_GROUP,
+       "scenario.link.up": SCENARIO_LINK}
+
+
+def describe() -> dict:
+    """``{key: {default, unit, range, help}}`` of :data:`ALL` (``config show --full``)."""
+    return {key: {"default": s.default, "unit": s.unit or None, "range": None if s.lo is None else [s.lo, s.hi],
+                  "help": s.help} for key, s in ALL.items()}
+
+
+__all__ = ["Setting", "WAIT_THRESHOLD", "PROJL_HORIZON", "CONSTANT_WAIT", "STALE_COMMAND", "LINK_TIMEOUT",
+           "DELAY_EPOCH", "DURATION", "ENCOUNTERS", "SEED", "INTRUDERS", "CHUNK_SIZE", "WAITMAP", "GAMMA", "PRESET", "STANDARD_PRESET", "SCENARIO_GROUP", "SCENARIO_LINK", "ALL",
+           "describe"]
