@@ -7,7 +7,8 @@ import pytest
 from scipy import stats
 
 from daa_sil.errors import FileFormatError, UsageError
-from daa_sil.models.latency import Constant, Trace, TruncatedGaussian, Uniform, delay_model_from_dict, parse_delay_spec
+from daa_sil.models.delay_spec import delay_model_from_dict, parse_delay_spec
+from daa_sil.models.latency import Constant, Trace, TruncatedGaussian, Uniform
 from daa_sil.models.delay_process import BatchedDelay, DelayProcess
 
 

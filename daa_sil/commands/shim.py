@@ -15,7 +15,7 @@ import sys
 
 from ..errors import UsageError
 from daa_sil.config.settings import DELAY_EPOCH
-from daa_sil.models.latency import SPEC_HELP, parse_delay_spec
+from daa_sil.models.delay_spec import SPEC_HELP, parse_delay_spec
 from daa_sil.models.link_rule import link_legs
 from daa_sil.sil.endpoint import format_udp_address
 from daa_sil.sil.shim import run_shim

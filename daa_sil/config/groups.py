@@ -64,7 +64,7 @@ class GroupSpec:
 
     def delay_model(self):
         """The :mod:`daa_sil.models.latency` model used on the uplink and on the downlink."""
-        from daa_sil.models.latency import delay_model_from_dict
+        from daa_sil.models.delay_spec import delay_model_from_dict
 
         return delay_model_from_dict(dict(self.latency), where=f"group {self.name} latency")
 

@@ -227,7 +227,7 @@ def _groups(node, where: str) -> tuple:
 def _latency(node, where: str) -> "str | None":
     if node is None:
         return None
-    from daa_sil.models.latency import SPEC_HELP, parse_delay_spec
+    from daa_sil.models.delay_spec import SPEC_HELP, parse_delay_spec
 
     try:
         parse_delay_spec(str(node))

@@ -28,7 +28,8 @@ A model's values are validated within ``[LEG_MIN_S, ROUND_TRIP_MAX_S]`` = [0.1, 
 link's half of the shortest round trip (the ``round-trip`` rule), 10 s the longest value any
 reading applies to one link (the ``one-way`` rule applies the group's value to each link).
 
-How a group's latency value reaches the two links (one-way on each, or a round trip split evenly)
+The text and YAML forms of these models (``gauss:5,3``, ``{type: gaussian, ...}``) are read by
+:mod:`daa_sil.models.delay_spec`. How a group's latency value reaches the two links (one-way on each, or a round trip split evenly)
 is :mod:`daa_sil.models.link_rule`.
 
 **Why a piecewise-constant delay process.** Drawing an independent delay per packet reorders
@@ -339,75 +340,3 @@ class Spike(Trace):
     def spec(self) -> str:
         s = f"spike:{self.base:g},{self.peak:g},{self.start:g},{self.length:g}"
         return s + (f",{self.period:g}" if self.period else "")
-
-
-SPEC_HELP = ("const:S | gauss:MEAN,SD[,LO,HI] | uniform:LO,HI | trace:FILE.csv | spike:BASE,PEAK,START,LEN[,PERIOD] "
-             f"(seconds, within [{LEG_MIN_S:g}, {DELAY_MAX_S:g}])")
-
-
-def parse_delay_spec(spec: str) -> DelayModel:
-    """Parse ``const:4``, ``gauss:5,3``, ``gauss:5,3,0.2,10``, ``uniform:1,8``, ``trace:FILE.csv`` or
-    ``spike:4,10,60,15[,40]``."""
-    text = str(spec).strip()
-    kind, sep, rest = text.partition(":")
-    kind = kind.strip().lower()
-    if not sep or not rest.strip():
-        raise UsageError(f"bad delay spec {spec!r}; expected {SPEC_HELP}")
-    if kind in ("trace", "file"):
-        return Trace.from_csv(rest.strip())
-    parts = [p.strip() for p in rest.split(",")]
-    try:
-        nums = [float(p) for p in parts]
-    except ValueError:
-        raise UsageError(f"bad delay spec {spec!r}: not all numbers; expected {SPEC_HELP}") from None
-    if kind in ("const", "constant") and len(nums) == 1:
-        return Constant(nums[0])
-    if kind in ("gauss", "gaussian", "normal") and len(nums) in (2, 4):
-        return TruncatedGaussian(*nums)
-    if kind in ("uniform", "unif") and len(nums) == 2:
-        return Uniform(*nums)
-    if kind == "spike" and len(nums) in (4, 5):
-        return Spike(*nums)
-    raise UsageError(f"bad delay spec {spec!r}; expected {SPEC_HELP}")
-
-
-def delay_model_from_dict(d: dict, where: str = "latency") -> DelayModel:
-    """Build a model from the YAML form, e.g. ``{"type": "gaussian", "mean_s": 5, "sd_s": 3}``.
-
-    Types and keys: ``constant`` (``seconds``); ``gaussian`` (``mean_s``, ``sd_s``, optional
-    ``lo_s``, ``hi_s``); ``uniform`` (``lo_s``, ``hi_s``); ``trace`` (``file``); ``spike``
-    (``base_s``, ``peak_s``, ``start_s``, ``length_s``, optional ``period_s``); ``half``
-    (``round_trip``: one of the above, :class:`HalfRoundTrip`).
-    ``where`` names the location in error messages.
-    """
-    if not isinstance(d, dict):
-        raise UsageError(f"{where} must be a mapping with a 'type', got {d!r}")
-    allowed = {"constant": ({"seconds"}, set()), "gaussian": ({"mean_s", "sd_s"}, {"lo_s", "hi_s"}),
-               "uniform": ({"lo_s", "hi_s"}, set()), "trace": ({"file"}, set()),
-               "spike": ({"base_s", "peak_s", "start_s", "length_s"}, {"period_s"}),
-               "half": ({"round_trip"}, set())}
-    typ = str(d.get("type", "")).lower()
-    if typ not in allowed:
-        raise UsageError(f"{where}.type must be one of {', '.join(allowed)}, got {d.get('type')!r}")
-    need, opt = allowed[typ]
-    keys = set(d) - {"type"}
-    if need - keys:
-        raise UsageError(f"{where} ({typ}) is missing {', '.join(sorted(need - keys))}")
-    if keys - need - opt:
-        raise UsageError(f"{where} ({typ}) has unknown key(s) {', '.join(sorted(keys - need - opt))}; "
-                         f"allowed: {', '.join(sorted(need | opt))}")
-    if typ == "constant":
-        return Constant(d["seconds"])
-    if typ == "gaussian":
-        return TruncatedGaussian(d["mean_s"], d["sd_s"], d.get("lo_s", DELAY_MIN_S), d.get("hi_s", DELAY_MAX_S))
-    if typ == "uniform":
-        return Uniform(d["lo_s"], d["hi_s"])
-    if typ == "spike":
-        return Spike(d["base_s"], d["peak_s"], d["start_s"], d["length_s"], d.get("period_s", 0.0))
-    if typ == "half":
-        from daa_sil.models.link_rule import HalfRoundTrip
-
-        return HalfRoundTrip(delay_model_from_dict(d["round_trip"], where=f"{where}.round_trip"))
-    return Trace.from_csv(d["file"])
-
-

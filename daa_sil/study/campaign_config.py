@@ -92,7 +92,7 @@ class CampaignConfig:
             if val is not None and not (isinstance(val, (int, float)) and math.isfinite(val) and lo <= val <= hi):
                 raise UsageError(f"{name} must be within [{lo:g}, {hi:g}], got {val!r}")
         if self.latency is not None:
-            from daa_sil.models.latency import parse_delay_spec
+            from daa_sil.models.delay_spec import parse_delay_spec
 
             parse_delay_spec(self.latency)
         self.effective_groups  # noqa: B018 -- validates the overridden definitions
@@ -135,7 +135,7 @@ class CampaignConfig:
         """The groups with the campaign's overrides applied (what is flown)."""
         latency = None
         if self.latency is not None:
-            from daa_sil.models.latency import parse_delay_spec
+            from daa_sil.models.delay_spec import parse_delay_spec
 
             latency = parse_delay_spec(self.latency).to_dict()
         rule = self.effective_reading.wait_rule

@@ -13,18 +13,18 @@ from .schema import Scenario
 
 def delay_spec_string(spec) -> str:
     """A scenario delay spec (str or dict) as the ``--delay`` string of ``daa-sil shim``."""
-    from daa_sil.models import latency
+    from daa_sil.models import delay_spec
 
-    return spec if isinstance(spec, str) else latency.delay_model_from_dict(spec).spec()
+    return spec if isinstance(spec, str) else delay_spec.delay_model_from_dict(spec).spec()
 
 
 def link_legs(sc: Scenario):
     """The scenario link's :class:`daa_sil.models.latency.LinkLegs`: ``up`` / ``down`` one-way, or the
     ``round_trip`` split evenly (each link half of one draw per epoch, from the uplink stream)."""
-    from daa_sil.models import latency, link_rule
+    from daa_sil.models import delay_spec, link_rule
 
     def build(spec):
-        return latency.parse_delay_spec(spec) if isinstance(spec, str) else latency.delay_model_from_dict(spec)
+        return delay_spec.parse_delay_spec(spec) if isinstance(spec, str) else delay_spec.delay_model_from_dict(spec)
 
     if sc.link.round_trip is not None:
         return link_rule.link_legs(build(sc.link.round_trip), "round-trip")

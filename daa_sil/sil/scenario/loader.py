@@ -170,17 +170,17 @@ def _intruder(v: _V, node, path, idx: int, dur: float) -> IntruderSpec:
 
 def _delay(v: _V, node, path):
     """A latency spec string or dict, checked by building the model (daa_sil.models.latency)."""
-    from daa_sil.models import latency
+    from daa_sil.models import delay_spec
 
     try:
         if isinstance(node, yaml.ScalarNode):
             spec = v.string(node, path)
-            latency.parse_delay_spec(spec)
+            delay_spec.parse_delay_spec(spec)
             return spec
         if isinstance(node, yaml.MappingNode):
             d = {k: v.scalar(val, f"{path}.{k}") for k, val in
                  v.mapping(node, path, {"type"}, {"seconds", "mean_s", "sd_s", "lo_s", "hi_s", "file"}).items()}
-            latency.delay_model_from_dict(d, where=path)
+            delay_spec.delay_model_from_dict(d, where=path)
             return d
     except UsageError as exc:
         v.fail(node, path, str(exc))
