@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from daa_sil.errors import FileFormatError, OutputError, UsageError
-from daa_sil.link.codec import (CONTROL_LINK_ID, STALE_LIMIT, MavCodec, generate_key_file, key_from_passphrase,
-                                load_key, mavlink as d)
+from daa_sil.link.codec import CONTROL_LINK_ID, STALE_LIMIT, MavCodec, mavlink as d
+from daa_sil.link.keys import generate_key_file, key_from_passphrase, load_key
 
 KEY = hashlib.sha256(b"daa-sil test").digest()
 NAN = float("nan")

@@ -31,7 +31,8 @@ from pathlib import Path
 
 import pytest
 
-from daa_sil.link.codec import MavCodec, generate_key_file, load_key, mavlink as d, signing_timestamp_now
+from daa_sil.link.codec import MavCodec, mavlink as d, signing_timestamp_now
+from daa_sil.link.keys import generate_key_file, load_key
 from daa_sil.sil.endpoint import open_endpoint
 from daa_sil.sil.shim import DelayShim
 from daa_sil.sil.shim_config import ShimConfig

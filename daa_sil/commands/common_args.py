@@ -33,7 +33,7 @@ def load_key_option(path, prog: str = "daa-sil") -> "bytes | None":
         return None
     import sys
 
-    from ..link.codec import load_key
+    from ..link.keys import load_key
 
     return load_key(path, warn=lambda text: print(f"{prog}: warning: {text}", file=sys.stderr, flush=True))
 

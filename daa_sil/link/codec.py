@@ -20,27 +20,19 @@ stream may be at most 60 s behind our clock) checks, then updates the stream tim
 Outgoing signing timestamps follow the wall clock (10 us units since 2015-01-01), so they never
 go backwards across restarts.
 
-Key files (:func:`load_key`): a file of exactly 32 bytes is the raw key; anything else is a
-UTF-8 passphrase (surrounding whitespace stripped, at least :data:`MIN_PASSPHRASE` characters) and
-the key is ``sha256(passphrase)``, the convention MAVProxy's ``signing setup`` uses. 32 bytes and a
-line break (what ``echo`` or an editor leaves) is read by what the 32 bytes are: binary -> the raw
-key, the line break ignored; printable text -> a passphrase; either way a warning says which. A key
-file readable by group or others is read, with a warning. :func:`generate_key_file` writes 32
-random bytes atomically with mode 0600.
+Key files are read and written by :mod:`daa_sil.link.keys`.
 """
 
 from __future__ import annotations
 
 import hashlib
-import os
-import secrets
 import time
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Callable, Iterable
+from typing import Iterable
 
-from ..errors import FileFormatError, OutputError, UsageError
+from ..errors import UsageError
 from .dialect import daa_sil as mavlink
+from .keys import KEY_LEN
 
 MAVError = mavlink.MAVError
 MAVLinkMessage = mavlink.MAVLink_message
@@ -49,9 +41,6 @@ MAVLinkMessage = mavlink.MAVLink_message
 SIGNING_EPOCH_UNIX = 1420070400
 #: a new signed stream may be at most this far behind our timestamp (10 us units) = 60 s
 STALE_LIMIT = 6_000_000
-KEY_LEN = 32
-#: shortest passphrase a key file may hold (characters)
-MIN_PASSPHRASE = 8
 #: signing link id for lockstep control messages (see :meth:`MavCodec.encode`)
 CONTROL_LINK_ID = 254
 
@@ -320,91 +309,3 @@ class MavCodec:
         parts = [self.encode(m, link_id) for m in msgs]
         self.counters.datagrams_out -= max(0, len(parts) - 1)
         return b"".join(parts)
-
-
-# -- key files ------------------------------------------------------------------------------------
-def key_from_passphrase(passphrase: str) -> bytes:
-    """The 32-byte key ``sha256(passphrase)`` (MAVProxy's convention)."""
-    if not passphrase:
-        raise UsageError("signing passphrase must not be empty")
-    return hashlib.sha256(passphrase.encode("utf-8")).digest()
-
-
-def load_key(path: "str | os.PathLike", warn: "Callable[[str], None] | None" = None) -> bytes:
-    """Read a key file (rules in the module docstring); ``warn`` gets one-line notes (default: none).
-
-    Raises a one-line :class:`FileFormatError` for an unreadable, empty, non-UTF-8 file or a
-    passphrase shorter than :data:`MIN_PASSPHRASE` characters.
-    """
-    p = Path(path)
-    say = warn or (lambda _text: None)
-    try:
-        data = p.read_bytes()
-        mode = p.stat().st_mode
-    except OSError as exc:
-        raise FileFormatError(f"cannot read signing key file {p}: {exc.strerror or exc}") from None
-    if os.name == "posix" and mode & 0o044:
-        say(f"signing key file {p} is readable by group or others (mode {mode & 0o777:04o}); "
-            f"run: chmod 600 {p}")
-    if len(data) == KEY_LEN:
-        return data
-    body = data[:-2] if data.endswith(b"\r\n") else data[:-1] if data.endswith(b"\n") else None
-    if body is not None and len(body) == KEY_LEN:
-        if not _printable(body):
-            say(f"signing key file {p}: {KEY_LEN} raw bytes and a line break: the line break is ignored "
-                f"(a raw key file is exactly {KEY_LEN} bytes)")
-            return body
-        say(f"signing key file {p}: {KEY_LEN} characters and a line break: read as a passphrase (key = "
-            f"sha256 of the text); for a raw key write exactly {KEY_LEN} bytes")
-    try:
-        text = data.decode("utf-8").strip()
-    except UnicodeDecodeError:
-        raise FileFormatError(f"signing key file {p} is neither {KEY_LEN} raw bytes ({len(data)} bytes) "
-                              "nor a UTF-8 passphrase") from None
-    if not text:
-        raise FileFormatError(f"signing key file {p} is empty")
-    if len(text) < MIN_PASSPHRASE:
-        raise FileFormatError(f"signing key file {p}: the passphrase has {len(text)} characters, at least "
-                              f"{MIN_PASSPHRASE} are needed (or a raw key of exactly {KEY_LEN} bytes)")
-    return key_from_passphrase(text)
-
-
-def _printable(data: bytes) -> bool:
-    """True if ``data`` is UTF-8 text of printable characters only (a typed passphrase, not random bytes)."""
-    try:
-        return data.decode("utf-8").isprintable()
-    except UnicodeDecodeError:
-        return False
-
-
-def generate_key_file(path: "str | os.PathLike", overwrite: bool = False) -> bytes:
-    """Write a new random 32-byte key to ``path`` atomically with mode 0600; returns the key.
-
-    The key never exists on disk with wider permissions: it is written to a ``mkstemp`` file
-    (created 0600) in the target directory, fsynced and renamed over ``path``.
-    """
-    import tempfile
-
-    target = Path(path)
-    if not overwrite and target.exists():
-        raise OutputError(f"{target} exists; refusing to overwrite (choose another path or remove it)")
-    key = secrets.token_bytes(KEY_LEN)
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent if str(target.parent) else ".")
-        with os.fdopen(fd, "wb") as fh:
-            os.fchmod(fh.fileno(), 0o600)
-            fh.write(key)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
-        tmp = None
-    except OSError as exc:
-        raise OutputError(f"cannot write signing key file {target}: {exc.strerror or exc}") from None
-    finally:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-    return key
