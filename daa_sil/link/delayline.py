@@ -38,6 +38,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from ..errors import UsageError
+from daa_sil.config.settings import DELAY_EPOCH
 from daa_sil.models.latency import DelayModel
 from daa_sil.models.delay_process import DelayProcess, as_seed_sequence, child_seed
 
@@ -142,7 +143,7 @@ class DelayLine:
     """
 
     def __init__(self, delay: "DelayProcess | DelayModel | Callable[[float, int], float]", *,
-                 seed: "int | np.random.SeedSequence | None" = None, epoch_s: float = 10.0,
+                 seed: "int | np.random.SeedSequence | None" = None, epoch_s: float = DELAY_EPOCH.default,
                  fifo: bool = True, loss: float = 0.0, dup: float = 0.0, reorder: float = 0.0,
                  reorder_fraction: float = 0.5, outages: Iterable[Sequence[float]] = (),
                  max_queue: "int | None" = None, log: bool = True, max_log: int = 1_000_000):
