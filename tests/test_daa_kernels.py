@@ -347,3 +347,89 @@ def test_command_state_kernel_identical():
         rel = [r - (0.0 + t * 0.0) for r in ref[:3]] + [r - 0.0 for r in ref[3:]]
     for g, r in zip(out, rel):
         _same(g, np.broadcast_to(r, t.shape).astype(float))
+
+
+# --------------------------------------------------------------------------------------------------
+# the undecided pieces' loop (kernels.resolve) against the numpy loop it replaces
+# --------------------------------------------------------------------------------------------------
+from daa_sil.daa import undecided  # noqa: E402
+from daa_sil.daa.kernels import resolve as resolve_kernel  # noqa: E402
+
+
+def test_bisection_halvings_are_numpys_log2():
+    """The kernel's count of halvings is ``int(np.ceil(np.log2(max(w, dt) / dt)))`` exactly, next to every
+    power of two (where a log2 that rounded its last bit differently would give another count)."""
+    thr = undecided.bisect_thresholds()
+    rng = np.random.default_rng(5)
+    widths = [0.0, -1.0, 0.04, 0.1, 1e-300, 300.0, 1e6]
+    for dt in (undecided.BISECT_DT_IN, undecided.BISECT_DT_OUT, 0.01, 0.3):
+        for n in range(0, 40):
+            x = dt * 2.0 ** n
+            widths += [x, np.nextafter(x, 0), np.nextafter(x, np.inf), np.nextafter(np.nextafter(x, np.inf), np.inf)]
+        widths += list(rng.uniform(0, 500, 300)) + list(dt * 2.0 ** rng.uniform(0, 30, 300))
+    for dt in (undecided.BISECT_DT_IN, undecided.BISECT_DT_OUT, 0.01, 0.3):
+        for w in widths:
+            ref = int(np.ceil(np.log2(max(np.max(np.array([w]), initial=0.0), dt) / dt)))
+            assert resolve_kernel._halvings(np.max(np.array([w]), initial=0.0), dt, thr) == ref, (w, dt)
+
+
+def _resolved_three_ways(paths, intr, th, t_end, **kw):
+    """Conflicts with the fused kernel, with the numpy loop over compiled pieces, with the numpy reference."""
+    out = []
+    for compiled, fused in ((True, True), (True, False), (False, False)):
+        ev = PathEvaluator(paths, intr, t_end, **kw)
+        ev.fused = fused
+        out.append(ev.evaluate(th) if compiled else _ref(ev.evaluate_reference, th))
+    return out
+
+
+def _small_volumes(cfg):
+    """A well-clear volume, a small cylinder (short clips: sampled every CLIP_DT) and a tiny volume with
+    a short TTHR, so that pieces are split to the last depth."""
+    return (cfg.th, cfg.th.with_(name="small", dthr=60.0, zthr=15.0, tthr=0.0, tcoa=0.0),
+            cfg.th.with_(name="tiny", dthr=152.0, zthr=30.0, tthr=3.0, tcoa=0.0))
+
+
+@pytest.mark.parametrize("preset", ["do365", "daidalus"])
+@pytest.mark.parametrize("axis", [AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED])
+def test_resolve_kernel_identical_on_close_encounters(preset, axis):
+    """Intruders 150-2500 m away, so that most of the undecided pieces are crossings, clips and splits:
+    the fused kernel gives the numpy loop's intervals, which it changes in many segments."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"resolve/{preset}/{axis}".encode()))
+    own, intr = _encounters(rng, 300, 2, cfg)
+    d = rng.uniform(150, 2500, intr.shape) / np.hypot(intr.x - own.x[:, None], intr.y - own.y[:, None])
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+    j_lo, j_hi = candidate_counts(own, axis, cfg)
+    paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
+    resolved = 0
+    for th in _small_volumes(cfg):
+        fused, loop, ref = _resolved_three_ways(paths, intr, th, cfg.lookahead_s)
+        _same_conflicts(fused, loop)
+        _same_conflicts(fused, ref)
+        ends = np.broadcast_to(paths.knot_times()[:, None, :, 1:], fused.seg_out.shape)
+        resolved += int(np.count_nonzero(np.isfinite(fused.seg_out) & (fused.seg_out != ends)))
+    assert resolved > 100  # the bisection placed that many exits inside a segment
+
+
+@pytest.mark.parametrize("exits", [False, True])
+def test_resolve_kernel_identical_on_command_paths(exits):
+    """SM's paths (turn, speed and vertical change at once, with a kink) against close intruders."""
+    cfg = DaaConfig.for_preset("do365")
+    rng = np.random.default_rng(31 + exits)
+    own, intr = _encounters(rng, 500, 2, cfg)
+    d = rng.uniform(150, 2500, intr.shape) / np.hypot(intr.x - own.x[:, None], intr.y - own.y[:, None])
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+    n = own.shape[0]
+    cmd = Command(own.trk + rng.choice([0.0, 0.3, -1.2, np.pi], n), rng.choice([0.0, 10.0, -20.0, np.nan], n),
+                  rng.choice([40.0, 55.0, 90.0, np.nan], n))
+    paths = command_paths(own, cmd, cfg)
+    assert paths.kin is not None
+    for th in _small_volumes(cfg):
+        fused, loop, ref = _resolved_three_ways(paths, intr, th, 85.0, tails="last", exits=exits)
+        _same_conflicts(fused, loop)
+        _same_conflicts(fused, ref)
