@@ -433,3 +433,36 @@ def test_resolve_kernel_identical_on_command_paths(exits):
         fused, loop, ref = _resolved_three_ways(paths, intr, th, 85.0, tails="last", exits=exits)
         _same_conflicts(fused, loop)
         _same_conflicts(fused, ref)
+
+
+# --------------------------------------------------------------------------------------------------
+# straight-line alerting through the compiled interval, against wellclear.violation_interval
+# --------------------------------------------------------------------------------------------------
+from daa_sil.daa import alerting  # noqa: E402
+
+
+@pytest.mark.parametrize("preset", ["do365", "paper", "daidalus"])
+def test_alerting_identical_to_violation_interval(preset, monkeypatch):
+    """Alert levels (with and without early alerting times), conflict lists and ProjL computed through
+    :func:`intervals.interval_soa` equal those from ``wellclear.violation_interval``, on encounters near
+    and far, with nan and huge states."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"alerting/{preset}".encode()))
+    own, intr = _encounters(rng, 3000, 3, cfg)
+    d = rng.uniform(0.02, 6.0, intr.shape)
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+    prev = rng.integers(0, 4, intr.shape)
+
+    def every():
+        with np.errstate(all="ignore"):
+            return (alerting.alert_levels(own, intr, cfg), alerting.alert_levels(own, intr, cfg, prev=prev),
+                    *alerting.conflict_lists(own, intr, cfg, early_level=prev), alerting.proj_lowc(own, intr, cfg),
+                    alerting.proj_lowc(own, intr, cfg, horizon_s=0.0))
+    got = every()
+    monkeypatch.setattr(alerting, "COMPILED", False)
+    ref = every()
+    for g, r in zip(got, ref):
+        _same(g, r)
+    assert set(np.unique(ref[0])) == {0, 1, 2, 3} and ref[2].any() and ref[4].any() and not ref[4].all()
