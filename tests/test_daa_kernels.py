@@ -466,3 +466,35 @@ def test_alerting_identical_to_violation_interval(preset, monkeypatch):
     for g, r in zip(got, ref):
         _same(g, r)
     assert set(np.unique(ref[0])) == {0, 1, 2, 3} and ref[2].any() and ref[4].any() and not ref[4].all()
+
+
+@pytest.mark.parametrize("preset", ["do365", "daidalus"])
+def test_relative_knots_identical(preset):
+    """The evaluator's relative states at the knots (compiled) equal the numpy broadcast, on band paths
+    of every axis, SM's command paths, and knot states with nan, inf and huge values."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"knots/{preset}".encode()))
+    own, intr = _encounters(rng, 300, 3, cfg)
+    ipos, ivel = intr.position(), intr.velocity()
+    cases = []
+    for axis in (AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED):
+        paths, _ = maneuver_paths(own, axis, cfg, 12, with_values=False)
+        cases.append(paths)
+    cases.append(command_paths(own, Command(own.trk + 0.5, own.vs * 0 + 5.0, own.gs * 0 + 60.0), cfg))
+    th = cfg.th
+    for paths in cases:
+        shape = (own.shape[0], intr.shape[1]) + paths.shape[1:]
+        args = (paths.pos, paths.vel, paths.knot_times(), ipos, ivel, shape)
+        for g, r in zip(intervals.relative_at_knots(*args), _ref(intervals.relative_at_knots_reference, *args)):
+            for a, b in zip(g, r):
+                _same(a, b)
+    n, m, p, k = 50, 2, 3, 7
+    shape = (n, m, p, k)
+    pos = [_draw(rng, n * p * k, th, 5000.0).reshape(n, p, k) for _ in range(3)]
+    vel = [_draw(rng, n * p, th, 100.0).reshape(n, p, 1) for _ in range(3)]  # broadcast along the knots
+    t = np.abs(_draw(rng, k, th, 50.0))
+    ip, iv = _draw(rng, n * m * 3, th, 5000.0).reshape(n, m, 3), _draw(rng, n * m * 3, th, 100.0).reshape(n, m, 3)
+    args = (pos, vel, t, ip, iv, shape)
+    for g, r in zip(intervals.relative_at_knots(*args), _ref(intervals.relative_at_knots_reference, *args)):
+        for a, b in zip(g, r):
+            _same(a, b)
