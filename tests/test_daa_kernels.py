@@ -498,3 +498,24 @@ def test_relative_knots_identical(preset):
     for g, r in zip(intervals.relative_at_knots(*args), _ref(intervals.relative_at_knots_reference, *args)):
         for a, b in zip(g, r):
             _same(a, b)
+
+
+@pytest.mark.parametrize("preset", ["do365", "daidalus"])
+def test_command_knot_states_identical(preset, monkeypatch):
+    """SM's paths: the knot states from the compiled command motion equal ``_CommandMotion.state``'s
+    (turns of up to 180 deg, speed and vertical changes, commands with nan axes, ownships at the limits)."""
+    from daa_sil.daa import safety
+
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"cmdknots/{preset}".encode()))
+    own, _ = _encounters(rng, 2000, 1, cfg)
+    n = own.shape[0]
+    cmd = Command(own.trk + rng.choice([0.0, 0.3, -1.2, np.pi, -np.pi, 2.5, 1e-7], n),
+                  rng.choice([0.0, 10.0, -20.0, 1e3, np.nan], n), rng.choice([20.0, 40.0, 55.0, 90.0, 400.0, np.nan], n))
+    got = command_paths(own, cmd, cfg)
+    assert got.kin is not None
+    monkeypatch.setattr(safety, "COMPILED", False)
+    ref = _ref(command_paths, own, cmd, cfg)
+    for g, r in zip(got.pos + got.vel, ref.pos + ref.vel):
+        _same(g, r)
+    assert got.pos[0].shape[-1] > 10

@@ -177,3 +177,12 @@ def command_bisect_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, lo, hi, lo_in
             else:
                 b = mid
         lo[i], hi[i] = a, b
+
+
+@kernel(void(A3, A2, F, F, F, A2, types.Array(float64, 3, "C")))
+def command_states_into(ph_rows, enc, max_turn, h_acc, v_acc, t, out):
+    """Ownship state of row ``i`` at each ``t[i, j]`` into ``out[:, i, j]`` (six rows; SM's knots)."""
+    for i in range(t.shape[0]):
+        for j in range(t.shape[1]):
+            out[0, i, j], out[1, i, j], out[2, i, j], out[3, i, j], out[4, i, j], out[5, i, j] = command_state(
+                ph_rows, enc, i, t[i, j], max_turn, h_acc, v_acc)
