@@ -519,3 +519,25 @@ def test_command_knot_states_identical(preset, monkeypatch):
     for g, r in zip(got.pos + got.vel, ref.pos + ref.vel):
         _same(g, r)
     assert got.pos[0].shape[-1] > 10
+
+
+@pytest.mark.parametrize("preset", ["do365", "daidalus"])
+@pytest.mark.parametrize("axis", [AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED])
+def test_axis_knot_states_identical(preset, axis, monkeypatch):
+    """The band paths' knot states from the compiled axis motion equal the numpy closed forms (the turn's
+    two-sided form included), ownships at and beyond the axis limits, nan and huge states."""
+    from daa_sil.daa import axis_paths
+
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"axisknots/{preset}/{axis}".encode()))
+    own, _ = _encounters(rng, 1500, 1, cfg)
+    own.gs[rng.random(1500) < 0.02] = np.nan
+    own.vs[rng.random(1500) < 0.02] = 1e300
+    j = 25  # (the counts of a batch with nan / huge speeds are not defined)
+    got, _ = maneuver_paths(own, axis, cfg, j, with_values=False)
+    monkeypatch.setattr(axis_paths, "COMPILED", False)
+    ref, _ = _ref(maneuver_paths, own, axis, cfg, j, False)
+    shape = got.shape
+    for g, r in zip(got.pos + got.vel, ref.pos + ref.vel):
+        _same(g, np.broadcast_to(r, shape).astype(float))
+    assert shape[-1] > 5

@@ -186,3 +186,15 @@ def command_states_into(ph_rows, enc, max_turn, h_acc, v_acc, t, out):
         for j in range(t.shape[1]):
             out[0, i, j], out[1, i, j], out[2, i, j], out[3, i, j], out[4, i, j], out[5, i, j] = command_state(
                 ph_rows, enc, i, t[i, j], max_turn, h_acc, v_acc)
+
+
+@kernel(void(I, F, A3, A, types.Array(float64, 4, "C")))
+def axis_knots_into(axis, rate, kin, t, out):
+    """Ownship state on path ``p`` of encounter ``n`` (row ``kin[n, p]``) at each knot time ``t[k]`` into
+    ``out[:, n, p, k]`` (six rows; the band axis's knot states, ``axis_paths.maneuver_paths``)."""
+    for n in range(kin.shape[0]):
+        for p in range(kin.shape[1]):
+            r = kin[n, p]
+            for k in range(t.shape[0]):
+                out[0, n, p, k], out[1, n, p, k], out[2, n, p, k], out[3, n, p, k], out[4, n, p, k], \
+                    out[5, n, p, k] = axis_state(axis, rate, r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], t[k])
