@@ -541,3 +541,66 @@ def test_axis_knot_states_identical(preset, axis, monkeypatch):
     for g, r in zip(got.pos + got.vel, ref.pos + ref.vel):
         _same(g, np.broadcast_to(r, shape).astype(float))
     assert shape[-1] > 5
+
+
+# --------------------------------------------------------------------------------------------------
+# an axis's regions, recovery and resolutions (band_regions) against axis_bands in numpy
+# --------------------------------------------------------------------------------------------------
+import dataclasses  # noqa: E402
+
+from daa_sil.daa import bands as bands_mod  # noqa: E402
+
+
+def _band_configs():
+    """Every preset with the earliest-exit recovery: as they are, and DAIDALUS's grid and conflict
+    lists with it (the compiled pass covers both; the cylinder recovery stays in numpy)."""
+    out = [DaaConfig.for_preset(p) for p in ("do365", "paper")]
+    out.append(dataclasses.replace(DaaConfig.for_preset("daidalus"), recovery="earliest_exit"))
+    out.append(dataclasses.replace(DaaConfig.for_preset("do365"), daidalus_grid=True))
+    out.append(dataclasses.replace(DaaConfig.for_preset("paper"), horizon_from_maneuver=True))
+    return out
+
+
+@pytest.mark.parametrize("case", range(5))
+@pytest.mark.parametrize("m", [0, 1, 3])
+def test_axis_regions_identical(case, m, monkeypatch):
+    """Bands of every axis (values, regions, gap regions, recovery, resolutions, preferred sides) from the
+    compiled tail equal axis_bands in numpy, on near and far intruders, with nan and huge states and
+    with no intruder at all."""
+    cfg = _band_configs()[case]
+    rng = np.random.default_rng(zlib.crc32(f"regions/{case}/{m}".encode()))
+    own, intr = _encounters(rng, 400, max(m, 1), cfg)
+    d = rng.uniform(0.05, 2.0, intr.shape)
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+    intr = intr[:, :m]
+    # and exact head-on encounters (both sides of every axis equally good: the preferred side's tie rule)
+    k = 60
+    rng_h = rng.uniform(1500.0, 6000.0, k)
+    own_h = AircraftState(np.zeros(k), np.zeros(k), np.full(k, 1000.0), np.full(k, 55.0), np.zeros(k), np.zeros(k))
+    intr_h = AircraftState(np.zeros((k, m)), np.repeat(rng_h[:, None], m, 1), np.full((k, m), 1000.0),
+                           np.full((k, m), 60.0), np.full((k, m), np.pi), np.zeros((k, m)))
+    early = rng.integers(0, 4, intr.shape)
+    batches = [(own, intr, alerting.conflict_lists(own, intr, cfg, early_level=early)),
+               (own_h, intr_h, alerting.conflict_lists(own_h, intr_h, cfg))]
+
+    def run():
+        with np.errstate(all="ignore"):
+            return [bands_mod.compute_bands(o, i, cfg, lists=li) for o, i, li in batches]
+    got = run()
+    monkeypatch.setattr(bands_mod, "COMPILED", False)
+    ref = run()
+    for gb, rb in zip(got, ref):
+        for g, r in zip(gb.axes(), rb.axes()):
+            for f in dataclasses.fields(r):
+                a, b = getattr(g, f.name), getattr(r, f.name)
+                if b is None or np.ndim(b) == 0:
+                    assert a == b, f.name
+                else:
+                    _same(a, b)
+    if m:
+        reg = np.concatenate([a.region.ravel() for a in ref[0].axes()])
+        assert {0, 2, 3, 4} <= set(np.unique(reg))
+        assert any(np.isfinite(a.res_lo).any() for a in ref[0].axes())
+        assert any((a.preferred == 1).any() for a in ref[1].axes())
