@@ -257,12 +257,8 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     t_in, t_out = pc.candidates()  # (N, M, 2, J+1)
     side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
     if COMPILED and cfg.recovery != "cylinder":  # the rest of this function in one compiled pass
-        if cfg.horizon_from_maneuver and lists is None:
-            lists = conflict_lists(own, intr, cfg)
-        values, delta, t_man, t_in_all, t_out_c, region, gap, res_lo, res_hi, pref = axis_regions(
-            t_in, t_out, alert, lists, t, own, axis, cfg, j_lo, j_hi)
-        return AxisBands(axis, values, delta, side, t_man, t_in_all, t_out_c, region, res_lo, res_hi, pref, gap,
-                         np.full(n, np.nan), np.full(n, -1, np.int16), np.full(n, np.nan), np.full(n, np.nan))
+        values, delta, t_man, *rest = axis_regions(t_in, t_out, alert, lists, t, own, intr, axis, cfg, j_lo, j_hi)
+        return AxisBands(axis, values, delta, side, t_man, *rest)
     L = cfg.lookahead_s
     tk = t[None, None, None, :]
     if cfg.horizon_from_maneuver:
