@@ -604,3 +604,33 @@ def test_axis_regions_identical(case, m, monkeypatch):
         assert {0, 2, 3, 4} <= set(np.unique(reg))
         assert any(np.isfinite(a.res_lo).any() for a in ref[0].axes())
         assert any((a.preferred == 1).any() for a in ref[1].axes())
+
+
+@pytest.mark.parametrize("preset", ["do365", "daidalus"])
+def test_classify_command_identical(preset, monkeypatch):
+    """Command classification (axis, direction) compiled equals numpy: held (nan) fields, track changes
+    at +-pi and next to it, changes on and next to the deadbands, equal times on two axes (the first
+    axis wins), no change at all."""
+    from daa_sil.daa import resolution
+
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"classify/{preset}".encode()))
+    n = 20_000
+    own, _ = _encounters(rng, n, 1, cfg)
+    db = resolution.CLASSIFY_DEADBAND
+    dtrk = rng.choice([0.0, np.pi, -np.pi, np.nextafter(np.pi, 0), db["trk"], np.nextafter(db["trk"], 0), 1.0, -2.5,
+                       7.0, cfg.turn_rate * 3.0], n)
+    dvs = rng.choice([0.0, db["vs"], np.nextafter(db["vs"], 0), -db["vs"], cfg.vertical_accel * 3.0, 12.0, -30.0], n)
+    dgs = rng.choice([0.0, db["gs"], np.nextafter(db["gs"], np.inf), cfg.horizontal_accel * 3.0, -20.0, 40.0], n)
+    cmd = Command(np.where(rng.random(n) < 0.15, np.nan, own.trk + dtrk), np.where(rng.random(n) < 0.15, np.nan, own.vs + dvs),
+                  np.where(rng.random(n) < 0.15, np.nan, own.gs + dgs))
+    # exact ties: 4 s on the vertical and the speed axis from rest (the vertical axis, the first, wins)
+    own.vs[:100], own.gs[:100] = 0.0, 0.0
+    cmd.trk[:100], cmd.vs[:100], cmd.gs[:100] = own.trk[:100], 4.0 * cfg.vertical_accel, 4.0 * cfg.horizontal_accel
+    got = resolution.classify_command(own, cmd, cfg)
+    monkeypatch.setattr(resolution, "COMPILED", False)
+    ref = resolution.classify_command(own, cmd, cfg)
+    for g, r in zip(got, ref):
+        _same(g, r)
+    assert set(np.unique(ref[0])) == {0, 1, 2, 3} and set(np.unique(ref[1])) == set(range(7))
+    assert (ref[0][:100] == AXIS_VERTICAL).all()
