@@ -38,8 +38,9 @@ def _load() -> float:
 
 
 def run_campaign(python: str, out: Path, n: int, m: int, groups: str, workers: int, seed: int, env: dict,
-                 extra: "list[str] | None" = None) -> tuple[float, float, tuple[float, float]]:
-    """One ``campaign run`` subprocess: (wall s, peak RSS MiB of its largest process, load before/after)."""
+                 extra: "list[str] | None" = None) -> tuple[float, float, tuple[float, float], float]:
+    """One ``campaign run`` subprocess: (wall s, peak RSS MiB of its largest process, load before/after,
+    CPU s of it and its workers (user + system, ``wait4``))."""
     cmd = [python, "-m", "daa_sil.cli", "campaign", "run", "--groups", groups, "--encounters", str(n),
            "--intruders", str(m), "--seed", str(seed), "--reading", "literal", "--workers", str(workers),
            "--out", str(out), "--no-progress", *(extra or [])]
@@ -53,7 +54,7 @@ def run_campaign(python: str, out: Path, n: int, m: int, groups: str, workers: i
     err = proc.stderr.read().decode(errors="replace")
     if proc.returncode != 0:
         raise SystemExit(f"bench_campaign: {' '.join(cmd)} failed ({proc.returncode}): {err.strip()[-2000:]}")
-    return wall, usage.ru_maxrss / 1024.0, (load0, _load())
+    return wall, usage.ru_maxrss / 1024.0, (load0, _load()), usage.ru_utime + usage.ru_stime
 
 
 def _warm(python: str, env: dict, m: int) -> None:
@@ -80,10 +81,10 @@ def measure(n: int, m: int, args, env_new: dict, env_base: "dict | None") -> dic
                 order.reverse()
             for name, py, env in order:
                 d = tmp / f"{name}-{rep}"
-                wall, rss, load = run_campaign(str(py), d, n, m, args.groups, args.workers, args.seed, env)
+                wall, rss, load, cpu = run_campaign(str(py), d, n, m, args.groups, args.workers, args.seed, env)
                 best = out.get(name)
                 if best is None or wall < best["wall"]:
-                    out[name] = {"wall": wall, "rss": rss, "load": load, "dir": d}
+                    out[name] = {"wall": wall, "rss": rss, "load": load, "cpu": cpu, "dir": d}
                 elif d.exists():
                     shutil.rmtree(d)
         if "base" in out:
@@ -92,7 +93,8 @@ def measure(n: int, m: int, args, env_new: dict, env_base: "dict | None") -> dic
 
 
 def _fmt(r: dict) -> str:
-    return f"{r['wall']:.1f} s, peak RSS {r['rss']:.0f} MiB (load {r['load'][0]:.1f}->{r['load'][1]:.1f})"
+    return (f"{r['wall']:.1f} s (CPU {r['cpu']:.1f} s), peak RSS {r['rss']:.0f} MiB "
+            f"(load {r['load'][0]:.1f}->{r['load'][1]:.1f})")
 
 
 def main() -> None:
@@ -111,6 +113,7 @@ def main() -> None:
     ap.add_argument("--baseline-cache", type=Path, default=BASELINE_CACHE,
                     help=f"DAA_SIL_CACHE of the baseline (default {BASELINE_CACHE})")
     ap.add_argument("--no-baseline", action="store_true", help="measure this code only")
+    ap.add_argument("--baseline-label", default="bba2fd8", help="what the baseline python runs (printed)")
     args = ap.parse_args()
     intruders = [int(x) for x in args.intruders.split(",")]
     sizes = [int(x) for x in args.scaling.split(",")] if args.scaling else [args.encounters]
@@ -138,8 +141,8 @@ def main() -> None:
             line = (f"{n_groups} groups x {n} encounters x 240 s, {m} intruder{'s' if m > 1 else ''}: "
                     f"{_fmt(new)}, {steps / new['wall']:,.0f} encounter-steps/s")
             if "base" in r:
-                line += (f"; bba2fd8 same run {_fmt(r['base'])}: ratio x{r['base']['wall'] / new['wall']:.2f} "
-                         f"(identical: {r['identical']})")
+                line += (f"; {args.baseline_label} same run {_fmt(r['base'])}: ratio x{r['base']['wall'] / new['wall']:.2f} "
+                         f"wall, x{r['base']['cpu'] / new['cpu']:.2f} CPU (identical: {r['identical']})")
             tag = "[campaign]" if not args.scaling else "[scaling]"
             target = "; target 40 s (stretch 20 s), <= 1 GiB per worker" if not args.scaling else ""
             print(f"{tag} {line}{target}", flush=True)

@@ -347,3 +347,290 @@ def test_command_state_kernel_identical():
         rel = [r - (0.0 + t * 0.0) for r in ref[:3]] + [r - 0.0 for r in ref[3:]]
     for g, r in zip(out, rel):
         _same(g, np.broadcast_to(r, t.shape).astype(float))
+
+
+# --------------------------------------------------------------------------------------------------
+# the undecided pieces' loop (kernels.resolve) against the numpy loop it replaces
+# --------------------------------------------------------------------------------------------------
+from daa_sil.daa import undecided  # noqa: E402
+from daa_sil.daa.kernels import resolve as resolve_kernel  # noqa: E402
+
+
+def test_bisection_halvings_are_numpys_log2():
+    """The kernel's count of halvings is ``int(np.ceil(np.log2(max(w, dt) / dt)))`` exactly, next to every
+    power of two (where a log2 that rounded its last bit differently would give another count)."""
+    thr = undecided.bisect_thresholds()
+    rng = np.random.default_rng(5)
+    widths = [0.0, -1.0, 0.04, 0.1, 1e-300, 300.0, 1e6]
+    for dt in (undecided.BISECT_DT_IN, undecided.BISECT_DT_OUT, 0.01, 0.3):
+        for n in range(0, 40):
+            x = dt * 2.0 ** n
+            widths += [x, np.nextafter(x, 0), np.nextafter(x, np.inf), np.nextafter(np.nextafter(x, np.inf), np.inf)]
+        widths += list(rng.uniform(0, 500, 300)) + list(dt * 2.0 ** rng.uniform(0, 30, 300))
+    for dt in (undecided.BISECT_DT_IN, undecided.BISECT_DT_OUT, 0.01, 0.3):
+        for w in widths:
+            ref = int(np.ceil(np.log2(max(np.max(np.array([w]), initial=0.0), dt) / dt)))
+            assert resolve_kernel._halvings(np.max(np.array([w]), initial=0.0), dt, thr) == ref, (w, dt)
+
+
+def _resolved_three_ways(paths, intr, th, t_end, **kw):
+    """Conflicts with the fused kernel, with the numpy loop over compiled pieces, with the numpy reference."""
+    out = []
+    for compiled, fused in ((True, True), (True, False), (False, False)):
+        ev = PathEvaluator(paths, intr, t_end, **kw)
+        ev.fused = fused
+        out.append(ev.evaluate(th) if compiled else _ref(ev.evaluate_reference, th))
+    return out
+
+
+def _small_volumes(cfg):
+    """A well-clear volume, a small cylinder (short clips: sampled every CLIP_DT) and a tiny volume with
+    a short TTHR, so that pieces are split to the last depth."""
+    return (cfg.th, cfg.th.with_(name="small", dthr=60.0, zthr=15.0, tthr=0.0, tcoa=0.0),
+            cfg.th.with_(name="tiny", dthr=152.0, zthr=30.0, tthr=3.0, tcoa=0.0))
+
+
+@pytest.mark.parametrize("preset", ["do365", "daidalus"])
+@pytest.mark.parametrize("axis", [AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED])
+def test_resolve_kernel_identical_on_close_encounters(preset, axis):
+    """Intruders 150-2500 m away, so that most of the undecided pieces are crossings, clips and splits:
+    the fused kernel gives the numpy loop's intervals, which it changes in many segments."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"resolve/{preset}/{axis}".encode()))
+    own, intr = _encounters(rng, 300, 2, cfg)
+    d = rng.uniform(150, 2500, intr.shape) / np.hypot(intr.x - own.x[:, None], intr.y - own.y[:, None])
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+    j_lo, j_hi = candidate_counts(own, axis, cfg)
+    paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
+    resolved = 0
+    for th in _small_volumes(cfg):
+        fused, loop, ref = _resolved_three_ways(paths, intr, th, cfg.lookahead_s)
+        _same_conflicts(fused, loop)
+        _same_conflicts(fused, ref)
+        ends = np.broadcast_to(paths.knot_times()[:, None, :, 1:], fused.seg_out.shape)
+        resolved += int(np.count_nonzero(np.isfinite(fused.seg_out) & (fused.seg_out != ends)))
+    assert resolved > 100  # the bisection placed that many exits inside a segment
+
+
+@pytest.mark.parametrize("exits", [False, True])
+def test_resolve_kernel_identical_on_command_paths(exits):
+    """SM's paths (turn, speed and vertical change at once, with a kink) against close intruders."""
+    cfg = DaaConfig.for_preset("do365")
+    rng = np.random.default_rng(31 + exits)
+    own, intr = _encounters(rng, 500, 2, cfg)
+    d = rng.uniform(150, 2500, intr.shape) / np.hypot(intr.x - own.x[:, None], intr.y - own.y[:, None])
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+    n = own.shape[0]
+    cmd = Command(own.trk + rng.choice([0.0, 0.3, -1.2, np.pi], n), rng.choice([0.0, 10.0, -20.0, np.nan], n),
+                  rng.choice([40.0, 55.0, 90.0, np.nan], n))
+    paths = command_paths(own, cmd, cfg)
+    assert paths.kin is not None
+    for th in _small_volumes(cfg):
+        fused, loop, ref = _resolved_three_ways(paths, intr, th, 85.0, tails="last", exits=exits)
+        _same_conflicts(fused, loop)
+        _same_conflicts(fused, ref)
+
+
+# --------------------------------------------------------------------------------------------------
+# straight-line alerting through the compiled interval, against wellclear.violation_interval
+# --------------------------------------------------------------------------------------------------
+from daa_sil.daa import alerting  # noqa: E402
+
+
+@pytest.mark.parametrize("preset", ["do365", "paper", "daidalus"])
+def test_alerting_identical_to_violation_interval(preset, monkeypatch):
+    """Alert levels (with and without early alerting times), conflict lists and ProjL computed through
+    :func:`intervals.interval_soa` equal those from ``wellclear.violation_interval``, on encounters near
+    and far, with nan and huge states."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"alerting/{preset}".encode()))
+    own, intr = _encounters(rng, 3000, 3, cfg)
+    d = rng.uniform(0.02, 6.0, intr.shape)
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+    prev = rng.integers(0, 4, intr.shape)
+
+    def every():
+        with np.errstate(all="ignore"):
+            return (alerting.alert_levels(own, intr, cfg), alerting.alert_levels(own, intr, cfg, prev=prev),
+                    *alerting.conflict_lists(own, intr, cfg, early_level=prev), alerting.proj_lowc(own, intr, cfg),
+                    alerting.proj_lowc(own, intr, cfg, horizon_s=0.0))
+    got = every()
+    monkeypatch.setattr(alerting, "COMPILED", False)
+    ref = every()
+    for g, r in zip(got, ref):
+        _same(g, r)
+    assert set(np.unique(ref[0])) == {0, 1, 2, 3} and ref[2].any() and ref[4].any() and not ref[4].all()
+
+
+@pytest.mark.parametrize("preset", ["do365", "daidalus"])
+def test_relative_knots_identical(preset):
+    """The evaluator's relative states at the knots (compiled) equal the numpy broadcast, on band paths
+    of every axis, SM's command paths, and knot states with nan, inf and huge values."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"knots/{preset}".encode()))
+    own, intr = _encounters(rng, 300, 3, cfg)
+    ipos, ivel = intr.position(), intr.velocity()
+    cases = []
+    for axis in (AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED):
+        paths, _ = maneuver_paths(own, axis, cfg, 12, with_values=False)
+        cases.append(paths)
+    cases.append(command_paths(own, Command(own.trk + 0.5, own.vs * 0 + 5.0, own.gs * 0 + 60.0), cfg))
+    th = cfg.th
+    for paths in cases:
+        shape = (own.shape[0], intr.shape[1]) + paths.shape[1:]
+        args = (paths.pos, paths.vel, paths.knot_times(), ipos, ivel, shape)
+        for g, r in zip(intervals.relative_at_knots(*args), _ref(intervals.relative_at_knots_reference, *args)):
+            for a, b in zip(g, r):
+                _same(a, b)
+    n, m, p, k = 50, 2, 3, 7
+    shape = (n, m, p, k)
+    pos = [_draw(rng, n * p * k, th, 5000.0).reshape(n, p, k) for _ in range(3)]
+    vel = [_draw(rng, n * p, th, 100.0).reshape(n, p, 1) for _ in range(3)]  # broadcast along the knots
+    t = np.abs(_draw(rng, k, th, 50.0))
+    ip, iv = _draw(rng, n * m * 3, th, 5000.0).reshape(n, m, 3), _draw(rng, n * m * 3, th, 100.0).reshape(n, m, 3)
+    args = (pos, vel, t, ip, iv, shape)
+    for g, r in zip(intervals.relative_at_knots(*args), _ref(intervals.relative_at_knots_reference, *args)):
+        for a, b in zip(g, r):
+            _same(a, b)
+
+
+@pytest.mark.parametrize("preset", ["do365", "daidalus"])
+def test_command_knot_states_identical(preset, monkeypatch):
+    """SM's paths: the knot states from the compiled command motion equal ``_CommandMotion.state``'s
+    (turns of up to 180 deg, speed and vertical changes, commands with nan axes, ownships at the limits)."""
+    from daa_sil.daa import safety
+
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"cmdknots/{preset}".encode()))
+    own, _ = _encounters(rng, 2000, 1, cfg)
+    n = own.shape[0]
+    cmd = Command(own.trk + rng.choice([0.0, 0.3, -1.2, np.pi, -np.pi, 2.5, 1e-7], n),
+                  rng.choice([0.0, 10.0, -20.0, 1e3, np.nan], n), rng.choice([20.0, 40.0, 55.0, 90.0, 400.0, np.nan], n))
+    got = command_paths(own, cmd, cfg)
+    assert got.kin is not None
+    monkeypatch.setattr(safety, "COMPILED", False)
+    ref = _ref(command_paths, own, cmd, cfg)
+    for g, r in zip(got.pos + got.vel, ref.pos + ref.vel):
+        _same(g, r)
+    assert got.pos[0].shape[-1] > 10
+
+
+@pytest.mark.parametrize("preset", ["do365", "daidalus"])
+@pytest.mark.parametrize("axis", [AXIS_HORIZONTAL, AXIS_VERTICAL, AXIS_SPEED])
+def test_axis_knot_states_identical(preset, axis, monkeypatch):
+    """The band paths' knot states from the compiled axis motion equal the numpy closed forms (the turn's
+    two-sided form included), ownships at and beyond the axis limits, nan and huge states."""
+    from daa_sil.daa import axis_paths
+
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"axisknots/{preset}/{axis}".encode()))
+    own, _ = _encounters(rng, 1500, 1, cfg)
+    own.gs[rng.random(1500) < 0.02] = np.nan
+    own.vs[rng.random(1500) < 0.02] = 1e300
+    j = 25  # (the counts of a batch with nan / huge speeds are not defined)
+    got, _ = maneuver_paths(own, axis, cfg, j, with_values=False)
+    monkeypatch.setattr(axis_paths, "COMPILED", False)
+    ref, _ = _ref(maneuver_paths, own, axis, cfg, j, False)
+    shape = got.shape
+    for g, r in zip(got.pos + got.vel, ref.pos + ref.vel):
+        _same(g, np.broadcast_to(r, shape).astype(float))
+    assert shape[-1] > 5
+
+
+# --------------------------------------------------------------------------------------------------
+# an axis's regions, recovery and resolutions (band_regions) against axis_bands in numpy
+# --------------------------------------------------------------------------------------------------
+import dataclasses  # noqa: E402
+
+from daa_sil.daa import bands as bands_mod  # noqa: E402
+
+
+def _band_configs():
+    """Every preset with the earliest-exit recovery: as they are, and DAIDALUS's grid and conflict
+    lists with it (the compiled pass covers both; the cylinder recovery stays in numpy)."""
+    out = [DaaConfig.for_preset(p) for p in ("do365", "paper")]
+    out.append(dataclasses.replace(DaaConfig.for_preset("daidalus"), recovery="earliest_exit"))
+    out.append(dataclasses.replace(DaaConfig.for_preset("do365"), daidalus_grid=True))
+    out.append(dataclasses.replace(DaaConfig.for_preset("paper"), horizon_from_maneuver=True))
+    return out
+
+
+@pytest.mark.parametrize("case", range(5))
+@pytest.mark.parametrize("m", [0, 1, 3])
+def test_axis_regions_identical(case, m, monkeypatch):
+    """Bands of every axis (values, regions, gap regions, recovery, resolutions, preferred sides) from the
+    compiled tail equal axis_bands in numpy, on near and far intruders, with nan and huge states and
+    with no intruder at all."""
+    cfg = _band_configs()[case]
+    rng = np.random.default_rng(zlib.crc32(f"regions/{case}/{m}".encode()))
+    own, intr = _encounters(rng, 400, max(m, 1), cfg)
+    d = rng.uniform(0.05, 2.0, intr.shape)
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+    intr = intr[:, :m]
+    # and exact head-on encounters (both sides of every axis equally good: the preferred side's tie rule)
+    k = 60
+    rng_h = rng.uniform(1500.0, 6000.0, k)
+    own_h = AircraftState(np.zeros(k), np.zeros(k), np.full(k, 1000.0), np.full(k, 55.0), np.zeros(k), np.zeros(k))
+    intr_h = AircraftState(np.zeros((k, m)), np.repeat(rng_h[:, None], m, 1), np.full((k, m), 1000.0),
+                           np.full((k, m), 60.0), np.full((k, m), np.pi), np.zeros((k, m)))
+    early = rng.integers(0, 4, intr.shape)
+    batches = [(own, intr, alerting.conflict_lists(own, intr, cfg, early_level=early)),
+               (own_h, intr_h, alerting.conflict_lists(own_h, intr_h, cfg))]
+
+    def run():
+        with np.errstate(all="ignore"):
+            return [bands_mod.compute_bands(o, i, cfg, lists=li) for o, i, li in batches]
+    got = run()
+    monkeypatch.setattr(bands_mod, "COMPILED", False)
+    ref = run()
+    for gb, rb in zip(got, ref):
+        for g, r in zip(gb.axes(), rb.axes()):
+            for f in dataclasses.fields(r):
+                a, b = getattr(g, f.name), getattr(r, f.name)
+                if b is None or np.ndim(b) == 0:
+                    assert a == b, f.name
+                else:
+                    _same(a, b)
+    if m:
+        reg = np.concatenate([a.region.ravel() for a in ref[0].axes()])
+        assert {0, 2, 3, 4} <= set(np.unique(reg))
+        assert any(np.isfinite(a.res_lo).any() for a in ref[0].axes())
+        assert any((a.preferred == 1).any() for a in ref[1].axes())
+
+
+@pytest.mark.parametrize("preset", ["do365", "daidalus"])
+def test_classify_command_identical(preset, monkeypatch):
+    """Command classification (axis, direction) compiled equals numpy: held (nan) fields, track changes
+    at +-pi and next to it, changes on and next to the deadbands, equal times on two axes (the first
+    axis wins), no change at all."""
+    from daa_sil.daa import resolution
+
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"classify/{preset}".encode()))
+    n = 20_000
+    own, _ = _encounters(rng, n, 1, cfg)
+    db = resolution.CLASSIFY_DEADBAND
+    dtrk = rng.choice([0.0, np.pi, -np.pi, np.nextafter(np.pi, 0), db["trk"], np.nextafter(db["trk"], 0), 1.0, -2.5,
+                       7.0, cfg.turn_rate * 3.0], n)
+    dvs = rng.choice([0.0, db["vs"], np.nextafter(db["vs"], 0), -db["vs"], cfg.vertical_accel * 3.0, 12.0, -30.0], n)
+    dgs = rng.choice([0.0, db["gs"], np.nextafter(db["gs"], np.inf), cfg.horizontal_accel * 3.0, -20.0, 40.0], n)
+    cmd = Command(np.where(rng.random(n) < 0.15, np.nan, own.trk + dtrk), np.where(rng.random(n) < 0.15, np.nan, own.vs + dvs),
+                  np.where(rng.random(n) < 0.15, np.nan, own.gs + dgs))
+    # exact ties: 4 s on the vertical and the speed axis from rest (the vertical axis, the first, wins)
+    own.vs[:100], own.gs[:100] = 0.0, 0.0
+    cmd.trk[:100], cmd.vs[:100], cmd.gs[:100] = own.trk[:100], 4.0 * cfg.vertical_accel, 4.0 * cfg.horizontal_accel
+    got = resolution.classify_command(own, cmd, cfg)
+    monkeypatch.setattr(resolution, "COMPILED", False)
+    ref = resolution.classify_command(own, cmd, cfg)
+    for g, r in zip(got, ref):
+        _same(g, r)
+    assert set(np.unique(ref[0])) == {0, 1, 2, 3} and set(np.unique(ref[1])) == set(range(7))
+    assert (ref[0][:100] == AXIS_VERTICAL).all()

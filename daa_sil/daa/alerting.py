@@ -7,6 +7,24 @@ import numpy as np
 from daa_sil.geometry import wellclear as wc
 from daa_sil.geometry.kinematics import AircraftState
 from .config import DaaConfig
+from .intervals import interval_soa
+
+#: False: the straight-line intervals below come from :func:`daa_sil.geometry.wellclear.violation_interval`
+#: (the numpy reference the tests compare the compiled :func:`daa_sil.daa.intervals.interval_soa` with)
+COMPILED = True
+
+
+def straight_t_in(s: np.ndarray, v: np.ndarray, volumes, length: float) -> list:
+    """First violation time (s, inf = none) over ``[0, length]`` of the straight relative lines ``s + t v``
+    (``(N, M, 3)``) for each volume of ``volumes``: the compiled interval on the components laid out
+    once, the same numbers as ``wc.violation_interval(s, v, th, 0.0, length)[0]``."""
+    if not COMPILED:
+        return [wc.violation_interval(s, v, th, 0.0, length)[0] for th in volumes]
+    shape = np.broadcast_shapes(s.shape[:-1], v.shape[:-1])
+    comp = [np.ascontiguousarray(np.broadcast_to(a[..., i], shape), dtype=float).reshape(-1) for a in (s, v)
+            for i in range(3)]
+    span = np.full(comp[0].shape[0], float(length))
+    return [interval_soa(*comp, span, th)[0].reshape(shape) for th in volumes]
 
 
 def relative_state(own: AircraftState, intr: AircraftState) -> tuple[np.ndarray, np.ndarray]:
@@ -60,8 +78,7 @@ def alert_levels(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None
     """
     cfg = cfg or DaaConfig()
     s, v = relative_state(own, intr)
-    t_c, _ = wc.violation_interval(s, v, cfg.th, 0.0, cfg.lookahead_s)
-    t_p, _ = wc.violation_interval(s, v, cfg.th_preventive, 0.0, cfg.lookahead_s)
+    t_c, t_p = straight_t_in(s, v, (cfg.th, cfg.th_preventive), cfg.lookahead_s)
     t_al = _alerting_times(cfg, prev, t_c.shape)
     level = np.zeros(t_c.shape, np.int8)
     for lv, t_in in ((3, t_c), (2, t_c), (1, t_p)):
@@ -78,7 +95,7 @@ def conflict_lists(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | No
     ``conflict_aircraft``); the other intruders are *peripheral* (:mod:`daa_sil.daa.bands`)."""
     cfg = cfg or DaaConfig()
     s, v = relative_state(own, intr)
-    t_c, _ = wc.violation_interval(s, v, cfg.th, 0.0, cfg.lookahead_s)
+    t_c, = straight_t_in(s, v, (cfg.th,), cfg.lookahead_s)
     t_al = _alerting_times(cfg, early_level, t_c.shape)
     return _conflict_before(t_c, t_al[2]), _conflict_before(t_c, t_al[1])
 
@@ -90,5 +107,5 @@ def proj_lowc(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" =
     :func:`daa_sil.geometry.wellclear.violation_interval`, no sampling)."""
     cfg = cfg or DaaConfig()
     s, v = relative_state(own, intr)
-    t_in, _ = wc.violation_interval(s, v, cfg.th, 0.0, float(horizon_s))
+    t_in, = straight_t_in(s, v, (cfg.th,), float(horizon_s))
     return np.isfinite(t_in)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from daa_sil.daa import kernels
 from daa_sil.daa.config import (
     AXIS_HORIZONTAL,
     AXIS_SPEED,
@@ -14,6 +15,10 @@ from daa_sil.daa.config import (
 )
 from daa_sil.daa.trajectory import ManeuverPaths
 from daa_sil.geometry.kinematics import TWO_PI, AircraftState
+
+#: False: the knot states of :func:`maneuver_paths` from the numpy closed forms (:func:`_turn_knots`,
+#: :func:`_axis_state_soa`), the oracle the tests compare the compiled ``kernels.motion.axis_knots_into`` with
+COMPILED = True
 
 
 def speed_limits(vertical: bool, cfg: DaaConfig, sgn) -> tuple:
@@ -111,7 +116,13 @@ def maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int,
     x0, y0, z0, gs0, vs0 = own.x.copy(), own.y.copy(), own.z.copy(), own.gs.copy(), own.vs.copy()
     col = lambda a: a[:, None, None]  # noqa: E731
     s3, t3 = sgn[None, :, None], t[None, None, :]
-    if axis == AXIS_HORIZONTAL:
+    kin = _kin_table(axis, cfg, x0, y0, z0, gs0, st, ct, vs0, sgn)
+    value = None
+    if COMPILED and not with_values:  # the same numbers as below (kernels.motion.axis_state is _axis_state_soa's)
+        out = np.empty((6, n, 2, j + 1))
+        kernels.get().axis_knots_into(kin[1], kin[2], kin[3], t.astype(float), out)
+        comp = tuple(out)
+    elif axis == AXIS_HORIZONTAL:
         comp, value = _turn_knots(cfg, col(x0), col(y0), col(z0), col(gs0), col(st), col(ct), col(vs0), t3)
         if with_values:
             value = col(own.trk) + value
@@ -138,5 +149,5 @@ def maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int,
     two = lambda a: np.repeat(a[:, None], 2, 1)  # noqa: E731
     paths = ManeuverPaths(comp[:3], comp[3:], t[None, None, :], state_at, two(acc_h), two(acc_v),
                           vz_const=axis != AXIS_VERTICAL, jerk_h=two(jerk), kink_t=kink,
-                          kin=_kin_table(axis, cfg, x0, y0, z0, gs0, st, ct, vs0, sgn))
+                          kin=kin)
     return paths, (np.broadcast_to(value, (n, 2, j + 1)) if with_values else None)

@@ -62,6 +62,10 @@ from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_SPEED, AXIS_VERTICAL, REG
 from .trajectory import PathConflicts, PathEvaluator
 from daa_sil.daa.recovery import CylinderRecovery, drop_isolated
 from daa_sil.daa.axis_paths import maneuver_paths, candidate_counts, speed_limits
+from daa_sil.daa.band_regions import axis_regions
+
+#: False: every axis in numpy (the oracle of :func:`daa_sil.daa.band_regions.axis_regions`)
+COMPILED = True
 
 
 @dataclass
@@ -251,6 +255,10 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     ev = PathEvaluator(paths, intr, cfg.lookahead_s)
     pc = ev.evaluate(cfg.th)
     t_in, t_out = pc.candidates()  # (N, M, 2, J+1)
+    side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
+    if COMPILED and cfg.recovery != "cylinder":  # the rest of this function in one compiled pass
+        values, delta, t_man, *rest = axis_regions(t_in, t_out, alert, lists, t, own, intr, axis, cfg, j_lo, j_hi)
+        return AxisBands(axis, values, delta, side, t_man, *rest)
     L = cfg.lookahead_s
     tk = t[None, None, None, :]
     if cfg.horizon_from_maneuver:
@@ -283,7 +291,6 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     if axis != AXIS_HORIZONTAL and cfg.daidalus_grid:  # a candidate past a limit is shown at the limit
         lo, hi = (-cfg.max_vs, cfg.max_vs) if axis == AXIS_VERTICAL else (cfg.min_gs, cfg.max_gs)
         values = np.clip(values, lo, hi)
-    side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
     t_man = np.abs(delta) / rate
     k0 = j_lo
     # -- recovery: every candidate MID or worse ---------------------------------------------------------

@@ -155,3 +155,28 @@ def wcv_soa_reference(sx, sy, sz, vx, vy, vz, th: Thresholds) -> np.ndarray:
             tcoa = -sz / np.where(np.abs(vz) > 1e-12, vz, np.inf)
         vert |= (np.abs(vz) > 1e-12) & (sz * vz <= 0) & (tcoa <= th.tcoa)
     return horiz & vert
+
+
+def relative_at_knots(pos, vel, t, ipos: np.ndarray, ivel: np.ndarray, shape) -> tuple[list, list]:
+    """Relative position and velocity (ownship minus intruder; m, m/s) at the knots, three contiguous
+    ``shape`` = ``(N, M, P, K)`` arrays each, from the ownship's knot positions / velocities ``pos``/``vel``
+    (component arrays broadcastable to ``(N, P, K)``), knot times ``t`` (s, broadcastable to ``(N, P, K)``)
+    and straight-line intruders at ``ipos`` with ``ivel`` ``(N, M, 3)`` at time 0 (compiled;
+    :func:`relative_at_knots_reference` is the same in numpy)."""
+    n, m, p, k = shape
+    b = lambda a: np.broadcast_to(np.asarray(a, float), (n, p, k))  # noqa: E731
+    s, v = [np.empty(shape) for _ in range(3)], [np.empty(shape) for _ in range(3)]
+    kernels.get().relative_knots_into(*(b(c) for c in pos), *(b(c) for c in vel), b(t), np.asarray(ipos, float),
+                                      np.asarray(ivel, float), *s, *v)
+    return s, v
+
+
+def relative_at_knots_reference(pos, vel, t, ipos: np.ndarray, ivel: np.ndarray, shape) -> tuple[list, list]:
+    """:func:`relative_at_knots` in numpy (its test oracle)."""
+    ip = [ipos[..., i][:, :, None, None] for i in range(3)]
+    iv = [ivel[..., i][:, :, None, None] for i in range(3)]
+    t4 = np.broadcast_to(np.asarray(t, float), shape[:1] + shape[2:])[:, None]
+    s = [np.asarray(pos[i])[:, None] - (ip[i] + t4 * iv[i]) for i in range(3)]
+    s = [c if c.shape == shape else np.ascontiguousarray(np.broadcast_to(c, shape)) for c in s]
+    v = [np.ascontiguousarray(np.broadcast_to(np.asarray(vel[i])[:, None] - iv[i], shape)) for i in range(3)]
+    return s, v

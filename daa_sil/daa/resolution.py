@@ -11,7 +11,8 @@ from functools import cached_property
 
 import numpy as np
 
-from daa_sil.geometry.frames import wrap_pi
+from daa_sil.daa import kernels
+from daa_sil.geometry.frames import TWO_PI, wrap_pi
 from daa_sil.geometry.kinematics import AircraftState, Command
 from daa_sil.geometry.units import DEG, FPM, KT
 from .bands import Bands, compute_bands
@@ -19,6 +20,8 @@ from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_NONE, AXIS_SPEED, AXIS_VE
                      REGION_NONE, REGION_RECOVERY, RULE_ANY, RULE_AXIS, RULE_AXIS_DIR, RULE_BEST_EFFORT, DaaConfig,
                      axis_code, dir_code, side_to_dir)
 
+#: False: :func:`classify_command` in numpy (the oracle of ``kernels.elementwise.classify_command_into``)
+COMPILED = True
 #: changes below these are "no change" when classifying a command
 CLASSIFY_DEADBAND = {"trk": 0.5 * DEG, "vs": 50.0 * FPM, "gs": 1.0 * KT}
 
@@ -38,6 +41,15 @@ def classify_command(state: AircraftState, cmd: Command, cfg: "DaaConfig | None"
     command with no change is ``(none, none)``. Direction: left/right, up/down, faster/slower.
     """
     cfg = cfg or DaaConfig()
+    if COMPILED and np.ndim(state.trk) == 1:
+        n = np.shape(state.trk)[0]
+        out = np.empty(n, np.int8), np.empty(n, np.int8)
+        vec = lambda a: np.broadcast_to(np.asarray(a, float), (n,))  # noqa: E731
+        kernels.get().classify_command_into(
+            *(vec(a) for a in (state.trk, state.vs, state.gs, cmd.trk, cmd.vs, cmd.gs)), CLASSIFY_DEADBAND["trk"],
+            CLASSIFY_DEADBAND["vs"], CLASSIFY_DEADBAND["gs"], float(cfg.turn_rate), float(cfg.vertical_accel),
+            float(cfg.horizontal_accel), np.pi, TWO_PI, *out)
+        return out
     dtrk, dvs, dgs = command_deltas(state, cmd)
     dtrk = np.where(np.abs(dtrk) < CLASSIFY_DEADBAND["trk"], 0.0, dtrk)
     dvs = np.where(np.abs(dvs) < CLASSIFY_DEADBAND["vs"], 0.0, dvs)

@@ -9,11 +9,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from daa_sil.daa import kernels
 from daa_sil.daa.config import DaaConfig
 from daa_sil.daa.trajectory import ManeuverPaths, path_conflicts
 from daa_sil.geometry.frames import wrap_2pi, wrap_pi
 from daa_sil.geometry.kinematics import (STRAIGHT_TURN_RATE, AircraftState, Command, fly_command, horizontal_segment,
                                          vertical_toward)
+
+#: False: the knot states of :func:`command_paths` from the numpy ``_CommandMotion.state`` (the oracle
+#: the tests compare the compiled ``kernels.motion.command_states_into`` with)
+COMPILED = True
 
 
 def maneuver_times(own: AircraftState, cmd: Command, cfg: DaaConfig) -> tuple[np.ndarray, ...]:
@@ -115,7 +120,13 @@ def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverP
     j_max = int(n_knots.max()) if n_knots.size else 0
     t = np.arange(j_max + 1)[None, :] * h[:, None]  # (N, J+1)
     motion = _CommandMotion(own, cmd, perf)
-    px, py, pz, vx, vy, vz = motion.state(np.arange(own.shape[0])[:, None], t)
+    kin = motion.kin()
+    if COMPILED and kin is not None:
+        out = np.empty((6,) + t.shape)
+        kernels.get().command_states_into(*kin[1:], t, out)
+        px, py, pz, vx, vy, vz = out
+    else:
+        px, py, pz, vx, vy, vz = motion.state(np.arange(own.shape[0])[:, None], t)
     gs_max = np.maximum(own.gs, np.clip(cmd.gs, perf.min_gs, perf.max_gs))
     acc_h = np.where(t_trk > eps, gs_max * cfg.turn_rate, 0.0) + np.where(t_gs > eps, cfg.horizontal_accel, 0.0)
     acc_v = np.where(t_vs > eps, cfg.vertical_accel, 0.0)
@@ -131,7 +142,7 @@ def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverP
     return ManeuverPaths((px[:, None], py[:, None], pz[:, None]), (vx[:, None], vy[:, None], vz[:, None]),
                          t[:, None], state_at,
                          acc_h[:, None], acc_v[:, None], vz_const=not np.any(t_vs > eps), jerk_h=jerk[:, None],
-                         kink_t=kink[:, None], kin=motion.kin())
+                         kink_t=kink[:, None], kin=kin)
 
 
 def command_conflicts(own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,

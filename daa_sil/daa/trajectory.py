@@ -41,7 +41,7 @@ import numpy as np
 from daa_sil.geometry import wellclear as wc
 from daa_sil.geometry.kinematics import (AircraftState)
 from daa_sil.geometry.thresholds import Thresholds
-from daa_sil.daa.intervals import row_blocks, interval_soa
+from daa_sil.daa.intervals import relative_at_knots, row_blocks, interval_soa
 from daa_sil.daa.certify import CLEAR, INSIDE, UNDECIDED, classify_pieces
 from daa_sil.daa import kernels
 from daa_sil.daa.undecided import UndecidedPieces
@@ -193,15 +193,9 @@ class PathEvaluator(UndecidedPieces):
         tt = paths.knot_times()[:, None]  # (N, 1, P, K)
         self.t = tt
         self.ipos, self.ivel = intr.position(), intr.velocity()  # (N, M, 3)
-        own_c, ovel_c = paths.pos, paths.vel
-        ip = [self.ipos[..., i][:, :, None, None] for i in range(3)]
-        iv = [self.ivel[..., i][:, :, None, None] for i in range(3)]
-        #: relative position ownship - intruder at the knots, per component (N, M, P, K)
-        t4 = np.asarray(paths.t, float)[..., None, :, :] if np.ndim(paths.t) == 3 else tt
-        self.s = [own_c[i][:, None] - (ip[i] + t4 * iv[i]) for i in range(3)]  # (intruder: no side axis)
-        self.s = [c if c.shape == self.shape else np.ascontiguousarray(np.broadcast_to(c, self.shape)) for c in self.s]
-        #: relative velocity of the tails (N, M, P, K), contiguous
-        self.v = [np.ascontiguousarray(np.broadcast_to(ovel_c[i][:, None] - iv[i], self.shape)) for i in range(3)]
+        #: relative position ownship - intruder at the knots and relative velocity of the tails, per
+        #: component (N, M, P, K), contiguous
+        self.s, self.v = relative_at_knots(paths.pos, paths.vel, paths.knot_times(), self.ipos, self.ivel, self.shape)
         self._vwin = None
         #: use the compiled kernels (False: the numpy reference, see :meth:`evaluate_reference`)
         self.compiled = True

@@ -4,9 +4,11 @@ clear a second-order certificate or sampling every CLIP_DT (the rules in docs/da
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
-from daa_sil.daa.certify import CLEAR, settle_time, classify_pieces, clear_second_order
+from daa_sil.daa.certify import CLEAR, P_TOL, V_TOL, settle_time, classify_pieces, clear_second_order
 from daa_sil.daa.intervals import as_vector, wcv_soa
 from daa_sil.daa import kernels
 
@@ -98,6 +100,37 @@ class UndecidedPieces:
 
     def _resolve(self, flat_seg, th, seg_in, seg_out) -> None:
         """Undecided segments on the true path (module docstring); updates the flat ``seg_in``/``seg_out``.
+        One compiled pass (:func:`daa_sil.daa.kernels.resolve.resolve_into`) when the paths' motion is
+        given as data; else, and as its test oracle, :meth:`_resolve_reference`."""
+        kin = self.paths.kin
+        if not self.compiled or kin is None or not getattr(self, "fused", True):
+            self._resolve_reference(flat_seg, th, seg_in, seg_out)
+            return
+        path, ka, _, _ = self._pieces(flat_seg)
+        tab = self._path_tables()
+        if getattr(self, "_ipv", None) is None:
+            self._ipv = np.concatenate([self.ipos, self.ivel], axis=-1).reshape(-1, 6)
+        n, ipv, r = tab["n"][path], self._ipv[tab["nm"][path]], path.size
+        if kin[0] == "axis":
+            motion = (0, kin[1], kin[2], kin[3][n, tab["p"][path]], _NO_PHASES, _NO_ROWS, 0.0, 0.0, 0.0)
+        else:
+            motion = (1, 0, 0.0, _NO_ROWS, kin[1][n], kin[2][n], *kin[3:])
+        jerk, kink = tab["jerk"], tab["kink"]
+        none = np.zeros(r)
+        vlo, vhi, has_vwin = (none, none, False) if self._vwin is None else \
+            (self._vwin[0].reshape(-1)[path], self._vwin[1].reshape(-1)[path], True)
+        D = float(th.dthr)
+        kernels.get().resolve_into(
+            *motion, ipv, *(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v), self._flat_times(),
+            flat_seg.astype(np.int64), ka.astype(np.int64), tab["acc_h"][path], tab["acc_v"][path],
+            jerk is not None, none if jerk is None else np.asarray(jerk[path], float),
+            kink is not None, none[:, None] if kink is None else np.asarray(kink[path], float).reshape(r, -1),
+            has_vwin, vlo, vhi, bool(self.exits), bisect_thresholds(), MAX_DEPTH, MAX_SPLIT, BISECT_DT_IN,
+            BISECT_DT_OUT, CLIP_DT, 2.0 * V_TOL, 8.0 * P_TOL, D, D * D, float(th.zthr), float(th.tthr),
+            float(th.tcoa), seg_in, seg_out)
+
+    def _resolve_reference(self, flat_seg, th, seg_in, seg_out) -> None:
+        """:meth:`_resolve` in numpy, one depth of pieces at a time.
 
         The predicate is exact at both ends (true states). Both violate: first entry at the start, last
         exit at the end. One violates: the boundary is found by bisection on the true path and the other
@@ -226,6 +259,32 @@ class UndecidedPieces:
         l1, h1 = self._bisect(th, pth[rows], before, t_first, lo_in=False)
         l2, h2 = self._bisect(th, pth[rows], t_last, after, lo_in=True)
         _update(seg_in, seg_out, sid[rows], 0.5 * (l1 + h1), 0.5 * (l2 + h2))
+
+
+#: placeholder motion rows for the kind of path a call does not use
+_NO_ROWS = np.zeros((0, 9))
+_NO_PHASES = np.zeros((0, 3, 9))
+
+
+@functools.lru_cache(maxsize=None)
+def bisect_thresholds(count: int = 64) -> np.ndarray:
+    """``thr[n]`` (n < ``count``): the smallest float ``x`` with ``np.log2(x) > n``, so that the number of
+    ``thr`` at or below ``x`` is ``int(np.ceil(np.log2(x)))`` for ``1 <= x < 2**count`` -- numpy's log2,
+    whatever its last bit, found by bisecting the floats between ``2**n`` and ``2**(n + 1)``."""
+    out = np.empty(count)
+    for n in range(count):
+        a, b = int(np.float64(2.0 ** n).view(np.int64)), int(np.float64(2.0 ** (n + 1)).view(np.int64))
+        if not (np.log2(np.int64(a).view(np.float64)) <= n < np.log2(np.int64(b).view(np.float64))):
+            raise ArithmeticError(f"numpy's log2 is not exact at 2**{n} / 2**{n + 1}")
+        while b - a > 1:
+            mid = (a + b) // 2
+            if np.log2(np.int64(mid).view(np.float64)) > n:
+                b = mid
+            else:
+                a = mid
+        out[n] = np.int64(b).view(np.float64)
+    out.setflags(write=False)
+    return out
 
 
 def _update(seg_in, seg_out, sid, t_in, t_out) -> None:

@@ -56,3 +56,38 @@ def clear2_into(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, e_p, e_v, e_z, D,
     for i in range(x0.shape[0]):
         out[i] = clear2(x0[i], y0[i], z0[i], x1[i], y1[i], z1[i], u0x[i], u0y[i], u1x[i], u1y[i], h[i], e_p[i],
                         e_v[i], e_z[i], D, DD, H, TT, TC)
+
+
+#: daa.config DIR_* codes by (axis code, side + 1) (daa.config.side_to_dir's table)
+_DIRS = ((0, 0, 0), (1, 0, 2), (4, 0, 3), (6, 0, 5))
+I8 = types.Array(int8, 1, "C")
+
+
+@kernel(void(A, A, A, A, A, A, F, F, F, F, F, F, F, F, I8, I8))
+def classify_command_into(trk, vs, gs, c_trk, c_vs, c_gs, db_trk, db_vs, db_gs, turn_rate, v_acc, h_acc, pi, two_pi,
+                          axis_out, dir_out):
+    """(axis, direction) code of each command against its state (``resolution.classify_command``): nan
+    command fields held, the track change wrapped to [-pi, pi), changes inside the deadbands zero, the
+    axis whose change takes longest (the first on ties; none if nothing changes or a time is nan)."""
+    for i in range(trk.shape[0]):
+        ct = trk[i] if c_trk[i] != c_trk[i] else c_trk[i]
+        cv = vs[i] if c_vs[i] != c_vs[i] else c_vs[i]
+        cg = gs[i] if c_gs[i] != c_gs[i] else c_gs[i]
+        d = ((ct - trk[i]) + pi) % two_pi - pi, cv - vs[i], cg - gs[i]
+        d0 = 0.0 if abs(d[0]) < db_trk else d[0]
+        d1 = 0.0 if abs(d[1]) < db_vs else d[1]
+        d2 = 0.0 if abs(d[2]) < db_gs else d[2]
+        t0, t1, t2 = abs(d0) / turn_rate, abs(d1) / v_acc, abs(d2) / h_acc
+        if t0 != t0 or t1 != t1 or t2 != t2:  # np.max is nan: not moved
+            axis_out[i], dir_out[i] = 0, 0
+            continue
+        ax, best, side = 1, t0, d0
+        if t1 > best:
+            ax, best, side = 2, t1, d1
+        if t2 > best:
+            ax, best, side = 3, t2, d2
+        if best > 0:
+            axis_out[i] = ax
+            dir_out[i] = _DIRS[ax][(1 if side > 0 else (-1 if side < 0 else 0)) + 1]
+        else:
+            axis_out[i], dir_out[i] = 0, 0

@@ -118,3 +118,28 @@ def candidates_into(tail_in, tail_out, seg_in, seg_out, K, t_end, t_in, t_out):
                 t_in[i], t_out[i] = a, npmin(b, t_end)
             else:
                 t_in[i], t_out[i] = INF, -INF
+
+
+A3 = types.Array(float64, 3, "A", readonly=True)
+O4 = types.Array(float64, 4, "C")
+
+
+@kernel(void(A3, A3, A3, A3, A3, A3, A3, A3, A3, O4, O4, O4, O4, O4, O4))
+def relative_knots_into(ox, oy, oz, ovx, ovy, ovz, t, ipos, ivel, s0, s1, s2, v0, v1, v2):
+    """Ownship minus intruder at the knots, ``(N, M, P, K)`` per component, from the ownship's knot states
+    and times ``(N, P, K)`` and the intruders' positions / velocities ``(N, M, 3)`` (straight lines):
+    ``s = own - (ipos + t ivel)``, ``v = ovel - ivel`` (``intervals.relative_at_knots_reference``)."""
+    N, M, P, K = s0.shape
+    for n in range(N):
+        for m in range(M):
+            ix, iy, iz = ipos[n, m, 0], ipos[n, m, 1], ipos[n, m, 2]
+            jx, jy, jz = ivel[n, m, 0], ivel[n, m, 1], ivel[n, m, 2]
+            for p in range(P):
+                for k in range(K):
+                    tk = t[n, p, k]
+                    s0[n, m, p, k] = ox[n, p, k] - (ix + tk * jx)
+                    s1[n, m, p, k] = oy[n, p, k] - (iy + tk * jy)
+                    s2[n, m, p, k] = oz[n, p, k] - (iz + tk * jz)
+                    v0[n, m, p, k] = ovx[n, p, k] - jx
+                    v1[n, m, p, k] = ovy[n, p, k] - jy
+                    v2[n, m, p, k] = ovz[n, p, k] - jz

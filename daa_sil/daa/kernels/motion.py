@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from numba import boolean, float64, int64, types, void
 
 from daa_sil.daa.kernels.jit import inline, kernel
@@ -29,16 +31,21 @@ I = int64
 
 
 @inline
+def turn_state(rate, x0, y0, z0, gs0, st, ct, vs0, sgn, sth, cth, t):
+    """The turn of :func:`axis_state` given ``sth``/``cth``, the sine and cosine of ``rate * t``."""
+    r = gs0 / rate
+    fwd, lat = r * sth, sgn * r * (1.0 - cth)
+    ssth = sgn * sth
+    return (x0 + fwd * st + lat * ct, y0 + fwd * ct - lat * st, z0 + vs0 * t,
+            gs0 * (st * cth + ct * ssth), gs0 * (ct * cth - st * ssth), vs0 + 0.0 * t)
+
+
+@inline
 def axis_state(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, lim, t):
     """Ownship (x, y, z, vx, vy, vz) after ``t`` s on the path (``_axis_state_soa``)."""
     if axis == _HORIZONTAL:
         th = rate * t
-        r = gs0 / rate
-        sth, cth = math.sin(th), math.cos(th)
-        fwd, lat = r * sth, sgn * r * (1.0 - cth)
-        ssth = sgn * sth
-        return (x0 + fwd * st + lat * ct, y0 + fwd * ct - lat * st, z0 + vs0 * t,
-                gs0 * (st * cth + ct * ssth), gs0 * (ct * cth - st * ssth), vs0 + 0.0 * t)
+        return turn_state(rate, x0, y0, z0, gs0, st, ct, vs0, sgn, math.sin(th), math.cos(th), t)
     v0 = vs0 if axis == _VERTICAL else gs0
     tc = npmin(t, npmax((lim - v0) * sgn / rate, 0.0))
     sa = sgn * rate
@@ -177,3 +184,34 @@ def command_bisect_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, lo, hi, lo_in
             else:
                 b = mid
         lo[i], hi[i] = a, b
+
+
+@kernel(void(A3, A2, F, F, F, A2, types.Array(float64, 3, "C")))
+def command_states_into(ph_rows, enc, max_turn, h_acc, v_acc, t, out):
+    """Ownship state of row ``i`` at each ``t[i, j]`` into ``out[:, i, j]`` (six rows; SM's knots)."""
+    for i in range(t.shape[0]):
+        for j in range(t.shape[1]):
+            out[0, i, j], out[1, i, j], out[2, i, j], out[3, i, j], out[4, i, j], out[5, i, j] = command_state(
+                ph_rows, enc, i, t[i, j], max_turn, h_acc, v_acc)
+
+
+@kernel(void(I, F, A3, A, types.Array(float64, 4, "C")))
+def axis_knots_into(axis, rate, kin, t, out):
+    """Ownship state on path ``p`` of encounter ``n`` (row ``kin[n, p]``) at each knot time ``t[k]`` into
+    ``out[:, n, p, k]`` (six rows; the band axis's knot states, ``axis_paths.maneuver_paths``)."""
+    K = t.shape[0]
+    sth, cth = np.empty(K), np.empty(K)  # the turn's sines and cosines are the same on every path
+    for k in range(K):
+        th = rate * t[k]
+        sth[k], cth[k] = math.sin(th), math.cos(th)
+    for n in range(kin.shape[0]):
+        for p in range(kin.shape[1]):
+            r = kin[n, p]
+            for k in range(K):
+                if axis == _HORIZONTAL:
+                    a, b, c, d, e, f = turn_state(rate, r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], sth[k], cth[k],
+                                                  t[k])
+                else:
+                    a, b, c, d, e, f = axis_state(axis, rate, r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], t[k])
+                out[0, n, p, k], out[1, n, p, k], out[2, n, p, k], out[3, n, p, k], out[4, n, p, k], out[5, n, p, k] = \
+                    a, b, c, d, e, f

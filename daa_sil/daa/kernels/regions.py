@@ -1,0 +1,185 @@
+"""One band axis from its candidates' conflicts to its regions, recovery and resolutions (compiled).
+
+The numpy reference is :func:`daa_sil.daa.bands.axis_bands` itself (its ``earliest_exit`` recovery;
+the cylinder recovery stays in numpy): red per intruder and level, the columns ordered low side
+(outward in), current, high side (``bands._side_order``), the reductions over intruders (``np.any`` /
+``np.min`` / ``np.max``, nan winning), isolated green candidates dropped on the DAIDALUS grid, the
+candidate values (``bands._candidate_values``), the recovery columns and ``bands.resolutions``, each
+with the reference's operations in its order. Python-scalar constants are computed by the caller.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import boolean, float64, int8, int64, types, void
+
+from daa_sil.daa.kernels.jit import inline, kernel
+from daa_sil.daa.kernels.scalar import INF, npmax, npmin
+
+A4 = types.Array(float64, 4, "A", readonly=True)
+A = types.Array(float64, 1, "A", readonly=True)
+B2 = types.Array(boolean, 2, "A", readonly=True)
+O2 = types.Array(float64, 2, "C")
+O = float64[:]
+F = float64
+I = int64
+B = boolean
+
+#: daa.config REGION_* and AXIS_HORIZONTAL
+NONE, MID, NEAR, RECOVERY = 0, 2, 3, 4
+_HORIZONTAL = 1
+
+
+@inline
+def _red_max(acc, x, first):
+    """One step of ``np.max`` over a row (nan wins; ``first``: the row's first element)."""
+    if first:
+        return x
+    if acc != acc:
+        return acc
+    return x if (x != x or x > acc) else acc
+
+
+@inline
+def _red_min(acc, x, first):
+    """One step of ``np.min`` over a row (nan wins; ``first``: the row's first element)."""
+    if first:
+        return x
+    if acc != acc:
+        return acc
+    return x if (x != x or x < acc) else acc
+
+
+@inline
+def _first_ok(ok_row, k0, want, K):
+    """``bands._first_on_side`` of one row: (index, found)."""
+    if want > 0:
+        if k0 + 1 >= K:
+            return k0, False
+        for j in range(k0 + 1, K):
+            if ok_row[j]:
+                return j, True
+        return k0 + 1, False
+    if k0 <= 0:
+        return k0, False
+    for j in range(k0 - 1, -1, -1):
+        if ok_row[j]:
+            return j, True
+    return k0 - 1, False
+
+
+@kernel(void(A4, A4, B, B2, B2, B2, A, F, F, F, I, I, B, I, A, F, F, F, B, F, F, F, F, F, F,
+             O2, O2, O2, O2, O2, types.Array(int8, 2, "C"), types.Array(int8, 2, "C"), O, O, int8[:]))
+def axis_regions_into(t_in, t_out, hfm, near_list, mid_list, alert2, tk, L, warn, corr, j_lo, j_hi, dgrid, axis,
+                      cur, rate, lim_lo, lim_hi, do_clip, clip_lo, clip_hi, sm_h, stab, pi_cut, two_pi,
+                      values, delta, t_man, t_in_all, t_out_c, region, gap, res_lo, res_hi, pref):
+    """The (N, K) candidate arrays, regions (N, K), gap regions (N, K-1; DAIDALUS grid), resolutions
+    and preferred sides (N,) of one axis from ``t_in``/``t_out`` (N, M, 2, J+1) (module docstring);
+    ``alert2`` (N, M): alert level >= 2; ``near_list``/``mid_list`` the conflict lists (``hfm``);
+    ``cur`` (N,) the current track / vs / gs; ``rate`` the turn rate or the axis acceleration."""
+    N, M = t_in.shape[0], t_in.shape[1]
+    K = j_lo + j_hi + 1
+    k0 = j_lo
+    red_near = np.empty(K, np.bool_)
+    red_mid = np.empty(K, np.bool_)
+    g_near = np.empty(K, np.bool_)
+    g_mid = np.empty(K, np.bool_)
+    ok = np.empty(K, np.bool_)
+    rec = np.empty(K, np.bool_)
+    for n in range(N):
+        # -- regions from the conflicts per intruder ---------------------------------------------------
+        for c in range(K):
+            p, k = (0, j_lo - c) if c < j_lo else (1, c - j_lo)
+            rn, rm = False, False
+            a_in, a_out = INF, -INF
+            for m in range(M):
+                ti = t_in[n, m, p, k]
+                if hfm:
+                    hn = L if near_list[n, m] else npmin(L, warn + tk[k])
+                    hm = L if mid_list[n, m] else npmin(L, corr + tk[k])
+                    r_near_i, r_mid_i = ti < hn, ti < hm
+                    rm = rm or r_mid_i
+                else:
+                    r_mid_i = ti < (L if alert2[n, m] else corr)
+                    r_near_i = ti < warn
+                    rm = rm or (r_near_i or r_mid_i)
+                rn = rn or r_near_i
+                a_in = _red_min(a_in, ti, m == 0)
+                a_out = _red_max(a_out, t_out[n, m, p, k] if (r_mid_i or r_near_i) else -INF, m == 0)
+            red_near[c], red_mid[c] = rn, rm
+            t_in_all[n, c], t_out_c[n, c] = a_in, a_out
+        for c in range(K):
+            gn, gm = not red_near[c], not red_mid[c]
+            if dgrid:  # a run of one green candidate is not a band (recovery.drop_isolated)
+                gn = gn and ((c > 0 and not red_near[c - 1]) or (c < K - 1 and not red_near[c + 1]))
+                gm = gm and ((c > 0 and not red_mid[c - 1]) or (c < K - 1 and not red_mid[c + 1]))
+            g_near[c], g_mid[c] = gn, gm
+            region[n, c] = NEAR if not gn else (MID if not gm else NONE)
+        # -- candidate values (bands._candidate_values) ----------------------------------------------------
+        for c in range(K):
+            sgn = -1.0 if c < j_lo else 1.0
+            tc_k = tk[j_lo - c] if c < j_lo else tk[c - j_lo]
+            if axis == _HORIZONTAL:
+                th = sgn * (rate * tc_k)
+                v = cur[n] + th
+                if v < 0.0:
+                    v = v + two_pi
+                elif v >= two_pi:
+                    v = v - two_pi
+                values[n, c], delta[n, c] = v, th
+                t_man[n, c] = abs(th) / rate
+            else:
+                lim = lim_lo if sgn < 0 else lim_hi
+                v0 = cur[n]
+                tc = npmin(tc_k, npmax((lim - v0) * sgn / rate, 0.0))
+                v = v0 + sgn * rate * tc
+                d = v - v0
+                values[n, c] = npmin(npmax(v, clip_lo), clip_hi) if do_clip else v
+                delta[n, c] = d
+                t_man[n, c] = abs(d) / rate
+        # -- recovery: every candidate MID or worse (earliest exit) ----------------------------------------
+        saturated = True
+        for c in range(K):
+            saturated = saturated and region[n, c] >= MID
+        any_late = False
+        best = 0.0
+        for c in range(K):
+            any_late = any_late or t_in_all[n, c] > sm_h
+            best = _red_min(best, t_out_c[n, c], c == 0)
+        for c in range(K):
+            late = t_in_all[n, c] > sm_h
+            rec[c] = saturated and (late if any_late else t_out_c[n, c] <= best + stab)
+            if rec[c]:
+                region[n, c] = RECOVERY
+        if dgrid:
+            for c in range(K - 1):
+                if rec[c] and rec[c + 1]:
+                    gap[n, c] = RECOVERY
+                elif not (g_near[c] and g_near[c + 1]):
+                    gap[n, c] = NEAR
+                elif not (g_mid[c] and g_mid[c + 1]):
+                    gap[n, c] = MID
+                else:
+                    gap[n, c] = NONE
+        # -- resolutions (bands.resolutions) ---------------------------------------------------------------
+        cr = region[n, k0]
+        conflict = cr == MID or cr == NEAR
+        for c in range(K):
+            r = region[n, c]
+            ok[c] = r == NONE or r == RECOVERY
+            if axis == _HORIZONTAL and dgrid:
+                ok[c] = ok[c] and abs(delta[n, c]) < pi_cut
+        i_lo, f_lo = _first_ok(ok, k0, -1, K)
+        i_hi, f_hi = _first_ok(ok, k0, 1, K)
+        if conflict:
+            res_lo[n] = values[n, i_lo] if f_lo else -INF
+            res_hi[n] = values[n, i_hi] if f_hi else INF
+        else:
+            res_lo[n], res_hi[n] = np.nan, np.nan
+        d_lo, d_hi = t_man[n, i_lo], t_man[n, i_hi]
+        hi_first = d_hi <= d_lo + 1e-9 * npmax(d_lo, 1.0)
+        if f_lo and f_hi:
+            pr = 1 if hi_first else -1
+        else:
+            pr = 1 if f_hi else (-1 if f_lo else 0)
+        pref[n] = pr if conflict else 0

@@ -1,0 +1,389 @@
+"""The undecided pieces of a maneuver path resolved on the true state, in one compiled pass.
+
+The numpy reference is :meth:`daa_sil.daa.undecided.UndecidedPieces._resolve_reference` (its
+``_bisect``, ``_classify_part``, ``_clear2``, ``_split`` and ``_clip``). The kernel keeps its phase
+structure, not only its per-piece arithmetic: the pieces of one depth are processed as one batch,
+and what the reference decides batch-wide stays batch-wide -- the number of halvings of a bisection
+(from the widest bracket of the call, per kind), the number of parts a split makes (from the longest
+piece), the clip sampling count, and whether the vertical position error ``e_z`` is used (``np.any``
+of the rows' vertical accelerations). ``ceil(log2(x))`` of a bisection's halvings is read from a
+table of the thresholds where numpy's ``log2`` passes each integer (``undecided.bisect_thresholds``),
+so it is numpy's, not libm's.
+
+Rows ``r`` are the undecided segments the call starts with; every piece split from a segment keeps
+its row (the motion, acceleration bounds, jerk, kinks and vertical window of its path).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import boolean, float64, int64, types, void
+
+from daa_sil.daa.kernels.jit import inline, kernel
+from daa_sil.daa.kernels.motion import command_rel_state, rel_state
+from daa_sil.daa.kernels.pieces import CLEAR, classify, clear2
+from daa_sil.daa.kernels.scalar import INF, npmax, npmin, wcv_soa
+
+A = types.Array(float64, 1, "A", readonly=True)
+A2 = types.Array(float64, 2, "A", readonly=True)
+A3 = types.Array(float64, 3, "A", readonly=True)
+IA = types.Array(int64, 1, "A", readonly=True)
+O = float64[:]
+F = float64
+I = int64
+B = boolean
+
+#: motion kinds: a band axis's path (kernels.motion.rel_state) or a command (command_rel_state)
+KIND_AXIS, KIND_COMMAND = 0, 1
+#: ``settle_time * (1 + 1e-9)`` of the reference, the factor computed in Python
+SETTLE_SLACK = 1.0 + 1e-9
+
+
+@inline
+def _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, r, t):
+    if kind == KIND_AXIS:
+        return rel_state(axis, rate, kin, ipv, r, t)
+    return command_rel_state(ph, enc, ipv, r, t, max_turn, h_acc, v_acc)
+
+
+@inline
+def _settle(ah, av, v2, p8):
+    """certify.settle_time of one path (``v2`` = 2 V_TOL, ``p8`` = 8 P_TOL, Python products)."""
+    t_v = v2 / ah if ah > 0 else INF
+    a = npmax(ah, av)
+    t_p = math.sqrt(p8 / a) if a > 0 else INF
+    return npmin(t_v, t_p)
+
+
+@inline
+def _max_acc(acc, x):
+    """One step of ``np.max`` (nan wins)."""
+    if acc != acc:
+        return acc
+    if x != x or x > acc:
+        return x
+    return acc
+
+
+@inline
+def _halvings(wmax, dt, thr):
+    """``int(np.ceil(np.log2(max(wmax, dt) / dt)))`` (``thr[n]``: smallest x with log2(x) > n)."""
+    x = (dt if dt > wmax else wmax) / dt
+    n = 0
+    while n < thr.shape[0] and x >= thr[n]:
+        n += 1
+    return n
+
+
+@inline
+def _update(seg_in, seg_out, s, t_in, t_out):
+    """``np.minimum.at`` / ``np.maximum.at`` of one entry."""
+    a = seg_in[s]
+    if not (a != a or a < t_in):
+        seg_in[s] = t_in
+    b = seg_out[s]
+    if not (b != b or b > t_out):
+        seg_out[s] = t_out
+
+
+@inline
+def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row, lo, hi, lo_in, thr, dt_in, dt_out,
+            DD, TT, H, TC):
+    """``UndecidedPieces._bisect`` of the rows ``row`` (one batch): ``lo``/``hi`` halved in place."""
+    n = lo.shape[0]
+    w_in, w_out = 0.0, 0.0
+    any_in, any_out = False, False
+    for i in range(n):
+        if lo_in[i]:
+            w_out = _max_acc(w_out, hi[i] - lo[i])
+            any_out = True
+        else:
+            w_in = _max_acc(w_in, hi[i] - lo[i])
+            any_in = True
+    n_in, n_out = _halvings(w_in, dt_in, thr), _halvings(w_out, dt_out, thr)
+    mixed = n_in != n_out and any_in and any_out
+    steps = max(n_in, n_out) if n else 0
+    for i in range(n):
+        a, b, flag = lo[i], hi[i], lo_in[i]
+        for k in range(steps):
+            mid = 0.5 * (a + b)
+            sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row[i], mid)
+            same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
+            if mixed:
+                if k < (n_out if flag else n_in):
+                    if same:
+                        a = mid
+                    else:
+                        b = mid
+            elif same:
+                a = mid
+            else:
+                b = mid
+        lo[i], hi[i] = a, b
+
+
+@inline
+def _any_nonzero(acc_v, row, sel):
+    for i in sel:
+        if acc_v[row[i]] != 0.0:
+            return True
+    return False
+
+
+@inline
+def _classify_part(a_h, a_v, anyv, has_vwin, w_lo, w_hi, ta, tb, x0, y0, z0, x1, y1, z1, D, DD, H, TT, TC):
+    """``UndecidedPieces._classify_part`` of one piece (``anyv``: ``np.any`` of the batch's a_v)."""
+    h = tb - ta
+    lo, hi = 0.0, 0.0
+    if has_vwin:
+        lo, hi = npmax(w_lo, ta) - ta, npmin(w_hi, tb) - ta
+    e_z = a_v * h * h * 0.125 if anyv else 0.0
+    return classify(x0, y0, z0, x1, y1, z1, h, a_h * h * h * 0.125, a_h * h * 0.5, e_z, lo, hi, has_vwin,
+                    D, DD, H, TT, TC)
+
+
+@inline
+def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, sid, row, ta, tb, thr, dt_in, dt_out,
+          clip_dt, DD, TT, H, TC, seg_in, seg_out):
+    """``UndecidedPieces._clip`` of pieces ``final``: sampled every ``clip_dt``, the first and last
+    violating samples bracketed and bisected (entries, then exits, each as one batch)."""
+    nf = final.shape[0]
+    hmax = 0.0
+    for c in range(nf):
+        i = final[c]
+        hmax = (tb[i] - ta[i]) if c == 0 else _max_acc(hmax, tb[i] - ta[i])
+    qf = np.ceil(hmax / clip_dt - 1e-9)
+    if not (qf >= 1):
+        return
+    q = int(qf)
+    b1, t1 = np.empty(nf), np.empty(nf)  # entry brackets (before, first sample inside)
+    t2, a2 = np.empty(nf), np.empty(nf)  # exit brackets (last sample inside, after)
+    hrow, hid = np.empty(nf, np.int64), np.empty(nf, np.int64)
+    nh = 0
+    for c in range(nf):
+        i = final[c]
+        r = row[i]
+        h = tb[i] - ta[i]
+        first, lastk = -1, -1
+        t_prev_first, t_first, t_last, t_after = ta[i], 0.0, 0.0, tb[i]
+        t_prev = ta[i]
+        pending_after = False
+        for k in range(q):
+            t = ta[i] + h * ((float(k) + 0.5) / q)
+            if pending_after:
+                t_after = t
+                pending_after = False
+            sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, r, t)
+            if wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC):
+                if first < 0:
+                    first, t_first = k, t
+                    t_prev_first = t_prev if k > 0 else ta[i]
+                lastk, t_last = k, t
+                t_after = tb[i]
+                pending_after = k < q - 1
+            t_prev = t
+        if first >= 0:
+            b1[nh], t1[nh], t2[nh], a2[nh] = t_prev_first, t_first, t_last, t_after
+            hrow[nh], hid[nh] = r, sid[i]
+            nh += 1
+    if nh == 0:
+        return
+    l1, h1, l2, h2, hr = b1[:nh].copy(), t1[:nh].copy(), t2[:nh].copy(), a2[:nh].copy(), hrow[:nh].copy()
+    _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, hr, l1, h1, np.zeros(nh, np.bool_), thr,
+            dt_in, dt_out, DD, TT, H, TC)
+    _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, hr, l2, h2, np.ones(nh, np.bool_), thr,
+            dt_in, dt_out, DD, TT, H, TC)
+    for c in range(nh):
+        _update(seg_in, seg_out, hid[c], 0.5 * (l1[c] + h1[c]), 0.5 * (l2[c] + h2[c]))
+
+
+@kernel(void(I, I, F, A2, A3, A2, F, F, F, A2,
+             A, A, A, A, A, A, A, IA, IA,
+             A, A, B, A, B, A2, B, A, A,
+             B, A, I, I, F, F, F, F, F,
+             F, F, F, F, F, O, O))
+def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
+                 s0, s1, s2, v0, v1, v2, tk, seg, ka,
+                 acc_h, acc_v, has_jerk, jerk, has_kink, kink, has_vwin, vlo, vhi,
+                 exits, thr, max_depth, max_split, dt_in, dt_out, clip_dt, v2tol, p8tol,
+                 D, DD, H, TT, TC, seg_in, seg_out):
+    """Resolve the undecided segments ``seg`` (flat segment ids; ``ka`` their first knots' flat indices
+    into the knot arrays ``s*``/``v*``/``tk``) into ``seg_in``/``seg_out`` (the reference's docstring).
+    Row ``r``'s motion is row ``r`` of ``kin`` (``kind`` axis) or of ``ph``/``enc`` (command), against
+    intruder row ``r`` of ``ipv``; ``acc_h`` ... ``vhi`` are per row."""
+    R = seg.shape[0]
+    settle = np.empty(R)
+    for r in range(R):
+        settle[r] = _settle(acc_h[r], acc_v[r], v2tol, p8tol)
+    # -- the pieces of the current depth --------------------------------------------------------------
+    L = R
+    sid = np.empty(L, np.int64)
+    row = np.empty(L, np.int64)
+    ta, tb = np.empty(L), np.empty(L)
+    pa, pb = np.empty((3, L)), np.empty((3, L))
+    ua, ub = np.empty((2, L)), np.empty((2, L))
+    fa, fb = np.empty(L, np.bool_), np.empty(L, np.bool_)
+    for r in range(R):
+        a = ka[r]
+        t0 = tk[a]
+        h = tk[a + 1] - t0
+        sid[r], row[r], ta[r], tb[r] = seg[r], r, t0, t0 + h
+        pa[0, r], pa[1, r], pa[2, r] = s0[a], s1[a], s2[a]
+        pb[0, r], pb[1, r], pb[2, r] = s0[a + 1], s1[a + 1], s2[a + 1]
+        ua[0, r], ua[1, r], ub[0, r], ub[1, r] = v0[a], v1[a], v0[a + 1], v1[a + 1]
+        fa[r] = wcv_soa(s0[a], s1[a], s2[a], v0[a], v1[a], v2[a], DD, TT, H, TC)
+        fb[r] = wcv_soa(s0[a + 1], s1[a + 1], s2[a + 1], v0[a + 1], v1[a + 1], v2[a + 1], DD, TT, H, TC)
+    for depth in range(max_depth):
+        if L == 0:
+            return
+        for i in range(L):
+            if fa[i] and fb[i]:
+                _update(seg_in, seg_out, sid[i], ta[i], tb[i])
+        split = np.zeros(L, np.bool_)
+        last = depth == max_depth - 1
+        settled = np.empty(L, np.bool_)
+        for i in range(L):
+            settled[i] = ((tb[i] - ta[i]) <= settle[row[i]] * SETTLE_SLACK) or last
+        # -- crossings: entries (start clear, end violating) and exits -----------------------------------
+        nc = 0
+        cross = np.empty(L, np.int64)
+        for i in range(L):
+            if fa[i] != fb[i]:
+                if not exits and fa[i]:  # an exit: first entry at the start; the last exit is not needed
+                    _update(seg_in, seg_out, sid[i], ta[i], tb[i])
+                else:
+                    cross[nc] = i
+                    nc += 1
+        if nc:
+            crs = cross[:nc].copy()
+            lo, hi = np.empty(nc), np.empty(nc)
+            lo_in = np.empty(nc, np.bool_)
+            crow = np.empty(nc, np.int64)
+            for c in range(nc):
+                i = crs[c]
+                lo[c], hi[c], lo_in[c], crow[c] = ta[i], tb[i], not fb[i], row[i]
+            _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, crow, lo, hi, lo_in, thr, dt_in,
+                    dt_out, DD, TT, H, TC)
+            # certify the other side of the crossing clear: before an entry, after an exit
+            anyv = _any_nonzero(acc_v, row, crs)
+            for c in range(nc):
+                i = crs[c]
+                r = row[i]
+                entry = fb[i]
+                mx, my, mz, _, _, _ = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, r,
+                                           lo[c] if entry else hi[c])
+                c_a, c_b = (ta[i], lo[c]) if entry else (hi[c], tb[i])
+                if entry:
+                    x0, y0, z0, x1, y1, z1 = pa[0, i], pa[1, i], pa[2, i], mx, my, mz
+                else:
+                    x0, y0, z0, x1, y1, z1 = mx, my, mz, pb[0, i], pb[1, i], pb[2, i]
+                code = _classify_part(acc_h[r], acc_v[r], anyv, has_vwin, vlo[r], vhi[r], c_a, c_b,
+                                      x0, y0, z0, x1, y1, z1, D, DD, H, TT, TC)
+                if code == CLEAR or settled[i]:
+                    tc = 0.5 * (lo[c] + hi[c])
+                    _update(seg_in, seg_out, sid[i], tc if entry else ta[i], tb[i] if entry else tc)
+                else:
+                    split[i] = True
+        # -- both ends clear: a clip may lie inside unless certified clear --------------------------------
+        nj = 0
+        jj = np.empty(L, np.int64)
+        for i in range(L):
+            if not fa[i] and not fb[i]:
+                jj[nj] = i
+                nj += 1
+        if nj and depth > 0:  # (at depth 0 these are the segments the first-order test left undecided)
+            anyv = _any_nonzero(acc_v, row, jj[:nj])
+            keep = 0
+            for c in range(nj):
+                i = jj[c]
+                r = row[i]
+                code = _classify_part(acc_h[r], acc_v[r], anyv, has_vwin, vlo[r], vhi[r], ta[i], tb[i],
+                                      pa[0, i], pa[1, i], pa[2, i], pb[0, i], pb[1, i], pb[2, i], D, DD, H, TT, TC)
+                if code != CLEAR:
+                    jj[keep] = i
+                    keep += 1
+            nj = keep
+        if nj and has_jerk:  # the tighter second-order certificate (true end velocities)
+            anyv = _any_nonzero(acc_v, row, jj[:nj])
+            keep = 0
+            for c in range(nj):
+                i = jj[c]
+                r = row[i]
+                h = tb[i] - ta[i]
+                e_v = jerk[r] * h * h * 0.125
+                if has_kink:
+                    across = False
+                    for e in range(kink.shape[1]):
+                        kt = kink[r, e]
+                        across = across or ((kt > ta[i]) and (kt < tb[i]))
+                    e_v = e_v + (acc_h[r] * h * 0.5 if across else 0.0)
+                e_z = acc_v[r] * h * h * 0.125 if anyv else 0.0
+                if not clear2(pa[0, i], pa[1, i], pa[2, i], pb[0, i], pb[1, i], pb[2, i], ua[0, i], ua[1, i],
+                              ub[0, i], ub[1, i], h, acc_h[r] * h * h * 0.125, e_v, e_z, D, DD, H, TT, TC):
+                    jj[keep] = i
+                    keep += 1
+            nj = keep
+        if nj:
+            nf = 0
+            final = np.empty(nj, np.int64)
+            for c in range(nj):
+                i = jj[c]
+                if settled[i]:
+                    final[nf] = i
+                    nf += 1
+                else:
+                    split[i] = True
+            if nf:
+                _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final[:nf], sid, row, ta, tb,
+                      thr, dt_in, dt_out, clip_dt, DD, TT, H, TC, seg_in, seg_out)
+        # -- split what is left into the fewest equal parts that settle ------------------------------------
+        ns = 0
+        for i in range(L):
+            if split[i]:
+                ns += 1
+        if ns == 0:
+            return
+        mx_ratio = -INF
+        first = True
+        for i in range(L):
+            if split[i]:
+                x = (tb[i] - ta[i]) / settle[row[i]]
+                mx_ratio = x if first else _max_acc(mx_ratio, x)
+                first = False
+        c = np.ceil(mx_ratio - 1e-9)
+        qf = c if c > 2 else 2.0
+        qf = qf if qf < max_split else float(max_split)
+        q = int(qf)
+        NL = ns * q
+        n_sid, n_row = np.empty(NL, np.int64), np.empty(NL, np.int64)
+        n_ta, n_tb = np.empty(NL), np.empty(NL)
+        n_pa, n_pb = np.empty((3, NL)), np.empty((3, NL))
+        n_ua, n_ub = np.empty((2, NL)), np.empty((2, NL))
+        n_fa, n_fb = np.empty(NL, np.bool_), np.empty(NL, np.bool_)
+        o = 0
+        for i in range(L):
+            if not split[i]:
+                continue
+            r = row[i]
+            t_prev, h = ta[i], tb[i] - ta[i]
+            px, py, pz, wx, wy, f_prev = pa[0, i], pa[1, i], pa[2, i], ua[0, i], ua[1, i], fa[i]
+            for k in range(q):
+                if k < q - 1:
+                    t_next = ta[i] + h * (float(k + 1) / q)
+                    sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, r,
+                                                  t_next)
+                    f_next = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC)
+                else:
+                    t_next = tb[i]
+                    sx, sy, sz, vx, vy, f_next = pb[0, i], pb[1, i], pb[2, i], ub[0, i], ub[1, i], fb[i]
+                n_sid[o], n_row[o], n_ta[o], n_tb[o] = sid[i], r, t_prev, t_next
+                n_pa[0, o], n_pa[1, o], n_pa[2, o] = px, py, pz
+                n_pb[0, o], n_pb[1, o], n_pb[2, o] = sx, sy, sz
+                n_ua[0, o], n_ua[1, o], n_ub[0, o], n_ub[1, o] = wx, wy, vx, vy
+                n_fa[o], n_fb[o] = f_prev, f_next
+                t_prev, px, py, pz, wx, wy, f_prev = t_next, sx, sy, sz, vx, vy, f_next
+                o += 1
+        L = NL
+        sid, row, ta, tb, pa, pb, ua, ub, fa, fb = n_sid, n_row, n_ta, n_tb, n_pa, n_pb, n_ua, n_ub, n_fa, n_fb
