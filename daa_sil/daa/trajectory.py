@@ -44,7 +44,7 @@ from daa_sil.geometry.thresholds import Thresholds
 from daa_sil.daa.intervals import relative_at_knots, row_blocks, interval_soa
 from daa_sil.daa.certify import CLEAR, INSIDE, UNDECIDED, classify_pieces
 from daa_sil.daa import kernels
-from daa_sil.daa.undecided import UndecidedPieces
+from daa_sil.daa.undecided import UndecidedPieces, piece_index
 
 #: knot-to-knot segments examined together first (a block far from the volume is clear as a whole)
 BLOCK = 4
@@ -53,11 +53,6 @@ _NONE = np.zeros(0)
 #: ``state_at(n, p) -> f`` with ``f(t) -> (x, y, z, vx, vy, vz)``: the true ownship state on path ``p[i]`` of
 #: encounter ``n[i]`` at time ``t[i]`` (the per-path parameters are gathered once, then ``f`` is cheap)
 StateAt = Callable[[np.ndarray, np.ndarray], Callable[[np.ndarray], tuple]]
-
-
-# --------------------------------------------------------------------------------------------------
-# certification of a piece of the true path against its chord
-# --------------------------------------------------------------------------------------------------
 
 
 # --------------------------------------------------------------------------------------------------
@@ -174,7 +169,7 @@ class PathConflicts:
         return t_in, t_out
 
 
-class PathEvaluator(UndecidedPieces):
+class PathEvaluator:
     """Relative geometry of maneuver paths against straight-line intruders, evaluated for any volume.
 
     Built once per (paths, intruders); :meth:`evaluate` then gives :class:`PathConflicts` for a
@@ -197,8 +192,9 @@ class PathEvaluator(UndecidedPieces):
         #: component (N, M, P, K), contiguous
         self.s, self.v = relative_at_knots(paths.pos, paths.vel, paths.knot_times(), self.ipos, self.ivel, self.shape)
         self._vwin = None
-        #: use the compiled kernels (False: the numpy reference, see :meth:`evaluate_reference`)
-        self.compiled = True
+        #: use the compiled kernels (False: the numpy reference, see :meth:`evaluate_reference`); ``fused``:
+        #: resolve undecided pieces in one compiled loop (False: the numpy loop over compiled pieces)
+        self.compiled, self.fused = True, True
 
     def evaluate(self, th: Thresholds) -> PathConflicts:
         """Segment and tail intervals for volume ``th`` (see :class:`PathConflicts`), compiled kernels."""
@@ -252,7 +248,7 @@ class PathEvaluator(UndecidedPieces):
                                  pc.tail_in.reshape(-1), pc.tail_out.reshape(-1))
 
     def _segments_compiled(self, th: Thresholds, pc: PathConflicts) -> None:
-        """:meth:`_segments` with the certificates in one compiled pass (undecided pieces: :meth:`_resolve`)."""
+        """:meth:`_segments` with the certificates in one compiled pass (undecided pieces: :meth:`UndecidedPieces.resolve`)."""
         n, m, p, k = self.shape
         lo, hi, has = self._vwin_flat()
         tab = self._path_tables()
@@ -264,7 +260,7 @@ class PathEvaluator(UndecidedPieces):
                                     float(th.tcoa), code, seg_in, seg_out)
         todo = np.flatnonzero(code == UNDECIDED)
         if todo.size:
-            self._resolve(todo, th, seg_in, seg_out)
+            self._undecided().resolve(todo, th, seg_in, seg_out)
 
     def _tails(self, th: Thresholds, pc: PathConflicts, want: "np.ndarray | None") -> None:
         """Tail intervals of every knot (``want`` None) or of the knots where ``want``."""
@@ -352,7 +348,12 @@ class PathEvaluator(UndecidedPieces):
         np.copyto(pc.seg_out, tt[..., 1:], where=inside)
         todo = np.flatnonzero(code == UNDECIDED)
         if todo.size:
-            self._resolve(todo, th, pc.seg_in.reshape(-1), pc.seg_out.reshape(-1))
+            self._undecided().resolve(todo, th, pc.seg_in.reshape(-1), pc.seg_out.reshape(-1))
+
+    def _undecided(self) -> UndecidedPieces:
+        """The true paths as the resolution of undecided pieces reads them (this evaluation's window)."""
+        return UndecidedPieces(self.paths, self.ipos, self.ivel, self.s, self.v, self._flat_times(),
+                               self._path_tables(), self._vwin, self.exits, self.compiled, self.fused)
 
     def _flat_times(self) -> np.ndarray:
         """Knot times as a flat contiguous (N*M*P*K) array (cached)."""
@@ -372,18 +373,8 @@ class PathEvaluator(UndecidedPieces):
                                 kink=None if P.kink_t is None else P.kink_t[nn, pp])
         return self._tables
 
-    def _pieces(self, flat_seg):
-        """Path (flat n, m, p), first-knot flat index, start, duration and end points of segments ``flat_seg``."""
-        k = self.shape[3]
-        path = flat_seg // (k - 1)
-        ka = flat_seg + path  # = path * k + (flat_seg - path * (k - 1))
-        tt = self._flat_times()
-        t0 = tt[ka]
-        h = tt[ka + 1] - t0
-        return path, ka, t0, h
-
     def _classify_flat(self, th, flat_seg, seg_shape) -> np.ndarray:
-        path, ka, t0, h = self._pieces(flat_seg)
+        path, ka, t0, h = piece_index(flat_seg, self.shape[3], self._flat_times())
         tab = self._path_tables()
         a_h, a_v = tab["acc_h"][path], tab["acc_v"][path]
         win = None

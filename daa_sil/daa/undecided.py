@@ -25,8 +25,38 @@ CLIP_DT = 0.01
 MAX_DEPTH = 8
 
 
+def piece_index(flat_seg: np.ndarray, k: int, t_flat: np.ndarray):
+    """Path (flat n, m, p), first-knot flat index, start (s) and duration (s) of the knot-to-knot segments
+    ``flat_seg`` (flat indices over (N, M, P, K - 1)) of paths with ``k`` knots at times ``t_flat`` (N*M*P*K)."""
+    path = flat_seg // (k - 1)
+    ka = flat_seg + path  # = path * k + (flat_seg - path * (k - 1))
+    t0 = t_flat[ka]
+    return path, ka, t0, t_flat[ka + 1] - t0
+
+
 class UndecidedPieces:
-    """Part of :class:`daa_sil.daa.trajectory.PathEvaluator` (a mixin: it uses the evaluator's attributes)."""
+    """The true paths of a :class:`daa_sil.daa.trajectory.PathEvaluator`, as far as resolving undecided
+    pieces needs them, and the resolution itself (:meth:`resolve`).
+
+    ``paths`` the ownship's :class:`~daa_sil.daa.trajectory.ManeuverPaths`; ``ipos``/``ivel`` (N, M, 3) the
+    intruders' positions (m) and velocities (m/s) at t = 0; ``s``/``v`` the relative positions and
+    velocities at the knots per component (N, M, P, K); ``t_flat`` the knot times (s) flat; ``tables`` the
+    per-path lookups (encounter ``n``, path ``p``, flat ``nm``, ``acc_h``, ``acc_v``, ``jerk``, ``kink``);
+    ``vwin`` the per-path vertical windows (or None); ``exits`` whether last exits are searched;
+    ``compiled`` / ``fused`` the compiled pieces and the fused loop (False: the numpy reference).
+    """
+
+    def __init__(self, paths, ipos: np.ndarray, ivel: np.ndarray, s, v, t_flat: np.ndarray, tables: dict,
+                 vwin, exits: bool, compiled: bool = True, fused: bool = True):
+        self.paths, self.ipos, self.ivel, self.s, self.v = paths, ipos, ivel, s, v
+        self.t_flat, self.tables, self.vwin, self.exits = t_flat, tables, vwin, exits
+        self.compiled, self.fused = compiled, fused
+        self._ipv = None  # intruder position and velocity per flat (n, m), (N * M, 6)
+        self._intr_flat = None  # intruder position / velocity components, flat (N * M)
+
+    def pieces(self, flat_seg):
+        """:func:`piece_index` of segments ``flat_seg`` of these paths."""
+        return piece_index(flat_seg, self.s[0].shape[-1], self.t_flat)
 
     def _kin_rows(self, path):
         """``(state kernel, bisection kernel, their leading arguments)`` for flat paths ``path``, or None when
@@ -34,8 +64,8 @@ class UndecidedPieces:
         kin = self.paths.kin
         if not self.compiled or kin is None:
             return None
-        tab = self._path_tables()
-        if getattr(self, "_ipv", None) is None:  # intruder position and velocity per flat (n, m), (N * M, 6)
+        tab = self.tables
+        if self._ipv is None:  # intruder position and velocity per flat (n, m), (N * M, 6)
             self._ipv = np.concatenate([self.ipos, self.ivel], axis=-1).reshape(-1, 6)
         n, ipv = tab["n"][path], self._ipv[tab["nm"][path]]
         k = kernels.get()
@@ -52,10 +82,10 @@ class UndecidedPieces:
                 rows[0](*rows[2], as_vector(t, path.size), out)
                 return tuple(out)
             return f_compiled
-        tab = self._path_tables()
+        tab = self.tables
         own = self.paths.state_at(tab["n"][path], tab["p"][path])
         nm = tab["nm"][path]
-        if getattr(self, "_intr_flat", None) is None:  # intruder position / velocity components, flat (N * M)
+        if self._intr_flat is None:  # intruder position / velocity components, flat (N * M)
             self._intr_flat = [np.ascontiguousarray(a[..., i]).reshape(-1) for a in (self.ipos, self.ivel) for i in range(3)]
         ipx, ipy, ipz, ivx, ivy, ivz = (a[nm] for a in self._intr_flat)
 
@@ -98,17 +128,17 @@ class UndecidedPieces:
                 hi = np.where(same, hi, mid)
         return lo, hi
 
-    def _resolve(self, flat_seg, th, seg_in, seg_out) -> None:
+    def resolve(self, flat_seg, th, seg_in, seg_out) -> None:
         """Undecided segments on the true path (module docstring); updates the flat ``seg_in``/``seg_out``.
         One compiled pass (:func:`daa_sil.daa.kernels.resolve.resolve_into`) when the paths' motion is
-        given as data; else, and as its test oracle, :meth:`_resolve_reference`."""
+        given as data; else, and as its test oracle, :meth:`resolve_reference`."""
         kin = self.paths.kin
-        if not self.compiled or kin is None or not getattr(self, "fused", True):
-            self._resolve_reference(flat_seg, th, seg_in, seg_out)
+        if not self.compiled or kin is None or not self.fused:
+            self.resolve_reference(flat_seg, th, seg_in, seg_out)
             return
-        path, ka, _, _ = self._pieces(flat_seg)
-        tab = self._path_tables()
-        if getattr(self, "_ipv", None) is None:
+        path, ka, _, _ = self.pieces(flat_seg)
+        tab = self.tables
+        if self._ipv is None:
             self._ipv = np.concatenate([self.ipos, self.ivel], axis=-1).reshape(-1, 6)
         n, ipv, r = tab["n"][path], self._ipv[tab["nm"][path]], path.size
         if kin[0] == "axis":
@@ -117,11 +147,11 @@ class UndecidedPieces:
             motion = (1, 0, 0.0, _NO_ROWS, kin[1][n], kin[2][n], *kin[3:])
         jerk, kink = tab["jerk"], tab["kink"]
         none = np.zeros(r)
-        vlo, vhi, has_vwin = (none, none, False) if self._vwin is None else \
-            (self._vwin[0].reshape(-1)[path], self._vwin[1].reshape(-1)[path], True)
+        vlo, vhi, has_vwin = (none, none, False) if self.vwin is None else \
+            (self.vwin[0].reshape(-1)[path], self.vwin[1].reshape(-1)[path], True)
         D = float(th.dthr)
         kernels.get().resolve_into(
-            *motion, ipv, *(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v), self._flat_times(),
+            *motion, ipv, *(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v), self.t_flat,
             flat_seg.astype(np.int64), ka.astype(np.int64), tab["acc_h"][path], tab["acc_v"][path],
             jerk is not None, none if jerk is None else np.asarray(jerk[path], float),
             kink is not None, none[:, None] if kink is None else np.asarray(kink[path], float).reshape(r, -1),
@@ -129,8 +159,8 @@ class UndecidedPieces:
             BISECT_DT_OUT, CLIP_DT, 2.0 * V_TOL, 8.0 * P_TOL, D, D * D, float(th.zthr), float(th.tthr),
             float(th.tcoa), seg_in, seg_out)
 
-    def _resolve_reference(self, flat_seg, th, seg_in, seg_out) -> None:
-        """:meth:`_resolve` in numpy, one depth of pieces at a time.
+    def resolve_reference(self, flat_seg, th, seg_in, seg_out) -> None:
+        """:meth:`resolve` in numpy, one depth of pieces at a time.
 
         The predicate is exact at both ends (true states). Both violate: first entry at the start, last
         exit at the end. One violates: the boundary is found by bisection on the true path and the other
@@ -138,14 +168,14 @@ class UndecidedPieces:
         piece is split into parts (each with exact end flags) and examined again; a both-clear part as
         short as V_TOL / P_TOL allow is sampled every CLIP_DT for a clip of the volume (:meth:`_clip`).
         """
-        path, ka, t0, h = self._pieces(flat_seg)
+        path, ka, t0, h = self.pieces(flat_seg)
         s = [c.reshape(-1) for c in self.s]
         v = [c.reshape(-1) for c in self.v]
         sa, sb = [c[ka] for c in s], [c[ka + 1] for c in s]
         va, vb = [c[ka] for c in v], [c[ka + 1] for c in v]
         f0, f1 = wcv_soa(*sa, *va, th), wcv_soa(*sb, *vb, th)
         pieces = (flat_seg, path, t0, t0 + h, sa, sb, f0, f1, va[:2], vb[:2])
-        tab = self._path_tables()
+        tab = self.tables
         for depth in range(MAX_DEPTH):
             sid, pth, ta, tb, pa, pb, fa, fb, ua, ub = pieces
             if not sid.size:
@@ -194,19 +224,19 @@ class UndecidedPieces:
                                  fa[idx], fb[idx], [c[idx] for c in ua], [c[idx] for c in ub])
 
     def _classify_part(self, th, pth, ta, tb, pa, pb) -> np.ndarray:
-        tab = self._path_tables()
+        tab = self.tables
         h = tb - ta
         a_h, a_v = tab["acc_h"][pth], tab["acc_v"][pth]
         win = None
-        if self._vwin is not None:
-            vlo, vhi = self._vwin[0].reshape(-1)[pth], self._vwin[1].reshape(-1)[pth]
+        if self.vwin is not None:
+            vlo, vhi = self.vwin[0].reshape(-1)[pth], self.vwin[1].reshape(-1)[pth]
             win = (np.maximum(vlo, ta) - ta, np.minimum(vhi, tb) - ta)
         e_z = a_v * h * h * 0.125 if np.any(a_v) else 0.0
         return classify_pieces(*pa, *pb, h, th, a_h * h * h * 0.125, a_h * h * 0.5, e_z, win)
 
     def _clear2(self, th, pth, ta, tb, pa, pb, ua, ub) -> np.ndarray:
         """Second-order CLEAR certificate of pieces (see :func:`clear_second_order`)."""
-        tab = self._path_tables()
+        tab = self.tables
         h = tb - ta
         a_h, a_v, jerk = tab["acc_h"][pth], tab["acc_v"][pth], tab["jerk"][pth]
         e_v = jerk * h * h * 0.125
@@ -220,7 +250,7 @@ class UndecidedPieces:
     def _split(self, th, sid, pth, ta, tb, pa, pb, fa, fb, ua, ub):
         """Split pieces into the fewest equal parts that settle (at least 2, at most MAX_SPLIT), with
         exact states and flags at the new ends."""
-        tab = self._path_tables()
+        tab = self.tables
         settle = settle_time(tab["acc_h"][pth], tab["acc_v"][pth])
         q = int(min(MAX_SPLIT, max(2, np.ceil(np.max((tb - ta) / settle) - 1e-9))))
         L = sid.size

@@ -1,6 +1,6 @@
 """The undecided pieces of a maneuver path resolved on the true state, in one compiled pass.
 
-The numpy reference is :meth:`daa_sil.daa.undecided.UndecidedPieces._resolve_reference` (its
+The numpy reference is :meth:`daa_sil.daa.undecided.UndecidedPieces.resolve_reference` (its
 ``_bisect``, ``_classify_part``, ``_clear2``, ``_split`` and ``_clip``). The kernel keeps its phase
 structure, not only its per-piece arithmetic: the pieces of one depth are processed as one batch,
 and what the reference decides batch-wide stays batch-wide -- the number of halvings of a bisection
