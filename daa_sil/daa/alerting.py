@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from daa_sil.config.settings import PROJL_HORIZON
+
 from daa_sil.geometry import wellclear as wc
 from daa_sil.geometry.kinematics import AircraftState
 from .config import DaaConfig
@@ -101,7 +103,7 @@ def conflict_lists(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | No
 
 
 def proj_lowc(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = None,
-              horizon_s: float = 25.0) -> np.ndarray:
+              horizon_s: float = PROJL_HORIZON.default) -> np.ndarray:
     """ProjL (paper Eq. 10), bool ``(N, M)``: a loss of well clear (``cfg.th``) is predicted within the
     next ``horizon_s`` seconds (including now) on the current straight-line trajectories (exact
     :func:`daa_sil.geometry.wellclear.violation_interval`, no sampling)."""

@@ -24,7 +24,8 @@ from dataclasses import dataclass, replace
 
 from daa_sil.geometry.kinematics import Performance
 from ..errors import UsageError
-from daa_sil.geometry.thresholds import DEFAULT_PRESET, PRESETS, Thresholds, get_thresholds
+from daa_sil.geometry.thresholds import PRESETS, Thresholds, get_thresholds
+from daa_sil.config.settings import STANDARD_PRESET
 from daa_sil.geometry.units import DEG, FPM, FT, G0, KT, NMI
 
 # --- codes -----------------------------------------------------------------------------------
@@ -85,7 +86,7 @@ class DaaConfig:
     (the ``daidalus`` preset); ``docs/daa.md`` explains each one.
     """
 
-    thresholds: "str | Thresholds" = "do365"  #: corrective/warning well-clear volume (preset name)
+    thresholds: "str | Thresholds" = STANDARD_PRESET.default  #: corrective/warning well-clear volume (preset name)
     preventive_zthr: float = 700.0 * FT  #: m, DO-365 preventive volume ZTHR
     lookahead_s: float = 180.0  #: s, DO-365B lookahead_time
     alert_time_preventive_s: float = 55.0
@@ -140,8 +141,9 @@ class DaaConfig:
 
     @classmethod
     def for_preset(cls, name: "str | None" = None, **changes) -> "DaaConfig":
-        """The DAA configuration of a named preset (``do365``, ``paper``, ``daidalus``), plus ``changes``."""
-        key = DEFAULT_PRESET if name is None else str(name).lower()
+        """The DAA configuration of a named preset (``do365``, ``paper``, ``daidalus``; None: the field's default,
+        the standard's ``do365``, as ``DaaConfig()``), plus ``changes``."""
+        key = STANDARD_PRESET.default if name is None else str(name).lower()
         if key not in PRESETS:
             raise UsageError(f"unknown preset {name!r}; allowed: {', '.join(PRESETS)}")
         base = dict(DAIDALUS_DO365B) if key == "daidalus" else {}
