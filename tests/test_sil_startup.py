@@ -1,7 +1,7 @@
 """SIL start-up does only what a run needs (issue 21, item 5).
 
 * The shim starts through its own entry point (``python -m daa_sil.commands.shim``), which takes
-  the arguments of ``daa-sil shim`` and imports none of the wait-map, DAA, configuration or
+  the arguments of ``daa-sil shim`` and imports none of the wait-map, DAA, configuration (but the shared-defaults table config.settings) or
   fast-time modules; the GCS imports no fast-time / Parquet code; nothing in the vehicle's start-up
   (including loading the wait maps) imports scipy, which only building a map needs, beyond what
   numba (the compiled DAA, loaded before READY) imports by itself.
@@ -46,7 +46,9 @@ def test_shim_entry_point_imports_only_the_link_side():
     mods = _modules_after("from daa_sil.commands import shim\nshim.build_parser().parse_args(['--delay', 'const:4'])")
     heavy = _under(mods, "scipy", "pyarrow", "daa_sil.waitmap", "daa_sil.daa", "daa_sil.config", "daa_sil.study",
                    "daa_sil.agent", "daa_sil.onboard", "daa_sil.commands.waitmap", "daa_sil.commands.run")
-    assert heavy == [], heavy
+    # the one table of shared defaults (the delay epoch) imports nothing of ours but errors: any layer may read it
+    allowed = ["daa_sil.config", "daa_sil.config.settings"]
+    assert [m for m in heavy if m not in allowed] == [], heavy
 
 
 def test_shim_entry_point_has_the_arguments_of_daa_sil_shim():
