@@ -166,7 +166,7 @@ def bench_lockstep(args) -> None:
               f"{_f(med['step_ms_vehicle'])} / {_f(med['step_ms_gcs'])} / {_f(med['step_ms_shim'])}"
               f"              {_f(med['play_ms_per_step'])}")
     for pyc in pycs:
-        vs = (f" vs bba2fd8 {best['base', pyc]:.2f} s in the same run: ratio {best['new', pyc] / best['base', pyc]:.2f}"
+        vs = (f" vs baseline {best['base', pyc]:.2f} s in the same run: ratio {best['new', pyc] / best['base', pyc]:.2f}"
               if ("base", pyc) in best else " (no baseline)")
         print(f"  => {'with' if pyc else 'without'} .pyc: {best['new', pyc]:.2f} s{vs}"
               + (f" (target <= {TARGET_S:g} s: {'met' if best['new', pyc] <= TARGET_S else 'NOT met'})" if pyc else ""))
@@ -189,7 +189,7 @@ def bench_lockstep(args) -> None:
         print(f"  {c:4s}: {r['wall']:.2f} s (build {r['build_wall']:.2f} s, steps {r['step_ms']:.2f} ms CPU each; "
               f"telemetry {r['telemetry_ms']:.2f} ms a step; load {r['load']:.1f})")
     if "base" in inp:
-        print(f"  => in-process {inp['new']['wall']:.2f} s vs bba2fd8 {inp['base']['wall']:.2f} s: ratio "
+        print(f"  => in-process {inp['new']['wall']:.2f} s vs baseline {inp['base']['wall']:.2f} s: ratio "
               f"{inp['new']['wall'] / inp['base']['wall']:.2f} (target <= {TARGET_INPROC_S:g} s: "
               f"{'met' if inp['new']['wall'] <= TARGET_INPROC_S else 'NOT met'})")
     k = ("new", pycs[0])
