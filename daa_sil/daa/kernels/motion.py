@@ -16,7 +16,7 @@ import numpy as np
 from numba import boolean, float64, int64, types, void
 
 from daa_sil.daa.kernels.jit import inline, kernel
-from daa_sil.daa.kernels.scalar import npmax, npmin, npsign, wcv_soa
+from daa_sil.daa.kernels.scalar import halve, npmax, npmin, npsign, wcv_soa
 
 #: columns of a path's row in ``kin``
 KIN_FIELDS = ("x0", "y0", "z0", "gs0", "st", "ct", "vs0", "sgn", "lim")
@@ -83,16 +83,7 @@ def bisect_into(axis, rate, kin, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed, 
             mid = 0.5 * (a + b)
             sx, sy, sz, vx, vy, vz = rel_state(axis, rate, kin, ipv, i, mid)
             same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
-            if mixed:
-                if k < (n_out if flag else n_in):
-                    if same:
-                        a = mid
-                    else:
-                        b = mid
-            elif same:
-                a = mid
-            else:
-                b = mid
+            a, b = halve(a, b, mid, same, k, mixed, flag, n_in, n_out)
         lo[i], hi[i] = a, b
 
 
@@ -173,16 +164,7 @@ def command_bisect_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, lo, hi, lo_in
             mid = 0.5 * (a + b)
             sx, sy, sz, vx, vy, vz = command_rel_state(ph_rows, enc, ipv, i, mid, max_turn, h_acc, v_acc)
             same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
-            if mixed:
-                if k < (n_out if flag else n_in):
-                    if same:
-                        a = mid
-                    else:
-                        b = mid
-            elif same:
-                a = mid
-            else:
-                b = mid
+            a, b = halve(a, b, mid, same, k, mixed, flag, n_in, n_out)
         lo[i], hi[i] = a, b
 
 

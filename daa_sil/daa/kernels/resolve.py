@@ -24,7 +24,7 @@ from numba import boolean, float64, int64, types, void
 from daa_sil.daa.kernels.jit import inline, kernel
 from daa_sil.daa.kernels.motion import command_rel_state, rel_state
 from daa_sil.daa.kernels.pieces import CLEAR, classify, clear2
-from daa_sil.daa.kernels.scalar import INF, npmax, npmin, wcv_soa
+from daa_sil.daa.kernels.scalar import INF, halve, npmax, npmin, wcv_soa
 
 A = types.Array(float64, 1, "A", readonly=True)
 A2 = types.Array(float64, 2, "A", readonly=True)
@@ -111,16 +111,7 @@ def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row, lo
             mid = 0.5 * (a + b)
             sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row[i], mid)
             same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
-            if mixed:
-                if k < (n_out if flag else n_in):
-                    if same:
-                        a = mid
-                    else:
-                        b = mid
-            elif same:
-                a = mid
-            else:
-                b = mid
+            a, b = halve(a, b, mid, same, k, mixed, flag, n_in, n_out)
         lo[i], hi[i] = a, b
 
 

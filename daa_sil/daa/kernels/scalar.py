@@ -18,6 +18,18 @@ EPS = 1e-12
 
 
 @inline
+def halve(a, b, mid, same, k, mixed, flag, n_in, n_out):
+    """Halving ``k`` of a bisection bracket ``[a, b]`` (s) at ``mid``: ``same`` when the predicate at ``mid``
+    equals the one at ``a`` (``flag``). With ``mixed`` a bracket starting inside halves only ``n_out``
+    times and one starting outside ``n_in`` times (as when the two kinds are bisected apart)."""
+    if mixed and k >= (n_out if flag else n_in):
+        return a, b
+    if same:
+        return mid, b
+    return a, mid
+
+
+@inline
 def npmax(a, b):
     """``np.maximum`` of two floats (nan if either is nan)."""
     if a != a:
