@@ -123,3 +123,21 @@ def test_a_setting_checks_counts_and_numbers():
     for bad in (True, float("nan"), "4", -0.1, 120.5):
         assert not S.WAIT_THRESHOLD.contains(bad)
     assert S.WAIT_THRESHOLD.flag_help("W_T") == "W_T, s within [0, 120] (default 4.0)"
+
+
+def test_an_integer_too_large_for_a_float_is_out_of_range_not_a_crash():
+    from daa_sil.config.settings import SEED, WAIT_THRESHOLD
+
+    for setting in (WAIT_THRESHOLD, SEED):
+        assert not setting.contains(10 ** 400)
+        with pytest.raises(UsageError, match="within"):
+            setting.check(10 ** 400, "f.yaml")
+
+
+def test_a_campaign_reads_the_duration_range():
+    from daa_sil.study.campaign_config import CampaignConfig
+
+    for bad in (0.5, 1e6, float("nan")):
+        with pytest.raises(UsageError, match="duration"):
+            CampaignConfig(duration_s=bad).validate()
+    CampaignConfig(duration_s=1.0).validate()

@@ -153,3 +153,36 @@ def test_realtime_ticks_stamp_a_late_gcs_with_the_tick_it_works_on():
     core.receive("gcs", _ack(2, 2.0))
     sends = core.receive("vehicle", _tick(3, 3.0))
     assert sends[0] == Send("vehicle", cmd)  # released at the next tick processed
+
+
+def _up_keys(retry: bool) -> list:
+    """Fault-draw keys of two GCS datagrams of step 0, with or without a retried tick 0 between them."""
+    core = _core()
+    keys = []
+    push = core.lines["up"].push
+    core.lines["up"].push = lambda t, data, key=None: keys.append(key) or push(t, data, key=key)
+    tick0 = _tick(0, 0.0)
+    core.receive("vehicle", tick0)
+    core.receive("gcs", _hb(GCS))
+    if retry:  # the vehicle re-sends tick 0 (its ack is late): forwarded and echoed again
+        assert core.receive("vehicle", tick0) == [Send("gcs", tick0), Send("vehicle", tick0)]
+    core.receive("gcs", _hb(GCS))
+    core.receive("gcs", _ack(0, 0.0))
+    return keys
+
+
+def test_a_retried_tick_does_not_change_the_fault_keys_of_the_gcs_step():
+    plain, retried = _up_keys(False), _up_keys(True)
+    assert len(plain) == 2 and len(set(plain)) == 2  # two datagrams, two independent draws
+    assert retried == plain  # before: the retry flushed the first alone, and both got the same key
+
+
+def test_a_gcs_flooding_one_step_is_capped_and_counted():
+    core = _core()
+    core.receive("vehicle", _tick(0, 0.0))
+    hb = _hb(GCS)
+    for _ in range(MAX_HELD + 5):
+        core.receive("gcs", hb)
+    assert core.counters["batch_dropped"] == 5
+    core.receive("gcs", _ack(0, 0.0))
+    assert len(core.lines["up"]) == MAX_HELD

@@ -44,9 +44,13 @@ class Setting:
     def contains(self, value: Any) -> bool:
         """True when ``value`` is a finite number (not a bool) within the range (a whole one for a count)."""
         lo, hi = self.range
-        ok = (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-              and lo <= value <= hi)
-        return ok and (not self.integer or float(value).is_integer())
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            return False
+        try:  # an int too large for a float (10**400 in a YAML file) is out of every range
+            ok = math.isfinite(value) and lo <= value <= hi
+            return ok and (not self.integer or float(value).is_integer())
+        except OverflowError:
+            return False
 
     def check(self, value: Any, where: str = "", key: "str | None" = None) -> float:
         """``value`` as a float, or a one-line :class:`UsageError` naming ``where`` and ``key``."""

@@ -62,7 +62,9 @@ from daa_sil.link.delayline import DelayLine
 from daa_sil.models.delay_process import as_seed_sequence
 from .shim_config import ACK_ID, TICK_ID, ShimConfig, control_ids, direction_seeds, shim_delay_processes
 
-#: realtime: datagrams from the GCS held until the vehicle side's first datagram decides the mode
+#: realtime: datagrams from the GCS held until the vehicle side's first datagram decides the mode; lockstep:
+#: datagrams of one GCS step held until its ack (past this, dropped and counted: ``held_dropped``,
+#: ``batch_dropped``)
 MAX_HELD = 10_000
 #: a GCS that has not acknowledged this many forwarded ticks is taken as gone (stamps fall back to the last tick)
 MAX_GCS_LAG_TICKS = 8
@@ -72,7 +74,8 @@ KEY_START, KEY_STEP, KEY_BACK = 0, 1, 2
 MAX_COUNTED_STAMPS = 64
 #: the protocol's counters (the socket side adds its own)
 COUNTERS = ("rejected_claim", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards", "tick_echoes",
-            "held_for_vehicle", "held_dropped", "gcs_lagged", "gcs_unresponsive", "released_late", "ticks_held")
+            "held_for_vehicle", "held_dropped", "batch_dropped", "gcs_lagged", "gcs_unresponsive", "released_late",
+            "ticks_held")
 #: the side each line delivers to
 DEST = {"down": "gcs", "up": "vehicle"}
 
@@ -194,6 +197,9 @@ class ShimCore:
             return
         stamp = self._gcs_stamp()
         if self.lockstep and self._unacked:
+            if len(self._gcs_batch) >= MAX_HELD:  # a GCS flooding one step without acking it
+                c["batch_dropped"] += 1
+                return
             self._gcs_batch.append((stamp, data))  # the GCS's step: keyed back from its ack
             return
         self._push_up(stamp, data, self._fault_key("up", stamp))
@@ -253,9 +259,10 @@ class ShimCore:
 
     def _process_tick(self, msg, data: bytes) -> None:
         c = self.counters
-        self._flush_gcs_batch()
-        t_k = msg.time_ms / 1000.0
         k = int(msg.tick)
+        if self.last_tick is None or k > self.last_tick:  # a retried tick leaves the GCS's step batch whole, so
+            self._flush_gcs_batch()  # its datagrams' fault keys do not depend on when the vehicle retried
+        t_k = msg.time_ms / 1000.0
         if t_k < self.sim_time:
             c["clock_backwards"] += 1
         else:

@@ -83,8 +83,7 @@ class CampaignConfig:
             raise UsageError(f"--seed must be a non-negative integer, got {self.seed!r}")
         if self.preset not in PRESETS:
             raise UsageError(f"unknown --preset {self.preset!r}; allowed: {', '.join(PRESETS)}")
-        if not (math.isfinite(self.duration_s) and self.duration_s > 0):
-            raise UsageError(f"duration must be > 0 s, got {self.duration_s!r}")
+        DURATION.check(self.duration_s, key="duration")
         if not (math.isfinite(self.dt_s) and self.dt_s > 0):
             raise UsageError(f"dt must be > 0 s, got {self.dt_s!r}")
         for name, val, lo, hi in (("--wt", self.wt, *WAIT_THRESHOLD.range), ("--projl-lookahead", self.projl_lookahead, *PROJL_HORIZON.range),

@@ -7,7 +7,7 @@ API
 ---
 ``SinkOptions(rrd=None, spawn=False, connect=None, serve_web=False, ...)``
     Where the data goes. Any combination; none = visualisation off (Rerun is never called).
-``EncounterLogger(sinks, preset="do365", encounter_id=None, wait_lookup=None)``
+``EncounterLogger(sinks, preset=None, encounter_id=None, wait_lookup=None)``
     One recording per encounter; also a context manager.
 
     * ``.log_step(record)`` -- one step-log row as a dict of column name -> value (scalars, lists,
@@ -18,8 +18,9 @@ API
       logged synchronously with ``send_columns`` (a 240-step encounter takes milliseconds).
     * ``.close()`` -- drain, flush, disconnect, move the ``.rrd`` into place (atomic rename) and stop
       the web server (``close(keep_serving=True)`` leaves it running; :meth:`stop_serving` stops it).
-``log_steplog(table, sinks, encounter_id=None, preset="do365") -> Path | None``
-    Convert a step log (one encounter, or pick one with ``encounter_id``) into the sinks.
+``log_steplog(table, sinks, encounter_id=None, preset=None) -> Path | None``
+    Convert a step log (one encounter, or pick one with ``encounter_id``) into the sinks. ``preset``: the
+    well-clear volume drawn (None: the run preset, ``paper``, :data:`daa_sil.config.settings.PRESET`).
 :class:`daa_sil.viz.recorder.BackgroundRecorder`
     What ``daa-sil run --rrd/--spawn-viewer`` uses: the same logging, done by a helper process
     prepared while the SIL plays, so that the run is not slowed.
