@@ -288,7 +288,7 @@ class GcsNode:
         for _, quiet in self.ticks.check_silence(asyncio.get_running_loop().time()):
             done = self.ticks.sent
             self._say(f"warning: no SIM_TICK from {self._peer_text()} for {quiet:.1f} s (last: tick "
-                      f"{done}, t = {done:g} s): has the vehicle (or the shim) stopped?")
+                      f"{done}): has the vehicle (or the shim) stopped?")
 
     def _peer_text(self) -> str:
         return format_udp_address(self.peer) if self.peer is not None else self.vehicle_conn.text

@@ -3,7 +3,7 @@ send time (s). :class:`DelayProcess` serves one link (the shim, N = 1); :class:`
 the same draws for N encounters at once (fast-time): the same seed gives the same values.
 
 :func:`link_delay_processes` (SIL) and :func:`batched_link_delays` (fast-time) build both links'
-processes from :class:`daa_sil.models.latency.LinkLegs`: under the ``round-trip`` rule the downlink
+processes from :class:`daa_sil.models.link_rule.LinkLegs`: under the ``round-trip`` rule the downlink
 reads the uplink's seed stream, so both links see the same epoch grid (``t0 + e * epoch_s``) and
 the same draw per epoch, halved: uplink + downlink delay of any epoch = that epoch's round trip."""
 

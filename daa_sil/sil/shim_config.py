@@ -87,7 +87,7 @@ class ShimConfig:
     ``listen_vehicle`` / ``listen_gcs``: the shim's sockets (``udp:HOST:PORT``; port 0 = OS-chosen).
     ``vehicle`` / ``gcs``: peer addresses, or None to learn them from the first datagram.
     ``delay_down`` (vehicle -> GCS), ``delay_up`` (GCS -> vehicle); ``round_trip``: the two are the
-    halves of one round trip (:func:`daa_sil.models.latency.link_legs`): the downlink reads the
+    halves of one round trip (:func:`daa_sil.models.link_rule.link_legs`): the downlink reads the
     uplink's draws; ``epoch_s`` of the delay process (0 = per-datagram draws). ``loss``/``dup``/``reorder`` probabilities and ``outages``
     (``[(t_start, t_end), ...]`` sim s) apply to both directions. ``speed``: sim seconds per wall
     second in realtime mode. ``key``: signing key used to verify control messages in lockstep and the first datagram of a peer.

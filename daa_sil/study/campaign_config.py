@@ -145,7 +145,7 @@ class CampaignConfig:
         return tuple(out)
 
     def link_legs(self, name: str):
-        """What each link of group ``name`` applies (:class:`daa_sil.models.latency.LinkLegs`): the
+        """What each link of group ``name`` applies (:class:`daa_sil.models.link_rule.LinkLegs`): the
         group's latency under the reading's rule (``one-way`` or ``round-trip``)."""
         from daa_sil.models.link_rule import link_legs
 

@@ -138,8 +138,8 @@ def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, laten
     """Simulate every encounter of ``encounters`` (an :class:`~daa_sil.models.encounters.EncounterSet`).
 
     ``policy`` the group's allocation policy; ``latency_up``/``latency_down`` each link's delay model
-    (s), from their own streams; ``link_legs`` (a :class:`~daa_sil.models.latency.LinkLegs`, e.g. the
-    round-trip rule's, :func:`~daa_sil.models.latency.link_legs`) replaces both; ``pilot_cfg`` (default :class:`PilotConfig`); ``daa_cfg`` (default: DO-365B with the
+    (s), from their own streams; ``link_legs`` (a :class:`~daa_sil.models.link_rule.LinkLegs`, e.g. the
+    round-trip rule's, :func:`~daa_sil.models.link_rule.link_legs`) replaces both; ``pilot_cfg`` (default :class:`PilotConfig`); ``daa_cfg`` (default: DO-365B with the
     thresholds of ``preset``, default ``"paper"``); ``wait_family`` a wait-map family (needed for
     ``wait_mode="map"``; or pass ``wait_lookup`` directly); ``seeds`` per-encounter seeds (default
     ``encounters.seed``); ``duration_s``/``dt`` (default from the set: 240 s / 1 s); ``epoch_s``

@@ -19,7 +19,7 @@ def delay_spec_string(spec) -> str:
 
 
 def link_legs(sc: Scenario):
-    """The scenario link's :class:`daa_sil.models.latency.LinkLegs`: ``up`` / ``down`` one-way, or the
+    """The scenario link's :class:`daa_sil.models.link_rule.LinkLegs`: ``up`` / ``down`` one-way, or the
     ``round_trip`` split evenly (each link half of one draw per epoch, from the uplink stream)."""
     from daa_sil.models import delay_spec, link_rule
 
