@@ -31,26 +31,6 @@ _HORIZONTAL = 1
 
 
 @inline
-def _red_max(acc, x, first):
-    """One step of ``np.max`` over a row (nan wins; ``first``: the row's first element)."""
-    if first:
-        return x
-    if acc != acc:
-        return acc
-    return x if (x != x or x > acc) else acc
-
-
-@inline
-def _red_min(acc, x, first):
-    """One step of ``np.min`` over a row (nan wins; ``first``: the row's first element)."""
-    if first:
-        return x
-    if acc != acc:
-        return acc
-    return x if (x != x or x < acc) else acc
-
-
-@inline
 def _first_ok(ok_row, k0, want, K):
     """``bands._first_on_side`` of one row: (index, found)."""
     if want > 0:
@@ -104,8 +84,10 @@ def axis_regions_into(t_in, t_out, hfm, near_list, mid_list, alert2, tk, L, warn
                     r_near_i = ti < warn
                     rm = rm or (r_near_i or r_mid_i)
                 rn = rn or r_near_i
-                a_in = _red_min(a_in, ti, m == 0)
-                a_out = _red_max(a_out, t_out[n, m, p, k] if (r_mid_i or r_near_i) else -INF, m == 0)
+                t_o = t_out[n, m, p, k] if (r_mid_i or r_near_i) else -INF
+                # np.min / np.max over the intruders: the first one, then np.minimum / np.maximum
+                a_in = ti if m == 0 else npmin(a_in, ti)
+                a_out = t_o if m == 0 else npmax(a_out, t_o)
             red_near[c], red_mid[c] = rn, rm
             t_in_all[n, c], t_out_c[n, c] = a_in, a_out
         for c in range(K):
@@ -145,7 +127,7 @@ def axis_regions_into(t_in, t_out, hfm, near_list, mid_list, alert2, tk, L, warn
         best = 0.0
         for c in range(K):
             any_late = any_late or t_in_all[n, c] > sm_h
-            best = _red_min(best, t_out_c[n, c], c == 0)
+            best = t_out_c[n, c] if c == 0 else npmin(best, t_out_c[n, c])
         for c in range(K):
             late = t_in_all[n, c] > sm_h
             rec[c] = saturated and (late if any_late else t_out_c[n, c] <= best + stab)
