@@ -11,7 +11,8 @@ bba2fd8 installed apart) in the same run, the same way, with no help from the co
   inherited by the vehicle, shim and GCS that ``daa-sil run`` starts). With ``DAA_SIL_PROBE_DIR``
   set it records, per process: its start (kernel start time), when it printed its ready line
   (``READY ...`` or the shim's ``... vehicle side ...``) and each vehicle progress line (``t= ...``,
-  every 10 steps), each with the process's CPU time (user + system) at that moment, and its exit.
+  every 10 steps), each with the process's CPU time (user + system) at that moment, and its exit
+  (at ``atexit``, or just before an ``os._exit``, which skips ``atexit``).
   Nothing here writes .pyc files but ``compileall`` on a copy; the runs only read them.
 
 All times are ``CLOCK_BOOTTIME`` seconds, the clock of ``/proc/<pid>/stat``'s start time.
@@ -70,6 +71,15 @@ if _DIR:
         _rec["daa_sil"] = getattr(mod, "__file__", None)
         with open(os.path.join(_DIR, f"{os.getpid()}.json"), "w") as f:
             json.dump(_rec, f)
+
+    _os_exit = os._exit
+
+    def _exit_recorded(code):  # a process that ends without the interpreter's teardown skips atexit
+        if "exit" not in _rec:
+            _write()
+        _os_exit(code)
+
+    os._exit = _exit_recorded
 '''
 
 

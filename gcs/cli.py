@@ -118,9 +118,9 @@ async def _amain(args) -> int:
     await node.start()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, node.stop.set)
+        loop.add_signal_handler(sig, node.request_stop)
     if args.duration:
-        loop.call_later(args.duration, node.stop.set)
+        loop.call_later(args.duration, node.request_stop)
     print(f"READY listen={node.local_address} vehicle={args.vehicle} pilot={node.mode} clock={args.clock}", flush=True)
     try:
         await node.run()

@@ -215,3 +215,40 @@ async def test_gcs_udpin_takes_the_first_vehicle_and_warns_about_a_second(capfd)
     err = capfd.readouterr().err
     warned = [x for x in err.splitlines() if "dropping datagrams from" in x]
     assert len(warned) == 1 and f"udp:127.0.0.1:{second.local_address[1]} (LOCAL_POSITION_NED from system 1)" in warned[0]
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize("clock", ["lockstep", "realtime"])
+async def test_request_stop_wakes_the_loop_waiting_for_a_datagram(tmp_path, monkeypatch, clock):
+    """SIGINT / SIGTERM call ``request_stop``: a loop waiting for a datagram ends at once instead of
+    after its wait timed out (0.1 s in lockstep, up to 0.5 s in realtime), which the end of every
+    ``daa-sil run`` waited for."""
+    real_wait_for, timed_out = asyncio.wait_for, []
+
+    async def counting_wait_for(aw, timeout):
+        try:
+            return await real_wait_for(aw, timeout)
+        except asyncio.TimeoutError:
+            timed_out.append(timeout)
+            raise
+
+    sc = parse_scenario(SCENARIO)
+    veh = await open_endpoint(MavCodec(1, 1), "udp:127.0.0.1:0")
+    node = GcsNode(sc, GcsOptions(vehicle=f"udp:127.0.0.1:{veh.local_address[1]}", listen="udp:127.0.0.1:0",
+                                  clock=clock, log=tmp_path / "cmds.jsonl", display=False))
+    await node.start()
+    monkeypatch.setattr(asyncio, "wait_for", counting_wait_for)
+    task = asyncio.create_task(node.run())
+    try:
+        await asyncio.sleep(0)  # the loop is now waiting for a datagram
+        before = len(timed_out)
+        node.request_stop()
+        await real_wait_for(task, 5.0)
+        assert node.stop.is_set()
+        assert len(timed_out) == before, "the loop ended only after its wait timed out"
+    finally:
+        node.stop.set()
+        if not task.done():
+            task.cancel()
+        node.close()
+        veh.close()

@@ -187,3 +187,36 @@ def test_cli_unknown_command_is_the_usual_one_line_error():
     res = subprocess.run([sys.executable, "-m", "daa_sil.cli", "bogus"], cwd=ROOT, capture_output=True, text=True,
                          timeout=60)
     assert res.returncode == 2 and "invalid choice: 'bogus'" in res.stderr and "'campaign'" in res.stderr
+
+
+def test_kernels_load_without_the_blas_probe_and_compute_the_same_bands():
+    """``kernels.skip_blas_probe`` (what ``python -m vehicle`` and ``python -m gcs`` call first): loading
+    the kernels then imports no ``scipy.linalg``, scipy still imports afterwards, and the bands are
+    bit-identical to a process that loaded them with numba's probe."""
+    code = """
+import json, sys
+import numpy as np
+from daa_sil.daa import kernels
+if SKIP:
+    kernels.skip_blas_probe()
+kernels.get()
+loaded = sorted(m for m in sys.modules if m == "scipy.linalg" or m.startswith("scipy.linalg."))
+import scipy.linalg
+from daa_sil.daa import DaaConfig, compute_bands
+from daa_sil.geometry.kinematics import AircraftState
+own = AircraftState(*(np.array([v]) for v in (0.0, 0.0, 1000.0, 55.0, 0.1, 0.0)))
+intr = AircraftState(*(np.array([[v]]) for v in (300.0, 6000.0, 1030.0, 60.0, 3.0, -1.0)))
+b = compute_bands(own, intr, DaaConfig.for_preset("do365"))
+print(json.dumps({"loaded": loaded, "linalg": scipy.linalg.__name__,
+                  "bands": [[a.values.tolist(), a.region.tolist()] for a in b.axes()]}))
+"""
+    out = {}
+    for skip in (True, False):
+        res = subprocess.run([sys.executable, "-c", code.replace("SKIP", str(skip))], cwd=ROOT, capture_output=True,
+                             text=True, timeout=300)
+        assert res.returncode == 0, res.stderr[-2000:]
+        out[skip] = json.loads(res.stdout.strip().splitlines()[-1])
+    assert out[True]["loaded"] == [] and out[False]["loaded"] != []
+    assert out[True]["linalg"] == "scipy.linalg"
+    assert out[True]["bands"] == out[False]["bands"]
+    assert any(r != 0 for axis in out[True]["bands"] for r in axis[1][0])  # the encounter has bands to compare

@@ -290,3 +290,13 @@ def test_gcs_restart_really_kills_and_restarts_the_gcs(tmp_path):
     print(f"gcs_restart (short): killed at t={f['killed_at_t_s']} s, restarted at t={f['restarted_at_t_s']} s "
           f"(ready at t={f['restart_ready_at_t_s']} s); last command before the kill received t={last_before:g} s, "
           f"link_lost from t={lost[0]:g} s to {max(lost):g} s; restarted GCS's first command received t={after[0][0]:g} s")
+
+
+def test_exit_without_teardown_flushes_output_keeps_the_status_and_skips_atexit():
+    """What ``python -m vehicle`` / ``gcs`` / the shim end with: buffered output (stdout is a pipe to
+    ``daa-sil run``) reaches the reader, the status is the command's, the teardown is skipped."""
+    code = ("import atexit, sys\nfrom daa_sil.sil.children import exit_without_teardown\n"
+            "atexit.register(lambda: print('atexit ran'))\n"
+            "sys.stdout.write('done, no newline')\nsys.stderr.write('a warning')\nexit_without_teardown(3)\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert (res.returncode, res.stdout, res.stderr) == (3, "done, no newline", "a warning")

@@ -193,4 +193,6 @@ def main(argv: "list[str] | None" = None) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover - exercised through daa-sil run (tests/test_sil_run.py)
-    sys.exit(main())
+    from daa_sil.sil.children import exit_without_teardown
+
+    exit_without_teardown(main())

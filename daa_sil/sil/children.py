@@ -218,6 +218,25 @@ def adopt(default_name: "str | None" = None) -> None:
     die_with_parent(int(parent), mode)
 
 
+def exit_without_teardown(code: int) -> None:
+    """End this process with status ``code`` now: flush stdout and stderr, then ``os._exit``.
+
+    For the ``__main__`` of a SIL child (vehicle, GCS, shim) once its command returned, i.e. after it
+    wrote and closed its files. It skips the interpreter's teardown, which is not free once numba
+    has loaded the DAA kernels: about 0.1 s for numba alone and 0.25 s with the kernels, on the 2-core
+    machine the benchmarks ran on. A lockstep run waits for that twice at its end: for the vehicle to
+    exit and, after it, for the GCS the driver then stops (docs/sil.md, "Start-up and shutdown").
+    Not for code that leaves buffered files or pending atexit work behind, nor for a function a test
+    calls in-process: the command functions themselves return normally.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):  # closed or replaced: nothing left to lose
+            pass
+    os._exit(code)
+
+
 # --------------------------------------------------------------------------------------------
 # starting a child
 

@@ -9,6 +9,7 @@ without computing bands -- the shim, a report -- pays nothing).
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import sys
 import time
@@ -24,6 +25,36 @@ CACHE_DIR = cache_dir()
 LOCK_WAIT_S: "float | None" = None
 LOAD_S: "float | None" = None
 _KERNELS: "SimpleNamespace | None" = None
+#: False once :func:`skip_blas_probe` was called in this process
+_BLAS_PROBE = True
+
+
+def skip_blas_probe() -> None:
+    """Load the kernels, in this process, without numba's probe for scipy's BLAS.
+
+    When numba first loads its array functions -- for a cached kernel too -- it checks whether
+    ``scipy.linalg.cython_blas`` imports, and importing ``scipy.linalg`` costs 0.15-0.25 s of
+    start-up on the benchmark machine. No kernel here uses linear algebra. The SIL's vehicle and GCS
+    (``python -m vehicle``, ``python -m gcs``) call this before anything else: in such a process
+    numba's own linear algebra (``np.dot``, ``np.linalg`` inside jitted code) is unavailable to
+    other jitted code; scipy itself is untouched and imports normally afterwards.
+    """
+    global _BLAS_PROBE
+    _BLAS_PROBE = False
+
+
+@contextlib.contextmanager
+def _without_scipy_linalg():
+    """While loading: ``import scipy.linalg`` fails at once (unless it is already imported)."""
+    if _BLAS_PROBE or "scipy.linalg" in sys.modules:
+        yield
+        return
+    sys.modules["scipy.linalg"] = None  # type: ignore[assignment]  (the import system's "not importable")
+    try:
+        yield
+    finally:
+        if "scipy.linalg" in sys.modules and sys.modules["scipy.linalg"] is None:
+            del sys.modules["scipy.linalg"]
 
 
 def _load(clear: bool) -> tuple[float, float]:
@@ -37,8 +68,9 @@ def _load(clear: bool) -> tuple[float, float]:
         if clear:
             for f in list(CACHE_DIR.rglob("*.nbi")) + list(CACHE_DIR.rglob("*.nbc")) + [CACHE_DIR / READY_MARKER]:
                 f.unlink(missing_ok=True)
-        for name in _MODULES:
-            importlib.import_module(f"{__name__}.{name}")
+        with _without_scipy_linalg():
+            for name in _MODULES:
+                importlib.import_module(f"{__name__}.{name}")
     return t1 - t0, time.perf_counter() - t1
 
 
@@ -69,4 +101,4 @@ def get() -> SimpleNamespace:
     return ns
 
 
-__all__ = ["CACHE_DIR", "LOAD_S", "LOCK_WAIT_S", "get"]
+__all__ = ["CACHE_DIR", "LOAD_S", "LOCK_WAIT_S", "get", "skip_blas_probe"]
