@@ -66,3 +66,22 @@ def test_the_numba_free_locator_agrees_with_the_kernels():
     kernels.get()
     assert jit_cache.cache_dir() == kernels.CACHE_DIR
     assert jit_cache.is_warm()
+
+
+def test_a_complete_cache_loads_without_the_compile_lock():
+    """Loading only reads: with the cache complete, a process loads while another holds the compile lock
+    (the SIL's vehicle and GCS start together; they used to load one after the other)."""
+    import fcntl
+
+    from daa_sil.daa import kernels
+
+    kernels.get()  # the cache is complete now (its ready file)
+    with open(kernels.CACHE_DIR / ".compile.lock", "a+b") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+            res = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, timeout=120)
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.split(" ", 2)[1] == str(kernels.CACHE_DIR)

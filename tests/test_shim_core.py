@@ -186,3 +186,29 @@ def test_a_gcs_flooding_one_step_is_capped_and_counted():
     assert core.counters["batch_dropped"] == 5
     core.receive("gcs", _ack(0, 0.0))
     assert len(core.lines["up"]) == MAX_HELD
+
+
+def test_tick_0_before_the_gcs_spoke_reaches_it_with_its_first_datagram():
+    """The GCS usually finishes starting after the vehicle: tick 0 found no GCS (its forward is dropped
+    as no_peer by the socket side), so the GCS's first datagram brings it tick 0 at once -- what the
+    vehicle's next retry of tick 0 would do then. From there the walk is the usual one: the GCS's
+    step-0 datagrams wait for its ack, tick 1 releases them at 1 s (up delay 1 s)."""
+    core = _core(gcs=None)
+    tick0, hello = _tick(0, 0.0), _hb(GCS)
+    assert core.receive("vehicle", tick0) == [Send("gcs", tick0), Send("vehicle", tick0)]
+    assert core.claim("gcs", hello)
+    assert core.receive("gcs", hello) == [Send("gcs", tick0), Send("vehicle", tick0)]
+    assert core.counters["start_tick_forwarded"] == 1 and core.last_tick == 0 and core.sim_time == 0.0
+    cmd, ack0, tick1 = _hb(GCS), _ack(0, 0.0), _tick(1, 1.0)
+    assert core.receive("gcs", cmd) == []  # held: the GCS now owes the ack of tick 0
+    assert core.receive("vehicle", tick1) == [] and core.counters["ticks_held"] == 1
+    assert core.receive("gcs", ack0) == [Send("vehicle", ack0), Send("vehicle", hello), Send("vehicle", cmd),
+                                         Send("gcs", tick1), Send("vehicle", tick1)]
+    assert core.receive("gcs", _hb(GCS)) == [] and core.counters["start_tick_forwarded"] == 1  # only once
+
+
+def test_a_known_gcs_gets_tick_0_once():
+    core = _core()  # the GCS address given: tick 0 reached it
+    tick0 = _tick(0, 0.0)
+    core.receive("vehicle", tick0)
+    assert core.receive("gcs", _hb(GCS)) == [] and core.counters["start_tick_forwarded"] == 0

@@ -27,6 +27,9 @@ Clocks
    datagrams are queued before tick ``k`` releases anything, while the vehicle runs its step on
    the echo in parallel with the GCS (what either sends during tick ``k`` reaches the other at
    tick ``k + 1`` at the earliest). A repeated tick is forwarded again (a lost one is recovered).
+5. Tick 0 processed before any GCS has spoken (its forward found no peer) is processed again when
+   the GCS's first datagram comes in (``start_tick_forwarded``): what the vehicle's next retry of
+   tick 0 would do, without waiting for it. The GCS usually finishes starting after the vehicle.
 
 **Free-running** (realtime, the vehicle sends no ticks): each datagram enters its line at the
 sim time ``t`` given to :meth:`ShimCore.receive`; :meth:`ShimCore.next_release` says when the
@@ -75,7 +78,7 @@ MAX_COUNTED_STAMPS = 64
 #: the protocol's counters (the socket side adds its own)
 COUNTERS = ("rejected_claim", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards", "tick_echoes",
             "held_for_vehicle", "held_dropped", "batch_dropped", "gcs_lagged", "gcs_unresponsive", "released_late",
-            "ticks_held")
+            "ticks_held", "start_tick_forwarded")
 #: the side each line delivers to
 DEST = {"down": "gcs", "up": "vehicle"}
 
@@ -114,6 +117,7 @@ class ShimCore:
         self._held: list[tuple[float, bytes]] = []  # mode undecided: GCS datagrams
         self._unacked: "deque[tuple[int, float]]" = deque()  # ticks forwarded to the GCS, not yet acked
         self._held_tick: "tuple | None" = None  # lockstep: the next tick, until the GCS acks its pending one
+        self._start_tick: "tuple | None" = None  # tick 0, processed before any GCS had spoken
         self._gcs_acks = False  # the GCS acknowledges ticks (so its data can be stamped by them)
         self._start_count = {"down": 0, "up": 0}
         self._stamp_count: dict[str, dict[int, int]] = {"down": {}, "up": {}}
@@ -144,6 +148,12 @@ class ShimCore:
             self._decide_mode(data)
         if self.tick_mode:
             self._tick_datapath(side, data)
+            if side == "gcs" and self._start_tick is not None and self.known["gcs"]:
+                # the GCS spoke for the first time after tick 0: it gets tick 0 now, exactly as if the
+                # vehicle's next retry of it had come in (instead of up to tick_retry_s later)
+                start, self._start_tick = self._start_tick, None
+                self.counters["start_tick_forwarded"] += 1
+                self._process_tick(*start)
         else:
             self.lines["down" if side == "vehicle" else "up"].push(t, data)
         return self._out
@@ -268,6 +278,7 @@ class ShimCore:
         else:
             self.sim_time = t_k
         self.last_tick = k
+        self._start_tick = (msg, data) if k == 0 and not self.known["gcs"] else None
         n = self._release("down", self.sim_time) + self._release("up", self.sim_time)
         self._out.append(Send("gcs", data))
         if self.known["gcs"] and (not self._unacked or self._unacked[-1][0] < k):

@@ -18,7 +18,10 @@
   first DAA computation of a process calls :func:`daa_sil.daa.kernels.get`, which imports them all
   under an exclusive file lock in the cache directory (:func:`compile_lock`): of processes starting
   together on a cold machine one compiles and the others then load its cache, instead of each
-  compiling on the same cores; the lock is released when its holder exits, however it exits.
+  compiling on the same cores; the lock is released when its holder exits, however it exits. Once
+  the cache is complete (its ``ready`` file) loading takes no lock: it only reads, and processes
+  starting together (the SIL's vehicle and GCS) then load side by side instead of one after the
+  other.
   ``python -m daa_sil.daa.kernels`` compiles ahead of time (CI does, after installing; the SIL driver
   does when the cache is cold, before it starts the vehicle and the GCS) and prints where the cache is
   and how long it took.
