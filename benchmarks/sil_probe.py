@@ -181,8 +181,8 @@ def median(xs: list) -> "float | None":
 
 
 def in_process(python: str, tree: Path, probe: Path, scenario: Path, cache: "str | None") -> dict:
-    """The vehicle's core alone in one process: build ``VehicleCore`` and fly every step (no link),
-    then the same steps again with each step's telemetry built and encoded (as the old bench did)."""
+    """The vehicle's core alone in one process: build ``VehicleCore`` (loading the DAA kernels as ``python -m
+    vehicle`` does) and fly every step (no link), then the same steps again with each step's telemetry built and encoded (as the old bench did)."""
     code = r'''
 import json, sys, time
 from pathlib import Path
@@ -192,6 +192,11 @@ from vehicle import telemetry as T
 from daa_sil.link.codec import MavCodec
 path = Path(sys.argv[1])
 t0 = time.perf_counter(); c0 = time.process_time()
+try:  # load the kernels as the vehicle process (python -m vehicle) does, in a checkout that has that
+    from daa_sil.daa.kernels import skip_blas_probe
+    skip_blas_probe()
+except ImportError:
+    pass
 vc = VehicleCore(load_scenario(path))
 t1 = time.perf_counter(); c1 = time.process_time()
 for k in range(vc.n_steps):
