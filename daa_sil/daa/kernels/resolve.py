@@ -21,8 +21,8 @@ import math
 import numpy as np
 from numba import boolean, float64, int64, types, void
 
-from daa_sil.daa.kernels.jit import inline, kernel
-from daa_sil.daa.kernels.motion import command_rel_state, rel_state
+from daa_sil.daa.kernels.jit import inline, inline_ir, kernel
+from daa_sil.daa.kernels.motion import axis_rel, axis_row, command_rel, command_row, intruder_row
 from daa_sil.daa.kernels.pieces import CLEAR, classify, clear2
 from daa_sil.daa.kernels.scalar import INF, halve, npmax, npmin, wcv_soa
 
@@ -41,11 +41,26 @@ KIND_AXIS, KIND_COMMAND = 0, 1
 SETTLE_SLACK = 1.0 + 1e-9
 
 
+#: placeholders for the motion of the kind of path a call does not use (:func:`_motion_row`)
+_NO_AXIS_ROW = (0.0,) * 9
+_NO_COMMAND_ROW = ((0.0,) * 9, (0.0,) * 9, (0.0,) * 9, (0.0,) * 7)
+
+
 @inline
-def _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, r, t):
+def _motion_row(kind, kin, ph, enc, ipv, r):
+    """Row ``r``'s motion and intruder as tuples of floats, for :func:`_rel` (loaded once per row)."""
     if kind == KIND_AXIS:
-        return rel_state(axis, rate, kin, ipv, r, t)
-    return command_rel_state(ph, enc, ipv, r, t, max_turn, h_acc, v_acc)
+        return axis_row(kin, r), _NO_COMMAND_ROW, intruder_row(ipv, r)
+    return _NO_AXIS_ROW, command_row(ph, enc, r), intruder_row(ipv, r)
+
+
+@inline_ir
+def _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc, t):
+    """Relative state at ``t`` of the row whose :func:`_motion_row` is ``mrow``."""
+    arow, crow, iv = mrow
+    if kind == KIND_AXIS:
+        return axis_rel(axis, rate, arow, iv, t)
+    return command_rel(crow, iv, t, max_turn, h_acc, v_acc)
 
 
 @inline
@@ -77,7 +92,7 @@ def _halvings(wmax, dt, thr):
     return n
 
 
-@inline
+@inline_ir
 def _update(seg_in, seg_out, s, t_in, t_out):
     """``np.minimum.at`` / ``np.maximum.at`` of one entry."""
     a = seg_in[s]
@@ -107,9 +122,11 @@ def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row, lo
     steps = max(n_in, n_out) if n else 0
     for i in range(n):
         a, b, flag = lo[i], hi[i], lo_in[i]
+        r = row[i]
+        mrow = _motion_row(kind, kin, ph, enc, ipv, r)
         for k in range(steps):
             mid = 0.5 * (a + b)
-            sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row[i], mid)
+            sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc, mid)
             same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
             a, b = halve(a, b, mid, same, k, mixed, flag, n_in, n_out)
         lo[i], hi[i] = a, b
@@ -156,6 +173,7 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, si
     for c in range(nf):
         i = final[c]
         r = row[i]
+        mrow = _motion_row(kind, kin, ph, enc, ipv, r)
         h = tb[i] - ta[i]
         first, lastk = -1, -1
         t_prev_first, t_first, t_last, t_after = ta[i], 0.0, 0.0, tb[i]
@@ -166,7 +184,7 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, si
             if pending_after:
                 t_after = t
                 pending_after = False
-            sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, r, t)
+            sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc, t)
             if wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC):
                 if first < 0:
                     first, t_first = k, t
@@ -263,8 +281,8 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
                 i = crs[c]
                 r = row[i]
                 entry = fb[i]
-                mx, my, mz, _, _, _ = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, r,
-                                           lo[c] if entry else hi[c])
+                mx, my, mz, _, _, _ = _rel(kind, axis, rate, _motion_row(kind, kin, ph, enc, ipv, r), max_turn, h_acc,
+                                           v_acc, lo[c] if entry else hi[c])
                 c_a, c_b = (ta[i], lo[c]) if entry else (hi[c], tb[i])
                 if entry:
                     x0, y0, z0, x1, y1, z1 = pa[0, i], pa[1, i], pa[2, i], mx, my, mz
@@ -360,10 +378,11 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
             r = row[i]
             t_prev, h = ta[i], tb[i] - ta[i]
             px, py, pz, wx, wy, f_prev = pa[0, i], pa[1, i], pa[2, i], ua[0, i], ua[1, i], fa[i]
+            mrow = _motion_row(kind, kin, ph, enc, ipv, r)
             for k in range(q):
                 if k < q - 1:
                     t_next = ta[i] + h * (float(k + 1) / q)
-                    sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, r,
+                    sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc,
                                                   t_next)
                     f_next = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC)
                 else:
