@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from numba import boolean, float64, int8, int64, types, void
 
-from daa_sil.daa.kernels.jit import inline, kernel
+from daa_sil.daa.kernels.jit import inline_ir, kernel
 from daa_sil.daa.kernels.pieces import CLEAR, INSIDE, UNDECIDED, classify
 from daa_sil.daa.kernels.scalar import INF, interval, npmax, npmin, vertical_window
 
@@ -46,9 +46,10 @@ def tails_into(s0, s1, s2, v0, v1, v2, tk, K, has_vwin, vlo, vhi, last_only, t_e
                 tail_in[i], tail_out[i] = a + t, b + t
 
 
-@inline
+@inline_ir
 def _piece(s0, s1, s2, tk, ia, ib, t_win_end, a_h, a_v, has_vwin, w_lo, w_hi, D, DD, H, TT, TC):
-    """Code of the chord from flat knot ``ia`` to ``ib``; the window is clipped to ``[t_a, t_win_end]``."""
+    """Code of the chord from flat knot ``ia`` to ``ib``; the window is clipped to ``[t_a, t_win_end]``
+    (inlined by numba: the arrays are not reference-counted per segment)."""
     t0 = tk[ia]
     h = tk[ib] - t0
     lo, hi = 0.0, 0.0

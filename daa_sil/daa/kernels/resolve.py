@@ -92,15 +92,10 @@ def _halvings(wmax, dt, thr):
     return n
 
 
-@inline_ir
-def _update(seg_in, seg_out, s, t_in, t_out):
-    """``np.minimum.at`` / ``np.maximum.at`` of one entry."""
-    a = seg_in[s]
-    if not (a != a or a < t_in):
-        seg_in[s] = t_in
-    b = seg_out[s]
-    if not (b != b or b > t_out):
-        seg_out[s] = t_out
+@inline
+def _update(a, b, t_in, t_out):
+    """``np.minimum.at`` / ``np.maximum.at`` of one entry ``(a, b)`` -> its new ``(a, b)``."""
+    return (a if (a != a or a < t_in) else t_in), (b if (b != b or b > t_out) else t_out)
 
 
 @inline
@@ -153,8 +148,8 @@ def _classify_part(a_h, a_v, anyv, has_vwin, w_lo, w_hi, ta, tb, x0, y0, z0, x1,
 
 
 @inline
-def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, sid, row, ta, tb, thr, dt_in, dt_out,
-          clip_dt, DD, TT, H, TC, seg_in, seg_out):
+def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, row, ta, tb, thr, dt_in, dt_out,
+          clip_dt, DD, TT, H, TC, row_in, row_out):
     """``UndecidedPieces._clip`` of pieces ``final``: sampled every ``clip_dt``, the first and last
     violating samples bracketed and bisected (entries, then exits, each as one batch)."""
     nf = final.shape[0]
@@ -168,7 +163,7 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, si
     q = int(qf)
     b1, t1 = np.empty(nf), np.empty(nf)  # entry brackets (before, first sample inside)
     t2, a2 = np.empty(nf), np.empty(nf)  # exit brackets (last sample inside, after)
-    hrow, hid = np.empty(nf, np.int64), np.empty(nf, np.int64)
+    hrow = np.empty(nf, np.int64)
     nh = 0
     for c in range(nf):
         i = final[c]
@@ -195,7 +190,7 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, si
             t_prev = t
         if first >= 0:
             b1[nh], t1[nh], t2[nh], a2[nh] = t_prev_first, t_first, t_last, t_after
-            hrow[nh], hid[nh] = r, sid[i]
+            hrow[nh] = r
             nh += 1
     if nh == 0:
         return
@@ -205,7 +200,8 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, si
     _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, hr, l2, h2, np.ones(nh, np.bool_), thr,
             dt_in, dt_out, DD, TT, H, TC)
     for c in range(nh):
-        _update(seg_in, seg_out, hid[c], 0.5 * (l1[c] + h1[c]), 0.5 * (l2[c] + h2[c]))
+        r = hr[c]
+        row_in[r], row_out[r] = _update(row_in[r], row_out[r], 0.5 * (l1[c] + h1[c]), 0.5 * (l2[c] + h2[c]))
 
 
 @kernel(void(I, I, F, A2, A3, A2, F, F, F, A2,
@@ -224,11 +220,14 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
     intruder row ``r`` of ``ipv``; ``acc_h`` ... ``vhi`` are per row."""
     R = seg.shape[0]
     settle = np.empty(R)
+    # each row's entry / exit (its segment's seg_in / seg_out), written back at the end: the updates
+    # stay in these small arrays instead of reaching into the large ones scattered
+    row_in, row_out = np.empty(R), np.empty(R)
     for r in range(R):
         settle[r] = _settle(acc_h[r], acc_v[r], v2tol, p8tol)
-    # -- the pieces of the current depth --------------------------------------------------------------
+        row_in[r], row_out[r] = seg_in[seg[r]], seg_out[seg[r]]
+    # -- the pieces of the current depth (every piece keeps its row, so its segment) --------------------
     L = R
-    sid = np.empty(L, np.int64)
     row = np.empty(L, np.int64)
     ta, tb = np.empty(L), np.empty(L)
     pa, pb = np.empty((3, L)), np.empty((3, L))
@@ -238,7 +237,7 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
         a = ka[r]
         t0 = tk[a]
         h = tk[a + 1] - t0
-        sid[r], row[r], ta[r], tb[r] = seg[r], r, t0, t0 + h
+        row[r], ta[r], tb[r] = r, t0, t0 + h
         pa[0, r], pa[1, r], pa[2, r] = s0[a], s1[a], s2[a]
         pb[0, r], pb[1, r], pb[2, r] = s0[a + 1], s1[a + 1], s2[a + 1]
         ua[0, r], ua[1, r], ub[0, r], ub[1, r] = v0[a], v1[a], v0[a + 1], v1[a + 1]
@@ -246,10 +245,11 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
         fb[r] = wcv_soa(s0[a + 1], s1[a + 1], s2[a + 1], v0[a + 1], v1[a + 1], v2[a + 1], DD, TT, H, TC)
     for depth in range(max_depth):
         if L == 0:
-            return
+            break
         for i in range(L):
             if fa[i] and fb[i]:
-                _update(seg_in, seg_out, sid[i], ta[i], tb[i])
+                r = row[i]
+                row_in[r], row_out[r] = _update(row_in[r], row_out[r], ta[i], tb[i])
         split = np.zeros(L, np.bool_)
         last = depth == max_depth - 1
         settled = np.empty(L, np.bool_)
@@ -261,7 +261,8 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
         for i in range(L):
             if fa[i] != fb[i]:
                 if not exits and fa[i]:  # an exit: first entry at the start; the last exit is not needed
-                    _update(seg_in, seg_out, sid[i], ta[i], tb[i])
+                    r = row[i]
+                    row_in[r], row_out[r] = _update(row_in[r], row_out[r], ta[i], tb[i])
                 else:
                     cross[nc] = i
                     nc += 1
@@ -292,7 +293,8 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
                                       x0, y0, z0, x1, y1, z1, D, DD, H, TT, TC)
                 if code == CLEAR or settled[i]:
                     tc = 0.5 * (lo[c] + hi[c])
-                    _update(seg_in, seg_out, sid[i], tc if entry else ta[i], tb[i] if entry else tc)
+                    row_in[r], row_out[r] = _update(row_in[r], row_out[r], tc if entry else ta[i],
+                                                    tb[i] if entry else tc)
                 else:
                     split[i] = True
         # -- both ends clear: a clip may lie inside unless certified clear --------------------------------
@@ -345,15 +347,15 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
                 else:
                     split[i] = True
             if nf:
-                _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final[:nf], sid, row, ta, tb,
-                      thr, dt_in, dt_out, clip_dt, DD, TT, H, TC, seg_in, seg_out)
+                _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final[:nf], row, ta, tb,
+                      thr, dt_in, dt_out, clip_dt, DD, TT, H, TC, row_in, row_out)
         # -- split what is left into the fewest equal parts that settle ------------------------------------
         ns = 0
         for i in range(L):
             if split[i]:
                 ns += 1
         if ns == 0:
-            return
+            break
         mx_ratio = -INF
         first = True
         for i in range(L):
@@ -366,7 +368,7 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
         qf = qf if qf < max_split else float(max_split)
         q = int(qf)
         NL = ns * q
-        n_sid, n_row = np.empty(NL, np.int64), np.empty(NL, np.int64)
+        n_row = np.empty(NL, np.int64)
         n_ta, n_tb = np.empty(NL), np.empty(NL)
         n_pa, n_pb = np.empty((3, NL)), np.empty((3, NL))
         n_ua, n_ub = np.empty((2, NL)), np.empty((2, NL))
@@ -382,13 +384,12 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
             for k in range(q):
                 if k < q - 1:
                     t_next = ta[i] + h * (float(k + 1) / q)
-                    sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc,
-                                                  t_next)
+                    sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc, t_next)
                     f_next = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC)
                 else:
                     t_next = tb[i]
                     sx, sy, sz, vx, vy, f_next = pb[0, i], pb[1, i], pb[2, i], ub[0, i], ub[1, i], fb[i]
-                n_sid[o], n_row[o], n_ta[o], n_tb[o] = sid[i], r, t_prev, t_next
+                n_row[o], n_ta[o], n_tb[o] = r, t_prev, t_next
                 n_pa[0, o], n_pa[1, o], n_pa[2, o] = px, py, pz
                 n_pb[0, o], n_pb[1, o], n_pb[2, o] = sx, sy, sz
                 n_ua[0, o], n_ua[1, o], n_ub[0, o], n_ub[1, o] = wx, wy, vx, vy
@@ -396,4 +397,6 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
                 t_prev, px, py, pz, wx, wy, f_prev = t_next, sx, sy, sz, vx, vy, f_next
                 o += 1
         L = NL
-        sid, row, ta, tb, pa, pb, ua, ub, fa, fb = n_sid, n_row, n_ta, n_tb, n_pa, n_pb, n_ua, n_ub, n_fa, n_fb
+        row, ta, tb, pa, pb, ua, ub, fa, fb = n_row, n_ta, n_tb, n_pa, n_pb, n_ua, n_ub, n_fa, n_fb
+    for r in range(R):
+        seg_in[seg[r]], seg_out[seg[r]] = row_in[r], row_out[r]
