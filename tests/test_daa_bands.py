@@ -174,9 +174,9 @@ def test_rows_select_lazily_what_an_eager_copy_selects():
     intr = intruders([[[r * np.sin(b), r * np.cos(b), 1000.0, 60.0, np.pi + b, 0.0]] for r, b in zip(rng_m, bear)])
     b = compute_bands(own, intr, CFG)
     mask = rng.random(n) < 0.6
-    for idx in (np.array([7, 2, 2, 9]), mask, np.flatnonzero(mask)):
+    for idx in (np.array([7, 2, 2, 9]), mask, np.flatnonzero(mask), slice(3, 8), [4, 1]):
         sub = b[idx]
-        inner = np.flatnonzero(idx) if idx.dtype == bool else idx
+        inner = np.arange(n)[idx]
         for ab, ab_sub in zip(b.axes(), sub.axes()):
             j = np.array([1, 0])
             for f in fields(ab):

@@ -125,12 +125,12 @@ class AxisBands:
     def rows(self, idx) -> "AxisBands":
         """The bands of encounters ``idx`` (an index array or a boolean mask: each field is selected when
         it is first read, and :meth:`sub` / :meth:`pick` select from this object's fields directly)."""
-        idx = np.asarray(idx)
-        if idx.ndim != 1 or idx.dtype.kind not in "biu":  # (a scalar: selected now)
+        arr = np.asarray(idx) if isinstance(idx, (np.ndarray, list)) else None
+        if arr is None or arr.ndim != 1 or arr.dtype.kind not in "biu":  # (a slice, a scalar: selected now)
             keep = lambda f: f.name in ("axis", "side") or getattr(self, f.name) is None  # noqa: E731
             return AxisBands(**{f.name: (getattr(self, f.name) if keep(f) else getattr(self, f.name)[idx])
                                 for f in fields(self)})
-        return _AxisRows(self, np.flatnonzero(idx) if idx.dtype.kind == "b" else idx)
+        return _AxisRows(self, np.flatnonzero(arr) if arr.dtype.kind == "b" else arr)
 
     def sub(self, name: str, rows) -> np.ndarray:
         """Field ``name`` of encounters ``rows`` (``self.<name>[rows]``, without selecting the whole field of
