@@ -100,8 +100,10 @@ def _update(a, b, t_in, t_out):
 
 @inline
 def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row, lo, hi, lo_in, thr, dt_in, dt_out,
-            DD, TT, H, TC):
-    """``UndecidedPieces._bisect`` of the rows ``row`` (one batch): ``lo``/``hi`` halved in place."""
+            DD, TT, H, TC, clear_pos, have_pos):
+    """``UndecidedPieces._bisect`` of the rows ``row`` (one batch): ``lo``/``hi`` halved in place. The relative
+    position at the end of the final bracket outside the volume (``lo`` of an entry, ``hi`` of an exit) goes
+    to ``clear_pos`` (3, n) when a halving put that end there (``have_pos``; else it is still the start's)."""
     n = lo.shape[0]
     w_in, w_out = 0.0, 0.0
     any_in, any_out = False, False
@@ -119,11 +121,16 @@ def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row, lo
         a, b, flag = lo[i], hi[i], lo_in[i]
         r = row[i]
         mrow = _motion_row(kind, kin, ph, enc, ipv, r)
+        have_pos[i] = False
         for k in range(steps):
             mid = 0.5 * (a + b)
             sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc, mid)
-            same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
-            a, b = halve(a, b, mid, same, k, mixed, flag, n_in, n_out)
+            inside = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC)
+            a2, b2 = halve(a, b, mid, inside == flag, k, mixed, flag, n_in, n_out)
+            if not inside and (a2 != a or b2 != b):  # the end outside moved to mid
+                clear_pos[0, i], clear_pos[1, i], clear_pos[2, i] = sx, sy, sz
+                have_pos[i] = True
+            a, b = a2, b2
         lo[i], hi[i] = a, b
 
 
@@ -195,10 +202,11 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, ro
     if nh == 0:
         return
     l1, h1, l2, h2, hr = b1[:nh].copy(), t1[:nh].copy(), t2[:nh].copy(), a2[:nh].copy(), hrow[:nh].copy()
+    pos, have = np.empty((3, nh)), np.empty(nh, np.bool_)  # (not read)
     _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, hr, l1, h1, np.zeros(nh, np.bool_), thr,
-            dt_in, dt_out, DD, TT, H, TC)
+            dt_in, dt_out, DD, TT, H, TC, pos, have)
     _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, hr, l2, h2, np.ones(nh, np.bool_), thr,
-            dt_in, dt_out, DD, TT, H, TC)
+            dt_in, dt_out, DD, TT, H, TC, pos, have)
     for c in range(nh):
         r = hr[c]
         row_in[r], row_out[r] = _update(row_in[r], row_out[r], 0.5 * (l1[c] + h1[c]), 0.5 * (l2[c] + h2[c]))
@@ -274,16 +282,20 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
             for c in range(nc):
                 i = crs[c]
                 lo[c], hi[c], lo_in[c], crow[c] = ta[i], tb[i], not fb[i], row[i]
+            clear_pos, have_pos = np.empty((3, nc)), np.empty(nc, np.bool_)
             _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, crow, lo, hi, lo_in, thr, dt_in,
-                    dt_out, DD, TT, H, TC)
+                    dt_out, DD, TT, H, TC, clear_pos, have_pos)
             # certify the other side of the crossing clear: before an entry, after an exit
             anyv = _any_nonzero(acc_v, row, crs)
             for c in range(nc):
                 i = crs[c]
                 r = row[i]
                 entry = fb[i]
-                mx, my, mz, _, _, _ = _rel(kind, axis, rate, _motion_row(kind, kin, ph, enc, ipv, r), max_turn, h_acc,
-                                           v_acc, lo[c] if entry else hi[c])
+                if have_pos[c]:  # (the state there, computed by the bisection)
+                    mx, my, mz = clear_pos[0, c], clear_pos[1, c], clear_pos[2, c]
+                else:
+                    mx, my, mz, _, _, _ = _rel(kind, axis, rate, _motion_row(kind, kin, ph, enc, ipv, r), max_turn,
+                                               h_acc, v_acc, lo[c] if entry else hi[c])
                 c_a, c_b = (ta[i], lo[c]) if entry else (hi[c], tb[i])
                 if entry:
                     x0, y0, z0, x1, y1, z1 = pa[0, i], pa[1, i], pa[2, i], mx, my, mz
