@@ -212,21 +212,37 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, ro
         row_in[r], row_out[r] = _update(row_in[r], row_out[r], 0.5 * (l1[c] + h1[c]), 0.5 * (l2[c] + h2[c]))
 
 
-@kernel(void(I, I, F, A2, A3, A2, F, F, F, A2,
+@kernel(void(I, I, F, A2, A3, A2, F, F, F, A2, IA, IA,
              A, A, A, A, A, A, A, IA, IA,
              A, A, B, A, B, A2, B, A, A,
              B, A, I, I, F, F, F, F, F,
              F, F, F, F, F, O, O))
-def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
+def resolve_into(kind, axis, rate, kin_all, ph_all, enc_all, max_turn, h_acc, v_acc, ipv_all, mi, ii,
                  s0, s1, s2, v0, v1, v2, tk, seg, ka,
                  acc_h, acc_v, has_jerk, jerk, has_kink, kink, has_vwin, vlo, vhi,
                  exits, thr, max_depth, max_split, dt_in, dt_out, clip_dt, v2tol, p8tol,
                  D, DD, H, TT, TC, seg_in, seg_out):
     """Resolve the undecided segments ``seg`` (flat segment ids; ``ka`` their first knots' flat indices
     into the knot arrays ``s*``/``v*``/``tk``) into ``seg_in``/``seg_out`` (the reference's docstring).
-    Row ``r``'s motion is row ``r`` of ``kin`` (``kind`` axis) or of ``ph``/``enc`` (command), against
-    intruder row ``r`` of ``ipv``; ``acc_h`` ... ``vhi`` are per row."""
+    Row ``r``'s motion is row ``mi[r]`` of ``kin_all`` (``kind`` axis) or of ``ph_all``/``enc_all`` (command),
+    against intruder row ``ii[r]`` of ``ipv_all``; ``acc_h`` ... ``vhi`` are per row."""
     R = seg.shape[0]
+    # the rows' motion and intruder, gathered (kin / ph and enc: empty for the kind not used)
+    nk = R if kind == KIND_AXIS else 0
+    kin, ipv = np.empty((nk, kin_all.shape[1])), np.empty((R, ipv_all.shape[1]))
+    ph, enc = np.empty((R - nk, ph_all.shape[1], ph_all.shape[2])), np.empty((R - nk, enc_all.shape[1]))
+    for r in range(R):
+        for j in range(ipv.shape[1]):
+            ipv[r, j] = ipv_all[ii[r], j]
+    for r in range(nk):
+        for j in range(kin.shape[1]):
+            kin[r, j] = kin_all[mi[r], j]
+    for r in range(R - nk):
+        for j in range(ph.shape[1]):
+            for f in range(ph.shape[2]):
+                ph[r, j, f] = ph_all[mi[r], j, f]
+        for j in range(enc.shape[1]):
+            enc[r, j] = enc_all[mi[r], j]
     settle = np.empty(R)
     # each row's entry / exit (its segment's seg_in / seg_out), written back at the end: the updates
     # stay in these small arrays instead of reaching into the large ones scattered
