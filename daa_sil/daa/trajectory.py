@@ -214,8 +214,8 @@ class PathEvaluator:
             self._vwin = wc.vertical_window(self.s[2][..., :1], self.v[2][..., :1], 0.0, self.t_end, th.zthr, th.tcoa)
         full_tails = self.with_tails is True
         tail = (lambda fill: np.empty(self.shape)) if full_tails else (lambda fill: np.full(self.shape, fill))  # noqa: E731
-        pc = PathConflicts(np.full(seg_shape, np.inf), np.full(seg_shape, -np.inf), tail(np.inf), tail(-np.inf), self.t,
-                           self.t_end)
+        seg = (lambda fill: np.empty(seg_shape)) if compiled else (lambda fill: np.full(seg_shape, fill))  # noqa: E731
+        pc = PathConflicts(seg(np.inf), seg(-np.inf), tail(np.inf), tail(-np.inf), self.t, self.t_end)
         if compiled:
             if k > 1:
                 self._segments_compiled(th, pc)

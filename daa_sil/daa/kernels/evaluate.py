@@ -65,7 +65,8 @@ def segments_into(s0, s1, s2, tk, K, block, acc_h, acc_v, has_vwin, vlo, vhi, t_
     """Certificate code of the maneuver between knots j and j+1 of every path (``code`` flat over
     ``(N, M, P, K-1)``): with more than ``block`` segments, blocks of ``block`` segments first (an
     undecided block's segments are then certified one by one); INSIDE segments get ``seg_in``/``seg_out``
-    = their knot times; segments starting after ``t_end`` are CLEAR."""
+    = their knot times, the others ``(inf, -inf)`` (every entry is written); segments starting after
+    ``t_end`` are CLEAR."""
     n_paths = tk.shape[0] // K
     S = K - 1
     for path in range(n_paths):
@@ -95,8 +96,10 @@ def segments_into(s0, s1, s2, tk, K, block, acc_h, acc_v, has_vwin, vlo, vhi, t_
             i = path * S + j
             if not (tk[base + j] < t_end):
                 code[i] = CLEAR
-            elif code[i] == INSIDE:
+            if code[i] == INSIDE:
                 seg_in[i], seg_out[i] = tk[base + j], tk[base + j + 1]
+            else:
+                seg_in[i], seg_out[i] = INF, -INF
 
 
 @kernel(void(A, A, A, A, I, F, O, O))
