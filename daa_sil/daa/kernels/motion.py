@@ -229,23 +229,61 @@ def command_states_into(ph_rows, enc, max_turn, h_acc, v_acc, t, out):
                 ph_rows, enc, i, t[i, j], max_turn, h_acc, v_acc)
 
 
+@inline
+def _axis_knot(axis, rate, row, sth, cth, t):
+    """Ownship state on the path ``row`` (:func:`axis_row`) at knot time ``t`` (``sth``/``cth``: the turn's
+    sine and cosine there)."""
+    x0, y0, z0, gs0, st, ct, vs0, sgn, lim = row
+    if axis == _HORIZONTAL:
+        return turn_state(rate, x0, y0, z0, gs0, st, ct, vs0, sgn, sth, cth, t)
+    return axis_state(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, lim, t)
+
+
+@inline
+def _turn_sincos(rate, t):
+    """Sines and cosines of ``rate * t[k]`` (the same on every path)."""
+    K = t.shape[0]
+    sth, cth = np.empty(K), np.empty(K)
+    for k in range(K):
+        th = rate * t[k]
+        sth[k], cth[k] = math.sin(th), math.cos(th)
+    return sth, cth
+
+
+@kernel(void(I, F, A3, A, A3, A3, *([types.Array(float64, 4, "C")] * 6)))
+def axis_relative_knots_into(axis, rate, kin, t, ipos, ivel, s0, s1, s2, v0, v1, v2):
+    """:func:`axis_knots_into` then ``evaluate.relative_knots_into`` in one pass: the relative position and
+    velocity (ownship - intruder ``m``, ``ipos``/``ivel`` (N, M, 3)) at the knots ``(N, M, P, K)`` per
+    component, without storing the ownship's knot states."""
+    K = t.shape[0]
+    sth, cth = _turn_sincos(rate, t)
+    for n in range(kin.shape[0]):
+        for p in range(kin.shape[1]):
+            row = axis_row(kin[n], p)
+            for k in range(K):
+                ox, oy, oz, ovx, ovy, ovz = _axis_knot(axis, rate, row, sth[k], cth[k], t[k])
+                tk = t[k]
+                for m in range(ipos.shape[1]):
+                    ix, iy, iz = ipos[n, m, 0], ipos[n, m, 1], ipos[n, m, 2]
+                    jx, jy, jz = ivel[n, m, 0], ivel[n, m, 1], ivel[n, m, 2]
+                    s0[n, m, p, k] = ox - (ix + tk * jx)
+                    s1[n, m, p, k] = oy - (iy + tk * jy)
+                    s2[n, m, p, k] = oz - (iz + tk * jz)
+                    v0[n, m, p, k] = ovx - jx
+                    v1[n, m, p, k] = ovy - jy
+                    v2[n, m, p, k] = ovz - jz
+
+
 @kernel(void(I, F, A3, A, types.Array(float64, 4, "C")))
 def axis_knots_into(axis, rate, kin, t, out):
     """Ownship state on path ``p`` of encounter ``n`` (row ``kin[n, p]``) at each knot time ``t[k]`` into
     ``out[:, n, p, k]`` (six rows; the band axis's knot states, ``axis_paths.maneuver_paths``)."""
     K = t.shape[0]
-    sth, cth = np.empty(K), np.empty(K)  # the turn's sines and cosines are the same on every path
-    for k in range(K):
-        th = rate * t[k]
-        sth[k], cth[k] = math.sin(th), math.cos(th)
+    sth, cth = _turn_sincos(rate, t)
     for n in range(kin.shape[0]):
         for p in range(kin.shape[1]):
-            r = kin[n, p]
+            row = axis_row(kin[n], p)
             for k in range(K):
-                if axis == _HORIZONTAL:
-                    a, b, c, d, e, f = turn_state(rate, r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], sth[k], cth[k],
-                                                  t[k])
-                else:
-                    a, b, c, d, e, f = axis_state(axis, rate, r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], t[k])
+                a, b, c, d, e, f = _axis_knot(axis, rate, row, sth[k], cth[k], t[k])
                 out[0, n, p, k], out[1, n, p, k], out[2, n, p, k], out[3, n, p, k], out[4, n, p, k], out[5, n, p, k] = \
                     a, b, c, d, e, f
