@@ -302,13 +302,12 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
     t = np.asarray(paths.t, float)[0, 0]
     ev = PathEvaluator(paths, intr, cfg.lookahead_s)
+    pc = ev.evaluate(cfg.th)
+    t_in, t_out = pc.candidates()  # (N, M, 2, J+1)
     side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
     if COMPILED and cfg.recovery != "cylinder":  # the rest of this function in one compiled pass
-        t_in, t_out = ev.candidates(cfg.th)  # (N, M, 2, J+1)
         values, delta, t_man, *rest = axis_regions(t_in, t_out, alert, lists, t, own, intr, axis, cfg, j_lo, j_hi)
         return AxisBands(axis, values, delta, side, t_man, *rest)
-    pc = ev.evaluate(cfg.th)
-    t_in, t_out = pc.candidates()
     L = cfg.lookahead_s
     tk = t[None, None, None, :]
     if cfg.horizon_from_maneuver:

@@ -223,28 +223,11 @@ class PathEvaluator:
         """Segment and tail intervals for volume ``th`` (see :class:`PathConflicts`), compiled kernels."""
         return self._evaluate(th, compiled=True)
 
-    def candidates(self, th: Thresholds) -> tuple[np.ndarray, np.ndarray]:
-        """``evaluate(th).candidates()`` (compiled), the tails going straight into the candidates instead of
-        being stored (:func:`daa_sil.daa.kernels.evaluate.tails_candidates_into`) when every knot has one."""
-        n, m, p, k = self.shape
-        if self.with_tails is not True or k < 2:
-            return self.evaluate(th).candidates()
-        pc = self._evaluate(th, compiled=True, tails=False)
-        t_in, t_out = np.empty(self.shape), np.empty(self.shape)
-        lo, hi, has = self._vwin_flat()
-        D = float(th.dthr)
-        kernels.get().tails_candidates_into(*(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v),
-                                            self._flat_times(), k, has, lo, hi, self.t_end, D, D * D, D ** 2,
-                                            float(th.tthr), float(th.zthr), float(th.tcoa), pc.seg_in.reshape(-1),
-                                            pc.seg_out.reshape(-1), t_in.reshape(-1), t_out.reshape(-1))
-        return t_in, t_out
-
     def evaluate_reference(self, th: Thresholds) -> PathConflicts:
         """:meth:`evaluate` with the numpy tails and chord certificates (the kernels' test oracle)."""
         return self._evaluate(th, compiled=False)
 
-    def _evaluate(self, th: Thresholds, compiled: bool, tails: bool = True) -> PathConflicts:
-        """(``tails=False``: the segments only, the tail arrays left empty and unfilled.)"""
+    def _evaluate(self, th: Thresholds, compiled: bool) -> PathConflicts:
         self.compiled = compiled
         n, m, p, k = self.shape
         tt = np.broadcast_to(self.t, self.shape)
@@ -254,14 +237,12 @@ class PathEvaluator:
             self._vwin = wc.vertical_window(self.s[2][..., :1], self.v[2][..., :1], 0.0, self.t_end, th.zthr, th.tcoa)
         full_tails = self.with_tails is True
         tail = (lambda fill: np.empty(self.shape)) if full_tails else (lambda fill: np.full(self.shape, fill))  # noqa: E731
-        if not tails:
-            tail = lambda fill: np.empty((0,) * len(self.shape))  # noqa: E731
         seg = (lambda fill: np.empty(seg_shape)) if compiled else (lambda fill: np.full(seg_shape, fill))  # noqa: E731
         pc = PathConflicts(seg(np.inf), seg(-np.inf), tail(np.inf), tail(-np.inf), self.t, self.t_end)
         if compiled:
             if k > 1:
                 self._segments_compiled(th, pc)
-            if self.with_tails and tails:
+            if self.with_tails:
                 self._tails_compiled(th, pc)
             return pc
         if k > 1:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from numba import boolean, float64, int8, int64, types, void
 
-from daa_sil.daa.kernels.jit import inline, inline_ir, kernel
+from daa_sil.daa.kernels.jit import inline_ir, kernel
 from daa_sil.daa.kernels.pieces import CLEAR, INSIDE, UNDECIDED, classify
 from daa_sil.daa.kernels.scalar import INF, interval, npmax, npmin, vertical_window
 
@@ -19,18 +19,6 @@ F = float64
 I = int64
 
 
-@inline
-def _tail(sx, sy, sz, vx, vy, vz, t, has_vwin, w_lo, w_hi, t_end, D, DD, D2, TT, H, TC):
-    """Violation interval (s from the knot) of the straight tail from a knot at ``t`` over ``[t, t_end]``;
-    ``(w_lo, w_hi)`` the path's vertical window when ``has_vwin``."""
-    length = npmax(t_end - t, 0.0)
-    if has_vwin:
-        lo, hi = npmax(w_lo, t) - t, npmin(w_hi, t_end) - t
-    else:
-        lo, hi = vertical_window(sz, vz, 0.0, length, H, TC)
-    return interval(sx, sy, sz, vx, vy, vz, length, lo, hi, D, DD, D2, TT, H, TC)
-
-
 @kernel(void(A, A, A, A, A, A, A, I, boolean, A, A, boolean, F, F, F, F, F, F, F, O, O))
 def tails_into(s0, s1, s2, v0, v1, v2, tk, K, has_vwin, vlo, vhi, last_only, t_end, D, DD, D2, TT, H, TC,
                tail_in, tail_out):
@@ -38,11 +26,15 @@ def tails_into(s0, s1, s2, v0, v1, v2, tk, K, has_vwin, vlo, vhi, last_only, t_e
     path) over ``[t_k, t_end]``, absolute s; ``vlo``/``vhi`` the path's vertical window when ``has_vwin``."""
     n_paths = tk.shape[0] // K
     for path in range(n_paths):
-        w_lo, w_hi = (vlo[path], vhi[path]) if has_vwin else (0.0, 0.0)
         for k in range(K - 1 if last_only else 0, K):
             i = path * K + k
             t = tk[i]
-            a, b = _tail(s0[i], s1[i], s2[i], v0[i], v1[i], v2[i], t, has_vwin, w_lo, w_hi, t_end, D, DD, D2, TT, H, TC)
+            length = npmax(t_end - t, 0.0)
+            if has_vwin:
+                lo, hi = npmax(vlo[path], t) - t, npmin(vhi[path], t_end) - t
+            else:
+                lo, hi = vertical_window(s2[i], v2[i], 0.0, length, H, TC)
+            a, b = interval(s0[i], s1[i], s2[i], v0[i], v1[i], v2[i], length, lo, hi, D, DD, D2, TT, H, TC)
             if last_only:
                 if t <= t_end:
                     tail_in[i], tail_out[i] = a + t, b + t
@@ -110,20 +102,6 @@ def segments_into(s0, s1, s2, tk, K, block, acc_h, acc_v, has_vwin, vlo, vhi, t_
                 seg_in[i], seg_out[i] = INF, -INF
 
 
-@inline
-def _candidate(k, a, b, acc_in, acc_out, s_in, s_out, t_end):
-    """Candidate ``k``'s (t_in, t_out) from its tail's ``(a, b)`` and the maneuver's first entry / last exit
-    up to knot ``k - 1`` (``acc_in``/``acc_out``) and on segment ``k - 1`` (``s_in``/``s_out``), and the new
-    ``acc_in``/``acc_out``."""
-    if k > 0:
-        acc_in = s_in if k == 1 else npmin(acc_in, s_in)
-        acc_out = s_out if k == 1 else npmax(acc_out, s_out)
-        a, b = npmin(a, acc_in), npmax(b, acc_out)
-    if a <= t_end:
-        return a, npmin(b, t_end), acc_in, acc_out
-    return INF, -INF, acc_in, acc_out
-
-
 @kernel(void(A, A, A, A, I, F, O, O))
 def candidates_into(tail_in, tail_out, seg_in, seg_out, K, t_end, t_in, t_out):
     """First violation / last exit of candidate k (maneuver to knot k, then straight) over ``[0, t_end]``
@@ -134,33 +112,16 @@ def candidates_into(tail_in, tail_out, seg_in, seg_out, K, t_end, t_in, t_out):
         acc_in, acc_out = INF, -INF
         for k in range(K):
             i = path * K + k
-            j = path * S + k - 1
-            t_in[i], t_out[i], acc_in, acc_out = _candidate(k, tail_in[i], tail_out[i], acc_in, acc_out,
-                                                            seg_in[j] if k > 0 else 0.0,
-                                                            seg_out[j] if k > 0 else 0.0, t_end)
-
-
-@kernel(void(A, A, A, A, A, A, A, I, boolean, A, A, F, F, F, F, F, F, F, A, A, O, O))
-def tails_candidates_into(s0, s1, s2, v0, v1, v2, tk, K, has_vwin, vlo, vhi, t_end, D, DD, D2, TT, H, TC,
-                          seg_in, seg_out, t_in, t_out):
-    """:func:`tails_into` of every knot then :func:`candidates_into`, in one pass: each tail goes straight
-    into its candidate (the tails are not stored)."""
-    n_paths = tk.shape[0] // K
-    S = K - 1
-    for path in range(n_paths):
-        w_lo, w_hi = (vlo[path], vhi[path]) if has_vwin else (0.0, 0.0)
-        acc_in, acc_out = INF, -INF
-        for k in range(K):
-            i = path * K + k
-            t = tk[i]
-            a, b = _tail(s0[i], s1[i], s2[i], v0[i], v1[i], v2[i], t, has_vwin, w_lo, w_hi, t_end, D, DD, D2, TT, H, TC)
-            if t > t_end:  # (tails_into's rule of every knot)
-                a, b = INF, -INF
+            a, b = tail_in[i], tail_out[i]
+            if k > 0:
+                j = path * S + k - 1
+                acc_in = seg_in[j] if k == 1 else npmin(acc_in, seg_in[j])
+                acc_out = seg_out[j] if k == 1 else npmax(acc_out, seg_out[j])
+                a, b = npmin(a, acc_in), npmax(b, acc_out)
+            if a <= t_end:
+                t_in[i], t_out[i] = a, npmin(b, t_end)
             else:
-                a, b = a + t, b + t
-            j = path * S + k - 1
-            t_in[i], t_out[i], acc_in, acc_out = _candidate(k, a, b, acc_in, acc_out, seg_in[j] if k > 0 else 0.0,
-                                                            seg_out[j] if k > 0 else 0.0, t_end)
+                t_in[i], t_out[i] = INF, -INF
 
 
 A3 = types.Array(float64, 3, "A", readonly=True)
