@@ -79,7 +79,10 @@ def run_baseline(root: Path, args) -> "tuple[float, float] | None":
         return None
     cmd = [str(py), str(script), "--n", str(args.n), "--loop", str(args.loop), "--repeat", str(args.repeat),
            "--preset", args.preset]
-    res = subprocess.run(cmd, capture_output=True, text=True, cwd=root)
+    # without PYTHONPATH: a checkout's code on it (as a worktree is run) would otherwise be imported by the
+    # baseline's python too, and the "baseline" would measure this code (bench_campaign.py does the same)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    res = subprocess.run(cmd, capture_output=True, text=True, cwd=root, env=env)
     wall = re.search(r"= ([\d,]+) encounter-steps/s", res.stdout)
     cpu = re.search(r"CPU time: batched ([\d,]+) encounter-steps/s", res.stdout)
     if res.returncode != 0 or not wall or not cpu:

@@ -158,3 +158,40 @@ def test_batch_independence_of_bands():
             assert a.intervals(i) == ai.intervals(0)
             assert np.array_equal(a.res_lo[i:i + 1], ai.res_lo, equal_nan=True)
             assert np.array_equal(a.res_hi[i:i + 1], ai.res_hi, equal_nan=True)
+
+
+def test_rows_select_lazily_what_an_eager_copy_selects():
+    # Bands[idx] selects each field when it is read; sub / pick select from the original's fields. Every
+    # way of reading must give the eager copy's arrays, for index arrays, masks, nested rows, and a field
+    # set on a rows object must be the one read after.
+    from dataclasses import fields
+
+    rng = np.random.default_rng(3)
+    n = 12
+    own = own_state(n=n)
+    bear = rng.uniform(-0.5, 0.5, n)
+    rng_m = rng.uniform(3000, 9000, n)
+    intr = intruders([[[r * np.sin(b), r * np.cos(b), 1000.0, 60.0, np.pi + b, 0.0]] for r, b in zip(rng_m, bear)])
+    b = compute_bands(own, intr, CFG)
+    mask = rng.random(n) < 0.6
+    for idx in (np.array([7, 2, 2, 9]), mask, np.flatnonzero(mask), slice(3, 8), [4, 1]):
+        sub = b[idx]
+        inner = np.arange(n)[idx]
+        for ab, ab_sub in zip(b.axes(), sub.axes()):
+            j = np.array([1, 0])
+            for f in fields(ab):
+                want = getattr(ab, f.name)
+                if f.name in ("axis", "side") or want is None:
+                    assert getattr(ab_sub, f.name) is want or np.array_equal(getattr(ab_sub, f.name), want)
+                    continue
+                assert np.array_equal(ab_sub.sub(f.name, j), want[inner][j], equal_nan=True), f.name
+                if want.ndim == 2:
+                    assert np.array_equal(ab_sub.pick(f.name, j, np.array([0, 1])), want[inner][j, [0, 1]],
+                                          equal_nan=True)
+                nested = ab_sub.rows(j)
+                assert np.array_equal(getattr(nested, f.name), want[inner][j], equal_nan=True), f.name
+                assert np.array_equal(getattr(ab_sub, f.name), want[inner], equal_nan=True), f.name
+    sub = b.trk.rows(np.array([0, 1, 2]))
+    sub.t_in = np.full_like(sub.t_in, 123.0)
+    assert np.all(sub.sub("t_in", np.array([1])) == 123.0)
+    assert np.all(sub.rows(np.array([2])).t_in == 123.0)

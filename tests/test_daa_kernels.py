@@ -484,10 +484,17 @@ def test_relative_knots_identical(preset):
     th = cfg.th
     for paths in cases:
         shape = (own.shape[0], intr.shape[1]) + paths.shape[1:]
-        args = (paths.pos, paths.vel, paths.knot_times(), ipos, ivel, shape)
+        args = (*paths.knot_states(), paths.knot_times(), ipos, ivel, shape)
         for g, r in zip(intervals.relative_at_knots(*args), _ref(intervals.relative_at_knots_reference, *args)):
             for a, b in zip(g, r):
                 _same(a, b)
+        if paths.kin[0] == "axis":  # the evaluator's, from the band paths' motion without their knot states
+            fresh = maneuver_paths(own, paths.kin[1], cfg, 12, with_values=False)[0]
+            assert fresh.pos is None
+            for g, r in zip(PathEvaluator(fresh, intr, 60.0).s + PathEvaluator(fresh, intr, 60.0).v,
+                            _ref(intervals.relative_at_knots_reference, *args)[0] +
+                            _ref(intervals.relative_at_knots_reference, *args)[1]):
+                _same(g, r)
     n, m, p, k = 50, 2, 3, 7
     shape = (n, m, p, k)
     pos = [_draw(rng, n * p * k, th, 5000.0).reshape(n, p, k) for _ in range(3)]
@@ -538,7 +545,7 @@ def test_axis_knot_states_identical(preset, axis, monkeypatch):
     monkeypatch.setattr(axis_paths, "COMPILED", False)
     ref, _ = _ref(maneuver_paths, own, axis, cfg, j, False)
     shape = got.shape
-    for g, r in zip(got.pos + got.vel, ref.pos + ref.vel):
+    for g, r in zip(sum(got.knot_states(), ()), ref.pos + ref.vel):
         _same(g, np.broadcast_to(r, shape).astype(float))
     assert shape[-1] > 5
 

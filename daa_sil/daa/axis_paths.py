@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from daa_sil.daa import kernels
 from daa_sil.daa.config import (
     AXIS_HORIZONTAL,
     AXIS_SPEED,
@@ -118,10 +117,8 @@ def maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int,
     s3, t3 = sgn[None, :, None], t[None, None, :]
     kin = _kin_table(axis, cfg, x0, y0, z0, gs0, st, ct, vs0, sgn)
     value = None
-    if COMPILED and not with_values:  # the same numbers as below (kernels.motion.axis_state is _axis_state_soa's)
-        out = np.empty((6, n, 2, j + 1))
-        kernels.get().axis_knots_into(kin[1], kin[2], kin[3], t.astype(float), out)
-        comp = tuple(out)
+    if COMPILED and not with_values:  # computed when asked for (ManeuverPaths.knot_states: kernels.motion's
+        comp = (None,) * 6  # axis_knots_into, the same numbers as below; the evaluator does without them)
     elif axis == AXIS_HORIZONTAL:
         comp, value = _turn_knots(cfg, col(x0), col(y0), col(z0), col(gs0), col(st), col(ct), col(vs0), t3)
         if with_values:
@@ -147,7 +144,8 @@ def maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int,
         return lambda tq: _axis_state_soa(axis, cfg, *args, tq)
 
     two = lambda a: np.repeat(a[:, None], 2, 1)  # noqa: E731
-    paths = ManeuverPaths(comp[:3], comp[3:], t[None, None, :], state_at, two(acc_h), two(acc_v),
+    paths = ManeuverPaths(None if comp[0] is None else comp[:3], None if comp[0] is None else comp[3:],
+                          t[None, None, :], state_at, two(acc_h), two(acc_v),
                           vz_const=axis != AXIS_VERTICAL, jerk_h=two(jerk), kink_t=kink,
                           kin=kin)
     return paths, (np.broadcast_to(value, (n, 2, j + 1)) if with_values else None)

@@ -51,7 +51,7 @@ Which preset gets which rule (issue 15), and why:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, dataclass, fields
 
 import numpy as np
 
@@ -123,10 +123,24 @@ class AxisBands:
         return int(np.nonzero(self.side == 0)[0][0])
 
     def rows(self, idx) -> "AxisBands":
-        """The bands of encounters ``idx``."""
-        keep = lambda f: f.name in ("axis", "side") or getattr(self, f.name) is None  # noqa: E731
-        return AxisBands(**{f.name: (getattr(self, f.name) if keep(f) else getattr(self, f.name)[idx])
-                            for f in fields(self)})
+        """The bands of encounters ``idx`` (an index array or a boolean mask: each field is selected when
+        it is first read, and :meth:`sub` / :meth:`pick` select from this object's fields directly)."""
+        arr = np.asarray(idx) if isinstance(idx, (np.ndarray, list)) else None
+        if arr is None or arr.ndim != 1 or arr.dtype.kind not in "biu":  # (a slice, a scalar: selected now)
+            keep = lambda f: f.name in ("axis", "side") or getattr(self, f.name) is None  # noqa: E731
+            return AxisBands(**{f.name: (getattr(self, f.name) if keep(f) else getattr(self, f.name)[idx])
+                                for f in fields(self)})
+        return _AxisRows(self, np.flatnonzero(arr) if arr.dtype.kind == "b" else arr)
+
+    def sub(self, name: str, rows) -> np.ndarray:
+        """Field ``name`` of encounters ``rows`` (``self.<name>[rows]``, without selecting the whole field of
+        a :meth:`rows` first; None for a field that is None)."""
+        value = getattr(self, name)
+        return None if value is None else value[rows]
+
+    def pick(self, name: str, rows, cols) -> np.ndarray:
+        """``self.<name>[rows, cols]`` (as :meth:`sub`)."""
+        return getattr(self, name)[rows, cols]
 
     def intervals(self, i: int = 0) -> list[tuple[float, float, str]]:
         """Bands of encounter ``i`` as ``[(lo, hi, region_name), ...]`` in SI units, low side first.
@@ -162,6 +176,41 @@ class AxisBands:
             else:
                 out.append((float(vals[j]), float(vals[j + 1]), name))
         return out
+
+
+#: the :class:`AxisBands` fields that are per encounter (``axis`` and ``side`` are not), and those of them
+#: without a default (the others are class attributes too, so :class:`_AxisRows` selects them at once)
+_ROW_FIELDS = frozenset(f.name for f in fields(AxisBands)) - {"axis", "side"}
+_LAZY_FIELDS = frozenset(f.name for f in fields(AxisBands) if f.default is MISSING) & _ROW_FIELDS
+
+
+class _AxisRows(AxisBands):
+    """:meth:`AxisBands.rows`: the bands of encounters ``idx`` (integer array) of ``base``; a per-encounter
+    field is ``base``'s at ``idx`` (a copy, as ``base.<field>[idx]``), made when it is first read, and
+    :meth:`sub` / :meth:`pick` of a field not made select from ``base`` at once."""
+
+    def __init__(self, base: AxisBands, idx: np.ndarray):  # (not the dataclass's: the fields come from ``base``)
+        self._base, self._idx = base, idx
+        self.axis, self.side = base.axis, base.side
+        for name in _ROW_FIELDS - _LAZY_FIELDS:
+            setattr(self, name, base.sub(name, idx))
+
+    def __getattr__(self, name: str):  # (called only for a field not made yet)
+        if name not in _ROW_FIELDS or "_base" not in self.__dict__:
+            raise AttributeError(name)
+        value = self._base.sub(name, self._idx)
+        setattr(self, name, value)
+        return value
+
+    def sub(self, name: str, rows) -> np.ndarray:
+        if name in self.__dict__ or name not in _ROW_FIELDS:
+            return super().sub(name, rows)
+        return self._base.sub(name, self._idx[rows])
+
+    def pick(self, name: str, rows, cols) -> np.ndarray:
+        if name in self.__dict__ or name not in _ROW_FIELDS:
+            return getattr(self, name)[rows, cols]
+        return self._base.pick(name, self._idx[rows], cols)
 
 
 def gap_regions(region: np.ndarray) -> np.ndarray:

@@ -113,16 +113,16 @@ class _Candidates:
         out = None
         for a in self._ab:
             c = self.cols[a.axis]
-            arr = getattr(a, name)
-            if out is None:
-                out = np.empty(idx.shape, arr.dtype)
             sel = np.flatnonzero((idx >= c.start) & (idx < c.stop))
-            out[sel] = arr[sel, idx[sel] - c.start]
+            vals = a.pick(name, sel, idx[sel] - c.start)
+            if out is None:
+                out = np.empty(idx.shape, vals.dtype)
+            out[sel] = vals
         return out
 
     def rows(self, name: str, rows: np.ndarray) -> np.ndarray:
         """Field ``name`` of encounters ``rows`` (as ``self.<name>[rows]``)."""
-        return np.concatenate([getattr(a, name)[rows] for a in self._ab], axis=1)
+        return np.concatenate([a.sub(name, rows) for a in self._ab], axis=1)
 
     def command(self, idx: np.ndarray) -> Command:
         """Command of candidate ``idx`` (N,): the candidate's axis set, the other axes held."""
@@ -213,7 +213,7 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
     bands = bands if bands is not None else compute_bands(own, intr, cfg)
     cand = _Candidates(own, bands)
     k0 = np.nonzero((cand.axis == AXIS_HORIZONTAL) & (cand.side == 0))[0][0]
-    in_conflict = bands.trk.region[:, k0 - cand.cols[AXIS_HORIZONTAL].start] != REGION_NONE
+    in_conflict = bands.trk.pick("region", slice(None), k0 - cand.cols[AXIS_HORIZONTAL].start) != REGION_NONE
     moving = cand.side[None, :] != 0
     chosen = np.full(n, -1)
     p_ax = np.full(n, AXIS_NONE)
@@ -243,10 +243,10 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
                 r = np.flatnonzero((chosen < 0) & in_conflict & (allow_reversal | (p_ax != a)))
                 if not r.size:
                     continue
-                ok = (ab.region[r] == want) & (ab.side != 0)[None, :]
-                pref = ab.preferred[r].astype(int)
+                ok = (ab.sub("region", r) == want) & (ab.side != 0)[None, :]
+                pref = ab.sub("preferred", r).astype(int)
                 m_side = (ab.side[None, :] == pref[:, None]) | (pref[:, None] == 0)
-                t_man = ab.t_man[r]
+                t_man = ab.sub("t_man", r)
                 i, f = _pick(ok & m_side, t_man)
                 i_any, f_any = _pick(ok, t_man)
                 i = np.where(f, i, i_any) + cols.start

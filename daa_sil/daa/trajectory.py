@@ -70,10 +70,12 @@ class ManeuverPaths:
     ``vz_const``: the vertical speed is the same all along every path (turns and speed changes);
     ``jerk_h``/``kink_t`` bound how far the velocity between two instants is from the line between its
     true values there (``jerk h^2 / 8``, or ``acc_h h / 2`` across a kink), used to exclude clips.
+    ``pos``/``vel`` None: computed from ``kin`` (a band axis's) when first asked for (:meth:`knot_states`; the
+    evaluator computes the relative states at the knots from ``kin`` directly).
     """
 
-    pos: tuple
-    vel: tuple
+    pos: "tuple | None"
+    vel: "tuple | None"
     t: np.ndarray
     state_at: StateAt
     acc_h: np.ndarray
@@ -89,13 +91,26 @@ class ManeuverPaths:
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        return np.broadcast_shapes(*(np.shape(a) for a in self.pos + self.vel), np.shape(self.t),
-                                   np.shape(self.acc_h) + (1,))
+        knots = () if self.pos is None else self.pos + self.vel
+        return np.broadcast_shapes(*(np.shape(a) for a in knots), np.shape(self.t), np.shape(self.acc_h) + (1,))
+
+    def knot_states(self) -> tuple[tuple, tuple]:
+        """``(pos, vel)``, computed from ``kin`` (:func:`daa_sil.daa.kernels.motion.axis_knots_into`) the first
+        time when they were left to it."""
+        if self.pos is None:
+            out = np.empty((6,) + self.shape)
+            kernels.get().axis_knots_into(self.kin[1], self.kin[2], self.kin[3], self.axis_times(), out)
+            self.pos, self.vel = tuple(out[:3]), tuple(out[3:])
+        return self.pos, self.vel
+
+    def axis_times(self) -> np.ndarray:
+        """The knot times (K,) s, the same on every path (a band axis's paths)."""
+        return np.asarray(self.t, float).reshape(-1)
 
     def stacked(self) -> tuple[np.ndarray, np.ndarray]:
         """Position and velocity at the knots as ``(N, P, K, 3)`` arrays."""
         shape = self.shape
-        return tuple(np.stack([np.broadcast_to(a, shape) for a in c], axis=-1) for c in (self.pos, self.vel))
+        return tuple(np.stack([np.broadcast_to(a, shape) for a in c], axis=-1) for c in self.knot_states())
 
     def knot_times(self) -> np.ndarray:
         return np.broadcast_to(np.asarray(self.t, float), self.shape)
@@ -105,7 +120,8 @@ class ManeuverPaths:
         idx = np.asarray(idx)
         base = self.state_at
         sub = lambda a: None if a is None else a[idx]  # noqa: E731
-        return ManeuverPaths(tuple(a[idx] for a in self.pos), tuple(a[idx] for a in self.vel), self.knot_times()[idx],
+        pos, vel = self.knot_states()
+        return ManeuverPaths(tuple(a[idx] for a in pos), tuple(a[idx] for a in vel), self.knot_times()[idx],
                              lambda n, p: base(idx[n], p),
                              self.acc_h[idx], self.acc_v[idx], self.vz_const, sub(self.jerk_h), sub(self.kink_t),
                              _kin_subset(self.kin, idx))
@@ -190,7 +206,14 @@ class PathEvaluator:
         self.ipos, self.ivel = intr.position(), intr.velocity()  # (N, M, 3)
         #: relative position ownship - intruder at the knots and relative velocity of the tails, per
         #: component (N, M, P, K), contiguous
-        self.s, self.v = relative_at_knots(paths.pos, paths.vel, paths.knot_times(), self.ipos, self.ivel, self.shape)
+        if paths.pos is None:  # a band axis's paths: straight from their motion (axis_relative_knots_into)
+            self.s, self.v = [np.empty(self.shape) for _ in range(3)], [np.empty(self.shape) for _ in range(3)]
+            kin = paths.kin
+            kernels.get().axis_relative_knots_into(kin[1], kin[2], kin[3], paths.axis_times(), self.ipos, self.ivel,
+                                                   *self.s, *self.v)
+        else:
+            self.s, self.v = relative_at_knots(paths.pos, paths.vel, paths.knot_times(), self.ipos, self.ivel,
+                                               self.shape)
         self._vwin = None
         #: use the compiled kernels (False: the numpy reference, see :meth:`evaluate_reference`); ``fused``:
         #: resolve undecided pieces in one compiled loop (False: the numpy loop over compiled pieces)
@@ -214,8 +237,8 @@ class PathEvaluator:
             self._vwin = wc.vertical_window(self.s[2][..., :1], self.v[2][..., :1], 0.0, self.t_end, th.zthr, th.tcoa)
         full_tails = self.with_tails is True
         tail = (lambda fill: np.empty(self.shape)) if full_tails else (lambda fill: np.full(self.shape, fill))  # noqa: E731
-        pc = PathConflicts(np.full(seg_shape, np.inf), np.full(seg_shape, -np.inf), tail(np.inf), tail(-np.inf), self.t,
-                           self.t_end)
+        seg = (lambda fill: np.empty(seg_shape)) if compiled else (lambda fill: np.full(seg_shape, fill))  # noqa: E731
+        pc = PathConflicts(seg(np.inf), seg(-np.inf), tail(np.inf), tail(-np.inf), self.t, self.t_end)
         if compiled:
             if k > 1:
                 self._segments_compiled(th, pc)

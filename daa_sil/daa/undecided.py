@@ -136,23 +136,29 @@ class UndecidedPieces:
         if not self.compiled or kin is None or not self.fused:
             self.resolve_reference(flat_seg, th, seg_in, seg_out)
             return
-        path, ka, _, _ = self.pieces(flat_seg)
+        _, m, p, k = self.s[0].shape
+        path = flat_seg // (k - 1)  # flat (n, m, p)
+        ka = flat_seg + path  # (piece_index)
         tab = self.tables
         if self._ipv is None:
             self._ipv = np.concatenate([self.ipos, self.ivel], axis=-1).reshape(-1, 6)
-        n, ipv, r = tab["n"][path], self._ipv[tab["nm"][path]], path.size
+        r = path.size
+        # the rows of the motion tables and of the intruders (flat (n, p) or n, and flat (n, m)) the kernel reads
+        n = path // (m * p)
         if kin[0] == "axis":
-            motion = (0, kin[1], kin[2], kin[3][n, tab["p"][path]], _NO_PHASES, _NO_ROWS, 0.0, 0.0, 0.0)
+            rows = n * p + path % p
+            motion = (0, kin[1], kin[2], kin[3].reshape(-1, kin[3].shape[-1]), _NO_PHASES, _NO_ROWS, 0.0, 0.0, 0.0)
         else:
-            motion = (1, 0, 0.0, _NO_ROWS, kin[1][n], kin[2][n], *kin[3:])
+            rows = n
+            motion = (1, 0, 0.0, _NO_ROWS, kin[1], kin[2], *kin[3:])
         jerk, kink = tab["jerk"], tab["kink"]
         none = np.zeros(r)
         vlo, vhi, has_vwin = (none, none, False) if self.vwin is None else \
             (self.vwin[0].reshape(-1)[path], self.vwin[1].reshape(-1)[path], True)
         D = float(th.dthr)
         kernels.get().resolve_into(
-            *motion, ipv, *(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v), self.t_flat,
-            flat_seg.astype(np.int64), ka.astype(np.int64), tab["acc_h"][path], tab["acc_v"][path],
+            *motion, self._ipv, rows, path // p, *(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v), self.t_flat,
+            flat_seg.astype(np.int64, copy=False), ka.astype(np.int64, copy=False), tab["acc_h"][path], tab["acc_v"][path],
             jerk is not None, none if jerk is None else np.asarray(jerk[path], float),
             kink is not None, none[:, None] if kink is None else np.asarray(kink[path], float).reshape(r, -1),
             has_vwin, vlo, vhi, bool(self.exits), bisect_thresholds(), MAX_DEPTH, MAX_SPLIT, BISECT_DT_IN,

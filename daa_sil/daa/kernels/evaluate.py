@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from numba import boolean, float64, int8, int64, types, void
 
-from daa_sil.daa.kernels.jit import inline, kernel
+from daa_sil.daa.kernels.jit import inline_ir, kernel
 from daa_sil.daa.kernels.pieces import CLEAR, INSIDE, UNDECIDED, classify
 from daa_sil.daa.kernels.scalar import INF, interval, npmax, npmin, vertical_window
 
@@ -46,9 +46,10 @@ def tails_into(s0, s1, s2, v0, v1, v2, tk, K, has_vwin, vlo, vhi, last_only, t_e
                 tail_in[i], tail_out[i] = a + t, b + t
 
 
-@inline
+@inline_ir
 def _piece(s0, s1, s2, tk, ia, ib, t_win_end, a_h, a_v, has_vwin, w_lo, w_hi, D, DD, H, TT, TC):
-    """Code of the chord from flat knot ``ia`` to ``ib``; the window is clipped to ``[t_a, t_win_end]``."""
+    """Code of the chord from flat knot ``ia`` to ``ib``; the window is clipped to ``[t_a, t_win_end]``
+    (inlined by numba: the arrays are not reference-counted per segment)."""
     t0 = tk[ia]
     h = tk[ib] - t0
     lo, hi = 0.0, 0.0
@@ -64,7 +65,8 @@ def segments_into(s0, s1, s2, tk, K, block, acc_h, acc_v, has_vwin, vlo, vhi, t_
     """Certificate code of the maneuver between knots j and j+1 of every path (``code`` flat over
     ``(N, M, P, K-1)``): with more than ``block`` segments, blocks of ``block`` segments first (an
     undecided block's segments are then certified one by one); INSIDE segments get ``seg_in``/``seg_out``
-    = their knot times; segments starting after ``t_end`` are CLEAR."""
+    = their knot times, the others ``(inf, -inf)`` (every entry is written); segments starting after
+    ``t_end`` are CLEAR."""
     n_paths = tk.shape[0] // K
     S = K - 1
     for path in range(n_paths):
@@ -94,8 +96,10 @@ def segments_into(s0, s1, s2, tk, K, block, acc_h, acc_v, has_vwin, vlo, vhi, t_
             i = path * S + j
             if not (tk[base + j] < t_end):
                 code[i] = CLEAR
-            elif code[i] == INSIDE:
+            if code[i] == INSIDE:
                 seg_in[i], seg_out[i] = tk[base + j], tk[base + j + 1]
+            else:
+                seg_in[i], seg_out[i] = INF, -INF
 
 
 @kernel(void(A, A, A, A, I, F, O, O))

@@ -75,3 +75,6 @@ def kernel(signatures):
 
 #: decorator for the scalar helpers the kernels call (compiled into each kernel, not on their own)
 inline = numba.njit(cache=False, fastmath=False, error_model="numpy")
+#: as :data:`inline`, inlined into the caller by numba itself (no call, so no reference counting of the
+#: arrays passed: a helper taking arrays that a kernel calls in its innermost loop)
+inline_ir = numba.njit(cache=False, fastmath=False, error_model="numpy", inline="always")

@@ -15,7 +15,7 @@ import numpy as np
 
 from numba import boolean, float64, int64, types, void
 
-from daa_sil.daa.kernels.jit import inline, kernel
+from daa_sil.daa.kernels.jit import inline, inline_ir, kernel
 from daa_sil.daa.kernels.scalar import halve, npmax, npmin, npsign, wcv_soa
 
 #: columns of a path's row in ``kin``
@@ -57,13 +57,38 @@ def axis_state(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, lim, t):
 
 
 @inline
+def axis_row(kin, i):
+    """Path row ``i`` of ``kin`` as a tuple of its :data:`KIN_FIELDS` (loaded once for the many times at
+    which a bisection or a sampling evaluates one row)."""
+    return (kin[i, 0], kin[i, 1], kin[i, 2], kin[i, 3], kin[i, 4], kin[i, 5], kin[i, 6], kin[i, 7], kin[i, 8])
+
+
+@inline
+def intruder_row(ipv, i):
+    """Intruder row ``i`` of ``ipv`` (position m, velocity m/s) as a tuple of six floats."""
+    return ipv[i, 0], ipv[i, 1], ipv[i, 2], ipv[i, 3], ipv[i, 4], ipv[i, 5]
+
+
+@inline
+def relative(ox, oy, oz, ovx, ovy, ovz, iv, t):
+    """Ownship state minus that of the straight-line intruder ``iv`` (:func:`intruder_row`) at ``t``."""
+    ipx, ipy, ipz, ivx, ivy, ivz = iv
+    return (ox - (ipx + t * ivx), oy - (ipy + t * ivy), oz - (ipz + t * ivz), ovx - ivx, ovy - ivy, ovz - ivz)
+
+
+@inline
+def axis_rel(axis, rate, row, iv, t):
+    """Relative state at ``t`` of the path ``row`` (:func:`axis_row`) against the intruder ``iv``: scalars
+    only, so nothing is reference-counted per call."""
+    x0, y0, z0, gs0, st, ct, vs0, sgn, lim = row
+    ox, oy, oz, ovx, ovy, ovz = axis_state(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, lim, t)
+    return relative(ox, oy, oz, ovx, ovy, ovz, iv, t)
+
+
+@inline_ir
 def rel_state(axis, rate, kin, ipv, i, t):
     """Relative state (ownship - intruder) of path row ``i`` at ``t``."""
-    ox, oy, oz, ovx, ovy, ovz = axis_state(axis, rate, kin[i, 0], kin[i, 1], kin[i, 2], kin[i, 3], kin[i, 4],
-                                           kin[i, 5], kin[i, 6], kin[i, 7], kin[i, 8], t)
-    ivx, ivy, ivz = ipv[i, 3], ipv[i, 4], ipv[i, 5]
-    return (ox - (ipv[i, 0] + t * ivx), oy - (ipv[i, 1] + t * ivy), oz - (ipv[i, 2] + t * ivz),
-            ovx - ivx, ovy - ivy, ovz - ivz)
+    return axis_rel(axis, rate, axis_row(kin, i), intruder_row(ipv, i), t)
 
 
 @kernel(void(I, F, A2, A2, A, types.Array(float64, 2, "C")))
@@ -99,12 +124,28 @@ A3 = types.Array(float64, 3, "A", readonly=True)
 
 
 @inline
-def command_state(ph_rows, enc, i, tau, max_turn, h_acc, v_acc):
-    """Ownship (x, y, z, vx, vy, vz) of encounter row ``i`` at ``tau`` s (``_CommandMotion.state``)."""
-    ph = (1 if tau > ph_rows[i, 1, 0] else 0) + (1 if tau > ph_rows[i, 2, 0] else 0)
-    t = tau - ph_rows[i, ph, 0]
-    gs0, acc, w, trk0 = ph_rows[i, ph, 3], ph_rows[i, ph, 6], ph_rows[i, ph, 5], ph_rows[i, ph, 4]
-    s0, c0 = ph_rows[i, ph, 7], ph_rows[i, ph, 8]
+def command_row(ph_rows, enc, i):
+    """Encounter row ``i`` of ``ph_rows`` and ``enc`` as tuples ``(phase 0, phase 1, phase 2, enc)`` of their
+    :data:`PHASE_FIELDS` and :data:`ENC_FIELDS` (loaded once for the many times of one row)."""
+    p0 = (ph_rows[i, 0, 0], ph_rows[i, 0, 1], ph_rows[i, 0, 2], ph_rows[i, 0, 3], ph_rows[i, 0, 4], ph_rows[i, 0, 5],
+          ph_rows[i, 0, 6], ph_rows[i, 0, 7], ph_rows[i, 0, 8])
+    p1 = (ph_rows[i, 1, 0], ph_rows[i, 1, 1], ph_rows[i, 1, 2], ph_rows[i, 1, 3], ph_rows[i, 1, 4], ph_rows[i, 1, 5],
+          ph_rows[i, 1, 6], ph_rows[i, 1, 7], ph_rows[i, 1, 8])
+    p2 = (ph_rows[i, 2, 0], ph_rows[i, 2, 1], ph_rows[i, 2, 2], ph_rows[i, 2, 3], ph_rows[i, 2, 4], ph_rows[i, 2, 5],
+          ph_rows[i, 2, 6], ph_rows[i, 2, 7], ph_rows[i, 2, 8])
+    return p0, p1, p2, (enc[i, 0], enc[i, 1], enc[i, 2], enc[i, 3], enc[i, 4], enc[i, 5], enc[i, 6])
+
+
+@inline
+def command_motion(row, tau, max_turn, h_acc, v_acc):
+    """Ownship (x, y, z, vx, vy, vz) at ``tau`` s of the encounter ``row`` (:func:`command_row`;
+    ``_CommandMotion.state``)."""
+    p0, p1, p2, e = row
+    ph = (1 if tau > p1[0] else 0) + (1 if tau > p2[0] else 0)
+    p = p0 if ph == 0 else (p1 if ph == 1 else p2)
+    t = tau - p[0]
+    gs0, acc, w, trk0 = p[3], p[6], p[5], p[4]
+    s0, c0 = p[7], p[8]
     turning = w != 0.0
     ws = w if turning else 1.0
     th1 = trk0 + w * t
@@ -116,14 +157,14 @@ def command_state(ph_rows, enc, i, tau, max_turn, h_acc, v_acc):
     else:
         dist = gs0 * t + 0.5 * acc * t * t
         dx, dy = dist * s0, dist * c0
-    x, y = ph_rows[i, ph, 1] + dx, ph_rows[i, ph, 2] + dy
+    x, y = p[1] + dx, p[2] + dy
     gs, trk = gs0 + acc * t, th1
-    if abs(enc[i, 0]) <= max_turn * tau:
-        trk = enc[i, 1]
-    if abs(enc[i, 2]) <= h_acc * tau:
-        gs = enc[i, 3]
+    if abs(e[0]) <= max_turn * tau:
+        trk = e[1]
+    if abs(e[2]) <= h_acc * tau:
+        gs = e[3]
     # kinematics.vertical_toward(z, vs, tgt_vs, v_acc, tau)
-    z0, vs0, tgt = enc[i, 4], enc[i, 5], enc[i, 6]
+    z0, vs0, tgt = e[4], e[5], e[6]
     dv = tgt - vs0
     if v_acc > 0:
         t1 = npmin(abs(dv) / v_acc, tau)
@@ -138,12 +179,23 @@ def command_state(ph_rows, enc, i, tau, max_turn, h_acc, v_acc):
 
 
 @inline
+def command_rel(row, iv, t, max_turn, h_acc, v_acc):
+    """Relative state at ``t`` of the encounter ``row`` (:func:`command_row`) against the intruder ``iv``
+    (:func:`intruder_row`): scalars only."""
+    ox, oy, oz, ovx, ovy, ovz = command_motion(row, t, max_turn, h_acc, v_acc)
+    return relative(ox, oy, oz, ovx, ovy, ovz, iv, t)
+
+
+@inline_ir
+def command_state(ph_rows, enc, i, tau, max_turn, h_acc, v_acc):
+    """Ownship (x, y, z, vx, vy, vz) of encounter row ``i`` at ``tau`` s (``_CommandMotion.state``)."""
+    return command_motion(command_row(ph_rows, enc, i), tau, max_turn, h_acc, v_acc)
+
+
+@inline_ir
 def command_rel_state(ph_rows, enc, ipv, i, t, max_turn, h_acc, v_acc):
     """Relative state (ownship - intruder) of row ``i`` at ``t``."""
-    ox, oy, oz, ovx, ovy, ovz = command_state(ph_rows, enc, i, t, max_turn, h_acc, v_acc)
-    ivx, ivy, ivz = ipv[i, 3], ipv[i, 4], ipv[i, 5]
-    return (ox - (ipv[i, 0] + t * ivx), oy - (ipv[i, 1] + t * ivy), oz - (ipv[i, 2] + t * ivz),
-            ovx - ivx, ovy - ivy, ovz - ivz)
+    return command_rel(command_row(ph_rows, enc, i), intruder_row(ipv, i), t, max_turn, h_acc, v_acc)
 
 
 @kernel(void(A3, A2, F, F, F, A2, A, types.Array(float64, 2, "C")))
@@ -177,23 +229,61 @@ def command_states_into(ph_rows, enc, max_turn, h_acc, v_acc, t, out):
                 ph_rows, enc, i, t[i, j], max_turn, h_acc, v_acc)
 
 
+@inline
+def _axis_knot(axis, rate, row, sth, cth, t):
+    """Ownship state on the path ``row`` (:func:`axis_row`) at knot time ``t`` (``sth``/``cth``: the turn's
+    sine and cosine there)."""
+    x0, y0, z0, gs0, st, ct, vs0, sgn, lim = row
+    if axis == _HORIZONTAL:
+        return turn_state(rate, x0, y0, z0, gs0, st, ct, vs0, sgn, sth, cth, t)
+    return axis_state(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, lim, t)
+
+
+@inline
+def _turn_sincos(rate, t):
+    """Sines and cosines of ``rate * t[k]`` (the same on every path)."""
+    K = t.shape[0]
+    sth, cth = np.empty(K), np.empty(K)
+    for k in range(K):
+        th = rate * t[k]
+        sth[k], cth[k] = math.sin(th), math.cos(th)
+    return sth, cth
+
+
+@kernel(void(I, F, A3, A, A3, A3, *([types.Array(float64, 4, "C")] * 6)))
+def axis_relative_knots_into(axis, rate, kin, t, ipos, ivel, s0, s1, s2, v0, v1, v2):
+    """:func:`axis_knots_into` then ``evaluate.relative_knots_into`` in one pass: the relative position and
+    velocity (ownship - intruder ``m``, ``ipos``/``ivel`` (N, M, 3)) at the knots ``(N, M, P, K)`` per
+    component, without storing the ownship's knot states."""
+    K = t.shape[0]
+    sth, cth = _turn_sincos(rate, t)
+    for n in range(kin.shape[0]):
+        for p in range(kin.shape[1]):
+            row = axis_row(kin[n], p)
+            for k in range(K):
+                ox, oy, oz, ovx, ovy, ovz = _axis_knot(axis, rate, row, sth[k], cth[k], t[k])
+                tk = t[k]
+                for m in range(ipos.shape[1]):
+                    ix, iy, iz = ipos[n, m, 0], ipos[n, m, 1], ipos[n, m, 2]
+                    jx, jy, jz = ivel[n, m, 0], ivel[n, m, 1], ivel[n, m, 2]
+                    s0[n, m, p, k] = ox - (ix + tk * jx)
+                    s1[n, m, p, k] = oy - (iy + tk * jy)
+                    s2[n, m, p, k] = oz - (iz + tk * jz)
+                    v0[n, m, p, k] = ovx - jx
+                    v1[n, m, p, k] = ovy - jy
+                    v2[n, m, p, k] = ovz - jz
+
+
 @kernel(void(I, F, A3, A, types.Array(float64, 4, "C")))
 def axis_knots_into(axis, rate, kin, t, out):
     """Ownship state on path ``p`` of encounter ``n`` (row ``kin[n, p]``) at each knot time ``t[k]`` into
     ``out[:, n, p, k]`` (six rows; the band axis's knot states, ``axis_paths.maneuver_paths``)."""
     K = t.shape[0]
-    sth, cth = np.empty(K), np.empty(K)  # the turn's sines and cosines are the same on every path
-    for k in range(K):
-        th = rate * t[k]
-        sth[k], cth[k] = math.sin(th), math.cos(th)
+    sth, cth = _turn_sincos(rate, t)
     for n in range(kin.shape[0]):
         for p in range(kin.shape[1]):
-            r = kin[n, p]
+            row = axis_row(kin[n], p)
             for k in range(K):
-                if axis == _HORIZONTAL:
-                    a, b, c, d, e, f = turn_state(rate, r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], sth[k], cth[k],
-                                                  t[k])
-                else:
-                    a, b, c, d, e, f = axis_state(axis, rate, r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], t[k])
+                a, b, c, d, e, f = _axis_knot(axis, rate, row, sth[k], cth[k], t[k])
                 out[0, n, p, k], out[1, n, p, k], out[2, n, p, k], out[3, n, p, k], out[4, n, p, k], out[5, n, p, k] = \
                     a, b, c, d, e, f

@@ -21,8 +21,8 @@ import math
 import numpy as np
 from numba import boolean, float64, int64, types, void
 
-from daa_sil.daa.kernels.jit import inline, kernel
-from daa_sil.daa.kernels.motion import command_rel_state, rel_state
+from daa_sil.daa.kernels.jit import inline, inline_ir, kernel
+from daa_sil.daa.kernels.motion import axis_rel, axis_row, command_rel, command_row, intruder_row
 from daa_sil.daa.kernels.pieces import CLEAR, classify, clear2
 from daa_sil.daa.kernels.scalar import INF, halve, npmax, npmin, wcv_soa
 
@@ -41,11 +41,26 @@ KIND_AXIS, KIND_COMMAND = 0, 1
 SETTLE_SLACK = 1.0 + 1e-9
 
 
+#: placeholders for the motion of the kind of path a call does not use (:func:`_motion_row`)
+_NO_AXIS_ROW = (0.0,) * 9
+_NO_COMMAND_ROW = ((0.0,) * 9, (0.0,) * 9, (0.0,) * 9, (0.0,) * 7)
+
+
 @inline
-def _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, r, t):
+def _motion_row(kind, kin, ph, enc, ipv, r):
+    """Row ``r``'s motion and intruder as tuples of floats, for :func:`_rel` (loaded once per row)."""
     if kind == KIND_AXIS:
-        return rel_state(axis, rate, kin, ipv, r, t)
-    return command_rel_state(ph, enc, ipv, r, t, max_turn, h_acc, v_acc)
+        return axis_row(kin, r), _NO_COMMAND_ROW, intruder_row(ipv, r)
+    return _NO_AXIS_ROW, command_row(ph, enc, r), intruder_row(ipv, r)
+
+
+@inline_ir
+def _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc, t):
+    """Relative state at ``t`` of the row whose :func:`_motion_row` is ``mrow``."""
+    arow, crow, iv = mrow
+    if kind == KIND_AXIS:
+        return axis_rel(axis, rate, arow, iv, t)
+    return command_rel(crow, iv, t, max_turn, h_acc, v_acc)
 
 
 @inline
@@ -78,20 +93,17 @@ def _halvings(wmax, dt, thr):
 
 
 @inline
-def _update(seg_in, seg_out, s, t_in, t_out):
-    """``np.minimum.at`` / ``np.maximum.at`` of one entry."""
-    a = seg_in[s]
-    if not (a != a or a < t_in):
-        seg_in[s] = t_in
-    b = seg_out[s]
-    if not (b != b or b > t_out):
-        seg_out[s] = t_out
+def _update(a, b, t_in, t_out):
+    """``np.minimum.at`` / ``np.maximum.at`` of one entry ``(a, b)`` -> its new ``(a, b)``."""
+    return (a if (a != a or a < t_in) else t_in), (b if (b != b or b > t_out) else t_out)
 
 
 @inline
 def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row, lo, hi, lo_in, thr, dt_in, dt_out,
-            DD, TT, H, TC):
-    """``UndecidedPieces._bisect`` of the rows ``row`` (one batch): ``lo``/``hi`` halved in place."""
+            DD, TT, H, TC, clear_pos, have_pos):
+    """``UndecidedPieces._bisect`` of the rows ``row`` (one batch): ``lo``/``hi`` halved in place. The relative
+    position at the end of the final bracket outside the volume (``lo`` of an entry, ``hi`` of an exit) goes
+    to ``clear_pos`` (3, n) when a halving put that end there (``have_pos``; else it is still the start's)."""
     n = lo.shape[0]
     w_in, w_out = 0.0, 0.0
     any_in, any_out = False, False
@@ -107,11 +119,18 @@ def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row, lo
     steps = max(n_in, n_out) if n else 0
     for i in range(n):
         a, b, flag = lo[i], hi[i], lo_in[i]
+        r = row[i]
+        mrow = _motion_row(kind, kin, ph, enc, ipv, r)
+        have_pos[i] = False
         for k in range(steps):
             mid = 0.5 * (a + b)
-            sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row[i], mid)
-            same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
-            a, b = halve(a, b, mid, same, k, mixed, flag, n_in, n_out)
+            sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc, mid)
+            inside = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC)
+            a2, b2 = halve(a, b, mid, inside == flag, k, mixed, flag, n_in, n_out)
+            if not inside and (a2 != a or b2 != b):  # the end outside moved to mid
+                clear_pos[0, i], clear_pos[1, i], clear_pos[2, i] = sx, sy, sz
+                have_pos[i] = True
+            a, b = a2, b2
         lo[i], hi[i] = a, b
 
 
@@ -136,8 +155,8 @@ def _classify_part(a_h, a_v, anyv, has_vwin, w_lo, w_hi, ta, tb, x0, y0, z0, x1,
 
 
 @inline
-def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, sid, row, ta, tb, thr, dt_in, dt_out,
-          clip_dt, DD, TT, H, TC, seg_in, seg_out):
+def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, row, ta, tb, thr, dt_in, dt_out,
+          clip_dt, DD, TT, H, TC, row_in, row_out):
     """``UndecidedPieces._clip`` of pieces ``final``: sampled every ``clip_dt``, the first and last
     violating samples bracketed and bisected (entries, then exits, each as one batch)."""
     nf = final.shape[0]
@@ -151,11 +170,12 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, si
     q = int(qf)
     b1, t1 = np.empty(nf), np.empty(nf)  # entry brackets (before, first sample inside)
     t2, a2 = np.empty(nf), np.empty(nf)  # exit brackets (last sample inside, after)
-    hrow, hid = np.empty(nf, np.int64), np.empty(nf, np.int64)
+    hrow = np.empty(nf, np.int64)
     nh = 0
     for c in range(nf):
         i = final[c]
         r = row[i]
+        mrow = _motion_row(kind, kin, ph, enc, ipv, r)
         h = tb[i] - ta[i]
         first, lastk = -1, -1
         t_prev_first, t_first, t_last, t_after = ta[i], 0.0, 0.0, tb[i]
@@ -166,7 +186,7 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, si
             if pending_after:
                 t_after = t
                 pending_after = False
-            sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, r, t)
+            sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc, t)
             if wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC):
                 if first < 0:
                     first, t_first = k, t
@@ -177,40 +197,61 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, si
             t_prev = t
         if first >= 0:
             b1[nh], t1[nh], t2[nh], a2[nh] = t_prev_first, t_first, t_last, t_after
-            hrow[nh], hid[nh] = r, sid[i]
+            hrow[nh] = r
             nh += 1
     if nh == 0:
         return
     l1, h1, l2, h2, hr = b1[:nh].copy(), t1[:nh].copy(), t2[:nh].copy(), a2[:nh].copy(), hrow[:nh].copy()
+    pos, have = np.empty((3, nh)), np.empty(nh, np.bool_)  # (not read)
     _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, hr, l1, h1, np.zeros(nh, np.bool_), thr,
-            dt_in, dt_out, DD, TT, H, TC)
+            dt_in, dt_out, DD, TT, H, TC, pos, have)
     _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, hr, l2, h2, np.ones(nh, np.bool_), thr,
-            dt_in, dt_out, DD, TT, H, TC)
+            dt_in, dt_out, DD, TT, H, TC, pos, have)
     for c in range(nh):
-        _update(seg_in, seg_out, hid[c], 0.5 * (l1[c] + h1[c]), 0.5 * (l2[c] + h2[c]))
+        r = hr[c]
+        row_in[r], row_out[r] = _update(row_in[r], row_out[r], 0.5 * (l1[c] + h1[c]), 0.5 * (l2[c] + h2[c]))
 
 
-@kernel(void(I, I, F, A2, A3, A2, F, F, F, A2,
+@kernel(void(I, I, F, A2, A3, A2, F, F, F, A2, IA, IA,
              A, A, A, A, A, A, A, IA, IA,
              A, A, B, A, B, A2, B, A, A,
              B, A, I, I, F, F, F, F, F,
              F, F, F, F, F, O, O))
-def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
+def resolve_into(kind, axis, rate, kin_all, ph_all, enc_all, max_turn, h_acc, v_acc, ipv_all, mi, ii,
                  s0, s1, s2, v0, v1, v2, tk, seg, ka,
                  acc_h, acc_v, has_jerk, jerk, has_kink, kink, has_vwin, vlo, vhi,
                  exits, thr, max_depth, max_split, dt_in, dt_out, clip_dt, v2tol, p8tol,
                  D, DD, H, TT, TC, seg_in, seg_out):
     """Resolve the undecided segments ``seg`` (flat segment ids; ``ka`` their first knots' flat indices
     into the knot arrays ``s*``/``v*``/``tk``) into ``seg_in``/``seg_out`` (the reference's docstring).
-    Row ``r``'s motion is row ``r`` of ``kin`` (``kind`` axis) or of ``ph``/``enc`` (command), against
-    intruder row ``r`` of ``ipv``; ``acc_h`` ... ``vhi`` are per row."""
+    Row ``r``'s motion is row ``mi[r]`` of ``kin_all`` (``kind`` axis) or of ``ph_all``/``enc_all`` (command),
+    against intruder row ``ii[r]`` of ``ipv_all``; ``acc_h`` ... ``vhi`` are per row."""
     R = seg.shape[0]
+    # the rows' motion and intruder, gathered (kin / ph and enc: empty for the kind not used)
+    nk = R if kind == KIND_AXIS else 0
+    kin, ipv = np.empty((nk, kin_all.shape[1])), np.empty((R, ipv_all.shape[1]))
+    ph, enc = np.empty((R - nk, ph_all.shape[1], ph_all.shape[2])), np.empty((R - nk, enc_all.shape[1]))
+    for r in range(R):
+        for j in range(ipv.shape[1]):
+            ipv[r, j] = ipv_all[ii[r], j]
+    for r in range(nk):
+        for j in range(kin.shape[1]):
+            kin[r, j] = kin_all[mi[r], j]
+    for r in range(R - nk):
+        for j in range(ph.shape[1]):
+            for f in range(ph.shape[2]):
+                ph[r, j, f] = ph_all[mi[r], j, f]
+        for j in range(enc.shape[1]):
+            enc[r, j] = enc_all[mi[r], j]
     settle = np.empty(R)
+    # each row's entry / exit (its segment's seg_in / seg_out), written back at the end: the updates
+    # stay in these small arrays instead of reaching into the large ones scattered
+    row_in, row_out = np.empty(R), np.empty(R)
     for r in range(R):
         settle[r] = _settle(acc_h[r], acc_v[r], v2tol, p8tol)
-    # -- the pieces of the current depth --------------------------------------------------------------
+        row_in[r], row_out[r] = seg_in[seg[r]], seg_out[seg[r]]
+    # -- the pieces of the current depth (every piece keeps its row, so its segment) --------------------
     L = R
-    sid = np.empty(L, np.int64)
     row = np.empty(L, np.int64)
     ta, tb = np.empty(L), np.empty(L)
     pa, pb = np.empty((3, L)), np.empty((3, L))
@@ -220,7 +261,7 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
         a = ka[r]
         t0 = tk[a]
         h = tk[a + 1] - t0
-        sid[r], row[r], ta[r], tb[r] = seg[r], r, t0, t0 + h
+        row[r], ta[r], tb[r] = r, t0, t0 + h
         pa[0, r], pa[1, r], pa[2, r] = s0[a], s1[a], s2[a]
         pb[0, r], pb[1, r], pb[2, r] = s0[a + 1], s1[a + 1], s2[a + 1]
         ua[0, r], ua[1, r], ub[0, r], ub[1, r] = v0[a], v1[a], v0[a + 1], v1[a + 1]
@@ -228,10 +269,11 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
         fb[r] = wcv_soa(s0[a + 1], s1[a + 1], s2[a + 1], v0[a + 1], v1[a + 1], v2[a + 1], DD, TT, H, TC)
     for depth in range(max_depth):
         if L == 0:
-            return
+            break
         for i in range(L):
             if fa[i] and fb[i]:
-                _update(seg_in, seg_out, sid[i], ta[i], tb[i])
+                r = row[i]
+                row_in[r], row_out[r] = _update(row_in[r], row_out[r], ta[i], tb[i])
         split = np.zeros(L, np.bool_)
         last = depth == max_depth - 1
         settled = np.empty(L, np.bool_)
@@ -243,7 +285,8 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
         for i in range(L):
             if fa[i] != fb[i]:
                 if not exits and fa[i]:  # an exit: first entry at the start; the last exit is not needed
-                    _update(seg_in, seg_out, sid[i], ta[i], tb[i])
+                    r = row[i]
+                    row_in[r], row_out[r] = _update(row_in[r], row_out[r], ta[i], tb[i])
                 else:
                     cross[nc] = i
                     nc += 1
@@ -255,16 +298,20 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
             for c in range(nc):
                 i = crs[c]
                 lo[c], hi[c], lo_in[c], crow[c] = ta[i], tb[i], not fb[i], row[i]
+            clear_pos, have_pos = np.empty((3, nc)), np.empty(nc, np.bool_)
             _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, crow, lo, hi, lo_in, thr, dt_in,
-                    dt_out, DD, TT, H, TC)
+                    dt_out, DD, TT, H, TC, clear_pos, have_pos)
             # certify the other side of the crossing clear: before an entry, after an exit
             anyv = _any_nonzero(acc_v, row, crs)
             for c in range(nc):
                 i = crs[c]
                 r = row[i]
                 entry = fb[i]
-                mx, my, mz, _, _, _ = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, r,
-                                           lo[c] if entry else hi[c])
+                if have_pos[c]:  # (the state there, computed by the bisection)
+                    mx, my, mz = clear_pos[0, c], clear_pos[1, c], clear_pos[2, c]
+                else:
+                    mx, my, mz, _, _, _ = _rel(kind, axis, rate, _motion_row(kind, kin, ph, enc, ipv, r), max_turn,
+                                               h_acc, v_acc, lo[c] if entry else hi[c])
                 c_a, c_b = (ta[i], lo[c]) if entry else (hi[c], tb[i])
                 if entry:
                     x0, y0, z0, x1, y1, z1 = pa[0, i], pa[1, i], pa[2, i], mx, my, mz
@@ -274,7 +321,8 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
                                       x0, y0, z0, x1, y1, z1, D, DD, H, TT, TC)
                 if code == CLEAR or settled[i]:
                     tc = 0.5 * (lo[c] + hi[c])
-                    _update(seg_in, seg_out, sid[i], tc if entry else ta[i], tb[i] if entry else tc)
+                    row_in[r], row_out[r] = _update(row_in[r], row_out[r], tc if entry else ta[i],
+                                                    tb[i] if entry else tc)
                 else:
                     split[i] = True
         # -- both ends clear: a clip may lie inside unless certified clear --------------------------------
@@ -327,15 +375,15 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
                 else:
                     split[i] = True
             if nf:
-                _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final[:nf], sid, row, ta, tb,
-                      thr, dt_in, dt_out, clip_dt, DD, TT, H, TC, seg_in, seg_out)
+                _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final[:nf], row, ta, tb,
+                      thr, dt_in, dt_out, clip_dt, DD, TT, H, TC, row_in, row_out)
         # -- split what is left into the fewest equal parts that settle ------------------------------------
         ns = 0
         for i in range(L):
             if split[i]:
                 ns += 1
         if ns == 0:
-            return
+            break
         mx_ratio = -INF
         first = True
         for i in range(L):
@@ -348,7 +396,7 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
         qf = qf if qf < max_split else float(max_split)
         q = int(qf)
         NL = ns * q
-        n_sid, n_row = np.empty(NL, np.int64), np.empty(NL, np.int64)
+        n_row = np.empty(NL, np.int64)
         n_ta, n_tb = np.empty(NL), np.empty(NL)
         n_pa, n_pb = np.empty((3, NL)), np.empty((3, NL))
         n_ua, n_ub = np.empty((2, NL)), np.empty((2, NL))
@@ -360,16 +408,16 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
             r = row[i]
             t_prev, h = ta[i], tb[i] - ta[i]
             px, py, pz, wx, wy, f_prev = pa[0, i], pa[1, i], pa[2, i], ua[0, i], ua[1, i], fa[i]
+            mrow = _motion_row(kind, kin, ph, enc, ipv, r)
             for k in range(q):
                 if k < q - 1:
                     t_next = ta[i] + h * (float(k + 1) / q)
-                    sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, r,
-                                                  t_next)
+                    sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc, t_next)
                     f_next = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC)
                 else:
                     t_next = tb[i]
                     sx, sy, sz, vx, vy, f_next = pb[0, i], pb[1, i], pb[2, i], ub[0, i], ub[1, i], fb[i]
-                n_sid[o], n_row[o], n_ta[o], n_tb[o] = sid[i], r, t_prev, t_next
+                n_row[o], n_ta[o], n_tb[o] = r, t_prev, t_next
                 n_pa[0, o], n_pa[1, o], n_pa[2, o] = px, py, pz
                 n_pb[0, o], n_pb[1, o], n_pb[2, o] = sx, sy, sz
                 n_ua[0, o], n_ua[1, o], n_ub[0, o], n_ub[1, o] = wx, wy, vx, vy
@@ -377,4 +425,6 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv,
                 t_prev, px, py, pz, wx, wy, f_prev = t_next, sx, sy, sz, vx, vy, f_next
                 o += 1
         L = NL
-        sid, row, ta, tb, pa, pb, ua, ub, fa, fb = n_sid, n_row, n_ta, n_tb, n_pa, n_pb, n_ua, n_ub, n_fa, n_fb
+        row, ta, tb, pa, pb, ua, ub, fa, fb = n_row, n_ta, n_tb, n_pa, n_pb, n_ua, n_ub, n_fa, n_fb
+    for r in range(R):
+        seg_in[seg[r]], seg_out[seg[r]] = row_in[r], row_out[r]
