@@ -220,9 +220,3 @@ print(json.dumps({"loaded": loaded, "linalg": scipy.linalg.__name__,
     assert out[True]["linalg"] == "scipy.linalg"
     assert out[True]["bands"] == out[False]["bands"]
     assert any(r != 0 for axis in out[True]["bands"] for r in axis[1][0])  # the encounter has bands to compare
-
-
-def test_import_in_background_loads_the_module_for_later_imports():
-    mods = _modules_after("from daa_sil.preload import import_in_background\n"
-                          "import_in_background('daa_sil.steplog').join(120)")
-    assert "daa_sil.steplog" in mods and "pyarrow" in mods

@@ -18,7 +18,6 @@ from daa_sil.cli import run_guarded
 from daa_sil.commands.common_args import OneLineParser as _Parser, check_speed, load_key_option
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.errors import UsageError
-from daa_sil.preload import import_in_background
 
 EXAMPLES = """examples:
   # stream to a GCS (or MAVProxy/QGC) on 14550, real time
@@ -185,9 +184,6 @@ async def _amain(args) -> int:
     observers = " ".join(f"{o.name}={describe(o.spec.conn)}{',rw' if o.spec.writable else ''}" for o in node.outputs[1:])
     print(f"READY listen={node.local_address} out={describe(node.out) if node.out.listens else format_udp_address(node.out.addr)} clock={opts.clock} "
           f"scenario={sc.name} steps={node.core.n_steps}" + (f" {observers}" if observers else ""), flush=True)
-    if opts.clock == "lockstep" and opts.steplog is not None:
-        # pyarrow, for the step log written at the end: imported while each step waits for its tick's answer
-        import_in_background("daa_sil.steplog")
 
     def progress(nd, out):
         if not args.quiet and nd.k % 10 == 0:

@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Callable
 
 from daa_sil.errors import DaaSilError, UsageError
-from daa_sil.preload import import_in_background
 from daa_sil.sil.children import Interrupted, interrupt_signum, signal_name
 from daa_sil.sil.summary import ProgressLine, gcs_ticks_skipped, realtime_report, summarize_steplog
 from daa_sil.sil.supervise import (
@@ -192,6 +191,15 @@ def prepare_kernels(say: "Callable[[str], None] | None") -> None:
         say(f"DAA kernels ready ({time.monotonic() - t:.1f} s)")
 
 
+def _preload(module: str) -> None:
+    """Import ``module`` in a daemon thread: while the vehicle is the only process still starting up,
+    a core is free, and the end of the run then does not wait for the import."""
+    import importlib
+    import threading
+
+    threading.Thread(target=importlib.import_module, args=(module,), daemon=True, name=f"preload {module}").start()
+
+
 def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, recorder) -> dict:
     from daa_sil.files import atomic_write_json
 
@@ -230,8 +238,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
             vehicle = pg.start("vehicle", python_module_argv("vehicle") + vargs)
             pg.wait_ready(shim)
             pg.wait_ready(gcs)
-            # pyarrow, for the step log at the end: while only the vehicle starts, a core is free
-            import_in_background("daa_sil.steplog")
+            _preload("daa_sil.steplog")  # pyarrow, for the step log at the end: while only the vehicle starts
             pg.wait_ready(vehicle, timeout=READY_TIMEOUT_S + 120.0)  # may build the wait map first
             if recorder is not None:
                 # now, not at launch: the three processes' start-up is CPU-bound (a helper importing
@@ -265,7 +272,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
         if interrupted is not None:
             raise Interrupted(interrupt_signum(interrupted), "before the vehicle wrote a step log")
         raise DaaSilError(failure or f"the vehicle wrote no step log (logs: {out / 'logs'})")
-    from daa_sil.steplog import read_steplog  # pyarrow: imported while the vehicle started
+    from daa_sil.steplog import read_steplog  # pyarrow: imported while the vehicle started (_preload)
 
     table = read_steplog(steplog)
     result = summarize_steplog(table, sc)
