@@ -235,7 +235,7 @@ def test_kernel_outcomes_are_not_trivial():
 from daa_sil.daa import DaaConfig  # noqa: E402
 from daa_sil.daa.axis_paths import maneuver_paths, candidate_counts  # noqa: E402
 from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_SPEED, AXIS_VERTICAL  # noqa: E402
-from daa_sil.daa.kernels.motion import command_rel_states_into, rel_states_into  # noqa: E402
+from daa_sil.daa.kernels.unfused import command_rel_states_into, rel_states_into  # noqa: E402
 from daa_sil.daa.safety import command_paths  # noqa: E402
 from daa_sil.daa.trajectory import PathEvaluator  # noqa: E402
 from daa_sil.geometry.kinematics import AircraftState, Command  # noqa: E402

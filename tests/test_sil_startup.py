@@ -220,3 +220,11 @@ print(json.dumps({"loaded": loaded, "linalg": scipy.linalg.__name__,
     assert out[True]["linalg"] == "scipy.linalg"
     assert out[True]["bands"] == out[False]["bands"]
     assert any(r != 0 for axis in out[True]["bands"] for r in axis[1][0])  # the encounter has bands to compare
+
+
+def test_the_kernels_every_process_loads_leave_out_the_unfused_ones():
+    """The unfused resolution's kernels (only the tests take that path) are loaded on first use, not by
+    ``kernels.get()``, which every SIL node and campaign worker calls."""
+    mods = _modules_after("from daa_sil.daa import kernels\nkernels.get()")
+    assert "daa_sil.daa.kernels.resolve" in mods
+    assert "daa_sil.daa.kernels.unfused" not in mods

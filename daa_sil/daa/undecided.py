@@ -68,7 +68,7 @@ class UndecidedPieces:
         if self._ipv is None:  # intruder position and velocity per flat (n, m), (N * M, 6)
             self._ipv = np.concatenate([self.ipos, self.ivel], axis=-1).reshape(-1, 6)
         n, ipv = tab["n"][path], self._ipv[tab["nm"][path]]
-        k = kernels.get()
+        k = kernels.get_unfused()
         if kin[0] == "axis":
             return k.rel_states_into, k.bisect_into, (kin[1], kin[2], kin[3][n, tab["p"][path]], ipv)
         return k.command_rel_states_into, k.command_bisect_into, (kin[1][n], kin[2][n], *kin[3:], ipv)

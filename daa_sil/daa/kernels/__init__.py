@@ -104,4 +104,18 @@ def get() -> SimpleNamespace:
     return ns
 
 
-__all__ = ["CACHE_DIR", "LOAD_S", "LOCK_WAIT_S", "get", "skip_blas_probe"]
+def get_unfused():
+    """The kernels of the unfused resolution (:mod:`daa_sil.daa.kernels.unfused`; ``UndecidedPieces`` with
+    ``fused=False``, which only the tests take), compiled or loaded on first use -- after :func:`get`,
+    under the compile lock -- so that no other process pays for them."""
+    name = f"{__name__}.unfused"
+    if name not in sys.modules:
+        get()
+        from daa_sil.daa.kernels.jit import compile_lock
+
+        with compile_lock(), _without_scipy_linalg():
+            importlib.import_module(name)
+    return sys.modules[name]
+
+
+__all__ = ["CACHE_DIR", "LOAD_S", "LOCK_WAIT_S", "get", "get_unfused", "skip_blas_probe"]

@@ -1,10 +1,11 @@
-"""The true ownship state on a band axis's maneuver path, relative to a straight-line intruder, and
-the bisection of a crossing of the well-clear boundary on it (compiled).
+"""The true ownship state on a band axis's maneuver path or a command's path, relative to a
+straight-line intruder (compiled; the scalar steps the fused resolution and the knot kernels inline,
+and the knot kernels themselves). Per-evaluation kernels of the unfused resolution are in
+:mod:`daa_sil.daa.kernels.unfused`.
 
 A path is one row of ``kin``: ``x0, y0, z0, gs0, sin(trk0), cos(trk0), vs0, side (+-1), limit`` (SI) of
 :data:`KIN_FIELDS`; the axis code and its rate (turn rate rad/s or acceleration m/s^2) are scalars.
-The numpy references are :func:`daa_sil.daa.axis_paths._axis_state_soa` and
-:meth:`daa_sil.daa.undecided.UndecidedPieces._bisect`.
+The numpy reference is :func:`daa_sil.daa.axis_paths._axis_state_soa`.
 """
 
 from __future__ import annotations
@@ -13,10 +14,10 @@ import math
 
 import numpy as np
 
-from numba import boolean, float64, int64, types, void
+from numba import float64, int64, types, void
 
 from daa_sil.daa.kernels.jit import inline, inline_ir, kernel
-from daa_sil.daa.kernels.scalar import halve, npmax, npmin, npsign, wcv_soa
+from daa_sil.daa.kernels.scalar import npmax, npmin, npsign
 
 #: columns of a path's row in ``kin``
 KIN_FIELDS = ("x0", "y0", "z0", "gs0", "st", "ct", "vs0", "sgn", "lim")
@@ -25,7 +26,6 @@ _HORIZONTAL, _VERTICAL = 1, 2
 
 A2 = types.Array(float64, 2, "A", readonly=True)
 A = types.Array(float64, 1, "A", readonly=True)
-O = float64[:]
 F = float64
 I = int64
 
@@ -89,27 +89,6 @@ def axis_rel(axis, rate, row, iv, t):
 def rel_state(axis, rate, kin, ipv, i, t):
     """Relative state (ownship - intruder) of path row ``i`` at ``t``."""
     return axis_rel(axis, rate, axis_row(kin, i), intruder_row(ipv, i), t)
-
-
-@kernel(void(I, F, A2, A2, A, types.Array(float64, 2, "C")))
-def rel_states_into(axis, rate, kin, ipv, t, out):
-    """Relative state of path row ``i`` at ``t[i]`` into ``out[:, i]`` (six rows)."""
-    for i in range(t.shape[0]):
-        out[0, i], out[1, i], out[2, i], out[3, i], out[4, i], out[5, i] = rel_state(axis, rate, kin, ipv, i, t[i])
-
-
-@kernel(void(I, F, A2, A2, O, O, types.Array(boolean, 1, "A", readonly=True), I, I, I, boolean, F, F, F, F))
-def bisect_into(axis, rate, kin, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed, DD, TT, H, TC):
-    """Halve ``[lo, hi]`` ``steps`` times keeping the predicate ``lo_in`` at ``lo``; with ``mixed``, rows
-    starting inside stop after ``n_out`` halvings and the others after ``n_in`` (``_bisect``)."""
-    for i in range(lo.shape[0]):
-        a, b, flag = lo[i], hi[i], lo_in[i]
-        for k in range(steps):
-            mid = 0.5 * (a + b)
-            sx, sy, sz, vx, vy, vz = rel_state(axis, rate, kin, ipv, i, mid)
-            same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
-            a, b = halve(a, b, mid, same, k, mixed, flag, n_in, n_out)
-        lo[i], hi[i] = a, b
 
 
 # --------------------------------------------------------------------------------------------------
@@ -196,28 +175,6 @@ def command_state(ph_rows, enc, i, tau, max_turn, h_acc, v_acc):
 def command_rel_state(ph_rows, enc, ipv, i, t, max_turn, h_acc, v_acc):
     """Relative state (ownship - intruder) of row ``i`` at ``t``."""
     return command_rel(command_row(ph_rows, enc, i), intruder_row(ipv, i), t, max_turn, h_acc, v_acc)
-
-
-@kernel(void(A3, A2, F, F, F, A2, A, types.Array(float64, 2, "C")))
-def command_rel_states_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, t, out):
-    """Relative state of row ``i`` at ``t[i]`` into ``out[:, i]``."""
-    for i in range(t.shape[0]):
-        out[0, i], out[1, i], out[2, i], out[3, i], out[4, i], out[5, i] = command_rel_state(
-            ph_rows, enc, ipv, i, t[i], max_turn, h_acc, v_acc)
-
-
-@kernel(void(A3, A2, F, F, F, A2, O, O, types.Array(boolean, 1, "A", readonly=True), I, I, I, boolean, F, F, F, F))
-def command_bisect_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed,
-                        DD, TT, H, TC):
-    """:func:`bisect_into` on command paths."""
-    for i in range(lo.shape[0]):
-        a, b, flag = lo[i], hi[i], lo_in[i]
-        for k in range(steps):
-            mid = 0.5 * (a + b)
-            sx, sy, sz, vx, vy, vz = command_rel_state(ph_rows, enc, ipv, i, mid, max_turn, h_acc, v_acc)
-            same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
-            a, b = halve(a, b, mid, same, k, mixed, flag, n_in, n_out)
-        lo[i], hi[i] = a, b
 
 
 @kernel(void(A3, A2, F, F, F, A2, types.Array(float64, 3, "C")))
