@@ -8,17 +8,12 @@ signatures are :func:`daa_sil.daa.intervals.interval_soa`, :func:`daa_sil.daa.in
 
 from __future__ import annotations
 
-from numba import boolean, float64, int8, types, void
+from numba import boolean, int8, void
 
 from daa_sil.daa.kernels.jit import kernel
 from daa_sil.daa.kernels.pieces import classify, clear2
 from daa_sil.daa.kernels.scalar import interval, vertical_window, wcv_soa
-
-#: input arrays: any layout, read-only accepted (a mutable array converts to it)
-A = types.Array(float64, 1, "A", readonly=True)
-#: output arrays
-O = float64[:]
-F = float64
+from daa_sil.daa.kernels.signatures import A, O, I8, F
 
 
 @kernel(void(A, A, A, A, A, A, A, A, A, boolean, F, F, F, F, F, F, O, O))
@@ -60,7 +55,6 @@ def clear2_into(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, e_p, e_v, e_z, D,
 
 #: daa.config DIR_* codes by (axis code, side + 1) (daa.config.side_to_dir's table)
 _DIRS = ((0, 0, 0), (1, 0, 2), (4, 0, 3), (6, 0, 5))
-I8 = types.Array(int8, 1, "C")
 
 
 @kernel(void(A, A, A, A, A, A, F, F, F, F, F, F, F, F, I8, I8))

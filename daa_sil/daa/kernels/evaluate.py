@@ -7,16 +7,12 @@ numpy code they replace is kept as the ``*_reference`` methods of the evaluator.
 
 from __future__ import annotations
 
-from numba import boolean, float64, int8, int64, types, void
+from numba import boolean, int8, void
 
 from daa_sil.daa.kernels.jit import inline_ir, kernel
 from daa_sil.daa.kernels.pieces import CLEAR, INSIDE, UNDECIDED, classify
 from daa_sil.daa.kernels.scalar import INF, interval, npmax, npmin, vertical_window
-
-A = types.Array(float64, 1, "A", readonly=True)
-O = float64[:]
-F = float64
-I = int64
+from daa_sil.daa.kernels.signatures import A, A3, O, O4, F, I
 
 
 @kernel(void(A, A, A, A, A, A, A, I, boolean, A, A, boolean, F, F, F, F, F, F, F, O, O))
@@ -122,10 +118,6 @@ def candidates_into(tail_in, tail_out, seg_in, seg_out, K, t_end, t_in, t_out):
                 t_in[i], t_out[i] = a, npmin(b, t_end)
             else:
                 t_in[i], t_out[i] = INF, -INF
-
-
-A3 = types.Array(float64, 3, "A", readonly=True)
-O4 = types.Array(float64, 4, "C")
 
 
 @kernel(void(A3, A3, A3, A3, A3, A3, A3, A3, A3, O4, O4, O4, O4, O4, O4))

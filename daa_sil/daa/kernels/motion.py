@@ -14,20 +14,16 @@ import math
 
 import numpy as np
 
-from numba import float64, int64, types, void
+from numba import float64, types, void
 
 from daa_sil.daa.kernels.jit import inline, inline_ir, kernel
 from daa_sil.daa.kernels.scalar import npmax, npmin, npsign
+from daa_sil.daa.kernels.signatures import A, A2, A3, F, I
 
 #: columns of a path's row in ``kin``
 KIN_FIELDS = ("x0", "y0", "z0", "gs0", "st", "ct", "vs0", "sgn", "lim")
 #: axis codes (daa.config.AXIS_*)
 _HORIZONTAL, _VERTICAL = 1, 2
-
-A2 = types.Array(float64, 2, "A", readonly=True)
-A = types.Array(float64, 1, "A", readonly=True)
-F = float64
-I = int64
 
 
 @inline
@@ -99,7 +95,6 @@ def rel_state(axis, rate, kin, ipv, i, t):
 PHASE_FIELDS = ("t0", "x", "y", "gs", "trk", "w", "acc", "sin0", "cos0")
 ENC_FIELDS = ("dpsi", "trk_cmd", "dgs", "tgt_gs", "z", "vs", "tgt_vs")
 _TWO_PI = 2.0 * math.pi
-A3 = types.Array(float64, 3, "A", readonly=True)
 
 
 @inline

@@ -11,19 +11,12 @@ with the reference's operations in its order. Python-scalar constants are comput
 from __future__ import annotations
 
 import numpy as np
-from numba import boolean, float64, int8, int64, types, void
+from numba import int8, types, void
 
 from daa_sil.daa.kernels.jit import inline, kernel
 from daa_sil.daa.kernels.scalar import INF, npmax, npmin
+from daa_sil.daa.kernels.signatures import A, A4, B2, O, O2, F, I, B
 
-A4 = types.Array(float64, 4, "A", readonly=True)
-A = types.Array(float64, 1, "A", readonly=True)
-B2 = types.Array(boolean, 2, "A", readonly=True)
-O2 = types.Array(float64, 2, "C")
-O = float64[:]
-F = float64
-I = int64
-B = boolean
 
 #: daa.config REGION_* and AXIS_HORIZONTAL
 NONE, MID, NEAR, RECOVERY = 0, 2, 3, 4

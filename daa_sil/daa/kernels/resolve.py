@@ -19,21 +19,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import boolean, float64, int64, types, void
+from numba import void
 
 from daa_sil.daa.kernels.jit import inline, inline_ir, kernel
 from daa_sil.daa.kernels.motion import axis_rel, axis_row, command_rel, command_row, intruder_row
 from daa_sil.daa.kernels.pieces import CLEAR, classify, clear2
 from daa_sil.daa.kernels.scalar import INF, halve, npmax, npmin, wcv_soa
+from daa_sil.daa.kernels.signatures import A, A2, A3, IA, O, F, I, B
 
-A = types.Array(float64, 1, "A", readonly=True)
-A2 = types.Array(float64, 2, "A", readonly=True)
-A3 = types.Array(float64, 3, "A", readonly=True)
-IA = types.Array(int64, 1, "A", readonly=True)
-O = float64[:]
-F = float64
-I = int64
-B = boolean
 
 #: motion kinds: a band axis's path (kernels.motion.rel_state) or a command (command_rel_state)
 KIND_AXIS, KIND_COMMAND = 0, 1

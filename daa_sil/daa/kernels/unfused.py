@@ -11,18 +11,12 @@ paths' ``state_at``.
 
 from __future__ import annotations
 
-from numba import boolean, float64, int64, types, void
+from numba import boolean, float64, types, void
 
 from daa_sil.daa.kernels.jit import kernel
 from daa_sil.daa.kernels.motion import command_rel_state, rel_state
 from daa_sil.daa.kernels.scalar import halve, wcv_soa
-
-A = types.Array(float64, 1, "A", readonly=True)
-A2 = types.Array(float64, 2, "A", readonly=True)
-A3 = types.Array(float64, 3, "A", readonly=True)
-O = float64[:]
-F = float64
-I = int64
+from daa_sil.daa.kernels.signatures import A, A2, A3, O, F, I
 
 
 @kernel(void(I, F, A2, A2, A, types.Array(float64, 2, "C")))
