@@ -25,11 +25,17 @@ CLIP_DT = 0.01
 MAX_DEPTH = 8
 
 
-def piece_index(flat_seg: np.ndarray, k: int, t_flat: np.ndarray):
-    """Path (flat n, m, p), first-knot flat index, start (s) and duration (s) of the knot-to-knot segments
-    ``flat_seg`` (flat indices over (N, M, P, K - 1)) of paths with ``k`` knots at times ``t_flat`` (N*M*P*K)."""
+def segment_knots(flat_seg: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Path (flat n, m, p) and first-knot flat index of the knot-to-knot segments ``flat_seg`` (flat indices
+    over (N, M, P, K - 1)) of paths with ``k`` knots."""
     path = flat_seg // (k - 1)
-    ka = flat_seg + path  # = path * k + (flat_seg - path * (k - 1))
+    return path, flat_seg + path  # = path * k + (flat_seg - path * (k - 1))
+
+
+def piece_index(flat_seg: np.ndarray, k: int, t_flat: np.ndarray):
+    """:func:`segment_knots` of the segments ``flat_seg``, and their start (s) and duration (s) at knot times
+    ``t_flat`` (N*M*P*K)."""
+    path, ka = segment_knots(flat_seg, k)
     t0 = t_flat[ka]
     return path, ka, t0, t_flat[ka + 1] - t0
 
@@ -137,8 +143,7 @@ class UndecidedPieces:
             self.resolve_reference(flat_seg, th, seg_in, seg_out)
             return
         _, m, p, k = self.s[0].shape
-        path = flat_seg // (k - 1)  # flat (n, m, p)
-        ka = flat_seg + path  # (piece_index)
+        path, ka = segment_knots(flat_seg, k)
         tab = self.tables
         if self._ipv is None:
             self._ipv = np.concatenate([self.ipos, self.ivel], axis=-1).reshape(-1, 6)
