@@ -174,7 +174,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
 
     # --- active phase -------------------------------------------------------------------------
     prev_exec = Command(memory.exec_trk, memory.exec_vs, memory.exec_gs)
-    in_progress = np.isin(memory.decision, (D_WAIT, D_BLEND)) & ~_reached(own, prev_exec)
+    in_progress = ((memory.decision == D_WAIT) | (memory.decision == D_BLEND)) & ~_reached(own, prev_exec)
     # Once the onboard DAA (or a blend) holds authority, handing back to the pilot's course is only
     # done when that course is safe: otherwise the ownship would fly back into the conflict it just
     # resolved as soon as the alert clears, and alternate between the two every step.

@@ -16,8 +16,7 @@ lookup, the DAA configuration and the allocation policy. :meth:`OnboardCore.step
    :func:`~daa_sil.geometry.kinematics.advance` with their scripted turn rate / accelerations);
 4. evaluates LoWC and NMAC on the continuous segment ``[t_k, t_k + dt]``
    (:func:`daa_sil.geometry.wellclear.segment_events`; an event strictly between samples is detected),
-   the time spent in LoWC on the segment, the minimum range on it, the penetration rate at
-   ``t_k``, and the penetration integral over the segment's LoWC interval
+   the time spent in LoWC on the segment, the minimum range on it, and the penetration integral over the segment's LoWC interval
    (:func:`daa_sil.geometry.wellclear.segment_penetration`, with the preset's and with the paper's constants).
 
 Sans-IO: no sockets, no clock; the caller supplies ``t`` and the pilot input and moves the bytes.
@@ -25,7 +24,8 @@ Sans-IO: no sockets, no clock; the caller supplies ``t`` and the pilot input and
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 from typing import Callable
 
 import numpy as np
@@ -50,7 +50,14 @@ class Telemetry:
     own: AircraftState  #: (N,)
     intruders: AircraftState  #: (N, M)
     alert_level: np.ndarray  #: (N, M) int8, 0..3
-    extra: dict = field(default_factory=dict)  #: band summary arrays from the decision record
+    #: the decision record's track bands ``(values (N, K) deg, region codes (N, K))``, None without them
+    bands: "tuple[np.ndarray, np.ndarray] | None" = None
+
+    @cached_property
+    def extra(self) -> dict:
+        """The band summary (:func:`band_intervals` of :attr:`bands`; empty without bands), computed when
+        first read: a fast-time step log reads it, the SIL vehicle does not."""
+        return band_intervals(*self.bands) if self.bands is not None else {}
 
 
 @dataclass
@@ -68,7 +75,6 @@ class StepOutput:
     lowc: np.ndarray  #: (N,) LoWC with any intruder on [t, t + dt]
     nmac: np.ndarray  #: (N,) NMAC with any intruder on [t, t + dt]
     lowc_time_s: np.ndarray  #: (N,) s in LoWC on the segment (max over intruders)
-    pen_rate: "np.ndarray | None"  #: (N,) penetration rate at t (max over intruders); None without a step log
     seg_min_range_m: np.ndarray  #: (N,) minimum horizontal range on the segment (over intruders)
     seg_vsep_m: np.ndarray  #: (N,) vertical separation at that minimum
     turn_est: "np.ndarray | None" = None  #: (N, M) estimated intruder turn rates, compass rad/s
@@ -195,7 +201,7 @@ class OnboardCore:
 
     def step(self, t: float, pilot_input) -> StepOutput:
         """Decide, publish telemetry for ``t`` (s), then advance truth to ``t + dt`` (see module doc)."""
-        if not np.isclose(t, self.t, rtol=0.0, atol=1e-9):
+        if not abs(float(t) - self.t) <= 1e-9:  # (nan fails too)
             raise ValueError(f"OnboardCore is at t={self.t:g} s, step() called with t={t:g} s")
         own0, intr0 = self.own, self.intruders
         turn_est = self.turn_estimator.update(t, intr0)
@@ -203,12 +209,11 @@ class OnboardCore:
                                                        self.daa_cfg, self.wait_lookup, turn_rate=turn_est,
                                                        band_record=self.step_log, daa_batches=self.daa_batches)
         alert = np.asarray(dec["alert_level"], dtype=np.int8).reshape(self.n, self.m)
-        geom = pen = None
+        geom = None
         if self.step_log:
             s0, v0 = relative_state(own0, intr0)
             geom = self.geometry(s0, v0)
-            telem = Telemetry(t, own0, intr0, alert, band_intervals(dec["bands_trk"], dec["bands_trk_region"]))
-            pen = wc.penetration_rate(s0, v0, self.th).max(axis=1)
+            telem = Telemetry(t, own0, intr0, alert, (dec["bands_trk"], dec["bands_trk_region"]))
         else:
             s0 = own0.position()[:, None] - intr0.position()  # relative_state's s, without the velocities
             telem = Telemetry(t, own0, intr0, alert)
@@ -232,7 +237,7 @@ class OnboardCore:
         out = StepOutput(step=self.k, t=float(t), own=own0, intruders=intr0, command=cmd, decisions=dec,
                          turn_est=turn_est,
                          telemetry=telem, geometry=geom, lowc=lowc_m.any(axis=1), nmac=nmac_m.any(axis=1),
-                         lowc_time_s=in_lowc.max(axis=1), pen_rate=pen, seg_min_range_m=rmin[rows, j],
+                         lowc_time_s=in_lowc.max(axis=1), seg_min_range_m=rmin[rows, j],
                          seg_vsep_m=vsep[rows, j], pi_s=pi_s, pi_paper_s=pi_paper_s)
         self.own, self.intruders = own1, intr1
         self.k += 1

@@ -23,8 +23,8 @@ def straight_t_in(s: np.ndarray, v: np.ndarray, volumes, length: float) -> list:
     if not COMPILED:
         return [wc.violation_interval(s, v, th, 0.0, length)[0] for th in volumes]
     shape = np.broadcast_shapes(s.shape[:-1], v.shape[:-1])
-    comp = [np.ascontiguousarray(np.broadcast_to(a[..., i], shape), dtype=float).reshape(-1) for a in (s, v)
-            for i in range(3)]
+    comp = [np.ascontiguousarray(a[..., i] if a.shape[:-1] == shape else np.broadcast_to(a[..., i], shape),
+                                 dtype=float).reshape(-1) for a in (s, v) for i in range(3)]
     span = np.full(comp[0].shape[0], float(length))
     return [interval_soa(*comp, span, th)[0].reshape(shape) for th in volumes]
 

@@ -16,6 +16,7 @@ from daa_sil.geometry.frames import TWO_PI, wrap_pi
 from daa_sil.geometry.kinematics import AircraftState, Command
 from daa_sil.geometry.units import DEG, FPM, KT
 from .bands import Bands, compute_bands
+from .intervals import as_vector
 from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_NONE, AXIS_SPEED, AXIS_VERTICAL, DIR_AXIS, DIR_SIDE,
                      REGION_NONE, REGION_RECOVERY, RULE_ANY, RULE_AXIS, RULE_AXIS_DIR, RULE_BEST_EFFORT, DaaConfig,
                      axis_code, dir_code, side_to_dir)
@@ -44,9 +45,8 @@ def classify_command(state: AircraftState, cmd: Command, cfg: "DaaConfig | None"
     if COMPILED and np.ndim(state.trk) == 1:
         n = np.shape(state.trk)[0]
         out = np.empty(n, np.int8), np.empty(n, np.int8)
-        vec = lambda a: np.broadcast_to(np.asarray(a, float), (n,))  # noqa: E731
         kernels.get().classify_command_into(
-            *(vec(a) for a in (state.trk, state.vs, state.gs, cmd.trk, cmd.vs, cmd.gs)), CLASSIFY_DEADBAND["trk"],
+            *(as_vector(a, n) for a in (state.trk, state.vs, state.gs, cmd.trk, cmd.vs, cmd.gs)), CLASSIFY_DEADBAND["trk"],
             CLASSIFY_DEADBAND["vs"], CLASSIFY_DEADBAND["gs"], float(cfg.turn_rate), float(cfg.vertical_accel),
             float(cfg.horizontal_accel), np.pi, TWO_PI, *out)
         return out
