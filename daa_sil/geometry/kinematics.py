@@ -18,7 +18,7 @@ Two ways to move aircraft by ``dt``:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -41,9 +41,12 @@ class AircraftState:
     vs: np.ndarray
 
     def __post_init__(self):
-        arrs = np.broadcast_arrays(*(np.asarray(getattr(self, f.name), dtype=float) for f in fields(self)))
-        for f, a in zip(fields(self), arrs):
-            object.__setattr__(self, f.name, np.array(a, dtype=float))
+        d = self.__dict__
+        vals = [d[name] for name in _STATE_FIELDS]
+        if not _same_float_arrays(vals):
+            vals = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in vals))
+        for name, a in zip(_STATE_FIELDS, vals):
+            d[name] = np.array(a, dtype=float)
 
     @property
     def shape(self) -> tuple:
@@ -51,11 +54,15 @@ class AircraftState:
 
     def position(self) -> np.ndarray:
         """ENU position ``(..., 3)``, m."""
-        return np.stack([self.x, self.y, self.z], axis=-1)
+        out = np.empty(self.x.shape + (3,))
+        out[..., 0], out[..., 1], out[..., 2] = self.x, self.y, self.z
+        return out
 
     def velocity(self) -> np.ndarray:
         """ENU velocity ``(..., 3)``, m/s."""
-        return np.stack([self.gs * np.sin(self.trk), self.gs * np.cos(self.trk), self.vs], axis=-1)
+        out = np.empty(self.x.shape + (3,))
+        out[..., 0], out[..., 1], out[..., 2] = self.gs * np.sin(self.trk), self.gs * np.cos(self.trk), self.vs
+        return out
 
     @classmethod
     def from_pos_vel(cls, pos, vel) -> "AircraftState":
@@ -65,7 +72,7 @@ class AircraftState:
                    track_from_velocity(vel[..., 0], vel[..., 1]), vel[..., 2])
 
     def copy(self) -> "AircraftState":
-        return AircraftState(*(getattr(self, f.name).copy() for f in fields(self)))
+        return AircraftState(*(getattr(self, name).copy() for name in _STATE_FIELDS))
 
     def __getitem__(self, idx) -> "AircraftState":
         parts = [getattr(self, name)[idx] for name in _STATE_FIELDS]
@@ -78,11 +85,11 @@ class AircraftState:
 
     def where(self, mask, other: "AircraftState") -> "AircraftState":
         """Element-wise choose ``self`` where ``mask`` else ``other``."""
-        return AircraftState(*(np.where(mask, getattr(self, f.name), getattr(other, f.name)) for f in fields(self)))
+        return AircraftState(*(np.where(mask, getattr(self, name), getattr(other, name)) for name in _STATE_FIELDS))
 
     def as_array(self) -> np.ndarray:
         """Stacked ``(..., 6)`` array (x, y, z, gs, trk, vs)."""
-        return np.stack([getattr(self, f.name) for f in fields(self)], axis=-1)
+        return np.stack([getattr(self, name) for name in _STATE_FIELDS], axis=-1)
 
     @classmethod
     def from_array(cls, a) -> "AircraftState":
@@ -91,6 +98,20 @@ class AircraftState:
 
 
 _STATE_FIELDS = ("x", "y", "z", "gs", "trk", "vs")
+
+
+def _same_float_arrays(vals: list) -> bool:
+    """True if every value is a float64 ndarray of one shape: ``np.broadcast_arrays`` would return them
+    unchanged, so the constructors copy them directly (the same arrays, without its per-call cost)."""
+    shape = None
+    for v in vals:
+        if type(v) is not np.ndarray or v.dtype != np.float64:
+            return False
+        if shape is None:
+            shape = v.shape
+        elif v.shape != shape:
+            return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -131,9 +152,10 @@ class Command:
     gs: np.ndarray = field(default_factory=lambda: np.array(np.nan))
 
     def __post_init__(self):
-        a, b, c = np.broadcast_arrays(np.asarray(self.trk, float), np.asarray(self.vs, float),
-                                      np.asarray(self.gs, float))
-        self.trk, self.vs, self.gs = np.array(a), np.array(b), np.array(c)
+        vals = [self.trk, self.vs, self.gs]
+        if not _same_float_arrays(vals):
+            vals = np.broadcast_arrays(*(np.asarray(v, float) for v in vals))
+        self.trk, self.vs, self.gs = (np.array(a) for a in vals)
 
     @property
     def shape(self) -> tuple:
