@@ -641,3 +641,38 @@ def test_classify_command_identical(preset, monkeypatch):
         _same(g, r)
     assert set(np.unique(ref[0])) == {0, 1, 2, 3} and set(np.unique(ref[1])) == set(range(7))
     assert (ref[0][:100] == AXIS_VERTICAL).all()
+
+
+@pytest.mark.parametrize("case", range(5))
+@pytest.mark.parametrize("m", [0, 1, 3])
+def test_fused_axis_pass_identical(case, m, monkeypatch):
+    """The conflicts of a band axis in one pass per path (``band_regions.axis_conflict_regions``: no arrays
+    of relative states or of candidates' conflicts, undecided segments resolved on their knots' states alone)
+    give every field of the bands exactly as ``PathEvaluator`` then ``axis_regions`` do, on far, near and
+    very close intruders (crossings, clips and splits), with nan and huge states and with no intruder."""
+    cfg = _band_configs()[case]
+    rng = np.random.default_rng(zlib.crc32(f"fused/{case}/{m}".encode()))
+    own, intr = _encounters(rng, 500, max(m, 1), cfg)
+    d = rng.choice([0.03, 0.1, 0.3, 1.0], intr.shape) * rng.uniform(0.5, 1.5, intr.shape)
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+    intr = intr[:, :m]
+    lists = alerting.conflict_lists(own, intr, cfg, early_level=rng.integers(0, 4, intr.shape))
+
+    def run():
+        with np.errstate(all="ignore"):
+            return bands_mod.compute_bands(own, intr, cfg, lists=lists)
+    got = run()
+    monkeypatch.setattr(bands_mod, "FUSED", False)
+    ref = run()
+    for g, r in zip(got.axes(), ref.axes()):
+        for f in dataclasses.fields(r):
+            a, b = getattr(g, f.name), getattr(r, f.name)
+            if b is None or np.ndim(b) == 0:
+                assert a == b, f.name
+            else:
+                _same(a, b)
+    if m:
+        assert any(np.isfinite(a.t_out).any() for a in ref.axes())
+        assert {0, 2, 3} <= set(np.unique(np.concatenate([a.region.ravel() for a in ref.axes()])))
