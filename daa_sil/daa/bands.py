@@ -135,6 +135,11 @@ class AxisBands:
                                 for f in fields(self)})
         return _AxisRows(self, np.flatnonzero(arr) if arr.dtype.kind == "b" else arr)
 
+    def source(self) -> "tuple[AxisBands, np.ndarray | None]":
+        """``(bands, rows)``: these bands are ``bands``' encounters ``rows`` (an integer array), read in place
+        (a :meth:`rows` view); ``rows`` None: ``bands`` is this object."""
+        return self, None
+
     def sub(self, name: str, rows) -> np.ndarray:
         """Field ``name`` of encounters ``rows`` (``self.<name>[rows]``, without selecting the whole field of
         a :meth:`rows` first; None for a field that is None)."""
@@ -204,6 +209,10 @@ class _AxisRows(AxisBands):
         value = self._base.sub(name, self._idx)
         setattr(self, name, value)
         return value
+
+    def source(self) -> "tuple[AxisBands, np.ndarray | None]":
+        base, idx = self._base.source()
+        return base, (self._idx if idx is None else idx[self._idx])
 
     def sub(self, name: str, rows) -> np.ndarray:
         if name in self.__dict__ or name not in _ROW_FIELDS:

@@ -20,7 +20,8 @@ from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_NONE, AXIS_SPEED, AXIS_VE
                      REGION_NONE, REGION_RECOVERY, RULE_ANY, RULE_AXIS, RULE_AXIS_DIR, RULE_BEST_EFFORT, DaaConfig,
                      axis_code, dir_code, side_to_dir)
 
-#: False: :func:`classify_command` in numpy (the oracle of ``kernels.elementwise.classify_command_into``)
+#: False: :func:`classify_command` and :func:`search_maneuver` in numpy (the oracles of
+#: ``kernels.elementwise.classify_command_into`` and ``kernels.select.search_into``)
 COMPILED = True
 #: changes below these are "no change" when classifying a command
 CLASSIFY_DEADBAND = {"trk": 0.5 * DEG, "vs": 50.0 * FPM, "gs": 1.0 * KT}
@@ -178,7 +179,6 @@ def search_maneuver(own: AircraftState, intr: AircraftState, axis, direction, cf
     dc = _codes(direction, n, dir_code)
     side = np.asarray(DIR_SIDE)[dc]
     ax = np.where((np.asarray(DIR_AXIS)[dc] != ax) & (dc != 0), np.asarray(DIR_AXIS)[dc], ax)
-    safe = cand.t_in > horizon
     # distance to the reference along the candidate's own axis, in seconds of maneuvering
     rates = np.array([1.0, cfg.turn_rate, cfg.vertical_accel, cfg.horizontal_accel])
     ref_d = np.zeros((n, 4))
@@ -186,6 +186,18 @@ def search_maneuver(own: AircraftState, intr: AircraftState, axis, direction, cf
         d = command_deltas(own, ref)
         ref_d[:, 1], ref_d[:, 2], ref_d[:, 3] = d
     ref_t = ref_d / rates
+    if COMPILED and n and all(a is not None for a in bands.axes()):  # one pass per row, the bands read in place
+        idx, rule = np.empty(n, np.int64), np.empty(n, np.int8)
+        src = [a.source() for a in bands.axes()]
+        rows = [np.arange(n) if r is None else r for _, r in src]
+        field = lambda name: [getattr(b, name) for b, _ in src]  # noqa: E731
+        kernels.get().search_into(*field("delta"), *field("t_man"), *field("t_in"), *field("t_out"), *rows,
+                                  *(a.side for a in bands.axes()), ax.astype(np.int64), side.astype(np.int64), ref_t,
+                                  rates, horizon, idx, rule)
+        if return_t_in:
+            return cand.command(idx), rule, cand.at("t_in", idx)
+        return cand.command(idx), rule
+    safe = cand.t_in > horizon
     cand_t = cand.delta / rates[cand.axis]
     dist = np.abs(cand_t - ref_t[:, cand.axis])
     on_axis = (cand.axis[None, :] == ax[:, None]) & (ax[:, None] != AXIS_NONE)
