@@ -74,7 +74,10 @@ def _regions(conflicts: tuple, alert, lists, t: np.ndarray, own: AircraftState, 
         rate, lim = speed_limits(vertical, cfg, np.array([-1.0, 1.0]))
         cur = own.vs if vertical else own.gs
     clip = (-cfg.max_vs, cfg.max_vs) if axis == AXIS_VERTICAL else (cfg.min_gs, cfg.max_gs)
-    values, delta, t_man, t_in_all, t_out_c = (np.empty((n, k)) for _ in range(5))
+    values, t_in_all, t_out_c = (np.empty((n, k)) for _ in range(3))
+    # a track candidate's change and maneuver time do not depend on the encounter: one row, broadcast
+    one = axis == AXIS_HORIZONTAL
+    delta, t_man = np.empty((1 if one else n, k)), np.empty((1 if one else n, k))
     region = np.empty((n, k), np.int8)
     gap = np.empty((n, max(k - 1, 0)), np.int8)
     res_lo, res_hi, pref = np.empty(n), np.empty(n), np.empty(n, np.int8)
@@ -88,6 +91,8 @@ def _regions(conflicts: tuple, alert, lists, t: np.ndarray, own: AircraftState, 
     if not from_paths:
         flat += [_NO_TIMES, _NO_TIMES]
     kernels.get().axis_regions_into(*flat, from_paths, m, float(cfg.lookahead_s), *rest)
+    if one:
+        delta, t_man = np.broadcast_to(delta, (n, k)), np.broadcast_to(t_man, (n, k))
     nan = np.full(n, np.nan)
     return (values, delta, t_man, t_in_all, t_out_c, region, res_lo, res_hi, pref, gap if cfg.daidalus_grid else None,
             nan, np.full(n, -1, np.int16), nan.copy(), nan.copy())
@@ -100,7 +105,8 @@ def axis_regions(t_in: np.ndarray, t_out: np.ndarray, alert, lists, t: np.ndarra
     after ``side``, s / rad / m/s; no recovery cylinder) from ``t_in``/``t_out`` (N, M, 2, J+1, s), the alert
     levels ``alert`` (N, M), the conflict lists ``lists`` (with ``cfg.horizon_from_maneuver``; computed for
     ownship ``own`` and intruders ``intr`` when None) and the knot times ``t`` (J+1,) s; ``gap_region`` is
-    None off the DAIDALUS grid."""
+    None off the DAIDALUS grid. A track axis's ``delta`` and ``t_man`` are the same for every encounter: one
+    row broadcast to (N, K), read-only."""
     return _regions((t_in, t_out), alert, lists, t, own, intr, axis, cfg, j_lo, j_hi)
 
 

@@ -56,7 +56,8 @@ def axis_regions_into(src_in, src_out, seg_in, seg_out, from_paths, M, t_end, hf
     buffer. ``alert2`` (N, M): alert level >= 2; ``near_list``/``mid_list`` the conflict lists (``hfm``);
     ``cur`` (N,) the current track / vs / gs; ``rate`` the turn rate or the axis acceleration. The terms
     that do not depend on the row (a track candidate's change and time) or on the column (a speed side's
-    time to its limit) are computed once, by the same operations."""
+    time to its limit) are computed once, by the same operations; a track axis's ``delta`` and ``t_man``
+    are the same for every encounter and have one row (1, K)."""
     N = values.shape[0]
     Kn = tk.shape[0]
     K = j_lo + j_hi + 1
@@ -78,6 +79,7 @@ def axis_regions_into(src_in, src_out, seg_in, seg_out, from_paths, M, t_end, hf
         if axis == _HORIZONTAL:
             th = sgn * (rate * tc_k)
             c_th[c], c_tm[c] = th, abs(th) / rate
+            delta[0, c], t_man[0, c] = th, c_tm[c]  # (one row: the same for every encounter)
     row_len = M * 2 * Kn
     for n in range(N):
         # -- the candidates' conflicts of this row (M, 2, J+1) ----------------------------------------------
@@ -129,8 +131,7 @@ def axis_regions_into(src_in, src_out, seg_in, seg_out, from_paths, M, t_end, hf
                     v = v + two_pi
                 elif v >= two_pi:
                     v = v - two_pi
-                values[n, c], delta[n, c] = v, th
-                t_man[n, c] = c_tm[c]
+                values[n, c] = v
         else:
             v0 = cur[n]
             cap_lo = npmax((lim_lo - v0) * -1.0 / rate, 0.0)  # each side's time to its limit (s)
@@ -174,7 +175,7 @@ def axis_regions_into(src_in, src_out, seg_in, seg_out, from_paths, M, t_end, hf
             r = region[n, c]
             ok[c] = r == NONE or r == RECOVERY
             if axis == _HORIZONTAL and dgrid:
-                ok[c] = ok[c] and abs(delta[n, c]) < pi_cut
+                ok[c] = ok[c] and abs(c_th[c]) < pi_cut
         i_lo, f_lo = _first_ok(ok, k0, -1, K)
         i_hi, f_hi = _first_ok(ok, k0, 1, K)
         if conflict:
@@ -182,7 +183,7 @@ def axis_regions_into(src_in, src_out, seg_in, seg_out, from_paths, M, t_end, hf
             res_hi[n] = values[n, i_hi] if f_hi else INF
         else:
             res_lo[n], res_hi[n] = np.nan, np.nan
-        d_lo, d_hi = t_man[n, i_lo], t_man[n, i_hi]
+        d_lo, d_hi = (c_tm[i_lo], c_tm[i_hi]) if axis == _HORIZONTAL else (t_man[n, i_lo], t_man[n, i_hi])
         hi_first = d_hi <= d_lo + 1e-9 * npmax(d_lo, 1.0)
         if f_lo and f_hi:
             pr = 1 if hi_first else -1
