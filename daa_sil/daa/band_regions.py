@@ -6,14 +6,13 @@ is the numpy reference the tests compare it with."""
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 
 from daa_sil.daa import kernels
 from daa_sil.daa.alerting import conflict_lists
 from daa_sil.daa.axis_paths import speed_limits
 from daa_sil.daa.certify import UNDECIDED
+from daa_sil.daa.scratch import scratch
 from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_VERTICAL, DaaConfig
 from daa_sil.daa.trajectory import BLOCK, ManeuverPaths
 from daa_sil.daa.undecided import resolve_segments
@@ -21,35 +20,6 @@ from daa_sil.geometry.kinematics import TWO_PI, AircraftState
 
 _NO_FLAGS = np.zeros((1, 1), bool)
 _NO_TIMES = np.zeros(0)
-
-
-class Scratch:
-    """Working arrays reused from one call to the next (a large array that is freshly allocated is
-    page-faulted in on every call: about 4 us per 4 KiB page on the benchmark machine). :meth:`take` hands
-    out a view of a buffer kept under a name, grown when too small; what it hands out is valid until the
-    next :meth:`take` of that name and must never be returned to a caller."""
-
-    def __init__(self):
-        self._bufs: dict[str, np.ndarray] = {}
-
-    def take(self, name: str, size: int, dtype=np.float64) -> np.ndarray:
-        """A 1-d array of ``size`` elements of ``dtype`` (uninitialised) under ``name``."""
-        buf = self._bufs.get(name)
-        if buf is None or buf.size < size or buf.dtype != dtype:
-            buf = np.empty(size, dtype)
-            self._bufs[name] = buf
-        return buf[:size]
-
-
-_THREAD = threading.local()
-
-
-def scratch() -> Scratch:
-    """This thread's :class:`Scratch` for the band computations (each thread its own)."""
-    s = getattr(_THREAD, "scratch", None)
-    if s is None:
-        s = _THREAD.scratch = Scratch()
-    return s
 
 
 def _regions(conflicts: tuple, alert, lists, t: np.ndarray, own: AircraftState, intr: AircraftState, axis: int,

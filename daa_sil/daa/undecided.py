@@ -11,6 +11,7 @@ import numpy as np
 from daa_sil.daa.certify import CLEAR, P_TOL, V_TOL, settle_time, classify_pieces, clear_second_order
 from daa_sil.daa.intervals import as_vector, wcv_soa
 from daa_sil.daa import kernels
+from daa_sil.daa.scratch import scratch
 
 #: most parts an undecided segment is split into (as many as its parts' chords need to meet V_TOL / P_TOL)
 MAX_SPLIT = 16
@@ -310,14 +311,24 @@ def resolve_segments(kin: tuple, ipv: np.ndarray, m: int, p: int, path: np.ndarr
     none = np.zeros(r)
     vlo, vhi, has_vwin = (none, none, False) if vwin is None else (vwin[0], vwin[1], True)
     D = float(th.dthr)
+    need = np.zeros(3, np.int64)
+    ws = scratch()
+    work = [ws.buffer(name, dtype) for name, dtype in zip(_WORK, _WORK_TYPES)]
     kernels.get().resolve_into(
         *motion, ipv, rows, path // p, *s, *v, tk, flat_seg.astype(np.int64, copy=False),
         ka.astype(np.int64, copy=False), acc_h, acc_v, jerk is not None,
         none if jerk is None else np.asarray(jerk, float), kink is not None,
         none[:, None] if kink is None else np.asarray(kink, float).reshape(r, -1), has_vwin, vlo, vhi, bool(exits),
         bisect_thresholds(), MAX_DEPTH, MAX_SPLIT, BISECT_DT_IN, BISECT_DT_OUT, CLIP_DT, 2.0 * V_TOL, 8.0 * P_TOL, D,
-        D * D, float(th.zthr), float(th.tthr), float(th.tcoa), seg_in, seg_out)
+        D * D, float(th.zthr), float(th.tthr), float(th.tcoa), seg_in, seg_out, *work, need)
+    for name, size, dtype in zip(_WORK, need, _WORK_TYPES):  # large enough for the next call of this size
+        if size > ws.buffer(name, dtype).size:
+            ws.take(name, int(size), dtype)
 
+
+#: the resolution kernel's working arrays (:mod:`daa_sil.daa.scratch`, kept from call to call): floats, ints, flags
+_WORK = ("resolve_f", "resolve_i", "resolve_b")
+_WORK_TYPES = (np.float64, np.int64, np.bool_)
 
 #: placeholder motion rows for the kind of path a call does not use
 _NO_ROWS = np.zeros((0, 9))
