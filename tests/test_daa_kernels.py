@@ -720,3 +720,41 @@ def test_search_maneuver_identical(preset, monkeypatch):
                     _same(g, w)
                 rules |= set(np.unique(want[1]).tolist())
     assert rules == {1, 2, 3, 4}
+
+
+@pytest.mark.parametrize("preset", ["do365", "paper", "daidalus"])
+def test_resolve_identical(preset, monkeypatch):
+    """``kernels.select.resolution_into`` (persistence, axes in priority order with the previous one last, NONE
+    then RECOVERY, best effort) chooses the resolution numpy does, with and without a previous resolution,
+    on whole bands and on nested row views."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"resolve/{preset}".encode()))
+    own, intr = _encounters(rng, 600, 2, cfg)
+    d = rng.uniform(0.02, 1.0, intr.shape)
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+        bands = bands_mod.compute_bands(own, intr, cfg)
+    n = own.shape[0]
+    prev = (rng.integers(0, 4, n).astype(np.int8), rng.integers(0, 7, n).astype(np.int8))
+    sub = np.flatnonzero(rng.random(n) < 0.6)
+    half = np.arange(sub.size) % 2 == 0
+    cases = [(bands, own, intr, prev), (bands[sub], own[sub], intr[sub], (prev[0][sub], prev[1][sub])),
+             (bands[sub][half], own[sub][half], intr[sub][half], (prev[0][sub][half], prev[1][sub][half]))]
+    cfgs = [cfg, dataclasses.replace(cfg, resolution_axes=("speed", "horizontal"))]
+    axes_seen = set()
+    for b, o, i, p in cases:
+        for c in cfgs:
+            for pv in (p, None):
+                def run():
+                    with np.errstate(all="ignore"):
+                        return resolution.resolve(o, i, c, pv, b, return_t_in=True)
+                got = run()
+                monkeypatch.setattr(resolution, "COMPILED", False)
+                want = run()
+                monkeypatch.setattr(resolution, "COMPILED", True)
+                for g, w in zip((got[0].trk, got[0].vs, got[0].gs, got[1], got[2], got[3]),
+                                (want[0].trk, want[0].vs, want[0].gs, want[1], want[2], want[3])):
+                    _same(g, w)
+                axes_seen |= set(np.unique(want[1]).tolist())
+    assert axes_seen == {0, 1, 2, 3}

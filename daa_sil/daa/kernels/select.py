@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from numba import int8, int64, types, void
+from numba import boolean, int8, int64, types, void
 
 from daa_sil.daa.kernels.jit import inline, kernel
 from daa_sil.daa.kernels.signatures import A, A2, IA, F
@@ -90,3 +90,103 @@ def search_into(d_h, d_v, d_g, m_h, m_v, m_g, i_h, i_v, i_g, o_h, o_v, o_g, r_h,
                     elif k == 0 or c > best:
                         best, bi = c, k
             idx[n], rule[n] = bi, _BEST_EFFORT
+
+
+_REGION_NONE, _REGION_RECOVERY = 0, 4
+_R2 = types.Array(int8, 2, "A", readonly=True)
+_R1 = types.Array(int8, 1, "A", readonly=True)
+_B1 = types.Array(boolean, 1, "A", readonly=True)
+
+
+@inline
+def _axis_pick(reg, tm, side, r, want, pref):
+    """``resolution.resolve``'s step 2 on one axis and row: ``(local index, found)`` of the candidate of region
+    ``want`` (not the current value) on the preferred side ``pref`` (0: either) reached soonest, else on
+    either side (``_pick`` of both masks on ``t_man``)."""
+    b1, j1, e1 = 0.0, 0, False
+    b2, j2, e2 = 0.0, 0, False
+    for j in range(side.shape[0]):
+        ok = reg[r, j] == want and side[j] != 0
+        c1 = tm[r, j] if (ok and (side[j] == pref or pref == 0)) else math.inf
+        c2 = tm[r, j] if ok else math.inf
+        b1, j1, e1 = _argmin_step(b1, j1, c1, j, e1)
+        b2, j2, e2 = _argmin_step(b2, j2, c2, j, e2)
+    if side.shape[0] and math.isfinite(b1):
+        return j1, True
+    if side.shape[0] and math.isfinite(b2):
+        return j2, True
+    return 0, False
+
+
+@kernel(void(_R2, _R2, _R2, A2, A2, A2, _R1, _R1, _R1, A2, A2, A2, A2, A2, A2, IA, IA, IA, IA, IA, IA, _B1, boolean,
+             IA, IA, IA, types.Array(int64, 1, "C")))
+def resolution_into(g_h, g_v, g_g, m_h, m_v, m_g, p_h, p_v, p_g, i_h, i_v, i_g, o_h, o_v, o_g, r_h, r_v, r_g,
+                    side_h, side_v, side_g, in_conflict, has_prev, p_ax, p_side, res_axes, chosen):
+    """The candidate ``resolution.resolve`` chooses per row ``n`` (columns: track, vertical speed, ground speed;
+    -1: none, not in conflict): the axes' ``region`` (``g_*``), ``t_man`` (``m_*``), ``preferred`` (``p_*``),
+    ``t_in`` (``i_*``) and ``t_out`` (``o_*``) read at rows ``r_*[n]``; ``p_ax``/``p_side`` the previous
+    resolution's axis code and side (with ``has_prev``), ``res_axes`` the axis codes in priority order."""
+    K_h, K_v = side_h.shape[0], side_v.shape[0]
+    K = K_h + K_v + side_g.shape[0]
+    for n in range(chosen.shape[0]):
+        ch = -1
+        if not in_conflict[n]:
+            chosen[n] = ch
+            continue
+        a_prev = p_ax[n] if has_prev else 0
+        # 1. persistence: the previous (axis, side), its conflict-free candidate reached soonest
+        if a_prev != 0:
+            if a_prev == 1:
+                reg, tm, side, r, start = g_h, m_h, side_h, r_h[n], 0
+            elif a_prev == 2:
+                reg, tm, side, r, start = g_v, m_v, side_v, r_v[n], K_h
+            else:
+                reg, tm, side, r, start = g_g, m_g, side_g, r_g[n], K_h + K_v
+            b, bj, done = 0.0, 0, False
+            for j in range(side.shape[0]):
+                g = reg[r, j]
+                ok = (g == _REGION_NONE or g == _REGION_RECOVERY) and side[j] == p_side[n] and side[j] != 0
+                b, bj, done = _argmin_step(b, bj, tm[r, j] if ok else math.inf, j, done)
+            # (the other axes' columns are inf: they never win, and they come first only for a later axis)
+            if side.shape[0] and math.isfinite(b):
+                ch = start + bj
+        # 2. fresh: axes in priority order, NONE then RECOVERY, the previous axis last
+        for want in (_REGION_NONE, _REGION_RECOVERY):
+            for allow_reversal in (False, True):
+                for q in range(res_axes.shape[0]):
+                    a = res_axes[q]
+                    if ch >= 0:
+                        break
+                    if not (allow_reversal or a_prev != a):
+                        continue
+                    if a == 1:
+                        j, f = _axis_pick(g_h, m_h, side_h, r_h[n], want, p_h[r_h[n]])
+                        start = 0
+                    elif a == 2:
+                        j, f = _axis_pick(g_v, m_v, side_v, r_v[n], want, p_v[r_v[n]])
+                        start = K_h
+                    else:
+                        j, f = _axis_pick(g_g, m_g, side_g, r_g[n], want, p_g[r_g[n]])
+                        start = K_h + K_v
+                    if f:
+                        ch = start + j
+        # 3. best effort: latest first LoWC, then earliest regain of well clear
+        if ch < 0:
+            best, bi, done = 0.0, 0, False
+            for k in range(K):
+                if k < K_h:
+                    ti, to = i_h[r_h[n], k], o_h[r_h[n], k]
+                elif k < K_h + K_v:
+                    ti, to = i_v[r_v[n], k - K_h], o_v[r_v[n], k - K_h]
+                else:
+                    ti, to = i_g[r_g[n], k - K_h - K_v], o_g[r_g[n], k - K_h - K_v]
+                t1 = ti if (ti != ti or ti <= 1e6) else 1e6
+                t2 = to if (to != to or to >= 0.0) else 0.0
+                c = t1 * 1e3 - t2
+                if not done:
+                    if c != c:
+                        best, bi, done = c, k, True
+                    elif k == 0 or c > best:
+                        best, bi = c, k
+            ch = bi
+        chosen[n] = ch
