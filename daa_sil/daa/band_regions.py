@@ -44,10 +44,13 @@ def _regions(conflicts: tuple, alert, lists, t: np.ndarray, own: AircraftState, 
         rate, lim = speed_limits(vertical, cfg, np.array([-1.0, 1.0]))
         cur = own.vs if vertical else own.gs
     clip = (-cfg.max_vs, cfg.max_vs) if axis == AXIS_VERTICAL else (cfg.min_gs, cfg.max_gs)
-    values, t_in_all, t_out_c = (np.empty((n, k)) for _ in range(3))
     # a track candidate's change and maneuver time do not depend on the encounter: one row, broadcast
     one = axis == AXIS_HORIZONTAL
-    delta, t_man = np.empty((1 if one else n, k)), np.empty((1 if one else n, k))
+    # the (N, K) float fields in one allocation (numpy asks the system for huge pages for one of 4 MB and
+    # more, so at N = 10,000 a few faults instead of one per 4 KiB page), each field a view of its own part
+    block = np.empty((3 if one else 5, n, k))
+    values, t_in_all, t_out_c = block[0], block[1], block[2]
+    delta, t_man = (np.empty((1, k)), np.empty((1, k))) if one else (block[3], block[4])
     region = np.empty((n, k), np.int8)
     gap = np.empty((n, max(k - 1, 0)), np.int8)
     res_lo, res_hi, pref = np.empty(n), np.empty(n), np.empty(n, np.int8)
