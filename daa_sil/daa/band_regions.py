@@ -101,26 +101,26 @@ def axis_conflict_regions(paths: ManeuverPaths, own: AircraftState, intr: Aircra
     D = float(th.dthr)
     t_end = float(cfg.lookahead_s)
     n_paths = n * m * 2
-    ws = scratch()  # (every array below is consumed in this call)
-    code = ws.take("code", n_paths * (knots - 1), np.int8)
-    seg_in, seg_out = ws.take("seg_in", n_paths * (knots - 1)), ws.take("seg_out", n_paths * (knots - 1))
-    tail_in, tail_out = ws.take("tail_in", n_paths * knots), ws.take("tail_out", n_paths * knots)
-    vlo, vhi = ws.take("vlo", n_paths), ws.take("vhi", n_paths)
-    k = kernels.get()
-    k.axis_conflicts_into(kin[1], kin[2], kin[3], t, ipos, ivel, bool(paths.vz_const), paths.acc_h, paths.acc_v, BLOCK,
-                          t_end, D, D * D, D ** 2, float(th.zthr), float(th.tthr), float(th.tcoa), code, seg_in,
-                          seg_out, tail_in, tail_out, vlo, vhi)
-    todo = np.flatnonzero(code == UNDECIDED)
-    if todo.size:
-        r = todo.size
-        knot = [np.empty(2 * r) for _ in range(7)]  # s (3), v (3), t at the segments' two knots
-        k.axis_segment_knots_into(kin[1], kin[2], kin[3], t, ipos, ivel, todo, *knot)
-        path = todo // (knots - 1)
-        e, p = path // (m * 2), path % 2
-        sub = lambda a: None if a is None else a[e, p]  # noqa: E731
-        ipv = np.concatenate([ipos, ivel], axis=-1).reshape(-1, 6)
-        resolve_segments(kin, ipv, m, 2, path, tuple(knot[:3]), tuple(knot[3:6]), knot[6], todo,
-                         np.arange(0, 2 * r, 2), paths.acc_h[e, p], paths.acc_v[e, p], sub(paths.jerk_h),
-                         sub(paths.kink_t), (vlo[path], vhi[path]) if paths.vz_const else None, True, th, seg_in,
-                         seg_out)
-    return _regions((tail_in, tail_out, seg_in, seg_out), alert, lists, t, own, intr, axis, cfg, j_lo, j_hi)
+    with scratch() as ws:  # (every array taken from it is consumed in this call)
+        code = ws.take("code", n_paths * (knots - 1), np.int8)
+        seg_in, seg_out = ws.take("seg_in", n_paths * (knots - 1)), ws.take("seg_out", n_paths * (knots - 1))
+        tail_in, tail_out = ws.take("tail_in", n_paths * knots), ws.take("tail_out", n_paths * knots)
+        vlo, vhi = ws.take("vlo", n_paths), ws.take("vhi", n_paths)
+        k = kernels.get()
+        k.axis_conflicts_into(kin[1], kin[2], kin[3], t, ipos, ivel, bool(paths.vz_const), paths.acc_h, paths.acc_v, BLOCK,
+                              t_end, D, D * D, D ** 2, float(th.zthr), float(th.tthr), float(th.tcoa), code, seg_in,
+                              seg_out, tail_in, tail_out, vlo, vhi)
+        todo = np.flatnonzero(code == UNDECIDED)
+        if todo.size:
+            r = todo.size
+            knot = [np.empty(2 * r) for _ in range(7)]  # s (3), v (3), t at the segments' two knots
+            k.axis_segment_knots_into(kin[1], kin[2], kin[3], t, ipos, ivel, todo, *knot)
+            path = todo // (knots - 1)
+            e, p = path // (m * 2), path % 2
+            sub = lambda a: None if a is None else a[e, p]  # noqa: E731
+            ipv = np.concatenate([ipos, ivel], axis=-1).reshape(-1, 6)
+            resolve_segments(kin, ipv, m, 2, path, tuple(knot[:3]), tuple(knot[3:6]), knot[6], todo,
+                             np.arange(0, 2 * r, 2), paths.acc_h[e, p], paths.acc_v[e, p], sub(paths.jerk_h),
+                             sub(paths.kink_t), (vlo[path], vhi[path]) if paths.vz_const else None, True, th, seg_in,
+                             seg_out)
+        return _regions((tail_in, tail_out, seg_in, seg_out), alert, lists, t, own, intr, axis, cfg, j_lo, j_hi)

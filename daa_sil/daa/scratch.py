@@ -1,12 +1,15 @@
-"""Working arrays the DAA's compiled passes reuse from one call to the next, one set per thread.
+"""Working arrays the DAA's compiled passes reuse from one call to the next.
 
 A large array allocated afresh is page-faulted in on every call (about 4 us per 4 KiB page on the
 benchmark machine; a call at N = 10,000 would fault in tens of MB). What :class:`Scratch` hands out is
-only ever read and written inside the call that took it, and never returned to a caller."""
+only ever read and written inside the call that took it, and never returned to a caller. A call holds
+its :class:`Scratch` for its duration (:func:`scratch`), so a call nested in it, or one in another
+thread, gets another one."""
 
 from __future__ import annotations
 
-import threading
+import contextlib
+from typing import Iterator
 
 import numpy as np
 
@@ -33,12 +36,20 @@ class Scratch:
         return buf[:size]
 
 
-_THREAD = threading.local()
+#: the Scratch objects no call holds (taken and put back last in, first out: a call and the call nested in
+#: it get the same two every time)
+_FREE: "list[Scratch]" = []
 
 
-def scratch() -> Scratch:
-    """This thread's :class:`Scratch`."""
-    s = getattr(_THREAD, "scratch", None)
-    if s is None:
-        s = _THREAD.scratch = Scratch()
-    return s
+@contextlib.contextmanager
+def scratch() -> Iterator[Scratch]:
+    """A :class:`Scratch` held for the duration of the ``with`` block (list ``pop`` / ``append`` are atomic:
+    two threads never hold the same one)."""
+    try:
+        s = _FREE.pop()
+    except IndexError:
+        s = Scratch()
+    try:
+        yield s
+    finally:
+        _FREE.append(s)

@@ -312,8 +312,18 @@ def resolve_segments(kin: tuple, ipv: np.ndarray, m: int, p: int, path: np.ndarr
     vlo, vhi, has_vwin = (none, none, False) if vwin is None else (vwin[0], vwin[1], True)
     D = float(th.dthr)
     need = np.zeros(3, np.int64)
-    ws = scratch()
-    work = [ws.buffer(name, dtype) for name, dtype in zip(_WORK, _WORK_TYPES)]
+    with scratch() as ws:
+        work = [ws.buffer(name, dtype) for name, dtype in zip(_WORK, _WORK_TYPES)]
+        _resolve_call(motion, ipv, rows, path, p, s, v, tk, flat_seg, ka, acc_h, acc_v, jerk, kink, none, r, has_vwin,
+                      vlo, vhi, exits, th, D, seg_in, seg_out, work, need)
+        for name, size, dtype in zip(_WORK, need, _WORK_TYPES):  # large enough for the next call of this size
+            if size > ws.buffer(name, dtype).size:
+                ws.take(name, int(size), dtype)
+
+
+def _resolve_call(motion, ipv, rows, path, p, s, v, tk, flat_seg, ka, acc_h, acc_v, jerk, kink, none, r, has_vwin,
+                  vlo, vhi, exits, th, D, seg_in, seg_out, work, need) -> None:
+    """The call of ``resolve_into`` of :func:`resolve_segments`."""
     kernels.get().resolve_into(
         *motion, ipv, rows, path // p, *s, *v, tk, flat_seg.astype(np.int64, copy=False),
         ka.astype(np.int64, copy=False), acc_h, acc_v, jerk is not None,
@@ -321,9 +331,6 @@ def resolve_segments(kin: tuple, ipv: np.ndarray, m: int, p: int, path: np.ndarr
         none[:, None] if kink is None else np.asarray(kink, float).reshape(r, -1), has_vwin, vlo, vhi, bool(exits),
         bisect_thresholds(), MAX_DEPTH, MAX_SPLIT, BISECT_DT_IN, BISECT_DT_OUT, CLIP_DT, 2.0 * V_TOL, 8.0 * P_TOL, D,
         D * D, float(th.zthr), float(th.tthr), float(th.tcoa), seg_in, seg_out, *work, need)
-    for name, size, dtype in zip(_WORK, need, _WORK_TYPES):  # large enough for the next call of this size
-        if size > ws.buffer(name, dtype).size:
-            ws.take(name, int(size), dtype)
 
 
 #: the resolution kernel's working arrays (:mod:`daa_sil.daa.scratch`, kept from call to call): floats, ints, flags
