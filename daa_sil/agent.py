@@ -271,6 +271,16 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
 def _band_record(cfg: DaaConfig, n: int, parts: list) -> tuple[np.ndarray, np.ndarray]:
     """The track bands of the record, ``(N, K)`` deg and region codes (nan / -1 on inactive rows)."""
     k_trk = (parts[0][1] if parts else _empty_bands(cfg)).trk.values.shape[1]
+    if len(parts) == 1:  # the bands of the whole batch's rows r (read in place: no copy of their rows)
+        r, b = parts[0]
+        base, idx = b.trk.source()
+        if base.values.shape[0] == n and (r.size == n if idx is None else np.array_equal(idx, r)):
+            bt, br_ = np.degrees(base.values), base.region.copy()
+            if r.size < n:
+                off = np.ones(n, bool)
+                off[r] = False
+                bt[off], br_[off] = np.nan, -1
+            return bt, br_
     bt = np.full((n, k_trk), np.nan)
     br_ = np.full((n, k_trk), -1, np.int8)
     for r, b in parts:

@@ -641,3 +641,120 @@ def test_classify_command_identical(preset, monkeypatch):
         _same(g, r)
     assert set(np.unique(ref[0])) == {0, 1, 2, 3} and set(np.unique(ref[1])) == set(range(7))
     assert (ref[0][:100] == AXIS_VERTICAL).all()
+
+
+@pytest.mark.parametrize("case", range(5))
+@pytest.mark.parametrize("m", [0, 1, 3])
+def test_fused_axis_pass_identical(case, m, monkeypatch):
+    """The conflicts of a band axis in one pass per path (``band_regions.axis_conflict_regions``: no arrays
+    of relative states or of candidates' conflicts, undecided segments resolved on their knots' states alone)
+    give every field of the bands exactly as ``PathEvaluator`` then ``axis_regions`` do, on far, near and
+    very close intruders (crossings, clips and splits), with nan and huge states and with no intruder."""
+    cfg = _band_configs()[case]
+    rng = np.random.default_rng(zlib.crc32(f"fused/{case}/{m}".encode()))
+    own, intr = _encounters(rng, 500, max(m, 1), cfg)
+    d = rng.choice([0.03, 0.1, 0.3, 1.0], intr.shape) * rng.uniform(0.5, 1.5, intr.shape)
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+    intr = intr[:, :m]
+    lists = alerting.conflict_lists(own, intr, cfg, early_level=rng.integers(0, 4, intr.shape))
+
+    def run():
+        with np.errstate(all="ignore"):
+            return bands_mod.compute_bands(own, intr, cfg, lists=lists)
+    got = run()
+    monkeypatch.setattr(bands_mod, "FUSED", False)
+    ref = run()
+    for g, r in zip(got.axes(), ref.axes()):
+        for f in dataclasses.fields(r):
+            a, b = getattr(g, f.name), getattr(r, f.name)
+            if b is None or np.ndim(b) == 0:
+                assert a == b, f.name
+            else:
+                _same(a, b)
+    if m:
+        assert any(np.isfinite(a.t_out).any() for a in ref.axes())
+        assert {0, 2, 3} <= set(np.unique(np.concatenate([a.region.ravel() for a in ref.axes()])))
+
+
+# --------------------------------------------------------------------------------------------------
+# the choice of a candidate (Algorithm 2) against search_maneuver in numpy
+# --------------------------------------------------------------------------------------------------
+from daa_sil.daa import resolution  # noqa: E402
+
+
+@pytest.mark.parametrize("preset", ["do365", "paper", "daidalus"])
+def test_search_maneuver_identical(preset, monkeypatch):
+    """``kernels.select.search_into`` (the bands read in place, through row views of row views) chooses the
+    candidate and rule numpy does, with every rule taken, with and without a reference command, nan states
+    included."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"search/{preset}".encode()))
+    own, intr = _encounters(rng, 600, 2, cfg)
+    d = rng.uniform(0.05, 1.0, intr.shape)
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+        bands = bands_mod.compute_bands(own, intr, cfg)
+    n = own.shape[0]
+    ax, dr = rng.integers(0, 4, n), rng.integers(0, 7, n)
+    ref = Command(own.trk + rng.normal(0, 0.5, n), rng.choice([0.0, 5.0, np.nan], n), rng.choice([40.0, 60.0, np.nan], n))
+    sub = np.flatnonzero(rng.random(n) < 0.6)
+    half = np.arange(sub.size) % 2 == 0
+    cases = [(bands, own, intr, ax, dr, ref), (bands[sub], own[sub], intr[sub], ax[sub], dr[sub], ref[sub]),
+             (bands[sub][half], own[sub][half], intr[sub][half], ax[sub][half], dr[sub][half], ref[sub][half])]
+    rules = set()
+    for b, o, i, a, dd, rf in cases:
+        for h in (cfg.sm_horizon_s, 5.0, 300.0):
+            for r in (rf, None):
+                def run():
+                    with np.errstate(all="ignore"):
+                        return resolution.search_maneuver(o, i, a, dd, cfg, ref=r, horizon_s=h, bands=b, return_t_in=True)
+                got = run()
+                monkeypatch.setattr(resolution, "COMPILED", False)
+                want = run()
+                monkeypatch.setattr(resolution, "COMPILED", True)
+                for g, w in zip((got[0].trk, got[0].vs, got[0].gs, got[1], got[2]),
+                                (want[0].trk, want[0].vs, want[0].gs, want[1], want[2])):
+                    _same(g, w)
+                rules |= set(np.unique(want[1]).tolist())
+    assert rules == {1, 2, 3, 4}
+
+
+@pytest.mark.parametrize("preset", ["do365", "paper", "daidalus"])
+def test_resolve_identical(preset, monkeypatch):
+    """``kernels.select.resolution_into`` (persistence, axes in priority order with the previous one last, NONE
+    then RECOVERY, best effort) chooses the resolution numpy does, with and without a previous resolution,
+    on whole bands and on nested row views."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"resolve/{preset}".encode()))
+    own, intr = _encounters(rng, 600, 2, cfg)
+    d = rng.uniform(0.02, 1.0, intr.shape)
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+        bands = bands_mod.compute_bands(own, intr, cfg)
+    n = own.shape[0]
+    prev = (rng.integers(0, 4, n).astype(np.int8), rng.integers(0, 7, n).astype(np.int8))
+    sub = np.flatnonzero(rng.random(n) < 0.6)
+    half = np.arange(sub.size) % 2 == 0
+    cases = [(bands, own, intr, prev), (bands[sub], own[sub], intr[sub], (prev[0][sub], prev[1][sub])),
+             (bands[sub][half], own[sub][half], intr[sub][half], (prev[0][sub][half], prev[1][sub][half]))]
+    cfgs = [cfg, dataclasses.replace(cfg, resolution_axes=("speed", "horizontal"))]
+    axes_seen = set()
+    for b, o, i, p in cases:
+        for c in cfgs:
+            for pv in (p, None):
+                def run():
+                    with np.errstate(all="ignore"):
+                        return resolution.resolve(o, i, c, pv, b, return_t_in=True)
+                got = run()
+                monkeypatch.setattr(resolution, "COMPILED", False)
+                want = run()
+                monkeypatch.setattr(resolution, "COMPILED", True)
+                for g, w in zip((got[0].trk, got[0].vs, got[0].gs, got[1], got[2], got[3]),
+                                (want[0].trk, want[0].vs, want[0].gs, want[1], want[2], want[3])):
+                    _same(g, w)
+                axes_seen |= set(np.unique(want[1]).tolist())
+    assert axes_seen == {0, 1, 2, 3}

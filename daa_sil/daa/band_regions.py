@@ -11,21 +11,22 @@ import numpy as np
 from daa_sil.daa import kernels
 from daa_sil.daa.alerting import conflict_lists
 from daa_sil.daa.axis_paths import speed_limits
+from daa_sil.daa.certify import UNDECIDED
+from daa_sil.daa.scratch import scratch
 from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_VERTICAL, DaaConfig
+from daa_sil.daa.trajectory import BLOCK, ManeuverPaths
+from daa_sil.daa.undecided import resolve_segments
 from daa_sil.geometry.kinematics import TWO_PI, AircraftState
 
 _NO_FLAGS = np.zeros((1, 1), bool)
+_NO_TIMES = np.zeros(0)
 
 
-def axis_regions(t_in: np.ndarray, t_out: np.ndarray, alert, lists, t: np.ndarray, own: AircraftState,
-                 intr: AircraftState, axis: int, cfg: DaaConfig, j_lo: int, j_hi: int) -> tuple:
-    """``(values, delta, t_man, t_in, t_out, region, res_lo, res_hi, preferred, gap_region, recovery_time,
-    recovery_nfactor, recovery_h, recovery_v)`` of one axis (the :class:`daa_sil.daa.bands.AxisBands` fields
-    after ``side``, s / rad / m/s; no recovery cylinder) from ``t_in``/``t_out`` (N, M, 2, J+1, s), the alert
-    levels ``alert`` (N, M), the conflict lists ``lists`` (with ``cfg.horizon_from_maneuver``; computed for
-    ownship ``own`` and intruders ``intr`` when None) and the knot times ``t`` (J+1,) s; ``gap_region`` is
-    None off the DAIDALUS grid."""
-    n = t_in.shape[0]
+def _regions(conflicts: tuple, alert, lists, t: np.ndarray, own: AircraftState, intr: AircraftState, axis: int,
+             cfg: DaaConfig, j_lo: int, j_hi: int) -> tuple:
+    """:func:`axis_regions` from ``conflicts``: the candidates' ``(t_in, t_out)`` (N, M, 2, J+1), or the paths'
+    ``(tail_in, tail_out, seg_in, seg_out)`` flat (``kernels.regions.axis_regions_into``)."""
+    n, m = own.shape[0], intr.shape[1]
     k = j_lo + j_hi + 1
     hfm = bool(cfg.horizon_from_maneuver)
     if hfm:
@@ -43,16 +44,83 @@ def axis_regions(t_in: np.ndarray, t_out: np.ndarray, alert, lists, t: np.ndarra
         rate, lim = speed_limits(vertical, cfg, np.array([-1.0, 1.0]))
         cur = own.vs if vertical else own.gs
     clip = (-cfg.max_vs, cfg.max_vs) if axis == AXIS_VERTICAL else (cfg.min_gs, cfg.max_gs)
-    values, delta, t_man, t_in_all, t_out_c = (np.empty((n, k)) for _ in range(5))
+    # a track candidate's change and maneuver time do not depend on the encounter: one row, broadcast
+    one = axis == AXIS_HORIZONTAL
+    # the (N, K) float fields in one allocation (numpy asks the system for huge pages for one of 4 MB and
+    # more, so at N = 10,000 a few faults instead of one per 4 KiB page), each field a view of its own part
+    block = np.empty((3 if one else 5, n, k))
+    values, t_in_all, t_out_c = block[0], block[1], block[2]
+    delta, t_man = (np.empty((1, k)), np.empty((1, k))) if one else (block[3], block[4])
     region = np.empty((n, k), np.int8)
     gap = np.empty((n, max(k - 1, 0)), np.int8)
     res_lo, res_hi, pref = np.empty(n), np.empty(n), np.empty(n, np.int8)
-    kernels.get().axis_regions_into(
-        t_in, t_out, hfm, near, mid, alert2, np.asarray(t, float), float(cfg.lookahead_s), float(cfg.alert_time_warning_s),
-        float(cfg.alert_time_corrective_s), j_lo, j_hi, bool(cfg.daidalus_grid), axis, np.asarray(cur, float),
-        float(rate), float(lim[0]), float(lim[1]), bool(cfg.daidalus_grid and axis != AXIS_HORIZONTAL), float(clip[0]),
-        float(clip[1]), float(cfg.sm_horizon_s), float(cfg.recovery_stability_s), np.pi - 1e-9, TWO_PI,
-        values, delta, t_man, t_in_all, t_out_c, region, gap, res_lo, res_hi, pref)
+    rest = (hfm, near, mid, alert2, np.asarray(t, float), float(cfg.lookahead_s), float(cfg.alert_time_warning_s),
+            float(cfg.alert_time_corrective_s), j_lo, j_hi, bool(cfg.daidalus_grid), axis, np.asarray(cur, float),
+            float(rate), float(lim[0]), float(lim[1]), bool(cfg.daidalus_grid and axis != AXIS_HORIZONTAL),
+            float(clip[0]), float(clip[1]), float(cfg.sm_horizon_s), float(cfg.recovery_stability_s), np.pi - 1e-9,
+            TWO_PI, values, delta, t_man, t_in_all, t_out_c, region, gap, res_lo, res_hi, pref)
+    flat = [np.ascontiguousarray(a).reshape(-1) for a in conflicts]
+    from_paths = len(flat) == 4
+    if not from_paths:
+        flat += [_NO_TIMES, _NO_TIMES]
+    kernels.get().axis_regions_into(*flat, from_paths, m, float(cfg.lookahead_s), *rest)
+    if one:
+        delta, t_man = np.broadcast_to(delta, (n, k)), np.broadcast_to(t_man, (n, k))
     nan = np.full(n, np.nan)
     return (values, delta, t_man, t_in_all, t_out_c, region, res_lo, res_hi, pref, gap if cfg.daidalus_grid else None,
             nan, np.full(n, -1, np.int16), nan.copy(), nan.copy())
+
+
+def axis_regions(t_in: np.ndarray, t_out: np.ndarray, alert, lists, t: np.ndarray, own: AircraftState,
+                 intr: AircraftState, axis: int, cfg: DaaConfig, j_lo: int, j_hi: int) -> tuple:
+    """``(values, delta, t_man, t_in, t_out, region, res_lo, res_hi, preferred, gap_region, recovery_time,
+    recovery_nfactor, recovery_h, recovery_v)`` of one axis (the :class:`daa_sil.daa.bands.AxisBands` fields
+    after ``side``, s / rad / m/s; no recovery cylinder) from ``t_in``/``t_out`` (N, M, 2, J+1, s), the alert
+    levels ``alert`` (N, M), the conflict lists ``lists`` (with ``cfg.horizon_from_maneuver``; computed for
+    ownship ``own`` and intruders ``intr`` when None) and the knot times ``t`` (J+1,) s; ``gap_region`` is
+    None off the DAIDALUS grid. A track axis's ``delta`` and ``t_man`` are the same for every encounter: one
+    row broadcast to (N, K), read-only."""
+    return _regions((t_in, t_out), alert, lists, t, own, intr, axis, cfg, j_lo, j_hi)
+
+
+def axis_conflict_regions(paths: ManeuverPaths, own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig,
+                          alert, lists, j_lo: int, j_hi: int) -> tuple:
+    """:func:`axis_regions` of the band axis ``paths`` (``axis_paths.maneuver_paths``) against ``intr`` for
+    ``cfg.th`` over the lookahead, the conflicts computed in one pass per path
+    (``kernels.axis_pass.axis_conflicts_into``; undecided segments by
+    :func:`daa_sil.daa.undecided.resolve_segments` on their knots' states alone) and read per row by the
+    regions kernel: the same numbers as ``PathEvaluator(paths, intr, cfg.lookahead_s).evaluate(cfg.th)``
+    then ``candidates()`` then :func:`axis_regions`, without their (N, M, 2, J+1) arrays of relative
+    states and candidates' conflicts."""
+    n, m = intr.shape
+    kin = paths.kin
+    t = paths.axis_times()
+    knots = t.shape[0]
+    ipos, ivel = intr.position(), intr.velocity()
+    th = cfg.th
+    D = float(th.dthr)
+    t_end = float(cfg.lookahead_s)
+    n_paths = n * m * 2
+    with scratch() as ws:  # (every array taken from it is consumed in this call)
+        code = ws.take("code", n_paths * (knots - 1), np.int8)
+        seg_in, seg_out = ws.take("seg_in", n_paths * (knots - 1)), ws.take("seg_out", n_paths * (knots - 1))
+        tail_in, tail_out = ws.take("tail_in", n_paths * knots), ws.take("tail_out", n_paths * knots)
+        vlo, vhi = ws.take("vlo", n_paths), ws.take("vhi", n_paths)
+        k = kernels.get()
+        k.axis_conflicts_into(kin[1], kin[2], kin[3], t, ipos, ivel, bool(paths.vz_const), paths.acc_h, paths.acc_v, BLOCK,
+                              t_end, D, D * D, D ** 2, float(th.zthr), float(th.tthr), float(th.tcoa), code, seg_in,
+                              seg_out, tail_in, tail_out, vlo, vhi)
+        todo = np.flatnonzero(code == UNDECIDED)
+        if todo.size:
+            r = todo.size
+            knot = [np.empty(2 * r) for _ in range(7)]  # s (3), v (3), t at the segments' two knots
+            k.axis_segment_knots_into(kin[1], kin[2], kin[3], t, ipos, ivel, todo, *knot)
+            path = todo // (knots - 1)
+            e, p = path // (m * 2), path % 2
+            sub = lambda a: None if a is None else a[e, p]  # noqa: E731
+            ipv = np.concatenate([ipos, ivel], axis=-1).reshape(-1, 6)
+            resolve_segments(kin, ipv, m, 2, path, tuple(knot[:3]), tuple(knot[3:6]), knot[6], todo,
+                             np.arange(0, 2 * r, 2), paths.acc_h[e, p], paths.acc_v[e, p], sub(paths.jerk_h),
+                             sub(paths.kink_t), (vlo[path], vhi[path]) if paths.vz_const else None, True, th, seg_in,
+                             seg_out)
+        return _regions((tail_in, tail_out, seg_in, seg_out), alert, lists, t, own, intr, axis, cfg, j_lo, j_hi)

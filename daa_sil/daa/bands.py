@@ -62,10 +62,13 @@ from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_SPEED, AXIS_VERTICAL, REG
 from .trajectory import PathConflicts, PathEvaluator
 from daa_sil.daa.recovery import CylinderRecovery, drop_isolated
 from daa_sil.daa.axis_paths import maneuver_paths, candidate_counts, speed_limits
-from daa_sil.daa.band_regions import axis_regions
+from daa_sil.daa.band_regions import axis_conflict_regions, axis_regions
 
 #: False: every axis in numpy (the oracle of :func:`daa_sil.daa.band_regions.axis_regions`)
 COMPILED = True
+#: False (with COMPILED): the conflicts through :class:`PathEvaluator` and its (N, M, 2, J+1) arrays, then
+#: :func:`daa_sil.daa.band_regions.axis_regions` (the oracle of :func:`~daa_sil.daa.band_regions.axis_conflict_regions`)
+FUSED = True
 
 
 @dataclass
@@ -131,6 +134,11 @@ class AxisBands:
             return AxisBands(**{f.name: (getattr(self, f.name) if keep(f) else getattr(self, f.name)[idx])
                                 for f in fields(self)})
         return _AxisRows(self, np.flatnonzero(arr) if arr.dtype.kind == "b" else arr)
+
+    def source(self) -> "tuple[AxisBands, np.ndarray | None]":
+        """``(bands, rows)``: these bands are ``bands``' encounters ``rows`` (an integer array), read in place
+        (a :meth:`rows` view); ``rows`` None: ``bands`` is this object."""
+        return self, None
 
     def sub(self, name: str, rows) -> np.ndarray:
         """Field ``name`` of encounters ``rows`` (``self.<name>[rows]``, without selecting the whole field of
@@ -201,6 +209,10 @@ class _AxisRows(AxisBands):
         value = self._base.sub(name, self._idx)
         setattr(self, name, value)
         return value
+
+    def source(self) -> "tuple[AxisBands, np.ndarray | None]":
+        base, idx = self._base.source()
+        return base, (self._idx if idx is None else idx[self._idx])
 
     def sub(self, name: str, rows) -> np.ndarray:
         if name in self.__dict__ or name not in _ROW_FIELDS:
@@ -301,10 +313,13 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     n, m = intr.shape
     paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
     t = np.asarray(paths.t, float)[0, 0]
+    side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
+    if COMPILED and FUSED and cfg.recovery != "cylinder" and paths.kin is not None:  # one pass per path, then per row
+        values, delta, t_man, *rest = axis_conflict_regions(paths, own, intr, axis, cfg, alert, lists, j_lo, j_hi)
+        return AxisBands(axis, values, delta, side, t_man, *rest)
     ev = PathEvaluator(paths, intr, cfg.lookahead_s)
     pc = ev.evaluate(cfg.th)
     t_in, t_out = pc.candidates()  # (N, M, 2, J+1)
-    side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
     if COMPILED and cfg.recovery != "cylinder":  # the rest of this function in one compiled pass
         values, delta, t_man, *rest = axis_regions(t_in, t_out, alert, lists, t, own, intr, axis, cfg, j_lo, j_hi)
         return AxisBands(axis, values, delta, side, t_man, *rest)

@@ -21,7 +21,8 @@ from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_NONE, AXIS_SPEED, AXIS_VE
                      REGION_NONE, REGION_RECOVERY, RULE_ANY, RULE_AXIS, RULE_AXIS_DIR, RULE_BEST_EFFORT, DaaConfig,
                      axis_code, dir_code, side_to_dir)
 
-#: False: :func:`classify_command` in numpy (the oracle of ``kernels.elementwise.classify_command_into``)
+#: False: :func:`classify_command`, :func:`search_maneuver` and :func:`resolve` in numpy (the oracles of
+#: ``kernels.elementwise.classify_command_into``, ``kernels.select.search_into`` and ``resolution_into``)
 COMPILED = True
 #: changes below these are "no change" when classifying a command
 CLASSIFY_DEADBAND = {"trk": 0.5 * DEG, "vs": 50.0 * FPM, "gs": 1.0 * KT}
@@ -178,7 +179,6 @@ def search_maneuver(own: AircraftState, intr: AircraftState, axis, direction, cf
     dc = _codes(direction, n, dir_code)
     side = np.asarray(DIR_SIDE)[dc]
     ax = np.where((np.asarray(DIR_AXIS)[dc] != ax) & (dc != 0), np.asarray(DIR_AXIS)[dc], ax)
-    safe = cand.t_in > horizon
     # distance to the reference along the candidate's own axis, in seconds of maneuvering
     rates = np.array([1.0, cfg.turn_rate, cfg.vertical_accel, cfg.horizontal_accel])
     ref_d = np.zeros((n, 4))
@@ -186,6 +186,18 @@ def search_maneuver(own: AircraftState, intr: AircraftState, axis, direction, cf
         d = command_deltas(own, ref)
         ref_d[:, 1], ref_d[:, 2], ref_d[:, 3] = d
     ref_t = ref_d / rates
+    if COMPILED and n and all(a is not None for a in bands.axes()):  # one pass per row, the bands read in place
+        idx, rule = np.empty(n, np.int64), np.empty(n, np.int8)
+        src = [a.source() for a in bands.axes()]
+        rows = [np.arange(n) if r is None else r for _, r in src]
+        field = lambda name: [getattr(b, name) for b, _ in src]  # noqa: E731
+        kernels.get().search_into(*field("delta"), *field("t_man"), *field("t_in"), *field("t_out"), *rows,
+                                  *(a.side for a in bands.axes()), ax.astype(np.int64), side.astype(np.int64), ref_t,
+                                  rates, horizon, idx, rule)
+        if return_t_in:
+            return cand.command(idx), rule, cand.at("t_in", idx)
+        return cand.command(idx), rule
+    safe = cand.t_in > horizon
     cand_t = cand.delta / rates[cand.axis]
     dist = np.abs(cand_t - ref_t[:, cand.axis])
     on_axis = (cand.axis[None, :] == ax[:, None]) & (ax[:, None] != AXIS_NONE)
@@ -215,6 +227,38 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
     k0 = np.nonzero((cand.axis == AXIS_HORIZONTAL) & (cand.side == 0))[0][0]
     in_conflict = bands.trk.pick("region", slice(None), k0 - cand.cols[AXIS_HORIZONTAL].start) != REGION_NONE
     moving = cand.side[None, :] != 0
+    axes = bands.axes()
+    src = [a.source() for a in axes] if COMPILED and n and all(a is not None for a in axes) else None
+    if src and all(b.region.dtype == np.int8 and b.preferred.dtype == np.int8 for b, _ in src):
+        # one pass per row, the bands read in place (kernels.select.resolution_into)
+        chosen = np.empty(n, np.int64)
+        rows = [np.arange(n) if r is None else r for _, r in src]
+        field = lambda name: [getattr(b, name) for b, _ in src]  # noqa: E731
+        if prev is not None:
+            p_ax, p_dir = (np.asarray(a).astype(np.int64) for a in prev)
+            p_side = np.asarray(DIR_SIDE, np.int64)[p_dir]
+        else:
+            p_ax = p_side = np.zeros(n, np.int64)
+        kernels.get().resolution_into(*field("region"), *field("t_man"), *field("preferred"), *field("t_in"),
+                                      *field("t_out"), *rows, *(a.side for a in axes), in_conflict, prev is not None,
+                                      p_ax, p_side, np.array([axis_code(a) for a in cfg.resolution_axes], np.int64),
+                                      chosen)
+    else:
+        chosen = _resolve_numpy(cand, bands, cfg, n, in_conflict, moving, prev)
+    hold = chosen < 0
+    idx = np.where(hold, k0, chosen)
+    cmd = cand.command(idx)
+    axis = np.where(hold, AXIS_NONE, cand.axis[idx]).astype(np.int8)
+    direction = np.where(hold, 0, side_to_dir(axis, cand.side[idx])).astype(np.int8)
+    if return_t_in:
+        return cmd, axis, direction, cand.at("t_in", idx)
+    return cmd, axis, direction
+
+
+def _resolve_numpy(cand: _Candidates, bands: Bands, cfg: DaaConfig, n: int, in_conflict: np.ndarray,
+                   moving: np.ndarray, prev) -> np.ndarray:
+    """The candidate :func:`resolve` chooses per row (-1: none, not in conflict), in numpy (the oracle of
+    ``kernels.select.resolution_into``)."""
     chosen = np.full(n, -1)
     p_ax = np.full(n, AXIS_NONE)
     # (each step works on the rows it can still change only)
@@ -254,14 +298,7 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
     # 3. best effort
     rest = np.nonzero((chosen < 0) & in_conflict)[0]
     chosen[rest] = cand.best_effort(rest)
-    hold = chosen < 0
-    idx = np.where(hold, k0, chosen)
-    cmd = cand.command(idx)
-    axis = np.where(hold, AXIS_NONE, cand.axis[idx]).astype(np.int8)
-    direction = np.where(hold, 0, side_to_dir(axis, cand.side[idx])).astype(np.int8)
-    if return_t_in:
-        return cmd, axis, direction, cand.at("t_in", idx)
-    return cmd, axis, direction
+    return chosen
 
 
 def daa_resolution(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = None,

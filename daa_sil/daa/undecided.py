@@ -11,6 +11,7 @@ import numpy as np
 from daa_sil.daa.certify import CLEAR, P_TOL, V_TOL, settle_time, classify_pieces, clear_second_order
 from daa_sil.daa.intervals import as_vector, wcv_soa
 from daa_sil.daa import kernels
+from daa_sil.daa.scratch import scratch
 
 #: most parts an undecided segment is split into (as many as its parts' chords need to meet V_TOL / P_TOL)
 MAX_SPLIT = 16
@@ -147,28 +148,13 @@ class UndecidedPieces:
         tab = self.tables
         if self._ipv is None:
             self._ipv = np.concatenate([self.ipos, self.ivel], axis=-1).reshape(-1, 6)
-        r = path.size
-        # the rows of the motion tables and of the intruders (flat (n, p) or n, and flat (n, m)) the kernel reads
-        n = path // (m * p)
-        if kin[0] == "axis":
-            rows = n * p + path % p
-            motion = (0, kin[1], kin[2], kin[3].reshape(-1, kin[3].shape[-1]), _NO_PHASES, _NO_ROWS, 0.0, 0.0, 0.0)
-        else:
-            rows = n
-            motion = (1, 0, 0.0, _NO_ROWS, kin[1], kin[2], *kin[3:])
         jerk, kink = tab["jerk"], tab["kink"]
-        none = np.zeros(r)
-        vlo, vhi, has_vwin = (none, none, False) if self.vwin is None else \
-            (self.vwin[0].reshape(-1)[path], self.vwin[1].reshape(-1)[path], True)
-        D = float(th.dthr)
-        kernels.get().resolve_into(
-            *motion, self._ipv, rows, path // p, *(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v), self.t_flat,
-            flat_seg.astype(np.int64, copy=False), ka.astype(np.int64, copy=False), tab["acc_h"][path], tab["acc_v"][path],
-            jerk is not None, none if jerk is None else np.asarray(jerk[path], float),
-            kink is not None, none[:, None] if kink is None else np.asarray(kink[path], float).reshape(r, -1),
-            has_vwin, vlo, vhi, bool(self.exits), bisect_thresholds(), MAX_DEPTH, MAX_SPLIT, BISECT_DT_IN,
-            BISECT_DT_OUT, CLIP_DT, 2.0 * V_TOL, 8.0 * P_TOL, D, D * D, float(th.zthr), float(th.tthr),
-            float(th.tcoa), seg_in, seg_out)
+        resolve_segments(kin, self._ipv, m, p, path, tuple(c.reshape(-1) for c in self.s),
+                         tuple(c.reshape(-1) for c in self.v), self.t_flat, flat_seg, ka, tab["acc_h"][path],
+                         tab["acc_v"][path], None if jerk is None else jerk[path],
+                         None if kink is None else kink[path],
+                         None if self.vwin is None else (self.vwin[0].reshape(-1)[path], self.vwin[1].reshape(-1)[path]),
+                         self.exits, th, seg_in, seg_out)
 
     def resolve_reference(self, flat_seg, th, seg_in, seg_out) -> None:
         """:meth:`resolve` in numpy, one depth of pieces at a time.
@@ -301,6 +287,55 @@ class UndecidedPieces:
         l2, h2 = self._bisect(th, pth[rows], t_last, after, lo_in=True)
         _update(seg_in, seg_out, sid[rows], 0.5 * (l1 + h1), 0.5 * (l2 + h2))
 
+
+def resolve_segments(kin: tuple, ipv: np.ndarray, m: int, p: int, path: np.ndarray, s: tuple, v: tuple,
+                     tk: np.ndarray, flat_seg: np.ndarray, ka: np.ndarray, acc_h: np.ndarray, acc_v: np.ndarray,
+                     jerk, kink, vwin, exits: bool, th, seg_in: np.ndarray, seg_out: np.ndarray) -> None:
+    """:meth:`UndecidedPieces.resolve` in one call of :func:`daa_sil.daa.kernels.resolve.resolve_into`.
+
+    ``kin`` the paths' motion (:attr:`daa_sil.daa.trajectory.ManeuverPaths.kin`), ``ipv`` (N * M, 6) the
+    intruders' positions and velocities at t = 0 (m, m/s), ``m``/``p`` intruders and paths per encounter;
+    per undecided segment (row): ``path`` its flat (n, m, p) path, ``flat_seg`` its flat segment id (into
+    ``seg_in``/``seg_out``, updated), ``ka`` the flat index of its first knot into the relative states
+    ``s``/``v`` (three flat component arrays each) and knot times ``tk`` (s), ``acc_h``/``acc_v`` (m/s^2),
+    ``jerk`` (m/s^3) and ``kink`` (s) of its path (None: none), ``vwin`` its path's vertical window
+    ``(lo, hi)`` (s; None: none)."""
+    r = path.size
+    n = path // (m * p)
+    if kin[0] == "axis":
+        rows = n * p + path % p
+        motion = (0, kin[1], kin[2], kin[3].reshape(-1, kin[3].shape[-1]), _NO_PHASES, _NO_ROWS, 0.0, 0.0, 0.0)
+    else:
+        rows = n
+        motion = (1, 0, 0.0, _NO_ROWS, kin[1], kin[2], *kin[3:])
+    none = np.zeros(r)
+    vlo, vhi, has_vwin = (none, none, False) if vwin is None else (vwin[0], vwin[1], True)
+    D = float(th.dthr)
+    need = np.zeros(3, np.int64)
+    with scratch() as ws:
+        work = [ws.buffer(name, dtype) for name, dtype in zip(_WORK, _WORK_TYPES)]
+        _resolve_call(motion, ipv, rows, path, p, s, v, tk, flat_seg, ka, acc_h, acc_v, jerk, kink, none, r, has_vwin,
+                      vlo, vhi, exits, th, D, seg_in, seg_out, work, need)
+        for name, size, dtype in zip(_WORK, need, _WORK_TYPES):  # large enough for the next call of this size
+            if size > ws.buffer(name, dtype).size:
+                ws.take(name, int(size), dtype)
+
+
+def _resolve_call(motion, ipv, rows, path, p, s, v, tk, flat_seg, ka, acc_h, acc_v, jerk, kink, none, r, has_vwin,
+                  vlo, vhi, exits, th, D, seg_in, seg_out, work, need) -> None:
+    """The call of ``resolve_into`` of :func:`resolve_segments`."""
+    kernels.get().resolve_into(
+        *motion, ipv, rows, path // p, *s, *v, tk, flat_seg.astype(np.int64, copy=False),
+        ka.astype(np.int64, copy=False), acc_h, acc_v, jerk is not None,
+        none if jerk is None else np.asarray(jerk, float), kink is not None,
+        none[:, None] if kink is None else np.asarray(kink, float).reshape(r, -1), has_vwin, vlo, vhi, bool(exits),
+        bisect_thresholds(), MAX_DEPTH, MAX_SPLIT, BISECT_DT_IN, BISECT_DT_OUT, CLIP_DT, 2.0 * V_TOL, 8.0 * P_TOL, D,
+        D * D, float(th.zthr), float(th.tthr), float(th.tcoa), seg_in, seg_out, *work, need)
+
+
+#: the resolution kernel's working arrays (:mod:`daa_sil.daa.scratch`, kept from call to call): floats, ints, flags
+_WORK = ("resolve_f", "resolve_i", "resolve_b")
+_WORK_TYPES = (np.float64, np.int64, np.bool_)
 
 #: placeholder motion rows for the kind of path a call does not use
 _NO_ROWS = np.zeros((0, 9))

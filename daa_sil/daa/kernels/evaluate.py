@@ -15,6 +15,32 @@ from daa_sil.daa.kernels.scalar import INF, interval, npmax, npmin, vertical_win
 from daa_sil.daa.kernels.signatures import A, A3, O, O4, F, I
 
 
+@inline_ir
+def tails_path(s0, s1, s2, v0, v1, v2, tk, ib, ob, K, has_vwin, w_lo, w_hi, last_only, t_end, D, DD, D2, TT, H, TC,
+               tail_in, tail_out):
+    """The tails of one path (:func:`tails_into`): its knots at ``ib + k`` of ``s*``/``v*``/``tk``, its tails
+    written at ``ob + k``; ``(w_lo, w_hi)`` its vertical window when ``has_vwin`` (inlined by numba)."""
+    for k in range(K - 1 if last_only else 0, K):
+        i = ib + k
+        t = tk[i]
+        length = npmax(t_end - t, 0.0)
+        if has_vwin:
+            lo, hi = npmax(w_lo, t) - t, npmin(w_hi, t_end) - t
+        else:
+            lo, hi = vertical_window(s2[i], v2[i], 0.0, length, H, TC)
+        a, b = interval(s0[i], s1[i], s2[i], v0[i], v1[i], v2[i], length, lo, hi, D, DD, D2, TT, H, TC)
+        o = ob + k
+        if last_only:
+            if t <= t_end:
+                tail_in[o], tail_out[o] = a + t, b + t
+            else:
+                tail_in[o], tail_out[o] = INF, -INF
+        elif t > t_end:
+            tail_in[o], tail_out[o] = INF, -INF
+        else:
+            tail_in[o], tail_out[o] = a + t, b + t
+
+
 @kernel(void(A, A, A, A, A, A, A, I, boolean, A, A, boolean, F, F, F, F, F, F, F, O, O))
 def tails_into(s0, s1, s2, v0, v1, v2, tk, K, has_vwin, vlo, vhi, last_only, t_end, D, DD, D2, TT, H, TC,
                tail_in, tail_out):
@@ -22,24 +48,9 @@ def tails_into(s0, s1, s2, v0, v1, v2, tk, K, has_vwin, vlo, vhi, last_only, t_e
     path) over ``[t_k, t_end]``, absolute s; ``vlo``/``vhi`` the path's vertical window when ``has_vwin``."""
     n_paths = tk.shape[0] // K
     for path in range(n_paths):
-        for k in range(K - 1 if last_only else 0, K):
-            i = path * K + k
-            t = tk[i]
-            length = npmax(t_end - t, 0.0)
-            if has_vwin:
-                lo, hi = npmax(vlo[path], t) - t, npmin(vhi[path], t_end) - t
-            else:
-                lo, hi = vertical_window(s2[i], v2[i], 0.0, length, H, TC)
-            a, b = interval(s0[i], s1[i], s2[i], v0[i], v1[i], v2[i], length, lo, hi, D, DD, D2, TT, H, TC)
-            if last_only:
-                if t <= t_end:
-                    tail_in[i], tail_out[i] = a + t, b + t
-                else:
-                    tail_in[i], tail_out[i] = INF, -INF
-            elif t > t_end:
-                tail_in[i], tail_out[i] = INF, -INF
-            else:
-                tail_in[i], tail_out[i] = a + t, b + t
+        w_lo, w_hi = (vlo[path], vhi[path]) if has_vwin else (0.0, 0.0)
+        tails_path(s0, s1, s2, v0, v1, v2, tk, path * K, path * K, K, has_vwin, w_lo, w_hi, last_only, t_end,
+                   D, DD, D2, TT, H, TC, tail_in, tail_out)
 
 
 @inline_ir
@@ -55,6 +66,41 @@ def _piece(s0, s1, s2, tk, ia, ib, t_win_end, a_h, a_v, has_vwin, w_lo, w_hi, D,
                     a_v * h * h * 0.125, lo, hi, has_vwin, D, DD, H, TT, TC)
 
 
+@inline_ir
+def segments_path(s0, s1, s2, tk, base, ob, K, block, a_h, a_v, has_vwin, w_lo, w_hi, t_end, D, DD, H, TT, TC,
+                  code, seg_in, seg_out):
+    """The segments of one path (:func:`segments_into`): its knots at ``base + j`` of ``s*``/``tk``, its
+    codes and intervals written at ``ob + j`` (inlined by numba)."""
+    S = K - 1
+    if S > block:
+        b0 = 0
+        while b0 < S:
+            b1 = min(b0 + block, S)
+            c = _piece(s0, s1, s2, tk, base + b0, base + b1, tk[base + b1], a_h, a_v, has_vwin, w_lo, w_hi,
+                       D, DD, H, TT, TC)
+            for j in range(b0, b1):
+                if c == UNDECIDED:  # the block's segments one by one (end time t0 + h, as the reference)
+                    t0 = tk[base + j]
+                    t1 = t0 + (tk[base + j + 1] - t0)
+                    code[ob + j] = _piece(s0, s1, s2, tk, base + j, base + j + 1, t1, a_h, a_v, has_vwin,
+                                          w_lo, w_hi, D, DD, H, TT, TC)
+                else:
+                    code[ob + j] = INSIDE if c == INSIDE else CLEAR
+            b0 = b1
+    else:
+        for j in range(S):
+            code[ob + j] = _piece(s0, s1, s2, tk, base + j, base + j + 1, tk[base + j + 1], a_h, a_v,
+                                  has_vwin, w_lo, w_hi, D, DD, H, TT, TC)
+    for j in range(S):
+        i = ob + j
+        if not (tk[base + j] < t_end):
+            code[i] = CLEAR
+        if code[i] == INSIDE:
+            seg_in[i], seg_out[i] = tk[base + j], tk[base + j + 1]
+        else:
+            seg_in[i], seg_out[i] = INF, -INF
+
+
 @kernel(void(A, A, A, A, I, I, A, A, boolean, A, A, F, F, F, F, F, F, int8[:], O, O))
 def segments_into(s0, s1, s2, tk, K, block, acc_h, acc_v, has_vwin, vlo, vhi, t_end, D, DD, H, TT, TC,
                   code, seg_in, seg_out):
@@ -64,38 +110,28 @@ def segments_into(s0, s1, s2, tk, K, block, acc_h, acc_v, has_vwin, vlo, vhi, t_
     = their knot times, the others ``(inf, -inf)`` (every entry is written); segments starting after
     ``t_end`` are CLEAR."""
     n_paths = tk.shape[0] // K
-    S = K - 1
     for path in range(n_paths):
-        a_h, a_v = acc_h[path], acc_v[path]
         w_lo, w_hi = (vlo[path], vhi[path]) if has_vwin else (0.0, 0.0)
-        base = path * K
-        if S > block:
-            b0 = 0
-            while b0 < S:
-                b1 = min(b0 + block, S)
-                c = _piece(s0, s1, s2, tk, base + b0, base + b1, tk[base + b1], a_h, a_v, has_vwin, w_lo, w_hi,
-                           D, DD, H, TT, TC)
-                for j in range(b0, b1):
-                    if c == UNDECIDED:  # the block's segments one by one (end time t0 + h, as the reference)
-                        t0 = tk[base + j]
-                        t1 = t0 + (tk[base + j + 1] - t0)
-                        code[path * S + j] = _piece(s0, s1, s2, tk, base + j, base + j + 1, t1, a_h, a_v, has_vwin,
-                                                    w_lo, w_hi, D, DD, H, TT, TC)
-                    else:
-                        code[path * S + j] = INSIDE if c == INSIDE else CLEAR
-                b0 = b1
+        segments_path(s0, s1, s2, tk, path * K, path * (K - 1), K, block, acc_h[path], acc_v[path], has_vwin,
+                      w_lo, w_hi, t_end, D, DD, H, TT, TC, code, seg_in, seg_out)
+
+
+@inline_ir
+def candidates_path(tail_in, tail_out, seg_in, seg_out, it, iseg, K, t_end, t_in, t_out, ob):
+    """First violation / last exit of the candidates of one path (:func:`candidates_into`): its tails at
+    ``it + k``, its segments at ``iseg + k - 1``, written at ``ob + k`` (inlined by numba)."""
+    acc_in, acc_out = INF, -INF
+    for k in range(K):
+        a, b = tail_in[it + k], tail_out[it + k]
+        if k > 0:
+            j = iseg + k - 1
+            acc_in = seg_in[j] if k == 1 else npmin(acc_in, seg_in[j])
+            acc_out = seg_out[j] if k == 1 else npmax(acc_out, seg_out[j])
+            a, b = npmin(a, acc_in), npmax(b, acc_out)
+        if a <= t_end:
+            t_in[ob + k], t_out[ob + k] = a, npmin(b, t_end)
         else:
-            for j in range(S):
-                code[path * S + j] = _piece(s0, s1, s2, tk, base + j, base + j + 1, tk[base + j + 1], a_h, a_v,
-                                            has_vwin, w_lo, w_hi, D, DD, H, TT, TC)
-        for j in range(S):
-            i = path * S + j
-            if not (tk[base + j] < t_end):
-                code[i] = CLEAR
-            if code[i] == INSIDE:
-                seg_in[i], seg_out[i] = tk[base + j], tk[base + j + 1]
-            else:
-                seg_in[i], seg_out[i] = INF, -INF
+            t_in[ob + k], t_out[ob + k] = INF, -INF
 
 
 @kernel(void(A, A, A, A, I, F, O, O))
@@ -103,21 +139,9 @@ def candidates_into(tail_in, tail_out, seg_in, seg_out, K, t_end, t_in, t_out):
     """First violation / last exit of candidate k (maneuver to knot k, then straight) over ``[0, t_end]``
     (:meth:`daa_sil.daa.trajectory.PathConflicts.candidates`); no violation is ``(inf, -inf)``."""
     n_paths = tail_in.shape[0] // K
-    S = K - 1
     for path in range(n_paths):
-        acc_in, acc_out = INF, -INF
-        for k in range(K):
-            i = path * K + k
-            a, b = tail_in[i], tail_out[i]
-            if k > 0:
-                j = path * S + k - 1
-                acc_in = seg_in[j] if k == 1 else npmin(acc_in, seg_in[j])
-                acc_out = seg_out[j] if k == 1 else npmax(acc_out, seg_out[j])
-                a, b = npmin(a, acc_in), npmax(b, acc_out)
-            if a <= t_end:
-                t_in[i], t_out[i] = a, npmin(b, t_end)
-            else:
-                t_in[i], t_out[i] = INF, -INF
+        candidates_path(tail_in, tail_out, seg_in, seg_out, path * K, path * (K - 1), K, t_end, t_in, t_out,
+                        path * K)
 
 
 @kernel(void(A3, A3, A3, A3, A3, A3, A3, A3, A3, O4, O4, O4, O4, O4, O4))

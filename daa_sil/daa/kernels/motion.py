@@ -182,7 +182,7 @@ def command_states_into(ph_rows, enc, max_turn, h_acc, v_acc, t, out):
 
 
 @inline
-def _axis_knot(axis, rate, row, sth, cth, t):
+def axis_knot(axis, rate, row, sth, cth, t):
     """Ownship state on the path ``row`` (:func:`axis_row`) at knot time ``t`` (``sth``/``cth``: the turn's
     sine and cosine there)."""
     x0, y0, z0, gs0, st, ct, vs0, sgn, lim = row
@@ -192,7 +192,7 @@ def _axis_knot(axis, rate, row, sth, cth, t):
 
 
 @inline
-def _turn_sincos(rate, t):
+def turn_sincos(rate, t):
     """Sines and cosines of ``rate * t[k]`` (the same on every path)."""
     K = t.shape[0]
     sth, cth = np.empty(K), np.empty(K)
@@ -208,12 +208,12 @@ def axis_relative_knots_into(axis, rate, kin, t, ipos, ivel, s0, s1, s2, v0, v1,
     velocity (ownship - intruder ``m``, ``ipos``/``ivel`` (N, M, 3)) at the knots ``(N, M, P, K)`` per
     component, without storing the ownship's knot states."""
     K = t.shape[0]
-    sth, cth = _turn_sincos(rate, t)
+    sth, cth = turn_sincos(rate, t)
     for n in range(kin.shape[0]):
         for p in range(kin.shape[1]):
             row = axis_row(kin[n], p)
             for k in range(K):
-                ox, oy, oz, ovx, ovy, ovz = _axis_knot(axis, rate, row, sth[k], cth[k], t[k])
+                ox, oy, oz, ovx, ovy, ovz = axis_knot(axis, rate, row, sth[k], cth[k], t[k])
                 tk = t[k]
                 for m in range(ipos.shape[1]):
                     ix, iy, iz = ipos[n, m, 0], ipos[n, m, 1], ipos[n, m, 2]
@@ -231,11 +231,11 @@ def axis_knots_into(axis, rate, kin, t, out):
     """Ownship state on path ``p`` of encounter ``n`` (row ``kin[n, p]``) at each knot time ``t[k]`` into
     ``out[:, n, p, k]`` (six rows; the band axis's knot states, ``axis_paths.maneuver_paths``)."""
     K = t.shape[0]
-    sth, cth = _turn_sincos(rate, t)
+    sth, cth = turn_sincos(rate, t)
     for n in range(kin.shape[0]):
         for p in range(kin.shape[1]):
             row = axis_row(kin[n], p)
             for k in range(K):
-                a, b, c, d, e, f = _axis_knot(axis, rate, row, sth[k], cth[k], t[k])
+                a, b, c, d, e, f = axis_knot(axis, rate, row, sth[k], cth[k], t[k])
                 out[0, n, p, k], out[1, n, p, k], out[2, n, p, k], out[3, n, p, k], out[4, n, p, k], out[5, n, p, k] = \
                     a, b, c, d, e, f

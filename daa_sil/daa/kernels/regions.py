@@ -13,9 +13,10 @@ from __future__ import annotations
 import numpy as np
 from numba import int8, types, void
 
+from daa_sil.daa.kernels.evaluate import candidates_path
 from daa_sil.daa.kernels.jit import inline, kernel
 from daa_sil.daa.kernels.scalar import INF, npmax, npmin
-from daa_sil.daa.kernels.signatures import A, A4, B2, O, O2, F, I, B
+from daa_sil.daa.kernels.signatures import A, B2, O, O2, F, I, B
 
 
 #: daa.config REGION_* and AXIS_HORIZONTAL
@@ -41,16 +42,24 @@ def _first_ok(ok_row, k0, want, K):
     return k0 - 1, False
 
 
-@kernel(void(A4, A4, B, B2, B2, B2, A, F, F, F, I, I, B, I, A, F, F, F, B, F, F, F, F, F, F,
+@kernel(void(A, A, A, A, B, I, F, B, B2, B2, B2, A, F, F, F, I, I, B, I, A, F, F, F, B, F, F, F, F, F, F,
              O2, O2, O2, O2, O2, types.Array(int8, 2, "C"), types.Array(int8, 2, "C"), O, O, int8[:]))
-def axis_regions_into(t_in, t_out, hfm, near_list, mid_list, alert2, tk, L, warn, corr, j_lo, j_hi, dgrid, axis,
-                      cur, rate, lim_lo, lim_hi, do_clip, clip_lo, clip_hi, sm_h, stab, pi_cut, two_pi,
-                      values, delta, t_man, t_in_all, t_out_c, region, gap, res_lo, res_hi, pref):
+def axis_regions_into(src_in, src_out, seg_in, seg_out, from_paths, M, t_end, hfm, near_list, mid_list, alert2, tk, L,
+                      warn, corr, j_lo, j_hi, dgrid, axis, cur, rate, lim_lo, lim_hi, do_clip, clip_lo, clip_hi, sm_h,
+                      stab, pi_cut, two_pi, values, delta, t_man, t_in_all, t_out_c, region, gap, res_lo, res_hi, pref):
     """The (N, K) candidate arrays, regions (N, K), gap regions (N, K-1; DAIDALUS grid), resolutions
-    and preferred sides (N,) of one axis from ``t_in``/``t_out`` (N, M, 2, J+1) (module docstring);
-    ``alert2`` (N, M): alert level >= 2; ``near_list``/``mid_list`` the conflict lists (``hfm``);
-    ``cur`` (N,) the current track / vs / gs; ``rate`` the turn rate or the axis acceleration."""
-    N, M = t_in.shape[0], t_in.shape[1]
+    and preferred sides (N,) of one axis (module docstring) from its candidates' first violation / last
+    exit per intruder, path side and knot (M, 2, J+1 per row): ``src_in``/``src_out`` themselves (flat over
+    (N, M, 2, J+1)), or with ``from_paths`` the paths' tail intervals ``src_in``/``src_out`` (flat over
+    (N, M, 2, J+1)) and segment intervals ``seg_in``/``seg_out`` (flat over (N, M, 2, J)), a row's
+    candidates made from them over ``[0, t_end]`` (``evaluate.candidates_into`` of its paths) into a small
+    buffer. ``alert2`` (N, M): alert level >= 2; ``near_list``/``mid_list`` the conflict lists (``hfm``);
+    ``cur`` (N,) the current track / vs / gs; ``rate`` the turn rate or the axis acceleration. The terms
+    that do not depend on the row (a track candidate's change and time) or on the column (a speed side's
+    time to its limit) are computed once, by the same operations; a track axis's ``delta`` and ``t_man``
+    are the same for every encounter and have one row (1, K)."""
+    N = values.shape[0]
+    Kn = tk.shape[0]
     K = j_lo + j_hi + 1
     k0 = j_lo
     red_near = np.empty(K, np.bool_)
@@ -59,27 +68,50 @@ def axis_regions_into(t_in, t_out, hfm, near_list, mid_list, alert2, tk, L, warn
     g_mid = np.empty(K, np.bool_)
     ok = np.empty(K, np.bool_)
     rec = np.empty(K, np.bool_)
+    ti, to = np.empty((M, 2, Kn)), np.empty((M, 2, Kn))
+    ti1, to1 = ti.reshape(-1), to.reshape(-1)
+    # per column: side, knot, and for a track candidate its change (rad) and maneuver time (s)
+    c_sgn, c_tk, c_th, c_tm = np.empty(K), np.empty(K), np.empty(K), np.empty(K)
+    for c in range(K):
+        sgn = -1.0 if c < j_lo else 1.0
+        tc_k = tk[j_lo - c] if c < j_lo else tk[c - j_lo]
+        c_sgn[c], c_tk[c] = sgn, tc_k
+        if axis == _HORIZONTAL:
+            th = sgn * (rate * tc_k)
+            c_th[c], c_tm[c] = th, abs(th) / rate
+            delta[0, c], t_man[0, c] = th, c_tm[c]  # (one row: the same for every encounter)
+    row_len = M * 2 * Kn
     for n in range(N):
+        # -- the candidates' conflicts of this row (M, 2, J+1) ----------------------------------------------
+        if from_paths:
+            for m in range(M):
+                for p in range(2):
+                    path = (n * M + m) * 2 + p
+                    candidates_path(src_in, src_out, seg_in, seg_out, path * Kn, path * (Kn - 1), Kn, t_end, ti1,
+                                    to1, (m * 2 + p) * Kn)
+        else:
+            for i in range(row_len):
+                ti1[i], to1[i] = src_in[n * row_len + i], src_out[n * row_len + i]
         # -- regions from the conflicts per intruder ---------------------------------------------------
         for c in range(K):
             p, k = (0, j_lo - c) if c < j_lo else (1, c - j_lo)
             rn, rm = False, False
             a_in, a_out = INF, -INF
             for m in range(M):
-                ti = t_in[n, m, p, k]
+                tv = ti[m, p, k]
                 if hfm:
                     hn = L if near_list[n, m] else npmin(L, warn + tk[k])
                     hm = L if mid_list[n, m] else npmin(L, corr + tk[k])
-                    r_near_i, r_mid_i = ti < hn, ti < hm
+                    r_near_i, r_mid_i = tv < hn, tv < hm
                     rm = rm or r_mid_i
                 else:
-                    r_mid_i = ti < (L if alert2[n, m] else corr)
-                    r_near_i = ti < warn
+                    r_mid_i = tv < (L if alert2[n, m] else corr)
+                    r_near_i = tv < warn
                     rm = rm or (r_near_i or r_mid_i)
                 rn = rn or r_near_i
-                t_o = t_out[n, m, p, k] if (r_mid_i or r_near_i) else -INF
+                t_o = to[m, p, k] if (r_mid_i or r_near_i) else -INF
                 # np.min / np.max over the intruders: the first one, then np.minimum / np.maximum
-                a_in = ti if m == 0 else npmin(a_in, ti)
+                a_in = tv if m == 0 else npmin(a_in, tv)
                 a_out = t_o if m == 0 else npmax(a_out, t_o)
             red_near[c], red_mid[c] = rn, rm
             t_in_all[n, c], t_out_c[n, c] = a_in, a_out
@@ -91,22 +123,22 @@ def axis_regions_into(t_in, t_out, hfm, near_list, mid_list, alert2, tk, L, warn
             g_near[c], g_mid[c] = gn, gm
             region[n, c] = NEAR if not gn else (MID if not gm else NONE)
         # -- candidate values (bands._candidate_values) ----------------------------------------------------
-        for c in range(K):
-            sgn = -1.0 if c < j_lo else 1.0
-            tc_k = tk[j_lo - c] if c < j_lo else tk[c - j_lo]
-            if axis == _HORIZONTAL:
-                th = sgn * (rate * tc_k)
+        if axis == _HORIZONTAL:
+            for c in range(K):
+                th = c_th[c]
                 v = cur[n] + th
                 if v < 0.0:
                     v = v + two_pi
                 elif v >= two_pi:
                     v = v - two_pi
-                values[n, c], delta[n, c] = v, th
-                t_man[n, c] = abs(th) / rate
-            else:
-                lim = lim_lo if sgn < 0 else lim_hi
-                v0 = cur[n]
-                tc = npmin(tc_k, npmax((lim - v0) * sgn / rate, 0.0))
+                values[n, c] = v
+        else:
+            v0 = cur[n]
+            cap_lo = npmax((lim_lo - v0) * -1.0 / rate, 0.0)  # each side's time to its limit (s)
+            cap_hi = npmax((lim_hi - v0) * 1.0 / rate, 0.0)
+            for c in range(K):
+                sgn = c_sgn[c]
+                tc = npmin(c_tk[c], cap_lo if sgn < 0 else cap_hi)
                 v = v0 + sgn * rate * tc
                 d = v - v0
                 values[n, c] = npmin(npmax(v, clip_lo), clip_hi) if do_clip else v
@@ -143,7 +175,7 @@ def axis_regions_into(t_in, t_out, hfm, near_list, mid_list, alert2, tk, L, warn
             r = region[n, c]
             ok[c] = r == NONE or r == RECOVERY
             if axis == _HORIZONTAL and dgrid:
-                ok[c] = ok[c] and abs(delta[n, c]) < pi_cut
+                ok[c] = ok[c] and abs(c_th[c]) < pi_cut
         i_lo, f_lo = _first_ok(ok, k0, -1, K)
         i_hi, f_hi = _first_ok(ok, k0, 1, K)
         if conflict:
@@ -151,7 +183,7 @@ def axis_regions_into(t_in, t_out, hfm, near_list, mid_list, alert2, tk, L, warn
             res_hi[n] = values[n, i_hi] if f_hi else INF
         else:
             res_lo[n], res_hi[n] = np.nan, np.nan
-        d_lo, d_hi = t_man[n, i_lo], t_man[n, i_hi]
+        d_lo, d_hi = (c_tm[i_lo], c_tm[i_hi]) if axis == _HORIZONTAL else (t_man[n, i_lo], t_man[n, i_hi])
         hi_first = d_hi <= d_lo + 1e-9 * npmax(d_lo, 1.0)
         if f_lo and f_hi:
             pr = 1 if hi_first else -1

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import void
+from numba import boolean, float64, int64, types, void
 
 from daa_sil.daa.kernels.jit import inline, inline_ir, kernel
 from daa_sil.daa.kernels.motion import axis_rel, axis_row, command_rel, command_row, intruder_row
@@ -40,11 +40,23 @@ _NO_COMMAND_ROW = ((0.0,) * 9, (0.0,) * 9, (0.0,) * 9, (0.0,) * 7)
 
 
 @inline
-def _motion_row(kind, kin, ph, enc, ipv, r):
-    """Row ``r``'s motion and intruder as tuples of floats, for :func:`_rel` (loaded once per row)."""
+def _motion_row(kind, kin, ph, enc, ipv, mi, ii, r):
+    """Row ``r``'s motion (row ``mi[r]`` of ``kin`` or of ``ph``/``enc``) and intruder (row ``ii[r]`` of ``ipv``)
+    as tuples of floats, for :func:`_rel` (loaded once per row)."""
     if kind == KIND_AXIS:
-        return axis_row(kin, r), _NO_COMMAND_ROW, intruder_row(ipv, r)
-    return _NO_AXIS_ROW, command_row(ph, enc, r), intruder_row(ipv, r)
+        return axis_row(kin, mi[r]), _NO_COMMAND_ROW, intruder_row(ipv, ii[r])
+    return _NO_AXIS_ROW, command_row(ph, enc, mi[r]), intruder_row(ipv, ii[r])
+
+
+@inline
+def _take(buf, cur, j, n):
+    """``n`` elements of ``buf`` from cursor ``cur[j]`` (a fresh array when ``buf`` is too small); the cursor
+    moves by ``n`` either way, so that at the end it tells how large ``buf`` should be."""
+    off = cur[j]
+    cur[j] = off + n
+    if off + n <= buf.shape[0]:
+        return buf[off:off + n]
+    return np.empty(n, buf.dtype)
 
 
 @inline_ir
@@ -92,8 +104,8 @@ def _update(a, b, t_in, t_out):
 
 
 @inline
-def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row, lo, hi, lo_in, thr, dt_in, dt_out,
-            DD, TT, H, TC, clear_pos, have_pos):
+def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, row, lo, hi, lo_in, thr, dt_in,
+            dt_out, DD, TT, H, TC, clear_pos, have_pos):
     """``UndecidedPieces._bisect`` of the rows ``row`` (one batch): ``lo``/``hi`` halved in place. The relative
     position at the end of the final bracket outside the volume (``lo`` of an entry, ``hi`` of an exit) goes
     to ``clear_pos`` (3, n) when a halving put that end there (``have_pos``; else it is still the start's)."""
@@ -113,7 +125,7 @@ def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, row, lo
     for i in range(n):
         a, b, flag = lo[i], hi[i], lo_in[i]
         r = row[i]
-        mrow = _motion_row(kind, kin, ph, enc, ipv, r)
+        mrow = _motion_row(kind, kin, ph, enc, ipv, mi, ii, r)
         have_pos[i] = False
         for k in range(steps):
             mid = 0.5 * (a + b)
@@ -148,8 +160,8 @@ def _classify_part(a_h, a_v, anyv, has_vwin, w_lo, w_hi, ta, tb, x0, y0, z0, x1,
 
 
 @inline
-def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, row, ta, tb, thr, dt_in, dt_out,
-          clip_dt, DD, TT, H, TC, row_in, row_out):
+def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, final, row, ta, tb, thr, dt_in,
+          dt_out, clip_dt, DD, TT, H, TC, row_in, row_out):
     """``UndecidedPieces._clip`` of pieces ``final``: sampled every ``clip_dt``, the first and last
     violating samples bracketed and bisected (entries, then exits, each as one batch)."""
     nf = final.shape[0]
@@ -168,7 +180,7 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, ro
     for c in range(nf):
         i = final[c]
         r = row[i]
-        mrow = _motion_row(kind, kin, ph, enc, ipv, r)
+        mrow = _motion_row(kind, kin, ph, enc, ipv, mi, ii, r)
         h = tb[i] - ta[i]
         first, lastk = -1, -1
         t_prev_first, t_first, t_last, t_after = ta[i], 0.0, 0.0, tb[i]
@@ -196,10 +208,10 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, ro
         return
     l1, h1, l2, h2, hr = b1[:nh].copy(), t1[:nh].copy(), t2[:nh].copy(), a2[:nh].copy(), hrow[:nh].copy()
     pos, have = np.empty((3, nh)), np.empty(nh, np.bool_)  # (not read)
-    _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, hr, l1, h1, np.zeros(nh, np.bool_), thr,
-            dt_in, dt_out, DD, TT, H, TC, pos, have)
-    _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, hr, l2, h2, np.ones(nh, np.bool_), thr,
-            dt_in, dt_out, DD, TT, H, TC, pos, have)
+    _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, hr, l1, h1, np.zeros(nh, np.bool_),
+            thr, dt_in, dt_out, DD, TT, H, TC, pos, have)
+    _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, hr, l2, h2, np.ones(nh, np.bool_),
+            thr, dt_in, dt_out, DD, TT, H, TC, pos, have)
     for c in range(nh):
         r = hr[c]
         row_in[r], row_out[r] = _update(row_in[r], row_out[r], 0.5 * (l1[c] + h1[c]), 0.5 * (l2[c] + h2[c]))
@@ -209,47 +221,35 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final, ro
              A, A, A, A, A, A, A, IA, IA,
              A, A, B, A, B, A2, B, A, A,
              B, A, I, I, F, F, F, F, F,
-             F, F, F, F, F, O, O))
-def resolve_into(kind, axis, rate, kin_all, ph_all, enc_all, max_turn, h_acc, v_acc, ipv_all, mi, ii,
+             F, F, F, F, F, O, O, types.Array(float64, 1, "C"), types.Array(int64, 1, "C"),
+             types.Array(boolean, 1, "C"), types.Array(int64, 1, "C")))
+def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii,
                  s0, s1, s2, v0, v1, v2, tk, seg, ka,
                  acc_h, acc_v, has_jerk, jerk, has_kink, kink, has_vwin, vlo, vhi,
                  exits, thr, max_depth, max_split, dt_in, dt_out, clip_dt, v2tol, p8tol,
-                 D, DD, H, TT, TC, seg_in, seg_out):
+                 D, DD, H, TT, TC, seg_in, seg_out, fbuf, ibuf, bbuf, need):
     """Resolve the undecided segments ``seg`` (flat segment ids; ``ka`` their first knots' flat indices
     into the knot arrays ``s*``/``v*``/``tk``) into ``seg_in``/``seg_out`` (the reference's docstring).
     Row ``r``'s motion is row ``mi[r]`` of ``kin_all`` (``kind`` axis) or of ``ph_all``/``enc_all`` (command),
-    against intruder row ``ii[r]`` of ``ipv_all``; ``acc_h`` ... ``vhi`` are per row."""
+    against intruder row ``ii[r]`` of ``ipv_all``; ``acc_h`` ... ``vhi`` are per row. The working arrays are
+    taken from ``fbuf``/``ibuf``/``bbuf`` (float, int, bool; arrays kept by the caller from call to call) as far
+    as they reach, else allocated; ``need`` (3,) gets the sizes the call would have taken from each."""
     R = seg.shape[0]
-    # the rows' motion and intruder, gathered (kin / ph and enc: empty for the kind not used)
-    nk = R if kind == KIND_AXIS else 0
-    kin, ipv = np.empty((nk, kin_all.shape[1])), np.empty((R, ipv_all.shape[1]))
-    ph, enc = np.empty((R - nk, ph_all.shape[1], ph_all.shape[2])), np.empty((R - nk, enc_all.shape[1]))
-    for r in range(R):
-        for j in range(ipv.shape[1]):
-            ipv[r, j] = ipv_all[ii[r], j]
-    for r in range(nk):
-        for j in range(kin.shape[1]):
-            kin[r, j] = kin_all[mi[r], j]
-    for r in range(R - nk):
-        for j in range(ph.shape[1]):
-            for f in range(ph.shape[2]):
-                ph[r, j, f] = ph_all[mi[r], j, f]
-        for j in range(enc.shape[1]):
-            enc[r, j] = enc_all[mi[r], j]
-    settle = np.empty(R)
+    cur = np.zeros(3, np.int64)  # cursors into fbuf, ibuf, bbuf
+    settle = _take(fbuf, cur, 0, R)
     # each row's entry / exit (its segment's seg_in / seg_out), written back at the end: the updates
     # stay in these small arrays instead of reaching into the large ones scattered
-    row_in, row_out = np.empty(R), np.empty(R)
+    row_in, row_out = _take(fbuf, cur, 0, R), _take(fbuf, cur, 0, R)
     for r in range(R):
         settle[r] = _settle(acc_h[r], acc_v[r], v2tol, p8tol)
         row_in[r], row_out[r] = seg_in[seg[r]], seg_out[seg[r]]
     # -- the pieces of the current depth (every piece keeps its row, so its segment) --------------------
     L = R
-    row = np.empty(L, np.int64)
-    ta, tb = np.empty(L), np.empty(L)
-    pa, pb = np.empty((3, L)), np.empty((3, L))
-    ua, ub = np.empty((2, L)), np.empty((2, L))
-    fa, fb = np.empty(L, np.bool_), np.empty(L, np.bool_)
+    row = _take(ibuf, cur, 1, L)
+    ta, tb = _take(fbuf, cur, 0, L), _take(fbuf, cur, 0, L)
+    pa, pb = _take(fbuf, cur, 0, 3 * L).reshape((3, L)), _take(fbuf, cur, 0, 3 * L).reshape((3, L))
+    ua, ub = _take(fbuf, cur, 0, 2 * L).reshape((2, L)), _take(fbuf, cur, 0, 2 * L).reshape((2, L))
+    fa, fb = _take(bbuf, cur, 2, L), _take(bbuf, cur, 2, L)
     for r in range(R):
         a = ka[r]
         t0 = tk[a]
@@ -267,14 +267,15 @@ def resolve_into(kind, axis, rate, kin_all, ph_all, enc_all, max_turn, h_acc, v_
             if fa[i] and fb[i]:
                 r = row[i]
                 row_in[r], row_out[r] = _update(row_in[r], row_out[r], ta[i], tb[i])
-        split = np.zeros(L, np.bool_)
+        split = _take(bbuf, cur, 2, L)
+        split[:] = False
         last = depth == max_depth - 1
-        settled = np.empty(L, np.bool_)
+        settled = _take(bbuf, cur, 2, L)
         for i in range(L):
             settled[i] = ((tb[i] - ta[i]) <= settle[row[i]] * SETTLE_SLACK) or last
         # -- crossings: entries (start clear, end violating) and exits -----------------------------------
         nc = 0
-        cross = np.empty(L, np.int64)
+        cross = _take(ibuf, cur, 1, L)
         for i in range(L):
             if fa[i] != fb[i]:
                 if not exits and fa[i]:  # an exit: first entry at the start; the last exit is not needed
@@ -284,16 +285,16 @@ def resolve_into(kind, axis, rate, kin_all, ph_all, enc_all, max_turn, h_acc, v_
                     cross[nc] = i
                     nc += 1
         if nc:
-            crs = cross[:nc].copy()
-            lo, hi = np.empty(nc), np.empty(nc)
-            lo_in = np.empty(nc, np.bool_)
-            crow = np.empty(nc, np.int64)
+            crs = cross[:nc]
+            lo, hi = _take(fbuf, cur, 0, nc), _take(fbuf, cur, 0, nc)
+            lo_in = _take(bbuf, cur, 2, nc)
+            crow = _take(ibuf, cur, 1, nc)
             for c in range(nc):
                 i = crs[c]
                 lo[c], hi[c], lo_in[c], crow[c] = ta[i], tb[i], not fb[i], row[i]
-            clear_pos, have_pos = np.empty((3, nc)), np.empty(nc, np.bool_)
-            _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, crow, lo, hi, lo_in, thr, dt_in,
-                    dt_out, DD, TT, H, TC, clear_pos, have_pos)
+            clear_pos, have_pos = _take(fbuf, cur, 0, 3 * nc).reshape((3, nc)), _take(bbuf, cur, 2, nc)
+            _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, crow, lo, hi, lo_in, thr,
+                    dt_in, dt_out, DD, TT, H, TC, clear_pos, have_pos)
             # certify the other side of the crossing clear: before an entry, after an exit
             anyv = _any_nonzero(acc_v, row, crs)
             for c in range(nc):
@@ -303,8 +304,8 @@ def resolve_into(kind, axis, rate, kin_all, ph_all, enc_all, max_turn, h_acc, v_
                 if have_pos[c]:  # (the state there, computed by the bisection)
                     mx, my, mz = clear_pos[0, c], clear_pos[1, c], clear_pos[2, c]
                 else:
-                    mx, my, mz, _, _, _ = _rel(kind, axis, rate, _motion_row(kind, kin, ph, enc, ipv, r), max_turn,
-                                               h_acc, v_acc, lo[c] if entry else hi[c])
+                    mx, my, mz, _, _, _ = _rel(kind, axis, rate, _motion_row(kind, kin, ph, enc, ipv, mi, ii, r),
+                                               max_turn, h_acc, v_acc, lo[c] if entry else hi[c])
                 c_a, c_b = (ta[i], lo[c]) if entry else (hi[c], tb[i])
                 if entry:
                     x0, y0, z0, x1, y1, z1 = pa[0, i], pa[1, i], pa[2, i], mx, my, mz
@@ -320,7 +321,7 @@ def resolve_into(kind, axis, rate, kin_all, ph_all, enc_all, max_turn, h_acc, v_
                     split[i] = True
         # -- both ends clear: a clip may lie inside unless certified clear --------------------------------
         nj = 0
-        jj = np.empty(L, np.int64)
+        jj = _take(ibuf, cur, 1, L)
         for i in range(L):
             if not fa[i] and not fb[i]:
                 jj[nj] = i
@@ -359,7 +360,7 @@ def resolve_into(kind, axis, rate, kin_all, ph_all, enc_all, max_turn, h_acc, v_
             nj = keep
         if nj:
             nf = 0
-            final = np.empty(nj, np.int64)
+            final = _take(ibuf, cur, 1, nj)
             for c in range(nj):
                 i = jj[c]
                 if settled[i]:
@@ -368,7 +369,7 @@ def resolve_into(kind, axis, rate, kin_all, ph_all, enc_all, max_turn, h_acc, v_
                 else:
                     split[i] = True
             if nf:
-                _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, final[:nf], row, ta, tb,
+                _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, final[:nf], row, ta, tb,
                       thr, dt_in, dt_out, clip_dt, DD, TT, H, TC, row_in, row_out)
         # -- split what is left into the fewest equal parts that settle ------------------------------------
         ns = 0
@@ -389,11 +390,11 @@ def resolve_into(kind, axis, rate, kin_all, ph_all, enc_all, max_turn, h_acc, v_
         qf = qf if qf < max_split else float(max_split)
         q = int(qf)
         NL = ns * q
-        n_row = np.empty(NL, np.int64)
-        n_ta, n_tb = np.empty(NL), np.empty(NL)
-        n_pa, n_pb = np.empty((3, NL)), np.empty((3, NL))
-        n_ua, n_ub = np.empty((2, NL)), np.empty((2, NL))
-        n_fa, n_fb = np.empty(NL, np.bool_), np.empty(NL, np.bool_)
+        n_row = _take(ibuf, cur, 1, NL)
+        n_ta, n_tb = _take(fbuf, cur, 0, NL), _take(fbuf, cur, 0, NL)
+        n_pa, n_pb = _take(fbuf, cur, 0, 3 * NL).reshape((3, NL)), _take(fbuf, cur, 0, 3 * NL).reshape((3, NL))
+        n_ua, n_ub = _take(fbuf, cur, 0, 2 * NL).reshape((2, NL)), _take(fbuf, cur, 0, 2 * NL).reshape((2, NL))
+        n_fa, n_fb = _take(bbuf, cur, 2, NL), _take(bbuf, cur, 2, NL)
         o = 0
         for i in range(L):
             if not split[i]:
@@ -401,7 +402,7 @@ def resolve_into(kind, axis, rate, kin_all, ph_all, enc_all, max_turn, h_acc, v_
             r = row[i]
             t_prev, h = ta[i], tb[i] - ta[i]
             px, py, pz, wx, wy, f_prev = pa[0, i], pa[1, i], pa[2, i], ua[0, i], ua[1, i], fa[i]
-            mrow = _motion_row(kind, kin, ph, enc, ipv, r)
+            mrow = _motion_row(kind, kin, ph, enc, ipv, mi, ii, r)
             for k in range(q):
                 if k < q - 1:
                     t_next = ta[i] + h * (float(k + 1) / q)
@@ -421,3 +422,4 @@ def resolve_into(kind, axis, rate, kin_all, ph_all, enc_all, max_turn, h_acc, v_
         row, ta, tb, pa, pb, ua, ub, fa, fb = n_row, n_ta, n_tb, n_pa, n_pb, n_ua, n_ub, n_fa, n_fb
     for r in range(R):
         seg_in[seg[r]], seg_out[seg[r]] = row_in[r], row_out[r]
+    need[0], need[1], need[2] = cur[0], cur[1], cur[2]

@@ -1,0 +1,93 @@
+"""A band axis's paths against their intruders in one pass per path: the relative states at the knots,
+the vertical window, the chord certificates of the segments and the straight tails, without storing
+the relative states (``(N, M, 2, J+1)`` per component); and the relative states at the two knots of
+given segments (what the resolution of the undecided ones reads).
+
+The same operations as ``motion.axis_relative_knots_into`` followed by the evaluator's
+``segments_into`` and ``tails_into`` (they share ``evaluate.segments_path`` / ``tails_path`` and
+``motion.axis_knot``), with the vertical window of ``wellclear.vertical_window`` in its scalar form;
+:class:`daa_sil.daa.trajectory.PathEvaluator` is the reference the tests compare with.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import boolean, void
+
+from daa_sil.daa.kernels.evaluate import segments_path, tails_path
+from daa_sil.daa.kernels.jit import kernel
+from daa_sil.daa.kernels.motion import axis_knot, axis_row, turn_sincos
+from daa_sil.daa.kernels.scalar import vertical_window
+from daa_sil.daa.kernels.signatures import A, A2, A3, IA, I8, O, F, I
+
+
+@kernel(void(I, F, A3, A, A3, A3, boolean, A2, A2, I, F, F, F, F, F, F, F, I8, O, O, O, O, O, O))
+def axis_conflicts_into(axis, rate, kin, t, ipos, ivel, vz_const, acc_h, acc_v, block, t_end, D, DD, D2, H, TT, TC,
+                        code, seg_in, seg_out, tail_in, tail_out, vlo, vhi):
+    """Paths ``kin`` (N, 2, 9) at knot times ``t`` (J+1,) against intruders ``ipos``/``ivel`` (N, M, 3):
+    segment codes and intervals (flat over (N, M, 2, J), as ``segments_into``; undecided segments are left
+    at ``(inf, -inf)``), tail intervals (flat over (N, M, 2, J+1), as ``tails_into``) over ``[0, t_end]``,
+    and with ``vz_const`` each path's vertical window ``vlo``/``vhi`` (flat over (N, M, 2); else not
+    written); ``acc_h``/``acc_v`` (N, 2) the paths' acceleration bounds (m/s^2)."""
+    N, P, M, K = kin.shape[0], kin.shape[1], ipos.shape[1], t.shape[0]
+    sth, cth = turn_sincos(rate, t)
+    ox, oy, oz, ovx, ovy, ovz = np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K)
+    s0, s1, s2, v0, v1, v2 = np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K)
+    for n in range(N):
+        for p in range(P):
+            row = axis_row(kin[n], p)
+            for k in range(K):
+                ox[k], oy[k], oz[k], ovx[k], ovy[k], ovz[k] = axis_knot(axis, rate, row, sth[k], cth[k], t[k])
+            a_h, a_v = acc_h[n, p], acc_v[n, p]
+            for m in range(M):
+                ix, iy, iz = ipos[n, m, 0], ipos[n, m, 1], ipos[n, m, 2]
+                jx, jy, jz = ivel[n, m, 0], ivel[n, m, 1], ivel[n, m, 2]
+                for k in range(K):
+                    tk = t[k]
+                    s0[k] = ox[k] - (ix + tk * jx)
+                    s1[k] = oy[k] - (iy + tk * jy)
+                    s2[k] = oz[k] - (iz + tk * jz)
+                    v0[k] = ovx[k] - jx
+                    v1[k] = ovy[k] - jy
+                    v2[k] = ovz[k] - jz
+                path = (n * M + m) * P + p
+                w_lo, w_hi = 0.0, 0.0
+                if vz_const:
+                    w_lo, w_hi = vertical_window(s2[0], v2[0], 0.0, t_end, H, TC)
+                    vlo[path], vhi[path] = w_lo, w_hi
+                if K > 1:
+                    segments_path(s0, s1, s2, t, 0, path * (K - 1), K, block, a_h, a_v, vz_const, w_lo, w_hi, t_end,
+                                  D, DD, H, TT, TC, code, seg_in, seg_out)
+                tails_path(s0, s1, s2, v0, v1, v2, t, 0, path * K, K, vz_const, w_lo, w_hi, False, t_end, D, DD, D2, TT,
+                           H, TC, tail_in, tail_out)
+
+
+@kernel(void(I, F, A3, A, A3, A3, IA, O, O, O, O, O, O, O))
+def axis_segment_knots_into(axis, rate, kin, t, ipos, ivel, seg, s0, s1, s2, v0, v1, v2, tk):
+    """The relative states (ownship - intruder) and times at the two knots of segments ``seg`` (flat over
+    (N, M, 2, J)) of the paths of :func:`axis_conflicts_into`, the first knot of segment ``r`` at ``2 r``,
+    the second at ``2 r + 1`` (the numbers ``motion.axis_relative_knots_into`` gives there)."""
+    P, M, K = kin.shape[1], ipos.shape[1], t.shape[0]
+    S = K - 1
+    sth, cth = turn_sincos(rate, t)
+    for r in range(seg.shape[0]):
+        path = seg[r] // S
+        j = seg[r] - path * S
+        p = path % P
+        nm = path // P
+        n, m = nm // M, nm % M
+        row = axis_row(kin[n], p)
+        ix, iy, iz = ipos[n, m, 0], ipos[n, m, 1], ipos[n, m, 2]
+        jx, jy, jz = ivel[n, m, 0], ivel[n, m, 1], ivel[n, m, 2]
+        for e in range(2):
+            k = j + e
+            ax, ay, az, avx, avy, avz = axis_knot(axis, rate, row, sth[k], cth[k], t[k])
+            tkk = t[k]
+            i = 2 * r + e
+            s0[i] = ax - (ix + tkk * jx)
+            s1[i] = ay - (iy + tkk * jy)
+            s2[i] = az - (iz + tkk * jz)
+            v0[i] = avx - jx
+            v1[i] = avy - jy
+            v2[i] = avz - jz
+            tk[i] = tkk
