@@ -599,13 +599,7 @@ def test_axis_regions_identical(case, m, monkeypatch):
     monkeypatch.setattr(bands_mod, "COMPILED", False)
     ref = run()
     for gb, rb in zip(got, ref):
-        for g, r in zip(gb.axes(), rb.axes()):
-            for f in dataclasses.fields(r):
-                a, b = getattr(g, f.name), getattr(r, f.name)
-                if b is None or np.ndim(b) == 0:
-                    assert a == b, f.name
-                else:
-                    _same(a, b)
+        _same_bands(gb, rb)
     if m:
         reg = np.concatenate([a.region.ravel() for a in ref[0].axes()])
         assert {0, 2, 3, 4} <= set(np.unique(reg))
@@ -666,13 +660,7 @@ def test_fused_axis_pass_identical(case, m, monkeypatch):
     got = run()
     monkeypatch.setattr(bands_mod, "FUSED", False)
     ref = run()
-    for g, r in zip(got.axes(), ref.axes()):
-        for f in dataclasses.fields(r):
-            a, b = getattr(g, f.name), getattr(r, f.name)
-            if b is None or np.ndim(b) == 0:
-                assert a == b, f.name
-            else:
-                _same(a, b)
+    _same_bands(got, ref)
     if m:
         assert any(np.isfinite(a.t_out).any() for a in ref.axes())
         assert {0, 2, 3} <= set(np.unique(np.concatenate([a.region.ravel() for a in ref.axes()])))
@@ -684,20 +672,37 @@ def test_fused_axis_pass_identical(case, m, monkeypatch):
 from daa_sil.daa import resolution  # noqa: E402
 
 
+def _same_bands(got, ref) -> None:
+    """Every field of every axis of two Bands is the same (arrays bit for bit, nan where nan)."""
+    for g, r in zip(got.axes(), ref.axes()):
+        for f in dataclasses.fields(r):
+            a, b = getattr(g, f.name), getattr(r, f.name)
+            if b is None or np.ndim(b) == 0:
+                assert a == b, f.name
+            else:
+                _same(a, b)
+
+
+def _closing_encounters(preset: str, tag: str, nearest: float):
+    """(cfg, rng, own, intr, bands, n): 600 encounters x 2 intruders of ``preset``, each intruder moved to a
+    random fraction in [nearest, 1] of its distance, and their bands."""
+    cfg = DaaConfig.for_preset(preset)
+    rng = np.random.default_rng(zlib.crc32(f"{tag}/{preset}".encode()))
+    own, intr = _encounters(rng, 600, 2, cfg)
+    d = rng.uniform(nearest, 1.0, intr.shape)
+    with np.errstate(invalid="ignore"):
+        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
+                             intr.z, intr.gs, intr.trk, intr.vs)
+        bands = bands_mod.compute_bands(own, intr, cfg)
+    return cfg, rng, own, intr, bands, own.shape[0]
+
+
 @pytest.mark.parametrize("preset", ["do365", "paper", "daidalus"])
 def test_search_maneuver_identical(preset, monkeypatch):
     """``kernels.select.search_into`` (the bands read in place, through row views of row views) chooses the
     candidate and rule numpy does, with every rule taken, with and without a reference command, nan states
     included."""
-    cfg = DaaConfig.for_preset(preset)
-    rng = np.random.default_rng(zlib.crc32(f"search/{preset}".encode()))
-    own, intr = _encounters(rng, 600, 2, cfg)
-    d = rng.uniform(0.05, 1.0, intr.shape)
-    with np.errstate(invalid="ignore"):
-        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
-                             intr.z, intr.gs, intr.trk, intr.vs)
-        bands = bands_mod.compute_bands(own, intr, cfg)
-    n = own.shape[0]
+    cfg, rng, own, intr, bands, n = _closing_encounters(preset, "search", 0.05)
     ax, dr = rng.integers(0, 4, n), rng.integers(0, 7, n)
     ref = Command(own.trk + rng.normal(0, 0.5, n), rng.choice([0.0, 5.0, np.nan], n), rng.choice([40.0, 60.0, np.nan], n))
     sub = np.flatnonzero(rng.random(n) < 0.6)
@@ -727,15 +732,7 @@ def test_resolve_identical(preset, monkeypatch):
     """``kernels.select.resolution_into`` (persistence, axes in priority order with the previous one last, NONE
     then RECOVERY, best effort) chooses the resolution numpy does, with and without a previous resolution,
     on whole bands and on nested row views."""
-    cfg = DaaConfig.for_preset(preset)
-    rng = np.random.default_rng(zlib.crc32(f"resolve/{preset}".encode()))
-    own, intr = _encounters(rng, 600, 2, cfg)
-    d = rng.uniform(0.02, 1.0, intr.shape)
-    with np.errstate(invalid="ignore"):
-        intr = AircraftState(own.x[:, None] + (intr.x - own.x[:, None]) * d, own.y[:, None] + (intr.y - own.y[:, None]) * d,
-                             intr.z, intr.gs, intr.trk, intr.vs)
-        bands = bands_mod.compute_bands(own, intr, cfg)
-    n = own.shape[0]
+    cfg, rng, own, intr, bands, n = _closing_encounters(preset, "resolve", 0.02)
     prev = (rng.integers(0, 4, n).astype(np.int8), rng.integers(0, 7, n).astype(np.int8))
     sub = np.flatnonzero(rng.random(n) < 0.6)
     half = np.arange(sub.size) % 2 == 0

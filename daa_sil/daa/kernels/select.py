@@ -31,6 +31,29 @@ def _argmin_step(best, bi, c, k, done):
     return best, bi, False
 
 
+@inline
+def _best_effort(i_h, i_v, i_g, o_h, o_v, o_g, rh, rv, rg, K_h, K_v, K):
+    """The best-effort candidate of one row (``np.argmax``, the first nan wins) over the three axes' K
+    candidates: latest first LoWC (capped at 1e6 s), then earliest regain of well clear."""
+    best, bi, done = 0.0, 0, False
+    for k in range(K):
+        if k < K_h:
+            ti, to = i_h[rh, k], o_h[rh, k]
+        elif k < K_h + K_v:
+            ti, to = i_v[rv, k - K_h], o_v[rv, k - K_h]
+        else:
+            ti, to = i_g[rg, k - K_h - K_v], o_g[rg, k - K_h - K_v]
+        t1 = ti if (ti != ti or ti <= 1e6) else 1e6
+        t2 = to if (to != to or to >= 0.0) else 0.0
+        c = t1 * 1e3 - t2
+        if not done:
+            if c != c:
+                best, bi, done = c, k, True
+            elif k == 0 or c > best:
+                best, bi = c, k
+    return bi
+
+
 @kernel(void(A2, A2, A2, A2, A2, A2, A2, A2, A2, A2, A2, A2, IA, IA, IA, IA, IA, IA, IA, IA, A2, A, F,
              types.Array(int64, 1, "C"), types.Array(int8, 1, "C")))
 def search_into(d_h, d_v, d_g, m_h, m_v, m_g, i_h, i_v, i_g, o_h, o_v, o_g, r_h, r_v, r_g, side_h, side_v, side_g,
@@ -73,23 +96,7 @@ def search_into(d_h, d_v, d_g, m_h, m_v, m_g, i_h, i_v, i_g, o_h, o_v, o_g, r_h,
         elif K > 0 and math.isfinite(b3):
             idx[n], rule[n] = j3, _ANY
         else:  # best effort: latest first LoWC, then earliest regain of well clear (np.argmax, the first nan wins)
-            best, bi, done = 0.0, 0, False
-            for k in range(K):
-                if k < K_h:
-                    ti, to = i_h[r_h[n], k], o_h[r_h[n], k]
-                elif k < K_h + K_v:
-                    ti, to = i_v[r_v[n], k - K_h], o_v[r_v[n], k - K_h]
-                else:
-                    ti, to = i_g[r_g[n], k - K_h - K_v], o_g[r_g[n], k - K_h - K_v]
-                t1 = ti if (ti != ti or ti <= 1e6) else 1e6
-                t2 = to if (to != to or to >= 0.0) else 0.0
-                c = t1 * 1e3 - t2
-                if not done:
-                    if c != c:
-                        best, bi, done = c, k, True
-                    elif k == 0 or c > best:
-                        best, bi = c, k
-            idx[n], rule[n] = bi, _BEST_EFFORT
+            idx[n], rule[n] = _best_effort(i_h, i_v, i_g, o_h, o_v, o_g, r_h[n], r_v[n], r_g[n], K_h, K_v, K), _BEST_EFFORT
 
 
 _REGION_NONE, _REGION_RECOVERY = 0, 4
@@ -172,21 +179,5 @@ def resolution_into(g_h, g_v, g_g, m_h, m_v, m_g, p_h, p_v, p_g, i_h, i_v, i_g, 
                         ch = start + j
         # 3. best effort: latest first LoWC, then earliest regain of well clear
         if ch < 0:
-            best, bi, done = 0.0, 0, False
-            for k in range(K):
-                if k < K_h:
-                    ti, to = i_h[r_h[n], k], o_h[r_h[n], k]
-                elif k < K_h + K_v:
-                    ti, to = i_v[r_v[n], k - K_h], o_v[r_v[n], k - K_h]
-                else:
-                    ti, to = i_g[r_g[n], k - K_h - K_v], o_g[r_g[n], k - K_h - K_v]
-                t1 = ti if (ti != ti or ti <= 1e6) else 1e6
-                t2 = to if (to != to or to >= 0.0) else 0.0
-                c = t1 * 1e3 - t2
-                if not done:
-                    if c != c:
-                        best, bi, done = c, k, True
-                    elif k == 0 or c > best:
-                        best, bi = c, k
-            ch = bi
+            ch = _best_effort(i_h, i_v, i_g, o_h, o_v, o_g, r_h[n], r_v[n], r_g[n], K_h, K_v, K)
         chosen[n] = ch
