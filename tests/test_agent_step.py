@@ -244,3 +244,34 @@ def test_pilot_intent_is_relative_to_the_previous_pilot_course_not_the_current_s
     hold = Command(np.array([0.0]), np.array([0.0]), np.array([30.0]))
     _, dec, _ = agent_step(10.0, own, intr, pilot_cmd(1, hold), mem, ID2, CFG, const_lookup(0.0))
     assert dec["pilot_axis"][0] == AXIS_NONE
+
+
+def test_stateful_preset_takes_the_whole_batchs_bands_on_its_active_rows():
+    """With a stateful preset (DAIDALUS hysteresis), bands passed for the whole batch while only some rows are
+    active (the agent then reads a rows view of them) give the decisions of bands computed by the agent
+    itself; the hysteresis once failed on the rows view (``dataclasses.replace`` of it)."""
+    from daa_sil.agent import PilotInput, WaitValue, policy_for_group
+    from daa_sil.daa import DaaConfig, compute_bands
+    from daa_sil.geometry.kinematics import AircraftState
+
+    cfg = DaaConfig.for_preset("daidalus")
+    assert cfg.stateful
+    rng = np.random.default_rng(5)
+    n = 40
+    own = AircraftState(np.zeros(n), np.zeros(n), np.full(n, 1000.0), np.full(n, 55.0), np.zeros(n), np.zeros(n))
+    rng_m = np.where(np.arange(n) % 2 == 0, rng.uniform(3000, 6000, n), 40000.0)  # odd rows far away: inactive
+    b = rng.uniform(-0.5, 0.5, n)
+    intr = AircraftState((rng_m * np.sin(b))[:, None], (rng_m * np.cos(b))[:, None], np.full((n, 1), 1000.0),
+                         np.full((n, 1), 80.0), (np.pi + b)[:, None], np.zeros((n, 1)))
+    pilot = PilotInput(rng.random(n) < 0.5, Command(rng.uniform(-0.5, 0.5, n) % (2 * np.pi), np.zeros(n), np.full(n, 55.0)),
+                       np.full(n, 5.0), np.full(n, 10.0), np.full(n, 10.0))
+    lookup = lambda o, i, rate: WaitValue.constant(o.shape[0], 6.0)  # noqa: E731
+    runs = []
+    for bands in (compute_bands(own, intr, cfg), None):
+        cmd, dec, _ = agent_step(10.0, own, intr, pilot, AgentMemory.initial(n, own), policy_for_group("ID-2"), cfg,
+                                 lookup, bands=bands)
+        runs.append((cmd, dec))
+    (c1, d1), (c2, d2) = runs
+    assert 0 < d1["active"].sum() < n
+    for a, b_ in ((c1.trk, c2.trk), (c1.vs, c2.vs), (c1.gs, c2.gs), (d1["decision"], d2["decision"])):
+        np.testing.assert_array_equal(a, b_)

@@ -114,6 +114,13 @@ class AxisBands:
     def name(self) -> str:
         return AXIS_NAMES[self.axis]
 
+    def with_fields(self, **changes) -> "AxisBands":
+        """A plain :class:`AxisBands` with ``changes`` and this one's other fields (``dataclasses.replace``,
+        which a rows view of :meth:`rows` cannot take: its constructor is not the dataclass's)."""
+        kw = {f.name: getattr(self, f.name) for f in fields(AxisBands)}
+        kw.update(changes)
+        return AxisBands(**kw)
+
     def gaps(self) -> np.ndarray:
         """``gap_region`` (computed from ``region`` by :func:`gap_regions` when not given)."""
         if self.gap_region is None:
