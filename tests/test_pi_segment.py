@@ -7,6 +7,7 @@ import pytest
 from daa_sil.geometry import wellclear as wc
 from daa_sil.agent import PilotInput, policy_for_group
 from daa_sil.daa import DaaConfig
+from daa_sil.daa.alerting import relative_state
 from daa_sil.geometry.kinematics import AircraftState, Performance
 from daa_sil.onboard import OnboardCore
 from daa_sil.geometry.thresholds import PAPER
@@ -95,7 +96,8 @@ def test_lowc_strictly_between_samples_gets_a_positive_pi_in_the_core():
     s1 = core.own.position()[:, None] - core.intruders.position()
     v = s1 - s0
     assert wc.penetration_rate(s0, v, PAPER)[0, 0] == 0 and wc.penetration_rate(s1, v, PAPER)[0, 0] == 0
-    assert out.pen_rate[0] == 0  # what the old sample-based PI summed
+    # what the old sample-based PI summed: the penetration rate of the sampled state and velocity
+    assert wc.penetration_rate(*relative_state(out.own, out.intruders), PAPER).max() == 0
     assert out.lowc[0] and out.pi_s[0] > 0.3 and out.pi_paper_s[0] > out.pi_s[0]
     z0, z1 = -s0[0, 0, 2], -s1[0, 0, 2]  # intruder above the ownship: +150 then about -150
     slope = abs(z1 - z0)
