@@ -226,7 +226,6 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
     cand = _Candidates(own, bands)
     k0 = np.nonzero((cand.axis == AXIS_HORIZONTAL) & (cand.side == 0))[0][0]
     in_conflict = bands.trk.pick("region", slice(None), k0 - cand.cols[AXIS_HORIZONTAL].start) != REGION_NONE
-    moving = cand.side[None, :] != 0
     axes = bands.axes()
     src = [a.source() for a in axes] if COMPILED and n and all(a is not None for a in axes) else None
     if src and all(b.region.dtype == np.int8 and b.preferred.dtype == np.int8 for b, _ in src):
@@ -244,7 +243,7 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
                                       p_ax, p_side, np.array([axis_code(a) for a in cfg.resolution_axes], np.int64),
                                       chosen)
     else:
-        chosen = _resolve_numpy(cand, bands, cfg, n, in_conflict, moving, prev)
+        chosen = _resolve_numpy(cand, bands, cfg, n, in_conflict, prev)
     hold = chosen < 0
     idx = np.where(hold, k0, chosen)
     cmd = cand.command(idx)
@@ -256,9 +255,10 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
 
 
 def _resolve_numpy(cand: _Candidates, bands: Bands, cfg: DaaConfig, n: int, in_conflict: np.ndarray,
-                   moving: np.ndarray, prev) -> np.ndarray:
+                   prev) -> np.ndarray:
     """The candidate :func:`resolve` chooses per row (-1: none, not in conflict), in numpy (the oracle of
     ``kernels.select.resolution_into``)."""
+    moving = cand.side[None, :] != 0
     chosen = np.full(n, -1)
     p_ax = np.full(n, AXIS_NONE)
     # (each step works on the rows it can still change only)
