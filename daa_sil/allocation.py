@@ -56,10 +56,11 @@ class PolicyRows:
         return int(self.index.size)
 
     def value(self, name: str) -> np.ndarray:
-        """Setting ``name`` of :class:`AllocationPolicy` for every row, ``(N,)``."""
+        """Setting ``name`` of :class:`AllocationPolicy` for every row, ``(N,)`` (read-only, computed once)."""
         got = self._cache.get(name)
         if got is None:
             got = np.asarray([getattr(p, name) for p in self.policies])[self.index]
+            got.flags.writeable = False  # shared by every later call (and step): read-only
             self._cache[name] = got
         return got
 

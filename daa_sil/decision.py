@@ -87,12 +87,16 @@ CODE_NAMES = {"decision": DECISION_NAMES, "rule": RULE_NAMES, "authority": AUTHO
               "pilot_axis": AXIS_NAMES, "exec_axis": AXIS_NAMES, "pilot_dir": DIR_NAMES, "exec_dir": DIR_NAMES}
 
 
+#: the name tables as object arrays, made once (decode indexes them on every step of the SIL vehicle)
+_NAME_ARRAYS = {key: np.asarray(names, dtype=object) for key, names in CODE_NAMES.items()}
+
+
 def decode(decisions: Mapping) -> dict:
     """Copy of a decision record (as a dict) with the integer-coded fields as string arrays."""
     out = dict(decisions)
-    for key, names in CODE_NAMES.items():
+    for key, names in _NAME_ARRAYS.items():
         if key in out:
-            out[key] = np.asarray(names, dtype=object)[np.asarray(out[key], int)]
+            out[key] = names[np.asarray(out[key], int)]
     return out
 
 

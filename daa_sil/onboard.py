@@ -118,18 +118,24 @@ class TurnRateEstimator:
 def band_intervals(values_deg: np.ndarray, region: np.ndarray) -> dict:
     """Merge per-candidate track bands ``(N, K)`` (degrees, low side first; region code, -1 = none)
     into intervals of equal region: ``bands_trk_lo_deg``, ``bands_trk_hi_deg``, ``bands_trk_region``
-    padded ``(N, R)`` and ``bands_count`` ``(N,)``. Vectorised run-length encoding."""
+    padded ``(N, R)`` and ``bands_count`` ``(N,)``.
+
+    The one definition of the step log's band summary (fast-time and the SIL vehicle): a sample with a
+    non-finite value or a negative region is left out; each run of equal regions among the samples kept
+    is one interval, from its first to its last sample's value (a sample left out does not split a
+    run). Vectorised: the kept samples are moved to the front of their row, then run-length encoded."""
     reg = np.asarray(region, dtype=np.int64)
     vals = np.asarray(values_deg, dtype=float)
     n, k = reg.shape
-    if k == 0:
-        z = np.zeros((n, 0))
-        return {"bands_trk_lo_deg": z, "bands_trk_hi_deg": z, "bands_trk_region": z.astype(np.int64),
-                "bands_count": np.zeros(n, np.int64)}
-    valid = reg >= 0
-    starts = valid.copy()
+    keep = (reg >= 0) & np.isfinite(vals)
+    if not keep.all():
+        order = np.argsort(~keep, axis=1, kind="stable")  # kept samples first, in their order
+        vals, reg = np.take_along_axis(vals, order, axis=1), np.take_along_axis(reg, order, axis=1)
+        keep = np.arange(k)[None, :] < keep.sum(axis=1)[:, None]
+        reg = np.where(keep, reg, -1)
+    starts = keep.copy()
     starts[:, 1:] &= reg[:, 1:] != reg[:, :-1]
-    ends = valid.copy()
+    ends = keep.copy()
     ends[:, :-1] &= reg[:, :-1] != reg[:, 1:]
     count = starts.sum(axis=1)
     width = int(count.max(initial=0))
@@ -172,6 +178,7 @@ class OnboardCore:
         self.n, self.m = intr.shape
         self.controls = controls
         self.policy = policy
+        self._policy_rows = None
         self.wait_lookup = wait_lookup
         self.dt = float(dt)
         self.t = float(t0)
@@ -191,6 +198,16 @@ class OnboardCore:
                    dt=encounters.dt_s, **kw)
 
 
+    def policy_rows(self):
+        """:attr:`policy` as a :class:`~daa_sil.allocation.PolicyRows` of the N rows, made again only when
+        :attr:`policy` is replaced (the vehicle may switch it mid-flight), so its settings are read
+        once, not on every step."""
+        if self._policy_rows is None or self._policy_rows[0] is not self.policy:
+            from .allocation import PolicyRows
+
+            self._policy_rows = (self.policy, PolicyRows.of(self.policy, self.n))
+        return self._policy_rows[1]
+
     def geometry(self, s=None, v=None) -> dict:
         """Per-intruder well-clear quantities at the current time, (N, M) each (``s``, ``v``: the
         relative state if already computed)."""
@@ -205,7 +222,7 @@ class OnboardCore:
             raise ValueError(f"OnboardCore is at t={self.t:g} s, step() called with t={t:g} s")
         own0, intr0 = self.own, self.intruders
         turn_est = self.turn_estimator.update(t, intr0)
-        cmd, dec, self.memory = self._agent.agent_step(t, own0, intr0, pilot_input, self.memory, self.policy,
+        cmd, dec, self.memory = self._agent.agent_step(t, own0, intr0, pilot_input, self.memory, self.policy_rows(),
                                                        self.daa_cfg, self.wait_lookup, turn_rate=turn_est,
                                                        band_record=self.step_log, daa_batches=self.daa_batches)
         alert = np.asarray(dec["alert_level"], dtype=np.int8).reshape(self.n, self.m)

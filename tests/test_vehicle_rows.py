@@ -1,4 +1,5 @@
-"""The vehicle's step-log helpers: the vectorised band-interval merge against a plain loop."""
+"""The step log's band summary (one definition for fast-time and the SIL vehicle): the vectorised
+merge against a plain loop, one row (the vehicle's) and whole batches (fast-time's)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import numpy as np
 import pytest
 
 from daa_sil.daa.config import REGION_NAMES
+from daa_sil.onboard import band_intervals
 from vehicle.core import track_intervals
 
 
@@ -36,6 +38,26 @@ def test_track_intervals_match_the_definition(seed):
     got = track_intervals(values, regions)
     assert got == _loop(values, regions)
     assert all(type(x) is float for x in got[0] + got[1])
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_batched_band_intervals_match_the_definition_row_by_row(seed):
+    """Fast-time's (N, K) merge gives every row what the loop gives it, padded to the widest row."""
+    rng = np.random.default_rng(100 + seed)
+    n, k = int(rng.integers(1, 30)), int(rng.integers(0, 60))
+    values = np.sort(rng.uniform(0, 360, (n, k)), axis=1)
+    values[rng.random((n, k)) < 0.15] = np.nan
+    values[rng.random((n, k)) < 0.05] = -np.inf
+    regions = rng.choice([-1, 0, 1, 2, 3, 4], (n, k), p=[0.15, 0.3, 0.05, 0.2, 0.2, 0.1]).astype(np.int8)
+    regions[rng.random(n) < 0.2] = -1  # whole rows without bands (inactive encounters)
+    b = band_intervals(values, regions)
+    for i in range(n):
+        lo, hi, names = _loop(values[i], regions[i])
+        c = int(b["bands_count"][i])
+        assert c == len(lo)
+        assert b["bands_trk_lo_deg"][i, :c].tolist() == lo and b["bands_trk_hi_deg"][i, :c].tolist() == hi
+        assert [REGION_NAMES[r] for r in b["bands_trk_region"][i, :c]] == names
+        assert np.isnan(b["bands_trk_lo_deg"][i, c:]).all() and np.isnan(b["bands_trk_hi_deg"][i, c:]).all()
 
 
 def test_track_intervals_edge_cases():

@@ -92,21 +92,16 @@ def link_delay_processes(sc: Scenario) -> "dict | None":
 
 
 def track_intervals(values_deg: np.ndarray, regions: np.ndarray) -> tuple[list, list, list]:
-    """Merge ordered track band samples (deg) with region codes into ``(lo, hi, region name)`` lists.
-
-    Samples with a non-finite value or a negative region are left out; each run of equal regions
-    among the rest is one interval, from its first to its last sample (vectorised: one call a step)."""
+    """One encounter's track band samples (deg, region codes; ``(K,)``) merged into ``(lo, hi, region
+    name)`` lists: :func:`daa_sil.onboard.band_intervals` (the one definition, shared with fast-time)
+    of that row, as the step-log row holds it."""
     from daa_sil.daa.config import REGION_NAMES
+    from daa_sil.onboard import band_intervals
 
-    v = np.asarray(values_deg, float)
-    r = np.asarray(regions)
-    keep = np.isfinite(v) & (r >= 0)
-    v, r = v[keep], r[keep].astype(np.int64)
-    if not v.size:
-        return [], [], []
-    first = np.flatnonzero(np.concatenate(([True], r[1:] != r[:-1])))
-    last = np.append(first[1:] - 1, v.size - 1)
-    return v[first].tolist(), v[last].tolist(), [REGION_NAMES[i] for i in r[first].tolist()]
+    b = band_intervals(np.asarray(values_deg, float)[None, :], np.asarray(regions)[None, :])
+    c = int(b["bands_count"][0])
+    return (b["bands_trk_lo_deg"][0, :c].tolist(), b["bands_trk_hi_deg"][0, :c].tolist(),
+            [REGION_NAMES[i] for i in b["bands_trk_region"][0, :c].tolist()])
 
 
 class VehicleCore:

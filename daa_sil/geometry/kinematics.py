@@ -188,15 +188,14 @@ def _arc(gs0, acc, trk0, w, t):
     small = np.abs(w) < STRAIGHT_TURN_RATE
     ws = np.where(small, 1.0, w)
     th1 = trk0 + w * t
+    # each sine, cosine and power once (the same numbers as writing them where they are used)
+    c0, s0, c1, s1, ws2 = np.cos(trk0), np.sin(trk0), np.cos(th1), np.sin(th1), ws ** 2
     # x: int (gs0 + a t) sin(trk0 + w t) dt ; y: int (gs0 + a t) cos(trk0 + w t) dt
-    dx_turn = (gs0 * (np.cos(trk0) - np.cos(th1)) / ws
-               + acc * (-t * np.cos(th1) / ws + (np.sin(th1) - np.sin(trk0)) / ws ** 2))
-    dy_turn = (gs0 * (np.sin(th1) - np.sin(trk0)) / ws
-               + acc * (t * np.sin(th1) / ws + (np.cos(th1) - np.cos(trk0)) / ws ** 2))
+    dx_turn = gs0 * (c0 - c1) / ws + acc * (-t * c1 / ws + (s1 - s0) / ws2)
+    dy_turn = gs0 * (s1 - s0) / ws + acc * (t * s1 / ws + (c1 - c0) / ws2)
     dist = gs0 * t + 0.5 * acc * t * t
-    dx_str = dist * np.sin(trk0 + 0.5 * w * t)
-    dy_str = dist * np.cos(trk0 + 0.5 * w * t)
-    return np.where(small, dx_str, dx_turn), np.where(small, dy_str, dy_turn)
+    mid = trk0 + 0.5 * w * t
+    return np.where(small, dist * np.sin(mid), dx_turn), np.where(small, dist * np.cos(mid), dy_turn)
 
 
 def horizontal_segment(x, y, gs, trk, w, acc, t):

@@ -180,10 +180,9 @@ def violation_interval(s, v, th: "Thresholds | str | None" = None, t0=0.0, t1=18
     th = get_thresholds(th)
     s, v = _f(s), _f(v)
     shape = np.broadcast_shapes(s.shape[:-1], v.shape[:-1], np.shape(t0), np.shape(t1))
-    s = np.broadcast_to(s, shape + (3,))
-    v = np.broadcast_to(v, shape + (3,))
-    B = np.broadcast_to(_f(t0), shape)
-    T = np.broadcast_to(_f(t1), shape)
+    s = s if s.shape == shape + (3,) else np.broadcast_to(s, shape + (3,))
+    v = v if v.shape == shape + (3,) else np.broadcast_to(v, shape + (3,))
+    B, T = _f(t0), _f(t1)  # the windows below take the shape of s and v
     D, H, TT, TC = th.dthr, th.zthr, th.tthr, th.tcoa
     sz, vz = s[..., 2], v[..., 2]
 
@@ -359,10 +358,10 @@ def segment_penetration(s0, v, t_in, t_out, constants: "tuple[float, float, floa
     t_in, t_out = _f(t_in), _f(t_out)
     shape = np.broadcast_shapes(s0.shape[:-1], v.shape[:-1], t_in.shape, t_out.shape)
     ok = (np.isfinite(t_in) & np.isfinite(t_out) & (t_out > t_in))
+    if not ok.any():
+        return np.zeros(shape)
     ok = np.broadcast_to(ok, shape).reshape(-1)
     out = np.zeros(ok.size)
-    if not ok.any():
-        return out.reshape(shape)
     s0_i = np.broadcast_to(s0, shape + (3,)).reshape(-1, 3)[ok]
     v_i = np.broadcast_to(v, shape + (3,)).reshape(-1, 3)[ok]
     a = np.broadcast_to(t_in, shape).reshape(-1)[ok]
