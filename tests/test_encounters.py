@@ -161,3 +161,29 @@ def test_geometry_constructor_head_on_by_hand():
     assert es.intr.trk[0, 0] == pytest.approx(np.pi)
     left = EG.encounter_from_geometry(EG.IntruderGeometry(angle_deg=180, hmd_m=-500, t_cpa_s=60, gs_mps=100))
     assert left.intr.x[0, 0] == pytest.approx(-500.0)
+
+
+@pytest.mark.parametrize("reading", ["paper", "feet"])
+def test_a_campaign_samples_its_encounters_in_pieces_without_changing_them(reading):
+    """The campaign samples its encounter set one piece per worker; the pieces concatenated are the set
+    sampled at once, field by field (two intruders, so every (N, M) array is checked), under a reading
+    in metres and one in feet (other HMD / VMD ranges)."""
+    import concurrent.futures as cf
+
+    from daa_sil.study.campaign import MIN_SAMPLE_PART, CampaignConfig, sample_campaign_encounters
+
+    cfg = CampaignConfig(groups=("B-1",), n_encounters=2 * MIN_SAMPLE_PART + 37, seed=5, n_intruders=2,
+                         reading=reading)
+    whole = sample_campaign_encounters(cfg)
+    with cf.ThreadPoolExecutor(2) as ex:
+        pieces = sample_campaign_encounters(cfg, ex, parts=3)  # 1,037 encounters: two pieces of >= 500
+    assert len(pieces) == len(whole) == cfg.n_encounters
+    for f in ("x", "y", "z", "gs", "trk", "vs"):
+        assert np.array_equal(getattr(whole.intr, f), getattr(pieces.intr, f))
+        assert np.array_equal(getattr(whole.own, f), getattr(pieces.own, f))
+    for k in E.SEGMENT_FIELDS:
+        assert np.array_equal(getattr(whole, k), getattr(pieces, k), equal_nan=True)
+    assert whole.params.keys() == pieces.params.keys()
+    for k in whole.params:
+        assert np.array_equal(whole.params[k], pieces.params[k], equal_nan=True), k
+    assert np.array_equal(whole.encounter_id, pieces.encounter_id) and np.array_equal(whole.seed, pieces.seed)
