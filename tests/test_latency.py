@@ -149,3 +149,27 @@ def test_iid_fifo_inflation_vs_piecewise_constant():
     d_pc = np.array([pc.delay(x) for x in t])
     eff_pc = fifo_release(t, d_pc) - t
     assert abs(eff_pc.mean() - d_pc.mean()) < 0.2
+
+
+@pytest.mark.parametrize("spec, draws", [("const:4", False), ("spike:1,6,10,5,30", False), ("uniform:1,8", True),
+                                         ("gauss:5,3", True)])
+def test_the_draws_flag_says_whether_sample_reads_its_generator(spec, draws):
+    """A model that declares it draws nothing gets no generator (fast-time skips making one per
+    encounter and block); one that draws gives other delays from other generators. Also through the
+    half-round-trip rule, which answers for its round trip."""
+    from daa_sil.models.link_rule import HalfRoundTrip
+
+    t = np.arange(64, dtype=float)
+    for model in (parse_delay_spec(spec), HalfRoundTrip(parse_delay_spec(spec))):
+        assert model.draws is draws
+        a = model.sample(np.random.default_rng(1), t)
+        b = model.sample(np.random.default_rng(2), t)
+        if draws:
+            assert not np.array_equal(a, b)
+        else:
+            assert np.array_equal(a, b) and np.array_equal(model.sample(None, t), a)
+            # the batched table is the per-encounter process, draw for draw, without any generator
+            bd = BatchedDelay(model, [7, 8], epoch_s=1.0, duration_s=63.0)
+            for i, seed in enumerate((7, 8)):
+                p = DelayProcess(model, seed, epoch_s=1.0)
+                assert np.array_equal([bd.delay_at(x)[i] for x in t], [p.delay(x) for x in t])

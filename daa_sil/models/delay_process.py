@@ -57,7 +57,9 @@ def draw_block(model: DelayModel, ss: np.random.SeedSequence, block: int, epoch_
     ``t0 + e*epoch_s`` (for a :class:`Trace`, the delay at that instant).
     """
     idx = np.arange(block * BLOCK, (block + 1) * BLOCK, dtype=float)
-    return model.sample(_block_rng(ss, block), t0 + idx * epoch_s)
+    # a model that draws nothing (constant, trace) needs no generator: making one per block and
+    # encounter was most of a constant link's cost in fast-time
+    return model.sample(_block_rng(ss, block) if model.draws else None, t0 + idx * epoch_s)
 
 
 class DelayProcess:

@@ -85,10 +85,13 @@ class DelayModel(abc.ABC):
     """Abstract base: a one-way delay distribution in seconds (every model implements all four)."""
 
     kind = "model"
+    #: False for a model whose :meth:`sample` never reads its generator (the caller may pass None)
+    draws = True
 
     @abc.abstractmethod
-    def sample(self, rng: np.random.Generator, t: "np.ndarray | float") -> np.ndarray:
-        """Draw delays (s), one per element of ``t`` (sim times, s; only :class:`Trace` uses them)."""
+    def sample(self, rng: "np.random.Generator | None", t: "np.ndarray | float") -> np.ndarray:
+        """Draw delays (s), one per element of ``t`` (sim times, s; only :class:`Trace` uses them);
+        ``rng`` may be None when :attr:`draws` is False."""
         raise NotImplementedError
 
     @abc.abstractmethod
@@ -116,6 +119,7 @@ class Constant(DelayModel):
 
     seconds: float
     kind = "constant"
+    draws = False
 
     def __post_init__(self):
         object.__setattr__(self, "seconds", _check_delay("constant delay", self.seconds))
@@ -231,6 +235,7 @@ class Trace(DelayModel):
     """Recorded delays: ``delays[i]`` (s) holds from ``times[i]`` (s, strictly increasing) on."""
 
     kind = "trace"
+    draws = False
 
     def __init__(self, times: Sequence[float], delays: Sequence[float], source: str = "<memory>"):
         t = np.asarray(times, dtype=float).ravel()

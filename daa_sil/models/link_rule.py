@@ -49,6 +49,11 @@ class HalfRoundTrip(DelayModel):
     def __hash__(self) -> int:
         return hash(("half", self.round_trip.spec()))
 
+    @property
+    def draws(self) -> bool:
+        """Whether :meth:`sample` reads its generator: the round trip's answer."""
+        return self.round_trip.draws
+
     def sample(self, rng, t):
         return 0.5 * np.asarray(self.round_trip.sample(rng, t), dtype=float)
 
