@@ -143,3 +143,33 @@ def test_geodetic_round_trip_and_scale():
     # 1 arc-minute of latitude is about 1852 m (1849-1853 m between equator and pole)
     _, yy, _ = frames.geodetic_to_enu(36.1 + 1 / 60, -97.1, 0, 36.1, -97.1)
     assert 1845 < yy < 1855
+
+
+def test_advance_skips_its_empty_second_segment_only_where_that_changes_no_bit():
+    """With no acceleration, advance's second (speed-limit) segment has length 0 and is skipped when its
+    arithmetic would change nothing. Bit for bit against both segments flown, on states built to break
+    a careless skip: -0.0 positions, tracks and speeds, a zero speed while turning (the arc is then a
+    signed zero of either sign), nan and inf."""
+    from daa_sil.geometry.frames import wrap_2pi
+    from daa_sil.geometry.kinematics import horizontal_segment
+
+    rng = np.random.default_rng(3)
+    n = 4000
+    pick = lambda *vals: rng.choice(np.array(vals, float), n)  # noqa: E731
+    x = np.where(rng.random(n) < 0.5, pick(-0.0, 0.0, np.nan, np.inf), rng.normal(0, 1e4, n))
+    y = np.where(rng.random(n) < 0.5, pick(-0.0, 0.0, -np.inf), rng.normal(0, 1e4, n))
+    gs = np.where(rng.random(n) < 0.5, pick(-0.0, 0.0, np.nan, np.inf), rng.uniform(0, 300, n))
+    trk = np.where(rng.random(n) < 0.5, pick(-0.0, 0.0, np.pi, 4.0, np.nan), rng.uniform(0, 2 * np.pi, n))
+    w = np.where(rng.random(n) < 0.5, pick(0.0, -0.0, 0.05, -0.05, 1e-8), rng.uniform(-0.1, 0.1, n))
+    perf = Performance(max_turn_rate=0.2, horizontal_accel=3.0, vertical_accel=2.0, max_vs=30.0, min_gs=0.0,
+                       max_gs=400.0)
+    with np.errstate(all="ignore"):  # the nan and inf rows make numpy warn, in both computations alike
+        finite = np.flatnonzero(np.isfinite(x + y + gs + trk))
+        # the batch, its finite rows (a batch the skip may take), and single rows (N = 1)
+        for rows in [np.arange(n), finite] + [np.array([i]) for i in range(400)]:
+            s = AircraftState(x[rows], y[rows], np.zeros(rows.size), gs[rows], trk[rows], np.zeros(rows.size))
+            got = advance(s, w[rows], 0.0, 0.0, 1.0, perf)
+            x1, y1, gs1, trk1 = horizontal_segment(s.x, s.y, s.gs, s.trk, w[rows], np.zeros(rows.size), np.ones(rows.size))
+            want = horizontal_segment(x1, y1, gs1, trk1, w[rows], 0.0, np.zeros(rows.size))
+            for a, b in zip((got.x, got.y, got.gs, got.trk), want[:3] + (wrap_2pi(want[3]),)):
+                assert a.tobytes() == b.tobytes()

@@ -205,6 +205,21 @@ def horizontal_segment(x, y, gs, trk, w, acc, t):
     return x + dx, y + dy, gs + acc * t, trk + w * t
 
 
+def _zero_length_keeps(x, y, gs, trk, w) -> bool:
+    """True when :func:`horizontal_segment` of length 0 (acceleration 0) would return ``x, y, gs, trk``
+    exactly: ``gs, trk, w`` finite, so the arc and ``w * 0`` are signed zeros, and no ``x, y, gs, trk`` is
+    -0.0, the one value to which adding +0.0 is not the identity. (:func:`advance` then skips its second
+    segment, whose arc took a quarter of sampling an encounter set.)"""
+    with np.errstate(invalid="ignore", over="ignore"):
+        if not np.isfinite(gs + trk + w).all():  # inf - inf is nan: "not finite" too
+            return False
+    for a in (x, y, gs, trk):
+        zero = a == 0
+        if zero.any() and np.signbit(a[zero]).any():
+            return False
+    return True
+
+
 def vertical_toward(z, vs, target_vs, v_accel, dt):
     """Altitude (m) and vertical speed (m/s) after ``dt`` s moving toward ``target_vs`` (m/s) with
     |acceleration| = ``v_accel`` (m/s^2); exact."""
@@ -232,7 +247,9 @@ def advance(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, 
         t_sat = np.where(acc != 0, (limit - s.gs) / np.where(acc != 0, acc, 1.0), np.inf)
     t_sat = np.clip(t_sat, 0.0, dt)
     x, y, gs, trk = horizontal_segment(s.x, s.y, s.gs, s.trk, w, acc, t_sat)
-    x, y, gs, trk = horizontal_segment(x, y, gs, trk, w, 0.0, dt - t_sat)
+    rest = dt - t_sat
+    if np.any(rest) or not _zero_length_keeps(x, y, gs, trk, w):  # (no speed limit reached: nothing left)
+        x, y, gs, trk = horizontal_segment(x, y, gs, trk, w, 0.0, rest)
     # vertical: constant acceleration toward the limit
     av = np.asarray(vertical_accel, float)
     vs_target = np.where(av > 0, perf.max_vs, np.where(av < 0, -perf.max_vs, s.vs))
