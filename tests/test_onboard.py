@@ -80,3 +80,21 @@ def test_band_intervals_merge_runs_of_equal_region():
     assert b["bands_trk_lo_deg"][0].tolist() == [350.0, 355.0, 5.0, 10.0]
     assert b["bands_trk_hi_deg"][0].tolist() == [350.0, 0.0, 5.0, 10.0]
     assert b["bands_trk_region"][0].tolist() == [0, 2, 0, 4]
+
+
+def test_a_policy_replaced_mid_flight_is_the_one_the_next_step_flies():
+    """The core reads its policy's settings once per policy, not per step (``policy_rows``); replacing
+    the policy (as the SIL vehicle does on a mode or parameter change) must reach the very next step:
+    with the agent disabled the DAA stops acting at once."""
+    from dataclasses import replace
+
+    es = encounter_from_geometry(IntruderGeometry(angle_deg=180, hmd_m=0.0, t_cpa_s=60, gs_mps=100.0))
+    core = OnboardCore.from_encounters(es, policy_for_group("B-1"), DaaConfig(thresholds="paper"))
+    outs = _run(core, 40)
+    assert any(o.decisions["active"][0] for o in outs)  # alerting and deciding by now
+    first = core.policy_rows()
+    assert core.policy_rows() is first and first.value("enabled")[0]
+    core.policy = replace(core.policy, enabled=False)
+    assert core.policy_rows() is not first and not core.policy_rows().value("enabled")[0]
+    out = core.step(40.0, PilotInput.nothing(core.n, link_alive_t=40.0))
+    assert not out.decisions["active"][0]
