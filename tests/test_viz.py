@@ -260,6 +260,31 @@ def test_disabled_logger_never_touches_rerun(table):
     assert logger.close() is None and logger.steps_logged == 0
 
 
+def test_interrupt_right_after_the_viewer_url_is_a_clean_stop(monkeypatch):
+    """Whoever reads the URL may stop the server at once (CI sent SIGTERM right after the line, before
+    the wait began, and the command exited 143): the announcement is inside the Ctrl-C guard, and the
+    server is stopped either way."""
+
+    class FakeServer:
+        stopped = 0
+
+        def alive(self) -> bool:
+            return not self.stopped
+
+        def stop(self) -> None:
+            self.stopped += 1
+
+    server = FakeServer()
+    monkeypatch.setattr(viz.EncounterLogger, "web", property(lambda self: server))
+    logger = viz.EncounterLogger(viz.SinkOptions())
+
+    def announce_then_interrupted() -> None:
+        raise KeyboardInterrupt  # the signal lands as the line is written
+
+    logger.wait_serving(announce=announce_then_interrupted)  # returns: no KeyboardInterrupt escapes
+    assert server.stopped == 1
+
+
 def test_overwrite_and_atomic_output(tmp_path, table):
     target = tmp_path / "enc.rrd"
     target.write_bytes(b"old")

@@ -221,9 +221,8 @@ def _serve_web(args, result: dict) -> None:
     if logger.web is None or not logger.web.alive():
         raise OutputError(f"--serve-web: the Rerun web viewer did not start on {args.bind} "
                           f"(ports {args.web_port}, {args.grpc_port})")
-    print(f"web viewer: {logger.web.url}  (Ctrl-C to stop)", file=sys.stderr if args.json else sys.stdout,
-          flush=True)
-    logger.wait_serving()
+    logger.wait_serving(announce=lambda: print(f"web viewer: {logger.web.url}  (Ctrl-C to stop)",
+                                               file=sys.stderr if args.json else sys.stdout, flush=True))
 
 
 def _say(prefix: str, args):

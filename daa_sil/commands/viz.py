@@ -92,21 +92,26 @@ def sink_options(args):
 def _finish(args, path, logger, summary: dict) -> int:
     summary.update({"rrd": str(path) if path else None, "steps": logger.steps_logged,
                     "web_url": logger.web.url if logger.web is not None and logger.web.alive() else None})
-    if args.json:
-        print(json.dumps(summary, sort_keys=True))
-    else:
-        if path:
-            print(f"wrote {path} ({Path(path).stat().st_size / 1000:.0f} kB, {logger.steps_logged} steps)")
-        if summary["web_url"]:
-            print(f"web viewer: {summary['web_url']}  (Ctrl-C to stop)")
+
+    def report() -> None:
+        if args.json:
+            print(json.dumps(summary, sort_keys=True))
+        else:
+            if path:
+                print(f"wrote {path} ({Path(path).stat().st_size / 1000:.0f} kB, {logger.steps_logged} steps)")
+            if summary["web_url"]:
+                print(f"web viewer: {summary['web_url']}  (Ctrl-C to stop)")
+        sys.stdout.flush()
+
+    if summary["web_url"] and not (args.rrd and path is None):
+        logger.wait_serving(announce=report)  # a Ctrl-C / SIGTERM right after the URL is a clean stop
+        return 0
+    report()
     if args.rrd and path is None:
         return 1
     if args.serve_web and not summary["web_url"]:
         raise OutputError(f"--serve-web: the Rerun web viewer did not start on {args.bind} "
                           f"(ports {args.web_port}, {args.grpc_port}); nothing is served")
-    if summary["web_url"]:
-        sys.stdout.flush()
-        logger.wait_serving()
     return 0
 
 

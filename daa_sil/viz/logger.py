@@ -156,9 +156,13 @@ class EncounterLogger:
         if self.web is not None:
             self.web.stop()
 
-    def wait_serving(self) -> None:
-        """Block until Ctrl-C while the web viewer runs, then stop it."""
+    def wait_serving(self, announce: "Callable[[], None] | None" = None) -> None:
+        """Call ``announce`` (e.g. print the viewer's URL), then block until Ctrl-C while the web viewer
+        runs, then stop it. The announcement is inside the Ctrl-C guard: whoever reads it may stop the
+        server at once, and that is still a clean stop."""
         try:
+            if announce is not None:
+                announce()
             while self.web is not None and self.web.alive():
                 time.sleep(0.5)
         except KeyboardInterrupt:
