@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from daa_sil.geometry import frames
-from daa_sil.geometry.kinematics import AircraftState, Command, Performance, advance, fly_command
+from daa_sil.geometry import kinematics
+from daa_sil.geometry.kinematics import (AircraftState, Command, Performance, advance, advance_reference, fly_command,
+                                         fly_command_reference)
 from daa_sil.geometry.units import DEG, FPM, G0
 
 PERF = Performance()
@@ -151,7 +153,7 @@ def test_advance_skips_its_empty_second_segment_only_where_that_changes_no_bit()
     a careless skip: -0.0 positions, tracks and speeds, a zero speed while turning (the arc is then a
     signed zero of either sign), nan and inf."""
     from daa_sil.geometry.frames import wrap_2pi
-    from daa_sil.geometry.kinematics import horizontal_segment
+    from daa_sil.geometry.kinematics import horizontal_segment_reference as horizontal_segment
 
     rng = np.random.default_rng(3)
     n = 4000
@@ -168,8 +170,96 @@ def test_advance_skips_its_empty_second_segment_only_where_that_changes_no_bit()
         # the batch, its finite rows (a batch the skip may take), and single rows (N = 1)
         for rows in [np.arange(n), finite] + [np.array([i]) for i in range(400)]:
             s = AircraftState(x[rows], y[rows], np.zeros(rows.size), gs[rows], trk[rows], np.zeros(rows.size))
-            got = advance(s, w[rows], 0.0, 0.0, 1.0, perf)
+            got = advance_reference(s, w[rows], 0.0, 0.0, 1.0, perf)  # the numpy skip (the kernel: below)
             x1, y1, gs1, trk1 = horizontal_segment(s.x, s.y, s.gs, s.trk, w[rows], np.zeros(rows.size), np.ones(rows.size))
             want = horizontal_segment(x1, y1, gs1, trk1, w[rows], 0.0, np.zeros(rows.size))
             for a, b in zip((got.x, got.y, got.gs, got.trk), want[:3] + (wrap_2pi(want[3]),)):
                 assert a.tobytes() == b.tobytes()
+
+
+def _motion_inputs(rng, n: int) -> tuple:
+    """States, controls and commands for :func:`test_compiled_motion_is_the_numpy_motion`: realistic values, a
+    quarter of them replaced by edge cases (signed zeros, nan, +-inf, huge, turn rates at the straight-line
+    threshold, tracks at 0 / pi / 2 pi, speeds and vertical speeds at and beyond the limits)."""
+    special = np.array([0.0, -0.0, np.nan, np.inf, -np.inf, 1e300, -1e300, 1e-300, 1e-6, -1e-6, 5e-7, 1e-7,
+                        3 * DEG, -3 * DEG, 0.05, -0.05, np.pi, 2 * np.pi, -np.pi, 2.0, -2.0, 5.0, 30.0, -30.0,
+                        200.0, 400.0, 1e4])
+
+    def edge(a):
+        pick = rng.random(n) < 0.25
+        a[pick] = rng.choice(special, int(pick.sum()))
+        return a
+
+    state = AircraftState(edge(rng.normal(0, 8000, n)), edge(rng.normal(0, 8000, n)), edge(rng.normal(1000, 300, n)),
+                          edge(rng.uniform(0, 150, n)), edge(rng.uniform(0, 2 * np.pi, n)), edge(rng.normal(0, 5, n)))
+    controls = (edge(rng.normal(0, 0.05, n)), edge(rng.normal(0, 2, n)), edge(rng.normal(0, 2, n)))
+    cmd = Command(edge(np.where(rng.random(n) < 0.3, np.nan, rng.uniform(0, 2 * np.pi, n))),
+                  edge(np.where(rng.random(n) < 0.3, np.nan, rng.normal(0, 10, n))),
+                  edge(np.where(rng.random(n) < 0.3, np.nan, rng.uniform(0, 250, n))))
+    return state, controls, cmd
+
+
+def _same_motion(got: AircraftState, want: AircraftState) -> None:
+    """Every component bit for bit (a zero's sign too); nan where the reference has nan (a nan's sign and
+    payload are not results: the compiler may take the other operand of a commutative operation)."""
+    for name in ("x", "y", "z", "gs", "trk", "vs"):
+        a, b = getattr(got, name), getattr(want, name)
+        assert a.shape == b.shape
+        nan = np.isnan(a) & np.isnan(b)
+        bad = (a.view(np.int64) != b.view(np.int64)) & ~nan
+        assert not bad.any(), f"{name}: {int(bad.sum())} differ, first {a[bad][:3]} vs {b[bad][:3]}"
+
+
+def test_compiled_motion_is_the_numpy_motion(monkeypatch):
+    """advance, fly_command and horizontal_segment as compiled kernels (a process that loaded the DAA's
+    kernels) give the numpy references' numbers: batches with edge cases, single rows (N = 1), (N, M) intruder arrays, scalar
+    controls, steps of 0 / 1e-9 / 0.1 / 1 / 2 s, and performances with no turn or no acceleration."""
+    from daa_sil.daa import kernels
+
+    kernels.get()
+    rng = np.random.default_rng(21)
+    ref_advance, ref_fly = advance_reference, fly_command_reference
+
+    def not_here(*_a, **_k):
+        raise AssertionError("the numpy reference ran: the compiled path was not taken")
+
+    perfs = [Performance(), Performance(max_turn_rate=0.0, horizontal_accel=0.0, vertical_accel=0.0),
+             Performance(max_turn_rate=0.2, horizontal_accel=3.0, vertical_accel=2.0, max_vs=30.0, min_gs=0.0,
+                         max_gs=400.0)]
+    cases = 0
+    with np.errstate(all="ignore"):  # the nan / inf rows make the numpy references warn
+        for trial in range(240):
+            n = [1, 2, 9, 500][trial % 4]
+            state, (w, a, av), cmd = _motion_inputs(rng, n)
+            dt = [1.0, 0.1, 2.0, 0.0, 1e-9][trial % 5]
+            perf = perfs[trial % 3]
+            if trial % 6 == 5:  # scalar controls and a scalar command field, broadcast
+                w, av = float(w[0]), float(av[0])
+                cmd = Command(cmd.trk, np.array(float(cmd.vs[0])), cmd.gs)
+            if trial % 3 == 1:  # no acceleration (the usual intruder): the speed-limit segment has length 0
+                a = 0.0
+            want_a = ref_advance(state, w, a, av, dt, perf)
+            want_f = ref_fly(state, cmd, dt, perf)
+            with monkeypatch.context() as m:
+                m.setattr(kinematics, "advance_reference", not_here)
+                m.setattr(kinematics, "fly_command_reference", not_here)
+                got_a = kinematics.advance(state, w, a, av, dt, perf)
+                got_f = kinematics.fly_command(state, cmd, dt, perf)
+            _same_motion(got_a, want_a)
+            _same_motion(got_f, want_f)
+            # the arc alone (SM's phase starts): per-element turn rates, accelerations and durations
+            t_seg = np.abs(rng.normal(0, 20, n)) if trial % 2 else np.where(rng.random(n) < 0.5, 0.0, dt)
+            args = (state.x, state.y, state.gs, state.trk, w, a, t_seg)
+            want_s = kinematics.horizontal_segment_reference(*args)
+            with monkeypatch.context() as m:
+                m.setattr(kinematics, "horizontal_segment_reference", not_here)
+                got_s = kinematics.horizontal_segment(*args)
+            _same_motion(AircraftState.adopt(*got_s[:2], state.z, *got_s[2:], state.vs),
+                         AircraftState.adopt(*want_s[:2], state.z, *want_s[2:], state.vs))
+            cases += 3
+        # intruders (N, M)
+        state, (w, a, av), _ = _motion_inputs(rng, 600)
+        grid = AircraftState(*(getattr(state, f).reshape(200, 3) for f in ("x", "y", "z", "gs", "trk", "vs")))
+        _same_motion(advance(grid, w.reshape(200, 3), a.reshape(200, 3), 0.0, 1.0), ref_advance(grid, w.reshape(200, 3),
+                                                                                               a.reshape(200, 3), 0.0, 1.0))
+    assert cases == 720

@@ -14,14 +14,20 @@ Two ways to move aircraft by ``dt``:
 * :func:`fly_command` -- fly toward a :class:`Command` (target track, vertical speed, ground
   speed) with the performance limits: turn the short way at the maximum turn rate until the target
   track is reached, then straight; likewise for speed and vertical speed. Exact piecewise.
+
+Both (and :func:`horizontal_segment`) run as compiled kernels (:mod:`daa_sil.daa.kernels.flight`, the same
+numbers) in a process that has loaded the DAA's kernels, and as the numpy functions ``*_reference`` (their
+test oracles) in one that has not: moving aircraft never starts numba itself (:mod:`daa_sil.compiled`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from daa_sil.compiled import loaded_kernels
 from .frames import TWO_PI, track_from_velocity, wrap_2pi, wrap_pi
 from .units import DEG, FPM, G0, KT
 
@@ -74,13 +80,19 @@ class AircraftState:
     def copy(self) -> "AircraftState":
         return AircraftState(*(getattr(self, name).copy() for name in _STATE_FIELDS))
 
+    @classmethod
+    def adopt(cls, *parts: np.ndarray) -> "AircraftState":
+        """A state made of six new float64 arrays of one shape (x, y, z, gs, trk, vs), taken as they are:
+        no copy (the caller gives them up)."""
+        out = object.__new__(cls)
+        out.__dict__.update(zip(_STATE_FIELDS, parts))
+        return out
+
     def __getitem__(self, idx) -> "AircraftState":
         parts = [getattr(self, name)[idx] for name in _STATE_FIELDS]
         if isinstance(idx, list) or (isinstance(idx, np.ndarray) and idx.ndim >= 1):
             # advanced indexing already returned six new float arrays of one shape: no second copy
-            out = object.__new__(AircraftState)
-            out.__dict__.update(zip(_STATE_FIELDS, parts))
-            return out
+            return AircraftState.adopt(*parts)
         return AircraftState(*parts)  # basic indexing gives views: copy them (no aliasing of the parent)
 
     def where(self, mask, other: "AircraftState") -> "AircraftState":
@@ -201,6 +213,19 @@ def _arc(gs0, acc, trk0, w, t):
 def horizontal_segment(x, y, gs, trk, w, acc, t):
     """Position ``x, y`` (m), ground speed (m/s) and track (rad) after ``t`` s at turn rate ``w``
     (rad/s, + = right) and along-track acceleration ``acc`` (m/s^2); exact (closed-form arc)."""
+    k = loaded_kernels()
+    if k is not None:
+        shape = next((np.shape(v) for v in (x, y, gs, trk, w, acc, t) if np.ndim(v)), ())
+        flat = _flat_inputs(shape, (x, y, gs, trk, w, acc, t)) if shape else None  # (0-d: numpy scalars out)
+        if flat is not None:
+            out = _outputs(math.prod(shape), 4)
+            k.segment_into(*flat, STRAIGHT_TURN_RATE, *out)
+            return tuple(a.reshape(shape) for a in out)
+    return horizontal_segment_reference(x, y, gs, trk, w, acc, t)
+
+
+def horizontal_segment_reference(x, y, gs, trk, w, acc, t):
+    """:func:`horizontal_segment` in numpy (the compiled kernel's reference)."""
     dx, dy = _arc(gs, acc, trk, w, t)
     return x + dx, y + dy, gs + acc * t, trk + w * t
 
@@ -231,12 +256,47 @@ def vertical_toward(z, vs, target_vs, v_accel, dt):
     return z_new, np.where(np.abs(dv) <= v_accel * dt, target_vs, vs1)
 
 
+def _flat_inputs(shape: tuple, values) -> "list[np.ndarray] | None":
+    """Each value as a 1-d float64 array of the batch's elements (or of its one element, a scalar numpy
+    would broadcast), or None when one broadcasts otherwise (then the numpy reference runs)."""
+    out = []
+    for v in values:
+        a = v if type(v) is np.ndarray and v.dtype == np.float64 else np.asarray(v, dtype=float)
+        if a.shape == shape:
+            out.append(a.reshape(-1))
+        elif a.ndim == 0:
+            out.append(a.reshape(1))
+        else:
+            return None
+    return out
+
+
+def _outputs(n: int, k: int = 6) -> tuple[np.ndarray, ...]:
+    """``k`` new float64 arrays of ``n`` elements (a compiled kernel's outputs)."""
+    return tuple(np.empty(n) for _ in range(k))
+
+
 def advance(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, dt: float = 1.0,
             perf: Performance = DEFAULT_PERFORMANCE) -> AircraftState:
     """Move aircraft by ``dt`` s with constant turn rate (rad/s, + = right), along-track acceleration
     and vertical acceleration (m/s^2). Turn rate is clipped to ``perf.max_turn_rate``; speed and
     vertical speed saturate at the limits inside the step (the step is split there).
     """
+    k = loaded_kernels()
+    if k is not None and isinstance(dt, (float, int)):
+        s = state
+        flat = _flat_inputs(s.shape, (s.x, s.y, s.z, s.gs, s.trk, s.vs, turn_rate, accel, vertical_accel))
+        if flat is not None:
+            out = _outputs(s.x.size)
+            k.advance_into(*flat, float(dt), *map(float, (perf.max_turn_rate, perf.min_gs, perf.max_gs, perf.max_vs)),
+                           STRAIGHT_TURN_RATE, *out, np.zeros(1, bool))
+            return AircraftState.adopt(*(a.reshape(s.shape) for a in out))
+    return advance_reference(state, turn_rate, accel, vertical_accel, dt, perf)
+
+
+def advance_reference(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, dt: float = 1.0,
+                      perf: Performance = DEFAULT_PERFORMANCE) -> AircraftState:
+    """:func:`advance` in numpy (the compiled kernel's reference)."""
     s = state
     w = np.clip(np.asarray(turn_rate, float), -perf.max_turn_rate, perf.max_turn_rate)
     acc = np.asarray(accel, float)
@@ -246,10 +306,10 @@ def advance(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, 
     with np.errstate(all="ignore"):
         t_sat = np.where(acc != 0, (limit - s.gs) / np.where(acc != 0, acc, 1.0), np.inf)
     t_sat = np.clip(t_sat, 0.0, dt)
-    x, y, gs, trk = horizontal_segment(s.x, s.y, s.gs, s.trk, w, acc, t_sat)
+    x, y, gs, trk = horizontal_segment_reference(s.x, s.y, s.gs, s.trk, w, acc, t_sat)
     rest = dt - t_sat
     if np.any(rest) or not _zero_length_keeps(x, y, gs, trk, w):  # (no speed limit reached: nothing left)
-        x, y, gs, trk = horizontal_segment(x, y, gs, trk, w, 0.0, rest)
+        x, y, gs, trk = horizontal_segment_reference(x, y, gs, trk, w, 0.0, rest)
     # vertical: constant acceleration toward the limit
     av = np.asarray(vertical_accel, float)
     vs_target = np.where(av > 0, perf.max_vs, np.where(av < 0, -perf.max_vs, s.vs))
@@ -269,6 +329,22 @@ def fly_command(state: AircraftState, cmd: Command, dt: float = 1.0,
     Ground speed: ``horizontal_accel`` toward the target (clipped to [min_gs, max_gs]).
     Vertical speed: ``vertical_accel`` toward the target (clipped to +-max_vs).
     """
+    k = loaded_kernels()
+    if k is not None and isinstance(dt, (float, int)):
+        s = state
+        flat = _flat_inputs(s.shape, (s.x, s.y, s.z, s.gs, s.trk, s.vs, cmd.trk, cmd.vs, cmd.gs))
+        if flat is not None:
+            out = _outputs(s.x.size)
+            k.fly_command_into(*flat, float(dt), *map(float, (perf.max_turn_rate, perf.horizontal_accel,
+                                                              perf.vertical_accel, perf.min_gs, perf.max_gs,
+                                                              perf.max_vs)), STRAIGHT_TURN_RATE, *out)
+            return AircraftState.adopt(*(a.reshape(s.shape) for a in out))
+    return fly_command_reference(state, cmd, dt, perf)
+
+
+def fly_command_reference(state: AircraftState, cmd: Command, dt: float = 1.0,
+                          perf: Performance = DEFAULT_PERFORMANCE) -> AircraftState:
+    """:func:`fly_command` in numpy (the compiled kernel's reference)."""
     s = state
     c = cmd.resolved(s)
     tgt_gs = np.clip(c.gs, perf.min_gs, perf.max_gs)
@@ -288,7 +364,7 @@ def fly_command(state: AircraftState, cmd: Command, dt: float = 1.0,
         seg = np.maximum(hi - lo, 0.0)
         w_seg = np.where(t_turn > lo, w, 0.0)
         a_seg = np.where(t_spd > lo, acc, 0.0)
-        x, y, gs, trk = horizontal_segment(x, y, gs, trk, w_seg, a_seg, seg)
+        x, y, gs, trk = horizontal_segment_reference(x, y, gs, trk, w_seg, a_seg, seg)
     reached_trk = np.abs(dpsi) <= perf.max_turn_rate * dt
     reached_gs = np.abs(dgs) <= perf.horizontal_accel * dt
     trk = np.where(reached_trk, c.trk, trk)
@@ -303,5 +379,6 @@ def turn_direction(from_trk, to_trk) -> np.ndarray:
 
 
 __all__ = ["AircraftState", "Performance", "DEFAULT_PERFORMANCE", "Command", "advance", "fly_command",
+           "advance_reference", "fly_command_reference", "horizontal_segment_reference",
            "turn_direction", "TWO_PI",
            "horizontal_segment", "vertical_toward", "STRAIGHT_TURN_RATE"]

@@ -17,7 +17,7 @@ from types import SimpleNamespace
 
 from daa_sil.jit_cache import READY_MARKER, cache_dir
 
-_MODULES = ("elementwise", "evaluate", "motion", "regions", "resolve", "axis_pass", "select")
+_MODULES = ("elementwise", "evaluate", "motion", "regions", "resolve", "axis_pass", "select", "flight")
 #: where the kernels are cached (:func:`daa_sil.jit_cache.cache_dir`)
 CACHE_DIR = cache_dir()
 #: s this process waited for another one's compilation, and spent compiling / loading the kernels
@@ -104,6 +104,13 @@ def get() -> SimpleNamespace:
     return ns
 
 
+def loaded() -> "SimpleNamespace | None":
+    """The kernels if this process has loaded them already (:func:`get`), else None: for code that uses
+    them only where they are there anyway and never starts numba itself (truth motion, which scenario
+    loading and encounter sampling also call)."""
+    return _KERNELS
+
+
 def get_unfused():
     """The kernels of the unfused resolution (:mod:`daa_sil.daa.kernels.unfused`; ``UndecidedPieces`` with
     ``fused=False``, which only the tests take), compiled or loaded on first use -- after :func:`get`,
@@ -118,4 +125,4 @@ def get_unfused():
     return sys.modules[name]
 
 
-__all__ = ["CACHE_DIR", "LOAD_S", "LOCK_WAIT_S", "get", "get_unfused", "skip_blas_probe"]
+__all__ = ["CACHE_DIR", "LOAD_S", "LOCK_WAIT_S", "get", "get_unfused", "loaded", "skip_blas_probe"]
