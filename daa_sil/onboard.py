@@ -35,6 +35,7 @@ from .geometry import wellclear as wc
 from daa_sil.geometry.frames import wrap_pi
 from daa_sil.geometry.kinematics import AircraftState, Command, Performance, advance, fly_command
 from .daa.alerting import relative_state
+from .daa.intervals import interval_soa
 from daa_sil.models.intruder_flight import INTRUDER_PERFORMANCE
 from daa_sil.geometry.thresholds import Thresholds, get_thresholds
 
@@ -241,7 +242,9 @@ class OnboardCore:
         s1 = own1.position()[:, None, :] - intr1.position()
         # LoWC on the segment: its violation interval (what wc.segment_events computes, once)
         v_seg = (s1 - s0) / self.dt
-        t_in, t_out = wc.violation_interval(s0, v_seg, self.th, 0.0, self.dt)
+        # (wc.violation_interval over [0, dt], compiled: the same numbers, tests/test_daa_interval_kernel.py)
+        t_in, t_out = (a.reshape(self.n, self.m) for a in interval_soa(
+            *(c[..., i].reshape(-1) for c in (s0, v_seg) for i in range(3)), self.dt, self.th))
         lowc_m = np.isfinite(t_in)
         nmac_m = np.isfinite(wc.nmac_interval(s0, v_seg, self.th, self.dt)[0])
         in_lowc = np.where(lowc_m, np.maximum(t_out - t_in, 0.0), 0.0)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from daa_sil.compiled import loaded_kernels
 from .thresholds import Thresholds, get_thresholds
 from .units import FT
 
@@ -249,7 +250,22 @@ def _slab_interval(z, vz, half, t_end):
 
 
 def nmac_interval(s, v, th: "Thresholds | str | None" = None, t_end=1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Interval within ``[0, t_end]`` during which straight-line motion ``s + t v`` is an NMAC."""
+    """Interval within ``[0, t_end]`` during which straight-line motion ``s + t v`` is an NMAC (compiled
+    where the process has the kernels, :mod:`daa_sil.compiled`; else :func:`nmac_interval_reference`)."""
+    th = get_thresholds(th)
+    s, v = _f(s), _f(v)
+    k = loaded_kernels()
+    if k is not None and s.shape == v.shape and isinstance(t_end, (float, int)):
+        shape = s.shape[:-1]
+        lo, hi = np.empty(shape), np.empty(shape)
+        k.nmac_interval_into(*(a[..., i].reshape(-1) for a in (s, v) for i in range(3)), float(th.nmac_h),
+                             float(th.nmac_v), float(t_end), lo.reshape(-1), hi.reshape(-1))
+        return lo, hi
+    return nmac_interval_reference(s, v, th, t_end)
+
+
+def nmac_interval_reference(s, v, th: "Thresholds | str | None" = None, t_end=1.0) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`nmac_interval` in numpy (the compiled kernel's reference)."""
     th = get_thresholds(th)
     s, v = _f(s), _f(v)
     hlo, hhi = _disc_interval(s[..., 0], s[..., 1], v[..., 0], v[..., 1], th.nmac_h, t_end)

@@ -3,16 +3,19 @@
 Each writes into output arrays the caller allocates; array arguments may be strided views (a
 scalar broadcast with ``np.broadcast_to`` costs nothing). The Python wrappers with the numpy
 signatures are :func:`daa_sil.daa.intervals.interval_soa`, :func:`daa_sil.daa.intervals.wcv_soa`,
-:func:`daa_sil.daa.certify.classify_pieces` and :func:`daa_sil.daa.certify.clear_second_order`.
+:func:`daa_sil.daa.certify.classify_pieces`, :func:`daa_sil.daa.certify.clear_second_order` and
+:func:`daa_sil.geometry.wellclear.nmac_interval`.
 """
 
 from __future__ import annotations
 
+import math
+
 from numba import boolean, int8, void
 
-from daa_sil.daa.kernels.jit import kernel
+from daa_sil.daa.kernels.jit import inline, kernel
 from daa_sil.daa.kernels.pieces import classify, clear2
-from daa_sil.daa.kernels.scalar import interval, vertical_window, wcv_soa
+from daa_sil.daa.kernels.scalar import EPS, interval, npmax, npmin, vertical_window, wcv_soa
 from daa_sil.daa.kernels.signatures import A, O, I8, F
 
 
@@ -85,3 +88,46 @@ def classify_command_into(trk, vs, gs, c_trk, c_vs, c_gs, db_trk, db_vs, db_gs, 
             dir_out[i] = _DIRS[ax][(1 if side > 0 else (-1 if side < 0 else 0)) + 1]
         else:
             axis_out[i], dir_out[i] = 0, 0
+
+
+@inline
+def disc_interval(px, py, vx, vy, radius, t_end):
+    """``wellclear._disc_interval``: times in [0, t_end] with |p + t v| <= radius (2-D), (inf, -inf) if none."""
+    a = vx * vx + vy * vy
+    p2 = px * px + py * py
+    pv = px * vx + py * vy
+    rr = radius * radius
+    moving = a >= EPS
+    disc = pv * pv - a * (p2 - rr)
+    if moving:
+        root = math.sqrt(npmax(disc, 0.0))
+        lo, hi, hit = (-pv - root) / a, (-pv + root) / a, disc >= 0
+    else:
+        lo, hi, hit = (0.0 if p2 <= rr else math.inf), (t_end if p2 <= rr else -math.inf), p2 <= rr
+    if not hit:
+        return math.inf, -math.inf
+    return npmax(lo, 0.0), npmin(hi, t_end)
+
+
+@inline
+def slab_interval(z, vz, half, t_end):
+    """``wellclear._slab_interval``: times in [0, t_end] with |z + t vz| <= half, (inf, -inf) if none."""
+    if abs(vz) < EPS:
+        inside = abs(z) <= half
+        return (0.0 if inside else math.inf), (t_end if inside else -math.inf)
+    ta = (-half - z) / vz
+    tb = (half - z) / vz
+    return npmax(npmin(ta, tb), 0.0), npmin(npmax(ta, tb), t_end)
+
+
+@kernel(void(A, A, A, A, A, A, F, F, F, O, O))
+def nmac_interval_into(sx, sy, sz, vx, vy, vz, nmac_h, nmac_v, t_end, lo_out, hi_out):
+    """``wellclear.nmac_interval`` of each straight line over ``[0, t_end]`` into ``lo_out``/``hi_out``."""
+    for i in range(sx.shape[0]):
+        hlo, hhi = disc_interval(sx[i], sy[i], vx[i], vy[i], nmac_h, t_end)
+        zlo, zhi = slab_interval(sz[i], vz[i], nmac_v, t_end)
+        lo, hi = npmax(hlo, zlo), npmin(hhi, zhi)
+        if lo > hi:
+            lo_out[i], hi_out[i] = math.inf, -math.inf
+        else:
+            lo_out[i], hi_out[i] = lo, hi
