@@ -17,7 +17,7 @@ import math
 from numba import boolean, float64, void
 
 from daa_sil.daa.kernels.jit import inline, kernel
-from daa_sil.daa.kernels.scalar import npmax, npmin, npsign
+from daa_sil.daa.kernels.scalar import npmax, npmin, npsign, vertical_toward
 from daa_sil.daa.kernels.signatures import A, F, O
 
 _TWO_PI = 2.0 * math.pi
@@ -142,14 +142,5 @@ def fly_command_into(x, y, z, gs, trk, vs, cmd_trk, cmd_vs, cmd_gs, dt, max_turn
             pt = ct
         if abs(dgs) <= h_acc * dt:
             pg = tgt_gs
-        # kinematics.vertical_toward(z, vs, tgt_vs, v_acc, dt)
-        dv = tgt_vs - v
-        if v_acc > 0:
-            t1 = npmin(abs(dv) / v_acc, dt)
-        else:
-            t1 = 0.0 if dv == 0 else dt
-        a = npsign(dv) * v_acc
-        vs1 = v + a * t1
-        oz[i] = at(z, i) + v * t1 + 0.5 * a * t1 * t1 + vs1 * (dt - t1)
-        ovs[i] = tgt_vs if abs(dv) <= v_acc * dt else vs1
+        oz[i], ovs[i] = vertical_toward(at(z, i), v, tgt_vs, v_acc, dt)
         ox[i], oy[i], ogs[i], otrk[i] = px, py, pg, pt % _TWO_PI

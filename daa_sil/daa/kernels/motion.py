@@ -17,7 +17,7 @@ import numpy as np
 from numba import float64, types, void
 
 from daa_sil.daa.kernels.jit import inline, inline_ir, kernel
-from daa_sil.daa.kernels.scalar import npmax, npmin, npsign
+from daa_sil.daa.kernels.scalar import npmax, npmin, vertical_toward
 from daa_sil.daa.kernels.signatures import A, A2, A3, F, I
 
 #: columns of a path's row in ``kin``
@@ -137,17 +137,7 @@ def command_motion(row, tau, max_turn, h_acc, v_acc):
         trk = e[1]
     if abs(e[2]) <= h_acc * tau:
         gs = e[3]
-    # kinematics.vertical_toward(z, vs, tgt_vs, v_acc, tau)
-    z0, vs0, tgt = e[4], e[5], e[6]
-    dv = tgt - vs0
-    if v_acc > 0:
-        t1 = npmin(abs(dv) / v_acc, tau)
-    else:
-        t1 = 0.0 if dv == 0 else tau
-    a = npsign(dv) * v_acc
-    vs1 = vs0 + a * t1
-    z = z0 + vs0 * t1 + 0.5 * a * t1 * t1 + vs1 * (tau - t1)
-    vs = tgt if abs(dv) <= v_acc * tau else vs1
+    z, vs = vertical_toward(e[4], e[5], e[6], v_acc, tau)
     trk = trk % _TWO_PI
     return x, y, z, gs * math.sin(trk), gs * math.cos(trk), vs
 

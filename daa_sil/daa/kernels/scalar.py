@@ -62,6 +62,21 @@ def npsign(x):
 
 
 @inline
+def vertical_toward(z0, vs0, tgt, v_acc, dt):
+    """``kinematics.vertical_toward`` of one element: altitude (m) and vertical speed (m/s) after ``dt`` s
+    moving toward ``tgt`` (m/s) at |acceleration| ``v_acc`` (m/s^2)."""
+    dv = tgt - vs0
+    if v_acc > 0:
+        t1 = npmin(abs(dv) / v_acc, dt)
+    else:
+        t1 = 0.0 if dv == 0 else dt
+    a = npsign(dv) * v_acc
+    vs1 = vs0 + a * t1
+    z = z0 + vs0 * t1 + 0.5 * a * t1 * t1 + vs1 * (dt - t1)
+    return z, (tgt if abs(dv) <= v_acc * dt else vs1)
+
+
+@inline
 def vertical_window(sz, vz, t0, t1, zthr, tcoa):
     """:func:`daa_sil.geometry.wellclear.vertical_window` -> (lo, hi)."""
     avz = abs(vz)
