@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from numba import boolean, float64, void
+from numba import boolean, void
 
 from daa_sil.daa.kernels.jit import inline, kernel
 from daa_sil.daa.kernels.scalar import npmax, npmin, npsign, vertical_toward
@@ -46,10 +46,9 @@ def segment(x, y, gs0, trk0, w, acc, t, straight):
         mid = trk0 + 0.5 * w * t
         dx, dy = dist * math.sin(mid), dist * math.cos(mid)
     else:
-        ws = w
-        c0, s0, c1, s1, ws2 = math.cos(trk0), math.sin(trk0), math.cos(th1), math.sin(th1), ws * ws
-        dx = gs0 * (c0 - c1) / ws + acc * (-t * c1 / ws + (s1 - s0) / ws2)
-        dy = gs0 * (s1 - s0) / ws + acc * (t * s1 / ws + (c1 - c0) / ws2)
+        c0, s0, c1, s1, w2 = math.cos(trk0), math.sin(trk0), math.cos(th1), math.sin(th1), w * w
+        dx = gs0 * (c0 - c1) / w + acc * (-t * c1 / w + (s1 - s0) / w2)
+        dy = gs0 * (s1 - s0) / w + acc * (t * s1 / w + (c1 - c0) / w2)
     return x + dx, y + dy, gs0 + acc * t, trk0 + w * t
 
 
