@@ -129,6 +129,9 @@ def band_intervals(values_deg: np.ndarray, region: np.ndarray) -> dict:
     vals = np.asarray(values_deg, dtype=float)
     n, k = reg.shape
     keep = (reg >= 0) & np.isfinite(vals)
+    if not keep.any():  # no bands anywhere (every idle step of the SIL vehicle): nothing to merge
+        return {"bands_trk_lo_deg": np.full((n, 0), np.nan), "bands_trk_hi_deg": np.full((n, 0), np.nan),
+                "bands_trk_region": np.zeros((n, 0), np.int64), "bands_count": np.zeros(n, np.int64)}
     if not keep.all():
         order = np.argsort(~keep, axis=1, kind="stable")  # kept samples first, in their order
         vals, reg = np.take_along_axis(vals, order, axis=1), np.take_along_axis(reg, order, axis=1)

@@ -60,6 +60,26 @@ def test_batched_band_intervals_match_the_definition_row_by_row(seed):
         assert np.isnan(b["bands_trk_lo_deg"][i, c:]).all() and np.isnan(b["bands_trk_hi_deg"][i, c:]).all()
 
 
+@pytest.mark.parametrize("n, k", [(1, 72), (5, 10), (3, 0), (0, 4)])
+def test_a_batch_without_bands_merges_to_empty_rows(n, k):
+    """No sample kept anywhere (inactive rows, nan values): every row has no interval, and the arrays
+    have the shapes and types a batch with bands pads to (N, 0) floats / int64 regions, (N,) counts."""
+    values = np.full((n, k), np.nan)
+    values[:, ::2] = 10.0  # values without a region are left out too
+    regions = np.full((n, k), -1, np.int8)
+    regions[:, 1::2] = 3  # regions without a value likewise
+    b = band_intervals(values, regions)
+    assert b["bands_count"].dtype == np.int64 and b["bands_count"].tolist() == [0] * n
+    for name, dtype in (("bands_trk_lo_deg", np.float64), ("bands_trk_hi_deg", np.float64),
+                        ("bands_trk_region", np.int64)):
+        assert b[name].shape == (n, 0) and b[name].dtype == dtype
+    if n and k > 1:  # the same types as the general merge gives a batch with one kept sample
+        kept = regions.copy()
+        kept[0, 0] = 2
+        g = band_intervals(values, kept)
+        assert g["bands_count"][0] == 1 and all(g[name].dtype == b[name].dtype for name in b)
+
+
 def test_track_intervals_edge_cases():
     assert track_intervals(np.array([]), np.array([], np.int8)) == ([], [], [])
     assert track_intervals(np.array([np.nan, 5.0]), np.array([2, -1])) == ([], [], [])

@@ -51,7 +51,9 @@ def row_blocks(n: int, per_row: int):
 def as_vector(a, n: int) -> np.ndarray:
     """``a`` as a 1-D float array of length ``n`` (a scalar or a length-1 array broadcast, not copied)."""
     a = np.asarray(a, dtype=float)
-    return a if a.shape == (n,) else np.broadcast_to(a, (n,))
+    if a.shape == (n,):
+        return a
+    return a.reshape(1) if n == 1 and a.size == 1 else np.broadcast_to(a, (n,))  # (reshape: cheaper at N = 1)
 
 
 def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) -> tuple[np.ndarray, np.ndarray]:
