@@ -276,22 +276,32 @@ def _outputs(n: int, k: int = 6) -> tuple[np.ndarray, ...]:
     return tuple(np.empty(n) for _ in range(k))
 
 
+def _moved_compiled(kernel: str, state: AircraftState, inputs: tuple, dt, limits: tuple, *extra) -> "AircraftState | None":
+    """``state`` moved by the compiled ``kernel`` (``advance_into`` / ``fly_command_into``: the state, the
+    per-element ``inputs``, ``dt``, the performance ``limits``, the straight-line turn rate, six outputs,
+    then ``extra``), or None where the numpy reference must run (kernels not loaded, an array ``dt``, or
+    inputs that broadcast otherwise)."""
+    k = loaded_kernels()
+    if k is None or not isinstance(dt, (float, int)):
+        return None
+    s = state
+    flat = _flat_inputs(s.shape, (s.x, s.y, s.z, s.gs, s.trk, s.vs, *inputs))
+    if flat is None:
+        return None
+    out = _outputs(s.x.size)
+    getattr(k, kernel)(*flat, float(dt), *map(float, limits), STRAIGHT_TURN_RATE, *out, *extra)
+    return AircraftState.adopt(*(a.reshape(s.shape) for a in out))
+
+
 def advance(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, dt: float = 1.0,
             perf: Performance = DEFAULT_PERFORMANCE) -> AircraftState:
     """Move aircraft by ``dt`` s with constant turn rate (rad/s, + = right), along-track acceleration
     and vertical acceleration (m/s^2). Turn rate is clipped to ``perf.max_turn_rate``; speed and
     vertical speed saturate at the limits inside the step (the step is split there).
     """
-    k = loaded_kernels()
-    if k is not None and isinstance(dt, (float, int)):
-        s = state
-        flat = _flat_inputs(s.shape, (s.x, s.y, s.z, s.gs, s.trk, s.vs, turn_rate, accel, vertical_accel))
-        if flat is not None:
-            out = _outputs(s.x.size)
-            k.advance_into(*flat, float(dt), *map(float, (perf.max_turn_rate, perf.min_gs, perf.max_gs, perf.max_vs)),
-                           STRAIGHT_TURN_RATE, *out, np.zeros(1, bool))
-            return AircraftState.adopt(*(a.reshape(s.shape) for a in out))
-    return advance_reference(state, turn_rate, accel, vertical_accel, dt, perf)
+    moved = _moved_compiled("advance_into", state, (turn_rate, accel, vertical_accel), dt,
+                            (perf.max_turn_rate, perf.min_gs, perf.max_gs, perf.max_vs), np.zeros(1, bool))
+    return moved if moved is not None else advance_reference(state, turn_rate, accel, vertical_accel, dt, perf)
 
 
 def advance_reference(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, dt: float = 1.0,
@@ -329,17 +339,10 @@ def fly_command(state: AircraftState, cmd: Command, dt: float = 1.0,
     Ground speed: ``horizontal_accel`` toward the target (clipped to [min_gs, max_gs]).
     Vertical speed: ``vertical_accel`` toward the target (clipped to +-max_vs).
     """
-    k = loaded_kernels()
-    if k is not None and isinstance(dt, (float, int)):
-        s = state
-        flat = _flat_inputs(s.shape, (s.x, s.y, s.z, s.gs, s.trk, s.vs, cmd.trk, cmd.vs, cmd.gs))
-        if flat is not None:
-            out = _outputs(s.x.size)
-            k.fly_command_into(*flat, float(dt), *map(float, (perf.max_turn_rate, perf.horizontal_accel,
-                                                              perf.vertical_accel, perf.min_gs, perf.max_gs,
-                                                              perf.max_vs)), STRAIGHT_TURN_RATE, *out)
-            return AircraftState.adopt(*(a.reshape(s.shape) for a in out))
-    return fly_command_reference(state, cmd, dt, perf)
+    moved = _moved_compiled("fly_command_into", state, (cmd.trk, cmd.vs, cmd.gs), dt,
+                            (perf.max_turn_rate, perf.horizontal_accel, perf.vertical_accel, perf.min_gs,
+                             perf.max_gs, perf.max_vs))
+    return moved if moved is not None else fly_command_reference(state, cmd, dt, perf)
 
 
 def fly_command_reference(state: AircraftState, cmd: Command, dt: float = 1.0,
