@@ -21,6 +21,7 @@ read-only explicitly. The first ``--out`` may not be marked: it is the pilot's, 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 from daa_sil.errors import UsageError
 from .connstr import SEND, Connection, parse_connection
@@ -43,9 +44,10 @@ class OutputSpec:
     def listens(self) -> bool:
         return self.conn.listens
 
-    @property
+    @cached_property
     def addr(self) -> "tuple[str, int]":
-        """``(numeric host, port)``: where it sends (udp/udpout) or listens (udpin)."""
+        """``(numeric host, port)``: where it sends (udp/udpout) or listens (udpin); resolved once (the
+        vehicle reads it for every datagram it sends or takes)."""
         return norm_host(self.conn.addr[0]), self.conn.addr[1]
 
 
