@@ -30,6 +30,25 @@ def test_round_trip_is_bit_exact(wm, tmp_path):
     assert back.stats["iterations"] == wm.stats["iterations"]
 
 
+def test_fields_are_the_float32_cast_of_the_arrays_given(wm):
+    """The interleaved float32 fields hold exactly ``astype(float32)`` of each float64 array (bit for bit),
+    and fields of different shapes are refused instead of broadcast."""
+    from dataclasses import replace
+
+    from daa_sil.waitmap.lookup import FIELDS
+
+    rng = np.random.default_rng(7)
+    raw = {n: rng.normal(0.0, 30.0, wm.grid.shape) for n in FIELDS}
+    raw["p_lowc"][0, 0, 0, 0, 0, 0] = 1.0 + 1e-9  # rounds to 1.0f
+    raw["q_wait"].flat[1] = -0.0
+    m = replace(wm, **raw)
+    for n in FIELDS:
+        got = getattr(m, n)
+        assert got.dtype == np.float32 and got.tobytes() == raw[n].astype(np.float32).tobytes()
+    with pytest.raises(ValueError, match="one shape"):
+        replace(wm, wait_s=raw["wait_s"][..., :1])
+
+
 def test_refuses_to_overwrite(wm, tmp_path):
     from daa_sil.errors import OutputError
 

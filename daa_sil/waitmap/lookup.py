@@ -96,7 +96,13 @@ class WaitMap:
         # The interpolated fields side by side in float32, so one gather per corner reads all four;
         # the public arrays are views into it (a family of large maps is held once, also in forked
         # campaign workers). Single precision holds them to ~1e-7 relative.
-        f = np.stack([np.asarray(getattr(self, n), np.float32) for n in FIELDS], axis=-1)
+        shape = np.shape(getattr(self, FIELDS[0]))
+        if any(np.shape(getattr(self, n)) != shape for n in FIELDS):
+            raise ValueError(f"wait-map fields {FIELDS} must have one shape, got "
+                             f"{[np.shape(getattr(self, n)) for n in FIELDS]}")
+        f = np.empty(shape + (len(FIELDS),), np.float32)
+        for i, n in enumerate(FIELDS):  # cast in place (the same rounding as astype; no float32 copies to stack)
+            f[..., i] = getattr(self, n)
         self._fields = f
         for i, n in enumerate(FIELDS):
             setattr(self, n, f[..., i])
