@@ -546,25 +546,68 @@ def test_relative_knots_identical(preset):
             _same(a, b)
 
 
+def _bits_same(a, b) -> None:
+    """``a`` and ``b`` bit for bit (signed zeros included); two nans are equal whatever their sign."""
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.dtype == b.dtype and a.shape == b.shape, (a.dtype, a.shape, b.dtype, b.shape)
+    if a.dtype.kind != "f":
+        assert np.array_equal(a, b)
+        return
+    bad = (a.view(np.uint64) != b.view(np.uint64)) & ~(np.isnan(a) & np.isnan(b))
+    assert not bad.any(), f"{int(bad.sum())} of {a.size} differ, first at {np.flatnonzero(bad)[:5]}: " \
+                          f"{a[bad][:5]} vs {b[bad][:5]}"
+
+
+def _same_command_paths(got, ref) -> None:
+    """Every field of two SM paths bit for bit: knot states and times, the acceleration, jerk and kink
+    bounds, whether the vertical speed is constant, and the motion handed to the kernels."""
+    for g, r in zip(got.pos + got.vel, ref.pos + ref.vel):
+        _bits_same(g, r)
+    for name in ("t", "acc_h", "acc_v", "jerk_h", "kink_t"):
+        _bits_same(getattr(got, name), getattr(ref, name))
+    assert got.vz_const == ref.vz_const
+    assert got.kin[0] == ref.kin[0] == "command" and got.kin[3:] == ref.kin[3:]
+    _bits_same(got.kin[1], ref.kin[1])
+    _bits_same(got.kin[2], ref.kin[2])
+
+
+def _command_batch(rng, own, cfg):
+    n = own.shape[0]
+    return Command(own.trk + rng.choice([0.0, -0.0, 0.3, -1.2, np.pi, -np.pi, 2.5, 1e-7, 1e-12, np.nan], n),
+                   rng.choice([0.0, 10.0, -20.0, 1e3, -1e3, cfg.max_vs, np.nan], n),
+                   rng.choice([20.0, 40.0, 55.0, 90.0, 400.0, cfg.min_gs, cfg.max_gs, -5.0, np.nan], n))
+
+
 @pytest.mark.parametrize("preset", ["do365", "daidalus"])
-def test_command_knot_states_identical(preset, monkeypatch):
-    """SM's paths: the knot states from the compiled command motion equal ``_CommandMotion.state``'s
-    (turns of up to 180 deg, speed and vertical changes, commands with nan axes, ownships at the limits)."""
+def test_command_paths_identical(preset, monkeypatch):
+    """SM's paths: the compiled plan (``kernels.command_plan``) and knot states equal the numpy plan and
+    ``_CommandMotion.state`` bit for bit (turns of up to 180 deg both ways, -0.0 and tiny track changes,
+    speed and vertical changes beyond the limits, commands with nan axes, ownships at the limits, nan
+    states), for batches and for N = 1 (the SIL). The numpy plan is made to raise while the compiled
+    one runs, so the comparison cannot be the numpy code against itself."""
     from daa_sil.daa import safety
 
     cfg = DaaConfig.for_preset(preset)
     rng = np.random.default_rng(zlib.crc32(f"cmdknots/{preset}".encode()))
     own, _ = _encounters(rng, 2000, 1, cfg)
-    n = own.shape[0]
-    cmd = Command(own.trk + rng.choice([0.0, 0.3, -1.2, np.pi, -np.pi, 2.5, 1e-7], n),
-                  rng.choice([0.0, 10.0, -20.0, 1e3, np.nan], n), rng.choice([20.0, 40.0, 55.0, 90.0, 400.0, np.nan], n))
-    got = command_paths(own, cmd, cfg)
-    assert got.kin is not None
-    monkeypatch.setattr(safety, "COMPILED", False)
-    ref = _ref(command_paths, own, cmd, cfg)
-    for g, r in zip(got.pos + got.vel, ref.pos + ref.vel):
-        _same(g, r)
-    assert got.pos[0].shape[-1] > 10
+    own.trk[rng.random(2000) < 0.01] = np.nan
+    own.gs[rng.random(2000) < 0.01] = np.nan
+    cmd = _command_batch(rng, own, cfg)
+    singles = [(own[i:i + 1], cmd[i:i + 1]) for i in rng.choice(2000, 40, replace=False)]
+
+    def no_numpy(*a):
+        raise AssertionError("the numpy plan ran")
+
+    with monkeypatch.context() as m:
+        m.setattr(safety, "command_paths_reference", no_numpy)
+        got = command_paths(own, cmd, cfg)
+        got_1 = [command_paths(o, c, cfg) for o, c in singles]
+    assert got.kin is not None and got.pos[0].shape[-1] > 10
+    _same_command_paths(got, _ref(safety.command_paths_reference, own, cmd, cfg))
+    monkeypatch.setattr(safety, "COMPILED", False)  # the numpy plan and the numpy motion
+    _same_command_paths(got, _ref(command_paths, own, cmd, cfg))
+    for g, (o, c) in zip(got_1, singles):
+        _same_command_paths(g, _ref(command_paths, o, c, cfg))
 
 
 @pytest.mark.parametrize("preset", ["do365", "daidalus"])

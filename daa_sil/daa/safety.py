@@ -10,15 +10,19 @@ from __future__ import annotations
 import numpy as np
 
 from daa_sil.daa import kernels
+from daa_sil.daa.kernels import plan_layout as plan_cols
 from daa_sil.daa.config import DaaConfig
 from daa_sil.daa.trajectory import ManeuverPaths, path_conflicts
 from daa_sil.geometry.frames import wrap_2pi, wrap_pi
-from daa_sil.geometry.kinematics import (STRAIGHT_TURN_RATE, AircraftState, Command, fly_command, horizontal_segment,
-                                         vertical_toward)
+from daa_sil.geometry.kinematics import (STRAIGHT_TURN_RATE, AircraftState, Command, flat_inputs, fly_command,
+                                         horizontal_segment, vertical_toward)
 
-#: False: the knot states of :func:`command_paths` from the numpy ``_CommandMotion.state`` (the oracle
-#: the tests compare the compiled ``kernels.motion.command_states_into`` with)
+#: False: :func:`command_paths` planned in numpy and its knot states from the numpy ``_CommandMotion.state``
+#: (the oracles the tests compare the compiled ``kernels.command_plan`` and
+#: ``kernels.motion.command_states_into`` with)
 COMPILED = True
+#: a maneuver time (s) at or below this is no change of that axis
+_EPS = 1e-9
 
 
 def maneuver_times(own: AircraftState, cmd: Command, cfg: DaaConfig) -> tuple[np.ndarray, ...]:
@@ -107,11 +111,51 @@ class _CommandMotion:
 def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverPaths:
     """The single path (P = 1) of each ownship flying ``cmd`` kinematically (as
     :func:`daa_sil.geometry.kinematics.fly_command`), with knots at the spacing of the axes the command changes
-    (the finest one if several), so a single-axis command has the knots of its band candidate."""
+    (the finest one if several), so a single-axis command has the knots of its band candidate.
+
+    Planned in one compiled pass (``kernels.command_plan``) for a batch of ownships ``(N,)``; the numpy
+    code (:func:`command_paths_reference`, also where ``COMPILED`` is False) gives the same numbers."""
+    perf = cfg.performance()
+    flat = flat_inputs(own.shape, (own.x, own.y, own.z, own.gs, own.trk, own.vs, cmd.trk, cmd.vs, cmd.gs)) \
+        if COMPILED and len(own.shape) == 1 else None
+    if flat is None:
+        return command_paths_reference(own, cmd, cfg)
+    k = kernels.get()
+    n = own.shape[0]
+    phases, enc, plan = np.empty((n, 3, 9)), np.empty((n, 7)), np.empty((n, plan_cols.N_PLAN))
+    if k.command_plan_into(*flat, float(perf.max_turn_rate), float(perf.horizontal_accel), float(perf.vertical_accel),
+                           float(perf.min_gs), float(perf.max_gs), float(perf.max_vs), float(cfg.turn_rate),
+                           float(cfg.vertical_accel), float(cfg.horizontal_accel), float(cfg.knot_trk),
+                           float(cfg.knot_vs), float(cfg.knot_gs), STRAIGHT_TURN_RATE, _EPS, phases, enc, plan):
+        return command_paths_reference(own, cmd, cfg)  # a turn rate the numpy motion treats as straight
+    h = plan[:, plan_cols.H]
+    j_max = int(plan[:, plan_cols.N_KNOTS].max()) if n else 0
+    t = np.arange(j_max + 1)[None, :] * h[:, None]  # (N, J+1)
+    kin = ("command", phases, enc, float(perf.max_turn_rate), float(perf.horizontal_accel), float(perf.vertical_accel))
+    out = np.empty((6,) + t.shape)
+    k.command_states_into(*kin[1:], t, out)
+    px, py, pz, vx, vy, vz = out
+    motion: list = []  # the numpy motion, made only if a caller evaluates the true path itself
+
+    def state_at(n_, p):
+        if not motion:
+            motion.append(_CommandMotion(own, cmd.resolved(own), perf))
+        return lambda tq: motion[0].state(n_, tq)
+
+    col = lambda c: plan[:, c, None]  # noqa: E731  ((N, 1): one path per encounter)
+    return ManeuverPaths((px[:, None], py[:, None], pz[:, None]), (vx[:, None], vy[:, None], vz[:, None]),
+                         t[:, None], state_at, col(plan_cols.ACC_H), col(plan_cols.ACC_V),
+                         vz_const=not np.any(plan[:, plan_cols.T_VS] > _EPS), jerk_h=col(plan_cols.JERK),
+                         kink_t=plan[:, None, plan_cols.KINK_TRK:plan_cols.KINK_GS + 1], kin=kin)
+
+
+def command_paths_reference(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverPaths:
+    """:func:`command_paths` in numpy (the compiled plan's reference; its knot states still come from the
+    compiled ``command_states_into`` unless ``COMPILED`` is False)."""
     cmd = cmd.resolved(own)
     perf = cfg.performance()
     t_trk, t_vs, t_gs = maneuver_times(own, cmd, cfg)
-    eps = 1e-9
+    eps = _EPS
     knots = np.stack([np.where(t_trk > eps, cfg.knot_trk, np.inf), np.where(t_vs > eps, cfg.knot_vs, np.inf),
                       np.where(t_gs > eps, cfg.knot_gs, np.inf)], axis=-1).min(axis=-1)
     t_man = np.maximum(np.maximum(t_trk, t_vs), t_gs)

@@ -216,7 +216,7 @@ def horizontal_segment(x, y, gs, trk, w, acc, t):
     k = loaded_kernels()
     if k is not None:
         shape = next((np.shape(v) for v in (x, y, gs, trk, w, acc, t) if np.ndim(v)), ())
-        flat = _flat_inputs(shape, (x, y, gs, trk, w, acc, t)) if shape else None  # (0-d: numpy scalars out)
+        flat = flat_inputs(shape, (x, y, gs, trk, w, acc, t)) if shape else None  # (0-d: numpy scalars out)
         if flat is not None:
             out = _outputs(math.prod(shape), 4)
             k.segment_into(*flat, STRAIGHT_TURN_RATE, *out)
@@ -256,7 +256,7 @@ def vertical_toward(z, vs, target_vs, v_accel, dt):
     return z_new, np.where(np.abs(dv) <= v_accel * dt, target_vs, vs1)
 
 
-def _flat_inputs(shape: tuple, values) -> "list[np.ndarray] | None":
+def flat_inputs(shape: tuple, values) -> "list[np.ndarray] | None":
     """Each value as a 1-d float64 array of the batch's elements (or of its one element, a scalar numpy
     would broadcast), or None when one broadcasts otherwise (then the numpy reference runs)."""
     out = []
@@ -285,7 +285,7 @@ def _moved_compiled(kernel: str, state: AircraftState, inputs: tuple, dt, limits
     if k is None or not isinstance(dt, (float, int)):
         return None
     s = state
-    flat = _flat_inputs(s.shape, (s.x, s.y, s.z, s.gs, s.trk, s.vs, *inputs))
+    flat = flat_inputs(s.shape, (s.x, s.y, s.z, s.gs, s.trk, s.vs, *inputs))
     if flat is None:
         return None
     out = _outputs(s.x.size)
@@ -384,4 +384,4 @@ def turn_direction(from_trk, to_trk) -> np.ndarray:
 __all__ = ["AircraftState", "Performance", "DEFAULT_PERFORMANCE", "Command", "advance", "fly_command",
            "advance_reference", "fly_command_reference", "horizontal_segment_reference",
            "turn_direction", "TWO_PI",
-           "horizontal_segment", "vertical_toward", "STRAIGHT_TURN_RATE"]
+           "horizontal_segment", "vertical_toward", "STRAIGHT_TURN_RATE", "flat_inputs"]

@@ -17,7 +17,8 @@ from types import SimpleNamespace
 
 from daa_sil.jit_cache import READY_MARKER, cache_dir
 
-_MODULES = ("elementwise", "evaluate", "motion", "regions", "resolve", "axis_pass", "select", "flight")
+_MODULES = ("elementwise", "evaluate", "motion", "regions", "resolve", "axis_pass", "select", "flight",
+            "command_plan")
 #: where the kernels are cached (:func:`daa_sil.jit_cache.cache_dir`)
 CACHE_DIR = cache_dir()
 #: s this process waited for another one's compilation, and spent compiling / loading the kernels
