@@ -85,3 +85,29 @@ def test_a_complete_cache_loads_without_the_compile_lock():
             fcntl.flock(fh, fcntl.LOCK_UN)
     assert res.returncode == 0, res.stderr[-2000:]
     assert res.stdout.split(" ", 2)[1] == str(kernels.CACHE_DIR)
+
+
+FIRST_CALL = r"""
+import sys
+from daa_sil.daa import kernels
+kernels.skip_blas_probe()
+kernels.get()
+import numpy as np
+from daa_sil.daa import DaaConfig, compute_bands
+from daa_sil.geometry.kinematics import AircraftState
+own = AircraftState(*(np.array([v]) for v in (0.0, 0.0, 1000.0, 50.0, 0.0, 0.0)))
+intr = AircraftState(*(np.array([[v]]) for v in (0.0, 6000.0, 1000.0, 50.0, 3.14159, 0.0)))
+before = set(sys.modules)
+b = compute_bands(own, intr, DaaConfig())
+assert b.trk.region.shape[0] == 1
+print(" ".join(sorted(set(sys.modules) - before)))
+"""
+
+
+def test_the_first_daa_step_imports_nothing():
+    """After :func:`kernels.get` (the SIL nodes call it before READY), the first bands of a conflict import no
+    module: numba's first typing of an array imported numpy.ma there (20-35 ms in the first DAA step of the
+    vehicle and the GCS, a realtime deadline)."""
+    res = subprocess.run([sys.executable, "-c", FIRST_CALL], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.strip() == "", f"imported during the first bands: {res.stdout.strip()}"

@@ -95,6 +95,9 @@ def get() -> SimpleNamespace:
         (CACHE_DIR / READY_MARKER).touch()
     except OSError:
         pass
+    # numba's typing of an array argument imports numpy.ma (to refuse masked arrays) at the first call of
+    # any kernel: 20-35 ms that would otherwise fall in the first DAA step (a realtime deadline), not here
+    import numpy.ma  # noqa: F401
     ns = SimpleNamespace()
     for name in _MODULES:
         mod = sys.modules[f"{__name__}.{name}"]
