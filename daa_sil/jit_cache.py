@@ -3,6 +3,7 @@ starts the processes that use them). The rules are in :mod:`daa_sil.daa.kernels.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import sys
@@ -22,8 +23,11 @@ def _version(dist: str) -> str:
         return "-"
 
 
+@functools.lru_cache(maxsize=1)
 def source_hash() -> str:
-    """16 hex digits identifying the kernel sources and the numba / llvmlite / numpy / Python versions."""
+    """16 hex digits identifying the kernel sources and the numba / llvmlite / numpy / Python versions; computed
+    once per process (reading the installed versions' metadata costs ~25 ms, and the SIL nodes asked twice
+    while starting)."""
     h = hashlib.sha256()
     for p in sorted(KERNEL_DIR.glob("*.py")):
         h.update(p.name.encode())
