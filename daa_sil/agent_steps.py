@@ -88,11 +88,16 @@ def wait_step(t: float, own: AircraftState, intr: AircraftState, cfg: DaaConfig,
             w = np.where(countdown, w - np.where(np.isfinite(wait_start[inc]), t - wait_start[inc], 0.0), w)
         value.wait_s[inc], value.p_lowc[inc], value.in_box[inc] = w, wv.p_lowc, wv.in_box
         value.turn_dps[inc], value.map_turn_dps[inc] = wv.turn_dps, wv.map_turn_dps
-    veto_map = nc & ~(np.nan_to_num(value.wait_s, nan=-np.inf) >= pol.value("wait_threshold_s"))
-    veto_projl = nc & projl & pol.value("projl").astype(bool)
-    wait = nc & ~veto_map & ~veto_projl
-    decided_by = np.select([~nc, veto_map & veto_projl, veto_map, veto_projl], [BY_NONE, BY_BOTH, BY_MAP, BY_PROJL],
-                           BY_NEITHER).astype(np.int8)
+    if inc.size:
+        veto_map = nc & ~(np.nan_to_num(value.wait_s, nan=-np.inf) >= pol.value("wait_threshold_s"))
+        veto_projl = nc & projl & pol.value("projl").astype(bool)
+        wait = nc & ~veto_map & ~veto_projl
+        # the first that holds of: not decided here, both vetoes, the map's, ProjL's, neither
+        decided_by = np.where(~nc, BY_NONE, np.where(veto_map & veto_projl, BY_BOTH, np.where(
+            veto_map, BY_MAP, np.where(veto_projl, BY_PROJL, BY_NEITHER)))).astype(np.int8)
+    else:  # no row decides a wait (every idle step): no veto, no wait
+        veto_map = veto_projl = wait = np.zeros(n, bool)
+        decided_by = np.full(n, BY_NONE, np.int8)
     wait_start = np.where(wait & np.isnan(wait_start), t, wait_start)
     return WaitStep(nc, wait, value, projl, decided_by, wait_start)
 

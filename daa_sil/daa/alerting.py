@@ -22,7 +22,7 @@ def straight_t_in(s: np.ndarray, v: np.ndarray, volumes, length: float) -> list:
     once, the same numbers as ``wc.violation_interval(s, v, th, 0.0, length)[0]``."""
     if not COMPILED:
         return [wc.violation_interval(s, v, th, 0.0, length)[0] for th in volumes]
-    shape = np.broadcast_shapes(s.shape[:-1], v.shape[:-1])
+    shape = s.shape[:-1] if s.shape == v.shape else np.broadcast_shapes(s.shape[:-1], v.shape[:-1])
     comp = [np.ascontiguousarray(a[..., i] if a.shape[:-1] == shape else np.broadcast_to(a[..., i], shape),
                                  dtype=float).reshape(-1) for a in (s, v) for i in range(3)]
     span = np.full(comp[0].shape[0], float(length))
@@ -49,16 +49,18 @@ def safe_avoidance(own: AircraftState, intr: "AircraftState | None", alert_level
 
 
 def _alerting_times(cfg: DaaConfig, early_level, shape) -> np.ndarray:
-    """Alerting time (s) of levels 1..3 per intruder ``(3, N, M)``: a level's early alerting time where
-    ``early_level`` (N, M) equals that level (DAIDALUS hysteresis), else its alerting time."""
+    """Alerting time (s) of levels 1..3 per intruder, broadcastable to ``(3, N, M)``: a level's early alerting
+    time where ``early_level`` (N, M) equals that level (DAIDALUS hysteresis), else its alerting time (then
+    one value per level, ``(3, 1, 1)``)."""
     times = np.array([cfg.alert_time_preventive_s, cfg.alert_time_corrective_s, cfg.alert_time_warning_s])
+    if early_level is None:
+        return times[:, None, None]
     early = np.array([cfg.early_alert_time_preventive_s, cfg.early_alert_time_corrective_s,
                       cfg.early_alert_time_warning_s])
     out = np.broadcast_to(times[:, None, None], (3,) + shape).copy()
-    if early_level is not None:
-        e = np.asarray(early_level)
-        for lv in (1, 2, 3):
-            out[lv - 1] = np.where(e == lv, early[lv - 1], out[lv - 1])
+    e = np.asarray(early_level)
+    for lv in (1, 2, 3):
+        out[lv - 1] = np.where(e == lv, early[lv - 1], out[lv - 1])
     return out
 
 

@@ -21,6 +21,7 @@ acceleration parabola) by :mod:`daa_sil.daa.trajectory`; ``docs/daa.md`` states 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 from daa_sil.geometry.kinematics import Performance
 from ..errors import UsageError
@@ -168,9 +169,10 @@ class DaaConfig:
         """Corrective/warning well-clear thresholds."""
         return get_thresholds(self.thresholds)
 
-    @property
+    @cached_property
     def th_preventive(self) -> Thresholds:
-        """Preventive volume: the corrective one with ZTHR = max(ZTHR, preventive_zthr)."""
+        """Preventive volume: the corrective one with ZTHR = max(ZTHR, preventive_zthr); made once per
+        configuration (the alert levels read it every step)."""
         th = self.th
         return th.with_(name=th.name + "-preventive", zthr=max(th.zthr, self.preventive_zthr))
 
