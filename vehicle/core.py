@@ -169,8 +169,9 @@ class VehicleCore:
     def _row(self, out, dec) -> dict:
         o, it, g = out.own, out.intruders, out.geometry
 
-        def deg(a):
-            return float(np.degrees(a)) if np.isfinite(a) else math.nan
+        def deg(a):  # (math.degrees is numpy's x * (180 / pi), bit for bit)
+            a = float(a)
+            return math.degrees(a) if math.isfinite(a) else math.nan
 
         lo, hi, rg = track_intervals(np.asarray(out.decisions["bands_trk"][0], float),
                                      np.asarray(out.decisions["bands_trk_region"][0]))

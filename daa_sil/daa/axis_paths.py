@@ -4,6 +4,8 @@ path."""
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from daa_sil.daa.config import (
@@ -30,12 +32,19 @@ def speed_limits(vertical: bool, cfg: DaaConfig, sgn) -> tuple:
     return acc, np.where(sgn < 0, -cfg.max_vs if vertical else cfg.min_gs, cfg.max_vs if vertical else cfg.max_gs)
 
 
+@functools.lru_cache(maxsize=64)
+def _track_counts(trk_range: float, trk_step: float, daidalus_grid: bool) -> tuple[int, int]:
+    """:func:`candidate_counts` of the track axis (the configuration's alone; made once per configuration,
+    not per step: ``np.isclose`` costs ~20 us)."""
+    j_lo = int(round(trk_range / trk_step))
+    full_circle = np.isclose(trk_range, np.pi)
+    return j_lo, (j_lo - 1 if full_circle and not daidalus_grid else j_lo)
+
+
 def candidate_counts(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[int, int]:
     """Number of candidates on the low and high side of ``axis`` for this batch of ownships (>= 0 each)."""
     if axis == AXIS_HORIZONTAL:
-        j_lo = int(round(cfg.trk_range / cfg.trk_step))
-        full_circle = np.isclose(cfg.trk_range, np.pi)
-        return j_lo, (j_lo - 1 if full_circle and not cfg.daidalus_grid else j_lo)
+        return _track_counts(float(cfg.trk_range), float(cfg.trk_step), bool(cfg.daidalus_grid))
     cur, lo, hi, step = ((own.vs, -cfg.max_vs, cfg.max_vs, cfg.vs_step) if axis == AXIS_VERTICAL
                          else (own.gs, cfg.min_gs, cfg.max_gs, cfg.gs_step))
     j_lo = int(np.ceil(np.max(cur - lo, initial=0.0) / step - 1e-9))
