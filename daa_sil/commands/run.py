@@ -130,7 +130,9 @@ def register(sub) -> None:
     d.set_defaults(func=interruptible(demo), scenario=None)
 
 
-def _check_args(args) -> None:
+def _check_args(args):
+    """Every check that can fail before a process starts (one line, exit 2); returns the scenario of
+    ``args.scenario`` loaded (None without one: the demo's)."""
     check_speed(args.speed)
     if args.config:
         load_config(args.config)  # a bad file fails here, one line, before any process starts
@@ -165,11 +167,13 @@ def _check_args(args) -> None:
             raise UsageError(f"--rrd {str(rrd)!r} is a directory, not an .rrd file path")
         if rrd.resolve().parent != Path(args.out).resolve():  # --out is created by the run
             check_rrd_path(rrd, overwrite=True)  # a missing/unwritable directory fails before any process starts
-    if args.scenario is not None:
-        from daa_sil.sil.scenario import load_scenario
+    if args.scenario is None:
+        return None
+    from daa_sil.sil.scenario import load_scenario
 
-        sc = load_scenario(args.scenario)  # fail fast, one line, before any process starts
-        check_faults_allowed(sc, args.clock, args.scenario)
+    sc = load_scenario(args.scenario)  # fail fast, one line, before any process starts
+    check_faults_allowed(sc, args.clock, args.scenario)
+    return sc
 
 
 def _waitmap_source(args) -> "str | None":
@@ -234,13 +238,12 @@ def _say(prefix: str, args):
 
 def run(args) -> int:
     from daa_sil.files import ensure_dir
-    from daa_sil.sil.scenario import load_scenario
 
-    _check_args(args)
+    sc = _check_args(args)  # (loaded once here, and handed on)
     ensure_dir(args.out)  # an unusable --out fails here, before the maps are built or anything starts
-    prepare_waitmap(load_scenario(args.scenario), _waitmap_source(args), _say("daa-sil", args))
-    result = run_sil(_options(args, args.scenario))
-    return _finish(args, result, load_scenario(args.scenario))
+    prepare_waitmap(sc, _waitmap_source(args), _say("daa-sil", args))
+    result = run_sil(_options(args, args.scenario), scenario=sc)
+    return _finish(args, result, sc)
 
 
 def demo_scenario_path() -> Path:
@@ -263,7 +266,7 @@ def demo(args) -> int:
     ensure_dir(args.out)
     say = _say("daa-sil demo", args)
     prepare_waitmap(sc, _waitmap_source(args), say and (lambda m: print(f"daa-sil demo: {m}", flush=True)))
-    result = run_sil(_options(args, path))
+    result = run_sil(_options(args, path), scenario=sc)
     if not args.json:
         print(pilot_story(Path(args.out)))
     return _finish(args, result, sc, legend=demo_legend(result, sc, Path(args.out)))

@@ -121,9 +121,12 @@ class Guidance:
     def __post_init__(self):
         names = ("alert_level", "left_trk", "left_level", "right_trk", "right_level", "up_vs", "up_level",
                  "down_vs", "down_level", "wcv")
-        arrs = np.broadcast_arrays(*(np.asarray(getattr(self, k), float) for k in names))
-        for k, a in zip(names, arrs):
-            setattr(self, k, np.array(a))
+        vals = [np.asarray(getattr(self, k), float) for k in names]
+        shape = vals[0].shape
+        if any(a.shape != shape for a in vals):  # (one shape, the usual case: no broadcast needed)
+            vals = np.broadcast_arrays(*vals)
+        for k, a in zip(names, vals):
+            setattr(self, k, np.array(a))  # own copies
         self.alert_level = np.nan_to_num(self.alert_level, nan=0.0).astype(np.int64)
         self.wcv = self.wcv.astype(bool)
         for k in ("left_level", "right_level", "up_level", "down_level"):

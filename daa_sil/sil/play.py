@@ -87,8 +87,9 @@ def _say(opts: RunOptions, msg: str) -> None:
         opts.progress(msg)
 
 
-def run_sil(opts: RunOptions) -> dict:
+def run_sil(opts: RunOptions, scenario=None) -> dict:
     """Play ``opts.scenario_path`` through vehicle, shim and GCS processes; return the result dict.
+    ``scenario``: that file's :class:`~daa_sil.sil.scenario.Scenario` if the caller loaded it already.
 
     Writes ``out_dir/result.json``, ``out_dir/steplog.parquet``, ``out_dir/gcs_commands.jsonl``
     and ``out_dir/logs/``. Raises DaaSilError if a process fails. Ctrl-C (and SIGTERM/SIGHUP under
@@ -99,7 +100,7 @@ def run_sil(opts: RunOptions) -> dict:
     from daa_sil.files import ensure_dir
     from daa_sil.sil.scenario import load_scenario
 
-    sc = load_scenario(opts.scenario_path)
+    sc = scenario if scenario is not None else load_scenario(opts.scenario_path)
     check_faults_allowed(sc, opts.clock, opts.scenario_path)
     out = ensure_dir(opts.out_dir)
     steplog = out / "steplog.parquet"
