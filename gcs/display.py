@@ -19,10 +19,17 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 
 from daa_sil.daa.config import REGION_NAMES
 
 _console = None
+#: a plain (not a TTY) status line is flushed when this many wall seconds passed since the last flush: a
+#: realtime run (one line a second) flushes each line as before, a lockstep run (hundreds of lines a
+#: second, into the run's log through a pipe the driver reads) a batch at a time; everything is flushed
+#: before the GCS writes to stderr and when it exits
+FLUSH_EVERY_S = 0.2
+_last_flush = -math.inf
 
 
 def format_line(node, t: float, n_cmd: int) -> str:
@@ -56,7 +63,7 @@ def format_line(node, t: float, n_cmd: int) -> str:
 
 
 def render_line(node, t: float, n_cmd: int) -> None:
-    """Print one status line (rich if stdout is a TTY)."""
+    """Print one status line (rich if stdout is a TTY; otherwise flushed at most every :data:`FLUSH_EVERY_S`)."""
     global _console
     line = format_line(node, t, n_cmd)
     if sys.stdout.isatty():
@@ -67,4 +74,9 @@ def render_line(node, t: float, n_cmd: int) -> None:
         style = {"daa": "bold red", "waiting": "yellow", "pilot": "green"}.get(node.view.authority, "")
         _console.print(line, style=style, highlight=False)
     else:
-        print(line, flush=True)
+        global _last_flush
+        now = time.monotonic()
+        flush = now - _last_flush >= FLUSH_EVERY_S
+        print(line, flush=flush)
+        if flush:
+            _last_flush = now

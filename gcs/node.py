@@ -304,9 +304,9 @@ class GcsNode:
 
     @staticmethod
     def _say(text: str) -> None:
-        import sys
+        from daa_sil.sil.msgguard import stderr_line
 
-        print(f"daa-gcs: {text}", file=sys.stderr, flush=True)
+        stderr_line(f"daa-gcs: {text}")  # (after the status lines gcs.display flushes in batches)
 
     async def _run_lockstep(self) -> None:
         inbox = self.ep.inbox

@@ -252,3 +252,44 @@ async def test_request_stop_wakes_the_loop_waiting_for_a_datagram(tmp_path, monk
             task.cancel()
         node.close()
         veh.close()
+
+
+def test_status_lines_are_flushed_in_batches_and_never_behind_a_warning(monkeypatch):
+    """Off a TTY (a run's log, through a pipe) the per-step status lines are flushed at most every
+    FLUSH_EVERY_S, not one write per line; a warning on stderr first flushes the lines printed before it,
+    so the log keeps their order."""
+    import sys
+
+    from gcs import display
+    from daa_sil.sil.msgguard import stderr_line
+
+    events: list = []
+
+    class Stream:
+        def __init__(self, name):
+            self.name = name
+
+        def write(self, text):
+            events.append((self.name, "write", text))
+            return len(text)
+
+        def flush(self):
+            events.append((self.name, "flush", None))
+
+        def isatty(self):
+            return False
+
+    monkeypatch.setattr(sys, "stdout", Stream("out"))
+    monkeypatch.setattr(sys, "stderr", Stream("err"))
+    monkeypatch.setattr(display, "format_line", lambda node, t, n: f"line {t:g}")
+    monkeypatch.setattr(display, "_last_flush", -math.inf)
+    monkeypatch.setattr(display, "FLUSH_EVERY_S", 3600.0)
+    for t in range(5):
+        display.render_line(None, float(t), 0)
+    assert [e for e in events if e[1] == "flush"] == [("out", "flush", None)]  # the first line only
+    assert events.index(("out", "flush", None)) < events.index(("out", "write", "line 1"))
+    stderr_line("daa-gcs: warning: something")
+    last_line = max(i for i, e in enumerate(events) if e[:2] == ("out", "write"))
+    out_flush = max(i for i, e in enumerate(events) if e == ("out", "flush", None))
+    err_write = next(i for i, e in enumerate(events) if e[0] == "err" and e[1] == "write")
+    assert last_line < out_flush < err_write

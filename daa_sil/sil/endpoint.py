@@ -42,7 +42,6 @@ from __future__ import annotations
 import asyncio
 import ipaddress
 import socket
-import sys
 import time
 from collections import Counter
 from dataclasses import dataclass
@@ -50,7 +49,7 @@ from typing import Callable, Iterable, NamedTuple
 
 from daa_sil.errors import UsageError
 from daa_sil.link.codec import MavCodec, MAVLinkMessage
-from daa_sil.sil.msgguard import MessageGuard
+from daa_sil.sil.msgguard import MessageGuard, stderr_line
 
 Address = tuple[str, int]
 DEFAULT_HOST = "127.0.0.1"
@@ -117,10 +116,6 @@ def set_rcvbuf(transport: asyncio.BaseTransport, size: int = RCVBUF_BYTES) -> No
             pass
 
 
-def _stderr_line(text: str) -> None:
-    print(text, file=sys.stderr, flush=True)
-
-
 class DropReporter:
     """Warn once per unexpected sender, then periodically with counts, while its datagrams are dropped.
 
@@ -136,7 +131,7 @@ class DropReporter:
                  emit: "Callable[[str], None] | None" = None, every_s: float = 10.0,
                  clock: "Callable[[], float]" = time.monotonic, max_named: int = 8):
         self.who, self.expected, self.hint = who, expected, hint
-        self.emit = emit or _stderr_line
+        self.emit = emit or stderr_line
         self.every_s, self.clock, self.max_named = float(every_s), clock, int(max_named)
         self.by_addr: Counter = Counter()
         self.total = 0

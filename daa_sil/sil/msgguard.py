@@ -26,7 +26,13 @@ from collections import Counter
 from typing import Callable
 
 
-def _stderr_line(text: str) -> None:
+def stderr_line(text: str) -> None:
+    """``text`` as one line on stderr, after whatever this process buffered on stdout (the GCS's status
+    lines are flushed in batches: a warning must not overtake them in a log where both streams meet)."""
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError, AttributeError):  # closed or replaced: nothing to keep in order
+        pass
     print(text, file=sys.stderr, flush=True)
 
 
@@ -36,7 +42,7 @@ class MessageGuard:
     def __init__(self, who: str, *, emit: "Callable[[str], None] | None" = None, every_s: float = 10.0,
                  clock: "Callable[[], float]" = time.monotonic, max_named: int = 8):
         self.who = who
-        self.emit = emit or _stderr_line
+        self.emit = emit or stderr_line
         self.every_s, self.clock, self.max_named = float(every_s), clock, int(max_named)
         self.by_type: Counter = Counter()  #: message type -> malformed messages
         self.total = 0
