@@ -75,6 +75,9 @@ def render_line(node, t: float, n_cmd: int) -> None:
         _console.print(line, style=style, highlight=False)
     else:
         global _last_flush
+        if _last_flush == -math.inf and getattr(sys.stdout, "write_through", False):
+            # a child of daa-sil run (PYTHONUNBUFFERED): keep the lines until a flush instead of a write each
+            sys.stdout.reconfigure(write_through=False)
         now = time.monotonic()
         flush = now - _last_flush >= FLUSH_EVERY_S
         print(line, flush=flush)

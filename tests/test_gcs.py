@@ -293,3 +293,41 @@ def test_status_lines_are_flushed_in_batches_and_never_behind_a_warning(monkeypa
     out_flush = max(i for i, e in enumerate(events) if e == ("out", "flush", None))
     err_write = next(i for i, e in enumerate(events) if e[0] == "err" and e[1] == "write")
     assert last_line < out_flush < err_write
+
+
+def test_status_lines_are_batched_under_pythonunbuffered():
+    """``daa-sil run`` starts the GCS with PYTHONUNBUFFERED=1 (every print a write): the status lines still
+    reach the pipe in batches, and a warning on stderr first writes the ones held back."""
+    import os
+    import subprocess
+    import sys
+
+    code = r'''
+import os, sys
+from gcs import display
+from daa_sil.sil.msgguard import stderr_line
+r, w = os.pipe()
+os.dup2(w, 1)  # stdout is now a pipe this process reads itself
+os.set_blocking(r, False)
+def written():
+    try:
+        return os.read(r, 65536).decode()
+    except BlockingIOError:
+        return ""
+display.format_line = lambda node, t, n: f"line {t:g}"
+display.FLUSH_EVERY_S = 3600.0
+for t in range(5):
+    display.render_line(None, float(t), 0)
+first = written()
+stderr_line("daa-gcs: warning: test")
+rest = written()
+print(repr((first, rest)), file=sys.stderr)
+'''
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr[-2000:]
+    import ast
+
+    first, rest = ast.literal_eval(res.stderr.strip().splitlines()[-1])
+    assert first == "line 0\n"
+    assert rest == "line 1\nline 2\nline 3\nline 4\n"
