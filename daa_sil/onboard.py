@@ -217,8 +217,7 @@ class OnboardCore:
         relative state if already computed)."""
         if s is None:
             s, v = relative_state(self.own, self.intruders)
-        return {"range_m": wc.horizontal_range(s), "hmd_m": wc.hmd(s, v, self.daa_cfg.lookahead_s),
-                "dh_m": -s[..., 2], "tau_mod_s": wc.tau_mod(s, v, self.th.dthr), "wcv": wc.wcv(s, v, self.th)}
+        return wc.encounter_geometry(s, v, self.th, self.daa_cfg.lookahead_s)
 
     def step(self, t: float, pilot_input) -> StepOutput:
         """Decide, publish telemetry for ``t`` (s), then advance truth to ``t + dt`` (see module doc)."""

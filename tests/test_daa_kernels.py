@@ -150,6 +150,44 @@ def test_nmac_interval_identical(th, seed, monkeypatch):
     assert 100 < hits < n - 100  # both outcomes occur: the equality above is not vacuous
 
 
+@pytest.mark.parametrize("th", THRESHOLDS, ids=lambda t: t.name)
+@pytest.mark.parametrize("seed", range(4))
+def test_encounter_geometry_identical(th, seed, monkeypatch):
+    """The step's geometry (range, HMD, height difference, tau_mod, WCV; wellclear.encounter_geometry,
+    compiled) against the numpy functions bit for bit (signed zeros too): adversarial states (the
+    thresholds +-1 ulp, tangents to the DTHR circle, zero, tiny, huge, nan and inf), lookaheads 0, 55 s
+    and inf, (N,), (N, M) and one row; the numpy reference is made to raise while the compiled one runs."""
+    from daa_sil.daa import kernels
+    from daa_sil.geometry import wellclear as wc
+
+    kernels.get()
+    rng = np.random.default_rng(500 + seed)
+    n = 40_000
+    drawn = [_draw(rng, n // 2, th, sc) for sc in (8000.0, 8000.0, 300.0, 150.0, 150.0, 10.0)]
+    comp = [np.concatenate([a, b]) for a, b in zip(drawn, _tangent(rng, n - n // 2, th))]
+    s, v = np.stack(comp[:3], axis=-1), np.stack(comp[3:], axis=-1)
+    v[rng.random(n) < 0.05] = 0.0
+
+    def not_here(*_a, **_k):
+        raise AssertionError("the numpy reference ran: the compiled path was not taken")
+
+    for lookahead in (55.0, 0.0, np.inf):
+        for shape in ((n,), (n // 8, 8), (1,)):
+            k = int(np.prod(shape))
+            ss, vv = s[:k].reshape(shape + (3,)), v[:k].reshape(shape + (3,))
+            want = _ref(wc.encounter_geometry_reference, ss, vv, th, lookahead)
+            with monkeypatch.context() as m:
+                m.setattr(wc, "encounter_geometry_reference", not_here)
+                got = wc.encounter_geometry(ss, vv, th, lookahead)
+            assert list(got) == list(want)
+            for name in want:
+                _bits_same(got[name], want[name])
+    ref = _ref(wc.encounter_geometry_reference, s, v, th, 55.0)
+    assert 100 < ref["wcv"].sum() < n - 100  # both outcomes occur: the equality above is not vacuous
+    tau = ref["tau_mod_s"]
+    assert (tau == 0).sum() > 100 and np.isnan(tau).sum() > 100 and (np.isfinite(tau) & (tau > 0)).sum() > 100
+
+
 def _pieces(rng, n, th):
     """Chord pieces: start / end relative positions (end = start + h v + a curvature offset), duration,
     error bounds (arrays or 0.0) and true end velocities."""

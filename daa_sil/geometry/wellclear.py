@@ -133,6 +133,33 @@ def wcv(s, v, th: "Thresholds | str | None" = None) -> np.ndarray:
     return horiz & vert
 
 
+def encounter_geometry(s, v, th: "Thresholds | str | None" = None, lookahead: float = np.inf) -> dict:
+    """Per relative state (``s``, ``v`` of one shape ``(..., 3)``): ``range_m`` (:func:`horizontal_range`),
+    ``hmd_m`` (:func:`hmd` within ``lookahead`` s), ``dh_m`` (``-s_z``), ``tau_mod_s`` (:func:`tau_mod` with
+    DMOD = DTHR) and ``wcv`` (:func:`wcv`) of thresholds ``th``: one compiled pass where the process has the
+    kernels (:mod:`daa_sil.compiled`), else :func:`encounter_geometry_reference` (the same numbers)."""
+    th = get_thresholds(th)
+    s, v = _f(s), _f(v)
+    k = loaded_kernels()
+    if k is None or s.shape != v.shape:
+        return encounter_geometry_reference(s, v, th, lookahead)
+    shape = s.shape[:-1]
+    out = {name: np.empty(shape) for name in ("range_m", "hmd_m", "dh_m", "tau_mod_s")}
+    out["wcv"] = np.empty(shape, bool)
+    D = float(th.dthr)
+    k.geometry_into(*(a[..., i].reshape(-1) for a in (s, v) for i in range(3)), float(lookahead), D, D * D, D,
+                    th.dthr ** 2, float(th.tthr), float(th.zthr), float(th.tcoa),
+                    *(out[n].reshape(-1) for n in ("range_m", "hmd_m", "dh_m", "tau_mod_s", "wcv")))
+    return out
+
+
+def encounter_geometry_reference(s, v, th: "Thresholds | str | None" = None, lookahead: float = np.inf) -> dict:
+    """:func:`encounter_geometry` from the numpy functions (the compiled kernel's reference)."""
+    th = get_thresholds(th)
+    return {"range_m": horizontal_range(s), "hmd_m": hmd(s, v, lookahead), "dh_m": -_f(s)[..., 2],
+            "tau_mod_s": tau_mod(s, v, th.dthr), "wcv": wcv(s, v, th)}
+
+
 def vertical_window(sz, vz, t0, t1, zthr: float, tcoa: float) -> tuple[np.ndarray, np.ndarray]:
     """Times ``[lo, hi]`` within ``[t0, t1]`` (s) when the vertical WCV condition holds for
     ``sz + t vz`` (m, m/s): ``|z| <= ZTHR`` or converging with ``t_coa <= TCOA``; empty if lo > hi."""

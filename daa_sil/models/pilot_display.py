@@ -79,14 +79,15 @@ class PilotDisplay:
         """Pilots ``rows`` (indices) now see ownship ``own`` (R,), intruders ``intr`` (R, M) and the
         vehicle's alert level ``alert`` (R,) sent with them."""
         from daa_sil.daa.alerting import relative_state
-        from daa_sil.geometry.wellclear import wcv
+        from daa_sil.geometry.wellclear import encounter_geometry
 
         rows = np.asarray(rows, np.int64)
         if not rows.size:
             return
         alert = np.asarray(alert, np.int64)
         self.alert[rows] = alert
-        self.wcv[rows] = wcv(*relative_state(own, intr), self.cfg.th).any(axis=1)
+        # (wellclear.wcv, in the one compiled pass of the step's geometry where the kernels are loaded)
+        self.wcv[rows] = encounter_geometry(*relative_state(own, intr), self.cfg.th)["wcv"].any(axis=1)
         sel = alert >= self.alert_level_min
         from daa_sil.daa_batches import positions_by_batch
 

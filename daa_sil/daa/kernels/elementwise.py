@@ -131,3 +131,41 @@ def nmac_interval_into(sx, sy, sz, vx, vy, vz, nmac_h, nmac_v, t_end, lo_out, hi
             lo_out[i], hi_out[i] = math.inf, -math.inf
         else:
             lo_out[i], hi_out[i] = lo, hi
+
+
+@inline
+def t_cpa(sx, sy, vx, vy):
+    """``wellclear.t_cpa``: time (s) to the horizontal closest approach, 0 without relative motion."""
+    a = vx * vx + vy * vy  # (numpy's v ** 2 is its square, x * x)
+    return -(sx * vx + sy * vy) / a if a > EPS else 0.0
+
+
+@kernel(void(A, A, A, A, A, A, F, F, F, F, F, F, F, F, O, O, O, O, boolean[:]))
+def geometry_into(sx, sy, sz, vx, vy, vz, lookahead, dmod, dmod_sq, dthr, dthr_sq, tthr, zthr, tcoa, range_out,
+                  hmd_out, dh_out, tau_out, wcv_out):
+    """``wellclear.encounter_geometry`` of each relative state: horizontal range (m), HMD within ``lookahead``
+    (m), height difference (m), modified tau with DMOD ``dmod`` (s, nan when diverging outside DMOD) and the
+    well-clear violation (``dthr`` .. ``tcoa``). ``dmod_sq`` is ``dmod * dmod`` and ``dthr_sq`` is
+    ``dthr ** 2``, as the numpy code computes them in Python."""
+    for i in range(sx.shape[0]):
+        x, y, z, u, w, h = sx[i], sy[i], sz[i], vx[i], vy[i], vz[i]
+        r = math.hypot(x, y)
+        sv = x * u + y * w
+        t = t_cpa(x, y, u, w)
+        tc = npmin(npmax(t, 0.0), lookahead)
+        range_out[i] = r
+        hmd_out[i] = math.hypot(x + tc * u, y + tc * w)
+        dh_out[i] = -z
+        den = sv if sv < 0 else -1.0
+        if r <= dmod:
+            tau_out[i] = 0.0
+        elif sv < 0:
+            tau_out[i] = (dmod_sq - r * r) / den
+        else:
+            tau_out[i] = math.nan
+        tau = (dthr_sq - r * r) / den
+        horiz = (r <= dthr) or ((math.hypot(x + t * u, y + t * w) <= dthr) and (sv < 0) and (tau <= tthr))
+        moving = abs(h) > EPS
+        t_coa = -z / (h if moving else 1.0)
+        vert = (abs(z) <= zthr) or (moving and (z * h <= 0) and (t_coa <= tcoa))
+        wcv_out[i] = horiz and vert
