@@ -111,6 +111,25 @@ def test_wcv_soa_identical(th, seed):
     _same(intervals.wcv_soa(*comp, th), _ref(intervals.wcv_soa_reference, *comp, th))
 
 
+def _compiled_and_reference(monkeypatch, module, name: str, s, v, *args):
+    """``(compiled, reference)`` results of ``module.<name>`` on the relative states ``s``, ``v`` (n, 3) laid out
+    as (n,), (n / 8, 8) and one row; the reference ``<name>_reference`` is made to raise while the compiled
+    function runs, so the pair cannot be the numpy code twice."""
+    n = s.shape[0]
+
+    def not_here(*_a, **_k):
+        raise AssertionError("the numpy reference ran: the compiled path was not taken")
+
+    for shape in ((n,), (n // 8, 8), (1,)):
+        k = int(np.prod(shape))
+        ss, vv = s[:k].reshape(shape + (3,)), v[:k].reshape(shape + (3,))
+        want = _ref(getattr(module, f"{name}_reference"), ss, vv, *args)
+        with monkeypatch.context() as m:
+            m.setattr(module, f"{name}_reference", not_here)
+            got = getattr(module, name)(ss, vv, *args)
+        yield got, want
+
+
 @pytest.mark.parametrize("th", THRESHOLDS[:3], ids=lambda t: t.name)
 @pytest.mark.parametrize("seed", range(4))
 def test_nmac_interval_identical(th, seed, monkeypatch):
@@ -133,18 +152,8 @@ def test_nmac_interval_identical(th, seed, monkeypatch):
         comp.append(a)
     s, v = np.stack(comp[:3], axis=-1), np.stack(comp[3:], axis=-1)
     v[rng.random(n) < 0.1] = 0.0
-
-    def not_here(*_a, **_k):
-        raise AssertionError("the numpy reference ran: the compiled path was not taken")
-
     for t_end in (1.0, 0.0, 2.5):
-        for shape in ((n,), (n // 8, 8), (1,)):
-            k = int(np.prod(shape))
-            ss, vv = s[:k].reshape(shape + (3,)), v[:k].reshape(shape + (3,))
-            want = _ref(wc.nmac_interval_reference, ss, vv, th, t_end)
-            with monkeypatch.context() as m:
-                m.setattr(wc, "nmac_interval_reference", not_here)
-                got = wc.nmac_interval(ss, vv, th, t_end)
+        for got, want in _compiled_and_reference(monkeypatch, wc, "nmac_interval", s, v, th, t_end):
             _same_pair(got, want)
     hits = np.isfinite(_ref(wc.nmac_interval_reference, s, v, th, 1.0)[0]).sum()
     assert 100 < hits < n - 100  # both outcomes occur: the equality above is not vacuous
@@ -167,18 +176,8 @@ def test_encounter_geometry_identical(th, seed, monkeypatch):
     comp = [np.concatenate([a, b]) for a, b in zip(drawn, _tangent(rng, n - n // 2, th))]
     s, v = np.stack(comp[:3], axis=-1), np.stack(comp[3:], axis=-1)
     v[rng.random(n) < 0.05] = 0.0
-
-    def not_here(*_a, **_k):
-        raise AssertionError("the numpy reference ran: the compiled path was not taken")
-
     for lookahead in (55.0, 0.0, np.inf):
-        for shape in ((n,), (n // 8, 8), (1,)):
-            k = int(np.prod(shape))
-            ss, vv = s[:k].reshape(shape + (3,)), v[:k].reshape(shape + (3,))
-            want = _ref(wc.encounter_geometry_reference, ss, vv, th, lookahead)
-            with monkeypatch.context() as m:
-                m.setattr(wc, "encounter_geometry_reference", not_here)
-                got = wc.encounter_geometry(ss, vv, th, lookahead)
+        for got, want in _compiled_and_reference(monkeypatch, wc, "encounter_geometry", s, v, th, lookahead):
             assert list(got) == list(want)
             for name in want:
                 _bits_same(got[name], want[name])

@@ -13,16 +13,13 @@ import math
 import numpy as np
 from numba import boolean, types
 
-from daa_sil.daa.kernels.flight import at, clip, segment
+from daa_sil.daa.kernels.flight import at, segment, toward
 from daa_sil.daa.kernels.jit import kernel
 from daa_sil.daa.kernels.plan_layout import ACC_H, ACC_V, H, JERK, KINK_GS, KINK_TRK, N_KNOTS, T_VS
-from daa_sil.daa.kernels.scalar import npmax, npmin, npsign
+from daa_sil.daa.kernels.scalar import npmax, npmin
 from daa_sil.daa.kernels.signatures import A, F, O2
 
-_TWO_PI = 2.0 * math.pi
-_PI = math.pi
 INF = math.inf
-
 
 
 @kernel(boolean(A, A, A, A, A, A, A, A, A, F, F, F, F, F, F, F, F, F, F, F, F, F, F,
@@ -39,15 +36,14 @@ def command_plan_into(x, y, z, gs, trk, vs, cmd_trk, cmd_vs, cmd_gs, max_turn, h
     exotic = False
     for i in range(phases.shape[0]):
         g, tr, v = at(gs, i), at(trk, i), at(vs, i)
-        ct, cv, cg = at(cmd_trk, i), at(cmd_vs, i), at(cmd_gs, i)
-        ct = tr if ct != ct else ct  # Command.resolved
-        cv = v if cv != cv else cv
-        cg = g if cg != cg else cg
-        # maneuver_times (the configuration's rates)
-        d_trk = (ct - tr + _PI) % _TWO_PI - _PI
-        t_trk = abs(d_trk) / turn_rate
-        t_vs = abs(clip(cv, -max_vs, max_vs) - v) / cfg_v_acc
-        t_gs = abs(clip(cg, min_gs, max_gs) - g) / cfg_h_acc
+        # _CommandMotion (the performance limits; the command resolved)
+        ct, tgt_gs, tgt_vs, dpsi, w, t_turn, dgs, acc, t_spd = toward(
+            g, tr, v, at(cmd_trk, i), at(cmd_vs, i), at(cmd_gs, i), max_turn, h_acc, min_gs, max_gs, max_vs)
+        # maneuver_times (the configuration's rates; its wrapped track change and clipped targets are the same
+        # operations on the same numbers as the motion's)
+        t_trk = abs(dpsi) / turn_rate
+        t_vs = abs(tgt_vs - v) / cfg_v_acc
+        t_gs = abs(tgt_gs - g) / cfg_h_acc
         # the knots: the finest spacing of the axes the command changes
         k_trk = knot_trk if t_trk > eps else INF
         k_vs = knot_vs if t_vs > eps else INF
@@ -57,7 +53,7 @@ def command_plan_into(x, y, z, gs, trk, vs, cmd_trk, cmd_vs, cmd_gs, max_turn, h
         h = knots if math.isfinite(knots) else 1.0
         plan[i, H] = h
         plan[i, N_KNOTS] = np.ceil(t_man / h - 1e-9) if t_man > eps else 0.0  # (a float, as numpy's)
-        gs_max = npmax(g, clip(cg, min_gs, max_gs))
+        gs_max = npmax(g, tgt_gs)
         plan[i, ACC_H] = (gs_max * turn_rate if t_trk > eps else 0.0) + (cfg_h_acc if t_gs > eps else 0.0)
         plan[i, ACC_V] = cfg_v_acc if t_vs > eps else 0.0
         w_k = turn_rate if t_trk > eps else 0.0
@@ -65,15 +61,6 @@ def command_plan_into(x, y, z, gs, trk, vs, cmd_trk, cmd_vs, cmd_gs, max_turn, h
         plan[i, KINK_TRK] = t_trk if t_trk > eps else INF
         plan[i, KINK_GS] = t_gs if t_gs > eps else INF
         plan[i, T_VS] = t_vs
-        # _CommandMotion (the performance limits)
-        tgt_gs = clip(cg, min_gs, max_gs)
-        tgt_vs = clip(cv, -max_vs, max_vs)
-        dpsi = (ct - tr + _PI) % _TWO_PI - _PI
-        w = npsign(dpsi) * max_turn
-        t_turn = abs(dpsi) / max_turn if max_turn > 0 else 0.0
-        dgs = tgt_gs - g
-        acc = npsign(dgs) * h_acc
-        t_spd = abs(dgs) / h_acc if h_acc > 0 else 0.0
         b1, b2 = npmin(t_turn, t_spd), npmax(t_turn, t_spd)
         px, py, pg, pt = at(x, i), at(y, i), g, tr
         for p in range(3):

@@ -107,24 +107,34 @@ def advance_into(x, y, z, gs, trk, vs, turn_rate, accel, vertical_accel, dt, max
         otrk[i] = otrk[i] % _TWO_PI
 
 
+@inline
+def toward(g, tr, v, ct, cv, cg, max_turn, h_acc, min_gs, max_gs, max_vs):
+    """The maneuver from ground speed ``g``, track ``tr`` and vertical speed ``v`` toward the command
+    (``ct``, ``cv``, ``cg``; nan = keep) at the limits, as ``kinematics.fly_command`` (and SM's
+    ``_CommandMotion``) set it up: ``(commanded track, target ground speed, target vertical speed, track
+    change, turn rate, turn time, speed change, acceleration, speed-change time)``."""
+    ct = tr if ct != ct else ct  # Command.resolved
+    cv = v if cv != cv else cv
+    cg = g if cg != cg else cg
+    tgt_gs = clip(cg, min_gs, max_gs)
+    tgt_vs = clip(cv, -max_vs, max_vs)
+    dpsi = (ct - tr + _PI) % _TWO_PI - _PI
+    w = npsign(dpsi) * max_turn
+    t_turn = abs(dpsi) / max_turn if max_turn > 0 else 0.0
+    dgs = tgt_gs - g
+    acc = npsign(dgs) * h_acc
+    t_spd = abs(dgs) / h_acc if h_acc > 0 else 0.0
+    return ct, tgt_gs, tgt_vs, dpsi, w, t_turn, dgs, acc, t_spd
+
+
 @kernel(void(A, A, A, A, A, A, A, A, A, F, F, F, F, F, F, F, F, O, O, O, O, O, O))
 def fly_command_into(x, y, z, gs, trk, vs, cmd_trk, cmd_vs, cmd_gs, dt, max_turn, h_acc, v_acc, min_gs, max_gs,
                      max_vs, straight, ox, oy, oz, ogs, otrk, ovs):
     """``kinematics.fly_command``: every element flown ``dt`` s toward its command (nan = keep)."""
     for i in range(ox.shape[0]):
         g, tr, v = at(gs, i), at(trk, i), at(vs, i)
-        ct, cv, cg = at(cmd_trk, i), at(cmd_vs, i), at(cmd_gs, i)
-        ct = tr if ct != ct else ct  # Command.resolved
-        cv = v if cv != cv else cv
-        cg = g if cg != cg else cg
-        tgt_gs = clip(cg, min_gs, max_gs)
-        tgt_vs = clip(cv, -max_vs, max_vs)
-        dpsi = (ct - tr + _PI) % _TWO_PI - _PI
-        w = npsign(dpsi) * max_turn
-        t_turn = abs(dpsi) / max_turn if max_turn > 0 else 0.0
-        dgs = tgt_gs - g
-        acc = npsign(dgs) * h_acc
-        t_spd = abs(dgs) / h_acc if h_acc > 0 else 0.0
+        ct, tgt_gs, tgt_vs, dpsi, w, t_turn, dgs, acc, t_spd = toward(
+            g, tr, v, at(cmd_trk, i), at(cmd_vs, i), at(cmd_gs, i), max_turn, h_acc, min_gs, max_gs, max_vs)
         t_turn = npmin(t_turn, dt)
         t_spd = npmin(t_spd, dt)
         b1 = npmin(t_turn, t_spd)
