@@ -29,7 +29,9 @@ Clocks
    tick ``k + 1`` at the earliest). A repeated tick is forwarded again (a lost one is recovered).
 5. Tick 0 processed before any GCS has spoken (its forward found no peer) is processed again when
    the GCS's first datagram comes in (``start_tick_forwarded``): what the vehicle's next retry of
-   tick 0 would do, without waiting for it. The GCS usually finishes starting after the vehicle.
+   tick 0 would do, without waiting for it, except that it is not echoed a second time (the same
+   signed bytes twice are a replay to the vehicle's codec). The GCS usually finishes starting after
+   the vehicle.
 
 **Free-running** (realtime, the vehicle sends no ticks): each datagram enters its line at the
 sim time ``t`` given to :meth:`ShimCore.receive`; :meth:`ShimCore.next_release` says when the
@@ -153,7 +155,9 @@ class ShimCore:
                 # vehicle's next retry of it had come in (instead of up to tick_retry_s later)
                 start, self._start_tick = self._start_tick, None
                 self.counters["start_tick_forwarded"] += 1
-                self._process_tick(*start)
+                # not echoed again: the vehicle had its echo, and a second copy of the same signed bytes is
+                # a replay to its codec (dropped and counted as an attack)
+                self._process_tick(*start, echo=False)
         else:
             self.lines["down" if side == "vehicle" else "up"].push(t, data)
         return self._out
@@ -267,7 +271,9 @@ class ShimCore:
             return
         self._process_tick(msg, data)
 
-    def _process_tick(self, msg, data: bytes) -> None:
+    def _process_tick(self, msg, data: bytes, echo: bool = True) -> None:
+        """Tick ``msg`` (its datagram ``data``): the clock, the releases, the forward to the GCS and (``echo``)
+        the echo to the vehicle."""
         c = self.counters
         k = int(msg.tick)
         if self.last_tick is None or k > self.last_tick:  # a retried tick leaves the GCS's step batch whole, so
@@ -288,8 +294,9 @@ class ShimCore:
                 if self._gcs_acks:
                     c["gcs_unresponsive"] += 1
                 self._gcs_acks = False
-        self._out.append(Send("vehicle", data))
-        c["tick_echoes"] += 1  # "shim alive, uplink due at t_k sent"
+        if echo:
+            self._out.append(Send("vehicle", data))
+            c["tick_echoes"] += 1  # "shim alive, uplink due at t_k sent"
         self.processed.append((k, t_k, n))
 
     def _on_ack(self, msg, data: bytes) -> None:
