@@ -176,3 +176,30 @@ def test_a_campaign_with_group_batches_resumes_and_matches(tmp_path):
     assert compare_dirs(tmp_path / "units", tmp_path / "batched").identical
     # the group's own policy with the reading's settings on top (the default reading: paper)
     assert replace(group_spec("IC-1").policy(), **cfg.effective_reading.policy_overrides()) == cfg.policy("IC-1")
+
+
+def test_parts_on_the_same_encounters_share_streams_and_equal_delay_tables_only(encs, family, monkeypatch):
+    """Parts that fly the same encounters make their streams once, and those with equal delay models
+    (equal, not the same object) draw one table; a different model draws its own. Every part still gets
+    exactly its results alone, so a wrongly shared table (or stream) fails here."""
+    a = encs.subset(np.arange(N))
+    parts = [SimPart(a, policy_for_group("ID-2"), TruncatedGaussian(5.0, 3.0), TruncatedGaussian(5.0, 3.0), group="ID-2"),
+             SimPart(a, policy_for_group("B-2"), TruncatedGaussian(5.0, 3.0), TruncatedGaussian(5.0, 3.0), group="B-2"),
+             SimPart(a, policy_for_group("ID-1"), TruncatedGaussian(6.0, 2.0), TruncatedGaussian(5.0, 3.0), group="ID-1")]
+    made = []
+    real = ft.BatchedDelay
+
+    def counted(model, seeds, *args):
+        made.append((model, id(seeds)))
+        return real(model, seeds, *args)
+
+    monkeypatch.setattr(ft, "BatchedDelay", counted)
+    batched = simulate_parts(parts, wait_family=family)
+    # uplink: (5, 3) once, (6, 2) once; downlink: (5, 3) once, all three parts on one stream list
+    assert [m for m, _ in made] == [TruncatedGaussian(5.0, 3.0), TruncatedGaussian(6.0, 2.0), TruncatedGaussian(5.0, 3.0)]
+    assert len({s for _, s in made}) == 2  # the uplink streams and the downlink streams, one list each
+    monkeypatch.setattr(ft, "BatchedDelay", real)
+    for p, (enc, dec) in zip(parts, batched):
+        alone = simulate(p.encounters, p.policy, p.latency_up, p.latency_down, wait_family=family, group=p.group)
+        _assert_tables_equal(enc, alone[0])
+        _assert_tables_equal(dec, alone[1])

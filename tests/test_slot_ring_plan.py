@@ -29,6 +29,32 @@ def test_ring_holds_what_is_still_read_and_grows_when_a_reader_lags():
         ring.slot(1)
 
 
+def test_gather_reads_each_rows_own_slot_element_by_element():
+    """Every (slot, row, component) holds a distinct value; gather of any slots for any rows (also a
+    subset in another order, and slot -1) equals reading them one element at a time, before and after
+    the ring grew."""
+    n = 7
+    ring = SlotRing(n, {"m": ((2, 3), float, np.nan), "i": ((), np.int64, -5)}, capacity=2)
+    rng = np.random.default_rng(3)
+    kept = {}
+    for k in range(12):
+        slot = ring.open(k)
+        slot["m"][:] = k * 1000 + np.arange(n)[:, None, None] * 10 + np.arange(6).reshape(2, 3)
+        slot["i"][:] = k * 100 + np.arange(n)
+        kept[k] = {f: v.copy() for f, v in slot.items()}
+        ring.release(max(0, k - (1 if k < 6 else 8)))  # lagging from k = 6: the ring grows
+        for rows in (None, rng.permutation(n)[:4]):
+            r = np.arange(n) if rows is None else rows
+            idx = rng.integers(ring.oldest, k + 1, r.size)
+            idx[0] = -1
+            for f, fill in (("m", np.nan), ("i", -5)):
+                got = ring.gather(f, idx, rows=rows)
+                want = np.stack([np.full_like(kept[k][f][0], fill) if j < 0 else kept[j][f][row]
+                                 for j, row in zip(idx, r)])
+                np.testing.assert_array_equal(got, want)
+    assert ring.capacity > 2
+
+
 def test_ring_memory_does_not_grow_with_the_number_of_steps():
     ring = SlotRing(5, {"v": ((), float, 0.0)}, capacity=8)
     for k in range(1000):

@@ -121,12 +121,48 @@ class _LinkDelays:
     (:class:`~daa_sil.models.delay_process.BatchedDelay` per part); ``delay_at(t)`` -> (N,) s."""
 
     def __init__(self, models: Sequence[DelayModel], streams: Sequence[list], epoch_s: float, duration_s: float):
-        self.parts = [BatchedDelay(m, ss, epoch_s, duration_s) for m, ss in zip(models, streams)]
+        # parts that fly the same encounters (one list object of streams) under equal models have equal
+        # tables, draw for draw: drawn once (the groups of a chunk share a latency model two at a time)
+        made: list = []
+        self.parts = []
+        for m, ss in zip(models, streams):
+            table = next((b for mm, s2, b in made if s2 is ss and mm == m), None)
+            if table is None:
+                table = BatchedDelay(m, ss, epoch_s, duration_s)
+                made.append((m, ss, table))
+            self.parts.append(table)
 
     def delay_at(self, t: float) -> np.ndarray:
         if len(self.parts) == 1:
             return self.parts[0].delay_at(t)
         return np.concatenate([p.delay_at(t) for p in self.parts])
+
+
+def _streams_per_part(seeds: Sequence[np.ndarray]) -> list[list]:
+    """Each part's per-encounter streams (:func:`encounter_streams`), made once per distinct seed array:
+    the groups of a chunk fly the same encounters, so their parts share one list (a SeedSequence is
+    only read, never spawned from, so sharing it changes no draw)."""
+    made: dict = {}
+    out = []
+    for s in seeds:
+        key = s.tobytes()
+        if key not in made:
+            made[key] = [encounter_streams(x) for x in s]
+        out.append(made[key])
+    return out
+
+
+def _stream_column(streams: Sequence[list], which: Sequence[int]) -> list[list]:
+    """Stream ``which[i]`` of every encounter of part ``i``; parts that share their streams and read the
+    same stream get one list object (so :class:`_LinkDelays` draws their tables once)."""
+    made: dict = {}
+    out = []
+    for st, k in zip(streams, which):
+        key = (id(st), k)
+        if key not in made:
+            made[key] = [x[k] for x in st]
+        out.append(made[key])
+    return out
 
 
 def simulate(encounters, policy: AllocationPolicy, latency_up: DelayModel, latency_down: DelayModel,
@@ -199,7 +235,7 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     bounds = np.concatenate([[0], np.cumsum(sizes)])
     batches = None if len(parts) == 1 else np.repeat(np.arange(len(parts)), sizes)  # one DAA batch per part
     policy = parts[0].policy if len(parts) == 1 else PolicyRows.stacked([p.policy for p in parts], sizes)
-    streams = [[encounter_streams(x) for x in s] for s in seeds]
+    streams = _streams_per_part(seeds)
     core = OnboardCore.from_encounters(encounters, policy, cfg, wait_lookup, thresholds=preset_name,
                                        step_log=record_steps, daa_batches=batches)
     # the flight plan the pilot returns to: the ownship's initial straight, level course
@@ -208,9 +244,9 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     # each part's link legs: one-way (each link its own stream) or a shared round trip (both links
     # read the uplink stream's draws: models/link_rule.py)
     legs = [p.link_legs if p.link_legs is not None else LinkLegs(p.latency_up, p.latency_down) for p in parts]
-    up = _LinkDelays([lg.up for lg in legs], [[x[STREAM_UP] for x in st] for st in streams], epoch_s, duration + dt)
+    up = _LinkDelays([lg.up for lg in legs], _stream_column(streams, [STREAM_UP] * len(legs)), epoch_s, duration + dt)
     down = _LinkDelays([lg.down for lg in legs],
-                       [[x[STREAM_UP if lg.shared else STREAM_DOWN] for x in st] for lg, st in zip(legs, streams)],
+                       _stream_column(streams, [STREAM_UP if lg.shared else STREAM_DOWN for lg in legs]),
                        epoch_s, duration + dt)
     m = core.m
     acc = Accumulators(n, core.own)
