@@ -78,6 +78,20 @@ def test_plan_uses_every_unit_once_and_balances_the_workers():
         assert {u[0] for u in t} == {"B-1", "B-2", "IC-1", "ID-1", "ID-2"}
 
 
+def test_plan_keeps_the_groups_of_a_chunk_together():
+    """A task is a contiguous run of units in (chunk, group) order: it spans at most two chunks (whose
+    parts then share their streams and delay tables), still holds four or five groups, and the tasks
+    stay within one unit of each other."""
+    groups = ["B-1", "B-2", "IC-1", "ID-1", "ID-2"]
+    units = _units(5, groups, 2000)
+    tasks = plan_batches(units, workers=2, batch_rows=10_000, min_tasks=4)
+    assert len(tasks) == 6 and [u for t in tasks for u in t] == units  # every unit once, in order
+    for t in tasks:
+        assert len({c for _, c, _ in t}) <= 2 and len({g for g, _, _ in t}) >= 4
+    loads = [sum(u[2] for u in t) for t in tasks]
+    assert max(loads) - min(loads) <= 2000
+
+
 def test_plan_bounds_rows_per_task_and_keeps_a_multiple_of_the_workers():
     units = _units(10, ["B-1", "ID-2"], 1000)
     tasks = plan_batches(units, workers=2, batch_rows=5000)

@@ -9,8 +9,11 @@ the unit run alone. The plan keeps the workers balanced and each task's memory b
   (about 21 kB a row with two intruders, 10,000 rows ~ 0.43 GiB), and a killed campaign loses the
   tasks in flight;
 * a number of tasks that is a multiple of the worker count (when there are enough units), each
-  with about the same number of rows; units are dealt in (chunk, group) order to the task with the
-  fewest rows so far, so every task holds a similar mix of groups (the groups' costs differ);
+  with about the same number of rows: a task is a contiguous run of units in (chunk, group) order
+  (unit to task by the position of its first row), so it holds the groups of one or two chunks.
+  Those fly the same encounters and share their random streams and equal delay tables
+  (:func:`daa_sil.study.fasttime.simulate_parts`); with chunks of five groups, a task of four or
+  more units still holds four or five different groups (the groups' costs differ);
 * with ``min_tasks``, at least that many tasks (finer progress and resume), as far as units allow.
 """
 
@@ -43,11 +46,10 @@ def plan_batches(units: Sequence[tuple], workers: int, batch_rows: int = DEFAULT
     n_tasks = workers * math.ceil(total / (workers * batch_rows))
     n_tasks = min(max(n_tasks, min_tasks), len(units))
     tasks: list[list[tuple]] = [[] for _ in range(n_tasks)]
-    load = [0] * n_tasks
+    first_row = 0
     for u in units:
-        k = min(range(n_tasks), key=lambda j: (load[j], j))
-        tasks[k].append(u)
-        load[k] += u[2]
+        tasks[min(first_row * n_tasks // total, n_tasks - 1)].append(u)
+        first_row += u[2]
     return [t for t in tasks if t]
 
 
