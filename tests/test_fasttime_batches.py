@@ -203,3 +203,33 @@ def test_parts_on_the_same_encounters_share_streams_and_equal_delay_tables_only(
         alone = simulate(p.encounters, p.policy, p.latency_up, p.latency_down, wait_family=family, group=p.group)
         _assert_tables_equal(enc, alone[0])
         _assert_tables_equal(dec, alone[1])
+
+
+def test_a_round_trip_draws_one_table_for_both_links(encs, family, monkeypatch):
+    """Under the round-trip rule both links apply half of one draw to the uplink stream: one table for the
+    two directions (per equal round trip), and the part still gets its results alone."""
+    from daa_sil.models.link_rule import link_legs
+
+    a = encs.subset(np.arange(N))
+    legs = link_legs(TruncatedGaussian(10.0, 4.0), "round-trip")
+    part = SimPart(a, policy_for_group("ID-2"), legs.up, legs.down, group="ID-2", link_legs=legs)
+    made = []
+    real = ft.BatchedDelay
+
+    def counted(model, seeds, *args):
+        made.append(model)
+        return real(model, seeds, *args)
+
+    monkeypatch.setattr(ft, "BatchedDelay", counted)
+    (enc, dec), = simulate_parts([part], wait_family=family)
+    assert made == [legs.up]
+    monkeypatch.setattr(ft, "BatchedDelay", real)
+    alone = ft.simulate(a, part.policy, legs.up, legs.down, wait_family=family, group="ID-2", link_legs=legs)
+    _assert_tables_equal(enc, alone[0])
+    _assert_tables_equal(dec, alone[1])
+    # and against the table drawn twice, the way it was (a round trip's halves are one draw)
+    monkeypatch.setattr(ft, "_stream_column", lambda streams, which, made: [[x[k] for x in st]
+                                                                          for st, k in zip(streams, which)])
+    twice = ft.simulate(a, part.policy, legs.up, legs.down, wait_family=family, group="ID-2", link_legs=legs)
+    _assert_tables_equal(enc, twice[0])
+    _assert_tables_equal(dec, twice[1])

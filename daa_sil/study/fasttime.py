@@ -120,10 +120,13 @@ class _LinkDelays:
     """One link direction of a batch: each part's delay model and the per-encounter delay streams
     (:class:`~daa_sil.models.delay_process.BatchedDelay` per part); ``delay_at(t)`` -> (N,) s."""
 
-    def __init__(self, models: Sequence[DelayModel], streams: Sequence[list], epoch_s: float, duration_s: float):
-        # parts that fly the same encounters (one list object of streams) under equal models have equal
-        # tables, draw for draw: drawn once (the groups of a chunk share a latency model two at a time)
-        made: list = []
+    def __init__(self, models: Sequence[DelayModel], streams: Sequence[list], epoch_s: float, duration_s: float,
+                 made: "list | None" = None):
+        # parts that read the same streams (one list object) under equal models have equal tables, draw
+        # for draw: drawn once. The groups of a chunk share a latency model two at a time; under the
+        # round-trip rule both links apply one model to the uplink stream (``made`` shared by the two
+        # directions)
+        made = [] if made is None else made
         self.parts = []
         for m, ss in zip(models, streams):
             table = next((b for mm, s2, b in made if s2 is ss and mm == m), None)
@@ -152,10 +155,10 @@ def _streams_per_part(seeds: Sequence[np.ndarray]) -> list[list]:
     return out
 
 
-def _stream_column(streams: Sequence[list], which: Sequence[int]) -> list[list]:
+def _stream_column(streams: Sequence[list], which: Sequence[int], made: dict) -> list[list]:
     """Stream ``which[i]`` of every encounter of part ``i``; parts that share their streams and read the
-    same stream get one list object (so :class:`_LinkDelays` draws their tables once)."""
-    made: dict = {}
+    same stream get one list object, also across calls with the same ``made`` (so :class:`_LinkDelays`
+    draws their tables once)."""
     out = []
     for st, k in zip(streams, which):
         key = (id(st), k)
@@ -244,10 +247,13 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     # each part's link legs: one-way (each link its own stream) or a shared round trip (both links
     # read the uplink stream's draws: models/link_rule.py)
     legs = [p.link_legs if p.link_legs is not None else LinkLegs(p.latency_up, p.latency_down) for p in parts]
-    up = _LinkDelays([lg.up for lg in legs], _stream_column(streams, [STREAM_UP] * len(legs)), epoch_s, duration + dt)
+    columns: dict = {}
+    tables: list = []
+    up = _LinkDelays([lg.up for lg in legs], _stream_column(streams, [STREAM_UP] * len(legs), columns), epoch_s,
+                     duration + dt, tables)
     down = _LinkDelays([lg.down for lg in legs],
-                       _stream_column(streams, [STREAM_UP if lg.shared else STREAM_DOWN for lg in legs]),
-                       epoch_s, duration + dt)
+                       _stream_column(streams, [STREAM_UP if lg.shared else STREAM_DOWN for lg in legs], columns),
+                       epoch_s, duration + dt, tables)
     m = core.m
     acc = Accumulators(n, core.own)
     log = sl.StepLogBuilder(encounters.encounter_id, m) if record_steps else None
