@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from daa_sil import waitmap
-from daa_sil.errors import FileFormatError, UsageError
+from daa_sil.errors import FileFormatError
 from daa_sil.waitmap.build import build_members
 from daa_sil.waitmap.source import map_params
 from daa_sil.waitmap.store import ARRAYS, check_family, load, map_filename
@@ -370,52 +370,3 @@ def test_a_script_without_a_main_guard_builds_in_parallel(how, tmp_path):
         if stdin is not None:
             stdin.close()
     assert res.returncode == 0 and res.stdout.strip() == "5", res.stderr[-2000:]
-
-
-@pytest.mark.parametrize("kind", ["member-array-damaged", "index-missing", "member-missing", "entry-hash-edited"])
-def test_family_as_is_reads_a_whole_entry_and_leaves_a_damaged_one_untouched(kind, good_cache, reference, tmp_path,
-                                                                            monkeypatch, capsys):
-    """What the vehicle reads on a background thread while numba loads: the family of a whole entry
-    (the same maps as a build), and None, with no file changed, no lock taken and no word said, for a
-    damaged one, which the vehicle's main thread then repairs (next test)."""
-    root = tmp_path / "cache"
-    shutil.copytree(good_cache, root)
-    monkeypatch.setenv("DAA_SIL_CACHE", str(root))
-    fam = waitmap.family_as_is(SMALL)
-    assert fam is not None and all(_same_map(a, b) for a, b in zip(fam.maps, reference.maps))
-    entry = _entry(root)
-    _damage(kind, entry)
-    before = {p.name: p.read_bytes() for p in entry.iterdir()}
-    assert waitmap.family_as_is(SMALL) is None
-    assert {p.name: p.read_bytes() for p in entry.iterdir()} == before
-    assert capsys.readouterr().err == ""
-
-
-def test_family_as_is_builds_nothing_and_leaves_bad_sources_to_family_for(tmp_path, monkeypatch):
-    monkeypatch.setenv("DAA_SIL_CACHE", str(tmp_path / "empty"))
-    assert waitmap.family_as_is(SMALL) is None
-    assert not (tmp_path / "empty").exists()  # no entry, no lock file
-    assert waitmap.family_as_is("no-such-preset") is None
-    with pytest.raises(UsageError, match="is not a map preset"):
-        waitmap.family_for("no-such-preset")
-
-
-def test_the_vehicle_repairs_a_damaged_entry_its_background_read_refused(good_cache, reference, tmp_path,
-                                                                         monkeypatch, capsys):
-    """``build_onboard`` reads the maps as they are on a background thread; when that finds the entry
-    damaged, the vehicle's own thread repairs it, with the cache's one warning line, and flies the
-    repaired family."""
-    from daa_sil.sil.scenario import load_scenario
-    from vehicle.core import build_onboard
-
-    root = tmp_path / "cache"
-    shutil.copytree(good_cache, root)
-    monkeypatch.setenv("DAA_SIL_CACHE", str(root))
-    _damage("member-array-damaged", _entry(root))
-    capsys.readouterr()
-    _, _, policy, fam = build_onboard(load_scenario(Path(__file__).resolve().parents[1] / "scenarios" / "head_on.yaml"),
-                                      waitmap=SMALL)
-    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
-    assert policy.wait_mode == "map"
-    assert len(err) == 1 and "rebuilding 1 of 5 maps" in err[0], err
-    assert all(_same_map(a, b) for a, b in zip(fam.maps, reference.maps))

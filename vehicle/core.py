@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 
 from daa_sil import agent as A
-from daa_sil.background import BackgroundCall
 from daa_sil.config.groups import policy_for_group
 from daa_sil.config.policy import AllocationPolicy, apply_overrides
 from daa_sil.geometry.kinematics import Command
@@ -49,27 +48,20 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
     from daa_sil.daa import kernels
     from daa_sil.onboard import OnboardCore
 
+    kernels.get()  # load the compiled DAA now, not at the first conflict (a realtime run would stall)
+    es = encounter_set(sc)
     policy = policy or build_policy(sc)
     if config is not None:  # the scenario's own timeouts win over the configuration's
         link = {k: v for k, v in config.link.items() if v is not None and getattr(sc.allocation, k) is None}
         policy = apply_overrides(policy, wt=config.allocation["wt"], projl_lookahead=config.allocation["projl_lookahead"],
                                  link=link)
         waitmap = waitmap if waitmap is not None else config.waitmap["source"]
-    family_load = None
-    if policy.wait_mode == "map":
-        from daa_sil import waitmap as wm
-
-        # read the maps while numba loads the kernels (file reads, CRCs and numpy copies release the GIL:
-        # ~0.1-0.3 s less start-up); a build or repair, if one is needed, runs below on this thread
-        family_load = BackgroundCall(wm.family_as_is, waitmap, preset="paper")
-    kernels.get()  # load the compiled DAA now, not at the first conflict (a realtime run would stall)
-    es = encounter_set(sc)
     daa_cfg = config.daa_config(sc.thresholds) if config is not None else _preset_daa(sc.thresholds)
     lookup = family = None
     if policy.wait_mode == "map":
-        family = family_load.result()
-        if family is None:
-            family = wm.family_for(waitmap, preset="paper")
+        from daa_sil import waitmap as wm
+
+        family = wm.family_for(waitmap, preset="paper")
         lookup = A.make_wait_lookup(family, cfg=daa_cfg)
     core = OnboardCore(es.own, es.intr, es.intruder_controls, policy, daa_cfg, lookup, thresholds=sc.thresholds)
     return core, es, policy, family

@@ -31,7 +31,7 @@ API::
 """
 
 from .build import build_family, build_map, build_members
-from .source import DEFAULT_MAP, MAP_PRESETS, default_family, describe, family_as_is, family_for, is_cached, map_params
+from .source import DEFAULT_MAP, MAP_PRESETS, default_family, describe, family_for, is_cached, map_params
 from .cache import cache_dir
 from .grid import GRID_PRESETS, Axis, Grid, alerting_grid, fine_grid, paper_grid, resolve_grid
 from .lookup import LookupResult, WaitMap, WaitMapFamily
@@ -41,6 +41,6 @@ from .store import FORMAT_VERSION, check_family, load, load_family, save, save_f
 __all__ = [
     "Axis", "DEFAULT_MAP", "FORMAT_VERSION", "GRID_PRESETS", "Grid", "LookupResult", "MAP_PRESETS", "MdpParams",
     "PAPER_TURN_RATES", "WAIT_DEFINITIONS", "WaitMap", "WaitMapFamily", "alerting_grid", "build_family", "build_map",
-    "build_members", "cache_dir", "check_family", "default_family", "describe", "family_as_is", "family_for", "fine_grid", "is_cached", "load", "load_family", "map_params",
+    "build_members", "cache_dir", "check_family", "default_family", "describe", "family_for", "fine_grid", "is_cached", "load", "load_family", "map_params",
     "paper_grid", "resolve_grid", "save", "save_family",
 ]

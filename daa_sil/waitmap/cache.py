@@ -60,10 +60,10 @@ def cached_family(grid: Grid, params: MdpParams, turn_rates: Sequence[float],
     key = params_hash(grid.to_dict(), params, turn_rates)
     entry = entry_path(key)
     rates = [float(r) for r in turn_rates]
-    family = cached_family_as_is(grid, params, turn_rates)
-    if family is not None:
-        return family
-    # not there, incomplete or damaged: repaired below, under the entry's lock
+    try:
+        return load_family(entry, rates, key)
+    except (FileFormatError, UsageError):
+        pass  # not there, incomplete or damaged: repaired below, under the entry's lock
     try:
         entry.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -90,16 +90,6 @@ def cached_family(grid: Grid, params: MdpParams, turn_rates: Sequence[float],
         members = [(r, entry / map_filename(r), read_meta(entry / map_filename(r))["content_hash"]) for r in rates]
         write_family_index(entry, members, key, rates)
         return load_family(entry, rates, key)
-
-
-def cached_family_as_is(grid: Grid, params: MdpParams, turn_rates: Sequence[float]) -> "WaitMapFamily | None":
-    """The family of these settings if its cache entry loads and passes every check as it stands, else
-    None. Never builds, repairs or locks anything (so it may run on any thread)."""
-    key = params_hash(grid.to_dict(), params, turn_rates)
-    try:
-        return load_family(entry_path(key), [float(r) for r in turn_rates], key)
-    except (FileFormatError, UsageError):
-        return None
 
 
 def _sort_members(entry: Path, grid: Grid, params: MdpParams, rates: list) -> tuple[list, list]:

@@ -10,8 +10,8 @@ from pathlib import Path
 from typing import Callable
 
 from ..config.settings import WAITMAP
-from ..errors import FileFormatError, UsageError
-from .cache import cached_family, cached_family_as_is, entry_ready
+from ..errors import UsageError
+from .cache import cached_family, entry_ready
 from .grid import Grid, resolve_grid
 from .lookup import WaitMapFamily
 from .model import PAPER_TURN_RATES, MdpParams, params_hash
@@ -80,20 +80,6 @@ def family_for(source: "str | os.PathLike | None", preset: str = "paper", gamma:
     return default_family(preset, g, p, progress=progress)
 
 
-def family_as_is(source: "str | os.PathLike | None", preset: str = "paper") -> "WaitMapFamily | None":
-    """The family :func:`family_for` would return, if it can be read without building or repairing
-    anything (a family directory, or a complete cache entry that passes its checks); None otherwise,
-    also for a bad ``source`` (:func:`family_for` then builds, repairs or says what is wrong). Takes no
-    lock and starts no process, so it may run on a background thread."""
-    try:
-        if source is not None and Path(str(source)).is_dir():
-            return family_for(source, preset)
-        g, p = check_source(source, preset)
-    except (FileFormatError, UsageError):
-        return None
-    return cached_family_as_is(g, p, PAPER_TURN_RATES)
-
-
 def check_source(source: "str | os.PathLike | None", preset: str = "paper", gamma: "float | None" = None):
     """Validate a ``--waitmap`` value without building anything: ``(grid, params)`` of a map preset or
     grid spec, or ``(None, None)`` for an existing directory; one-line UsageError otherwise."""
@@ -114,5 +100,5 @@ def describe(fam: WaitMapFamily) -> dict:
             "content_hashes": [m.content_hash for m in fam.maps]}
 
 
-__all__ = ["MAP_PRESETS", "DEFAULT_MAP", "map_params", "default_family", "is_cached", "family_for",
-           "family_as_is", "check_source", "describe"]
+__all__ = ["MAP_PRESETS", "DEFAULT_MAP", "map_params", "default_family", "is_cached", "family_for", "check_source",
+           "describe"]
