@@ -53,6 +53,9 @@ def test_gather_reads_each_rows_own_slot_element_by_element():
                                  for j, row in zip(idx, r)])
                 np.testing.assert_array_equal(got, want)
     assert ring.capacity > 2
+    empty = SlotRing(3, {"intr": ((0, 6), float, np.nan)})  # no intruder fields at all: still (N, 0, 6)
+    empty.open(0)
+    assert empty.gather("intr", np.array([0, -1, 0])).shape == (3, 0, 6)
 
 
 def test_ring_memory_does_not_grow_with_the_number_of_steps():
@@ -90,6 +93,26 @@ def test_plan_keeps_the_groups_of_a_chunk_together():
         assert len({c for _, c, _ in t}) <= 2 and len({g for g, _, _ in t}) >= 4
     loads = [sum(u[2] for u in t) for t in tasks]
     assert max(loads) - min(loads) <= 2000
+
+
+def test_plan_of_unequal_units_keeps_its_task_count_and_balance():
+    """Units of different sizes (a last, smaller chunk; a resume with some units done) still give the
+    planned number of non-empty tasks, every unit once and in order, no task more than one unit over
+    an equal share. (Assigning each unit by the position of its first row left tasks empty here: 3,001
+    encounters in chunks of 2,000, four groups, four workers gave 7 tasks, one of them two units.)"""
+    units = [(g, 0, 2000) for g in ("B-1", "B-2", "IC-1", "ID-1")] + [(g, 1, 1001) for g in ("B-1", "B-2", "IC-1", "ID-1")]
+    tasks = plan_batches(units, workers=4, min_tasks=8)
+    assert [len(t) for t in tasks] == [1] * 8
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        rows = [int(r) for r in rng.choice([1, 7, 1001, 2000], size=int(rng.integers(1, 40)))]
+        us = [(f"G{i % 5}", i // 5, r) for i, r in enumerate(rows)]
+        workers, min_tasks, batch = int(rng.integers(1, 9)), int(rng.integers(1, 20)), int(rng.choice([500, 4000, 10_000]))
+        tasks = plan_batches(us, workers=workers, batch_rows=batch, min_tasks=min_tasks)
+        want = min(max(workers * -(-sum(rows) // (workers * batch)), min_tasks), len(us))
+        assert len(tasks) == want and all(tasks)
+        assert [u for t in tasks for u in t] == us
+        assert max(sum(u[2] for u in t) for t in tasks) <= sum(rows) / want + max(rows)
 
 
 def test_plan_bounds_rows_per_task_and_keeps_a_multiple_of_the_workers():

@@ -10,7 +10,8 @@ the unit run alone. The plan keeps the workers balanced and each task's memory b
   tasks in flight;
 * a number of tasks that is a multiple of the worker count (when there are enough units), each
   with about the same number of rows: a task is a contiguous run of units in (chunk, group) order
-  (unit to task by the position of its first row), so it holds the groups of one or two chunks.
+  (cut at the unit boundaries nearest to equal shares of the rows; every task gets a unit), so it
+  holds the groups of one or two chunks.
   Those fly the same encounters and share their random streams and equal delay tables
   (:func:`daa_sil.study.fasttime.simulate_parts`); with chunks of five groups, a task of four or
   more units still holds four or five different groups (the groups' costs differ);
@@ -19,6 +20,7 @@ the unit run alone. The plan keeps the workers balanced and each task's memory b
 
 from __future__ import annotations
 
+import bisect
 import math
 from typing import Sequence
 
@@ -45,12 +47,29 @@ def plan_batches(units: Sequence[tuple], workers: int, batch_rows: int = DEFAULT
     workers = max(int(workers), 1)
     n_tasks = workers * math.ceil(total / (workers * batch_rows))
     n_tasks = min(max(n_tasks, min_tasks), len(units))
-    tasks: list[list[tuple]] = [[] for _ in range(n_tasks)]
-    first_row = 0
-    for u in units:
-        tasks[min(first_row * n_tasks // total, n_tasks - 1)].append(u)
-        first_row += u[2]
-    return [t for t in tasks if t]
+    return [units[a:b] for a, b in zip(*_contiguous_bounds([u[2] for u in units], n_tasks))]
+
+
+def _contiguous_bounds(rows: Sequence[int], n_tasks: int) -> tuple[list[int], list[int]]:
+    """``(starts, ends)`` of ``n_tasks`` non-empty contiguous runs of ``rows`` (``n_tasks <= len(rows)``):
+    each cut at the unit boundary nearest to its share ``k / n_tasks`` of the rows (by count where
+    there are no rows), kept so that every run has at least one unit."""
+    cum = [0]
+    for r in rows:
+        cum.append(cum[-1] + r)
+    total, n = cum[-1], len(rows)
+    scaled = [c * n_tasks for c in cum]
+    cuts = [0]
+    for k in range(1, n_tasks):
+        lo, hi = cuts[-1] + 1, n - (n_tasks - k)
+        if total == 0:
+            cuts.append(max(lo, min(hi, k * n // n_tasks)))
+            continue
+        # the boundary b with cum[b] * n_tasks nearest to k * total (integers: no rounding), the first on ties
+        b = bisect.bisect_left(scaled, k * total)
+        best = min((c for c in (b - 1, b) if 0 <= c <= n), key=lambda c: (abs(scaled[c] - k * total), c))
+        cuts.append(max(lo, min(hi, best)))
+    return cuts, cuts[1:] + [n]
 
 
 __all__ = ["plan_batches", "DEFAULT_BATCH_ROWS"]

@@ -61,7 +61,7 @@ class SlotRing:
         # one flat index into the (capacity * N, ...) view: a take along one axis copies the same values
         # as indexing (slot, row) with two arrays, 1.4-2.7x faster
         flat = np.where(idx >= 0, idx % self.capacity, 0) * self.n + (self._rows if rows is None else rows)
-        got = arr.reshape((-1,) + arr.shape[2:]).take(flat, axis=0)
+        got = arr.reshape((self.capacity * self.n,) + arr.shape[2:]).take(flat, axis=0)
         none = idx < 0
         if none.any():
             got[none] = self.spec[name][2]
