@@ -52,8 +52,8 @@ def plan_batches(units: Sequence[tuple], workers: int, batch_rows: int = DEFAULT
 
 def _contiguous_bounds(rows: Sequence[int], n_tasks: int) -> tuple[list[int], list[int]]:
     """``(starts, ends)`` of ``n_tasks`` non-empty contiguous runs of ``rows`` (``n_tasks <= len(rows)``):
-    each cut at the unit boundary nearest to its share ``k / n_tasks`` of the rows (by count where
-    there are no rows), kept so that every run has at least one unit."""
+    each cut at the unit boundary nearest to its share ``k / n_tasks`` of the rows, kept so that every
+    run has at least one unit."""
     cum = [0]
     for r in rows:
         cum.append(cum[-1] + r)
@@ -62,9 +62,6 @@ def _contiguous_bounds(rows: Sequence[int], n_tasks: int) -> tuple[list[int], li
     cuts = [0]
     for k in range(1, n_tasks):
         lo, hi = cuts[-1] + 1, n - (n_tasks - k)
-        if total == 0:
-            cuts.append(max(lo, min(hi, k * n // n_tasks)))
-            continue
         # the boundary b with cum[b] * n_tasks nearest to k * total (integers: no rounding), the first on ties
         b = bisect.bisect_left(scaled, k * total)
         best = min((c for c in (b - 1, b) if 0 <= c <= n), key=lambda c: (abs(scaled[c] - k * total), c))
