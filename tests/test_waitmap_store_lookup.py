@@ -49,6 +49,65 @@ def test_fields_are_the_float32_cast_of_the_arrays_given(wm):
         replace(wm, wait_s=raw["wait_s"][..., :1])
 
 
+def test_a_loaded_maps_fields_are_read_into_one_array_as_np_load_reads_them(wm, tmp_path):
+    """``read_arrays`` gives every array bit for bit as ``np.load`` does; the four interpolated fields
+    come as views of one (..., 4) float32 array, which the map keeps as its fields without a copy."""
+    from daa_sil.waitmap.lookup import FIELDS
+    from daa_sil.waitmap.store import read_arrays
+
+    path = waitmap.save(wm, tmp_path / "m.npz")
+    got, extrema = read_arrays(path)
+    with np.load(path) as z:
+        want = {k: z[k] for k in z.files}
+    assert set(got) == set(want)
+    for k, a in want.items():
+        assert got[k].dtype == a.dtype and got[k].shape == a.shape and got[k].tobytes() == a.tobytes(), k
+    base = got[FIELDS[0]].base
+    assert base.shape == wm.grid.shape + (len(FIELDS),)
+    for i, n in enumerate(FIELDS):
+        assert got[n].base is base and np.array_equal(base[..., i], want[n])
+        assert extrema[n] == (want[n].min(), want[n].max())
+    back = waitmap.load(path)
+    assert all(getattr(back, n).base is back.p_lowc.base for n in FIELDS)
+
+
+@pytest.mark.parametrize("name, value, ok", [
+    ("p_lowc", np.nextafter(np.float32(1.0), np.float32(2.0)), False),  # the next float32 above 1
+    ("p_lowc", 1.0 + 1e-9, True),  # rounds to 1.0f: within [0, 1], as before
+    ("wait_s", -0.5, False),
+    ("t_lowc", np.nan, False),
+    ("q_wait", np.inf, False),
+    ("q_wait", -1e30, True),
+])
+def test_the_value_checks_of_a_map_read_side_by_side_are_the_old_rule(wm, tmp_path, name, value, ok):
+    """The range checks take the fields' extrema from the read (no pass of their own); a value one
+    float32 step outside its range, a NaN or an inf is still refused, naming the array."""
+    from dataclasses import replace
+
+    arr = getattr(wm, name).astype(np.float64)
+    arr.flat[arr.size // 2] = value
+    path = waitmap.save(replace(wm, **{name: arr}), tmp_path / "m.npz")
+    if ok:
+        assert float(getattr(waitmap.load(path), name).flat[arr.size // 2]) == float(np.float32(value))
+    else:
+        with pytest.raises(FileFormatError, match=name):
+            waitmap.load(path)
+
+
+def test_a_map_with_float64_fields_loads_as_their_float32_cast(wm, tmp_path):
+    """Fields not stored as float32 are read by numpy as they stand and cast as before."""
+    path = waitmap.save(wm, tmp_path / "m.npz")
+    with np.load(path) as z:
+        data = {k: z[k] for k in z.files}
+    wide = {k: (v.astype(np.float64) if v.dtype == np.float32 else v) for k, v in data.items()}
+    other = tmp_path / "wide.npz"
+    with open(other, "wb") as fh:
+        np.savez(fh, **wide)
+    back = waitmap.load(other, expected_hash=wm.content_hash)
+    for n in ("wait_s", "p_lowc", "t_lowc", "q_wait"):
+        assert getattr(back, n).dtype == np.float32 and getattr(back, n).tobytes() == data[n].tobytes()
+
+
 def test_refuses_to_overwrite(wm, tmp_path):
     from daa_sil.errors import OutputError
 

@@ -72,6 +72,20 @@ def interpolate(grid: Grid, fields: np.ndarray, states: np.ndarray) -> tuple[np.
 FIELDS = ("p_lowc", "t_lowc", "q_wait", "wait_s")
 
 
+def side_by_side(arrays: list) -> "np.ndarray | None":
+    """The ``(..., len(arrays))`` float32 array whose ``[..., i]`` are ``arrays[i]`` when they already are
+    such views of one array (as :func:`daa_sil.waitmap.store.load` reads a map's fields), else None."""
+    base = arrays[0].base if isinstance(arrays[0], np.ndarray) else None
+    if not (isinstance(base, np.ndarray) and base.dtype == np.float32 and base.flags.c_contiguous
+            and base.ndim >= 1 and base.shape[-1] == len(arrays)):
+        return None
+    for i, a in enumerate(arrays):
+        if not (isinstance(a, np.ndarray) and a.base is base and a.dtype == np.float32 and a.shape == base.shape[:-1]
+                and a.strides == base.strides[:-1] and a.ctypes.data == base.ctypes.data + i * base.itemsize):
+            return None
+    return base
+
+
 @dataclass
 class WaitMap:
     """One solved wait map on a grid (arrays shaped ``grid.shape``; times in s)."""
@@ -100,9 +114,11 @@ class WaitMap:
         if any(np.shape(getattr(self, n)) != shape for n in FIELDS):
             raise ValueError(f"wait-map fields {FIELDS} must have one shape, got "
                              f"{[np.shape(getattr(self, n)) for n in FIELDS]}")
-        f = np.empty(shape + (len(FIELDS),), np.float32)
-        for i, n in enumerate(FIELDS):  # cast in place (the same rounding as astype; no float32 copies to stack)
-            f[..., i] = getattr(self, n)
+        f = side_by_side([getattr(self, n) for n in FIELDS])
+        if f is None:
+            f = np.empty(shape + (len(FIELDS),), np.float32)
+            for i, n in enumerate(FIELDS):  # cast in place (the same rounding as astype; no float32 copies to stack)
+                f[..., i] = getattr(self, n)
         self._fields = f
         for i, n in enumerate(FIELDS):
             setattr(self, n, f[..., i])

@@ -33,7 +33,7 @@ import numpy as np
 from ..errors import FileFormatError, UsageError
 from daa_sil.files import atomic_path, atomic_write_json, to_jsonable
 from .grid import grid_from_dict
-from .lookup import WaitMap, WaitMapFamily
+from .lookup import FIELDS, WaitMap, WaitMapFamily
 from .model import FORMAT_VERSION, MdpParams, settings_hash
 
 ARRAYS = ("wait_s", "p_lowc", "t_lowc", "q_wait", "lowc")
@@ -99,8 +99,7 @@ def load(path: "str | os.PathLike", expected_hash: "str | None" = None) -> WaitM
         raise FileFormatError(f"{path}: not a daa-sil wait map ({what}; expected an .npz written by "
                               f"'daa-sil waitmap build')")
     try:
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
+        data, extrema = read_arrays(path)
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
         raise FileFormatError(f"{path}: not a readable wait-map .npz ({type(exc).__name__}: "
                               f"{str(exc).splitlines()[0] if str(exc) else 'corrupt'})") from None
@@ -130,24 +129,107 @@ def load(path: "str | os.PathLike", expected_hash: "str | None" = None) -> WaitM
         raise FileFormatError(f"{path}: bad metadata ({exc})") from None
     if any(data[n].shape != grid.shape for n in ARRAYS):
         raise FileFormatError(f"{path}: array shapes do not match the grid {grid.shape}")
-    _check_values(path, data, params.horizon)
+    _check_values(path, data, params.horizon, extrema)
     return WaitMap(grid=grid, params=params, turn_rate_deg=float(meta["turn_rate_deg"]),
                    stats=meta.get("stats", {}), content_hash=meta["content_hash"],
                    **{n: data[n] for n in ARRAYS})
 
 
-def _check_values(path: Path, data: dict, horizon: float) -> None:
-    """Refuse maps whose values cannot be right (NaN, negative waits, probabilities outside [0, 1])."""
+#: bytes of each member read at a time by :func:`read_arrays` (a multiple of every dtype's size)
+READ_CHUNK = 1 << 18
+
+
+def read_arrays(path: "str | os.PathLike") -> tuple[dict, dict]:
+    """``(arrays, extrema)``: every array of an ``.npz`` as ``np.load`` gives it, with each zip member's
+    CRC-32 checked, and ``{name: (min, max)}`` of the arrays read side by side (NaN if any is NaN).
+
+    The interpolated fields (:data:`daa_sil.waitmap.lookup.FIELDS`), when all are float32 in C order
+    and of one shape (as ``save`` writes them), are read chunk by chunk straight into one
+    ``shape + (4,)`` float32 array, the layout :class:`WaitMap` keeps them in, and returned as its
+    views: no second copy of the largest arrays (93 MB for the SIL's default family), one write pass
+    over them, and their extrema taken from the chunks while they are in cache (the value checks then
+    need no pass of their own). Anything else is read by numpy as it stands. Raises what ``np.load``
+    raises on a bad file (ValueError, OSError, EOFError, BadZipFile)."""
+    with zipfile.ZipFile(path) as zf:
+        members = {i.filename[:-4]: i for i in zf.infolist() if i.filename.endswith(".npy")}
+        data: dict = {}
+        extrema: dict = {}
+        if all(n in members for n in FIELDS):
+            got = _read_side_by_side(zf, [members[n] for n in FIELDS])
+            if got is not None:
+                fields, lo, hi = got
+                data.update({n: fields[..., i] for i, n in enumerate(FIELDS)})
+                extrema.update({n: (lo[i], hi[i]) for i, n in enumerate(FIELDS)})
+        for name, info in members.items():
+            if name not in data:
+                with zf.open(info) as fh:
+                    data[name] = np.lib.format.read_array(fh, allow_pickle=False)
+                    fh.read()  # to the member's end: zipfile checks its CRC-32 there
+    return data, extrema
+
+
+def _read_side_by_side(zf: zipfile.ZipFile, infos: list) -> "tuple[np.ndarray, list, list] | None":
+    """Members ``infos`` (float32 arrays of one shape, C order) interleaved into one ``shape + (k,)``
+    float32 array, with each member's min and max (float32; NaN if it has a NaN); None (nothing read
+    into it) if they are not such arrays."""
+    handles = [zf.open(i) for i in infos]
+    try:
+        shapes = []
+        for fh in handles:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+            elif version == (2, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+            else:
+                return None
+            if fortran or dtype != np.dtype("<f4") or (shapes and shape != shapes[0]):
+                return None
+            shapes.append(shape)
+        shape = shapes[0]
+        out = np.empty(tuple(shape) + (len(infos),), np.float32)
+        flat = out.reshape(-1, len(infos))
+        count = flat.shape[0]
+        lo, hi = [np.float32(np.inf)] * len(infos), [np.float32(-np.inf)] * len(infos)
+        step = READ_CHUNK // 4
+        for j in range(0, count, step):
+            k = min(step, count - j)
+            for i, fh in enumerate(handles):
+                chunk = fh.read(4 * k)
+                if len(chunk) != 4 * k:
+                    raise EOFError(f"{infos[i].filename}: array data ends early")
+                v = np.frombuffer(chunk, np.float32)
+                flat[j:j + k, i] = v
+                lo[i], hi[i] = np.minimum(lo[i], v.min()), np.maximum(hi[i], v.max())  # (both propagate NaN)
+        for fh in handles:
+            fh.read()  # to the member's end: zipfile checks its CRC-32 there
+        return out, lo, hi
+    finally:
+        for fh in handles:
+            fh.close()
+
+
+def _check_values(path: Path, data: dict, horizon: float, extrema: "dict | None" = None) -> None:
+    """Refuse maps whose values cannot be right (NaN, negative waits, probabilities outside [0, 1]).
+    ``extrema``: ``{name: (min, max)}`` of arrays already known (:func:`read_arrays`): an array whose
+    extrema pass is not read again; the rule is the same, compared in the array's own dtype."""
+    extrema = extrema or {}
     for name, lo, hi in (("wait_s", 0.0, horizon), ("p_lowc", 0.0, 1.0), ("t_lowc", 0.0, horizon)):
         a = np.asarray(data[name])
         if a.dtype.kind != "f":
             raise FileFormatError(f"{path}: array {name} has dtype {a.dtype}, expected floating point")
+        if name in extrema and a.size:
+            mn, mx = extrema[name]  # (numpy scalars of a's dtype: the bounds are compared in it, as below)
+            if bool(mn >= lo - 1e-9) and bool(mx <= hi + 1e-9):  # (False for a NaN)
+                continue
         bad = ~((a >= lo - 1e-9) & (a <= hi + 1e-9))  # also catches NaN
         if bad.any():
             v = a[bad].flat[0]
             raise FileFormatError(f"{path}: {int(bad.sum())} values of {name} outside [{lo:g}, {hi:g}] "
                                   f"(e.g. {float(v)!r}); the map is invalid")
-    if not np.isfinite(data["q_wait"]).all():
+    q = extrema.get("q_wait")
+    if not (q is not None and data["q_wait"].size and np.isfinite(q[0]) and np.isfinite(q[1])) \
+            and not np.isfinite(data["q_wait"]).all():
         raise FileFormatError(f"{path}: array q_wait has non-finite values; the map is invalid")
     if data["lowc"].dtype != np.bool_:
         raise FileFormatError(f"{path}: array lowc has dtype {data['lowc'].dtype}, expected bool")
