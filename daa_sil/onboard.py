@@ -75,9 +75,10 @@ class StepOutput:
     geometry: "dict | None"  #: (N, M) range_m, hmd_m, dh_m, tau_mod_s, wcv at t (None without a step log)
     lowc: np.ndarray  #: (N,) LoWC with any intruder on [t, t + dt]
     nmac: np.ndarray  #: (N,) NMAC with any intruder on [t, t + dt]
-    lowc_time_s: np.ndarray  #: (N,) s in LoWC on the segment (max over intruders)
-    seg_min_range_m: np.ndarray  #: (N,) minimum horizontal range on the segment (over intruders)
-    seg_vsep_m: np.ndarray  #: (N,) vertical separation at that minimum
+    #: the segment's outcome figures fast-time sums (None when the core was built with ``outcomes=False``):
+    lowc_time_s: "np.ndarray | None"  #: (N,) s in LoWC on the segment (max over intruders)
+    seg_min_range_m: "np.ndarray | None"  #: (N,) minimum horizontal range on the segment (over intruders)
+    seg_vsep_m: "np.ndarray | None"  #: (N,) vertical separation at that minimum
     turn_est: "np.ndarray | None" = None  #: (N, M) estimated intruder turn rates, compass rad/s
     # -- PI on the continuous segment (issue 14): integrated over the LoWC interval of [t, t + dt] --
     pi_s: "np.ndarray | None" = None  #: (N,) s, PI on the segment with the preset's constants (max over intruders)
@@ -160,14 +161,17 @@ class OnboardCore:
     :class:`~daa_sil.daa.config.DaaConfig` (its thresholds are the LoWC volume unless
     ``thresholds`` is given); ``wait_lookup`` from :func:`daa_sil.agent.make_wait_lookup` (None when
     the policy needs no map); ``t0`` start time (s); ``dt`` step (s); ``perf`` ownship limits
-    (default from ``daa_cfg``); ``intruder_perf`` limits for the scripted intruders.
+    (default from ``daa_cfg``); ``intruder_perf`` limits for the scripted intruders. ``outcomes=False``
+    skips the segment figures only fast-time's results read (``lowc_time_s``, ``seg_min_range_m``,
+    ``seg_vsep_m``, ``pi_s``, ``pi_paper_s`` are then None; ~60 us a step at N = 1): the SIL vehicle
+    reads ``lowc`` and ``nmac`` only.
     """
 
     def __init__(self, own: AircraftState, intruders: AircraftState, controls: IntruderControls, policy,
                  daa_cfg=None, wait_lookup=None, *, thresholds: "Thresholds | str | None" = None,
                  t0: float = 0.0, dt: float = 1.0, perf: "Performance | None" = None,
                  intruder_perf: "Performance | None" = None, memory=None, step_log: bool = True,
-                 daa_batches: "np.ndarray | None" = None):
+                 daa_batches: "np.ndarray | None" = None, outcomes: bool = True):
         from . import agent
         from .daa.config import DEFAULT_CONFIG
 
@@ -193,6 +197,7 @@ class OnboardCore:
         self.memory = memory if memory is not None else agent.AgentMemory.initial(self.n, self.own)
         self.turn_estimator = TurnRateEstimator((self.n, self.m))
         self.step_log = bool(step_log)
+        self.outcomes = bool(outcomes)
         self.daa_batches = daa_batches
 
     @classmethod
@@ -249,18 +254,18 @@ class OnboardCore:
             *(c[..., i].reshape(-1) for c in (s0, v_seg) for i in range(3)), self.dt, self.th))
         lowc_m = np.isfinite(t_in)
         nmac_m = np.isfinite(wc.nmac_interval(s0, v_seg, self.th, self.dt)[0])
-        in_lowc = np.where(lowc_m, np.maximum(t_out - t_in, 0.0), 0.0)
-        # PI on the same segment and LoWC interval that detect the LoWC (issue 14)
-        pi_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.pi_constants(self.th)).max(axis=1)
-        pi_paper_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.PAPER_PI_CONSTANTS).max(axis=1)
-        rmin, vsep = wc.min_separation_on_segment(s0, s1)
-        j = np.argmin(rmin, axis=1)
-        rows = np.arange(self.n)
         out = StepOutput(step=self.k, t=float(t), own=own0, intruders=intr0, command=cmd, decisions=dec,
-                         turn_est=turn_est,
-                         telemetry=telem, geometry=geom, lowc=lowc_m.any(axis=1), nmac=nmac_m.any(axis=1),
-                         lowc_time_s=in_lowc.max(axis=1), seg_min_range_m=rmin[rows, j],
-                         seg_vsep_m=vsep[rows, j], pi_s=pi_s, pi_paper_s=pi_paper_s)
+                         turn_est=turn_est, telemetry=telem, geometry=geom, lowc=lowc_m.any(axis=1),
+                         nmac=nmac_m.any(axis=1), lowc_time_s=None, seg_min_range_m=None, seg_vsep_m=None)
+        if self.outcomes:
+            out.lowc_time_s = np.where(lowc_m, np.maximum(t_out - t_in, 0.0), 0.0).max(axis=1)
+            # PI on the same segment and LoWC interval that detect the LoWC (issue 14)
+            out.pi_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.pi_constants(self.th)).max(axis=1)
+            out.pi_paper_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.PAPER_PI_CONSTANTS).max(axis=1)
+            rmin, vsep = wc.min_separation_on_segment(s0, s1)
+            j = np.argmin(rmin, axis=1)
+            rows = np.arange(self.n)
+            out.seg_min_range_m, out.seg_vsep_m = rmin[rows, j], vsep[rows, j]
         self.own, self.intruders = own1, intr1
         self.k += 1
         self.t = float(t) + self.dt

@@ -59,6 +59,25 @@ def test_nmac_strictly_between_samples_is_detected():
     assert out.lowc_time_s[0] == pytest.approx(1.0)  # inside DMOD for the whole step
 
 
+def test_without_outcomes_every_other_output_is_the_same():
+    """``outcomes=False`` (the SIL vehicle) leaves the fast-time outcome figures None and every other
+    output of every step bit for bit as with them (a head-on found too late to avoid an NMAC, so the
+    LoWC interval, the PI and the minimum range are non-trivial on some steps)."""
+    es = encounter_from_geometry(IntruderGeometry(angle_deg=180, hmd_m=0.0, t_cpa_s=10, gs_mps=100.0))
+    runs = {flag: _run(OnboardCore.from_encounters(es, policy_for_group("B-1"), DaaConfig(thresholds="paper"),
+                                                   outcomes=flag), 60) for flag in (True, False)}
+    assert any(o.pi_s[0] > 0 for o in runs[True]) and any(o.nmac[0] for o in runs[True])
+    for a, b in zip(runs[True], runs[False]):
+        for name in ("lowc_time_s", "seg_min_range_m", "seg_vsep_m", "pi_s", "pi_paper_s"):
+            assert getattr(b, name) is None
+        for st_a, st_b in ((a.own, b.own), (a.intruders, b.intruders)):
+            assert all(np.array_equal(getattr(st_a, f), getattr(st_b, f)) for f in ("x", "y", "z", "gs", "trk", "vs"))
+        assert np.array_equal(a.lowc, b.lowc) and np.array_equal(a.nmac, b.nmac)
+        assert all(np.array_equal(x, y, equal_nan=True) for x, y in
+                   ((a.command.trk, b.command.trk), (a.command.vs, b.command.vs), (a.command.gs, b.command.gs)))
+        assert {k: str(v) for k, v in a.geometry.items()} == {k: str(v) for k, v in b.geometry.items()}
+
+
 def test_step_advances_time_and_rejects_wrong_time():
     es = encounter_from_geometry(IntruderGeometry(angle_deg=90, hmd_m=500.0, t_cpa_s=120, gs_mps=80.0))
     core = OnboardCore.from_encounters(es, policy_for_group("ID-1"), DaaConfig(thresholds="paper"),

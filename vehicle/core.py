@@ -63,7 +63,8 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
 
         family = wm.family_for(waitmap, preset="paper")
         lookup = A.make_wait_lookup(family, cfg=daa_cfg)
-    core = OnboardCore(es.own, es.intr, es.intruder_controls, policy, daa_cfg, lookup, thresholds=sc.thresholds)
+    core = OnboardCore(es.own, es.intr, es.intruder_controls, policy, daa_cfg, lookup, thresholds=sc.thresholds,
+                       outcomes=False)  # (the step log reads lowc / nmac; the PI and minimum range are fast-time's)
     return core, es, policy, family
 
 
