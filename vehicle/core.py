@@ -161,9 +161,9 @@ class VehicleCore:
             self.delay_up_s = self._delay_procs["up"].delay(t)
             self.delay_down_s = self._delay_procs["down"].delay(t)
         out = self.core.step(t, self.pilot_input(t))
-        dec = A.decode(out.decisions)
-        self.last_authority = str(dec["authority"][0])
-        self.last_decision = str(dec["decision"][0])
+        dec = out.decisions  # (N = 1: its coded fields are named one value at a time, see _row)
+        self.last_authority = A.AUTHORITY_NAMES[int(dec.authority[0])]
+        self.last_decision = A.DECISION_NAMES[int(dec.decision[0])]
         self.rows.append(self._row(out, dec))
         return out
 
@@ -190,7 +190,7 @@ class VehicleCore:
                "delay_up_s": self.delay_up_s, "delay_down_s": self.delay_down_s,
                "bands_trk_lo_deg": lo, "bands_trk_hi_deg": hi, "bands_trk_region": rg}
         for k in ("decision", "rule", "authority", "decided_by", "pilot_axis", "pilot_dir", "exec_axis", "exec_dir"):
-            row[k] = str(dec[k][0])
+            row[k] = A.CODE_NAMES[k][int(dec[k][0])]
         for k in ("wait_s", "wait_p_lowc", "wait_map_turn_dps", "pilot_cmd_age_s", "sm_pilot", "sm_exec", "cmd_vs",
                   "cmd_gs", "pilot_vs", "pilot_gs", "daa_vs", "daa_gs"):
             row[k] = float(dec[k][0])
