@@ -53,7 +53,11 @@ from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
 from daa_sil.sil.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint
 from daa_sil.sil.lockstep import TickPeer
 
-from .view import View
+from .view import READ_IDS as VIEW_READS, View
+
+#: every message id the GCS reads: the telemetry its view takes in, and the lockstep tick; its codec
+#: verifies the rest of the vehicle's stream and counts it as ``unread`` without unpacking it
+READ_IDS = VIEW_READS | {M.MAVLINK_MSG_ID_SIM_TICK}
 
 GCS_SYSID, GCS_COMPID = 255, 190
 VEHICLE_SYSID = 1
@@ -88,7 +92,7 @@ class GcsNode:
         self.listen_conn = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))
         self._peer = None if self.vehicle_conn.listens else self.vehicle_conn.addr
         self.pending_settings = sorted(opts.settings, key=lambda s: s[0])
-        self.codec = MavCodec(GCS_SYSID, GCS_COMPID, key=opts.key)
+        self.codec = MavCodec(GCS_SYSID, GCS_COMPID, key=opts.key, read_ids=READ_IDS)
         self.ep: "MavEndpoint | None" = None
         self.view = View()
         self.mode = opts.pilot or (scenario.pilot.mode if scenario is not None else "scripted")

@@ -35,13 +35,13 @@ from daa_sil.link.fuzz import CRAFTED, Fuzzer
 from daa_sil.sil.shim import DelayShim
 from daa_sil.sil.shim_config import ShimConfig
 from daa_sil.sil.scenario import delay_models, load_scenario
-from gcs.node import GcsNode, GcsOptions
+from gcs.node import READ_IDS as GCS_READ_IDS, GcsNode, GcsOptions
 from vehicle.node import VehicleNode, VehicleOptions
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "head_on.yaml"
 HANG_GUARD_S = 3600.0  # only to fail instead of hanging forever (the 100k run takes ~11 min on a busy 2-core machine)
-CODEC_FIELDS = ("datagrams_in", "messages_in", "bad_crc", "bad_prefix", "truncated", "unknown", "malformed")
+CODEC_FIELDS = ("datagrams_in", "messages_in", "bad_crc", "bad_prefix", "truncated", "unknown", "malformed", "unread")
 COMMAND_TYPES = ("PILOT_MANEUVER", "SET_POSITION_TARGET_GLOBAL_INT")
 REQUEST_TYPES = ("COMMAND_LONG", "PARAM_REQUEST_LIST", "MISSION_REQUEST_LIST")
 
@@ -56,7 +56,8 @@ class Plan:
         self.to_vehicle = Fuzzer(corpus_g, seed=seed, crafted=CRAFTED["vehicle"])
         self.to_gcs = Fuzzer(corpus_v, seed=seed + 1, crafted=CRAFTED["gcs"])
         self.sent = Counter()  # (target, mode) -> datagrams
-        self.mirror = {"vehicle": MavCodec(1, 1), "gcs": MavCodec(255, 190)}
+        # (the GCS's codec verifies the telemetry it does not read without unpacking it: so does its mirror)
+        self.mirror = {"vehicle": MavCodec(1, 1), "gcs": MavCodec(255, 190, read_ids=GCS_READ_IDS)}
         self.accepted = {"vehicle": Counter(), "gcs": Counter()}  # message class -> count
         self.kinds = Counter()
 

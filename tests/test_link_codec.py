@@ -247,3 +247,49 @@ def test_key_file_rules_permissions_short_passphrases_and_a_trailing_newline(tmp
     lines = cp.stderr.strip().splitlines()
     assert cp.returncode == 2 and len(lines) == 2, cp.stderr  # the key warning, then the --tap error
     assert lines[0].startswith("daa-sil: warning: signing key file") and "chmod 600" in lines[0]
+
+
+@pytest.mark.parametrize("key", [None, KEY], ids=["unsigned", "signed"])
+def test_unread_packets_pass_the_same_checks_as_decoded_ones(key):
+    """A codec with ``read_ids`` against one without, fed the same genuine, replayed, stale, forged and
+    fuzzed datagrams: it returns exactly the read messages the full decode returns, counts every other
+    good packet as ``unread`` and every bad one under the same reason, and ends every datagram with the
+    same signing state (stream time stamps, own time stamp, unsigned packets accepted)."""
+    from daa_sil.link.fuzz import CRAFTED, Fuzzer
+
+    msgs = _messages()
+    read = {m.get_msgId() for m in msgs[::2]}  # half the types
+    senders = [MavCodec(255, 190, key=key), MavCodec(255, 191, key=key, link_id=3)]
+    genuine = [senders[i % 2].encode_many(msgs[i % len(msgs):] [:3]) for i in range(40)]
+    stream = list(genuine)
+    stream += genuine[:10]  # replays (with a key) of packets already seen
+    if key is not None:
+        ts = senders[0].mav.signing.timestamp
+        for offset in (-STALE_LIMIT - 100_000, STALE_LIMIT):  # a stale new stream, then a future one
+            other = MavCodec(255, 192 + (offset > 0), key=key, initial_timestamp=ts + offset)
+            other.mav.signing.sign_outgoing = True
+            stream.append(b"".join(m.pack(other.mav) for m in msgs[:4]))
+        stream.append(MavCodec(255, 190, key=hashlib.sha256(b"forger").digest()).encode_many(msgs[:6]))
+        stream.append(MavCodec(255, 190).encode_many(msgs[:6]))  # unsigned
+    fuzz = Fuzzer(genuine, seed=5, crafted=CRAFTED["gcs"])
+    stream += [fuzz.next()[1] for _ in range(600)]
+    now = senders[0].mav.signing.timestamp  # (one starting time stamp for both receivers)
+    full = MavCodec(1, 1, key=key, allow_unsigned={0}, initial_timestamp=now)
+    part = MavCodec(1, 1, key=key, allow_unsigned={0}, read_ids=read, initial_timestamp=now)
+    for data in stream:
+        want = [m.get_msgbuf() for m in full.decode(data) if m.get_msgId() in read]
+        assert [m.get_msgbuf() for m in part.decode(data)] == want
+        a, b = full.counters.as_dict(), part.counters.as_dict()
+        assert b["messages_in"] + b["unread"] == a["messages_in"] and a["unread"] == 0
+        assert {k: v for k, v in a.items() if k not in ("messages_in", "signed_in", "unread")} == \
+            {k: v for k, v in b.items() if k not in ("messages_in", "signed_in", "unread")}
+        sa, sb = full.mav.signing, part.mav.signing
+        assert (sa.stream_timestamps, sa.timestamp, full.mav.n_unsigned_accepted) == \
+            (sb.stream_timestamps, sb.timestamp, part.mav.n_unsigned_accepted)
+    c = part.counters
+    assert c.unread > 50 and c.messages_in > 50 and c.bad_crc > 50 and c.unknown > 0
+    if key is not None:
+        assert c.replayed >= 10 and c.stale >= 4 and c.bad_signature >= 6 and c.unsigned >= 5
+        assert c.unsigned_accepted >= 1 and 0 < c.signed_in <= c.messages_in  # (the accepted HEARTBEAT is unread)
+    # decoded without commit (a stranger's datagram), nothing is left unread: the whole datagram is returned
+    assert len(MavCodec(1, 1, read_ids=read).decode(genuine[0], commit=False)) == 3

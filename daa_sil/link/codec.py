@@ -8,7 +8,11 @@ Network input is hostile, so decoding follows these rules (docs/sil.md, "Signing
   its cost): a truncated datagram never corrupts the next one;
 * bad CRC, bad prefix, truncated, unknown-id, malformed, unsigned, wrong-key, replayed and stale
   packets are counted (:class:`CodecCounters`) and dropped; ``decode`` only returns good messages
-  and never raises on bad input.
+  and never raises on bad input;
+* with ``read_ids`` (the ids its owner reads; the GCS reads 7 of the 15 types the vehicle streams), a
+  MAVLink 2 packet of another id goes through every check ``decode`` makes -- CRC, signature, replay
+  and staleness, with the same signing-state changes (:meth:`SecureMAVLink.verify`) -- and is counted
+  as ``unread`` instead of being unpacked into a message nobody reads.
 
 Signing (MAVLink 2, 32-byte secret key): when a key is set, outgoing packets are signed and
 incoming ones must carry a valid signature (except message ids listed in ``allow_unsigned``).
@@ -65,6 +69,7 @@ class CodecCounters:
     unsigned: int = 0  # unsigned packets refused because signing is required
     unsigned_accepted: int = 0  # unsigned packets let through by ``allow_unsigned``
     signed_in: int = 0  # good messages that carried a valid signature (of messages_in)
+    unread: int = 0  # good packets of an id outside read_ids: verified, not unpacked (not in messages_in)
     bad_signature: int = 0  # wrong key or forged signature
     replayed: int = 0  # signature timestamp not newer than the stream's last one
     stale: int = 0  # new stream more than 60 s behind our clock
@@ -129,6 +134,34 @@ class SecureMAVLink(mavlink.MAVLink):
                 signing.timestamp = timestamp
         return True
 
+    def verify(self, msgbuf: bytearray, msg_id: int) -> "str | None":
+        """The checks :meth:`decode` makes on one whole MAVLink 2 packet of id ``msg_id``, without
+        unpacking its payload: None if it would decode, else the :class:`CodecCounters` field that counts
+        it (``unknown``, ``bad_crc``, ``unsigned``, ``bad_signature``, ``replayed``, ``stale``). The
+        signing state changes as :meth:`decode` changes it. (The header walk of
+        :meth:`MavCodec.decode` has already cut the packet to its length and refused unknown
+        incompatibility flags; a payload that passes these checks always unpacks: a short one is
+        zero-filled, a long one cut.)"""
+        msgtype = mavlink.mavlink_map.get(msg_id)
+        if msgtype is None:  # (before the CRC, as decode: its CRC_EXTRA is unknown)
+            return "unknown"
+        sig_len = mavlink.MAVLINK_SIGNATURE_BLOCK_LEN if msgbuf[2] & mavlink.MAVLINK_IFLAG_SIGNED else 0
+        end = len(msgbuf) - 2 - sig_len
+        crc = mavlink.x25crc(msgbuf[1:end])
+        crc.accumulate(bytes((msgtype.crc_extra,)))
+        if crc.crc != msgbuf[end] | (msgbuf[end + 1] << 8):
+            return "bad_crc"
+        if self.signing.secret_key is None:
+            return None
+        self._sig_reason = None
+        if sig_len:
+            return None if self.check_signature(msgbuf, msgbuf[5], msgbuf[6]) else self._sig_reason
+        if not self._unsigned_gate(msg_id):
+            return "unsigned"
+        if self.commit:
+            self.n_unsigned_accepted += 1
+        return None
+
     def _unsigned_gate(self, msg_id: int) -> bool:
         # pymavlink calls allow_unsigned_callback for unsigned packets *and* after a failed
         # signature check; never let the latter through.
@@ -166,12 +199,14 @@ class MavCodec:
     ``key``: 32-byte secret (see :func:`load_key`); enables signing of outgoing packets
     (``sign_outgoing``, default True with a key) and requires valid signatures on incoming ones.
     ``allow_unsigned``: message ids accepted unsigned even with a key (e.g. ``{0}`` for HEARTBEAT).
-    ``link_id``: signing link id (0-255) of this endpoint.
+    ``link_id``: signing link id (0-255) of this endpoint. ``read_ids``: the message ids the owner reads
+    (None: all); a MAVLink 2 packet of another id is verified and counted as ``unread``, not unpacked
+    (only in committed decoding: a datagram decoded with ``commit=False`` is decoded whole).
     """
 
     def __init__(self, source_system: int = 1, source_component: int = 1, *, key: "bytes | None" = None,
                  sign_outgoing: "bool | None" = None, allow_unsigned: Iterable[int] = (), link_id: int = 0,
-                 initial_timestamp: "int | None" = None):
+                 initial_timestamp: "int | None" = None, read_ids: "Iterable[int] | None" = None):
         for name, val, hi in (("source_system", source_system, 255), ("source_component", source_component, 255),
                               ("link_id", link_id, 255)):
             if not isinstance(val, int) or not 0 <= val <= hi:
@@ -180,6 +215,7 @@ class MavCodec:
         self.mav.robust_parsing = True
         self.mav._allow_unsigned = frozenset(int(i) for i in allow_unsigned)
         self.counters = CodecCounters()
+        self.read_ids = None if read_ids is None else frozenset(int(i) for i in read_ids)
         self.dialect = mavlink
         self.signed = key is not None
         if key is not None:
@@ -222,6 +258,7 @@ class MavCodec:
         c.datagrams_in += 1
         c.bytes_in += n
         dec = self.mav.decode
+        read = self.read_ids if commit else None
         good: list[MAVLinkMessage] = []
         i = 0
         while i < n:
@@ -251,6 +288,13 @@ class MavCodec:
             if flags & 0xFE:  # unknown incompatibility flag: must not be parsed (MAVLink 2 spec)
                 c.malformed += 1
                 continue
+            if read is not None and b0 == 0xFD:
+                msg_id = pkt[7] | (pkt[8] << 8) | (pkt[9] << 16)
+                if msg_id not in read:
+                    field = self.mav.verify(pkt, msg_id)
+                    field = field if field is not None else "unread"
+                    setattr(c, field, getattr(c, field) + 1)
+                    continue
             try:
                 m = dec(pkt)
             except MAVError as exc:
