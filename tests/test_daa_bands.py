@@ -160,6 +160,30 @@ def test_batch_independence_of_bands():
             assert np.array_equal(a.res_hi[i:i + 1], ai.res_hi, equal_nan=True)
 
 
+def test_bands_read_the_states_as_given_without_changing_or_holding_them():
+    """compute_bands takes the states of one chunk as they are (no copy): it must not write them, and no
+    array of the bands it returns may share memory with them (a caller may change either afterwards)."""
+    from dataclasses import fields
+
+    rng = np.random.default_rng(11)
+    n = 9
+    own = own_state(n, gs=rng.uniform(30, 90, n), trk=rng.uniform(0, 6.28, n), vs=rng.uniform(-5, 5, n))
+    rows = np.stack([rng.uniform(-4000, 4000, n), rng.uniform(-4000, 4000, n), 1000 + rng.uniform(-100, 100, n),
+                     rng.uniform(40, 200, n), rng.uniform(0, 6.28, n), rng.uniform(-5, 5, n)], -1)[:, None, :]
+    intr = intruders(rows)
+    names = ("x", "y", "z", "gs", "trk", "vs")
+    before = [getattr(st_, f).copy() for st_ in (own, intr) for f in names]
+    b = compute_bands(own, intr, CFG)
+    assert all(np.array_equal(a, getattr(st_, f)) for a, (st_, f) in
+               zip(before, [(st_, f) for st_ in (own, intr) for f in names]))
+    assert any(ab.region.max() > REGION_NONE for ab in b.axes())  # (some conflict: the work was done)
+    for ab in b.axes():
+        for f in fields(ab):
+            got = getattr(ab, f.name)
+            if isinstance(got, np.ndarray):
+                assert not any(np.shares_memory(got, getattr(st_, g)) for st_ in (own, intr) for g in names), f.name
+
+
 def test_rows_select_lazily_what_an_eager_copy_selects():
     # Bands[idx] selects each field when it is read; sub / pick select from the original's fields. Every
     # way of reading must give the eager copy's arrays, for index arrays, masks, nested rows, and a field

@@ -453,7 +453,9 @@ def compute_bands(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | Non
     for lo in range(0, max(n, 1), CHUNK):
         sl = slice(lo, min(lo + CHUNK, n))
         li = None if lists is None else (lists[0][sl], lists[1][sl])
-        chunks.append({a: axis_bands(own[sl], intr[sl], a, cfg, alert[sl], sizes[a], li) for a in wanted})
+        # one chunk: the states as given (axis_bands only reads them; a slice would copy all twelve arrays)
+        o, i_ = (own, intr) if n <= CHUNK else (own[sl], intr[sl])
+        chunks.append({a: axis_bands(o, i_, a, cfg, alert[sl], sizes[a], li) for a in wanted})
     out = [None if a not in wanted else chunks[0][a] if len(chunks) == 1 else _concat([c[a] for c in chunks])
            for a in codes]
     return Bands(*out, alert=alert, preset=cfg.th.name)
