@@ -144,13 +144,18 @@ def test_safety_metric_matches_brute_force(c):
         assert sm > 0
 
 
-def test_batch_independence_of_bands():
-    rng = np.random.default_rng(3)
-    n = 40
+def _random_encounters(seed: int, n: int, half_width_m: float, dz_m: float):
+    """``n`` ownships and one intruder each, at random within ``half_width_m`` (m) and ``dz_m`` (m) of 1000 m."""
+    rng = np.random.default_rng(seed)
     own = own_state(n, gs=rng.uniform(30, 90, n), trk=rng.uniform(0, 6.28, n), vs=rng.uniform(-5, 5, n))
-    rows = np.stack([rng.uniform(-5000, 5000, n), rng.uniform(-5000, 5000, n), 1000 + rng.uniform(-200, 200, n),
-                     rng.uniform(40, 200, n), rng.uniform(0, 6.28, n), rng.uniform(-5, 5, n)], -1)[:, None, :]
-    intr = intruders(rows)
+    rows = np.stack([rng.uniform(-half_width_m, half_width_m, n), rng.uniform(-half_width_m, half_width_m, n),
+                     1000 + rng.uniform(-dz_m, dz_m, n), rng.uniform(40, 200, n), rng.uniform(0, 6.28, n),
+                     rng.uniform(-5, 5, n)], -1)[:, None, :]
+    return own, intruders(rows)
+
+
+def test_batch_independence_of_bands():
+    own, intr = _random_encounters(3, 40, 5000.0, 200.0)
     b = compute_bands(own, intr, CFG)
     for i in (0, 17, 39):
         bi = compute_bands(own[i:i + 1], intr[i:i + 1], CFG)
@@ -165,12 +170,7 @@ def test_bands_read_the_states_as_given_without_changing_or_holding_them():
     array of the bands it returns may share memory with them (a caller may change either afterwards)."""
     from dataclasses import fields
 
-    rng = np.random.default_rng(11)
-    n = 9
-    own = own_state(n, gs=rng.uniform(30, 90, n), trk=rng.uniform(0, 6.28, n), vs=rng.uniform(-5, 5, n))
-    rows = np.stack([rng.uniform(-4000, 4000, n), rng.uniform(-4000, 4000, n), 1000 + rng.uniform(-100, 100, n),
-                     rng.uniform(40, 200, n), rng.uniform(0, 6.28, n), rng.uniform(-5, 5, n)], -1)[:, None, :]
-    intr = intruders(rows)
+    own, intr = _random_encounters(11, 9, 4000.0, 100.0)
     names = ("x", "y", "z", "gs", "trk", "vs")
     before = [getattr(st_, f).copy() for st_ in (own, intr) for f in names]
     b = compute_bands(own, intr, CFG)
