@@ -55,6 +55,39 @@ def test_cold_start_together_then_damaged_cache(tmp_path):
     assert len(lines) == 1 and "recompiling" in lines[0]
     (warm,) = _finish(_start(cache))  # rebuilt: nothing to report any more
     assert warm[2] == runs[0][2] and "compiled-kernel cache" not in warm[3]
+    # the cold start compiled the lazy kernels too (the "ready" file says every kernel is cached)
+    index = " ".join(f.name for f in cache.rglob("*.nbi"))
+    for name in LAZY:
+        assert f".{name}-" in index, name
+
+
+#: the kernels only some configurations call, loaded at their first call
+LAZY = ("wcv_soa_into", "classify_into", "clear2_into", "candidates_into", "segment_into", "axis_relative_knots_into",
+        "axis_knots_into", "search_into")
+
+#: with a warm cache: how many lazy kernels get() left unloaded, then one called
+LAZY_PROBE = """
+import numpy as np
+from daa_sil.daa import kernels
+ns = kernels.get()
+lazy = {k.__name__: k for k in kernels.lazy_kernels()}
+before = sorted(n for n, k in lazy.items() if k.dispatcher is None)
+out = np.zeros(2, bool)
+z = np.zeros(2)
+ns.wcv_soa_into(z + 100.0, z, z, z - 50.0, z, z, 1.0e6, 35.0, 140.0, 0.0, out)
+print(" ".join(before), "|", lazy["wcv_soa_into"].dispatcher is not None, out.tolist())
+"""
+
+
+def test_lazy_kernels_are_loaded_at_their_first_call():
+    """A process on a warm cache loads every kernel but the lazy ones (eight a SIL process never calls with
+    the default configuration); the first call loads one and computes with it."""
+    for _ in range(2):  # (the first run warms the cache if this machine's is cold)
+        p = subprocess.run([sys.executable, "-c", LAZY_PROBE], capture_output=True, text=True, timeout=900)
+        assert p.returncode == 0, p.stderr[-2000:]
+    names, after = p.stdout.split("|")
+    assert sorted(names.split()) == sorted(LAZY)
+    assert after.strip().split(None, 1) == ["True", "[True, True]"]
 
 
 def test_the_numba_free_locator_agrees_with_the_kernels():

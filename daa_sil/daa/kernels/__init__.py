@@ -45,7 +45,7 @@ def skip_blas_probe() -> None:
 
 
 @contextlib.contextmanager
-def _without_scipy_linalg():
+def without_scipy_linalg():
     """While loading: ``import scipy.linalg`` fails at once (unless it is already imported)."""
     if _BLAS_PROBE or "scipy.linalg" in sys.modules:
         yield
@@ -72,10 +72,21 @@ def _load(clear: bool) -> tuple[float, float]:
         if clear:
             for f in list(CACHE_DIR.rglob("*.nbi")) + list(CACHE_DIR.rglob("*.nbc")) + [CACHE_DIR / READY_MARKER]:
                 f.unlink(missing_ok=True)
-        with _without_scipy_linalg():
+        with without_scipy_linalg():
             for name in _MODULES:
                 importlib.import_module(f"{__name__}.{name}")
+            if not warm:  # a cold cache gets the lazy kernels too: "ready" means every kernel is in it
+                for k in lazy_kernels():
+                    k.compile()
     return t1 - t0, time.perf_counter() - t1
+
+
+def lazy_kernels() -> list:
+    """The :class:`~daa_sil.daa.kernels.jit.LazyKernel` objects of the imported kernel modules."""
+    from daa_sil.daa.kernels.jit import LazyKernel
+
+    mods = [sys.modules.get(f"{__name__}.{name}") for name in _MODULES]
+    return [v for m in mods if m is not None for a, v in vars(m).items() if a.endswith("_into") and isinstance(v, LazyKernel)]
 
 
 def get() -> SimpleNamespace:
@@ -124,9 +135,10 @@ def get_unfused():
         get()
         from daa_sil.daa.kernels.jit import compile_lock
 
-        with compile_lock(), _without_scipy_linalg():
+        with compile_lock(), without_scipy_linalg():
             importlib.import_module(name)
     return sys.modules[name]
 
 
-__all__ = ["CACHE_DIR", "LOAD_S", "LOCK_WAIT_S", "get", "get_unfused", "loaded", "skip_blas_probe"]
+__all__ = ["CACHE_DIR", "LOAD_S", "LOCK_WAIT_S", "get", "get_unfused", "lazy_kernels", "loaded", "skip_blas_probe",
+           "without_scipy_linalg"]

@@ -32,14 +32,14 @@ def interval_into(sx, sy, sz, vx, vy, vz, length, wlo, whi, has_win, D, DD, D2, 
                                      D, DD, D2, TT, H, TC)
 
 
-@kernel(void(A, A, A, A, A, A, F, F, F, F, boolean[:]))
+@kernel(void(A, A, A, A, A, A, F, F, F, F, boolean[:]), lazy=True)
 def wcv_soa_into(sx, sy, sz, vx, vy, vz, DD, TT, H, TC, out):
     """Instantaneous well-clear violation of each relative state into ``out``."""
     for i in range(sx.shape[0]):
         out[i] = wcv_soa(sx[i], sy[i], sz[i], vx[i], vy[i], vz[i], DD, TT, H, TC)
 
 
-@kernel(void(A, A, A, A, A, A, A, A, A, A, A, A, boolean, F, F, F, F, F, int8[:]))
+@kernel(void(A, A, A, A, A, A, A, A, A, A, A, A, boolean, F, F, F, F, F, int8[:]), lazy=True)
 def classify_into(x0, y0, z0, x1, y1, z1, h, e_p, e_v, e_z, wlo, whi, has_win, D, DD, H, TT, TC, out):
     """CLEAR / INSIDE / UNDECIDED code of each chord piece into ``out``."""
     for i in range(x0.shape[0]):
@@ -48,7 +48,7 @@ def classify_into(x0, y0, z0, x1, y1, z1, h, e_p, e_v, e_z, wlo, whi, has_win, D
                           D, DD, H, TT, TC)
 
 
-@kernel(void(A, A, A, A, A, A, A, A, A, A, A, A, A, A, F, F, F, F, F, boolean[:]))
+@kernel(void(A, A, A, A, A, A, A, A, A, A, A, A, A, A, F, F, F, F, F, boolean[:]), lazy=True)
 def clear2_into(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, e_p, e_v, e_z, D, DD, H, TT, TC, out):
     """Second-order CLEAR certificate of each piece into ``out``."""
     for i in range(x0.shape[0]):

@@ -134,7 +134,7 @@ def candidates_path(tail_in, tail_out, seg_in, seg_out, it, iseg, K, t_end, t_in
             t_in[ob + k], t_out[ob + k] = INF, -INF
 
 
-@kernel(void(A, A, A, A, I, F, O, O))
+@kernel(void(A, A, A, A, I, F, O, O), lazy=True)
 def candidates_into(tail_in, tail_out, seg_in, seg_out, K, t_end, t_in, t_out):
     """First violation / last exit of candidate k (maneuver to knot k, then straight) over ``[0, t_end]``
     (:meth:`daa_sil.daa.trajectory.PathConflicts.candidates`); no violation is ``(inf, -inf)``."""

@@ -52,7 +52,7 @@ def segment(x, y, gs0, trk0, w, acc, t, straight):
     return x + dx, y + dy, gs0 + acc * t, trk0 + w * t
 
 
-@kernel(void(A, A, A, A, A, A, A, F, O, O, O, O))
+@kernel(void(A, A, A, A, A, A, A, F, O, O, O, O), lazy=True)
 def segment_into(x, y, gs, trk, w, acc, t, straight, ox, oy, ogs, otrk):
     """``kinematics.horizontal_segment`` element by element."""
     for i in range(ox.shape[0]):

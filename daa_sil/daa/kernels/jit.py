@@ -14,7 +14,12 @@
   entry to a temporary file and renames it, so processes that compile at the same time (three SIL
   processes on a cold machine) each compile and the last rename wins, with identical contents.
 * **When.** Every kernel has explicit signatures, so it is compiled (or loaded from the cache) when
-  its module is imported, never in the middle of a step. Nothing imports them, or numba, until the
+  its module is imported, never in the middle of a step -- except the few ``lazy`` ones that only some
+  configurations call (the unfused evaluator, the cylinder recovery, the resolution search): those
+  are loaded at their first call (~7 ms each from the cache), so that a SIL process, which never calls
+  them with the default configuration, does not load eight kernels for nothing at every start; a
+  cold cache still gets them all (:func:`daa_sil.daa.kernels.get` compiles them with the others, so the
+  ``ready`` file keeps meaning "everything is cached"). Nothing imports them, or numba, until the
   first DAA computation of a process calls :func:`daa_sil.daa.kernels.get`, which imports them all
   under an exclusive file lock in the cache directory (:func:`compile_lock`): of processes starting
   together on a cold machine one compiles and the others then load its cache, instead of each
@@ -30,6 +35,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 from pathlib import Path
 
 import numba
@@ -68,9 +74,38 @@ def compile_lock():
             fcntl.flock(fh, fcntl.LOCK_UN)
 
 
-def kernel(signatures):
-    """Decorator: compile eagerly for ``signatures`` with the project's settings (module docstring)."""
-    return numba.njit(signatures, cache=True, fastmath=False, error_model="numpy", nogil=True)
+#: the project's compilation settings (module docstring)
+OPTIONS = {"cache": True, "fastmath": False, "error_model": "numpy", "nogil": True}
+
+
+class LazyKernel:
+    """A kernel compiled for its ``signatures`` (or loaded from the cache) at its first call, or when
+    :meth:`compile` is called; then exactly the dispatcher ``kernel(signatures)`` makes."""
+
+    def __init__(self, signatures, py_func):
+        self.signatures, self.py_func = signatures, py_func
+        self.dispatcher = None  #: the compiled kernel once loaded
+        functools.update_wrapper(self, py_func)
+
+    def compile(self):
+        """The compiled kernel (compiled or loaded now if it was not yet)."""
+        if self.dispatcher is None:
+            from daa_sil.daa import kernels
+
+            with kernels.without_scipy_linalg():  # (as the eager kernels load: no BLAS probe)
+                self.dispatcher = numba.njit(self.signatures, **OPTIONS)(self.py_func)
+        return self.dispatcher
+
+    def __call__(self, *args):
+        return (self.dispatcher or self.compile())(*args)
+
+
+def kernel(signatures, *, lazy: bool = False):
+    """Decorator: compile eagerly for ``signatures`` with the project's settings (module docstring);
+    ``lazy``: at the first call instead (:class:`LazyKernel`)."""
+    if lazy:
+        return lambda fn: LazyKernel(signatures, fn)
+    return numba.njit(signatures, **OPTIONS)
 
 
 #: decorator for the scalar helpers the kernels call (compiled into each kernel, not on their own)

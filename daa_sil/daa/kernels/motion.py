@@ -192,7 +192,7 @@ def turn_sincos(rate, t):
     return sth, cth
 
 
-@kernel(void(I, F, A3, A, A3, A3, *([types.Array(float64, 4, "C")] * 6)))
+@kernel(void(I, F, A3, A, A3, A3, *([types.Array(float64, 4, "C")] * 6)), lazy=True)
 def axis_relative_knots_into(axis, rate, kin, t, ipos, ivel, s0, s1, s2, v0, v1, v2):
     """:func:`axis_knots_into` then ``evaluate.relative_knots_into`` in one pass: the relative position and
     velocity (ownship - intruder ``m``, ``ipos``/``ivel`` (N, M, 3)) at the knots ``(N, M, P, K)`` per
@@ -216,7 +216,7 @@ def axis_relative_knots_into(axis, rate, kin, t, ipos, ivel, s0, s1, s2, v0, v1,
                     v2[n, m, p, k] = ovz - jz
 
 
-@kernel(void(I, F, A3, A, types.Array(float64, 4, "C")))
+@kernel(void(I, F, A3, A, types.Array(float64, 4, "C")), lazy=True)
 def axis_knots_into(axis, rate, kin, t, out):
     """Ownship state on path ``p`` of encounter ``n`` (row ``kin[n, p]``) at each knot time ``t[k]`` into
     ``out[:, n, p, k]`` (six rows; the band axis's knot states, ``axis_paths.maneuver_paths``)."""

@@ -55,7 +55,7 @@ def _best_effort(i_h, i_v, i_g, o_h, o_v, o_g, rh, rv, rg, K_h, K_v, K):
 
 
 @kernel(void(A2, A2, A2, A2, A2, A2, A2, A2, A2, A2, A2, A2, IA, IA, IA, IA, IA, IA, IA, IA, A2, A, F,
-             types.Array(int64, 1, "C"), types.Array(int8, 1, "C")))
+             types.Array(int64, 1, "C"), types.Array(int8, 1, "C")), lazy=True)
 def search_into(d_h, d_v, d_g, m_h, m_v, m_g, i_h, i_v, i_g, o_h, o_v, o_g, r_h, r_v, r_g, side_h, side_v, side_g,
                 ax, side, ref_t, rates, horizon, idx, rule):
     """Candidate index (columns: track, then vertical speed, then ground speed, as ``_Candidates``) and rule
