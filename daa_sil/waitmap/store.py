@@ -219,8 +219,9 @@ def _check_values(path: Path, data: dict, horizon: float, extrema: "dict | None"
         if a.dtype.kind != "f":
             raise FileFormatError(f"{path}: array {name} has dtype {a.dtype}, expected floating point")
         if name in extrema and a.size:
-            mn, mx = extrema[name]  # (numpy scalars of a's dtype: the bounds are compared in it, as below)
-            if bool(mn >= lo - 1e-9) and bool(mx <= hi + 1e-9):  # (False for a NaN)
+            mn, mx = extrema[name]
+            t = a.dtype.type  # (the bounds rounded to a's dtype, as the array comparison below rounds them)
+            if bool(mn >= t(lo - 1e-9)) and bool(mx <= t(hi + 1e-9)):  # (False for a NaN)
                 continue
         bad = ~((a >= lo - 1e-9) & (a <= hi + 1e-9))  # also catches NaN
         if bad.any():
