@@ -97,7 +97,8 @@ class LazyKernel:
         return self.dispatcher
 
     def __call__(self, *args):
-        return (self.dispatcher or self.compile())(*args)
+        d = self.dispatcher
+        return (d if d is not None else self.compile())(*args)
 
 
 def kernel(signatures, *, lazy: bool = False):
