@@ -145,6 +145,31 @@ def test_truncated_and_corrupt_files_fail_cleanly(wm, tmp_path):
         waitmap.load(junk)
 
 
+@pytest.mark.parametrize("member", ["p_lowc", "wait_s", "lowc"])
+def test_a_forged_array_header_is_one_line_before_anything_is_allocated(wm, tmp_path, member):
+    """A member whose header claims far more data than it holds (10^12 elements: terabytes) is refused in
+    one line from its size, before its array is allocated (np.load allocates the header's shape first)."""
+    import io
+
+    path = waitmap.save(wm, tmp_path / "m.npz")
+    with zipfile.ZipFile(path) as zf:
+        items = [(i.filename, zf.read(i)) for i in zf.infolist()]
+    forged = tmp_path / "forged.npz"
+    with zipfile.ZipFile(forged, "w") as zf:
+        for name, raw in items:
+            if name == f"{member}.npy":
+                arr = np.lib.format.read_array(io.BytesIO(raw))
+                buf = io.BytesIO()
+                np.lib.format.write_array_header_1_0(buf, {"descr": np.lib.format.dtype_to_descr(arr.dtype),
+                                                           "fortran_order": False, "shape": (10**12,)})
+                raw = buf.getvalue() + arr.tobytes()
+            zf.writestr(name, raw)
+    for expected_hash in (None, wm.content_hash):
+        with pytest.raises(FileFormatError) as e:
+            waitmap.load(forged, expected_hash=expected_hash)
+        assert f"{member}.npy" in _one_line(e) and "more than it holds" in _one_line(e)
+
+
 def test_wrong_version_fails(wm, tmp_path):
     path = waitmap.save(wm, tmp_path / "m.npz")
     with np.load(path) as z:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import zipfile
 from dataclasses import dataclass
@@ -163,9 +164,25 @@ def read_arrays(path: "str | os.PathLike") -> tuple[dict, dict]:
         for name, info in members.items():
             if name not in data:
                 with zf.open(info) as fh:
+                    array_header(fh, info)
+                with zf.open(info) as fh:
                     data[name] = np.lib.format.read_array(fh, allow_pickle=False)
                     fh.read()  # to the member's end: zipfile checks its CRC-32 there
     return data, extrema
+
+
+def array_header(fh, info: zipfile.ZipInfo) -> "tuple | None":
+    """``(shape, fortran_order, dtype)`` of the ``.npy`` member ``info`` open as ``fh``, left at the start
+    of its data; None for a format version other than 1.0 and 2.0. ValueError if the header claims more
+    data than the member holds: a forged shape must not make the reader allocate it."""
+    version = np.lib.format.read_magic(fh)
+    read = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}.get(version)
+    if read is None:
+        return None
+    shape, fortran, dtype = read(fh)
+    if dtype.itemsize * math.prod(shape) > info.file_size - fh.tell():
+        raise ValueError(f"{info.filename}: its array header claims {shape} of {dtype}, more than it holds")
+    return shape, fortran, dtype
 
 
 def _read_side_by_side(zf: zipfile.ZipFile, infos: list) -> "tuple[np.ndarray, list, list] | None":
@@ -175,14 +192,11 @@ def _read_side_by_side(zf: zipfile.ZipFile, infos: list) -> "tuple[np.ndarray, l
     handles = [zf.open(i) for i in infos]
     try:
         shapes = []
-        for fh in handles:
-            version = np.lib.format.read_magic(fh)
-            if version == (1, 0):
-                shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
-            elif version == (2, 0):
-                shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
-            else:
+        for info, fh in zip(infos, handles):
+            header = array_header(fh, info)
+            if header is None:
                 return None
+            shape, fortran, dtype = header
             if fortran or dtype != np.dtype("<f4") or (shapes and shape != shapes[0]):
                 return None
             shapes.append(shape)
