@@ -85,8 +85,8 @@ def lazy_kernels() -> list:
     """The :class:`~daa_sil.daa.kernels.jit.LazyKernel` objects of the imported kernel modules."""
     from daa_sil.daa.kernels.jit import LazyKernel
 
-    mods = [sys.modules.get(f"{__name__}.{name}") for name in _MODULES]
-    return [v for m in mods if m is not None for a, v in vars(m).items() if a.endswith("_into") and isinstance(v, LazyKernel)]
+    mods = [m for m in (sys.modules.get(f"{__name__}.{name}") for name in _MODULES) if m is not None]
+    return [v for m in mods for name, v in vars(m).items() if name.endswith("_into") and isinstance(v, LazyKernel)]
 
 
 def get() -> SimpleNamespace:
