@@ -291,8 +291,10 @@ class MavCodec:
             if read is not None and b0 == 0xFD:
                 msg_id = pkt[7] | (pkt[8] << 8) | (pkt[9] << 16)
                 if msg_id not in read:
-                    field = self.mav.verify(pkt, msg_id)
-                    field = field if field is not None else "unread"
+                    try:
+                        field = self.mav.verify(pkt, msg_id) or "unread"
+                    except Exception:  # hostile input must never escape (as for a decoded packet)
+                        field = "malformed"
                     setattr(c, field, getattr(c, field) + 1)
                     continue
             try:
