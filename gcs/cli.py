@@ -17,6 +17,7 @@ from daa_sil.cli import run_guarded
 from daa_sil.commands.common_args import OneLineParser as _Parser, check_speed, load_key_option
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.errors import UsageError
+from daa_sil.sil.startup_gc import freeze_after_startup
 
 EXAMPLES = """examples:
   # pilot model of the scenario, vehicle directly on 14550 (realtime)
@@ -121,6 +122,7 @@ async def _amain(args) -> int:
         loop.add_signal_handler(sig, node.request_stop)
     if args.duration:
         loop.call_later(args.duration, node.request_stop)
+    freeze_after_startup()  # the start-up's objects stay out of the steps' collections
     print(f"READY listen={node.local_address} vehicle={args.vehicle} pilot={node.mode} clock={args.clock}", flush=True)
     try:
         await node.run()

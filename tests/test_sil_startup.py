@@ -228,3 +228,74 @@ def test_the_kernels_every_process_loads_leave_out_the_unfused_ones():
     mods = _modules_after("from daa_sil.daa import kernels\nkernels.get()")
     assert "daa_sil.daa.kernels.resolve" in mods
     assert "daa_sil.daa.kernels.unfused" not in mods
+
+
+def test_startup_gc_relaxes_collects_garbage_and_then_freezes_and_restores():
+    """:mod:`daa_sil.sil.startup_gc`, in a fresh interpreter (the test process's collector is left alone):
+    relaxed, the young threshold is STARTUP_THRESHOLD and a garbage cycle is still freed by the
+    collector once that many objects were allocated; frozen, every live object is in the permanent
+    generation and the thresholds are the ones found at the start."""
+    code = """
+import gc, json, weakref
+from daa_sil.sil import startup_gc as S
+before = gc.get_threshold()
+S.relax_for_startup()
+relaxed = gc.get_threshold()
+class Node: pass
+a, b = Node(), Node(); a.peer, b.peer = b, a
+gone = weakref.ref(a); del a, b
+keep = [[] for _ in range(S.STARTUP_THRESHOLD // 10)]      # fewer allocations than the threshold
+early = gone() is None
+keep += [[] for _ in range(2 * S.STARTUP_THRESHOLD)]      # more than the threshold
+late = gone() is None
+S.freeze_after_startup()
+print(json.dumps({"before": before, "relaxed": relaxed, "early": early, "late": late,
+                  "after": gc.get_threshold(), "frozen": gc.get_freeze_count(), "alive": len(gc.get_objects())}))
+"""
+    res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr[-2000:]
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    from daa_sil.sil.startup_gc import STARTUP_THRESHOLD
+
+    assert out["relaxed"] == [STARTUP_THRESHOLD, *out["before"][1:]] and out["before"][0] < STARTUP_THRESHOLD
+    assert (out["early"], out["late"]) == (False, True)  # relaxed, not off: the cycle went once the threshold passed
+    assert out["after"] == out["before"]
+    assert out["frozen"] > 2 * STARTUP_THRESHOLD and out["alive"] < 100  # the kept lists are frozen, not tracked
+
+
+@pytest.mark.parametrize("node", ["vehicle", "gcs"])
+def test_sil_nodes_start_relaxed_and_are_frozen_with_default_thresholds_at_ready(node, tmp_path):
+    """The real ``python -m vehicle`` / ``python -m gcs`` start-up, stopped at its READY line: by then the
+    start-up's objects (numba's, the kernels', the dialect's) are frozen and the thresholds are the
+    interpreter's defaults again; before READY (here: ``--help``) the collector is the relaxed one."""
+    from daa_sil.sil.startup_gc import STARTUP_THRESHOLD
+
+    argv = {"vehicle": ["vehicle", "scenarios/head_on.yaml", "--listen", "udp:127.0.0.1:0", "--out", "udp:127.0.0.1:9",
+                        "--steplog", str(tmp_path / "steps.parquet"), "--tap", "none", "--clock", "lockstep"],
+            "gcs": ["gcs", "--scenario", "scenarios/head_on.yaml", "--listen", "udp:127.0.0.1:0",
+                    "--vehicle", "udp:127.0.0.1:9", "--clock", "lockstep", "--no-display"]}[node]
+    code = f"""
+import builtins, gc, json, os, runpy, sys
+defaults = gc.get_threshold()
+sys.argv = {argv!r} + sys.argv[1:]
+show = builtins.print
+def at_ready(*a, **k):
+    if a and str(a[0]).startswith("READY"):
+        show(json.dumps({{"defaults": defaults, "now": gc.get_threshold(), "frozen": gc.get_freeze_count()}}), flush=True)
+        os._exit(0)
+    show(*a, **k)
+builtins.print = at_ready
+try:
+    runpy.run_module({node!r}, run_name="__main__")
+except SystemExit:
+    show(json.dumps({{"defaults": defaults, "now": gc.get_threshold(), "frozen": gc.get_freeze_count()}}), flush=True)
+"""
+    for extra, want_relaxed in (([], False), (["--help"], True)):
+        res = subprocess.run([sys.executable, "-c", code, *extra], cwd=ROOT, capture_output=True, text=True,
+                             timeout=300)
+        assert res.returncode == 0, res.stderr[-2000:]
+        out = json.loads(res.stdout.strip().splitlines()[-1])
+        if want_relaxed:
+            assert out["now"] == [STARTUP_THRESHOLD, *out["defaults"][1:]] and out["frozen"] == 0
+        else:
+            assert out["now"] == out["defaults"] and out["frozen"] > 50_000, out

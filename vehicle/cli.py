@@ -18,6 +18,7 @@ from daa_sil.cli import run_guarded
 from daa_sil.commands.common_args import OneLineParser as _Parser, check_speed, load_key_option
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.errors import UsageError
+from daa_sil.sil.startup_gc import freeze_after_startup
 
 EXAMPLES = """examples:
   # stream to a GCS (or MAVProxy/QGC) on 14550, real time
@@ -181,6 +182,7 @@ async def _amain(args) -> int:
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, on_signal, sig)
+    freeze_after_startup()  # the start-up's objects stay out of the steps' collections
     observers = " ".join(f"{o.name}={describe(o.spec.conn)}{',rw' if o.spec.writable else ''}" for o in node.outputs[1:])
     print(f"READY listen={node.local_address} out={describe(node.out) if node.out.listens else format_udp_address(node.out.addr)} clock={opts.clock} "
           f"scenario={sc.name} steps={node.core.n_steps}" + (f" {observers}" if observers else ""), flush=True)
