@@ -15,7 +15,7 @@ from pathlib import Path
 
 from daa_sil.cli import run_guarded
 from daa_sil.commands.common_args import OneLineParser as _Parser, check_speed, load_key_option
-from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.config.config_option import add_config_argument, config_of
 from daa_sil.errors import UsageError
 from daa_sil.sil.startup_gc import freeze_after_startup
 
@@ -115,7 +115,7 @@ async def _amain(args) -> int:
     node = GcsNode(sc, GcsOptions(vehicle=args.vehicle, listen=args.listen or "udp:127.0.0.1:14550", clock=args.clock,
                                   speed=args.speed, key=key, pilot=args.pilot, log=args.log,
                                   display=not args.no_display, settings=settings,
-                                  config=load_config(args.config) if args.config else None))
+                                  config=config_of(args.config)))
     await node.start()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -17,7 +17,7 @@ import json
 import sys
 from pathlib import Path
 
-from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.config.config_option import add_config_argument, config_of
 from daa_sil.errors import OutputError, UsageError
 from .common_args import check_speed, load_key_option
 from daa_sil.sil.children import interruptible
@@ -135,7 +135,7 @@ def _check_args(args):
     ``args.scenario`` loaded (None without one: the demo's)."""
     check_speed(args.speed)
     if args.config:
-        load_config(args.config)  # a bad file fails here, one line, before any process starts
+        config_of(args.config)  # a bad file fails here, one line, before any process starts
     if args.key is not None:
         if not args.key.is_file():
             raise UsageError(f"--key: key file {args.key} does not exist")
@@ -180,7 +180,7 @@ def _waitmap_source(args) -> "str | None":
     """``--waitmap``, else the ``--config``'s wait-map source, else None (the default map)."""
     if args.waitmap is not None:
         return args.waitmap
-    return load_config(args.config).waitmap["source"] if args.config else None
+    return config_of(args.config).waitmap["source"] if args.config else None
 
 
 def _options(args, scenario: Path) -> RunOptions:

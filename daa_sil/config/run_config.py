@@ -52,6 +52,7 @@ from typing import Any, Mapping
 
 import yaml
 
+from daa_sil.config.config_option import PRESET_NAMES, add_config_argument
 from daa_sil.config.sections import (SECTIONS, AllocationSection, LinkSection, ReadingSection, StudySection,
                                      WaitmapSection)
 from daa_sil.config.settings import PRESET
@@ -59,7 +60,6 @@ from daa_sil.config.yaml_input import load_yaml_file
 from daa_sil.errors import UsageError
 from daa_sil.geometry.thresholds import PRESETS as THRESHOLD_PRESETS
 
-PRESET_NAMES = ("paper", "do365", "daidalus")
 #: keys ``config show --full`` adds (derived values, ignored when a file is read back)
 DERIVED_KEYS = ("resolved", "settings")
 TOP_KEYS = ("base", "thresholds", "daa", "waitmap", "allocation", "groups", "pilot", "latency", "link",
@@ -262,13 +262,6 @@ def _check(cfg: RunConfig, where: str) -> None:
             raise UsageError(f"{where}: {what}: {exc}") from None
         except (TypeError, ValueError) as exc:
             raise UsageError(f"{where}: {what}: bad value ({exc})") from None
-
-
-def add_config_argument(p, default_help: str = PRESET.default) -> None:
-    """The ``--config PRESET|FILE`` option of a command."""
-    p.add_argument("--config", default=None, metavar="PRESET|FILE",
-                   help=f"run configuration: a preset ({', '.join(PRESET_NAMES)}) or a YAML file "
-                        f"('daa-sil config show {default_help}' prints one to start from); explicit flags override it")
 
 
 __all__ = ["RunConfig", "PRESET_NAMES", "preset", "load_config", "config_from_dict", "save_config",
