@@ -181,10 +181,15 @@ def median(xs: list) -> "float | None":
 
 
 def in_process(python: str, tree: Path, probe: Path, scenario: Path, cache: "str | None") -> dict:
-    """The vehicle's core alone in one process: build ``VehicleCore`` (loading the DAA kernels as ``python -m
-    vehicle`` does) and fly every step (no link), then the same steps again with each step's telemetry built and encoded (as the old bench did)."""
+    """The vehicle's core alone in one process: build ``VehicleCore`` (loading the DAA kernels and running the
+    garbage collector as ``python -m vehicle`` does) and fly every step (no link), then the same steps again with each step's telemetry built and encoded (as the old bench did)."""
     code = r'''
 import json, sys, time
+try:  # the garbage collector as python -m vehicle runs it (relaxed until READY), in a checkout that has that
+    from daa_sil.sil.startup_gc import freeze_after_startup, relax_for_startup
+except ImportError:
+    freeze_after_startup = relax_for_startup = lambda: None
+relax_for_startup()
 from pathlib import Path
 from daa_sil.sil.scenario import load_scenario
 from vehicle.core import VehicleCore
@@ -198,6 +203,7 @@ try:  # load the kernels as the vehicle process (python -m vehicle) does, in a c
 except ImportError:
     pass
 vc = VehicleCore(load_scenario(path))
+freeze_after_startup()  # where the vehicle prints READY
 t1 = time.perf_counter(); c1 = time.process_time()
 for k in range(vc.n_steps):
     vc.step(float(k))
