@@ -15,6 +15,7 @@ import sys
 from . import __version__
 from .commands.common_args import OneLineParser as _Parser
 from .errors import DaaSilError
+from .process_gc import freeze_at_exit
 
 #: modules providing ``register(subparsers)``; order = order in ``--help``
 COMMAND_MODULES = [
@@ -90,6 +91,7 @@ def _interrupted(prog: str, exc: KeyboardInterrupt) -> int:
 
 def main(argv: "list[str] | None" = None) -> int:
     _adopt(None)
+    freeze_at_exit()  # the interpreter's shutdown skips traversing numba's objects (daa_sil.process_gc)
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv[0] if argv else None)
     try:
@@ -110,8 +112,10 @@ def main(argv: "list[str] | None" = None) -> int:
 def run_guarded(prog: str, fn) -> int:
     """Run ``fn()`` for a console script named ``prog``: a DaaSilError becomes one line on stderr and
     its exit code, Ctrl-C exits 130 (tracebacks only with ``DAA_SIL_DEBUG=1``). The process is named
-    ``prog`` (ps/pgrep) and, when ``daa-sil run`` started it, dies with its parent."""
+    ``prog`` (ps/pgrep) and, when ``daa-sil run`` started it, dies with its parent. Its exit is made cheap
+    as :func:`main`'s (:func:`daa_sil.process_gc.freeze_at_exit`)."""
     _adopt(prog)
+    freeze_at_exit()
     try:
         return int(fn() or 0)
     except DaaSilError as exc:

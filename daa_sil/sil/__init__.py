@@ -12,6 +12,5 @@
 * :mod:`daa_sil.sil.web_ports` -- the Rerun web viewer's ports and their ``--serve-web`` options
 * :mod:`daa_sil.sil.children` -- how every child process is started (dies with its parent, even on
   SIGKILL; named for ps/pgrep) and SIGTERM/SIGHUP taken as Ctrl-C
-* :mod:`daa_sil.sil.startup_gc` -- the garbage collector around a node's start-up (relaxed, then frozen)
 * :mod:`daa_sil.sil.scenario` -- scenario files: schema, loader/validator, conversion, expectations
 """
