@@ -8,7 +8,10 @@ default bba2fd8 installed apart in /work/baseline with its own venv and ``DAA_SI
 Prints per configuration the best and median wall time, the ratio to the baseline, start-up to
 READY of each process (wall s after the run started, and its CPU s by then), CPU per step of the
 vehicle, the GCS and the shim, the wall time per lockstep step, and the load average around each
-run. Every run's step log must be identical to the baseline's (``daa_sil.steplog.cells_equal``).
+run; with two repeats or more, the median of the paired differences (this checkout minus the baseline
+run just before or after it) and in how many pairs this checkout was lower, which resolves a change
+of a tenth of a second that the machine's drift hides in best and median figures (20 repeats did).
+Every run's step log must be identical to the baseline's (``daa_sil.steplog.cells_equal``).
 Then the in-process figure: the vehicle's core alone (``VehicleCore`` built and flown for every
 step, no link, no processes) and its telemetry cost per step, for both checkouts.
 Targets (issue 21): <= 2.0 s wall with .pyc; in-process <= 1.0 s; at N = 1 the vehicle's step
@@ -26,6 +29,9 @@ ratio of the loaded figures to the alone run.
 
     python benchmarks/bench_sil.py [--part lockstep|realtime|all] [--repeat 3] [--pyc both|present|absent]
     python benchmarks/bench_sil.py --baseline none          # this checkout only
+    git worktree add /tmp/start HEAD~3 && python benchmarks/bench_sil.py --pyc present --repeat 20 \
+        --baseline /tmp/start --baseline-python .venv/bin/python --baseline-cache ~/.cache/daa-sil-start
+                                                            # an A/B against an earlier commit, paired
     python benchmarks/bench_sil.py --part realtime --runs 20 --speeds 1,4 [--duration 180]
 """
 
@@ -60,6 +66,9 @@ def main() -> None:
                          f"installed apart, if it exists); none = this checkout only")
     ap.add_argument("--baseline-cache", default="/work/cache-baseline",
                     help="lockstep: DAA_SIL_CACHE of the baseline (default /work/cache-baseline)")
+    ap.add_argument("--baseline-python", default=None,
+                    help="lockstep: the baseline's interpreter (default DIR/.venv/bin/python); e.g. this checkout's "
+                         "own .venv/bin/python to compare with an earlier commit's sources (a git worktree)")
     ap.add_argument("--runs", type=int, default=20, help="realtime: concurrent runs (default 20)")
     ap.add_argument("--speeds", default="1,4", help="realtime: speed factors, comma-separated (default 1,4)")
     ap.add_argument("--duration", type=float, default=None, help="realtime: sim s per run (default: the scenario's)")
@@ -78,6 +87,26 @@ def main() -> None:
 
 # ------------------------------------------------------------------------------------------------
 # lockstep: this checkout against the baseline, with and without .pyc
+
+#: the figures compared run by run (new - baseline of the same repeat: the two ran back to back)
+PAIRED = (("wall", "wall s"), ("ready_vehicle", "vehicle READY s"), ("ready_cpu_vehicle", "vehicle CPU to READY s"),
+          ("ready_cpu_gcs", "GCS CPU to READY s"), ("step_ms_vehicle", "vehicle CPU ms a step"),
+          ("step_ms_gcs", "GCS CPU ms a step"), ("step_ms_shim", "shim CPU ms a step"))
+
+
+def _paired(new: list, base: list, pyc: bool) -> None:
+    """Print the median of the paired differences (new - baseline, repeat by repeat) of :data:`PAIRED`, and in how
+    many pairs the new code was lower: on a machine whose speed drifts, the pairs resolve what best and median
+    figures do not."""
+    import sil_probe as P
+
+    parts = []
+    for key, label in PAIRED:
+        d = [a[key] - b[key] for a, b in zip(new, base) if a.get(key) is not None and b.get(key) is not None]
+        if d:
+            parts.append(f"{label} {P.median(d):+.3f} (lower in {sum(x < 0 for x in d)}/{len(d)})")
+    print(f"  => paired, new - base, median over {len(new)} back-to-back repeats ({'with' if pyc else 'no'} .pyc): "
+          + "; ".join(parts))
 
 def _f(x, fmt=".2f") -> str:
     return "-" if x is None else format(x, fmt)
@@ -109,7 +138,7 @@ def bench_lockstep(args) -> None:
     path.write_text(yaml.safe_dump(d, sort_keys=False))
     probe = P.write_probe(base / "probe")
     checkouts = {"new": (ROOT, sys.executable, os.environ.get("DAA_SIL_CACHE"))}
-    bpy = Path(args.baseline) / ".venv" / "bin" / "python"
+    bpy = Path(args.baseline_python).absolute() if args.baseline_python else Path(args.baseline) / ".venv" / "bin" / "python"
     if args.baseline == DEFAULT_BASELINE and not bpy.is_file():
         print(f"bench_sil: no baseline at {DEFAULT_BASELINE}: this checkout only (--baseline DIR to compare)")
         args.baseline = "none"
@@ -170,6 +199,9 @@ def bench_lockstep(args) -> None:
               if ("base", pyc) in best else " (no baseline)")
         print(f"  => {'with' if pyc else 'without'} .pyc: {best['new', pyc]:.2f} s{vs}"
               + (f" (target <= {TARGET_S:g} s: {'met' if best['new', pyc] <= TARGET_S else 'NOT met'})" if pyc else ""))
+    for pyc in pycs:
+        if ("base", pyc) in res and args.repeat >= 2:
+            _paired(res["new", pyc], res["base", pyc], pyc)
     print(f"  => step logs identical to the baseline's: {'yes' if not any(diff.values()) else 'NO'} "
           f"({', '.join(f'{_label(k)}: {n} cells differ' for k, n in diff.items())})")
     # in-process: the vehicle's core alone

@@ -120,3 +120,18 @@ def test_compare_campaigns_maps_old_authority_names_so_old_step_logs_still_compa
     assert res.returncode == 1 and "'authority' differs" in res.stdout
     helptext = run("compare_campaigns.py", ["--help"], tmp_path).stdout
     assert "'hold' -> 'waiting'" in helptext
+
+
+@pytest.mark.slow  # ~100 s: two more copies of the packages, each compiling its kernels once
+def test_bench_sil_pairs_its_runs_with_a_baseline_of_the_same_interpreter(tmp_path):
+    """``--baseline-python``: a checkout without its own venv (here this one) as the baseline, run by the given
+    interpreter; with two repeats the paired differences are printed, and the step logs compared."""
+    from daa_sil.waitmap.cache import cache_dir
+
+    res = run("bench_sil.py", ["--part", "lockstep", "--repeat", "2", "--pyc", "present", "--baseline", str(ROOT),
+                               "--baseline-python", sys.executable, "--baseline-cache", str(cache_dir())], tmp_path)
+    out = res.stdout + res.stderr
+    assert res.returncode == 0, out[-3000:]
+    assert "=> paired, new - base, median over 2 back-to-back repeats (with .pyc): wall s " in out, out[-3000:]
+    assert "(lower in " in out and "/2)" in out
+    assert "=> step logs identical to the baseline's: yes" in out, out[-3000:]
