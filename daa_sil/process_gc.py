@@ -13,8 +13,8 @@ The collector's default thresholds (700, 10, 10) still cost it twice:
   before the node prints READY) moves every live object into the permanent generation
   (``gc.freeze``) and restores the thresholds, so the steps' collections traverse only what the
   steps create.
-* **Exit.** The interpreter's shutdown collects repeatedly while it clears the modules, and each
-  pass traverses everything alive: 0.3-0.5 s of CPU once the kernels are loaded (0.1 s for numba
+* **Exit.** The interpreter's shutdown runs full collections while it clears the modules, and they
+  traverse everything still alive: 0.3-0.5 s of CPU once the kernels are loaded (0.1 s for numba
   alone). :func:`freeze_at_exit` registers an ``atexit`` handler that freezes the collector: the
   shutdown is otherwise the normal one (every other ``atexit`` handler runs first, the standard
   streams are flushed, modules are cleared and objects freed by reference counting); only objects
@@ -23,8 +23,8 @@ The collector's default thresholds (700, 10, 10) still cost it twice:
   (atomically) before a command returns. ``daa-sil`` (:func:`daa_sil.cli.main`), ``daa-vehicle``
   and ``daa-gcs`` (:func:`daa_sil.cli.run_guarded`) call it.
 
-Python's documentation describes the same ``gc.disable``/``gc.freeze`` pattern for servers that fork
-after loading. None of this changes what a process computes: only when unreachable cycles are freed.
+Python's documentation of ``gc.freeze`` describes the same pattern (collector off early, frozen
+before ``fork``) for processes that fork after loading. None of this changes what a process computes: only when unreachable cycles are freed.
 """
 
 from __future__ import annotations
