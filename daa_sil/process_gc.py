@@ -23,7 +23,7 @@ The collector's default thresholds (700, 10, 10) still cost it twice:
   (atomically) before a command returns. ``daa-sil`` (:func:`daa_sil.cli.main`), ``daa-vehicle``
   and ``daa-gcs`` (:func:`daa_sil.cli.run_guarded`) call it.
 
-Python's documentation of ``gc.freeze`` describes the same pattern (collector off early, frozen
+Python's documentation of ``gc.freeze`` describes a similar pattern (the collector off early, frozen
 before ``fork``) for processes that fork after loading. None of this changes what a process computes: only when unreachable cycles are freed.
 """
 
