@@ -148,3 +148,28 @@ def test_property_line_equals_pure_rule_and_never_early(gaps, seed, loss):
     assert np.all(got[keep] >= t[keep] + 0.2)
     out = line.pop_due(float(t[-1]) + 20.0)
     assert out == [i for i in range(len(t)) if keep[i]]  # FIFO, nothing lost but the dropped
+
+
+def test_keyed_impairment_draws_are_skipped_only_on_a_line_without_impairments(monkeypatch):
+    """Keyed pushes (the shim's) on a line with no loss, duplication or reordering draw nothing: every uniform
+    would be compared with a zero rate. Their records and releases are those of the same line pushed from its
+    sequential stream (which the rates do not read either). With any rate the keyed draw is made per packet."""
+    calls = []
+    real = DelayLine.fault_uniforms
+    monkeypatch.setattr(DelayLine, "fault_uniforms", lambda self, key: calls.append(key) or real(self, key))
+    times = np.arange(0.0, 30.0, 0.7)
+    keyed, plain = (DelayLine(TruncatedGaussian(4, 2), seed=5, epoch_s=0, outages=[(10.0, 12.0)]) for _ in range(2))
+    for i, t in enumerate(times):
+        keyed.push(float(t), i, key=(2, i, 0))
+        plain.push(float(t), i)
+    assert calls == []
+    fields = lambda r: (r.seq, r.t_in, r.delay, r.t_out, r.dropped, r.copy, r.reordered)  # noqa: E731
+    assert [fields(r) for r in keyed.log] == [fields(r) for r in plain.log]
+    assert any(r.dropped == "outage" for r in keyed.log)  # the outage is still applied
+    assert keyed.pop_due(1e9) == plain.pop_due(1e9) and keyed.counters == plain.counters
+    for rates in ({"loss": 0.2}, {"dup": 0.2}, {"reorder": 0.2}):
+        calls.clear()
+        line = DelayLine(Constant(4.0), seed=5, **rates)
+        for i, t in enumerate(times):
+            line.push(float(t), i, key=(2, i, 0))
+        assert calls == [(2, i, 0) for i in range(times.size)], rates
