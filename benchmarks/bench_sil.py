@@ -10,7 +10,8 @@ READY of each process (wall s after the run started, and its CPU s by then), CPU
 vehicle, the GCS and the shim, the wall time per lockstep step, and the load average around each
 run; with two repeats or more, the median of the paired differences (this checkout minus the baseline
 run just before or after it) and in how many pairs this checkout was lower, which resolves a change
-of a tenth of a second that the machine's drift hides in best and median figures (20 repeats did).
+of a tenth of a second that the machine's drift hides in best and median figures (20 alternated
+pairs did).
 Every run's step log must be identical to the baseline's (``daa_sil.steplog.cells_equal``).
 Then the in-process figure: the vehicle's core alone (``VehicleCore`` built and flown for every
 step, no link, no processes) and its telemetry cost per step, for both checkouts.
@@ -30,7 +31,7 @@ ratio of the loaded figures to the alone run.
     python benchmarks/bench_sil.py [--part lockstep|realtime|all] [--repeat 3] [--pyc both|present|absent]
     python benchmarks/bench_sil.py --baseline none          # this checkout only
     git worktree add /tmp/start HEAD~3 && python benchmarks/bench_sil.py --pyc present --repeat 20 \
-        --baseline /tmp/start --baseline-python .venv/bin/python --baseline-cache ~/.cache/daa-sil-start
+        --baseline /tmp/start --baseline-python .venv/bin/python --baseline-cache ~/.cache/daa-sil
                                                             # an A/B against an earlier commit, paired
     python benchmarks/bench_sil.py --part realtime --runs 20 --speeds 1,4 [--duration 180]
 """
@@ -107,6 +108,7 @@ def _paired(new: list, base: list, pyc: bool) -> None:
             parts.append(f"{label} {P.median(d):+.3f} (lower in {sum(x < 0 for x in d)}/{len(d)})")
     print(f"  => paired, new - base, median over {len(new)} back-to-back repeats ({'with' if pyc else 'no'} .pyc): "
           + "; ".join(parts))
+
 
 def _f(x, fmt=".2f") -> str:
     return "-" if x is None else format(x, fmt)
