@@ -84,7 +84,6 @@ except SystemExit:
             assert out["now"] == out["defaults"] and out["frozen"] > 50_000, out
 
 
-
 def test_every_command_freezes_the_collector_at_exit_after_the_other_exit_handlers():
     """``daa-sil`` (``cli.main``) and the node scripts (``cli.run_guarded``) register the freeze: it runs after
     every exit handler registered after it (they still see a working collector) and before those

@@ -231,19 +231,23 @@ def test_the_kernels_every_process_loads_leave_out_the_unfused_ones():
 
 
 def test_run_and_the_gcs_import_the_run_configuration_only_for_config(tmp_path):
-    """``daa-sil run``'s checks before its processes start, and the GCS's start-up, import the run configuration
-    (its sections and readings) only when ``--config`` is given; with it, a bad value is still the one-line
-    error before anything starts, and a preset is read."""
+    """``daa-sil run``'s parser and the GCS's start-up import the run configuration (its sections and
+    readings) only when ``--config`` is given; with it, a bad value is still the one-line error before
+    any process starts, and a preset is read."""
     gcs_start = ("import gcs.cli\nfrom daa_sil.sil.scenario import load_scenario\nfrom gcs.node import GcsNode, GcsOptions\n"
                  "from daa_sil.config.config_option import config_of\n"
                  "a = gcs.cli.build_parser().parse_args(['--scenario', 'scenarios/head_on.yaml'{extra}])\n"
                  "GcsNode(load_scenario(a.scenario), GcsOptions(clock='lockstep', config=config_of(a.config)))")
-    run_checks = ("from daa_sil.cli import build_parser\nfrom daa_sil.commands.run import _check_args, _waitmap_source\n"
-                  "a = build_parser('run').parse_args(['run', 'scenarios/head_on.yaml', '--out', 'o'{extra}])\n"
-                  "_check_args(a); _waitmap_source(a)")
-    for code in (gcs_start, run_checks):
-        assert "daa_sil.config.run_config" not in _modules_after(code.format(extra=""))
-        assert "daa_sil.config.run_config" in _modules_after(code.format(extra=", '--config', 'do365'"))
+    assert "daa_sil.config.run_config" not in _modules_after(gcs_start.format(extra=""))
+    assert "daa_sil.config.run_config" in _modules_after(gcs_start.format(extra=", '--config', 'do365'"))
+    run_parser = ("from daa_sil.cli import build_parser\n"
+                  "build_parser('run').parse_args(['run', 'scenarios/head_on.yaml', '--out', 'o', '--config', 'do365'])")
+    assert "daa_sil.config.run_config" not in _modules_after(run_parser)
+    bad = subprocess.run([sys.executable, "-m", "daa_sil.cli", "run", "scenarios/head_on.yaml", "--out",
+                          str(tmp_path / "o"), "--config", str(tmp_path / "missing.yaml")], cwd=ROOT,
+                         capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "neither a preset" in bad.stderr, bad.stderr
+    assert not (tmp_path / "o").exists()  # nothing started, nothing written
 
     from daa_sil.config.config_option import config_of
     from daa_sil.errors import UsageError
