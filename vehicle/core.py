@@ -48,7 +48,9 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
     from daa_sil.daa import kernels
     from daa_sil.onboard import OnboardCore
 
-    kernels.get()  # load the compiled DAA now, not at the first conflict (a realtime run would stall)
+    # load the compiled DAA now, not at the first conflict (a realtime run would stall); Algorithm 2's search
+    # too, lazy elsewhere: a blend can come at any step, and a parameter can switch blending on mid-run
+    kernels.get().search_into.compile()
     es = encounter_set(sc)
     policy = policy or build_policy(sc)
     if config is not None:  # the scenario's own timeouts win over the configuration's

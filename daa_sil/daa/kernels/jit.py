@@ -16,8 +16,9 @@
 * **When.** Every kernel has explicit signatures, so it is compiled (or loaded from the cache) when
   its module is imported, never in the middle of a step -- except the few ``lazy`` ones that only some
   configurations call (the unfused evaluator, the cylinder recovery, the resolution search): those
-  are loaded at their first call (~7 ms each from the cache), so that a SIL process, which never calls
-  them with the default configuration, does not load eight kernels for nothing at every start; a
+  are loaded at their first call (~7 ms each from the cache), so that a SIL process does not load
+  kernels its configuration never calls at every start (the vehicle loads the search while it starts:
+  it blends whenever the pilot's command is unsafe); a
   cold cache still gets them all (:func:`daa_sil.daa.kernels.get` compiles them with the others, so the
   ``ready`` file keeps meaning "everything is cached"). Nothing imports them, or numba, until the
   first DAA computation of a process calls :func:`daa_sil.daa.kernels.get`, which imports them all
