@@ -1,5 +1,6 @@
-"""Where the DAA's compiled kernels are cached, without importing numba (the SIL driver asks before it
-starts the processes that use them). The rules are in :mod:`daa_sil.daa.kernels.jit`."""
+"""Where the DAA's compiled kernels are cached, and whether that cache is complete, without importing numba
+(the SIL driver asks before it starts the processes that use them). The rules are in
+:mod:`daa_sil.daa.kernels.jit`."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from pathlib import Path
 
 #: the kernels' sources (hashed: a change anywhere in them starts a fresh cache directory)
 KERNEL_DIR = Path(__file__).resolve().parent / "daa" / "kernels"
-#: file written into the cache directory once every kernel is in it
+#: file written into the cache directory once every kernel is in it (it holds :func:`source_stamps`)
 READY_MARKER = "ready"
 
 
@@ -25,10 +26,11 @@ def _version(dist: str) -> str:
 
 @functools.lru_cache(maxsize=1)
 def source_hash() -> str:
-    """16 hex digits identifying the kernel sources and the numba / llvmlite / numpy / Python versions; computed
-    once per process (reading the installed versions' metadata costs ~25 ms, and the SIL nodes asked twice
-    while starting)."""
-    h = hashlib.sha256()
+    """16 hex digits identifying the kernel sources, where they are, and the numba / llvmlite / numpy / Python
+    versions; computed once per process (reading the installed versions' metadata costs ~25 ms, and the SIL
+    nodes asked twice while starting). numba files its entries under each source file's directory, so a
+    second checkout of the same sources has none of the first one's: it gets its own directory."""
+    h = hashlib.sha256(str(KERNEL_DIR).encode())
     for p in sorted(KERNEL_DIR.glob("*.py")):
         h.update(p.name.encode())
         h.update(p.read_bytes())
@@ -46,6 +48,29 @@ def cache_dir() -> Path:
     return Path(base) / source_hash()
 
 
+def source_stamps() -> str:
+    """Each kernel source file's name, modification time and size, one per line: what numba checks its
+    cache entries against (a file touched without a change -- a branch switched and back -- makes numba
+    compile that file's kernels again)."""
+    lines = []
+    for p in sorted(KERNEL_DIR.glob("*.py")):
+        st = p.stat()
+        lines.append(f"{p.name} {st.st_mtime!r} {st.st_size}\n")
+    return "".join(lines)
+
+
+def mark_ready() -> None:
+    """Record that every kernel is cached for the sources as they are now (written whole, then renamed)."""
+    path = cache_dir() / READY_MARKER
+    tmp = path.with_name(f".{READY_MARKER}.{os.getpid()}")
+    tmp.write_text(source_stamps())
+    os.replace(tmp, path)
+
+
 def is_warm() -> bool:
-    """True when every kernel is in the cache (a process will load them instead of compiling)."""
-    return (cache_dir() / READY_MARKER).is_file()
+    """True when every kernel is in the cache for the sources as they are now (a process will load them instead
+    of compiling): the ``ready`` file :func:`mark_ready` wrote holds the sources' current stamps."""
+    try:
+        return (cache_dir() / READY_MARKER).read_text() == source_stamps()
+    except OSError:
+        return False

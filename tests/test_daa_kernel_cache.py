@@ -165,3 +165,47 @@ def test_the_vehicle_loads_the_blending_search_before_its_first_step():
     res = subprocess.run([sys.executable, "-c", VEHICLE_START], capture_output=True, text=True, timeout=300, cwd=root)
     assert res.returncode == 0, res.stderr[-2000:]
     assert res.stdout.split() == ["search_into"]
+
+
+def test_ready_means_complete_for_these_sources_where_they_are(tmp_path, monkeypatch):
+    """The ``ready`` file holds for one checkout's sources as they are: a copy elsewhere gets its own cache
+    directory (numba files entries under each source's directory, so the copy has none of them), and a
+    source touched without a change (numba then recompiles it) is not warm until marked again. Either
+    used to read as warm: the vehicle and the GCS then compiled side by side at start-up, and a lazy
+    kernel in the middle of a run."""
+    import shutil
+
+    from daa_sil import jit_cache
+
+    copies = []
+    for name in ("a", "b"):
+        d = tmp_path / name / "kernels"
+        shutil.copytree(jit_cache.KERNEL_DIR, d, ignore=shutil.ignore_patterns("__pycache__"), copy_function=shutil.copy2)
+        copies.append(d)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
+
+    def at(d):
+        monkeypatch.setattr(jit_cache, "KERNEL_DIR", d)
+        jit_cache.source_hash.cache_clear()
+
+    try:
+        at(copies[0])
+        first = jit_cache.cache_dir()
+        first.mkdir(parents=True)
+        assert not jit_cache.is_warm()
+        (first / jit_cache.READY_MARKER).touch()  # an empty marker (as older code wrote it) says nothing
+        assert not jit_cache.is_warm()
+        jit_cache.mark_ready()
+        assert jit_cache.is_warm()
+        at(copies[1])  # the same sources, copied with their time stamps, elsewhere
+        assert jit_cache.cache_dir() != first and not jit_cache.is_warm()
+        at(copies[0])
+        assert jit_cache.is_warm()
+        f = sorted(copies[0].glob("*.py"))[0]
+        st = f.stat()
+        os.utime(f, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
+        assert jit_cache.cache_dir() == first and not jit_cache.is_warm()
+        jit_cache.mark_ready()
+        assert jit_cache.is_warm() and not list(first.glob(".ready.*"))
+    finally:
+        jit_cache.source_hash.cache_clear()

@@ -15,7 +15,7 @@ import sys
 import time
 from types import SimpleNamespace
 
-from daa_sil.jit_cache import READY_MARKER, cache_dir
+from daa_sil.jit_cache import READY_MARKER, cache_dir, is_warm, mark_ready
 
 _MODULES = ("elementwise", "evaluate", "motion", "regions", "resolve", "axis_pass", "select", "flight",
             "command_plan")
@@ -66,7 +66,7 @@ def _load(clear: bool) -> tuple[float, float]:
     from daa_sil.daa.kernels.jit import compile_lock
 
     t0 = time.perf_counter()
-    warm = not clear and (CACHE_DIR / READY_MARKER).is_file()
+    warm = not clear and is_warm()
     with contextlib.nullcontext() if warm else compile_lock():
         t1 = time.perf_counter()
         if clear:
@@ -103,7 +103,7 @@ def get() -> SimpleNamespace:
               f"recompiling", file=sys.stderr)
         LOCK_WAIT_S, LOAD_S = _load(clear=True)
     try:  # every kernel is cached now (daa_sil.jit_cache.is_warm)
-        (CACHE_DIR / READY_MARKER).touch()
+        mark_ready()
     except OSError:
         pass
     # numba's typing of an array argument imports numpy.ma (to refuse masked arrays) at the first call of
