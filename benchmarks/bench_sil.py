@@ -158,10 +158,11 @@ def bench_lockstep(args) -> None:
           f"{os.cpu_count()} CPUs; load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print(f"  new = {ROOT}; base = {checkouts['base'][0] if 'base' in checkouts else '(none)'}; "
           f"{args.repeat} interleaved repeats of {len(configs)} configurations")
-    # one warm-up run per checkout (page cache, wait-map cache present)
-    for c in checkouts:
+    # one warm-up run per tree (page cache, wait-map cache present, and the copy's compiled kernels: numba
+    # files them under each copy's path, so every copy compiles once)
+    for c, pyc in configs:
         root, py, cache = checkouts[c]
-        P.run_probed(py, trees[c, pycs[0]], probe, path, base / f"warm-{c}", cache)
+        P.run_probed(py, trees[c, pyc], probe, path, base / f"warm-{c}-{'pyc' if pyc else 'nopyc'}", cache)
     res = {k: [] for k in configs}
     for i in range(args.repeat):
         for c, pyc in configs:
