@@ -209,3 +209,44 @@ def test_ready_means_complete_for_these_sources_where_they_are(tmp_path, monkeyp
         assert jit_cache.is_warm() and not list(first.glob(".ready.*"))
     finally:
         jit_cache.source_hash.cache_clear()
+
+
+#: on PYTHONPATH: the compile helper (and only it) fails at once
+FAILING_HELPER = """
+import os, sys
+if os.environ.get("DAA_SIL_PROCESS_NAME") == "daa-kernels":
+    sys.stderr.write("helper broken on purpose\\n")
+    os._exit(3)
+"""
+
+
+@pytest.mark.slow  # two cold compilations (about 35 and 55 s on the 2-vCPU benchmark VM)
+def test_a_cold_cache_is_compiled_with_a_helper_process_and_without_one_if_it_fails(tmp_path):
+    """On two cores a cold cache is compiled by this process and a helper (kernels.HELPER_MODULES), and gives
+    the bands a warm cache gives; a helper that fails is reported in one line and its part compiled here."""
+    from daa_sil.daa import kernels
+
+    kernels.get()
+    (warm,) = _finish(_start(kernels.CACHE_DIR.parent))  # this machine's cache: the bands to get
+    runs = {}
+    for case in ("helper", "failing"):
+        env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / case))
+        if case == "failing":
+            (tmp_path / "site").mkdir()
+            (tmp_path / "site" / "sitecustomize.py").write_text(FAILING_HELPER)
+            env["PYTHONPATH"] = os.pathsep.join([str(tmp_path / "site")] + [p for p in [env.get("PYTHONPATH")] if p])
+        p = subprocess.run([sys.executable, "-m", "daa_sil.daa.kernels"], env=env, capture_output=True, text=True,
+                           timeout=900)
+        assert p.returncode == 0, p.stderr[-2000:]
+        runs[case] = p
+        (again,) = _finish(_start(tmp_path / case))
+        assert again[2] == warm[2], case
+        index = " ".join(f.name for f in (tmp_path / case).rglob("*.nbi"))
+        for name in LAZY:
+            assert f".{name}-" in index, (case, name)
+    assert "with a helper process compiling resolve" in runs["helper"].stdout, runs["helper"].stdout
+    assert "helper" not in runs["helper"].stderr
+    assert "its helper process failed: exit 3" in runs["failing"].stdout
+    lines = [ln for ln in runs["failing"].stderr.splitlines() if "helper" in ln]
+    assert lines == ["daa-sil: the kernel compilation helper failed (exit 3: helper broken on purpose); "
+                     "compiling its part here"], runs["failing"].stderr

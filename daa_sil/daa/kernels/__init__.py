@@ -3,28 +3,42 @@
 The numpy functions they replace stay as ``*_reference`` in their modules and are the test oracles
 (``tests/test_daa_kernels.py``: identical results on random and adversarial inputs). Nothing is
 compiled, and numba is not imported, until the first kernel is needed: :func:`get` then compiles every
-kernel under the cache's file lock, or loads it from a complete cache without that lock (a process
-that imports the DAA without computing bands -- the shim, a report -- pays nothing).
+kernel under the cache's file lock (on two cores, part of them in a helper process), or loads it from a
+complete cache without that lock (a process that imports the DAA without computing bands -- the shim, a
+report -- pays nothing).
 """
 
 from __future__ import annotations
 
 import contextlib
 import importlib
+import os
+import subprocess
 import sys
+import tempfile
+import threading
 import time
+from pathlib import Path
 from types import SimpleNamespace
 
 from daa_sil.jit_cache import READY_MARKER, cache_dir, is_warm, mark_ready
 
 _MODULES = ("elementwise", "evaluate", "motion", "regions", "resolve", "axis_pass", "select", "flight",
             "command_plan")
+#: a cold cache: compiled first, here, as the helper's modules import them (the helper then loads them)
+SHARED_MODULES = ("motion", "flight")
+#: a cold cache: compiled by a helper process while this one compiles the rest (:func:`compile_part`)
+HELPER_MODULES = ("resolve", "command_plan", "select")
+#: the helper process's name (``ps``, ``pgrep``)
+HELPER_NAME = "daa-kernels"
 #: where the kernels are cached (:func:`daa_sil.jit_cache.cache_dir`)
 CACHE_DIR = cache_dir()
 #: s this process waited for another one's compilation, and spent compiling / loading the kernels
 #: (None until :func:`get` has run)
 LOCK_WAIT_S: "float | None" = None
 LOAD_S: "float | None" = None
+#: exit status of the helper process that compiled part of a cold cache (None: no helper ran)
+HELPER_RC: "int | None" = None
 _KERNELS: "SimpleNamespace | None" = None
 #: False once :func:`skip_blas_probe` was called in this process
 _BLAS_PROBE = True
@@ -73,19 +87,94 @@ def _load(clear: bool) -> tuple[float, float]:
             for f in list(CACHE_DIR.rglob("*.nbi")) + list(CACHE_DIR.rglob("*.nbc")) + [CACHE_DIR / READY_MARKER]:
                 f.unlink(missing_ok=True)
         with without_scipy_linalg():
-            for name in _MODULES:
-                importlib.import_module(f"{__name__}.{name}")
-            if not warm:  # a cold cache gets the lazy kernels too: "ready" means every kernel is in it
-                for k in lazy_kernels():
-                    k.compile()
+            if warm:
+                _import(_MODULES)
+            else:
+                _compile_everything()
     return t1 - t0, time.perf_counter() - t1
 
 
-def lazy_kernels() -> list:
-    """The :class:`~daa_sil.daa.kernels.jit.LazyKernel` objects of the imported kernel modules."""
+def _import(names) -> None:
+    for name in names:
+        importlib.import_module(f"{__name__}.{name}")
+
+
+def _compile_everything() -> None:
+    """A cold cache: compile every kernel, the lazy ones too ("ready" means every kernel is in it), with
+    :data:`HELPER_MODULES` in a helper process when one can be started: their kernels and the rest take
+    about the same time, so two cores compile in 36-42 s what one compiles in 56 s (docs/daa.md). The kernels are the
+    same whichever process compiled them; no file of the cache is written by both."""
+    _import(SHARED_MODULES)
+    helper = _start_helper()
+    try:
+        _import(m for m in _MODULES if m not in SHARED_MODULES + HELPER_MODULES)
+        if helper is None:
+            _import(HELPER_MODULES)
+        for k in lazy_kernels():
+            k.compile()
+        if helper is not None:
+            _finish_helper(*helper)
+            _import(HELPER_MODULES)  # loaded from the helper's entries (compiled here if it failed)
+            for k in lazy_kernels():
+                k.compile()
+    finally:
+        if helper is not None and helper[0].poll() is None:  # interrupted: the helper goes too
+            helper[0].kill()
+            helper[0].wait()
+
+
+def _start_helper() -> "tuple[subprocess.Popen, object] | None":
+    """The helper compiling :data:`HELPER_MODULES` (dies with this process), and its stderr file; None on
+    one core, outside the main thread (children are started from it), or with a cache it could not fill."""
+    if (os.cpu_count() or 1) < 2 or threading.current_thread() is not threading.main_thread():
+        return None
+    if not os.access(CACHE_DIR, os.W_OK):
+        return None
+    from daa_sil.sil.children import spawn
+
+    root = str(Path(__file__).resolve().parents[3])  # these sources, whatever the helper's sys.path holds
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([root] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
+    code = f"from daa_sil.daa import kernels; kernels.compile_part({HELPER_MODULES!r})"
+    err = tempfile.TemporaryFile()
+    try:
+        return spawn([sys.executable, "-c", code], HELPER_NAME, env=env, stdin=subprocess.DEVNULL,
+                     stdout=subprocess.DEVNULL, stderr=err), err
+    except OSError:
+        err.close()
+        return None
+
+
+def _finish_helper(proc: subprocess.Popen, err) -> None:
+    """Wait for the helper; if it failed, say so in one line (this process then compiles its part)."""
+    global HELPER_RC
+    with err:
+        HELPER_RC = proc.wait()
+        if HELPER_RC != 0:
+            err.seek(0)
+            tail = err.read().decode(errors="replace").strip().splitlines()[-1:] or ["no message"]
+            print(f"daa-sil: the kernel compilation helper failed (exit {proc.returncode}: {tail[0]}); "
+                  f"compiling its part here", file=sys.stderr)
+
+
+def compile_part(names) -> None:
+    """In the helper process of a cold cache: compile the kernel modules ``names`` into the cache (the
+    process that started it holds the compile lock and loads them afterwards), their lazy kernels too."""
+    from daa_sil.sil.children import adopt
+
+    adopt(HELPER_NAME)
+    skip_blas_probe()
+    with without_scipy_linalg():
+        _import(names)
+        for k in lazy_kernels(names):  # (only these modules': no cache file is written by both processes)
+            k.compile()
+
+
+def lazy_kernels(modules=_MODULES) -> list:
+    """The :class:`~daa_sil.daa.kernels.jit.LazyKernel` objects of the imported kernel ``modules`` (names; default
+    all)."""
     from daa_sil.daa.kernels.jit import LazyKernel
 
-    mods = [m for m in (sys.modules.get(f"{__name__}.{name}") for name in _MODULES) if m is not None]
+    mods = [m for m in (sys.modules.get(f"{__name__}.{name}") for name in modules) if m is not None]
     return [v for m in mods for name, v in vars(m).items() if name.endswith("_into") and isinstance(v, LazyKernel)]
 
 

@@ -4,5 +4,8 @@ where it is and how long it took (CI runs it after installing, so tests and SIL 
 from daa_sil.daa import kernels
 
 kernels.get()
-print(f"DAA kernels ready: {kernels.LOAD_S:.1f} s compiling or loading, {kernels.LOCK_WAIT_S:.1f} s waiting for "
-      f"another process's compilation; cache {kernels.CACHE_DIR}")
+helper = "" if kernels.HELPER_RC is None else (
+    f" (with a helper process compiling {', '.join(kernels.HELPER_MODULES)})" if kernels.HELPER_RC == 0
+    else f" (its helper process failed: exit {kernels.HELPER_RC})")
+print(f"DAA kernels ready: {kernels.LOAD_S:.1f} s compiling or loading{helper}, {kernels.LOCK_WAIT_S:.1f} s waiting "
+      f"for another process's compilation; cache {kernels.CACHE_DIR}")

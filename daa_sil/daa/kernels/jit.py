@@ -24,7 +24,9 @@
   first DAA computation of a process calls :func:`daa_sil.daa.kernels.get`, which imports them all
   under an exclusive file lock in the cache directory (:func:`compile_lock`): of processes starting
   together on a cold machine one compiles and the others then load its cache, instead of each
-  compiling on the same cores; the lock is released when its holder exits, however it exits. Once
+  compiling on the same cores; the lock is released when its holder exits, however it exits. The
+  holder compiles with a helper process on two cores or more (:func:`daa_sil.daa.kernels.compile_part`:
+  no cache file is written by both). Once
   the cache is complete (its ``ready`` file) loading takes no lock: it only reads, and processes
   starting together (the SIL's vehicle and GCS) then load side by side instead of one after the
   other.
