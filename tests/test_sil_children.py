@@ -339,3 +339,26 @@ def test_a_binary_child_in_poll_mode_runs_under_a_watchdog(tmp_path):
                 pass
     assert comms == ["sleep", "sleeper-watch"]
     assert left == {}
+
+
+@pytest.mark.slow  # starts compiling a cold kernel cache (killed after its helper appears, ~10 s)
+def test_the_kernel_compile_helper_dies_with_its_parent(tmp_path):
+    """A cold kernel cache is compiled with a helper process (daa_sil.daa.kernels.compile_part), named
+    ``daa-kernels``; SIGKILL of the process that started it takes the helper too."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    parent = subprocess.Popen([sys.executable, "-m", "daa_sil.daa.kernels"], env=env, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
+    try:
+        end = time.monotonic() + WAIT_S
+        helpers: dict[int, float] = {}
+        while not helpers and time.monotonic() < end and parent.poll() is None:
+            helpers = {p: s for p, s in _children_of(parent.pid).items() if _comm(p) == "daa-kernels"}
+            time.sleep(0.05)
+        assert helpers, "no daa-kernels helper started"
+        parent.kill()
+        parent.wait(timeout=WAIT_S)
+        assert _wait_gone(helpers, ORPHAN_DEADLINE_S) == {}
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+            parent.wait()
