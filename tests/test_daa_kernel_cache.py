@@ -180,7 +180,8 @@ def test_ready_means_complete_for_these_sources_where_they_are(tmp_path, monkeyp
     copies = []
     for name in ("a", "b"):
         d = tmp_path / name / "kernels"
-        shutil.copytree(jit_cache.KERNEL_DIR, d, ignore=shutil.ignore_patterns("__pycache__"), copy_function=shutil.copy2)
+        shutil.copytree(jit_cache.KERNEL_DIR, d, ignore=shutil.ignore_patterns("__pycache__"),
+                        copy_function=shutil.copy2)
         copies.append(d)
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
 

@@ -10,23 +10,23 @@
   (:mod:`daa_sil.jit_cache`, which answers without importing numba; a ``ready`` file there says every
   kernel is cached for the sources' current time stamps, which numba checks its entries against).
   numba keys its own cache on each kernel file's time stamp only, so a change in a helper another
-  file calls would otherwise go unnoticed; the hash makes any change start a fresh directory. numba writes each
-  entry to a temporary file and renames it, so processes that compile at the same time (three SIL
-  processes on a cold machine) each compile and the last rename wins, with identical contents.
+  file calls would otherwise go unnoticed; the hash makes any change start a fresh directory. numba
+  writes each entry to a temporary file and renames it, so processes that compile at the same time
+  (three SIL processes on a cold machine) each compile and the last rename wins, with identical
+  contents.
 * **When.** Every kernel has explicit signatures, so it is compiled (or loaded from the cache) when
   its module is imported, never in the middle of a step -- except the few ``lazy`` ones that only some
   configurations call (the unfused evaluator, the cylinder recovery, the resolution search): those
   are loaded at their first call (~7 ms each from the cache), so that a SIL process does not load
-  kernels its configuration never calls at every start (the vehicle loads the search while it starts:
-  it blends whenever the pilot's command is unsafe); a
-  cold cache still gets them all (:func:`daa_sil.daa.kernels.get` compiles them with the others, so the
-  ``ready`` file keeps meaning "everything is cached"). Nothing imports them, or numba, until the
-  first DAA computation of a process calls :func:`daa_sil.daa.kernels.get`, which imports them all
-  under an exclusive file lock in the cache directory (:func:`compile_lock`): of processes starting
-  together on a cold machine one compiles and the others then load its cache, instead of each
-  compiling on the same cores; the lock is released when its holder exits, however it exits. The
-  holder compiles with a helper process on two cores or more (:func:`daa_sil.daa.kernels.compile_part`:
-  no cache file is written by both). Once
+  kernels its configuration never calls at every start (the vehicle loads the search while it
+  starts: it blends whenever the pilot's command is unsafe); a cold cache still gets them all
+  (:func:`daa_sil.daa.kernels.get` compiles them with the others, so the ``ready`` file keeps meaning
+  "everything is cached"). Nothing imports them, or numba, until the first DAA computation of a
+  process calls :func:`daa_sil.daa.kernels.get`, which imports them all under an exclusive file lock
+  in the cache directory (:func:`compile_lock`): of processes starting together on a cold machine one
+  compiles and the others then load its cache, instead of each compiling on the same cores; the lock
+  is released when its holder exits, however it exits. The holder compiles with a helper process on
+  two cores or more (:func:`daa_sil.daa.kernels.compile_part`: no cache file is written by both). Once
   the cache is complete (its ``ready`` file) loading takes no lock: it only reads, and processes
   starting together (the SIL's vehicle and GCS) then load side by side instead of one after the
   other.
