@@ -12,13 +12,12 @@ from __future__ import annotations
 
 import os
 import signal
-import sys
 import time
-import types
 from pathlib import Path
 from typing import Callable, Sequence
 
 from ..errors import DaaSilError, error_class
+from ..spawned import die_with_parent, start_spawned
 from .grid import Grid
 from .lookup import WaitMap, WaitMapFamily
 from .model import PAPER_TURN_RATES, MdpParams
@@ -110,7 +109,7 @@ def _build_in_processes(grid: Grid, params: MdpParams, rates: list, d: Path, n: 
             conn, child = ctx.Pipe()
             proc = ctx.Process(target=_builder_process, args=(os.getpid(), grid, params, child), daemon=True,
                                name=PROCESS_NAME)
-            _start_builder(proc)
+            start_spawned(proc)
             child.close()
             builders.append((proc, conn))
         for proc, conn in builders:
@@ -145,37 +144,11 @@ def _build_in_processes(grid: Grid, params: MdpParams, rates: list, d: Path, n: 
             proc.join()
 
 
-def _start_builder(proc) -> None:
-    """Start ``proc`` (spawn context) as a builder that needs nothing from this process's main script.
-
-    * SIGINT is ignored from the child's first instruction (a spawned interpreter keeps an inherited
-      SIG_IGN), so Ctrl-C reaches only this process, which stops the builders itself.
-    * ``spawn`` normally re-runs the parent's main script in the child. A script that calls
-      :func:`default_family` without an ``if __name__ == "__main__"`` guard would then wait in the
-      child for the cache lock its parent holds (a deadlock), and ``python - < script`` has no
-      script to re-run at all. The builder needs only this module, so the main module is hidden
-      while the child's start-up data is taken.
-    """
-    main = sys.modules.get("__main__")
-    sys.modules["__main__"] = types.ModuleType("__main__")
-    try:
-        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    except ValueError:  # not the main thread: signals are the main thread's business
-        old = None
-    try:
-        proc.start()
-    finally:
-        if old is not None:
-            signal.signal(signal.SIGINT, old)
-        if main is not None:
-            sys.modules["__main__"] = main
-
-
 def _builder_process(parent_pid: int, grid: Grid, params: MdpParams, conn) -> None:
     """Body of one builder process: build and save each ``(rate, path)`` received, answer each, and
     exit when the parent closes the pipe. SIGTERM (the parent stopping it) raises SystemExit, so a
     half-written temporary is removed on the way out."""
-    _die_with_parent(parent_pid)
+    die_with_parent(parent_pid, PROCESS_NAME)
     signal.signal(signal.SIGTERM, _exit_on_sigterm)
     while True:
         try:
@@ -204,21 +177,3 @@ def _exit_on_sigterm(signum, frame) -> None:
 
 #: the name a builder process shows to ``ps`` and ``pgrep`` on Linux (at most 15 characters)
 PROCESS_NAME = "daa-sil-waitmap"
-
-
-def _die_with_parent(parent_pid: int) -> None:
-    """Linux: have the kernel SIGKILL this process when its parent dies (``PR_SET_PDEATHSIG``), name
-    it :data:`PROCESS_NAME`, and exit at once if the parent is already gone. Elsewhere a daemonic
-    child is stopped when its parent exits normally; a killed parent leaves it to finish its one map
-    and exit."""
-    if sys.platform.startswith("linux"):
-        try:
-            import ctypes
-
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
-            libc.prctl(15, ctypes.c_char_p(PROCESS_NAME.encode()), 0, 0, 0)  # 15 = PR_SET_NAME: pgrep finds it
-        except (OSError, AttributeError):
-            pass
-    if os.getppid() != parent_pid:
-        os._exit(1)

@@ -1,0 +1,55 @@
+"""Worker processes the core starts itself (``multiprocessing``'s spawn context): they die with their
+parent and need nothing from its main script. The wait-map builders (:mod:`daa_sil.waitmap.build`) and
+the compile helper of a cold kernel cache (:mod:`daa_sil.daa.kernels`) start this way; the SIL's
+processes go through :mod:`daa_sil.sil.children`."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import types
+
+
+def die_with_parent(parent_pid: int, name: str) -> None:
+    """First thing in a worker: Linux: have the kernel SIGKILL this process when its parent dies
+    (``PR_SET_PDEATHSIG``), name it ``name`` (``ps``, ``pgrep``; at most 15 characters), and exit at once
+    if the parent is already gone. Elsewhere a daemonic worker is stopped when its parent exits
+    normally; a killed parent leaves it to finish its task and exit."""
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+            libc.prctl(15, ctypes.c_char_p(name.encode()), 0, 0, 0)  # 15 = PR_SET_NAME: pgrep finds it
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+
+def start_spawned(proc) -> None:
+    """Start ``proc`` (spawn context) as a worker that needs nothing from this process's main script.
+
+    * SIGINT is ignored from the child's first instruction (a spawned interpreter keeps an inherited
+      SIG_IGN), so Ctrl-C reaches only this process, which stops its workers itself.
+    * ``spawn`` normally re-runs the parent's main script in the child. A script that builds the wait
+      maps or compiles the kernels without an ``if __name__ == "__main__"`` guard would then wait in
+      the child for the cache lock its parent holds (a deadlock), and ``python - < script`` has no
+      script to re-run at all. A worker needs only its own module, so the main module is hidden
+      while the child's start-up data is taken.
+    """
+    main = sys.modules.get("__main__")
+    sys.modules["__main__"] = types.ModuleType("__main__")
+    try:
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: signals are the main thread's business
+        old = None
+    try:
+        proc.start()
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+        if main is not None:
+            sys.modules["__main__"] = main
