@@ -11,9 +11,10 @@ import sys
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-#: the kernels' sources (hashed: a change anywhere in them starts a fresh cache directory)
-KERNEL_DIR = Path(__file__).resolve().parent / "daa" / "kernels"
-#: file written into the cache directory once every kernel is in it (it holds :func:`source_stamps`)
+#: the kernels' sources (hashed: a change anywhere in them starts a fresh cache directory), as imported: not
+#: resolved, since numba files its entries under each source file's absolute, unresolved directory
+KERNEL_DIR = Path(os.path.abspath(__file__)).parent / "daa" / "kernels"
+#: file written into the cache directory once every kernel is in it
 READY_MARKER = "ready"
 
 
@@ -48,29 +49,12 @@ def cache_dir() -> Path:
     return Path(base) / source_hash()
 
 
-def source_stamps() -> str:
-    """Each kernel source file's name, modification time and size, one per line: what numba checks its
-    cache entries against (a file touched without a change -- a branch switched and back -- makes numba
-    compile that file's kernels again)."""
-    lines = []
-    for p in sorted(KERNEL_DIR.glob("*.py")):
-        st = p.stat()
-        lines.append(f"{p.name} {st.st_mtime!r} {st.st_size}\n")
-    return "".join(lines)
+def mark_ready(directory: "Path | None" = None) -> None:
+    """Record that every kernel is cached in ``directory`` (default :func:`cache_dir`)."""
+    ((directory or cache_dir()) / READY_MARKER).touch()
 
 
-def mark_ready() -> None:
-    """Record that every kernel is cached for the sources as they are now (written whole, then renamed)."""
-    path = cache_dir() / READY_MARKER
-    tmp = path.with_name(f".{READY_MARKER}.{os.getpid()}")
-    tmp.write_text(source_stamps())
-    os.replace(tmp, path)
-
-
-def is_warm() -> bool:
-    """True when every kernel is in the cache for the sources as they are now (a process will load them instead
-    of compiling): the ``ready`` file :func:`mark_ready` wrote holds the sources' current stamps."""
-    try:
-        return (cache_dir() / READY_MARKER).read_text() == source_stamps()
-    except OSError:
-        return False
+def is_warm(directory: "Path | None" = None) -> bool:
+    """True when every kernel is in the cache ``directory`` (default :func:`cache_dir`): a process will load
+    them instead of compiling."""
+    return ((directory or cache_dir()) / READY_MARKER).is_file()

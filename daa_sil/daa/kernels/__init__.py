@@ -13,12 +13,8 @@ from __future__ import annotations
 import contextlib
 import importlib
 import os
-import subprocess
 import sys
-import tempfile
-import threading
 import time
-from pathlib import Path
 from types import SimpleNamespace
 
 from daa_sil.jit_cache import READY_MARKER, cache_dir, is_warm, mark_ready
@@ -31,6 +27,8 @@ SHARED_MODULES = ("motion", "flight")
 HELPER_MODULES = ("resolve", "command_plan", "select")
 #: the helper process's name (``ps``, ``pgrep``)
 HELPER_NAME = "daa-kernels"
+#: s the helper may take before it is stopped and its part compiled here (it takes ~30 s on two cores)
+HELPER_TIMEOUT_S = 1800.0
 #: where the kernels are cached (:func:`daa_sil.jit_cache.cache_dir`)
 CACHE_DIR = cache_dir()
 #: s this process waited for another one's compilation, and spent compiling / loading the kernels
@@ -75,22 +73,29 @@ def without_scipy_linalg():
 def _load(clear: bool) -> tuple[float, float]:
     """Import (so compile, or load from the cache) every kernel module; ``clear``: delete the cache's
     entries first. Under the compile lock unless the cache is complete (its ``ready`` file): loading
-    only reads, so the SIL's vehicle and GCS load side by side instead of one after the other.
-    Returns (s waited for the lock, s compiling / loading)."""
+    only reads, so the SIL's vehicle and GCS load side by side instead of one after the other. A
+    process that waited for the lock finds the cache complete and loads. Returns (s waited for the
+    lock, s compiling / loading)."""
     from daa_sil.daa.kernels.jit import compile_lock
 
     t0 = time.perf_counter()
-    warm = not clear and is_warm()
+    warm = not clear and is_warm(CACHE_DIR)
     with contextlib.nullcontext() if warm else compile_lock():
         t1 = time.perf_counter()
         if clear:
             for f in list(CACHE_DIR.rglob("*.nbi")) + list(CACHE_DIR.rglob("*.nbc")) + [CACHE_DIR / READY_MARKER]:
                 f.unlink(missing_ok=True)
+        else:
+            warm = is_warm(CACHE_DIR)  # (another process compiled while this one waited)
         with without_scipy_linalg():
             if warm:
                 _import(_MODULES)
             else:
                 _compile_everything()
+                try:  # every kernel is cached now (daa_sil.jit_cache.is_warm)
+                    mark_ready(CACHE_DIR)
+                except OSError:
+                    pass
     return t1 - t0, time.perf_counter() - t1
 
 
@@ -102,71 +107,101 @@ def _import(names) -> None:
 def _compile_everything() -> None:
     """A cold cache: compile every kernel, the lazy ones too ("ready" means every kernel is in it), with
     :data:`HELPER_MODULES` in a helper process when one can be started: their kernels and the rest take
-    about the same time, so two cores compile in 36-42 s what one compiles in 56 s (docs/daa.md). The kernels are the
-    same whichever process compiled them; no file of the cache is written by both."""
+    about the same time, so two cores compile in 36-42 s what one compiles in 56 s (docs/daa.md). The
+    kernels are the same whichever process compiled them; no file of the cache is written by both."""
     _import(SHARED_MODULES)
     helper = _start_helper()
+    mine = [m for m in _MODULES if m not in HELPER_MODULES]
     try:
-        _import(m for m in _MODULES if m not in SHARED_MODULES + HELPER_MODULES)
+        _import(m for m in mine if m not in SHARED_MODULES)
         if helper is None:
             _import(HELPER_MODULES)
-        for k in lazy_kernels():
+        for k in lazy_kernels(mine if helper is not None else _MODULES):
             k.compile()
         if helper is not None:
             _finish_helper(*helper)
             _import(HELPER_MODULES)  # loaded from the helper's entries (compiled here if it failed)
-            for k in lazy_kernels():
+            for k in lazy_kernels(HELPER_MODULES):
                 k.compile()
     finally:
-        if helper is not None and helper[0].poll() is None:  # interrupted: the helper goes too
+        if helper is not None and helper[0].is_alive():  # interrupted: the helper goes too
             helper[0].kill()
-            helper[0].wait()
+            helper[0].join()
 
 
-def _start_helper() -> "tuple[subprocess.Popen, object] | None":
-    """The helper compiling :data:`HELPER_MODULES` (dies with this process), and its stderr file; None on
-    one core, outside the main thread (children are started from it), or with a cache it could not fill."""
-    if (os.cpu_count() or 1) < 2 or threading.current_thread() is not threading.main_thread():
+def _usable_cpus() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def _start_helper():
+    """The helper process compiling :data:`HELPER_MODULES` (spawned: it imports these sources, with this
+    process's ``sys.path``, and dies with this process; it ends before this call returns, so the thread
+    that started it outlives it) and the pipe it reports on; None on one core, with a cache it could not
+    fill, or if it cannot be started."""
+    import multiprocessing as mp
+
+    if _usable_cpus() < 2:
         return None
     if not os.access(CACHE_DIR, os.W_OK):
         return None
-    from daa_sil.sil.children import spawn
+    from daa_sil.spawned import start_spawned
 
-    root = str(Path(__file__).resolve().parents[3])  # these sources, whatever the helper's sys.path holds
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([root] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
-    code = f"from daa_sil.daa import kernels; kernels.compile_part({HELPER_MODULES!r})"
-    err = tempfile.TemporaryFile()
+    ctx = mp.get_context("spawn")
     try:
-        return spawn([sys.executable, "-c", code], HELPER_NAME, env=env, stdin=subprocess.DEVNULL,
-                     stdout=subprocess.DEVNULL, stderr=err), err
-    except OSError:
-        err.close()
+        conn, child = ctx.Pipe(duplex=False)
+        proc = ctx.Process(target=compile_part, args=(os.getpid(), HELPER_MODULES, str(CACHE_DIR), child),
+                           daemon=True, name=HELPER_NAME)
+        start_spawned(proc)
+        child.close()
+    except (OSError, ValueError, RuntimeError):
         return None
+    return proc, conn
 
 
-def _finish_helper(proc: subprocess.Popen, err) -> None:
-    """Wait for the helper; if it failed, say so in one line (this process then compiles its part)."""
+def _finish_helper(proc, conn) -> None:
+    """Wait for the helper (at most :data:`HELPER_TIMEOUT_S`); if it failed, say so in one line (this process
+    then compiles its part)."""
     global HELPER_RC
-    with err:
-        HELPER_RC = proc.wait()
-        if HELPER_RC != 0:
-            err.seek(0)
-            tail = err.read().decode(errors="replace").strip().splitlines()[-1:] or ["no message"]
-            print(f"daa-sil: the kernel compilation helper failed (exit {proc.returncode}: {tail[0]}); "
-                  f"compiling its part here", file=sys.stderr)
+    with conn:
+        proc.join(HELPER_TIMEOUT_S)
+        if proc.is_alive():
+            proc.kill()
+            proc.join()
+            why = f"no answer in {HELPER_TIMEOUT_S:g} s"
+        else:
+            try:
+                why = conn.recv() if conn.poll() else "no message"
+            except (EOFError, OSError):
+                why = "no message"
+    HELPER_RC = proc.exitcode
+    if HELPER_RC != 0:
+        print(f"daa-sil: the kernel compilation helper failed (exit {HELPER_RC}: {why}); compiling its part here",
+              file=sys.stderr)
 
 
-def compile_part(names) -> None:
-    """In the helper process of a cold cache: compile the kernel modules ``names`` into the cache (the
-    process that started it holds the compile lock and loads them afterwards), their lazy kernels too."""
-    from daa_sil.sil.children import adopt
+def compile_part(parent_pid: int, names, cache: str, conn) -> None:
+    """The helper process of a cold cache: compile the kernel modules ``names`` and their lazy kernels into
+    the cache (the process that started it holds the compile lock and loads them afterwards). Exits 1 with
+    a one-line reason on ``conn`` if it fails, or if it would not write to ``cache``, the parent's."""
+    from daa_sil.spawned import die_with_parent
 
-    adopt(HELPER_NAME)
-    skip_blas_probe()
-    with without_scipy_linalg():
-        _import(names)
-        for k in lazy_kernels(names):  # (only these modules': no cache file is written by both processes)
-            k.compile()
+    die_with_parent(parent_pid, HELPER_NAME)
+    try:
+        if str(CACHE_DIR) != cache:
+            raise RuntimeError(f"its cache would be {CACHE_DIR}, not {cache}")
+        skip_blas_probe()
+        with without_scipy_linalg():
+            _import(names)
+            for k in lazy_kernels(names):  # (only these modules': no cache file is written by both processes)
+                k.compile()
+    except Exception as exc:  # noqa: BLE001  (reported by the parent in one line)
+        conn.send(f"{type(exc).__name__}: {exc}")
+        conn.close()
+        sys.exit(1)
+    conn.close()
 
 
 def lazy_kernels(modules=_MODULES) -> list:
@@ -191,10 +226,6 @@ def get() -> SimpleNamespace:
         print(f"daa-sil: the compiled-kernel cache {CACHE_DIR} could not be read ({type(exc).__name__}: {exc}); "
               f"recompiling", file=sys.stderr)
         LOCK_WAIT_S, LOAD_S = _load(clear=True)
-    try:  # every kernel is cached now (daa_sil.jit_cache.is_warm)
-        mark_ready()
-    except OSError:
-        pass
     # numba's typing of an array argument imports numpy.ma (to refuse masked arrays) at the first call of
     # any kernel: 20-35 ms that would otherwise fall in the first DAA step (a realtime deadline), not here
     import numpy.ma  # noqa: F401

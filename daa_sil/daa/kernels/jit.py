@@ -8,9 +8,9 @@
   ``$XDG_CACHE_HOME/daa-sil-numba`` (``~/.cache/daa-sil-numba``), in a subdirectory named after a
   hash of the kernel sources, their directory and the numba / llvmlite / numpy / Python versions
   (:mod:`daa_sil.jit_cache`, which answers without importing numba; a ``ready`` file there says every
-  kernel is cached for the sources' current time stamps, which numba checks its entries against).
-  numba keys its own cache on each kernel file's time stamp only, so a change in a helper another
-  file calls would otherwise go unnoticed; the hash makes any change start a fresh directory. numba
+  kernel is cached). numba keys its own entries on each kernel file's contents and directory only, so
+  a change in a helper another file calls would otherwise go unnoticed, and a second checkout would
+  find the first one's ``ready`` file without its entries; the hash makes either a fresh directory. numba
   writes each entry to a temporary file and renames it, so processes that compile at the same time
   (three SIL processes on a cold machine) each compile and the last rename wins, with identical
   contents.
