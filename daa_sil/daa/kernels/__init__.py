@@ -139,25 +139,27 @@ def _usable_cpus() -> int:
 def _start_helper():
     """The helper process compiling :data:`HELPER_MODULES` (spawned: it imports these sources, with this
     process's ``sys.path``, and dies with this process; it ends before this call returns, so the thread
-    that started it outlives it) and the pipe it reports on; None on one core, with a cache it could not
-    fill, or if it cannot be started."""
+    that started it outlives it) and the pipe it reports on; None on one core, in a daemonic process (a
+    Dask worker), with a cache it could not fill, or if it cannot be started."""
     import multiprocessing as mp
 
-    if _usable_cpus() < 2:
+    if _usable_cpus() < 2 or mp.current_process().daemon:  # (a daemonic process may not have children: Dask's)
         return None
     if not os.access(CACHE_DIR, os.W_OK):
         return None
     from daa_sil.spawned import start_spawned
 
     ctx = mp.get_context("spawn")
+    conn, child = ctx.Pipe(duplex=False)
     try:
-        conn, child = ctx.Pipe(duplex=False)
         proc = ctx.Process(target=compile_part, args=(os.getpid(), HELPER_MODULES, str(CACHE_DIR), child),
                            daemon=True, name=HELPER_NAME)
         start_spawned(proc)
-        child.close()
-    except (OSError, ValueError, RuntimeError):
+    except Exception:  # noqa: BLE001  (no helper: this process compiles everything, as on one core)
+        conn.close()
         return None
+    finally:
+        child.close()
     return proc, conn
 
 
@@ -186,8 +188,11 @@ def compile_part(parent_pid: int, names, cache: str, conn) -> None:
     """The helper process of a cold cache: compile the kernel modules ``names`` and their lazy kernels into
     the cache (the process that started it holds the compile lock and loads them afterwards). Exits 1 with
     a one-line reason on ``conn`` if it fails, or if it would not write to ``cache``, the parent's."""
+    import signal
+
     from daa_sil.spawned import die_with_parent
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's (it stops this process)
     die_with_parent(parent_pid, HELPER_NAME)
     try:
         if str(CACHE_DIR) != cache:
@@ -198,7 +203,7 @@ def compile_part(parent_pid: int, names, cache: str, conn) -> None:
             for k in lazy_kernels(names):  # (only these modules': no cache file is written by both processes)
                 k.compile()
     except Exception as exc:  # noqa: BLE001  (reported by the parent in one line)
-        conn.send(f"{type(exc).__name__}: {exc}")
+        conn.send(" ".join(f"{type(exc).__name__}: {exc}".split())[:300])
         conn.close()
         sys.exit(1)
     conn.close()
