@@ -107,7 +107,7 @@ def _import(names) -> None:
 def _compile_everything() -> None:
     """A cold cache: compile every kernel, the lazy ones too ("ready" means every kernel is in it), with
     :data:`HELPER_MODULES` in a helper process when one can be started: their kernels and the rest take
-    about the same time, so two cores compile in 36-42 s what one compiles in 56 s (docs/daa.md). The
+    about the same time, so two cores compile in ~38 s what one compiles in 54-63 s (docs/daa.md). The
     kernels are the same whichever process compiled them; no file of the cache is written by both."""
     _import(SHARED_MODULES)
     helper = _start_helper()
