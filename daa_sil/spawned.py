@@ -11,6 +11,14 @@ import sys
 import types
 
 
+def usable_cpus() -> int:
+    """The cores this process may run on (its affinity where the OS says, else the machine's count)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
 def die_with_parent(parent_pid: int, name: str) -> None:
     """First thing in a worker: Linux: have the kernel SIGKILL this process when its parent dies
     (``PR_SET_PDEATHSIG``), name it ``name`` (``ps``, ``pgrep``; at most 15 characters), and exit at once

@@ -198,7 +198,7 @@ def test_a_copy_of_the_sources_elsewhere_has_its_own_cache_directory(tmp_path, m
         assert not jit_cache.is_warm()
         jit_cache.mark_ready()
         assert jit_cache.is_warm() and jit_cache.is_warm(first)
-        second = at(copies[1])  # the same sources, with their time stamps, elsewhere
+        second = at(copies[1])  # the same sources (copied with their metadata), elsewhere
         assert second != first and second.parent == first.parent
         assert not jit_cache.is_warm() and jit_cache.is_warm(first)
     finally:

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from ..errors import DaaSilError, error_class
-from ..spawned import die_with_parent, start_spawned
+from ..spawned import die_with_parent, start_spawned, usable_cpus
 from .grid import Grid
 from .lookup import WaitMap, WaitMapFamily
 from .model import PAPER_TURN_RATES, MdpParams
@@ -68,11 +68,7 @@ def default_workers(n_maps: int, states: int = MIN_STATES_FOR_PROCESSES) -> int:
     or 1 (this process) for maps smaller than :data:`MIN_STATES_FOR_PROCESSES`."""
     if states < MIN_STATES_FOR_PROCESSES:
         return 1
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        cores = os.cpu_count() or 1
-    return max(1, min(cores, int(n_maps)))
+    return max(1, min(usable_cpus(), int(n_maps)))
 
 
 def build_members(grid: Grid, params: MdpParams, turn_rates: Sequence[float], directory: "str | os.PathLike",

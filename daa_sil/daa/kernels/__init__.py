@@ -129,13 +129,6 @@ def _compile_everything() -> None:
             helper[0].join()
 
 
-def _usable_cpus() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
-
-
 def _start_helper():
     """The helper process compiling :data:`HELPER_MODULES` (spawned: it imports these sources, with this
     process's ``sys.path``, and dies with this process; it ends before this call returns, so the thread
@@ -143,12 +136,12 @@ def _start_helper():
     Dask worker), with a cache it could not fill, or if it cannot be started."""
     import multiprocessing as mp
 
-    if _usable_cpus() < 2 or mp.current_process().daemon:  # (a daemonic process may not have children: Dask's)
+    from daa_sil.spawned import start_spawned, usable_cpus
+
+    if usable_cpus() < 2 or mp.current_process().daemon:  # (a daemonic process may not have children: Dask's)
         return None
     if not os.access(CACHE_DIR, os.W_OK):
         return None
-    from daa_sil.spawned import start_spawned
-
     ctx = mp.get_context("spawn")
     conn, child = ctx.Pipe(duplex=False)
     try:
