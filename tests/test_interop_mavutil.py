@@ -271,26 +271,64 @@ def test_parameter_protocol_list_read_set_and_refusals(link):
     assert v.param_value == 6.0
 
 
-def test_do_reposition_is_a_pilot_command(link):
+def quiet_scenario(tmp):
+    """The lengthened head-on scenario with its intruder passing 5 km abeam: no alert, ever, so the
+    vehicle flies exactly what its pilot commands (the agent never blends or takes over)."""
+    import yaml
+
+    d = yaml.safe_load(long_scenario(tmp).read_text())
+    # the largest miss a scenario takes; DO-365 alerts need a HMD under 0.66 nmi (1.2 km)
+    d["intruders"][0]["cpa"]["hmd_m"] = 5000.0
+    path = tmp / "quiet.yaml"
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    return path
+
+
+def test_do_reposition_is_a_pilot_command(tmp_path):
+    """DO_REPOSITION toward a point due east becomes the pilot's command "track 090 at 60 m/s".
+
+    A vehicle of its own, with no conflict: in the shared head-on link the command arrived while the
+    agent held authority or blended, so the executed setpoint was (rightly) not the pilot's."""
+    os.environ["MAVLINK20"] = "1"
     from pymavlink import mavutil
 
     from daa_sil.geometry.frames import enu_to_geodetic
     from daa_sil.sil.scenario import load_scenario
+    from daa_sil.steplog import read_steplog
 
-    conn, *_ = link
     m = mavutil.mavlink
     sc = load_scenario(SCENARIO)
-    pos = recv_until(conn, lambda x: x.get_type() == "LOCAL_POSITION_NED", 3.0)[-1]
-    # a point 5 km due east of the aircraft: the pilot command is "track 090"
-    lat, lon, _ = enu_to_geodetic(pos.y + 5000.0, pos.x, 1000.0, sc.origin.lat_deg, sc.origin.lon_deg, sc.origin.alt_m)
-    conn.mav.command_int_send(1, 1, m.MAV_FRAME_GLOBAL, m.MAV_CMD_DO_REPOSITION, 0, 0, 60.0, 0, 0, math.nan,
-                              int(float(lat) * 1e7), int(float(lon) * 1e7), 1000.0)
-    assert _ack(conn, m.MAV_CMD_DO_REPOSITION)[0].result == m.MAV_RESULT_ACCEPTED
-    tg = recv_until(conn, lambda x: x.get_type() == "POSITION_TARGET_GLOBAL_INT" and x.vy > 50, 5.0)[-1]
-    assert tg.get_type() == "POSITION_TARGET_GLOBAL_INT" and abs(tg.vx) < 1.0 and abs(math.hypot(tg.vx, tg.vy) - 60) < 0.01
-    conn.mav.command_int_send(1, 1, m.MAV_FRAME_GLOBAL, m.MAV_CMD_DO_REPOSITION, 0, 0, 60.0, 0, 0, 0,
-                              int(95e7), 0, 1000.0)  # latitude 95 deg: invalid
-    assert _ack(conn, m.MAV_CMD_DO_REPOSITION)[0].result == m.MAV_RESULT_DENIED
+    (port,) = free_ports(1)
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255, source_component=190,
+                                      dialect="common")
+    proc = start(["vehicle", quiet_scenario(tmp_path), "--out", f"udp:127.0.0.1:{port}", "--speed", "5",
+                  "--steplog", tmp_path / "steplog.parquet"], tmp_path / "vehicle.log")
+    try:
+        assert recv_until(conn, lambda x: x.get_type() == "HEARTBEAT", 30.0), (tmp_path / "vehicle.log").read_text()
+        pos = recv_until(conn, lambda x: x.get_type() == "LOCAL_POSITION_NED", 3.0)[-1]
+        # a point 5 km due east of the aircraft: the pilot command is "track 090"
+        lat, lon, _ = enu_to_geodetic(pos.y + 5000.0, pos.x, 1000.0, sc.origin.lat_deg, sc.origin.lon_deg,
+                                      sc.origin.alt_m)
+        conn.mav.command_int_send(1, 1, m.MAV_FRAME_GLOBAL, m.MAV_CMD_DO_REPOSITION, 0, 0, 60.0, 0, 0, math.nan,
+                                  int(float(lat) * 1e7), int(float(lon) * 1e7), 1000.0)
+        assert _ack(conn, m.MAV_CMD_DO_REPOSITION)[0].result == m.MAV_RESULT_ACCEPTED
+        tg = recv_until(conn, lambda x: x.get_type() == "POSITION_TARGET_GLOBAL_INT" and x.vy > 50, 5.0)[-1]
+        assert tg.get_type() == "POSITION_TARGET_GLOBAL_INT"
+        assert abs(tg.vx) < 1.0 and abs(math.hypot(tg.vx, tg.vy) - 60) < 0.01, (tg.vx, tg.vy)
+        conn.mav.command_int_send(1, 1, m.MAV_FRAME_GLOBAL, m.MAV_CMD_DO_REPOSITION, 0, 0, 60.0, 0, 0, 0,
+                                  int(95e7), 0, 1000.0)  # latitude 95 deg: invalid
+        assert _ack(conn, m.MAV_CMD_DO_REPOSITION)[0].result == m.MAV_RESULT_DENIED
+    finally:
+        stop(proc)
+        conn.close()
+    log = read_steplog(tmp_path / "steplog.parquet")
+    col = {c: log.column(c).to_pylist() for c in ("alert_level", "authority", "pilot_trk_deg", "pilot_gs",
+                                                    "cmd_trk_deg", "cmd_gs")}
+    assert all(max(a) == 0 for a in col["alert_level"]) and set(col["authority"]) == {"pilot"}
+    taken = [i for i, g in enumerate(col["pilot_gs"]) if g == 60.0]
+    assert taken and taken[-1] == len(col["pilot_gs"]) - 1  # held from the step it arrived (no later override)
+    assert all(abs(col["pilot_trk_deg"][i] - 90.0) < 1.0 and col["cmd_trk_deg"][i] == col["pilot_trk_deg"][i]
+               and col["cmd_gs"][i] == 60.0 for i in taken)
 
 
 def test_guided_is_refused_while_the_agent_holds_authority(link):
