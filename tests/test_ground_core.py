@@ -39,6 +39,22 @@ def test_only_fresh_encounters_refresh_their_display():
     assert core.display.guidance().alert_level.tolist() == [3, 2]
 
 
+def test_the_guidance_handed_out_is_a_snapshot():
+    """The display updates its own arrays row by row; what :meth:`guidance` returned stays as it was, and
+    writing into it does not reach the display."""
+    core = _core(1)
+    own, intr = _head_on(1)
+    g0 = core.display.guidance()
+    core.step(0.0, own, intr, np.array([0]), np.array([3]))
+    assert g0.alert_level.tolist() == [0] and np.isnan(g0.left_trk[0]) and g0.left_level[0] == np.inf
+    g1 = core.display.guidance()
+    assert g1.alert_level.tolist() == [3] and np.isfinite(g1.left_trk[0])
+    g1.alert_level[0], g1.left_trk[0] = 0, 123.0
+    g2 = core.display.guidance()
+    assert g2.alert_level.tolist() == [3] and g2.left_trk[0] != 123.0
+    assert (g2.alert_level.dtype, g2.wcv.dtype, g2.left_level.dtype) == (np.int64, bool, np.float64)
+
+
 def test_a_step_with_nothing_fresh_keeps_the_display():
     core = _core(1)
     own, intr = _head_on(1)

@@ -133,6 +133,12 @@ class Guidance:
             a = getattr(self, k)
             setattr(self, k, np.where(np.isnan(a), NO_BAND, a))
 
+    def copy(self) -> "Guidance":
+        """An independent copy (its fields are already normalised: no second pass)."""
+        out = object.__new__(Guidance)
+        out.__dict__.update({k: v.copy() for k, v in self.__dict__.items()})
+        return out
+
 
 @dataclass
 class PilotOutput:

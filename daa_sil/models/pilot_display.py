@@ -71,9 +71,24 @@ class PilotDisplay:
         self.cfg = cfg
         self.daa_batches = daa_batches  #: (N,) DAA batch of each pilot: bands one call per batch
         self.alert_level_min = int(alert_level_min)
-        self.alert = np.zeros(n, np.int64)
-        self.wcv = np.zeros(n, bool)
-        self.bands = {k: np.full(n, np.inf if k.endswith("_level") else np.nan) for k in self.KEYS}
+        nan = np.full(n, np.nan)
+        #: what every pilot sees now, updated row by row (:meth:`guidance` hands out copies)
+        self.current = Guidance(np.zeros(n, np.int64), nan, nan, nan, nan, nan, nan, nan, nan, np.zeros(n, bool))
+
+    @property
+    def alert(self) -> np.ndarray:
+        """(N,) the vehicle's alert level each pilot was last sent (int64; the display's own array)."""
+        return self.current.alert_level
+
+    @property
+    def wcv(self) -> np.ndarray:
+        """(N,) well clear violated on the observed states (bool; the display's own array)."""
+        return self.current.wcv
+
+    @property
+    def bands(self) -> dict:
+        """``{key: (N,)}`` of :attr:`KEYS` (the display's own arrays)."""
+        return {key: getattr(self.current, key) for key in self.KEYS}
 
     def refresh(self, rows: np.ndarray, own: AircraftState, intr: AircraftState, alert: np.ndarray) -> None:
         """Pilots ``rows`` (indices) now see ownship ``own`` (R,), intruders ``intr`` (R, M) and the
@@ -84,10 +99,11 @@ class PilotDisplay:
         rows = np.asarray(rows, np.int64)
         if not rows.size:
             return
+        g = self.current
         alert = np.asarray(alert, np.int64)
-        self.alert[rows] = alert
+        g.alert_level[rows] = alert
         # (wellclear.wcv, in the one compiled pass of the step's geometry where the kernels are loaded)
-        self.wcv[rows] = encounter_geometry(*relative_state(own, intr), self.cfg.th)["wcv"].any(axis=1)
+        g.wcv[rows] = encounter_geometry(*relative_state(own, intr), self.cfg.th)["wcv"].any(axis=1)
         sel = alert >= self.alert_level_min
         from daa_sil.daa_batches import positions_by_batch
 
@@ -95,11 +111,11 @@ class PilotDisplay:
         for pos in positions_by_batch(self.daa_batches, rows[k]):
             got = guidance_values(display_bands(own[k[pos]], intr[k[pos]], self.cfg))
             for key in self.KEYS:
-                self.bands[key][rows[k[pos]]] = got[key]
+                getattr(g, key)[rows[k[pos]]] = got[key]
 
     def guidance(self) -> Guidance:
-        """The current :class:`Guidance` of every pilot (N,)."""
-        return Guidance(alert_level=self.alert, wcv=self.wcv, **self.bands)
+        """The current :class:`Guidance` of every pilot (N,): a copy, unchanged by later refreshes."""
+        return self.current.copy()
 
 
 def guidance_from_daa(own: AircraftState, intr: AircraftState, cfg=None) -> Guidance:
