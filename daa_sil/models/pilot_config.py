@@ -4,7 +4,7 @@ decision rules), :class:`Guidance` (what the pilot's display shows, per plane) a
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -135,8 +135,8 @@ class Guidance:
 
     def copy(self) -> "Guidance":
         """An independent copy (its fields are already normalised: no second pass)."""
-        out = object.__new__(Guidance)
-        out.__dict__.update({k: v.copy() for k, v in self.__dict__.items()})
+        out = object.__new__(type(self))
+        out.__dict__.update({f.name: getattr(self, f.name).copy() for f in fields(self)})
         return out
 
 
