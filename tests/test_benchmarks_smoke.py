@@ -40,8 +40,23 @@ def run(script: str, args: list[str], cwd: Path, timeout: float = 900.0) -> subp
 
 def test_every_benchmark_is_covered():
     scripts = {p.name for p in BENCH.glob("*.py")}
-    # compare_campaigns.py is tested below with its own data; sil_probe.py is a helper of bench_sil.py
-    assert scripts - set(CASES) == {"compare_campaigns.py", "sil_probe.py"}
+    # compare_campaigns.py and check_identity.py are tested below; sil_probe.py is a helper of bench_sil.py
+    assert scripts - set(CASES) == {"compare_campaigns.py", "check_identity.py", "sil_probe.py"}
+
+
+def test_check_identity_against_itself_and_without_a_baseline(tmp_path):
+    # this checkout as its own baseline: the campaign and the conformance run twice and compare identical
+    res = run("check_identity.py", ["--baseline", str(ROOT), "--baseline-python", sys.executable,
+                                    "--baseline-cache", "none", "--readings", "paper", "--groups", "B-2",
+                                    "--encounters", "6", "--workers", "1", "--conformance", "--presets", "paper"],
+              tmp_path)
+    out = res.stdout + res.stderr
+    assert res.returncode == 0, out[-3000:]
+    assert "campaign paper" in out and "conformance --preset paper" in out
+    assert "identical: yes (2 of 2 comparisons)" in out, out[-3000:]
+    # no baseline: one line, exit 2
+    res = run("check_identity.py", ["--baseline", str(tmp_path / "nowhere")], tmp_path)
+    assert res.returncode == 2 and res.stdout == "" and len(res.stderr.strip().splitlines()) == 1, res.stderr
 
 
 @pytest.mark.parametrize("script", sorted(CASES))
