@@ -1,5 +1,5 @@
 """``python -m daa_sil.daa.kernels``: compile the DAA kernels into their cache (or load them) and say
-where it is and how long it took (CI runs it after installing, so tests and SIL processes start warm)."""
+where it is and how long it took (the test suite runs it before its first test, so its SIL processes start warm)."""
 
 from daa_sil.daa import kernels
 

@@ -30,7 +30,7 @@
   the cache is complete (its ``ready`` file) loading takes no lock: it only reads, and processes
   starting together (the SIL's vehicle and GCS) then load side by side instead of one after the
   other.
-  ``python -m daa_sil.daa.kernels`` compiles ahead of time (CI does, after installing; the SIL driver
+  ``python -m daa_sil.daa.kernels`` compiles ahead of time (the test suite does before its first test; the SIL driver
   does when the cache is cold, before it starts the vehicle and the GCS) and prints where the cache is
   and how long it took.
 """
