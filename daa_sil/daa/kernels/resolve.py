@@ -104,6 +104,18 @@ def _update(a, b, t_in, t_out):
 
 
 @inline
+def _own_halvings(steps, mixed, flag, n_in, n_out, a, b):
+    """The halvings of :func:`_bisect` that can move the bracket ``[a, b]`` (s) of a row starting inside
+    (``flag``) or outside: in a ``mixed`` batch :func:`~daa_sil.daa.kernels.scalar.halve` leaves a bracket
+    unchanged from its kind's count on, and the predicate evaluated there is not kept (its state is
+    kept only when an end moves), so those steps are skipped; all ``steps`` when an end is nan (an
+    unchanged nan end compares unequal to itself, as the full loop would see it)."""
+    if mixed and a == a and b == b:
+        return n_out if flag else n_in
+    return steps
+
+
+@inline
 def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, row, lo, hi, lo_in, thr, dt_in,
             dt_out, DD, TT, H, TC, clear_pos, have_pos):
     """``UndecidedPieces._bisect`` of the rows ``row`` (one batch): ``lo``/``hi`` halved in place. The relative
@@ -127,7 +139,7 @@ def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii,
         r = row[i]
         mrow = _motion_row(kind, kin, ph, enc, ipv, mi, ii, r)
         have_pos[i] = False
-        for k in range(steps):
+        for k in range(_own_halvings(steps, mixed, flag, n_in, n_out, a, b)):
             mid = 0.5 * (a + b)
             sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc, mid)
             inside = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC)
