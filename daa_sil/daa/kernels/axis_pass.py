@@ -16,7 +16,7 @@ from numba import boolean, void
 
 from daa_sil.daa.kernels.evaluate import segments_path, tails_path
 from daa_sil.daa.kernels.jit import kernel
-from daa_sil.daa.kernels.motion import axis_knot, axis_row, turn_sincos
+from daa_sil.daa.kernels.motion import axis_knot, axis_row, row_limit_time, turn_sincos
 from daa_sil.daa.kernels.scalar import vertical_window
 from daa_sil.daa.kernels.signatures import A, A2, A3, IA, I8, O, F, I
 
@@ -36,8 +36,9 @@ def axis_conflicts_into(axis, rate, kin, t, ipos, ivel, vz_const, acc_h, acc_v, 
     for n in range(N):
         for p in range(P):
             row = axis_row(kin[n], p)
+            cap = row_limit_time(axis, rate, row)
             for k in range(K):
-                ox[k], oy[k], oz[k], ovx[k], ovy[k], ovz[k] = axis_knot(axis, rate, row, sth[k], cth[k], t[k])
+                ox[k], oy[k], oz[k], ovx[k], ovy[k], ovz[k] = axis_knot(axis, rate, row, cap, sth[k], cth[k], t[k])
             a_h, a_v = acc_h[n, p], acc_v[n, p]
             for m in range(M):
                 ix, iy, iz = ipos[n, m, 0], ipos[n, m, 1], ipos[n, m, 2]
@@ -77,11 +78,12 @@ def axis_segment_knots_into(axis, rate, kin, t, ipos, ivel, seg, s0, s1, s2, v0,
         nm = path // P
         n, m = nm // M, nm % M
         row = axis_row(kin[n], p)
+        cap = row_limit_time(axis, rate, row)
         ix, iy, iz = ipos[n, m, 0], ipos[n, m, 1], ipos[n, m, 2]
         jx, jy, jz = ivel[n, m, 0], ivel[n, m, 1], ivel[n, m, 2]
         for e in range(2):
             k = j + e
-            ax, ay, az, avx, avy, avz = axis_knot(axis, rate, row, sth[k], cth[k], t[k])
+            ax, ay, az, avx, avy, avz = axis_knot(axis, rate, row, cap, sth[k], cth[k], t[k])
             tkk = t[k]
             i = 2 * r + e
             s0[i] = ax - (ix + tkk * jx)

@@ -37,13 +37,31 @@ def turn_state(rate, x0, y0, z0, gs0, st, ct, vs0, sgn, sth, cth, t):
 
 
 @inline
+def limit_time(axis, rate, vs0, gs0, sgn, lim):
+    """Time (s) a vertical / speed path takes to reach its limit ``lim`` (m/s) from ``vs0`` / ``gs0`` at
+    ``rate`` (m/s^2) on side ``sgn`` (0 if past it; 0.0 on a track path, which does not read it): the
+    same at every ``t`` of a path, so the callers that evaluate a path many times compute it once."""
+    if axis == _HORIZONTAL:
+        return 0.0
+    v0 = vs0 if axis == _VERTICAL else gs0
+    return npmax((lim - v0) * sgn / rate, 0.0)
+
+
+@inline
 def axis_state(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, lim, t):
     """Ownship (x, y, z, vx, vy, vz) after ``t`` s on the path (``_axis_state_soa``)."""
+    return axis_state_capped(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn,
+                             limit_time(axis, rate, vs0, gs0, sgn, lim), t)
+
+
+@inline
+def axis_state_capped(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, cap, t):
+    """:func:`axis_state` given the path's :func:`limit_time` ``cap`` (s)."""
     if axis == _HORIZONTAL:
         th = rate * t
         return turn_state(rate, x0, y0, z0, gs0, st, ct, vs0, sgn, math.sin(th), math.cos(th), t)
     v0 = vs0 if axis == _VERTICAL else gs0
-    tc = npmin(t, npmax((lim - v0) * sgn / rate, 0.0))
+    tc = npmin(t, cap)
     sa = sgn * rate
     dist = v0 * t + sa * tc * (t - 0.5 * tc)
     v_t = v0 + sa * tc
@@ -60,6 +78,13 @@ def axis_row(kin, i):
 
 
 @inline
+def row_limit_time(axis, rate, row):
+    """:func:`limit_time` of the path ``row`` (:func:`axis_row`)."""
+    x0, y0, z0, gs0, st, ct, vs0, sgn, lim = row
+    return limit_time(axis, rate, vs0, gs0, sgn, lim)
+
+
+@inline
 def intruder_row(ipv, i):
     """Intruder row ``i`` of ``ipv`` (position m, velocity m/s) as a tuple of six floats."""
     return ipv[i, 0], ipv[i, 1], ipv[i, 2], ipv[i, 3], ipv[i, 4], ipv[i, 5]
@@ -73,18 +98,19 @@ def relative(ox, oy, oz, ovx, ovy, ovz, iv, t):
 
 
 @inline
-def axis_rel(axis, rate, row, iv, t):
-    """Relative state at ``t`` of the path ``row`` (:func:`axis_row`) against the intruder ``iv``: scalars
-    only, so nothing is reference-counted per call."""
+def axis_rel(axis, rate, row, cap, iv, t):
+    """Relative state at ``t`` of the path ``row`` (:func:`axis_row`, its :func:`row_limit_time` ``cap``)
+    against the intruder ``iv``: scalars only, so nothing is reference-counted per call."""
     x0, y0, z0, gs0, st, ct, vs0, sgn, lim = row
-    ox, oy, oz, ovx, ovy, ovz = axis_state(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, lim, t)
+    ox, oy, oz, ovx, ovy, ovz = axis_state_capped(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, cap, t)
     return relative(ox, oy, oz, ovx, ovy, ovz, iv, t)
 
 
 @inline_ir
 def rel_state(axis, rate, kin, ipv, i, t):
     """Relative state (ownship - intruder) of path row ``i`` at ``t``."""
-    return axis_rel(axis, rate, axis_row(kin, i), intruder_row(ipv, i), t)
+    row = axis_row(kin, i)
+    return axis_rel(axis, rate, row, row_limit_time(axis, rate, row), intruder_row(ipv, i), t)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -172,13 +198,13 @@ def command_states_into(ph_rows, enc, max_turn, h_acc, v_acc, t, out):
 
 
 @inline
-def axis_knot(axis, rate, row, sth, cth, t):
-    """Ownship state on the path ``row`` (:func:`axis_row`) at knot time ``t`` (``sth``/``cth``: the turn's
-    sine and cosine there)."""
+def axis_knot(axis, rate, row, cap, sth, cth, t):
+    """Ownship state on the path ``row`` (:func:`axis_row`, its :func:`row_limit_time` ``cap``) at knot
+    time ``t`` (``sth``/``cth``: the turn's sine and cosine there)."""
     x0, y0, z0, gs0, st, ct, vs0, sgn, lim = row
     if axis == _HORIZONTAL:
         return turn_state(rate, x0, y0, z0, gs0, st, ct, vs0, sgn, sth, cth, t)
-    return axis_state(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, lim, t)
+    return axis_state_capped(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, cap, t)
 
 
 @inline
@@ -202,8 +228,9 @@ def axis_relative_knots_into(axis, rate, kin, t, ipos, ivel, s0, s1, s2, v0, v1,
     for n in range(kin.shape[0]):
         for p in range(kin.shape[1]):
             row = axis_row(kin[n], p)
+            cap = row_limit_time(axis, rate, row)
             for k in range(K):
-                ox, oy, oz, ovx, ovy, ovz = axis_knot(axis, rate, row, sth[k], cth[k], t[k])
+                ox, oy, oz, ovx, ovy, ovz = axis_knot(axis, rate, row, cap, sth[k], cth[k], t[k])
                 tk = t[k]
                 for m in range(ipos.shape[1]):
                     ix, iy, iz = ipos[n, m, 0], ipos[n, m, 1], ipos[n, m, 2]
@@ -225,7 +252,8 @@ def axis_knots_into(axis, rate, kin, t, out):
     for n in range(kin.shape[0]):
         for p in range(kin.shape[1]):
             row = axis_row(kin[n], p)
+            cap = row_limit_time(axis, rate, row)
             for k in range(K):
-                a, b, c, d, e, f = axis_knot(axis, rate, row, sth[k], cth[k], t[k])
+                a, b, c, d, e, f = axis_knot(axis, rate, row, cap, sth[k], cth[k], t[k])
                 out[0, n, p, k], out[1, n, p, k], out[2, n, p, k], out[3, n, p, k], out[4, n, p, k], out[5, n, p, k] = \
                     a, b, c, d, e, f

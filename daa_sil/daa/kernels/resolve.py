@@ -22,7 +22,7 @@ import numpy as np
 from numba import boolean, float64, int64, types, void
 
 from daa_sil.daa.kernels.jit import inline, inline_ir, kernel
-from daa_sil.daa.kernels.motion import axis_rel, axis_row, command_rel, command_row, intruder_row
+from daa_sil.daa.kernels.motion import axis_rel, axis_row, command_rel, command_row, intruder_row, row_limit_time
 from daa_sil.daa.kernels.pieces import CLEAR, classify, clear2
 from daa_sil.daa.kernels.scalar import INF, halve, npmax, npmin, wcv_soa
 from daa_sil.daa.kernels.signatures import A, A2, A3, IA, O, F, I, B
@@ -40,12 +40,13 @@ _NO_COMMAND_ROW = ((0.0,) * 9, (0.0,) * 9, (0.0,) * 9, (0.0,) * 7)
 
 
 @inline
-def _motion_row(kind, kin, ph, enc, ipv, mi, ii, r):
-    """Row ``r``'s motion (row ``mi[r]`` of ``kin`` or of ``ph``/``enc``) and intruder (row ``ii[r]`` of ``ipv``)
-    as tuples of floats, for :func:`_rel` (loaded once per row)."""
+def _motion_row(kind, axis, rate, kin, ph, enc, ipv, mi, ii, r):
+    """Row ``r``'s motion (row ``mi[r]`` of ``kin`` with its time to its limit, s, or of ``ph``/``enc``) and
+    intruder (row ``ii[r]`` of ``ipv``) as tuples of floats, for :func:`_rel` (loaded once per row)."""
     if kind == KIND_AXIS:
-        return axis_row(kin, mi[r]), _NO_COMMAND_ROW, intruder_row(ipv, ii[r])
-    return _NO_AXIS_ROW, command_row(ph, enc, mi[r]), intruder_row(ipv, ii[r])
+        arow = axis_row(kin, mi[r])
+        return arow, row_limit_time(axis, rate, arow), _NO_COMMAND_ROW, intruder_row(ipv, ii[r])
+    return _NO_AXIS_ROW, 0.0, command_row(ph, enc, mi[r]), intruder_row(ipv, ii[r])
 
 
 @inline
@@ -62,9 +63,9 @@ def _take(buf, cur, j, n):
 @inline_ir
 def _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc, t):
     """Relative state at ``t`` of the row whose :func:`_motion_row` is ``mrow``."""
-    arow, crow, iv = mrow
+    arow, cap, crow, iv = mrow
     if kind == KIND_AXIS:
-        return axis_rel(axis, rate, arow, iv, t)
+        return axis_rel(axis, rate, arow, cap, iv, t)
     return command_rel(crow, iv, t, max_turn, h_acc, v_acc)
 
 
@@ -104,6 +105,18 @@ def _update(a, b, t_in, t_out):
 
 
 @inline
+def _own_halvings(steps, mixed, flag, n_in, n_out, a, b):
+    """The halvings of :func:`_bisect` that can move the bracket ``[a, b]`` (s) of a row starting inside
+    (``flag``) or outside: in a ``mixed`` batch :func:`~daa_sil.daa.kernels.scalar.halve` leaves a bracket
+    unchanged from its kind's count on, and the predicate evaluated there is not kept (its state is
+    kept only when an end moves), so those steps are skipped; all ``steps`` when an end is nan (an
+    unchanged nan end compares unequal to itself, as the full loop would see it)."""
+    if mixed and a == a and b == b:
+        return n_out if flag else n_in
+    return steps
+
+
+@inline
 def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, row, lo, hi, lo_in, thr, dt_in,
             dt_out, DD, TT, H, TC, clear_pos, have_pos):
     """``UndecidedPieces._bisect`` of the rows ``row`` (one batch): ``lo``/``hi`` halved in place. The relative
@@ -125,9 +138,9 @@ def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii,
     for i in range(n):
         a, b, flag = lo[i], hi[i], lo_in[i]
         r = row[i]
-        mrow = _motion_row(kind, kin, ph, enc, ipv, mi, ii, r)
+        mrow = _motion_row(kind, axis, rate, kin, ph, enc, ipv, mi, ii, r)
         have_pos[i] = False
-        for k in range(steps):
+        for k in range(_own_halvings(steps, mixed, flag, n_in, n_out, a, b)):
             mid = 0.5 * (a + b)
             sx, sy, sz, vx, vy, vz = _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc, mid)
             inside = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC)
@@ -180,7 +193,7 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, f
     for c in range(nf):
         i = final[c]
         r = row[i]
-        mrow = _motion_row(kind, kin, ph, enc, ipv, mi, ii, r)
+        mrow = _motion_row(kind, axis, rate, kin, ph, enc, ipv, mi, ii, r)
         h = tb[i] - ta[i]
         first, lastk = -1, -1
         t_prev_first, t_first, t_last, t_after = ta[i], 0.0, 0.0, tb[i]
@@ -304,8 +317,9 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi
                 if have_pos[c]:  # (the state there, computed by the bisection)
                     mx, my, mz = clear_pos[0, c], clear_pos[1, c], clear_pos[2, c]
                 else:
-                    mx, my, mz, _, _, _ = _rel(kind, axis, rate, _motion_row(kind, kin, ph, enc, ipv, mi, ii, r),
-                                               max_turn, h_acc, v_acc, lo[c] if entry else hi[c])
+                    mrow = _motion_row(kind, axis, rate, kin, ph, enc, ipv, mi, ii, r)
+                    mx, my, mz, _, _, _ = _rel(kind, axis, rate, mrow, max_turn, h_acc, v_acc,
+                                               lo[c] if entry else hi[c])
                 c_a, c_b = (ta[i], lo[c]) if entry else (hi[c], tb[i])
                 if entry:
                     x0, y0, z0, x1, y1, z1 = pa[0, i], pa[1, i], pa[2, i], mx, my, mz
@@ -402,7 +416,7 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi
             r = row[i]
             t_prev, h = ta[i], tb[i] - ta[i]
             px, py, pz, wx, wy, f_prev = pa[0, i], pa[1, i], pa[2, i], ua[0, i], ua[1, i], fa[i]
-            mrow = _motion_row(kind, kin, ph, enc, ipv, mi, ii, r)
+            mrow = _motion_row(kind, axis, rate, kin, ph, enc, ipv, mi, ii, r)
             for k in range(q):
                 if k < q - 1:
                     t_next = ta[i] + h * (float(k + 1) / q)
