@@ -120,6 +120,10 @@ def main() -> None:
 
     env_new = dict(os.environ, PYTHONPATH=str(ROOT))
     env_base = None
+    if not args.no_baseline and args.baseline_python == BASELINE_PYTHON and not BASELINE_PYTHON.is_file():
+        print(f"bench_campaign: no baseline at {BASELINE_PYTHON}: this code only, no ratio "
+              f"(--baseline-python PY to compare; CONTRIBUTING.md says how to install bba2fd8 apart)")
+        args.no_baseline = True
     if not args.no_baseline:
         if not args.baseline_python.is_file():
             raise SystemExit(f"bench_campaign: no baseline python at {args.baseline_python} "

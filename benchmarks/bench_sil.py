@@ -30,9 +30,9 @@ ratio of the loaded figures to the alone run.
 
     python benchmarks/bench_sil.py [--part lockstep|realtime|all] [--repeat 3] [--pyc both|present|absent]
     python benchmarks/bench_sil.py --baseline none          # this checkout only
-    git worktree add /tmp/start HEAD~3 && python benchmarks/bench_sil.py --pyc present --repeat 20 \
-        --baseline /tmp/start --baseline-python .venv/bin/python --baseline-cache ~/.cache/daa-sil
-                                                            # an A/B against an earlier commit, paired
+    git worktree add /tmp/start HEAD~3                      # an A/B against an earlier commit, paired:
+    python benchmarks/bench_sil.py --pyc present --repeat 20 --baseline /tmp/start \\
+        --baseline-python .venv/bin/python --baseline-cache ~/.cache/daa-sil
     python benchmarks/bench_sil.py --part realtime --runs 20 --speeds 1,4 [--duration 180]
 """
 
@@ -56,10 +56,13 @@ DEFAULT_BASELINE = "/work/baseline"
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--scenario", type=Path, default=ROOT / "scenarios" / "head_on.yaml")
-    ap.add_argument("--part", choices=("lockstep", "realtime", "all"), default="lockstep")
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], epilog=__doc__.split("\n\n", 1)[1],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--repeat", type=int, default=3, help="lockstep: interleaved repeats of each configuration (default 3)")
+    ap.add_argument("--scenario", type=Path, default=ROOT / "scenarios" / "head_on.yaml",
+                    help="scenario YAML (default scenarios/head_on.yaml; lockstep stretches it to 240 s)")
+    ap.add_argument("--part", choices=("lockstep", "realtime", "all"), default="lockstep",
+                    help="what to measure (default lockstep)")
     ap.add_argument("--pyc", choices=("both", "present", "absent"), default="both",
                     help="lockstep: measure with the project's .pyc present, absent or both (default)")
     ap.add_argument("--baseline", default=DEFAULT_BASELINE,
