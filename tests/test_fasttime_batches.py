@@ -85,6 +85,7 @@ def test_the_daa_is_called_once_per_part_on_exactly_its_rows(encs, family, monke
     for p in parts:
         simulate(p.encounters, p.policy, p.latency_up, p.latency_down, wait_family=family, duration_s=150.0)
     assert batched == sorted(calls) and len(calls) > 50
+    assert min(len(c[1]) for c in calls) > 0  # nothing is computed for an empty set of rows (issue 21, item 3)
 
 
 def test_display_bands_every_state_it_shows_in_one_call_per_batch(encs, monkeypatch):
@@ -117,6 +118,7 @@ def test_display_bands_every_state_it_shows_in_one_call_per_batch(encs, monkeypa
              SimPart(b, policy_for_group("ID-2-projl"), lat, lat, group="ID-2-projl")]
     simulate_parts(parts, duration_s=150.0)
     assert len(expected) > 10 and len(banded) == len(expected)
+    assert min(len(x) for x in banded) > 0  # no display bands for an empty set of rows
     for got, want in zip(banded, expected):
         assert np.array_equal(got, want)
 
