@@ -28,7 +28,7 @@ _HORIZONTAL, _VERTICAL = 1, 2
 
 @inline
 def turn_state(rate, x0, y0, z0, gs0, st, ct, vs0, sgn, sth, cth, t):
-    """The turn of :func:`axis_state` given ``sth``/``cth``, the sine and cosine of ``rate * t``."""
+    """The turn of :func:`axis_state_capped` given ``sth``/``cth``, the sine and cosine of ``rate * t``."""
     r = gs0 / rate
     fwd, lat = r * sth, sgn * r * (1.0 - cth)
     ssth = sgn * sth
@@ -48,15 +48,9 @@ def limit_time(axis, rate, vs0, gs0, sgn, lim):
 
 
 @inline
-def axis_state(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, lim, t):
-    """Ownship (x, y, z, vx, vy, vz) after ``t`` s on the path (``_axis_state_soa``)."""
-    return axis_state_capped(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn,
-                             limit_time(axis, rate, vs0, gs0, sgn, lim), t)
-
-
-@inline
 def axis_state_capped(axis, rate, x0, y0, z0, gs0, st, ct, vs0, sgn, cap, t):
-    """:func:`axis_state` given the path's :func:`limit_time` ``cap`` (s)."""
+    """Ownship (x, y, z, vx, vy, vz) after ``t`` s on the path (``axis_paths._axis_state_soa``), given the
+    path's :func:`limit_time` ``cap`` (s)."""
     if axis == _HORIZONTAL:
         th = rate * t
         return turn_state(rate, x0, y0, z0, gs0, st, ct, vs0, sgn, math.sin(th), math.cos(th), t)
