@@ -11,12 +11,19 @@ from daa_sil.jit_cache import cache_dir, is_warm
 
 
 @pytest.fixture(scope="session", autouse=True)
-def warm_kernel_cache() -> None:
+def warm_kernel_cache(request) -> None:
     """The DAA kernels compiled into their cache before the first test, as ``python -m daa_sil.daa.kernels``
     does (once per machine and source version; a no-op when the cache is complete). Without it, on a
     fresh machine the first tests that start SIL processes would have them compile the kernels
-    (20-60 s on two cores) against their READY timeouts."""
+    (17-40 s on two cores, about a minute on one) against their READY timeouts. Its lines are shown
+    whatever pytest captures; a failed compilation stops the session with one line."""
     if is_warm():
         return
-    print(f"\ncompiling the DAA kernels into {cache_dir()} (first run only)", file=sys.__stderr__, flush=True)
-    subprocess.run([sys.executable, "-m", "daa_sil.daa.kernels"], check=True, timeout=900)
+    capture = request.config.pluginmanager.getplugin("capturemanager")
+    with capture.global_and_fixture_disabled():
+        print(f"\ncompiling the DAA kernels into {cache_dir()} (first run only; 17-40 s on two cores)", flush=True)
+        try:
+            subprocess.run([sys.executable, "-m", "daa_sil.daa.kernels"], check=True, timeout=900)
+        except (subprocess.CalledProcessError, subprocess.TimeoutExpired) as exc:
+            pytest.exit(f"compiling the DAA kernels failed ({exc}); run 'python -m daa_sil.daa.kernels' to see why",
+                        returncode=3)
