@@ -13,7 +13,8 @@ Runs, for this checkout and for a baseline checkout installed apart (its own ``.
 
 Prints one line per comparison and a final ``identical: yes|no``; exit 0 when everything is
 identical, 1 when something differs or a run failed, 2 (one line) on bad arguments. Each side's
-output goes under ``--work`` (default: a temporary directory, removed at the end unless ``--keep``).
+output goes under ``--work`` (empty or new; default: a temporary directory, removed at the end unless
+``--keep``).
 
 One baseline, installed apart (the benchmarks find it at ``/work/baseline`` by default)::
 
@@ -60,13 +61,15 @@ class Side:
         if cache is not None:
             self.env["DAA_SIL_CACHE"] = str(cache)
 
-    def run(self, args: list, log: Path) -> bool:
-        """``python -m daa_sil.cli ARGS`` from the checkout (stdout + stderr to ``log``); True on success."""
-        with open(log, "wb") as f:
+    def run(self, args: list, out: Path) -> bool:
+        """``python -m daa_sil.cli ARGS`` from the checkout, its stdout to ``out`` and its stderr to ``out``
+        + ``.err`` (a notice on stderr must not make two outputs differ); True on success."""
+        err = out.with_name(out.name + ".err")
+        with open(out, "wb") as f, open(err, "wb") as e:
             rc = subprocess.run([str(self.python), "-m", "daa_sil.cli", *args], cwd=self.tree, env=self.env,
-                                stdout=f, stderr=subprocess.STDOUT).returncode
+                                stdout=f, stderr=e).returncode
         if rc != 0:
-            print(f"  {self.name}: 'daa-sil {' '.join(args)}' failed (exit {rc}); see {log}")
+            print(f"  {self.name}: 'daa-sil {' '.join(args)}' failed (exit {rc}); see {out} and {err}")
         return rc == 0
 
 
@@ -162,6 +165,9 @@ def main(argv: "list[str] | None" = None) -> int:
         print("check_identity: --encounters must be at least 1", file=sys.stderr)
         return 2
     made = args.work is None
+    if not made and args.work.exists() and any(args.work.iterdir()):
+        print(f"check_identity: --work {args.work} is not empty (each run writes a new directory there)", file=sys.stderr)
+        return 2
     work = Path(tempfile.mkdtemp(prefix="identity-")) if made else args.work
     work.mkdir(parents=True, exist_ok=True)
     cache = None if args.baseline_cache == "none" else Path(args.baseline_cache)

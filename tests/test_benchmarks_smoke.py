@@ -54,6 +54,18 @@ def test_check_identity_against_itself_and_without_a_baseline(tmp_path):
     assert res.returncode == 0, out[-3000:]
     assert "campaign paper" in out and "conformance --preset paper" in out
     assert "identical: yes (2 of 2 comparisons)" in out, out[-3000:]
+    # a "baseline" that flies another seed: the campaigns differ, and the script says so and exits 1
+    other = tmp_path / "other-seed-python"
+    other.write_text(f"#!{sys.executable}\nimport os, sys\nargs = sys.argv[1:]\n"
+                     f"if '--seed' in args:\n    args[args.index('--seed') + 1] = '8'\n"
+                     f"os.execv({sys.executable!r}, [{sys.executable!r}] + args)\n")
+    other.chmod(0o755)
+    res = run("check_identity.py", ["--baseline", str(ROOT), "--baseline-python", str(other), "--baseline-cache", "none",
+                                    "--readings", "paper", "--groups", "B-2", "--encounters", "6", "--workers", "1"],
+              tmp_path)
+    out = res.stdout + res.stderr
+    assert res.returncode == 1, out[-3000:]
+    assert "campaign paper" in out and "DIFFERENT" in out and "identical: no (0 of 1 comparisons)" in out, out[-3000:]
     # no baseline: one line, exit 2
     res = run("check_identity.py", ["--baseline", str(tmp_path / "nowhere")], tmp_path)
     assert res.returncode == 2 and res.stdout == "" and len(res.stderr.strip().splitlines()) == 1, res.stderr
