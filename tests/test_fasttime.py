@@ -5,7 +5,7 @@ import pyarrow.compute as pc
 import pytest
 
 from daa_sil.agent import policy_for_group
-from daa_sil.daa.undecided import BISECT_DT_OUT
+from daa_sil.daa.undecided import BISECT_DT_IN
 from daa_sil.models.encounters import concat_encounters, sample_encounters
 from daa_sil.study.fasttime import DECISION_SCHEMA, ENCOUNTER_SCHEMA, simulate
 from daa_sil.models.latency import Constant, TruncatedGaussian
@@ -83,7 +83,7 @@ def test_chunking_keeps_encounter_results_and_moves_sm_only_within_the_bisection
         got, want = np.concatenate([_col(parts[1][1], name), _col(parts[0][1], name)]), _col(dec_whole, name)
         if name in ("sm_pilot", "sm_exec"):
             np.testing.assert_array_equal(np.isnan(got), np.isnan(want), err_msg=name)
-            np.testing.assert_allclose(got, want, rtol=0, atol=BISECT_DT_OUT, err_msg=name)
+            np.testing.assert_allclose(got, want, rtol=0, atol=BISECT_DT_IN, err_msg=name)  # (SM: an entry time)
             moved += int(np.sum(got[~np.isnan(got)] != want[~np.isnan(want)]))
         else:
             np.testing.assert_array_equal(got, want, err_msg=name)
