@@ -183,7 +183,7 @@ def prepare_kernels(say: "Callable[[str], None] | None") -> None:
         return
     t = time.monotonic()
     if say:
-        say(f"compiling the DAA kernels (first run: 20-60 s on two cores, longer on one; cached in {cache_dir()}) ...")
+        say(f"compiling the DAA kernels (first run: 17-40 s on two cores, about a minute on one; cached in {cache_dir()}) ...")
     from daa_sil.daa import kernels
 
     kernels.get()
