@@ -28,8 +28,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-BASELINE_PYTHON = Path("/work/baseline/.venv/bin/python")
-BASELINE_CACHE = Path("/work/cache-baseline")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from baseline_paths import BASELINE_CACHE, BASELINE_PYTHON  # noqa: E402
 GROUPS = "B-1,B-2,IC-1,ID-1,ID-2"
 
 

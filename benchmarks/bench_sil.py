@@ -51,8 +51,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from baseline_paths import BASELINE_CACHE, BASELINE_DIR  # noqa: E402
+
 TARGET_S, TARGET_INPROC_S, TARGET_VEHICLE_MS, TARGET_GCS_MS = 2.0, 1.0, 1.5, 1.0
-DEFAULT_BASELINE = "/work/baseline"
+DEFAULT_BASELINE = str(BASELINE_DIR)
 
 
 def main() -> None:
@@ -68,8 +70,8 @@ def main() -> None:
     ap.add_argument("--baseline", default=DEFAULT_BASELINE,
                     help=f"lockstep: checkout of the baseline with its .venv (default {DEFAULT_BASELINE}, bba2fd8 "
                          f"installed apart, if it exists); none = this checkout only")
-    ap.add_argument("--baseline-cache", default="/work/cache-baseline",
-                    help="lockstep: DAA_SIL_CACHE of the baseline (default /work/cache-baseline)")
+    ap.add_argument("--baseline-cache", default=str(BASELINE_CACHE),
+                    help=f"lockstep: DAA_SIL_CACHE of the baseline (default {BASELINE_CACHE})")
     ap.add_argument("--baseline-python", default=None,
                     help="lockstep: the baseline's interpreter (default DIR/.venv/bin/python); e.g. this checkout's "
                          "own .venv/bin/python to compare with an earlier commit's sources (a git worktree)")

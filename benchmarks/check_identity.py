@@ -42,6 +42,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from baseline_paths import BASELINE_CACHE, BASELINE_DIR  # noqa: E402
 #: the readings that exist at bba2fd8, by their names there (``literal`` is called ``extended`` now)
 BBA2FD8_READINGS = ("literal", "paper-counts", "preventive", "feet", "detection", "no-hold", "paper-grid")
 GROUPS = "B-1,B-2,IC-1,ID-1,ID-2,ID-2-projl,ID-2-map"
@@ -135,12 +138,12 @@ def check_conformance(sides: list, args, work: Path) -> list:
 def main(argv: "list[str] | None" = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], epilog=__doc__.split("\n\n", 1)[1],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--baseline", type=Path, default=Path("/work/baseline"),
-                    help="the baseline checkout (default /work/baseline)")
+    ap.add_argument("--baseline", type=Path, default=BASELINE_DIR,
+                    help=f"the baseline checkout (default {BASELINE_DIR})")
     ap.add_argument("--baseline-python", type=Path, default=None,
                     help="the baseline's interpreter (default BASELINE/.venv/bin/python)")
-    ap.add_argument("--baseline-cache", default="/work/cache-baseline",
-                    help="DAA_SIL_CACHE of the baseline (default /work/cache-baseline; none: this environment's)")
+    ap.add_argument("--baseline-cache", default=str(BASELINE_CACHE),
+                    help=f"DAA_SIL_CACHE of the baseline (default {BASELINE_CACHE}; none: this environment's)")
     ap.add_argument("--readings", type=lambda s: [r for r in s.split(",") if r], default=list(BBA2FD8_READINGS),
                     help=f"comma-separated readings, by their names at the baseline (default: {','.join(BBA2FD8_READINGS)})")
     ap.add_argument("--groups", default=GROUPS, help=f"groups (default {GROUPS})")
@@ -154,7 +157,7 @@ def main(argv: "list[str] | None" = None) -> int:
     ap.add_argument("--presets", type=lambda s: [x for x in s.split(",") if x], default=list(PRESETS),
                     help=f"conformance presets (default {','.join(PRESETS)})")
     ap.add_argument("--work", type=Path, default=None, help="where both sides write (default: a temporary directory)")
-    ap.add_argument("--keep", action="store_true", help="keep --work's contents")
+    ap.add_argument("--keep", action="store_true", help="keep the temporary directory (a given --work is always kept)")
     args = ap.parse_args(argv)
     base_py = args.baseline_python or args.baseline / ".venv" / "bin" / "python"
     if not base_py.is_file() or not (args.baseline / "daa_sil").is_dir():

@@ -40,8 +40,9 @@ def run(script: str, args: list[str], cwd: Path, timeout: float = 900.0) -> subp
 
 def test_every_benchmark_is_covered():
     scripts = {p.name for p in BENCH.glob("*.py")}
-    # compare_campaigns.py and check_identity.py are tested below; sil_probe.py is a helper of bench_sil.py
-    assert scripts - set(CASES) == {"compare_campaigns.py", "check_identity.py", "sil_probe.py"}
+    # compare_campaigns.py and check_identity.py are tested below; sil_probe.py (bench_sil.py's) and
+    # baseline_paths.py (where the baseline is installed) are helpers
+    assert scripts - set(CASES) == {"compare_campaigns.py", "check_identity.py", "sil_probe.py", "baseline_paths.py"}
 
 
 def test_check_identity_against_itself_and_without_a_baseline(tmp_path):
