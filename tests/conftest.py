@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from daa_sil.jit_cache import cache_dir, is_warm
+from daa_sil.jit_cache import COLD_COMPILE_TIME, cache_dir, is_warm
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -15,13 +15,13 @@ def warm_kernel_cache(request) -> None:
     """The DAA kernels compiled into their cache before the first test, as ``python -m daa_sil.daa.kernels``
     does (once per machine and source version; a no-op when the cache is complete). Without it, on a
     fresh machine the first tests that start SIL processes would have them compile the kernels
-    (17-40 s on two cores, about a minute on one) against their READY timeouts. Its lines are shown
+    (:data:`~daa_sil.jit_cache.COLD_COMPILE_TIME`) against their READY timeouts. Its lines are shown
     whatever pytest captures; a failed compilation stops the session with one line."""
     if is_warm():
         return
     capture = request.config.pluginmanager.getplugin("capturemanager")
     with capture.global_and_fixture_disabled():
-        print(f"\ncompiling the DAA kernels into {cache_dir()} (first run only; 17-40 s on two cores)", flush=True)
+        print(f"\ncompiling the DAA kernels into {cache_dir()} (first run only; {COLD_COMPILE_TIME})", flush=True)
         try:
             subprocess.run([sys.executable, "-m", "daa_sil.daa.kernels"], check=True, timeout=900)
         except (subprocess.CalledProcessError, subprocess.TimeoutExpired) as exc:
