@@ -63,12 +63,13 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def parse_setting(text: str) -> "tuple[float, str, float]":
+def parse_setting(text: str) -> "ScheduledSetting":
     """``"30:DAA_WT=6"`` -> ``(30.0, "DAA_WT", 6.0)``; ``"90:MODE=GUIDED"`` -> ``(90.0, "MODE", 15.0)``."""
     import math
     import re
 
     from daa_sil.link.plane import PLANE_MODES
+    from gcs.pilot import ScheduledSetting
 
     m = re.fullmatch(r"\s*([^:]+):([A-Za-z0-9_]{1,16})=(\S+)\s*", str(text))
     if m is None:
@@ -83,15 +84,15 @@ def parse_setting(text: str) -> "tuple[float, str, float]":
     if name == "MODE":
         by_name = {v: k for k, v in PLANE_MODES.items()}
         if raw.upper() in by_name:
-            return t, name, float(by_name[raw.upper()])
+            return ScheduledSetting(t, name, float(by_name[raw.upper()]))
         if raw.isdigit():
-            return t, name, float(int(raw))
+            return ScheduledSetting(t, name, float(int(raw)))
         raise UsageError(f"--set {text!r}: unknown mode {raw!r}; the vehicle takes GUIDED or AVOID_ADSB")
     try:
         value = float(raw)
     except ValueError:
         raise UsageError(f"--set {text!r}: VALUE must be a number, got {raw!r}") from None
-    return t, name, value
+    return ScheduledSetting(t, name, value)
 
 
 async def _amain(args) -> int:

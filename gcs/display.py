@@ -23,6 +23,8 @@ import time
 
 from daa_sil.daa.config import REGION_NAMES
 
+from .pilot import SettingSent
+
 _console = None
 #: a plain (not a TTY) status line is flushed when this many wall seconds passed since the last flush: a
 #: realtime run (one line a second) flushes each line as before, a lockstep run (hundreds of lines a
@@ -33,7 +35,8 @@ _last_flush = -math.inf
 
 
 def format_line(node, t: float, n_cmd: int) -> str:
-    """``t  own(track, alt, gs)  nearest intruder(range, dh)  authority/decision  commands`` as text."""
+    """``t  own(track, alt, gs)  nearest intruder(range, dh)  authority/decision  commands`` as text;
+    ``node``: the GCS's :class:`gcs.protocol.GcsProtocol` (its view and what it sent)."""
     v = node.view
     parts = [f"t={t:5.0f}s"]
     if v.own is not None:
@@ -55,10 +58,10 @@ def format_line(node, t: float, n_cmd: int) -> str:
         parts.append("(alert < 2: manoeuvre in progress or pilot's course unsafe)")
     if n_cmd and node.sent:
         c = node.sent[-1]
-        if c.get("kind") in ("param", "mode"):
-            parts.append(f"set {c['name']} {c['value']:g}")
+        if isinstance(c, SettingSent):
+            parts.append(f"set {c.name} {c.value:g}")
         else:
-            parts.append(f"sent #{c['seq']} {c['kind']} trk {c['track_deg']:.0f}")
+            parts.append(f"sent #{c.seq} {c.order.kind} trk {c.order.track_deg:.0f}")
     return "  ".join(parts)
 
 

@@ -64,7 +64,7 @@ async def test_lockstep_tick_commands_then_ack_and_repeated_tick(tmp_path):
         veh.send(M.MAVLink_sim_tick_message(3, 3000), gcs_addr)
         got = await _recv_until(veh, lambda m: m.get_type() == "SIM_TICK_ACK")
         assert got[-1].tick == 3 and not [m for m in got if m.get_type() == "PILOT_MANEUVER"]
-        assert node.steps == 5 and [c["seq"] for c in node.sent] == [1, 2]
+        assert node.steps == 5 and [c.seq for c in node.sent] == [1, 2]
     finally:
         node.stop.set()
         await asyncio.wait_for(task, 5.0)
@@ -75,69 +75,63 @@ async def test_lockstep_tick_commands_then_ack_and_repeated_tick(tmp_path):
     assert [(r["t"], r["seq"], r["kind"]) for r in rows] == [(2.0, 1, "scripted"), (3.0, 2, "scripted")]
 
 
-async def _gcs_with_fake_vehicle():
-    """A started lockstep GCS on loopback and a bare endpoint playing the vehicle."""
+VEHICLE = ("127.0.0.1", 14601)
+
+
+def _gcs_core():
+    """A lockstep GCS protocol core (no socket) taking the vehicle side at VEHICLE, and the vehicle's codec."""
+    from daa_sil.sil.intake import Intake
+    from gcs.pilot import make_pilot
+    from gcs.protocol import READ_IDS, GcsProtocol
+
     sc = parse_scenario(SCENARIO)
-    veh = await open_endpoint(MavCodec(1, 1), "udp:127.0.0.1:0")
-    node = GcsNode(sc, GcsOptions(vehicle=f"udp:127.0.0.1:{veh.local_address[1]}", listen="udp:127.0.0.1:0",
-                                  clock="lockstep", display=False))
-    await node.start()
-    return sc, veh, node
+    codec = MavCodec(255, 190, read_ids=READ_IDS)
+    intake = Intake(codec, peer=VEHICLE, learn_peer=False, allow_peers=[VEHICLE], allow_sysids=[1])
+    core = GcsProtocol(sc, GcsOptions(clock="lockstep", display=False), codec, intake, make_pilot(sc, "scripted", None))
+    return sc, core, MavCodec(1, 1)
 
 
-@pytest.mark.asyncio
-async def test_gcs_builds_what_the_pilot_sees_from_telemetry():
+def test_gcs_builds_what_the_pilot_sees_from_telemetry():
+    from gcs.pilot import observed
     from vehicle import telemetry as T
 
-    sc, veh, node = await _gcs_with_fake_vehicle()
-    try:
-        own = T.Kin(100.0, 2000.0, 1000.0, 55.0, math.radians(10.0), 1.5)
-        intr = T.Kin(-300.0, 6000.0, 1100.0, 60.0, math.radians(190.0), -2.0)
-        veh.send_many([T.local_position(7.0, own), T.adsb_vehicle(1000, "X", intr, sc.origin), T.alert_level(7.0, 2)],
-                      node.ep.local_address)
-        for _ in range(3):
-            node.handle(await node.ep.recv(5.0))
-        o, i = node.observed()
-        assert (o.x[0], o.y[0], o.z[0]) == pytest.approx((100.0, 2000.0, 1000.0), abs=1e-3)
-        assert (o.gs[0], math.degrees(o.trk[0]), o.vs[0]) == pytest.approx((55.0, 10.0, 1.5), abs=1e-4)
-        # ADS-B is quantised (degE7 ~ 1 cm, cm/s, centidegrees)
-        assert (i.x[0, 0], i.y[0, 0], i.z[0, 0]) == pytest.approx((-300.0, 6000.0, 1100.0), abs=0.05)
-        assert (i.gs[0, 0], math.degrees(i.trk[0, 0]), i.vs[0, 0]) == pytest.approx((60.0, 190.0, -2.0), abs=0.01)
-        assert node.view.alert == (7.0, 2)
-    finally:
-        node.close()
-        veh.close()
+    sc, core, veh = _gcs_core()
+    own = T.Kin(100.0, 2000.0, 1000.0, 55.0, math.radians(10.0), 1.5)
+    intr = T.Kin(-300.0, 6000.0, 1100.0, 60.0, math.radians(190.0), -2.0)
+    core.receive(veh.encode_many([T.local_position(7.0, own), T.adsb_vehicle(1000, "X", intr, sc.origin),
+                                  T.alert_level(7.0, 2)]), VEHICLE, 0.0)
+    o, i = observed(core.view, core.order)
+    assert (o.x[0], o.y[0], o.z[0]) == pytest.approx((100.0, 2000.0, 1000.0), abs=1e-3)
+    assert (o.gs[0], math.degrees(o.trk[0]), o.vs[0]) == pytest.approx((55.0, 10.0, 1.5), abs=1e-4)
+    # ADS-B is quantised (degE7 ~ 1 cm, cm/s, centidegrees)
+    assert (i.x[0, 0], i.y[0, 0], i.z[0, 0]) == pytest.approx((-300.0, 6000.0, 1100.0), abs=0.05)
+    assert (i.gs[0, 0], math.degrees(i.trk[0, 0]), i.vs[0, 0]) == pytest.approx((60.0, 190.0, -2.0), abs=0.01)
+    assert core.view.alert == (7.0, 2)
 
 
-@pytest.mark.asyncio
-async def test_gcs_ignores_non_finite_and_older_telemetry():
+def test_gcs_ignores_non_finite_and_older_telemetry():
     """A valid-CRC position with NaN fields, or an older datagram overtaking a newer one, must not
     replace what the pilot sees (nor the ADS-B and alert that ride with it); each is counted."""
+    from gcs.pilot import observed
     from vehicle import telemetry as T
 
-    sc, veh, node = await _gcs_with_fake_vehicle()
-    try:
-        own = T.Kin(100.0, 2000.0, 1000.0, 55.0, math.radians(10.0), 1.5)
-        intr = T.Kin(-300.0, 6000.0, 1100.0, 60.0, math.radians(190.0), -2.0)
-        old_own = T.Kin(0.0, 0.0, 900.0, 55.0, 0.0, 0.0)
-        old_intr = T.Kin(5000.0, 9000.0, 700.0, 60.0, 0.0, 0.0)
-        nan_pos = M.MAVLink_local_position_ned_message(9000, math.nan, 0.0, -1000.0, 55.0, 0.0, 0.0)
-        batches = [[T.local_position(7.0, own), T.adsb_vehicle(1000, "X", intr, sc.origin), T.alert_level(7.0, 2)],
-                   [T.local_position(5.0, old_own), T.adsb_vehicle(1000, "X", old_intr, sc.origin),
-                    T.alert_level(5.0, 0)],  # overtaken: older than t = 7 s
-                   [nan_pos]]
-        for b in batches:
-            veh.send_many(b, node.ep.local_address)
-            for _ in range(len(b)):
-                node.handle(await node.ep.recv(5.0))
-        o, i = node.observed()
-        assert (o.x[0], o.y[0], o.z[0]) == pytest.approx((100.0, 2000.0, 1000.0), abs=1e-3)
-        assert (i.x[0, 0], i.y[0, 0]) == pytest.approx((-300.0, 6000.0), abs=0.05)
-        assert node.view.alert == (7.0, 2) and node.view.last_t == 7.0
-        assert node.view.rejected == 4  # old position, its ADS-B, its alert, the NaN position
-    finally:
-        node.close()
-        veh.close()
+    sc, core, veh = _gcs_core()
+    own = T.Kin(100.0, 2000.0, 1000.0, 55.0, math.radians(10.0), 1.5)
+    intr = T.Kin(-300.0, 6000.0, 1100.0, 60.0, math.radians(190.0), -2.0)
+    old_own = T.Kin(0.0, 0.0, 900.0, 55.0, 0.0, 0.0)
+    old_intr = T.Kin(5000.0, 9000.0, 700.0, 60.0, 0.0, 0.0)
+    nan_pos = M.MAVLink_local_position_ned_message(9000, math.nan, 0.0, -1000.0, 55.0, 0.0, 0.0)
+    batches = [[T.local_position(7.0, own), T.adsb_vehicle(1000, "X", intr, sc.origin), T.alert_level(7.0, 2)],
+               [T.local_position(5.0, old_own), T.adsb_vehicle(1000, "X", old_intr, sc.origin),
+                T.alert_level(5.0, 0)],  # overtaken: older than t = 7 s
+               [nan_pos]]
+    for b in batches:
+        core.receive(veh.encode_many(b), VEHICLE, 0.0)
+    o, i = observed(core.view, core.order)
+    assert (o.x[0], o.y[0], o.z[0]) == pytest.approx((100.0, 2000.0, 1000.0), abs=1e-3)
+    assert (i.x[0, 0], i.y[0, 0]) == pytest.approx((-300.0, 6000.0), abs=0.05)
+    assert core.view.alert == (7.0, 2) and core.view.last_t == 7.0
+    assert core.view.rejected == 4  # old position, its ADS-B, its alert, the NaN position
 
 
 def test_view_takes_only_physical_telemetry():

@@ -89,7 +89,8 @@ def test_the_gcs_steps_its_pilot_model_through_the_ground_core(monkeypatch):
     monkeypatch.setattr(GroundCore, "step", lambda self, t, *a: calls.append((t, a[2].size)) or real(self, t, *a))
     node = GcsNode(load_scenario("scenarios/head_on.yaml"), GcsOptions(clock="lockstep", display=False))
     assert isinstance(node.ground, GroundCore)
-    assert node.pilot_commands(0.0) == []  # no telemetry yet: the pilot steps on an unknown state
+    assert node.protocol.pilot.orders(0.0, node.view, node.protocol.order) == []  # no telemetry yet: the pilot
+    # steps on an unknown state
     assert calls == [(0.0, 0)]
 
 

@@ -33,135 +33,16 @@ from __future__ import annotations
 
 import asyncio
 import math
-import struct
 
 import pytest
-from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from daa_sil.geometry.kinematics import state_in_bounds
-from daa_sil.link.codec import MavCodec, mavlink as M
-from daa_sil.steplog import cells_equal
-from hostile_helpers import (GCS_CANARY, INJECT_STEP, STEPS, TAP_CANARY, TAP_CANARY_US, VEHICLE_CANARY, msg_class, pack,
-                             play)
-
-NAN, INF = math.nan, math.inf
-FLOATS = (NAN, INF, -INF, 3.0e38, -3.0e38, 0.0, -0.0, -1.0, -1e6, 65535.0, 1e9)
-INTS = {"uint8_t": (0, 1, 200, 255), "int8_t": (-128, -1, 0, 127), "uint16_t": (0, 1, 54321, 65535),
-        "int16_t": (-32768, -1, 0, 32767), "uint32_t": (0, 1, 2**31, 2**32 - 1),
-        "int32_t": (-2**31, -1, 0, 2**31 - 1), "uint64_t": (0, 1, 2**63, 2**64 - 1),
-        "int64_t": (-2**63, -1, 0, 2**63 - 1)}
-TEXT = {"param_id": (b"DAA_WT", b"DAA_ENABLE", b"DAA_PROJL_S", b"DAA_STALE_S", b"DAA_LINK_TO", b"DAA_WAIT_MODE",
-                     b"DAA_PRESET", b"BOGUS", b""),
-        "name": (b"DAA_ALERT", b"OTHER"), "text": (b"x", b"DAA-SIL t=1s authority"), "callsign": (b"HEAD1", b"")}
-#: the COMMAND_LONG / COMMAND_INT commands the vehicle handles, and two it does not know
-COMMANDS = (M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_GET_HOME_POSITION, M.MAV_CMD_SET_MESSAGE_INTERVAL,
-            M.MAV_CMD_GET_MESSAGE_INTERVAL, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, M.MAV_CMD_COMPONENT_ARM_DISARM,
-            M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_DO_REPOSITION, 0, 65535)
-#: every message type the vehicle handles (docs/sil.md "Commands", vehicle/services.py), besides the commands
-VEHICLE_TYPES = ("HEARTBEAT", "SYSTEM_TIME", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET", "TIMESYNC", "PING",
-                 "REQUEST_DATA_STREAM", "MISSION_REQUEST_LIST", "FILE_TRANSFER_PROTOCOL", "SET_MODE", "PILOT_MANEUVER",
-                 "SET_POSITION_TARGET_GLOBAL_INT", "SIM_TICK", "SIM_TICK_ACK")
-#: every message type the GCS takes in (gcs/view.py; SIM_TICK drives its steps)
-GCS_TYPES = ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "ADSB_VEHICLE", "NAMED_VALUE_INT", "ALLOCATION_DECISION",
-             "DAA_BANDS", "COMMAND_ACK", "HEARTBEAT", "PARAM_VALUE", "STATUSTEXT")
-
-
-def _field_strategy(name: str, ctype: str, length: int):
-    if ctype == "char":
-        return st.sampled_from(TEXT.get(name, (b"x", b"")))
-    one = st.sampled_from(FLOATS) if ctype in ("float", "double") else st.sampled_from(INTS[ctype])
-    return st.lists(one, min_size=length, max_size=length) if length else one
-
-
-def message_strategy(mtype: str, command: "int | None" = None):
-    """``(mtype, {field: value})`` with every field drawn from the hostile pools (COMMAND_*: ``command`` fixed)."""
-    cls = msg_class(mtype)
-    lengths = dict(zip(cls.ordered_fieldnames, cls.array_lengths))
-    fields = {n: _field_strategy(n, t, lengths[n]) for n, t in zip(cls.fieldnames, cls.fieldtypes)}
-    if command is not None:
-        fields["command"] = st.just(command)
-    return st.fixed_dictionaries(fields).map(lambda f: (mtype, f))
-
-
-def datagram_strategy(types, commands=()):
-    """One message of each type (and one COMMAND_LONG and COMMAND_INT per command), fields drawn."""
-    parts = [message_strategy(t) for t in types]
-    parts += [message_strategy(kind, c) for c in commands for kind in ("COMMAND_LONG", "COMMAND_INT")]
-    return st.tuples(*parts)
-
-
-# -- the documented acceptance rules (the oracle for the GCS path) -------------------------------------
-def f32(x: float) -> float:
-    return struct.unpack("<f", struct.pack("<f", x))[0] if math.isfinite(x) else x
-
-
-WRITABLE = {"DAA_ENABLE": (0.0, 1.0, True), "DAA_WT": (0.0, 120.0, False), "DAA_PROJL_S": (0.0, 120.0, False),
-            "DAA_STALE_S": (1.0, 120.0, False), "DAA_LINK_TO": (1.0, 120.0, False)}  # docs/sil.md "Parameters"
-
-
-def _gate_ok(t_sent: float, trk: float, vs: float, gs: float) -> bool:
-    """The command gate (docs/sil.md "Commands"): send time not ahead of the vehicle (handled at
-    >= INJECT_STEP s, 2 s allowed), not all NaN, no infinity, track [0, 360], gs (0, 400], |vs| <= 60."""
-    vals = (trk, vs, gs)
-    return (t_sent <= INJECT_STEP + 2.0 and not all(math.isnan(v) for v in vals) and not any(math.isinf(v) for v in vals)
-            and (math.isnan(trk) or 0.0 <= trk <= 360.0) and (math.isnan(gs) or 0.0 < gs <= 400.0)
-            and (math.isnan(vs) or abs(vs) <= 60.0))
-
-
-PILOT_TYPES = ("PILOT_MANEUVER", "SET_POSITION_TARGET_GLOBAL_INT")
-#: REQUEST_DATA_STREAM groups and the messages the vehicle streams (docs/sil.md "Telemetry and rates")
-STREAM_GROUPS = (M.MAV_DATA_STREAM_ALL, M.MAV_DATA_STREAM_EXTENDED_STATUS, M.MAV_DATA_STREAM_POSITION,
-                 M.MAV_DATA_STREAM_EXTRA1, M.MAV_DATA_STREAM_EXTRA2, M.MAV_DATA_STREAM_EXTRA3)
-STREAMED = {M.MAVLINK_MSG_ID_HEARTBEAT, M.MAVLINK_MSG_ID_SYSTEM_TIME, M.MAVLINK_MSG_ID_SYS_STATUS,
-            M.MAVLINK_MSG_ID_GPS_RAW_INT, M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
-            M.MAVLINK_MSG_ID_ATTITUDE, M.MAVLINK_MSG_ID_VFR_HUD, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
-            M.MAVLINK_MSG_ID_POSITION_TARGET_GLOBAL_INT, M.MAVLINK_MSG_ID_HOME_POSITION,
-            M.MAVLINK_MSG_ID_ADSB_VEHICLE, M.MAVLINK_MSG_ID_NAMED_VALUE_INT, M.MAVLINK_MSG_ID_DAA_BANDS,
-            M.MAVLINK_MSG_ID_ALLOCATION_DECISION}
-
-
-def is_pilot_command(mtype: str, f: dict) -> bool:
-    return mtype in PILOT_TYPES or (mtype in ("COMMAND_LONG", "COMMAND_INT") and f["command"] == M.MAV_CMD_DO_REPOSITION)
-
-
-def accepted_by_the_rules(mtype: str, f: dict) -> bool:
-    """True if the vehicle must act on this message from the GCS link in a way that can change the step
-    log: a parameter it may set, a pilot command the gate takes, or a change of the GCS link's own
-    telemetry rates (the pilot then sees less, or more)."""
-    to_us = f.get("target_system") in (0, 1)
-    both = to_us and f.get("target_component") in (0, 1)
-    if mtype == "REQUEST_DATA_STREAM":
-        return both and f["req_stream_id"] in STREAM_GROUPS
-    if mtype == "COMMAND_LONG" and f["command"] == M.MAV_CMD_SET_MESSAGE_INTERVAL:
-        mid, iv = f32(f["param1"]), f32(f["param2"])
-        ok_iv = math.isfinite(iv) and (iv >= 0 or iv == -1) and iv <= 2**31 - 1
-        if mid == M.MAVLINK_MSG_ID_HEARTBEAT:
-            ok_iv = ok_iv and iv != -1 and iv <= 1e6 + 1
-        return both and mid in STREAMED and ok_iv
-    if mtype == "PARAM_SET":
-        name = f["param_id"].decode()
-        if not (to_us and f["target_component"] in (0, 1) and name in WRITABLE):
-            return False
-        lo, hi, integer = WRITABLE[name]
-        v = f32(f["param_value"])
-        return lo <= v <= hi and (not integer or v == round(v))
-    if mtype == "PILOT_MANEUVER":
-        return to_us and _gate_ok(f["time_boot_ms"] / 1000.0, f32(f["track_deg"]), f32(f["vs"]), f32(f["gs"]))
-    if mtype == "SET_POSITION_TARGET_GLOBAL_INT":
-        vn, ve, vd = f32(f["vx"]), f32(f["vy"]), f32(f["vz"])
-        if not (to_us and f["type_mask"] & 0b111000 == 0 and all(map(math.isfinite, (vn, ve, vd)))):
-            return False
-        gs = math.hypot(vn, ve)
-        trk = math.degrees(math.atan2(ve, vn)) % 360.0 if gs > 0.5 else NAN
-        return _gate_ok(f["time_boot_ms"] / 1000.0, trk, -vd, gs if gs > 0.5 else NAN)
-    if mtype in ("COMMAND_LONG", "COMMAND_INT") and f["command"] == M.MAV_CMD_DO_REPOSITION:
-        lat, lon = (f["x"] / 1e7, f["y"] / 1e7) if mtype == "COMMAND_INT" else (f32(f["param5"]), f32(f["param6"]))
-        gs = f32(f["param1"])
-        gs = gs if math.isfinite(gs) and gs > 0 else NAN  # the point is >= 100 km from the aircraft: a bearing
-        return to_us and -90 <= lat <= 90 and -180 <= lon <= 180 and _gate_ok(0.0, 0.0, NAN, gs)
-    return False  # reads, modes, time stamps, heartbeats, ticks: nothing the agent flies by
-
+from daa_sil.link.codec import MavCodec
+from hostile_helpers import (COMMANDS, GCS_CANARY, GCS_TYPES, STEPS, TAP_CANARY, TAP_CANARY_US, VEHICLE_CANARY,
+                             VEHICLE_TYPES, accepted_by_the_rules, datagram_strategy, hostile_settings,
+                             is_pilot_command, pack, play, same_rows)
 
 _REFERENCES: dict = {}
 
@@ -176,13 +57,6 @@ def reference(clock: str, gcs_packets: "tuple | None" = None) -> dict:
                 gcs.ep.transport.sendto(b"".join(gcs_packets) + GCS_CANARY, shim.gcs_side)
         _REFERENCES[key] = asyncio.run(play(clock, inject))
     return _REFERENCES[key]
-
-
-def _same_rows(a: list, b: list) -> "list":
-    """(t, column) of every step-log cell that differs (empty = identical)."""
-    if len(a) != len(b):
-        return [("rows", len(a), len(b))]
-    return [(ra["t"], k) for ra, rb in zip(a, b) for k in ra if not cells_equal(ra[k], rb[k])]
 
 
 def _lockstep_timing(run: dict) -> bool:
@@ -274,7 +148,7 @@ def _compare(clock: str, run: dict, ref: dict) -> None:
     if clock == "realtime" and not (_lockstep_timing(run) and _lockstep_timing(ref)):
         COMPARED["realtime_timing_off"] += 1
         return
-    diff = _same_rows(run["rows"], ref["rows"])
+    diff = same_rows(run["rows"], ref["rows"])
     assert not diff, f"step log differs from the clean run at {diff[:8]}"
     COMPARED[clock] += 1
 
@@ -283,36 +157,31 @@ VEHICLE_DATAGRAM = datagram_strategy(VEHICLE_TYPES, COMMANDS)
 GCS_DATAGRAM = datagram_strategy(GCS_TYPES + ("SIM_TICK",))
 
 
-def _settings(n: int):
-    return settings(max_examples=n, deadline=None, derandomize=True, database=None, phases=[Phase.generate],
-                    suppress_health_check=list(HealthCheck))
-
-
 @pytest.fixture(scope="module", autouse=True)
 def _report():
     yield
     print(f"\nhostile-message runs compared with their reference: {COMPARED}")
 
 
-@_settings(4)
+@hostile_settings(4)
 @given(msgs=VEHICLE_DATAGRAM)
 def test_hostile_messages_from_the_tap_lockstep(msgs):
     check_from_tap("lockstep", msgs)
 
 
-@_settings(4)
+@hostile_settings(4)
 @given(msgs=VEHICLE_DATAGRAM)
 def test_hostile_messages_from_the_gcs_peer_lockstep(msgs):
     check_from_gcs("lockstep", msgs)
 
 
-@_settings(2)
+@hostile_settings(2)
 @given(msgs=GCS_DATAGRAM)
 def test_hostile_messages_from_the_vehicle_peer_lockstep(msgs):
     check_from_vehicle("lockstep", msgs)
 
 
-@_settings(1)
+@hostile_settings(1)
 @given(msgs=VEHICLE_DATAGRAM)
 def test_hostile_messages_from_the_tap_and_gcs_realtime(msgs):
     check_from_tap("realtime", msgs)
@@ -320,14 +189,14 @@ def test_hostile_messages_from_the_tap_and_gcs_realtime(msgs):
 
 
 @pytest.mark.slow
-@_settings(40)
+@hostile_settings(40)
 @given(msgs=VEHICLE_DATAGRAM, source=st.sampled_from(("tap", "gcs")))
 def test_hostile_messages_lockstep_broad(msgs, source):
     (check_from_tap if source == "tap" else check_from_gcs)("lockstep", msgs)
 
 
 @pytest.mark.slow
-@_settings(15)
+@hostile_settings(15)
 @given(msgs=GCS_DATAGRAM)
 def test_hostile_messages_from_the_vehicle_peer_broad(msgs):
     check_from_vehicle("lockstep", msgs)
@@ -335,7 +204,7 @@ def test_hostile_messages_from_the_vehicle_peer_broad(msgs):
 
 
 @pytest.mark.slow
-@_settings(8)
+@hostile_settings(8)
 @given(msgs=VEHICLE_DATAGRAM, source=st.sampled_from(("tap", "gcs")))
 def test_hostile_messages_realtime_broad(msgs, source):
     (check_from_tap if source == "tap" else check_from_gcs)("realtime", msgs)

@@ -63,10 +63,10 @@ def test_a_vehicle_handler_that_raises_loses_only_its_message(clock, monkeypatch
 
     real_read = GcsServices.read
 
-    def read(self, msg, link):
+    def read(self, msg, *args):
         if msg.get_type() == "PING":
             raise ValueError("boom in PING")
-        return real_read(self, msg, link)
+        return real_read(self, msg, *args)
 
     monkeypatch.setattr(GcsServices, "read", read)
     ping = pack("PING", {"time_usec": 1, "seq": 1, "target_system": 0, "target_component": 0}, 255, 190)

@@ -300,45 +300,40 @@ def _highest_region(regions: list) -> str:
 # ------------------------------------------------------------------------------------------------
 # §15: the display line, the progress line, the summary (units)
 
-@pytest.mark.asyncio
-async def test_display_shows_the_onboard_alert_not_the_band_region():
+def test_display_shows_the_onboard_alert_not_the_band_region():
     """A vehicle at alert 1 with no band painted (and authority daa): the line said ``alert 0`` (it
     showed the highest band region); now ``alert 1 bands none`` plus why the agent keeps control."""
     from daa_sil.link.codec import MavCodec
-    from daa_sil.sil.endpoint import open_endpoint
+    from daa_sil.sil.intake import Intake
     from daa_sil.sil.scenario import load_scenario
     from gcs.display import format_line
-    from gcs.node import GcsNode, GcsOptions
+    from gcs.pilot import make_pilot
+    from gcs.protocol import READ_IDS, GcsOptions, GcsProtocol
     from vehicle import telemetry as T
 
     sc = load_scenario(HEAD_ON)
-    veh = await open_endpoint(MavCodec(1, 1), "udp:127.0.0.1:0")
-    node = GcsNode(sc, GcsOptions(vehicle=f"udp:127.0.0.1:{veh.local_address[1]}", listen="udp:127.0.0.1:0",
-                                  clock="lockstep", display=False))
-    await node.start()
-    try:
-        own = T.Kin(0.0, 2000.0, 1000.0, 55.0, 0.0, 0.0)
-        intr = T.Kin(150.0, 9000.0, 1000.0, 60.0, math.pi, 0.0)
+    vehicle, veh = ("127.0.0.1", 14601), MavCodec(1, 1)
+    codec = MavCodec(255, 190, read_ids=READ_IDS)
+    core = GcsProtocol(sc, GcsOptions(clock="lockstep", display=False), codec,
+                       Intake(codec, peer=vehicle, allow_peers=[vehicle], allow_sysids=[1]),
+                       make_pilot(sc, "scripted", None))
+    own = T.Kin(0.0, 2000.0, 1000.0, 55.0, 0.0, 0.0)
+    intr = T.Kin(150.0, 9000.0, 1000.0, 60.0, math.pi, 0.0)
 
-        async def step(t, level, region, authority, decision):
-            msgs = [T.local_position(t, own), T.adsb_vehicle(1000, "HEAD1", intr, sc.origin), T.alert_level(t, level),
-                    *T.track_bands(t, [0.0], [360.0], [region]),
-                    T.allocation_decision(t, {"authority": authority, "decision": decision}, 0, math.nan)]
-            veh.send_many(msgs, node.ep.local_address)
-            for _ in msgs:
-                node.handle(await node.ep.recv(5.0))
-            return format_line(node, t + 4.0, 0)
+    def step(t, level, region, authority, decision):
+        msgs = [T.local_position(t, own), T.adsb_vehicle(1000, "HEAD1", intr, sc.origin), T.alert_level(t, level),
+                *T.track_bands(t, [0.0], [360.0], [region]),
+                T.allocation_decision(t, {"authority": authority, "decision": decision}, 0, math.nan)]
+        core.receive(veh.encode_many(msgs), vehicle, 0.0)
+        return format_line(core, t + 4.0, 0)
 
-        quiet = await step(57.0, 1, "none", "daa", "blend")
-        assert re.search(r"  alert 1 bands none  \S+ daa/blend  \(alert < 2: manoeuvre in progress or pilot's "
-                         r"course unsafe\)$", quiet), quiet
-        loud = await step(58.0, 2, "mid", "daa", "blend")
-        assert re.search(r"  alert 2 bands mid  \S+ daa/blend$", loud), loud
-        calm = await step(59.0, 0, "none", "pilot", "none")
-        assert re.search(r"  alert 0 bands none  \S+ pilot/none$", calm), calm
-    finally:
-        node.close()
-        veh.close()
+    quiet = step(57.0, 1, "none", "daa", "blend")
+    assert re.search(r"  alert 1 bands none  \S+ daa/blend  \(alert < 2: manoeuvre in progress or pilot's "
+                     r"course unsafe\)$", quiet), quiet
+    loud = step(58.0, 2, "mid", "daa", "blend")
+    assert re.search(r"  alert 2 bands mid  \S+ daa/blend$", loud), loud
+    calm = step(59.0, 0, "none", "pilot", "none")
+    assert re.search(r"  alert 0 bands none  \S+ pilot/none$", calm), calm
 
 
 def test_progress_line_rate_and_text():

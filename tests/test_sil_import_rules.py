@@ -3,8 +3,8 @@
 * the GCS imports nothing from the vehicle (what both ends share lives in ``daa_sil.link``);
 * ``daa_sil.sil``, ``vehicle`` and ``gcs`` import nothing from ``daa_sil.study`` (seed streams live
   in ``daa_sil.models.streams``);
-* the SIL's protocol modules are sans-IO: ``daa_sil.sil.shim_core``, ``daa_sil.sil.lockstep`` and
-  ``daa_sil.sil.silence`` import no ``asyncio``, ``socket``, ``selectors`` nor the shim's socket side;
+* the SIL's protocol modules are sans-IO: the shim's, the vehicle's and the GCS's protocol cores
+  (:data:`SANS_IO`) import no ``asyncio``, ``socket``, ``selectors``, no endpoint nor the shim's socket side;
 * the shim's socket module does not import the shim (no circle, not even for a type).
 
 Every ``import`` statement is read with :mod:`ast` (module level and inside functions, under
@@ -19,7 +19,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SANS_IO = ("daa_sil.sil.shim_core", "daa_sil.sil.lockstep", "daa_sil.sil.silence")
+SANS_IO = ("daa_sil.sil.shim_core", "daa_sil.sil.lockstep", "daa_sil.sil.silence", "daa_sil.sil.intake",
+           "vehicle.protocol", "vehicle.tick_rules", "vehicle.services", "gcs.protocol", "gcs.pilot", "gcs.view")
 IO_MODULES = ("asyncio", "socket", "selectors", "daa_sil.sil.shim", "daa_sil.sil.shim_socket",
               "daa_sil.sil.endpoint", "daa_sil.sil.rtclock")
 

@@ -116,7 +116,7 @@ def test_each_output_has_its_own_rates_and_is_read_only_unless_marked(capfd):
             first.send(M.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3), ("127.0.0.1", din))
             await _until(lambda: first.of("GLOBAL_POSITION_INT"), (first,), "the udpin output streaming")
             second.send(M.MAVLink_param_request_list_message(1, 1), ("127.0.0.1", din))
-            await _until(lambda: veh.outputs[3].ep.counters.datagrams_rejected_peer == 1, (first, second),
+            await _until(lambda: veh.outputs[3].intake.counters.datagrams_rejected_peer == 1, (first, second),
                          "the second sender dropped")
             assert not second.of("PARAM_VALUE")
             return veh, [(e.link, e.name, e.status) for e in veh.services.events]

@@ -135,6 +135,23 @@ class VehicleCore:
         self.icao = [i.id for i in sc.intruders]
         self.callsigns = [i.callsign for i in sc.intruders]
 
+    # -- what the protocol reads and writes (:class:`vehicle.services.Plant`) -----------------------
+    def set_policy(self, policy) -> None:
+        """Swap the agent's AllocationPolicy (at a step boundary: it holds from this step)."""
+        self.core.policy = policy
+        self.policy = policy
+
+    def mode(self) -> int:
+        """The ArduPlane mode the vehicle shows now (:func:`vehicle.identity.mode_of` of the last authority)."""
+        from .identity import mode_of
+
+        return mode_of(self.last_authority, bool(self.core.policy.enabled))
+
+    def own_position(self) -> "tuple[float, float, float]":
+        """The ownship's position now (ENU m)."""
+        o = self.core.own
+        return float(o.x[0]), float(o.y[0]), float(o.z[0])
+
     # -- inputs -----------------------------------------------------------------------------------
     def note_gcs_data(self, t: float) -> None:
         """A data packet (not lockstep control) from the GCS arrived at vehicle sim time ``t`` (s)."""

@@ -1,60 +1,55 @@
-"""The asyncio vehicle node: one :class:`daa_sil.onboard.OnboardCore` (N = 1) behind a MAVLink endpoint.
+"""The asyncio vehicle node: sockets, timers and the loop around a :class:`vehicle.protocol.VehicleProtocol`.
 
-Per step ``k`` (``t_k = k`` s, ``docs/architecture.md`` "The step order") the node's
-:class:`vehicle.ticks.VehicleClock` sends ``SIM_TICK(k, t_k)`` and waits until the step may run:
-lockstep on the shim's echo (the GCS's ack for tick 0 and the last one), realtime by the wall clock
-with the echo as confirmation (its module docstring has the rules).
-Then ``OnboardCore.step(t_k, pilot input)`` decides, the telemetry for ``t_k`` is published (one
-datagram to the peer, and the same undelayed to the observer ``tap`` if set), a step-log row is
-kept (and, with ``live``, sent at once to the Rerun recorder's loopback feed, fire-and-forget:
-:class:`daa_sil.sil.live.LiveSender`), and truth advances. The step log is written atomically at the end, on Ctrl-C and on
-SIGTERM (:meth:`VehicleNode.write_steplog`).
+Per step ``k`` (``t_k = k`` s, ``docs/architecture.md`` "The step order") the node sends
+``SIM_TICK(k, t_k)`` and waits until the step may run -- lockstep on the shim's echo (the GCS's ack
+for tick 0 and the last one), realtime by the wall clock with the echo as confirmation; the rules
+(when to send again, when to give up, who is silent) are :class:`vehicle.tick_rules.TickRules`.
+Then ``OnboardCore.step(t_k, pilot input)`` decides (:class:`vehicle.core.VehicleCore`), the
+telemetry for ``t_k`` is published, a step-log row is kept (and, with ``live``, sent at once to
+the Rerun recorder's loopback feed, fire-and-forget: :class:`daa_sil.sil.live.LiveSender`), and
+truth advances. The step log is written atomically at the end, on Ctrl-C and on SIGTERM
+(:meth:`VehicleNode.write_steplog`).
+
+Everything a message does -- parameters, modes, rates, the command gate, acks, the tick protocol --
+is the protocol core's (:mod:`vehicle.protocol`); this module moves bytes and time only: each
+datagram goes to :meth:`VehicleProtocol.receive` as it arrives, the core's sends go out, its
+console lines are printed.
 
 Outputs (:mod:`daa_sil.sil.outputs`): the first ``--out`` is the pilot's link (``gcs``); further
 ``--out`` and ``--tap`` are observers with their own stream rates, read-only unless marked writable.
-
-Hostile input: the endpoint/codec count and drop malformed, forged and replayed packets; every
-message's handling runs under the endpoint's :class:`daa_sil.sil.msgguard.MessageGuard`, so one
-that raises is counted as malformed and the rest of its datagram is still handled; the
-:class:`~vehicle.commands.CommandGate` drops duplicate, older, future-stamped and invalid pilot
-commands; pilot commands from an observer are ignored. Link liveness for the agent counts only
-**data** from the GCS (HEARTBEAT, commands), never the lockstep control messages, which bypass the
-delay line.
 """
 
 from __future__ import annotations
 
 import asyncio
+import sys
 import time
-from functools import partial
 from pathlib import Path
 
 from daa_sil.link.codec import MavCodec
-from daa_sil.link.codec import mavlink as M
 from daa_sil.sil.connstr import LISTEN, parse_connection
-from daa_sil.sil.endpoint import MavEndpoint, Received, format_udp_address, open_endpoint
+from daa_sil.sil.endpoint import MavEndpoint, format_udp_address, open_endpoint
 from daa_sil.sil.msgguard import MessageGuard
-from daa_sil.sil.outputs import PILOT_LINK, Output, output_specs
+from daa_sil.sil.outputs import output_specs
 
-from . import telemetry as T
-from .commands import CommandGate, reposition_command, setpoint_command
 from .core import VehicleCore
-from .params import ParamTable
-from .services import GcsServices
-from .streams import STREAMED
-from daa_sil.sil.lockstep import TickPeer
-from vehicle.ticks import VehicleClock
-from vehicle.node_steplog import StepTiming, steplog_meta
-from vehicle.node_options import VehicleOptions, VehicleStats
+from .node_options import VehicleOptions, VehicleStats
+from .node_steplog import StepTiming, steplog_meta
+from .protocol import MAIN, VEHICLE_COMPID, VEHICLE_SYSID, OutputLink, VehicleProtocol
+from .tick_rules import TickOptions
 
-VEHICLE_SYSID, VEHICLE_COMPID = 1, 1
-PILOT_MANEUVER_ID = M.MAVLINK_MSG_ID_PILOT_MANEUVER
+__all__ = ["VehicleNode", "VehicleOptions", "VEHICLE_SYSID", "VEHICLE_COMPID"]
+
+
+def say(text: str) -> None:
+    """One ``daa-vehicle:`` line on stderr."""
+    print(f"daa-vehicle: {text}", file=sys.stderr, flush=True)
 
 
 class VehicleNode:
-    """The vehicle process logic around a :class:`vehicle.core.VehicleCore`.
+    """The vehicle process around a :class:`vehicle.protocol.VehicleProtocol`.
 
-    ``await node.start()`` binds the socket; ``await node.run()`` plays every step;
+    ``await node.start()`` binds the sockets; ``await node.run()`` plays every step;
     ``node.write_steplog()`` writes what was simulated so far (safe to call more than once).
     """
 
@@ -66,109 +61,107 @@ class VehicleNode:
         self.out = self.specs[0].conn
         self.listen = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))
         self.codec = MavCodec(VEHICLE_SYSID, VEHICLE_COMPID, key=opts.key, allow_unsigned=())
-        self.ep: "MavEndpoint | None" = None  #: the main socket (the pilot's link, fixed observers)
-        self.outputs: "list[Output]" = []  #: filled by :meth:`start`; outputs[0] is the pilot's link
-        #: every received message's handling runs under it (all endpoints share it)
+        #: every received message's handling runs under it (all sockets share it)
         self.guard = MessageGuard("daa-vehicle")
-        self.gate = CommandGate()
-        self.stats = VehicleStats()
-        self.k = 0
-        self.t = 0.0
-        self.authority = "pilot"
-        #: the tick protocol (:class:`daa_sil.sil.lockstep.TickPeer`) and the waiting on it
-        self.clock = VehicleClock(TickPeer("vehicle", self.codec), opts, self.core.dt, self.stats, self.out.text,
-                                  ep=lambda: self.ep, dest=lambda: self.peer, take=self.take, drain=self._drain,
-                                  check_stop=self._check_stop)
+        ticks = TickOptions(opts.clock, opts.speed, opts.tick_timeout_s, opts.tick_retry_s, opts.start_timeout_s,
+                            opts.tick_sync)
+        #: the protocol: parameters, modes, rates, the command gate, acks, the tick protocol
+        self.protocol = VehicleProtocol(self.core, self.specs, self.listen.addr, self.codec, ticks, guard=self.guard,
+                                        out_text=self.out.text)
+        self.eps: "list[MavEndpoint]" = []  #: one socket per protocol port (filled by :meth:`start`)
         #: set by :meth:`request_stop` (SIGINT / SIGTERM): the loop stops at the next step or wait even if
         #: the task's cancellation was lost (Python 3.11's ``asyncio.wait_for`` can swallow a cancel that
         #: arrives together with the awaited message)
         self.stop_requested = False
         self.timing = StepTiming()  #: realtime: per-step lateness and readiness (ms)
-        self._step_t, self._step_wall = 0.0, None  # sim and monotonic time of the last publish
-        self._stamp = None  # (addr, datagram time, t_sent) of the GCS's last SYSTEM_TIME
-        self.home: "T.Kin | None" = None
-        self.latest: dict = {}
-        self.services = GcsServices(ParamTable(scenario.thresholds), lambda: self.core.core.policy, self._set_policy,
-                                    lambda: self.latest, self.sim_now, dt=self.core.dt,
-                                    writable=frozenset(s.name for s in self.specs if s.writable or s.name == PILOT_LINK),
-                                    step_t=lambda: self.t, current_mode=self._mode_now)
+        self.wall0 = 0.0  #: loop time of step 0's deadline (realtime)
+        self._wake: "asyncio.Event | None" = None
         self.live = None
         if opts.live:
             from daa_sil.sil.live import LiveSender
 
             self.live = LiveSender(opts.live)
 
+    # -- the protocol's state, by the names the CLI and the tests read ---------------------------
+    @property
+    def stats(self) -> VehicleStats:
+        return self.protocol.stats
+
+    @property
+    def gate(self):
+        return self.protocol.gate
+
+    @property
+    def services(self):
+        return self.protocol.services
+
+    @property
+    def outputs(self) -> "list[OutputLink]":
+        return self.protocol.outputs
+
+    @property
+    def k(self) -> int:
+        return self.protocol.k
+
+    @property
+    def t(self) -> float:
+        return self.protocol.t
+
+    @property
+    def ep(self) -> "MavEndpoint | None":
+        """The main socket (the pilot's link, fixed observers)."""
+        return self.eps[MAIN] if self.eps else None
+
     @property
     def peer(self):
         """The pilot's link (the first ``--out``): fixed, or with ``udpin:`` the first address that sent a good
-        message; None before that (or before :meth:`start`)."""
-        return self.outputs[0].addr if self.outputs else None
-
-    def _mode_now(self) -> int:
-        from .identity import mode_of
-
-        return mode_of(self.core.last_authority, bool(self.core.core.policy.enabled))
-
-    def _set_policy(self, policy) -> None:
-        """Swap the onboard core's AllocationPolicy (called at a step boundary: it holds from this step)."""
-        self.core.core.policy = policy
-        self.core.policy = policy
-
-    def sim_now(self) -> float:
-        """Vehicle sim time now (s): lockstep the current step; realtime the last published step plus the
-        wall time since x speed."""
-        return self._sim_time_of(time.monotonic())
-
-    def _sim_time_of(self, wall: float) -> float:
-        """Sim time (s) of monotonic instant ``wall`` (e.g. a datagram's arrival)."""
-        if self.opts.clock == "lockstep" or self._step_wall is None:
-            return self.t
-        return self._step_t + max(0.0, wall - self._step_wall) * self.opts.speed
-
-    # -- lifecycle -------------------------------------------------------------------------------
-    async def start(self) -> None:
-        """Bind the sockets: the main one (``--listen``, or the first ``--out`` if it is ``udpin:``) and one
-        per further ``udpin:`` output.
-
-        Only datagrams from the outputs' exact ``(host, port)`` are accepted (a ``udpin:`` output: its
-        first sender); anything else (another port claiming the GCS's system id, an early copy of a
-        genuine packet, ...) is counted, reported and dropped by the endpoint without touching the
-        signing state.
-        """
-        primary, rest = self.specs[0], self.specs[1:]
-        fixed = [s.addr for s in rest if not s.listens]
-        common = dict(name="daa-vehicle", guard=self.guard)
-        if primary.listens:  # --out udpin:HOST:PORT: listen there, answer the first GCS that sends
-            self.ep = await open_endpoint(self.codec, primary.addr, peer=None, learn_peer=True, lock_peer=True,
-                                          allow_peers=fixed, peer_label="--out udpin: the first GCS that sent",
-                                          drop_hint="the vehicle answers only the first GCS that sent to "
-                                                    f"{primary.conn.text}", **common)
-        else:
-            self.ep = await open_endpoint(self.codec, self.listen.addr, peer=primary.addr, learn_peer=False,
-                                          allow_peers=[primary.addr] + fixed, peer_label="--out / --tap",
-                                          drop_hint="if that is your GCS or shim, give its address as --out "
-                                                    "(commands are taken only from the first --out)", **common)
-        self.outputs = [Output(primary, self.ep)]
-        for s in rest:
-            ep = self.ep
-            if s.listens:
-                ep = await open_endpoint(self.codec, s.addr, peer=None, learn_peer=True, lock_peer=True,
-                                         peer_label=f"{s.name}: the first sender",
-                                         drop_hint=f"{s.name} ({s.conn.text}) answers only its first sender", **common)
-            self.outputs.append(Output(s, ep))
-        if self.opts.clock != "lockstep":  # realtime: reads are answered the moment they arrive
-            for ep in self.endpoints:
-                ep.on_message = partial(self._on_message, ep=ep)
-
-    def dropped(self) -> int:
-        """Messages dropped on every socket: codec rejections, unexpected peers, overflow, malformed content."""
-        return sum(ep.stats()["dropped"] - ep.guard.total for ep in self.endpoints) + self.guard.total
+        message; None before that."""
+        return self.protocol.outputs[0].addr
 
     @property
     def endpoints(self) -> "list[MavEndpoint]":
         """Every socket of the vehicle, the main one first."""
-        eps = [self.ep] if self.ep is not None else []
-        return eps + [o.ep for o in self.outputs if o.ep is not self.ep]
+        return list(self.eps)
+
+    def sim_now(self) -> float:
+        """Vehicle sim time now (s)."""
+        return self.protocol.sim_time_of(time.monotonic())
+
+    # -- lifecycle -------------------------------------------------------------------------------
+    async def start(self) -> None:
+        """Bind one socket per protocol port: the main one (``--listen``, or the first ``--out`` if it is
+        ``udpin:``) and one per further ``udpin:`` output."""
+        self._wake = asyncio.Event()
+        for i, port in enumerate(self.protocol.ports):
+            ep = await open_endpoint(self.codec, port.bind, intake=port.intake,
+                                     on_datagram=lambda data, addr, now, i=i: self._on_datagram(i, data, addr, now))
+            self.eps.append(ep)
+
+    def _on_datagram(self, port: int, data: bytes, addr, now: float) -> None:
+        self.protocol.receive(port, data, addr, now)
+        self.flush()
+        self._wake.set()
+
+    def flush(self) -> None:
+        """Send what the protocol has to send and print its lines."""
+        p = self.protocol
+        for s in p.take_sends():
+            ep = self.eps[s.port] if s.port < len(self.eps) else None
+            if ep is None or ep.transport is None or ep.transport.is_closing():
+                continue
+            if s.counted:
+                ep.send_datagram(s.data, s.addr, s.messages)
+            else:
+                ep.transport.sendto(s.data, s.addr)
+        for n in p.take_notices():
+            if n.stream == "stdout":
+                print(n.text, flush=True)
+            else:
+                say(n.text)
+
+    def dropped(self) -> int:
+        """Messages dropped on every socket: codec rejections, unexpected peers, overflow, malformed content."""
+        return self.protocol.dropped()
 
     def request_stop(self) -> None:
         """Stop playing: :meth:`run` raises ``asyncio.CancelledError`` at its next step or wait."""
@@ -183,188 +176,142 @@ class VehicleNode:
         return format_udp_address(self.ep.local_address)
 
     def close(self) -> None:
-        for ep in self.endpoints:
+        for ep in self.eps:
             ep.close()
         if self.live is not None:
             self.live.close()
 
-    # -- receiving -------------------------------------------------------------------------------
-    def _link_of(self, addr, ep=None) -> "str | None":
-        """The name of the output ``addr`` is on (``gcs``, ``tap``, ``out2``, ...) for a datagram that came in on
-        ``ep`` (default: the main socket), or None (someone else)."""
-        ep, a = ep or self.ep, tuple(addr)
-        for o in self.outputs:
-            if o.ep is ep and o.addr is not None and tuple(o.addr) == a:
-                return o.name
-        return None
-
-    def _on_message(self, r: Received, ep=None) -> None:
-        """Realtime: answer reads (parameters, requests, TIMESYNC, ...) the moment they arrive."""
-        msg = r.msg
-        if msg.get_srcSystem() == VEHICLE_SYSID or not GcsServices.is_read(msg):
-            return
-        link = self._link_of(r.addr, ep)
-        if link is not None:
-            self._reply(self.services.read(msg, link), r.addr, ep=ep)
-
-    def _reply(self, msgs: list, addr, count: bool = True, ep=None) -> None:
-        if msgs:
-            (ep or self.ep).send_many(msgs, addr)
-            self.stats.gcs_requests_answered += int(count)
-
-    def take(self, r: Received, ep=None) -> None:
-        """:meth:`handle` ``r`` under the guard: if it raises, ``r`` counts as malformed (warned, with counts)
-        and nothing else is lost."""
-        self.guard.run(partial(self.handle, ep=ep), r)
-
-    def handle(self, r: Received, ep=None) -> None:
-        """Process one good message (commands, settings, stock-GCS requests, acks) that came in on ``ep``
-        (default: the main socket). Run it through :meth:`take`: content it did not foresee may raise."""
-        msg = r.msg
-        mtype = msg.get_type()
-        link = self._link_of(r.addr, ep)
-        if mtype == "SIM_TICK_ACK":
-            if link == PILOT_LINK:
-                self.clock.answered("gcs", int(msg.tick), self.t)
-            return
-        if mtype == "SIM_TICK" and msg.get_srcSystem() == VEHICLE_SYSID and link == PILOT_LINK:
-            self.stats.tick_echoes += 1  # our own tick, echoed by the shim (one we never sent changes nothing)
-            self.clock.answered("shim", int(msg.tick), self.t)
-            return
-        if msg.get_srcSystem() == VEHICLE_SYSID:
-            self.stats.foreign_messages_ignored += 1  # our own sysid echoed back / spoofed
-            return
-        if link is None:
-            self.stats.other_address_ignored += 1
-            return
-        observer = link != PILOT_LINK
-        if not observer:
-            self.core.note_gcs_data(self.t)
-        if mtype == "SYSTEM_TIME":  # a GCS's send-time stamp for the settings in the same datagram
-            self._stamp = (tuple(r.addr), r.t, msg.time_boot_ms / 1000.0)
-            return
-        if GcsServices.is_read(msg):
-            if self.opts.clock == "lockstep":  # realtime: answered on arrival (_on_message)
-                self._reply(self.services.read(msg, link), r.addr, ep=ep)
-            return
-        if GcsServices.is_write(msg):
-            stamp = self._stamp
-            t_sent = stamp[2] if stamp is not None and stamp[0] == tuple(r.addr) and stamp[1] == r.t else None
-            n0 = len(self.services.events)
-            self._reply(self.services.write(msg, link, self._sim_time_of(r.t), t_sent), r.addr, ep=ep)
-            for ev in self.services.events[n0:]:
-                self._announce(ev)
-            return
-        if mtype in ("PILOT_MANEUVER", "SET_POSITION_TARGET_GLOBAL_INT") or (
-                mtype in ("COMMAND_INT", "COMMAND_LONG") and int(msg.command) == M.MAV_CMD_DO_REPOSITION):
-            if observer:  # a command must cross the delayed link: only the first --out flies
-                self.stats.commands_from_observers_ignored += 1
-                if mtype.startswith("COMMAND"):
-                    self._reply([M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_DENIED, 0, 0,
-                                                               msg.get_srcSystem(), msg.get_srcComponent())],
-                                r.addr, ep=ep)
-                return
-            self._pilot_command(msg, r)
-
-    def _pilot_command(self, msg, r: Received) -> None:
-        mtype = msg.get_type()
-        is_cmd = mtype.startswith("COMMAND")
-        if is_cmd:
-            if msg.target_system not in (0, VEHICLE_SYSID):
-                return
-            o = self.core.core.own
-            cmd = reposition_command(msg, (float(o.x[0]), float(o.y[0]), float(o.z[0])), self.sc.origin,
-                                     self._sim_time_of(r.t), msg.get_seq())
-        else:
-            cmd = setpoint_command(msg, VEHICLE_SYSID)
-        if cmd is None or isinstance(cmd, str):
-            self.gate.counters.invalid += 1
-            if is_cmd:
-                self._reply([M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_DENIED, 0, 0, msg.get_srcSystem(),
-                                                           msg.get_srcComponent()),
-                             T.statustext(str(cmd)[:50] if cmd else "DO_REPOSITION: invalid")], r.addr)
-            return
-        ok = self.gate.offer(cmd, self.t)
-        if ok:
-            self.core.add_command(cmd)
-        if cmd.kind == "PILOT_MANEUVER" and ok:  # our dialect acknowledges with its cmd_seq
-            self._reply([T.command_ack(PILOT_MANEUVER_ID, M.MAV_RESULT_ACCEPTED, cmd.seq, msg.get_srcSystem(),
-                                       msg.get_srcComponent())], r.addr, count=False)
-        elif is_cmd:
-            self._reply([M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_ACCEPTED if ok else M.MAV_RESULT_DENIED,
-                                                       0, 0, msg.get_srcSystem(), msg.get_srcComponent())], r.addr)
-        # SET_POSITION_TARGET_GLOBAL_INT: no COMMAND_ACK (not a command); POSITION_TARGET_GLOBAL_INT is the feedback
-
-    def _announce(self, ev) -> None:
-        """A setting write: one console line, and an accepted one as a STATUSTEXT to the other outputs too."""
-        sent = f", sent t={ev.t_sent:g}s" if ev.t_sent is not None else ""
-        print(f"t={ev.t_applied:5.0f}s {ev.kind} {ev.name} {ev.status}: {ev.reason} (from {ev.link}, "
-              f"received t={ev.t_received:.1f}s{sent})", flush=True)
-        if ev.status == "accepted":
-            for o in self.outputs:
-                if o.name != ev.link and o.name != PILOT_LINK and o.addr is not None:
-                    o.ep.send_many([T.statustext(ev.reason[:50])], o.addr)
+    # -- waiting ---------------------------------------------------------------------------------
+    async def _wait(self, timeout: float) -> None:
+        """Until a datagram arrives or ``timeout`` (s) passes."""
+        if not self._wake.is_set():
+            try:
+                await asyncio.wait_for(self._wake.wait(), max(0.0, timeout))
+            except asyncio.TimeoutError:
+                pass
+        self._wake.clear()
 
     def _drain(self) -> None:
-        """Handle everything received on every socket so far (each message under the guard)."""
-        for ep in self.endpoints:
-            while True:
-                try:
-                    r = ep.inbox.get_nowait()
-                except asyncio.QueueEmpty:
-                    break
-                self.take(r, ep if ep is not self.ep else None)
+        self.protocol.process()
+        self.flush()
 
-    # -- sending ---------------------------------------------------------------------------------
-    def publish(self, t: float, out) -> None:
-        """Telemetry for ``t`` (s): per output, one datagram of the messages due on that output's stream."""
-        pol = self.core.core.policy
-        if self.home is None:
-            self.home = T.kin_of(out.own, 0)
-        msgs = T.step_messages(self.core, t, out, self.home, agent_enabled=bool(pol.enabled))
-        self.latest = msgs
-        self._step_t, self._step_wall = t, time.monotonic()
-        extra = []
-        new_auth = self.core.last_authority
-        if new_auth != self.authority:
-            self.stats.authority_changes += 1
-            extra.append(T.statustext(f"DAA-SIL t={t:.0f}s authority {self.authority}->{new_auth}"
-                                      f" ({self.core.last_decision})"))
-            self.authority = new_auth
-        for o in self.outputs:
-            if o.addr is None:  # udpin: nobody has spoken yet
+    async def await_ready(self, k: int, t: float, need_ack: bool = False, send: bool = True) -> None:
+        """Send SIM_TICK(k) (unless ``send`` is False: already sent) and handle messages until step ``k``
+        may run, sending it again when the rules say; :class:`vehicle.tick_rules.TickTimeout` past the limit."""
+        loop = asyncio.get_running_loop()
+        p = self.protocol
+        w = p.ticks.wait(k, t, loop.time(), need_ack)
+        if send:
+            p.send_tick(k, t)
+            self.flush()
+        while not w.ready():
+            self._check_stop()
+            if p.pending(MAIN):
+                p.process(MAIN)
+                self.flush()
                 continue
-            due = self.services.link_rates(o.name).due(t)
-            batch = [m for mid in STREAMED if mid in due for m in msgs.get(mid, ())]
-            o.ep.send_many(batch + extra, o.addr)
+            now = loop.time()
+            if now >= w.next_timer():
+                for kk, tt in w.on_timer(now, self.ep.last_refused):
+                    p.send_tick(kk, tt)
+                self.flush()
+                continue
+            await self._wait(w.next_timer() - now)
+
+    async def receive_until(self, when: float, until=None) -> None:
+        """Handle messages until loop time ``when`` (or until ``until()`` is true)."""
+        loop = asyncio.get_running_loop()
+        p = self.protocol
+        while until is None or not until():
+            self._check_stop()
+            if p.pending(MAIN):
+                p.process(MAIN)
+                self.flush()
+                continue
+            left = when - loop.time()
+            if left <= 0:
+                return
+            await self._wait(left)
+
+    async def realtime_tick(self, k: int, t: float, period: float) -> float:
+        """Realtime step ``k``: send its tick a lead before the deadline, then wait for the partner's
+        answer (at most a grace past the deadline; without a partner, until the deadline). Returns the
+        step's deadline (loop time)."""
+        loop = asyncio.get_running_loop()
+        p = self.protocol
+        rules = p.ticks
+        lead = rules.lead_s(period)
+        if k == 0:
+            if self.opts.tick_sync == "wait":
+                await self.await_ready(0, t)  # (re-)sends tick 0 until the GCS (behind the shim) answers
+            else:
+                p.send_tick(0, t)
+                self.flush()
+            self.wall0 = loop.time() + lead
+            if callable(self.opts.on_clock_start):
+                self.opts.on_clock_start(self.wall0)
+        else:
+            rules.note_late_ack(k)
+            await self.receive_until(self.wall0 + t / self.opts.speed - lead)
+            self._drain()
+            p.send_tick(k, t)
+            self.flush()
+        due = self.wall0 + t / self.opts.speed
+        p.check_silence(loop.time())
+        self.flush()
+        until, stop_early = rules.confirm_deadline(due, period)
+        await self.receive_until(until, until=(lambda: rules.confirmed(k)) if stop_early else None)
+        rules.note_unconfirmed(k)
+        p.check_silence(loop.time())
+        self.flush()
+        return due
+
+    def _sharpen(self) -> None:
+        """Realtime: like the shim, wake at deadlines without timer coalescing, and ask for a short EEVDF
+        slice so a woken vehicle preempts sooner on a busy machine (unprivileged; no-op elsewhere).
+        ``DAA_SIL_VEHICLE_SLICE_US``: the slice asked for (0 = keep the default; benchmarks compare both)."""
+        import os
+
+        from daa_sil.sil.rtclock import request_short_slice, set_timer_slack
+
+        self.stats.extra["timer_slack_1us"] = set_timer_slack(1000)
+        slice_us = float(os.environ.get("DAA_SIL_VEHICLE_SLICE_US", "100") or 0)
+        self.stats.extra["short_slice"] = request_short_slice(slice_us * 1e-6) if slice_us > 0 else False
 
     # -- main loop -------------------------------------------------------------------------------
+    def publish(self, t: float, out) -> None:
+        """Telemetry for ``t`` (s): per output, one datagram of the messages due on that output's stream."""
+        self.protocol.publish(t, out, time.monotonic())
+        self.flush()
+
     async def run(self, on_step=None) -> None:
         """Play every step of the scenario (see the module docstring)."""
         loop = asyncio.get_running_loop()
+        p = self.protocol
         n = self.core.n_steps
         lockstep = self.opts.clock == "lockstep"
         period = self.core.dt / self.opts.speed
-        self.clock.wall0 = loop.time()
+        self.wall0 = loop.time()
         if not lockstep:
-            self.clock.sharpen()
+            self._sharpen()
         for k in range(n):
             self._check_stop()
-            self.k, self.t = k, float(k) * self.core.dt
+            p.begin_step(k)
+            t = p.t
             if lockstep:
                 self._drain()
-                await self.clock.await_ready(k, self.t)
+                await self.await_ready(k, t)
             else:
-                due = await self.clock.realtime_tick(k, self.t, period)
+                due = await self.realtime_tick(k, t, period)
             self._drain()
-            out = self.core.step(self.t)
+            out = self.core.step(t)
             if not lockstep:  # computed ahead (inputs complete once the tick is echoed): out at the deadline
                 self.timing.ready(1000.0 * (loop.time() - due))
                 wait = due - loop.time()
                 if wait > 0:
                     await asyncio.sleep(wait)
                 self._check_stop()
-            self.publish(self.t, out)
+            self.publish(t, out)
             if self.live is not None:
                 self.live.send(self.core.rows[-1])  # non-blocking; failures are counted, never raised
             self.stats.steps = k + 1
@@ -375,7 +322,7 @@ class VehicleNode:
             await asyncio.sleep(0)
         if lockstep and n:
             # the GCS ran its last step in parallel: done once it acknowledged it (as every other tick)
-            await self.clock.await_ready(n - 1, (n - 1) * self.core.dt, need_ack=True, send=False)
+            await self.await_ready(n - 1, (n - 1) * self.core.dt, need_ack=True, send=False)
 
     def write_steplog(self) -> "Path | None":
         """Write the step log so far (atomic Parquet; only the steps published); returns its path or None."""
@@ -386,7 +333,5 @@ class VehicleNode:
         meta = steplog_meta(self.sc, self.opts, self.core, self.stats, signed=self.codec.signed,
                             gate=self.gate.counters.__dict__, link=self.ep.stats() if self.ep else {},
                             live=self.live.stats.__dict__ if self.live is not None else None,
-                            timing=self.timing, wall0=self.clock.wall0, events=self.services.events)
+                            timing=self.timing, wall0=self.wall0, events=self.services.events)
         return self.core.write_steplog(self.opts.steplog, meta, n_rows=self.stats.steps)
-
-

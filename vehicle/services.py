@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Protocol
 
 from daa_sil.link.codec import mavlink as M
 from daa_sil.link.messages import wire_int
@@ -35,6 +36,9 @@ from . import identity as ident
 from . import telemetry as T
 from .params import ParamTable
 from .streams import StreamRates, msg_name
+
+if TYPE_CHECKING:
+    from daa_sil.config.policy import AllocationPolicy
 
 SYSID, COMPID = 1, 1
 CMD_ACK_FOR_SET_MODE = M.MAVLINK_MSG_ID_SET_MODE  #: ArduPilot acks the SET_MODE message with command = 11
@@ -91,28 +95,34 @@ def _ack(msg, command: int, result: int):
     return M.MAVLink_command_ack_message(int(command) & 0xFFFF, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
 
 
+class Plant(Protocol):
+    """What the services read from and write to the simulation (:class:`vehicle.core.VehicleCore` is one):
+    the agent's policy, replaced by a PARAM_SET, and the flight mode the vehicle shows."""
+
+    @property
+    def policy(self) -> AllocationPolicy: ...
+
+    def set_policy(self, policy: AllocationPolicy) -> None: ...
+
+    def mode(self) -> int: ...
+
+
 @dataclass
 class GcsServices:
     """Parameter, mode, rate and request handling for one vehicle (see the module docstring).
 
-    ``get_policy`` / ``set_policy`` read and replace the onboard core's AllocationPolicy;
-    ``latest`` returns the newest step's telemetry ``{msg_id: [messages]}`` (REQUEST_MESSAGE
-    answers with the latest state); ``now`` the vehicle's sim time (s); ``step_t`` the step a write
-    applied now holds from (s).
+    ``plant``: the simulation (its policy and mode); ``dt``: the step (sim s); ``writable``: the links
+    (outputs) whose parameter and mode writes are applied, the others being read-only observers.
+    Times come with each call: ``now`` the vehicle's sim time (s) of a read; ``t_applied`` the step a
+    write holds from.
     """
 
     params: ParamTable
-    get_policy: object
-    set_policy: object
-    latest: object
-    now: object
+    plant: Plant
     dt: float = 1.0
-    #: links (outputs) whose parameter and mode writes are applied; the others are read-only observers
     writable: frozenset = frozenset({"gcs"})
-    step_t: object = None  #: () -> the step a write takes effect at (s); default ``now``
-    current_mode: object = None  #: () -> the ArduPlane mode the vehicle shows now
-    rates: dict = field(default_factory=dict)
-    events: list = field(default_factory=list)
+    rates: "dict[str, StreamRates]" = field(default_factory=dict)
+    events: "list[SettingEvent]" = field(default_factory=list)
     answered: int = 0
 
     def link_rates(self, link: str) -> StreamRates:
@@ -136,13 +146,15 @@ class GcsServices:
         return t in _WRITE_TYPES
 
     # -- reads ---------------------------------------------------------------------------------------
-    def read(self, msg, link: str) -> list:
-        """Answer a read request (see :meth:`is_read`); never raises on content."""
+    def read(self, msg, link: str, now: float, latest: "dict[int, list]") -> list:
+        """Answer a read request (see :meth:`is_read`) from ``link`` at sim time ``now`` (s); ``latest``: the
+        newest step's telemetry ``{msg_id: [messages]}`` (REQUEST_MESSAGE answers with it). Never raises
+        on content."""
         t = msg.get_type()
         out: list = []
         if t == "PARAM_REQUEST_LIST":
             if _targets_us(msg):
-                pol = self.get_policy()
+                pol = self.plant.policy
                 out = [T.param_value(s.name, self.params.value(s, pol), s.ptype, len(self.params), i)
                        for i, s in enumerate(self.params.specs)]
         elif t == "PARAM_REQUEST_READ":
@@ -152,17 +164,17 @@ class GcsServices:
                     out = [_text(f"PARAM_REQUEST_READ: unknown parameter {str(msg.param_id)!r}", M.MAV_SEVERITY_WARNING)]
                 else:
                     i, s = found
-                    out = [T.param_value(s.name, self.params.value(s, self.get_policy()), s.ptype, len(self.params), i)]
+                    out = [T.param_value(s.name, self.params.value(s, self.plant.policy), s.ptype, len(self.params), i)]
         elif t == "TIMESYNC":
             if int(msg.tc1) == 0:  # a request; tc1 != 0 is someone's reply
-                out = [M.MAVLink_timesync_message(int(self.now() * 1e9), int(msg.ts1))]
+                out = [M.MAVLink_timesync_message(int(now * 1e9), int(msg.ts1))]
         elif t == "PING":
             if int(msg.target_system) == 0 and int(msg.target_component) == 0:  # a request
                 out = [M.MAVLink_ping_message(int(msg.time_usec), int(msg.seq), msg.get_srcSystem(), msg.get_srcComponent())]
         elif t == "REQUEST_DATA_STREAM":
             if _targets_us(msg):
                 note = self.link_rates(link).request_data_stream(msg.req_stream_id, float(msg.req_message_rate),
-                                                                 bool(msg.start_stop), self.now())
+                                                                 bool(msg.start_stop), now)
                 out = [_text(note)] if note else []
         elif t == "MISSION_REQUEST_LIST":
             if _targets_us(msg):
@@ -171,7 +183,7 @@ class GcsServices:
         elif t == "FILE_TRANSFER_PROTOCOL":
             out = self._ftp_nak(msg)
         elif t in ("COMMAND_LONG", "COMMAND_INT"):
-            out = self._command_read(msg, link)
+            out = self._command_read(msg, link, now, latest)
         if out:
             self.answered += 1
         return out
@@ -189,7 +201,7 @@ class GcsServices:
         reply += bytes(251 - len(reply))
         return [M.MAVLink_file_transfer_protocol_message(0, msg.get_srcSystem(), msg.get_srcComponent(), list(reply))]
 
-    def _command_read(self, msg, link: str) -> list:
+    def _command_read(self, msg, link: str, now: float, latest: dict) -> list:
         if not _targets_us(msg):
             return []
         c = int(msg.command)
@@ -203,13 +215,13 @@ class GcsServices:
                 or c == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             mid = (M.MAVLINK_MSG_ID_HOME_POSITION if c == M.MAV_CMD_GET_HOME_POSITION else
                    M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if c == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES else int(p1))
-            msgs = self._one_shot(mid, link)
+            msgs = self._one_shot(mid, link, latest)
             if msgs is None:
                 return [_ack(msg, c, M.MAV_RESULT_UNSUPPORTED),
                         _text(f"REQUEST_MESSAGE: {msg_name(mid)} is not produced here", M.MAV_SEVERITY_WARNING)]
             return [_ack(msg, c, M.MAV_RESULT_ACCEPTED)] + msgs
         if c == M.MAV_CMD_SET_MESSAGE_INTERVAL:
-            result, note = self.link_rates(link).set_interval(int(p1), p2, self.now())
+            result, note = self.link_rates(link).set_interval(int(p1), p2, now)
             sev = M.MAV_SEVERITY_INFO if result == M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_WARNING
             return [_ack(msg, c, result)] + ([_text(note, sev)] if note else [])
         if c == M.MAV_CMD_GET_MESSAGE_INTERVAL:
@@ -223,10 +235,9 @@ class GcsServices:
                     _text("Disarm refused: airborne" + (" (forced too)" if forced else ""), M.MAV_SEVERITY_WARNING)]
         return [_ack(msg, c, M.MAV_RESULT_UNSUPPORTED)]
 
-    def _one_shot(self, mid: int, link: str) -> "list | None":
+    def _one_shot(self, mid: int, link: str, latest: dict) -> "list | None":
         if mid == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             return [T.autopilot_version()]
-        latest = self.latest() or {}
         if mid in latest and latest[mid]:
             return list(latest[mid])
         if self.link_rates(link).request_once(mid):
@@ -234,45 +245,46 @@ class GcsServices:
         return None
 
     # -- writes --------------------------------------------------------------------------------------
-    def write(self, msg, link: str, t_received: float, t_sent: "float | None" = None) -> list:
-        """Apply a PARAM_SET / SET_MODE / DO_SET_MODE now (call at a step boundary); returns replies."""
+    def write(self, msg, link: str, t_received: float, t_applied: float, t_sent: "float | None" = None) -> list:
+        """Apply a PARAM_SET / SET_MODE / DO_SET_MODE from ``link`` now (call at a step boundary: it holds
+        from the step at ``t_applied``, sim s); returns the replies."""
         t = msg.get_type()
+        when = (t_received, t_applied, t_sent)
         if t == "PARAM_SET":
-            return self._param_set(msg, link, t_received, t_sent)
+            return self._param_set(msg, link, *when)
         if t == "SET_MODE":
             if int(msg.target_system) not in (0, SYSID):
                 return []
-            return self._mode(msg, CMD_ACK_FOR_SET_MODE, int(msg.base_mode), int(msg.custom_mode), link,
-                              t_received, t_sent)
+            return self._mode(msg, CMD_ACK_FOR_SET_MODE, int(msg.base_mode), int(msg.custom_mode), link, *when)
         if t in ("COMMAND_LONG", "COMMAND_INT") and int(msg.command) == M.MAV_CMD_DO_SET_MODE and _targets_us(msg):
             base, custom = wire_int(msg.param1, 0, 0xFF), wire_int(msg.param2, 0, 2**32 - 1)
             if base is None or custom is None:  # base_mode is a uint8, custom_mode a uint32
                 return [_ack(msg, M.MAV_CMD_DO_SET_MODE, M.MAV_RESULT_DENIED),
                         _text(f"DO_SET_MODE: mode {float(msg.param1)!r}, {float(msg.param2)!r} invalid",
                               M.MAV_SEVERITY_WARNING)]
-            return self._mode(msg, M.MAV_CMD_DO_SET_MODE, base, custom, link, t_received, t_sent)
+            return self._mode(msg, M.MAV_CMD_DO_SET_MODE, base, custom, link, *when)
         return []
 
     def _log(self, **kw) -> SettingEvent:
-        ev = SettingEvent(t_applied=(self.step_t or self.now)(), **kw)
+        ev = SettingEvent(**kw)
         self.events.append(ev)
         return ev
 
-    def _param_set(self, msg, link, t_received, t_sent) -> list:
+    def _param_set(self, msg, link, t_received, t_applied, t_sent) -> list:
         if not _targets_us(msg):
             return []
         src = (msg.get_srcSystem(), msg.get_srcComponent())
-        pol = self.get_policy()
+        pol = self.plant.policy
         res = self.params.set(msg.param_id, float(msg.param_value), pol)
         name = res.spec.name if res.spec is not None else str(msg.param_id).split("\0", 1)[0]
         status, reason = res.status, res.reason
         if link not in self.writable and res.spec is not None:
             status, reason = "denied_readonly", f"{name}: {link} is read-only"
         elif res.status == "accepted":
-            self.set_policy(res.policy)
+            self.plant.set_policy(res.policy)
         value = res.value if status in ("accepted", "unchanged") else res.old
         self._log(kind="param", name=name, old=res.old, new=value, status=status, link=link,
-                  source=src, t_received=t_received, t_sent=t_sent, reason=reason)
+                  source=src, t_received=t_received, t_applied=t_applied, t_sent=t_sent, reason=reason)
         out = []
         if res.spec is not None:
             i, _ = self.params.find(name)
@@ -283,17 +295,16 @@ class GcsServices:
         self.answered += 1
         return out
 
-    def _mode(self, msg, ack_cmd, base, custom, link, t_received, t_sent) -> list:
+    def _mode(self, msg, ack_cmd, base, custom, link, t_received, t_applied, t_sent) -> list:
         src = (msg.get_srcSystem(), msg.get_srcComponent())
-        current = int(self.current_mode()) if self.current_mode is not None else ident.GUIDED
+        current = int(self.plant.mode())
         result, reason = ident.mode_request(base, custom, current)
         status = {M.MAV_RESULT_ACCEPTED: "accepted", M.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily_rejected"}.get(
             result, "denied")
         if link not in self.writable:
             result, status, reason = M.MAV_RESULT_DENIED, "denied_readonly", f"mode: {link} is read-only"
         self._log(kind="mode", name=ident.mode_name(custom), old=float(current), new=float(current), status=status,
-                  link=link, source=src, t_received=t_received, t_sent=t_sent,
-                  reason=reason)
+                  link=link, source=src, t_received=t_received, t_applied=t_applied, t_sent=t_sent, reason=reason)
         self.answered += 1
         sev = M.MAV_SEVERITY_INFO if result == M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_WARNING
         return [_ack(msg, ack_cmd, result), _text(reason, sev)]

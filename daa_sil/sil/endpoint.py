@@ -1,19 +1,13 @@
 """asyncio UDP endpoint around :class:`daa_sil.link.codec.MavCodec`, and address parsing.
 
-One ``asyncio.DatagramProtocol`` per endpoint (no ``mavutil``: it blocks the loop). Each received
-datagram is decoded on its own (parser reset per datagram); good messages go to an async inbox
-as :class:`Received` tuples. Everything hostile is counted and dropped:
-
-* packets from addresses outside ``allow_peers``: they are still decoded, *without changing any
-  signing state* (``MavCodec.decode(..., commit=False)``), so each is counted once under its codec
-  reason (unsigned, bad signature, replayed, stale, bad CRC, ...) or, if it is a good packet, as
-  ``rejected_peer``; ``datagrams_rejected_peer`` counts their datagrams. Not committing matters:
-  an early copy of a genuine signed packet sent from another port must not advance the stream's
-  replay window and so turn the genuine packet (arriving later through the shim) into a "replay";
-* messages whose source system id is outside ``allow_sysids`` (``rejected_sysid``);
-* codec rejections (bad CRC, prefix, truncated, unknown, malformed, unsigned, bad signature,
-  replayed, stale);
-* messages arriving while the inbox is full (``inbox_overflow``; the inbox is bounded).
+One ``asyncio.DatagramProtocol`` per endpoint (no ``mavutil``: it blocks the loop). What it takes in
+is decided by its sans-IO :class:`daa_sil.sil.intake.Intake` (which senders, decoding, counts; read
+its docstring): each datagram is decoded on its own (parser reset per datagram), packets from
+addresses outside ``allow_peers`` are decoded without changing any signing state and counted,
+messages from system ids outside ``allow_sysids`` are dropped, and every codec rejection is
+counted. Good messages go to a bounded async inbox as :class:`Received` tuples (``inbox_overflow``
+past it), after ``on_message`` if given. With ``on_datagram`` the endpoint is only the socket and
+hands each datagram to its owner's protocol core (the vehicle's and the GCS's nodes).
 
 Dropping a peer is never silent: a :class:`DropReporter` prints one warning line (stderr) the first
 time datagrams from an address outside ``allow_peers`` are dropped, naming that address, what it
@@ -28,12 +22,11 @@ sender of the first datagram that contained a good message -- garbage cannot cla
 address than the learned peer (and ``allow_peers``) are then dropped and reported like those of an
 unexpected peer; an address in ``allow_peers`` is never learned as the peer.
 
-Handling: each good message goes to ``on_message`` (if given) under the endpoint's
-:class:`daa_sil.sil.msgguard.MessageGuard` (an exception there counts the message as malformed,
-``malformed_content``, drops it, and the next message of the datagram is still handled), then to the inbox;
-consumers of the inbox run their handling under the same guard (``ep.guard.run(handler, r)``).
-Binds 127.0.0.1 by default and asks for a 4 MB receive buffer (the default 212 KB overflows on
-bursts: a lockstep step delivers every delayed packet of both
+Handling: each message's handling runs under the :class:`daa_sil.sil.msgguard.MessageGuard` (an
+exception counts the message as malformed, ``malformed_content``, drops it, and the next message of
+the datagram is still handled); consumers of the inbox run theirs under the same guard
+(``ep.guard.run(handler, r)``). Binds 127.0.0.1 by default and asks for a 4 MB receive buffer (the
+default 212 KB overflows on bursts: a lockstep step delivers every delayed packet of both
 directions at once).
 """
 
@@ -43,15 +36,13 @@ import asyncio
 import ipaddress
 import socket
 import time
-from collections import Counter
-from dataclasses import dataclass
-from typing import Callable, Iterable, NamedTuple
+from typing import Callable, Iterable
 
 from daa_sil.errors import UsageError
 from daa_sil.link.codec import MavCodec, MAVLinkMessage
-from daa_sil.sil.msgguard import MessageGuard, stderr_line
-
-Address = tuple[str, int]
+from daa_sil.sil.intake import (Address, DropReporter, EndpointCounters, Intake, Received,  # noqa: F401 (this
+                                format_udp_address)  # module's interface since before they moved to intake)
+from daa_sil.sil.msgguard import MessageGuard
 DEFAULT_HOST = "127.0.0.1"
 RCVBUF_BYTES = 4 * 1024 * 1024
 _SCHEMES = ("udp", "udpin", "udpout")
@@ -89,12 +80,6 @@ def parse_udp_address(text: str, name: str = "address", allow_port_zero: bool = 
     return host, port
 
 
-def format_udp_address(addr: Address) -> str:
-    """``("127.0.0.1", 14601)`` -> ``"udp:127.0.0.1:14601"``."""
-    host = addr[0]
-    return f"udp:[{host}]:{addr[1]}" if ":" in host else f"udp:{host}:{addr[1]}"
-
-
 def norm_host(host: str) -> str:
     """``host`` as a numeric address (``"localhost"`` -> ``"127.0.0.1"``), so it compares equal to a sender's."""
     try:
@@ -116,129 +101,58 @@ def set_rcvbuf(transport: asyncio.BaseTransport, size: int = RCVBUF_BYTES) -> No
             pass
 
 
-class DropReporter:
-    """Warn once per unexpected sender, then periodically with counts, while its datagrams are dropped.
-
-    ``note(addr, what)`` counts one dropped datagram from ``addr`` (``what``: e.g. ``"HEARTBEAT from
-    system 1"``, or ""). The first drop from each of up to ``max_named`` distinct addresses is
-    reported at once; after that one summary line at most every ``every_s`` seconds (``clock``
-    seconds) while drops continue: how many in the interval and in all, per address (top 3).
-    Lines go to ``emit`` (default: stderr) as ``"{who}: warning: ..."``. ``expected()`` names the
-    peer that is accepted (called when a line is made, so a learned peer shows up).
-    """
-
-    def __init__(self, who: str, expected: "Callable[[], str]", *, hint: str = "",
-                 emit: "Callable[[str], None] | None" = None, every_s: float = 10.0,
-                 clock: "Callable[[], float]" = time.monotonic, max_named: int = 8):
-        self.who, self.expected, self.hint = who, expected, hint
-        self.emit = emit or stderr_line
-        self.every_s, self.clock, self.max_named = float(every_s), clock, int(max_named)
-        self.by_addr: Counter = Counter()
-        self.total = 0
-        self.lines = 0
-        self._since = 0
-        self._next: "float | None" = None
-
-    def note(self, addr: "Address", what: str = "") -> None:
-        """Count one dropped datagram from ``addr``; maybe emit a line."""
-        addr = (addr[0], addr[1])
-        new = addr not in self.by_addr
-        self.by_addr[addr] += 1
-        self.total += 1
-        self._since += 1
-        now = self.clock()
-        if new and len(self.by_addr) <= self.max_named:
-            self._say(f"dropping datagrams from {format_udp_address(addr)}"
-                      f"{f' ({what})' if what else ''}: not the expected peer {self.expected()}"
-                      f"{'; ' + self.hint if self.hint else ''}")
-            self._since = 0
-            if self._next is None:
-                self._next = now + self.every_s
-        elif self._next is None or now >= self._next:
-            top = ", ".join(f"{format_udp_address(a)}: {n}" for a, n in self.by_addr.most_common(3))
-            more = f" and {len(self.by_addr) - 3} more" if len(self.by_addr) > 3 else ""
-            self._say(f"still dropping datagrams from unexpected peers: {self._since} in the last "
-                      f"{self.every_s:g} s, {self.total} in all ({top}{more}); expected {self.expected()}")
-            self._since = 0
-            self._next = now + self.every_s
-
-    def _say(self, text: str) -> None:
-        self.lines += 1
-        self.emit(f"{self.who}: warning: {text}")
-
-    def summary(self) -> "str | None":
-        """One line with the totals (None if nothing was dropped), e.g. for a process's last words."""
-        if not self.total:
-            return None
-        top = ", ".join(f"{format_udp_address(a)}: {n}" for a, n in self.by_addr.most_common(3))
-        return f"dropped {self.total} datagrams from unexpected peers ({top}); expected {self.expected()}"
-
-
-class Received(NamedTuple):
-    """One good message: monotonic arrival time (s), sender address, the message."""
-
-    t: float
-    addr: Address
-    msg: MAVLinkMessage
-
-
-@dataclass
-class EndpointCounters:
-    """Transport-level counts (codec-level ones are merged in :meth:`MavEndpoint.stats`)."""
-
-    sent: int = 0  # messages sent
-    datagrams_sent: int = 0
-    send_no_peer: int = 0  # send attempts before a peer was known
-    received: int = 0  # good messages delivered to the inbox
-    datagrams_received: int = 0
-    rejected_peer: int = 0  # good packets from an address outside allow_peers (bad ones: codec reasons)
-    datagrams_rejected_peer: int = 0  # datagrams from an address outside allow_peers
-    rejected_sysid: int = 0
-    inbox_overflow: int = 0
-    socket_errors: int = 0
-    refused: int = 0  # ICMP port unreachable: nothing listens where we send (part of socket_errors)
-
-
 class MavEndpoint(asyncio.DatagramProtocol):
-    """A MAVLink endpoint on one UDP socket. Create with :func:`open_endpoint`."""
+    """A MAVLink endpoint on one UDP socket. Create with :func:`open_endpoint`.
+
+    Its receiving rules are an :class:`daa_sil.sil.intake.Intake` (``intake``: given, e.g. a
+    protocol core's, or made from the keyword arguments). By default each good message goes to
+    ``on_message`` (if given) under the guard, then to the bounded ``inbox``. With ``on_datagram``
+    the endpoint is only the socket: each datagram goes to ``on_datagram(data, addr, now)`` as it
+    arrives (the caller's core decodes it with the same intake)."""
 
     def __init__(self, codec: MavCodec, *, peer: "Address | None" = None, learn_peer: "bool | None" = None,
                  allow_peers: "Iterable[Address | str] | None" = None, allow_sysids: "Iterable[int] | None" = None,
                  inbox_size: int = 10_000, on_message: "Callable[[Received], None] | None" = None,
                  name: str = "daa-sil", peer_label: str = "", drop_hint: str = "",
                  drop_warn_every_s: float = 10.0, warn: "Callable[[str], None] | None" = None,
-                 lock_peer: bool = False, guard: "MessageGuard | None" = None):
-        self.codec = codec
-        self.peer = peer
-        self.learn_peer = (peer is None) if learn_peer is None else bool(learn_peer)
-        self.lock_peer = bool(lock_peer)
-        #: every message's handling runs under it (shared with the node that owns the endpoint)
-        self.guard = guard if guard is not None else MessageGuard(name, emit=warn)
-        self._allow_hosts: "set[str] | None" = None
-        self._allow_addrs: "set[Address] | None" = None
-        if allow_peers is not None:
-            self._allow_hosts, self._allow_addrs = set(), set()
-            for a in allow_peers:
-                if isinstance(a, str):
-                    self._allow_hosts.add(norm_host(a))
-                else:
-                    self._allow_addrs.add((norm_host(a[0]), int(a[1])))
-        self.allow_sysids = None if allow_sysids is None else frozenset(int(s) for s in allow_sysids)
+                 lock_peer: bool = False, guard: "MessageGuard | None" = None, intake: "Intake | None" = None,
+                 on_datagram: "Callable[[bytes, Address, float], None] | None" = None):
+        if intake is None:
+            allowed = None
+            if allow_peers is not None:
+                allowed = [norm_host(a) if isinstance(a, str) else (norm_host(a[0]), int(a[1])) for a in allow_peers]
+            intake = Intake(codec, peer=peer, learn_peer=learn_peer, allow_peers=allowed, allow_sysids=allow_sysids,
+                            lock_peer=lock_peer, name=name, peer_label=peer_label, drop_hint=drop_hint,
+                            drop_warn_every_s=drop_warn_every_s, warn=warn, guard=guard)
+        self.intake = intake
+        self.codec = intake.codec
         self.inbox: "asyncio.Queue[Received]" = asyncio.Queue(maxsize=inbox_size)
         self.on_message = on_message
-        self.counters = EndpointCounters()
+        self.on_datagram = on_datagram
         self.transport: "asyncio.DatagramTransport | None" = None
         self._closed: "asyncio.Future | None" = None
         self.last_refused: "float | None" = None  #: time.monotonic() of the last ICMP port unreachable
-        self.peer_label = peer_label
-        self.drops = DropReporter(name, self._expected_text, hint=drop_hint, emit=warn, every_s=drop_warn_every_s)
 
-    def _expected_text(self) -> str:
-        addrs = sorted(self._allow_addrs or ())
-        if self.peer is not None and (not addrs or self.lock_peer) and tuple(self.peer) not in addrs:
-            addrs = [tuple(self.peer)] + addrs
-        who = ", ".join(format_udp_address(a) for a in addrs) if addrs else "(none yet)"
-        return who + (f" ({self.peer_label})" if self.peer_label else "")
+    @property
+    def peer(self) -> "Address | None":
+        """The peer: fixed, or learned from the first good datagram (None before that)."""
+        return self.intake.peer
+
+    @peer.setter
+    def peer(self, addr: "Address | None") -> None:
+        self.intake.peer = addr
+
+    @property
+    def counters(self) -> EndpointCounters:
+        return self.intake.counters
+
+    @property
+    def guard(self) -> MessageGuard:
+        return self.intake.guard
+
+    @property
+    def drops(self) -> DropReporter:
+        return self.intake.drops
 
     # -- asyncio protocol ----------------------------------------------------------------------
     def connection_made(self, transport) -> None:
@@ -256,41 +170,13 @@ class MavEndpoint(asyncio.DatagramProtocol):
             self.counters.refused += 1
             self.last_refused = time.monotonic()
 
-    def _listed(self, addr: Address) -> bool:
-        return self._allow_hosts is not None and (addr[0] in self._allow_hosts or (addr[0], addr[1]) in self._allow_addrs)
-
-    def _peer_allowed(self, addr: Address) -> bool:
-        if self.lock_peer:  # the learned peer (or, before one is learned, anyone) and the allowed list
-            return self._listed(addr) or self.peer is None or (addr[0], addr[1]) == tuple(self.peer)
-        if self._allow_hosts is None:
-            return True
-        return self._listed(addr)
-
     def datagram_received(self, data: bytes, addr) -> None:
-        c = self.counters
-        c.datagrams_received += 1
-        addr = (addr[0], addr[1])
-        if not self._peer_allowed(addr):
-            c.datagrams_rejected_peer += 1
-            good = self.codec.decode(data, commit=False)
-            c.rejected_peer += len(good)
-            what = f"{good[0].get_type()} from system {good[0].get_srcSystem()}" if good else "no valid MAVLink"
-            self.drops.note(addr, what)
-            return
-        msgs = self.codec.decode(data)
-        if not msgs:
-            return
-        if self.allow_sysids is not None:
-            keep = [m for m in msgs if m.get_srcSystem() in self.allow_sysids]
-            c.rejected_sysid += len(msgs) - len(keep)
-            msgs = keep
-            if not msgs:
-                return
-        if self.peer is None and self.learn_peer and not (self.lock_peer and self._listed(addr)):
-            self.peer = addr
         now = time.monotonic()
-        for m in msgs:
-            item = Received(now, addr, m)
+        if self.on_datagram is not None:
+            self.on_datagram(data, (addr[0], addr[1]), now)
+            return
+        c = self.counters
+        for item in self.intake.receive(data, addr, now):
             if self.on_message is not None and not self.guard.run(self.on_message, item):
                 continue  # malformed (counted, reported): dropped; the datagram's other messages go on
             try:
@@ -298,6 +184,16 @@ class MavEndpoint(asyncio.DatagramProtocol):
                 c.received += 1
             except asyncio.QueueFull:
                 c.inbox_overflow += 1
+
+    def send_datagram(self, data: bytes, addr: Address, messages: int = 1) -> bool:
+        """Send encoded bytes (``messages`` packets) to ``addr``; False if the socket is closed."""
+        if self.transport is None or self.transport.is_closing():
+            self.counters.send_no_peer += 1
+            return False
+        self.transport.sendto(data, addr)
+        self.counters.sent += messages
+        self.counters.datagrams_sent += 1
+        return True
 
     # -- API -------------------------------------------------------------------------------------
     @property
@@ -348,12 +244,7 @@ class MavEndpoint(asyncio.DatagramProtocol):
 
     def stats(self) -> dict:
         """Transport and codec counters in one dict (``dropped`` = every rejected packet)."""
-        d = dict(self.codec.counters.as_dict())
-        d.update(self.counters.__dict__)
-        d["malformed_content"] = self.guard.total  # decoded, but its handling raised (msgguard)
-        d["dropped"] = (self.codec.counters.dropped + self.counters.rejected_peer + self.counters.rejected_sysid
-                        + self.counters.inbox_overflow + self.guard.total)
-        return d
+        return self.intake.stats()
 
     def close(self) -> None:
         """Close the socket (idempotent)."""

@@ -88,22 +88,3 @@ def output_specs(outs: "list[str] | tuple[str, ...]", tap: "str | None" = None,
             raise UsageError(f"{s.name} ({s.conn.text}) and {seen[key]} are the same address; give each output its own")
         seen[key] = s.name
     return specs
-
-
-class Output:
-    """An output while the vehicle runs: its :class:`OutputSpec` and the endpoint that serves it (the
-    main socket, or a ``udpin:`` output's own)."""
-
-    def __init__(self, spec: OutputSpec, ep):
-        self.spec, self.ep = spec, ep
-
-    @property
-    def name(self) -> str:
-        return self.spec.name
-
-    @property
-    def addr(self) -> "tuple[str, int] | None":
-        """Where its datagrams go: the fixed address, or (``udpin:``) the first sender; None before one spoke."""
-        if self.spec.listens:
-            return tuple(self.ep.peer) if self.ep.peer is not None else None
-        return self.spec.addr
