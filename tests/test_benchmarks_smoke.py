@@ -30,6 +30,8 @@ CASES = {
     "bench_sil.py": (["--part", "lockstep", "--repeat", "1", "--baseline", "none", "--pyc", "present"],
                      "=> with .pyc:"),
     "bench_viz.py": (["--skip-sil", "--repeat", "1", "--live-repeat", "1"], "[3] fast-time"),
+    "bench_flood.py": (["--part", "amplification,addresses", "--datagrams", "1", "--addresses", "2000",
+                        "--baseline", "none"], "[amplification] this"),
 }
 
 

@@ -59,8 +59,9 @@ def test_parameters_list_read_and_set_from_bytes(plant):
     p.process()
     got = decoded(p.take_sends(), PILOT)
     values = [(m.param_id, m.param_value, m.param_index) for m in got if m.get_type() == "PARAM_VALUE"]
-    assert len(values) == 8 + 1 + 1 and values[0][2] == 0 and values[7][2] == 7  # the list, the read, the set
-    assert ("DAA_WT", 4.0, 1) in values[:9] and values[-1] == ("DAA_WT", 6.0, 1)
+    # the step boundary applies settings first (the set's answer), then answers the reads in order
+    assert values[0] == ("DAA_WT", 6.0, 1) and [v[2] for v in values[1:9]] == list(range(8))
+    assert values[2] == ("DAA_WT", 6.0, 1) and values[9] == ("DAA_WT", 6.0, 1) and len(values) == 10
     assert plant.policy.wait_threshold_s == 6.0
     ev = p.events[-1]
     assert (ev.name, ev.status, ev.link, ev.t_applied) == ("DAA_WT", "accepted", "gcs", 1.0)
@@ -153,3 +154,47 @@ def test_gcs_core_steps_on_a_tick_and_acks():
     assert [m.get_type() for m in msgs] == ["SIM_TICK_ACK"] and core.steps == 5
     assert [(c.t, c.seq, c.order.kind) for c in core.sent] == [(2.0, 1, "scripted"), (3.0, 2, "scripted")]
     assert core.sent[0].as_dict()["track_deg"] == 30.0 and "axis" not in core.sent[0].as_dict()
+
+
+def test_reads_are_paced_per_step_and_one_parameter_list_per_peer(plant):
+    """A datagram full of PARAM_REQUEST_LIST and PARAM_REQUEST_READ: one list answered, the other lists
+    dropped (most before decoding), the reads answered within the reply budget a step, in order."""
+    from vehicle.peers import REPLY_BYTES_PER_STEP, REQUEST_QUEUE_BYTES
+
+    p = vehicle_protocol(SC, plant=plant)
+    lst = GCS.encode(M.MAVLink_param_request_list_message(1, 1))
+    read = GCS.encode(M.MAVLink_param_request_read_message(1, 1, b"DAA_WT", -1))
+    p.receive(0, lst * 1000 + read * 400, PILOT, 0.1)
+    peer = p.outputs[0].peer
+    assert peer.counters.coalesced == 999 and p.codec.counters.shed == 999 - 7  # 8 decoded: one list, 7 dropped
+    assert peer.request_bytes <= REQUEST_QUEUE_BYTES and peer.counters.dropped_queue == 0  # 400 reads fit
+    budgets = []
+    for k in range(8):
+        p.begin_step(k)
+        p.process()
+        sends = p.take_sends()
+        budgets.append(sum(len(s.data) for s in sends))
+        got = decoded(sends, PILOT)
+        if k == 0:  # the list first, in one datagram, then the reads
+            assert [m.param_index for m in got[:8]] == list(range(8))
+    assert all(b <= REPLY_BYTES_PER_STEP + 64 for b in budgets)  # one reply may overshoot: at most its size
+    answered = peer.counters.answered
+    assert answered == 401 and not peer.requests, (answered, budgets)  # every read answered, over several steps
+    assert peer.counters.deferred_steps >= 3
+
+
+def test_queues_have_byte_budgets_and_commands_their_own(plant):
+    from vehicle.peers import SETTING_QUEUE_BYTES
+
+    p = vehicle_protocol(SC, plant=plant)
+    setting = GCS.encode(M.MAVLink_param_set_message(1, 1, b"DAA_WT", 5.0, M.MAV_PARAM_TYPE_REAL32))
+    p.receive(0, setting * 1800, PILOT, 0.1)
+    p.receive(0, GCS.encode(M.MAVLink_pilot_maneuver_message(0, 1, 1, 1, 90.0, 0.0, 55.0)), PILOT, 0.2)
+    n = SETTING_QUEUE_BYTES // len(setting)
+    assert p.stats.dropped_queue == 1800 - n and p.ports[0].intake.stats()["dropped_queue"] == 1800 - n
+    warned = [x.text for x in p.take_notices() if "queue is full" in x.text]
+    assert len(warned) == 1 and "settings from gcs" in warned[0]
+    p.process()
+    assert p.gate.counters.accepted == 1  # the command behind the flood
+    assert sum(1 for e in p.events if e.name == "DAA_WT") == n
+    assert "dropped" in p.queue_summary()

@@ -222,7 +222,7 @@ async def _amain(args) -> int:
         print(f"daa-vehicle: realtime: ticks answered by {v.sync_partner}, steps run before their tick was "
               f"confirmed {v.steps_unconfirmed}, GCS acks late {v.acks_late}; step lateness mean {v.late_mean_ms:.1f} "
               f"ms, max {v.late_max_ms:.1f} ms", flush=True)
-    for line in [ep.drops.summary() for ep in node.endpoints] + [node.guard.summary()]:
+    for line in [ep.drops.summary() for ep in node.endpoints] + [node.guard.summary(), node.protocol.queue_summary()]:
         if line:
             print(f"daa-vehicle: {line}", flush=True)
     return 0

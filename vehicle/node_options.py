@@ -64,4 +64,6 @@ class VehicleStats:
     acks_late: int = 0
     #: warnings printed because the shim or the GCS stopped answering ticks
     silence_warnings: int = 0
+    #: messages dropped because the queue they wait in (reads, settings, commands) was past its byte budget
+    dropped_queue: int = 0
     extra: dict = field(default_factory=dict)

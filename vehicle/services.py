@@ -7,19 +7,21 @@ split the way the timing needs it:
   TIMESYNC, PING, REQUEST_DATA_STREAM, MISSION_REQUEST_LIST, FILE_TRANSFER_PROTOCOL, and the
   COMMAND_LONG / COMMAND_INT that change nothing the simulation uses (REQUEST_MESSAGE,
   GET_HOME_POSITION, SET_ / GET_MESSAGE_INTERVAL, REQUEST_AUTOPILOT_CAPABILITIES, ARM / DISARM,
-  unknown commands). Rates are per link (output), so an observer asking for rates changes only its
-  own stream.
-  In realtime the node answers reads as they arrive; in lockstep at the step boundary.
+  unknown commands). Rates are per peer (the caller passes the peer's :class:`StreamRates`), so an
+  observer asking for rates changes only its own stream. A PARAM_REQUEST_LIST is answered one
+  :meth:`GcsServices.param_value` at a time by the caller (:mod:`vehicle.peers`: paced, one list in
+  flight per peer). The protocol core answers reads as they arrive in realtime, at the step boundary
+  in lockstep, within each peer's reply budget.
 * **writes** (:meth:`GcsServices.write`): PARAM_SET, SET_MODE and DO_SET_MODE. A PARAM_SET changes
-  the agent's policy, so the node applies writes only at a step boundary (the change holds from
+  the agent's policy, so the protocol applies writes only at a step boundary (the change holds from
   the step after arrival) and only from a link in ``writable``: the GCS link (through the shim,
   delayed like pilot commands), and observers marked writable (``--tap-writable``, ``--out
   CONN,rw``; :mod:`daa_sil.sil.outputs`). Mode requests change nothing the agent
   decides (:mod:`vehicle.identity`) but are answered and logged the same way. Each write is kept
-  as a :class:`SettingEvent` for the step log.
+  as a :class:`SettingEvent` for the step log (the first :data:`MAX_EVENTS`; the rest are counted).
 
 Pilot commands (PILOT_MANEUVER, SET_POSITION_TARGET_GLOBAL_INT, COMMAND_INT DO_REPOSITION) are
-the node's (they go through :class:`vehicle.commands.CommandGate`).
+the protocol core's (:mod:`vehicle.protocol`; they go through :class:`vehicle.commands.CommandGate`).
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ CMD_ACK_FOR_SET_MODE = M.MAVLINK_MSG_ID_SET_MODE  #: ArduPilot acks the SET_MODE
 FORCE_DISARM_MAGIC = 21196
 FTP_OP_NACK, FTP_ERR_UNKNOWN_COMMAND = 129, 7
 MAX_MSG_ID = 2**24 - 1  #: MAVLink 2 message ids are 24-bit
+#: setting writes kept for the step log (a flood of PARAM_SET must not grow the vehicle's memory)
+MAX_EVENTS = 10_000
 
 _READ_COMMANDS = {M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_GET_HOME_POSITION, M.MAV_CMD_SET_MESSAGE_INTERVAL,
                   M.MAV_CMD_GET_MESSAGE_INTERVAL, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
@@ -52,7 +56,8 @@ _READ_COMMANDS = {M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_GET_HOME_POSITION, M.MAV_
 _WRITE_COMMANDS = {M.MAV_CMD_DO_SET_MODE}
 #: pilot commands that come as COMMAND_INT / COMMAND_LONG (handled by the node with the gate)
 PILOT_COMMANDS = {M.MAV_CMD_DO_REPOSITION}
-_READ_TYPES = {"PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "TIMESYNC", "PING", "REQUEST_DATA_STREAM",
+#: message types that only read (COMMAND_LONG / COMMAND_INT aside: those depend on their command)
+READ_TYPES = {"PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "TIMESYNC", "PING", "REQUEST_DATA_STREAM",
                "MISSION_REQUEST_LIST", "FILE_TRANSFER_PROTOCOL"}
 _WRITE_TYPES = {"PARAM_SET", "SET_MODE"}
 
@@ -121,14 +126,10 @@ class GcsServices:
     plant: Plant
     dt: float = 1.0
     writable: frozenset = frozenset({"gcs"})
-    rates: "dict[str, StreamRates]" = field(default_factory=dict)
     events: "list[SettingEvent]" = field(default_factory=list)
     answered: int = 0
-
-    def link_rates(self, link: str) -> StreamRates:
-        if link not in self.rates:
-            self.rates[link] = StreamRates(self.dt)
-        return self.rates[link]
+    #: setting writes beyond :data:`MAX_EVENTS`: applied and answered, but not kept for the step log
+    events_unlogged: int = 0
 
     # -- classification ------------------------------------------------------------------------------
     @staticmethod
@@ -136,7 +137,7 @@ class GcsServices:
         t = msg.get_type()
         if t in ("COMMAND_LONG", "COMMAND_INT"):
             return int(msg.command) not in _WRITE_COMMANDS and int(msg.command) not in PILOT_COMMANDS
-        return t in _READ_TYPES
+        return t in READ_TYPES
 
     @staticmethod
     def is_write(msg) -> bool:
@@ -146,18 +147,23 @@ class GcsServices:
         return t in _WRITE_TYPES
 
     # -- reads ---------------------------------------------------------------------------------------
-    def read(self, msg, link: str, now: float, latest: "dict[int, list]") -> list:
-        """Answer a read request (see :meth:`is_read`) from ``link`` at sim time ``now`` (s); ``latest``: the
-        newest step's telemetry ``{msg_id: [messages]}`` (REQUEST_MESSAGE answers with it). Never raises
-        on content."""
+    @staticmethod
+    def is_param_list(msg) -> bool:
+        """A PARAM_REQUEST_LIST for this vehicle (answered one PARAM_VALUE at a time: :meth:`param_value`)."""
+        return msg.get_type() == "PARAM_REQUEST_LIST" and _targets_us(msg)
+
+    def param_value(self, i: int):
+        """PARAM_VALUE of parameter ``i`` (0 .. ``len(self.params) - 1``) now."""
+        s = self.params.specs[i]
+        return T.param_value(s.name, self.params.value(s, self.plant.policy), s.ptype, len(self.params), i)
+
+    def read(self, msg, rates: StreamRates, now: float, latest: "dict[int, list]") -> list:
+        """Answer a read request (see :meth:`is_read`; a PARAM_REQUEST_LIST: :meth:`param_value` one by one)
+        from a peer whose stream rates are ``rates``, at sim time ``now`` (s); ``latest``: the newest step's
+        telemetry ``{msg_id: [messages]}`` (REQUEST_MESSAGE answers with it). Never raises on content."""
         t = msg.get_type()
         out: list = []
-        if t == "PARAM_REQUEST_LIST":
-            if _targets_us(msg):
-                pol = self.plant.policy
-                out = [T.param_value(s.name, self.params.value(s, pol), s.ptype, len(self.params), i)
-                       for i, s in enumerate(self.params.specs)]
-        elif t == "PARAM_REQUEST_READ":
+        if t == "PARAM_REQUEST_READ":
             if _targets_us(msg):
                 found = self.params.find(msg.param_id, int(msg.param_index))
                 if found is None:
@@ -173,7 +179,7 @@ class GcsServices:
                 out = [M.MAVLink_ping_message(int(msg.time_usec), int(msg.seq), msg.get_srcSystem(), msg.get_srcComponent())]
         elif t == "REQUEST_DATA_STREAM":
             if _targets_us(msg):
-                note = self.link_rates(link).request_data_stream(msg.req_stream_id, float(msg.req_message_rate),
+                note = rates.request_data_stream(msg.req_stream_id, float(msg.req_message_rate),
                                                                  bool(msg.start_stop), now)
                 out = [_text(note)] if note else []
         elif t == "MISSION_REQUEST_LIST":
@@ -183,7 +189,7 @@ class GcsServices:
         elif t == "FILE_TRANSFER_PROTOCOL":
             out = self._ftp_nak(msg)
         elif t in ("COMMAND_LONG", "COMMAND_INT"):
-            out = self._command_read(msg, link, now, latest)
+            out = self._command_read(msg, rates, now, latest)
         if out:
             self.answered += 1
         return out
@@ -201,7 +207,7 @@ class GcsServices:
         reply += bytes(251 - len(reply))
         return [M.MAVLink_file_transfer_protocol_message(0, msg.get_srcSystem(), msg.get_srcComponent(), list(reply))]
 
-    def _command_read(self, msg, link: str, now: float, latest: dict) -> list:
+    def _command_read(self, msg, rates: StreamRates, now: float, latest: dict) -> list:
         if not _targets_us(msg):
             return []
         c = int(msg.command)
@@ -215,18 +221,18 @@ class GcsServices:
                 or c == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             mid = (M.MAVLINK_MSG_ID_HOME_POSITION if c == M.MAV_CMD_GET_HOME_POSITION else
                    M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if c == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES else int(p1))
-            msgs = self._one_shot(mid, link, latest)
+            msgs = self._one_shot(mid, rates, latest)
             if msgs is None:
                 return [_ack(msg, c, M.MAV_RESULT_UNSUPPORTED),
                         _text(f"REQUEST_MESSAGE: {msg_name(mid)} is not produced here", M.MAV_SEVERITY_WARNING)]
             return [_ack(msg, c, M.MAV_RESULT_ACCEPTED)] + msgs
         if c == M.MAV_CMD_SET_MESSAGE_INTERVAL:
-            result, note = self.link_rates(link).set_interval(int(p1), p2, now)
+            result, note = rates.set_interval(int(p1), p2, now)
             sev = M.MAV_SEVERITY_INFO if result == M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_WARNING
             return [_ack(msg, c, result)] + ([_text(note, sev)] if note else [])
         if c == M.MAV_CMD_GET_MESSAGE_INTERVAL:
             mid = int(p1)
-            return [_ack(msg, c, M.MAV_RESULT_ACCEPTED), T.message_interval(mid, self.link_rates(link).interval_us(mid))]
+            return [_ack(msg, c, M.MAV_RESULT_ACCEPTED), T.message_interval(mid, rates.interval_us(mid))]
         if c == M.MAV_CMD_COMPONENT_ARM_DISARM:
             if p1 == 1.0:
                 return [_ack(msg, c, M.MAV_RESULT_ACCEPTED), _text("Arm: already armed (airborne)")]
@@ -235,12 +241,12 @@ class GcsServices:
                     _text("Disarm refused: airborne" + (" (forced too)" if forced else ""), M.MAV_SEVERITY_WARNING)]
         return [_ack(msg, c, M.MAV_RESULT_UNSUPPORTED)]
 
-    def _one_shot(self, mid: int, link: str, latest: dict) -> "list | None":
+    def _one_shot(self, mid: int, rates: StreamRates, latest: dict) -> "list | None":
         if mid == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             return [T.autopilot_version()]
         if mid in latest and latest[mid]:
             return list(latest[mid])
-        if self.link_rates(link).request_once(mid):
+        if rates.request_once(mid):
             return []  # streamed, but no step yet: it goes out with the first step
         return None
 
@@ -267,7 +273,10 @@ class GcsServices:
 
     def _log(self, **kw) -> SettingEvent:
         ev = SettingEvent(**kw)
-        self.events.append(ev)
+        if len(self.events) < MAX_EVENTS:
+            self.events.append(ev)
+        else:
+            self.events_unlogged += 1
         return ev
 
     def _param_set(self, msg, link, t_received, t_applied, t_sent) -> list:

@@ -16,8 +16,9 @@ node (:mod:`vehicle.node`) only waits: it asks :meth:`TickWait.next_timer` when 
   ``tick_timeout_s`` wall seconds -> :class:`TickTimeout` (one clear line naming who is silent:
   :meth:`TickRules.who_is_silent`). The tick is re-sent every ``tick_retry_s`` in case a datagram
   was lost (the GCS re-acks a tick it already did; a shim holding tick ``k`` for the GCS's ack of
-  tick ``k - 1`` gets that one again too, and echoes it: so a shim that answers nothing at all is
-  told from a GCS that does not acknowledge).
+  tick ``k - 1`` gets that one again too, and echoes it). So a shim that has echoed nothing for two
+  retry periods has stopped itself (Ctrl-Z, SIGSTOP, gone), whatever the GCS behind it does, and is
+  named; a shim that echoes while the GCS does not acknowledge names the GCS.
 * **realtime** (docs/sil.md, "Realtime and lockstep"): the same ticks, paced by the wall clock.
   ``SIM_TICK(k)`` goes out a lead of half a step (at most 0.25 s) before the step's deadline
   ``W_k = t0 + t_k / speed``; once the partner's answer is in, every input of step ``k`` is there
@@ -106,6 +107,13 @@ class TickRules:
         """Why tick ``k`` got no answer by wall ``now`` (s): which of shim and GCS is not there (for the
         one-line error). ``last_refused``: wall time of the last ICMP port unreachable, if any."""
         peer, echoed, acked = self.out_text, self.peer.newest["shim"], self.peer.newest["gcs"]
+        shim_last = self.peer.silence["shim"].last
+        stalled_after = max(2 * self.opts.tick_retry_s, START_RETRY_S)
+        if self.peer.partner == "shim" and shim_last is not None and now - shim_last >= stalled_after:
+            # a live shim echoes every tick it processes, a repeated one too (the retries): no echo at all means
+            # the shim itself stopped reading -- whatever the GCS behind it does
+            return (f"the shim at {peer} has echoed nothing for {now - shim_last:.1f} s, not even the repeated "
+                    f"ticks (last echo: tick {echoed}): is the shim still running, or stopped (Ctrl-Z, SIGSTOP)?")
         if k > 0 and echoed == k - 1 and acked < k - 1:
             return (f"the shim at {peer} holds tick {k} until the GCS behind it acknowledges tick {k - 1}, which "
                     f"it has not: is daa-gcs still running (with --clock lockstep), pointed at the shim's GCS side?")

@@ -32,7 +32,7 @@ from __future__ import annotations
 import hashlib
 import time
 from dataclasses import dataclass
-from typing import Iterable
+from typing import Callable, Iterable
 
 from ..errors import UsageError
 from .dialect import daa_sil as mavlink
@@ -70,6 +70,7 @@ class CodecCounters:
     unsigned_accepted: int = 0  # unsigned packets let through by ``allow_unsigned``
     signed_in: int = 0  # good messages that carried a valid signature (of messages_in)
     unread: int = 0  # good packets of an id outside read_ids: verified, not unpacked (not in messages_in)
+    shed: int = 0  # packets the caller's ``admit`` refused before any check (its queue for them was full)
     bad_signature: int = 0  # wrong key or forged signature
     replayed: int = 0  # signature timestamp not newer than the stream's last one
     stale: int = 0  # new stream more than 60 s behind our clock
@@ -80,7 +81,7 @@ class CodecCounters:
     @property
     def dropped(self) -> int:
         return (self.bad_crc + self.bad_prefix + self.truncated + self.unknown + self.malformed
-                + self.unsigned + self.bad_signature + self.replayed + self.stale)
+                + self.unsigned + self.bad_signature + self.replayed + self.stale + self.shed)
 
     def as_dict(self) -> dict:
         d = dict(self.__dict__)
@@ -229,7 +230,8 @@ class MavCodec:
             s.allow_unsigned_callback = lambda mav, msg_id: mav._unsigned_gate(msg_id)
 
     # -- decoding -----------------------------------------------------------------------------
-    def decode(self, datagram: "bytes | bytearray | memoryview", commit: bool = True) -> list[MAVLinkMessage]:
+    def decode(self, datagram: "bytes | bytearray | memoryview", commit: bool = True,
+               admit: "Callable[[int, int], bool] | None" = None) -> list[MAVLinkMessage]:
         """Good messages in one datagram (in order); every bad packet is counted and dropped.
 
         The datagram is split into packets by walking the MAVLink headers (no parser state is
@@ -243,15 +245,20 @@ class MavCodec:
         changes (a valid packet does not advance its stream's replay window, so an early copy of a
         genuine packet cannot make the genuine one look like a replay) and the good messages are
         returned without counting them in ``messages_in`` / ``signed_in``.
+
+        ``admit(msg_id, size)`` (committed decoding only): called for each whole packet found by the
+        header walk before any check; a packet it refuses is counted as ``shed`` and skipped unchecked
+        (a receiver whose queue for such packets is full saves the CRC, signature and unpacking of a
+        flood).
         """
         mav = self.mav
         mav.commit = bool(commit)
         try:
-            return self._decode(datagram, mav.commit)
+            return self._decode(datagram, mav.commit, admit if commit else None)
         finally:
             mav.commit = True
 
-    def _decode(self, datagram, commit: bool) -> list[MAVLinkMessage]:
+    def _decode(self, datagram, commit: bool, admit=None) -> list[MAVLinkMessage]:
         c = self.counters
         data = bytes(datagram)
         n = len(data)
@@ -287,6 +294,10 @@ class MavCodec:
             i += size
             if flags & 0xFE:  # unknown incompatibility flag: must not be parsed (MAVLink 2 spec)
                 c.malformed += 1
+                continue
+            if admit is not None and not admit(pkt[7] | (pkt[8] << 8) | (pkt[9] << 16) if b0 == 0xFD else pkt[5],
+                                               size):
+                c.shed += 1
                 continue
             if read is not None and b0 == 0xFD:
                 msg_id = pkt[7] | (pkt[8] << 8) | (pkt[9] << 16)

@@ -68,6 +68,11 @@ def fifo_release(t_in: np.ndarray, delay: np.ndarray, keep: "np.ndarray | None" 
     return out
 
 
+def item_bytes(item: Any) -> int:
+    """The bytes an item holds in a line's byte budget: its length if it is bytes, else 0."""
+    return len(item) if isinstance(item, (bytes, bytearray, memoryview)) else 0
+
+
 def delay_seed(seed: "int | np.random.SeedSequence") -> np.random.SeedSequence:
     """The seed a ``DelayLine(model, seed=seed)`` gives its :class:`DelayProcess` (child 0).
 
@@ -138,15 +143,18 @@ class DelayLine:
     ``delay``: a :class:`DelayProcess`, a :class:`DelayModel` (wrapped in a DelayProcess with
     ``seed`` and ``epoch_s``), or a callable ``(t_in, index) -> seconds``. ``seed`` seeds both
     the delay process (child 0) and the impairment draws (child 1). ``max_queue``: packets in
-    flight beyond this are tail-dropped (None = unbounded). ``log``: keep a :class:`LinkRecord`
-    per packet (bounded by ``max_log``; the oldest records are discarded past it).
+    flight beyond this are tail-dropped (None = unbounded); ``max_bytes``: likewise for the bytes of
+    the ``bytes`` items in flight (the shim's datagrams; other items count 0). Both drops count as
+    ``dropped_queue`` and do not move the FIFO clamp. ``log``: keep a :class:`LinkRecord` per packet
+    (bounded by ``max_log``; the oldest records are discarded past it).
     """
 
     def __init__(self, delay: "DelayProcess | DelayModel | Callable[[float, int], float]", *,
                  seed: "int | np.random.SeedSequence | None" = None, epoch_s: float = DELAY_EPOCH.default,
                  fifo: bool = True, loss: float = 0.0, dup: float = 0.0, reorder: float = 0.0,
                  reorder_fraction: float = 0.5, outages: Iterable[Sequence[float]] = (),
-                 max_queue: "int | None" = None, log: bool = True, max_log: int = 1_000_000):
+                 max_queue: "int | None" = None, max_bytes: "int | None" = None, log: bool = True,
+                 max_log: int = 1_000_000):
         ss = as_seed_sequence(seed)
         d_ss, imp_ss = delay_seed(ss), child_seed(ss, 1)
         if isinstance(delay, DelayModel):
@@ -165,6 +173,8 @@ class DelayLine:
         self.reorder_fraction = float(reorder_fraction)
         self.outages = check_outages(outages)
         self.max_queue = max_queue
+        self.max_bytes = max_bytes
+        self.bytes_in_flight = 0  #: bytes of the ``bytes`` items in flight
         self._imp_ss = imp_ss
         self._rng = np.random.default_rng(imp_ss)
         self._heap: list[tuple[float, int, Any]] = []  # (release, order, item)
@@ -216,7 +226,8 @@ class DelayLine:
         elif u_loss < self.loss:
             drop = "loss"
             self.counters.dropped_loss += 1
-        elif self.max_queue is not None and len(self._heap) >= self.max_queue:
+        elif (self.max_queue is not None and len(self._heap) >= self.max_queue) or (
+                self.max_bytes is not None and self.bytes_in_flight + item_bytes(item) > self.max_bytes):
             drop = "queue"
             self.counters.dropped_queue += 1
         if drop:
@@ -243,6 +254,7 @@ class DelayLine:
     def _schedule(self, t_out: float, item: Any) -> None:
         heapq.heappush(self._heap, (t_out, self._order, item))
         self._order += 1
+        self.bytes_in_flight += item_bytes(item)
 
     def _record(self, rec: LinkRecord) -> LinkRecord:
         if self.log_enabled:
@@ -257,7 +269,9 @@ class DelayLine:
         out = []
         heap = self._heap
         while heap and heap[0][0] <= t_now:
-            out.append(heapq.heappop(heap)[2])
+            item = heapq.heappop(heap)[2]
+            self.bytes_in_flight -= item_bytes(item)
+            out.append(item)
         self.counters.released += len(out)
         return out
 
@@ -274,6 +288,7 @@ class DelayLine:
         """Counters plus sampled/effective delay summaries (s) over the logged, delivered packets."""
         out = self.counters.as_dict()
         out["in_flight"] = len(self._heap)
+        out["bytes_in_flight"] = self.bytes_in_flight
         recs = [r for r in self.log if not r.dropped and not r.copy]
         if recs:
             samp = np.array([r.delay for r in recs])

@@ -23,7 +23,6 @@ is never learned as the peer. Hosts must be given numeric (the endpoint resolves
 from __future__ import annotations
 
 import time
-from collections import Counter
 from dataclasses import dataclass
 from typing import Callable, Iterable, NamedTuple
 
@@ -39,6 +38,48 @@ def format_udp_address(addr: Address) -> str:
     return f"udp:[{host}]:{addr[1]}" if ":" in host else f"udp:{host}:{addr[1]}"
 
 
+class TopCounter:
+    """Counts per key, bounded: the ``k`` heaviest keys kept, every other count in ``others``.
+
+    Up to ``2 k`` keys are counted exactly; when a new key comes past that, the lighter half is folded
+    into ``others`` (their counts, and ``others_keys`` how many keys they were). Memory stays
+    ``O(k)`` whatever the number of distinct keys (spoofed source addresses, say); a key that stays
+    heavy is never folded. ``distinct`` is the number of keys seen, counted again if one comes back
+    after being folded (so at least the true number).
+    """
+
+    def __init__(self, k: int = 64):
+        self.k = max(1, int(k))
+        self.counts: "dict[object, int]" = {}
+        self.others = 0
+        self.others_keys = 0
+        self.distinct = 0
+
+    def add(self, key, n: int = 1) -> bool:
+        """Count ``n`` for ``key``; True if it was not being counted (new, or folded before)."""
+        if key in self.counts:
+            self.counts[key] += n
+            return False
+        if len(self.counts) >= 2 * self.k:
+            keep = sorted(self.counts.items(), key=lambda kv: -kv[1])
+            for _, c in keep[self.k:]:
+                self.others += c
+            self.others_keys += len(keep) - self.k
+            self.counts = dict(keep[: self.k])
+        self.counts[key] = n
+        self.distinct += 1
+        return True
+
+    def __contains__(self, key) -> bool:
+        return key in self.counts
+
+    def __len__(self) -> int:
+        return len(self.counts)
+
+    def most_common(self, n: int) -> "list[tuple[object, int]]":
+        return sorted(self.counts.items(), key=lambda kv: -kv[1])[:n]
+
+
 class DropReporter:
     """Warn once per unexpected sender, then periodically with counts, while its datagrams are dropped.
 
@@ -47,7 +88,8 @@ class DropReporter:
     reported at once; after that one summary line at most every ``every_s`` seconds (``now``, or the
     ``clock``'s seconds) while drops continue: how many in the interval and in all, per address
     (top 3). Lines go to ``emit`` (default: stderr) as ``"{who}: warning: ..."``. ``expected()`` names
-    the peer that is accepted (called when a line is made, so a learned peer shows up).
+    the peer that is accepted (called when a line is made, so a learned peer shows up). The counts per
+    address are a :class:`TopCounter`: a flood from a million spoofed addresses keeps a few kB.
     """
 
     def __init__(self, who: str, expected: "Callable[[], str]", *, hint: str = "",
@@ -56,7 +98,8 @@ class DropReporter:
         self.who, self.expected, self.hint = who, expected, hint
         self.emit = emit or stderr_line
         self.every_s, self.clock, self.max_named = float(every_s), clock, int(max_named)
-        self.by_addr: Counter = Counter()
+        self.by_addr = TopCounter()
+        self.named: "set[Address]" = set()  #: addresses already reported by name (at most max_named)
         self.total = 0
         self.lines = 0
         self._since = 0
@@ -65,13 +108,13 @@ class DropReporter:
     def note(self, addr: "Address", what: str = "", now: "float | None" = None) -> None:
         """Count one dropped datagram from ``addr`` at ``now`` (s; default the clock's); maybe emit a line."""
         addr = (addr[0], addr[1])
-        new = addr not in self.by_addr
-        self.by_addr[addr] += 1
+        self.by_addr.add(addr)
         self.total += 1
         self._since += 1
         if now is None:
             now = self.clock()
-        if new and len(self.by_addr) <= self.max_named:
+        if addr not in self.named and len(self.named) < self.max_named:
+            self.named.add(addr)
             self._say(f"dropping datagrams from {format_udp_address(addr)}"
                       f"{f' ({what})' if what else ''}: not the expected peer {self.expected()}"
                       f"{'; ' + self.hint if self.hint else ''}")
@@ -79,10 +122,8 @@ class DropReporter:
             if self._next is None:
                 self._next = now + self.every_s
         elif self._next is None or now >= self._next:
-            top = ", ".join(f"{format_udp_address(a)}: {n}" for a, n in self.by_addr.most_common(3))
-            more = f" and {len(self.by_addr) - 3} more" if len(self.by_addr) > 3 else ""
             self._say(f"still dropping datagrams from unexpected peers: {self._since} in the last "
-                      f"{self.every_s:g} s, {self.total} in all ({top}{more}); expected {self.expected()}")
+                      f"{self.every_s:g} s, {self.total} in all ({self._top()}); expected {self.expected()}")
             self._since = 0
             self._next = now + self.every_s
 
@@ -94,8 +135,13 @@ class DropReporter:
         """One line with the totals (None if nothing was dropped), e.g. for a process's last words."""
         if not self.total:
             return None
+        return f"dropped {self.total} datagrams from unexpected peers ({self._top()}); expected {self.expected()}"
+
+    def _top(self) -> str:
+        """The three heaviest senders, and how many more (at least) there were."""
         top = ", ".join(f"{format_udp_address(a)}: {n}" for a, n in self.by_addr.most_common(3))
-        return f"dropped {self.total} datagrams from unexpected peers ({top}); expected {self.expected()}"
+        more = self.by_addr.distinct - min(3, len(self.by_addr))
+        return top + (f" and {more} more addresses" if more > 0 else "")
 
 
 class Received(NamedTuple):
@@ -119,6 +165,8 @@ class EndpointCounters:
     datagrams_rejected_peer: int = 0  # datagrams from an address outside allow_peers
     rejected_sysid: int = 0
     inbox_overflow: int = 0
+    #: decoded messages dropped because the queue they wait in for the step boundary was full (its byte budget)
+    dropped_queue: int = 0
     socket_errors: int = 0
     refused: int = 0  # ICMP port unreachable: nothing listens where we send (part of socket_errors)
 
@@ -172,8 +220,11 @@ class Intake:
             return True
         return self.listed(addr)
 
-    def receive(self, data: bytes, addr: Address, now: float) -> "list[Received]":
-        """The good messages of one datagram from ``addr`` arriving at ``now`` (s); the rest counted."""
+    def receive(self, data: bytes, addr: Address, now: float,
+                admit: "Callable[[int, int], bool] | None" = None) -> "list[Received]":
+        """The good messages of one datagram from ``addr`` arriving at ``now`` (s); the rest counted.
+        ``admit(msg_id, size)``: a packet it refuses is skipped before decoding (``shed``:
+        :meth:`daa_sil.link.codec.MavCodec.decode`)."""
         c = self.counters
         c.datagrams_received += 1
         addr = (addr[0], addr[1])
@@ -184,7 +235,7 @@ class Intake:
             what = f"{good[0].get_type()} from system {good[0].get_srcSystem()}" if good else "no valid MAVLink"
             self.drops.note(addr, what, now)
             return []
-        msgs = self.codec.decode(data)
+        msgs = self.codec.decode(data, admit=admit)
         if not msgs:
             return []
         if self.allow_sysids is not None:
@@ -202,6 +253,7 @@ class Intake:
         d = dict(self.codec.counters.as_dict())
         d.update(self.counters.__dict__)
         d["malformed_content"] = self.guard.total  # decoded, but its handling raised (msgguard)
-        d["dropped"] = (self.codec.counters.dropped + self.counters.rejected_peer + self.counters.rejected_sysid
-                        + self.counters.inbox_overflow + self.guard.total)
+        c = self.counters
+        d["dropped"] = (self.codec.counters.dropped + c.rejected_peer + c.rejected_sysid + c.inbox_overflow
+                        + c.dropped_queue + self.guard.total)
         return d

@@ -38,7 +38,9 @@ or non-Linux: ``call_at`` + poll) is armed for the core's :meth:`ShimCore.next_r
 Hostile input: each datagram's handling runs under a :class:`daa_sil.sil.msgguard.MessageGuard`:
 one that raises is counted (``malformed_content``) and reported, and the next datagram is handled.
 
-Never silent: datagrams from an address that is not the learned peer are dropped with a warning
+Never silent: datagrams past a queue's byte budget (a flood) are dropped with one warning and
+counted (``dropped_queue``, in the stats); datagrams from an address that is not the learned peer are
+dropped with a warning
 (first one per address at once, then with counts at most every 10 s), datagrams due for a side
 nobody has claimed yet likewise, and a side that has talked and then falls silent for
 ``SILENT_AFTER_S["shim"]`` (:mod:`daa_sil.sil.silence`) is reported (stderr, ``daa-sil shim: warning: ...``).
@@ -98,6 +100,7 @@ class DelayShim:
                       for side in SIDES}
         self.silence = {side: Silence(SILENT_AFTER_S["shim"]) for side in SIDES}
         self._no_peer_warned: set[str] = set()
+        self._queue_warned = False
         #: every datagram's handling runs under it
         self.guard = MessageGuard("daa-sil shim", emit=lambda text: self.warn(text))
         self._watch: "asyncio.TimerHandle | None" = None
@@ -216,6 +219,12 @@ class DelayShim:
         if not core.tick_mode and self._loop is not None:  # the free-running clock: kernel arrival time
             t_in = self.now() if t_rx is None else min(self.now(), (t_rx - self._t0) * self.config.speed)
         self._send_all(core.receive(side, data, t_in))
+        if core.counters["dropped_queue"] and not self._queue_warned:
+            self._queue_warned = True
+            cfg = self.config
+            self.warn(f"dropping datagrams from the {LABELS[side]}: a queue is past its byte budget (delay lines "
+                      f"{cfg.max_line_bytes // 2**20} MiB each, held datagrams {cfg.max_held_bytes // 2**20} MiB; "
+                      f"a flood?); counted as dropped_queue in the stats")
         if core.processed:
             self._ticks_done(core.processed, t_rx)
         elif core.tick_mode is False:

@@ -22,6 +22,10 @@ from daa_sil.models.streams import STREAM_DOWN, STREAM_UP
 from daa_sil.sil.endpoint import parse_udp_address
 
 CLOCKS = ("realtime", "lockstep")
+#: bytes each delay line may hold in flight (a lockstep step carries 1-3 kB each way: this is hours of it)
+LINE_BYTES = 16 * 1024 * 1024
+#: bytes of GCS datagrams held before the mode is decided (realtime) or while a step awaits its ack (lockstep)
+HELD_BYTES = 8 * 1024 * 1024
 TIMINGS = ("precise", "poll")
 #: MAVLink ids of the lockstep clock's tick and its acknowledgement
 TICK_ID = mavlink.MAVLINK_MSG_ID_SIM_TICK
@@ -97,6 +101,8 @@ class ShimConfig:
     (still serving I/O) until the release instant (the selector's millisecond timeout rounding
     otherwise makes releases up to ~1 ms late; ``spin_s`` 0 = no polling). ``"precise"`` falls
     back to ``"poll"`` where timerfd / kernel stamps are unavailable (non-Linux).
+    ``max_line_bytes``: bytes each delay line holds in flight; ``max_held_bytes``: bytes of GCS datagrams
+    held (start-up, a lockstep step): past either, datagrams are dropped and counted (``dropped_queue``).
     """
 
     delay_down: DelayModel
@@ -120,6 +126,8 @@ class ShimConfig:
     max_log: int = 100_000
     spin_s: float = 0.002
     timing: str = "precise"
+    max_line_bytes: int = LINE_BYTES
+    max_held_bytes: int = HELD_BYTES
 
     def validate(self) -> None:
         """Raise a one-line UsageError for any bad value."""
@@ -131,6 +139,10 @@ class ShimConfig:
             raise UsageError(f"timing must be one of {', '.join(TIMINGS)}, got {self.timing!r}")
         if not (math.isfinite(self.spin_s) and 0 <= self.spin_s <= 0.05):
             raise UsageError(f"spin_s must be within [0, 0.05] s, got {self.spin_s!r}")
+        for name in ("max_line_bytes", "max_held_bytes"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and 65_536 <= v <= 2**34):
+                raise UsageError(f"{name} must be an integer within [65536, 2**34] bytes, got {v!r}")
         for name in ("delay_down", "delay_up"):
             if not isinstance(getattr(self, name), DelayModel):
                 raise UsageError(f"{name} must be a delay model (see daa_sil.models.latency), got {getattr(self, name)!r}")

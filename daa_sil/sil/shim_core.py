@@ -38,7 +38,13 @@ sim time ``t`` given to :meth:`ShimCore.receive`; :meth:`ShimCore.next_release` 
 caller should call :meth:`ShimCore.release`.
 
 Until the vehicle's first datagram decides the mode (realtime), GCS datagrams are held
-(``held_for_vehicle``, at most ``MAX_HELD``, then ``held_dropped``) and replayed after it.
+(``held_for_vehicle``, at most ``MAX_HELD`` datagrams and ``max_held_bytes`` bytes, then
+``held_dropped``) and replayed after it.
+
+Every queue has a byte budget: each delay line ``max_line_bytes`` in flight, the start-up hold and a
+lockstep step's held GCS datagrams ``max_held_bytes`` (:class:`daa_sil.sil.shim_config.ShimConfig`).
+A datagram past one is dropped and counted in ``dropped_queue`` (and in the line's own
+``dropped_queue``, or ``held_dropped`` / ``batch_dropped``); the socket side warns once.
 
 Control messages are found by a header walk (:func:`daa_sil.sil.shim_config.control_ids`), then
 fully decoded (CRC, and the signature with a key), so a forged or corrupt tick cannot move the clock
@@ -80,7 +86,7 @@ MAX_COUNTED_STAMPS = 64
 #: the protocol's counters (the socket side adds its own)
 COUNTERS = ("rejected_claim", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards", "tick_echoes",
             "held_for_vehicle", "held_dropped", "batch_dropped", "gcs_lagged", "gcs_unresponsive", "released_late",
-            "ticks_held", "start_tick_forwarded")
+            "ticks_held", "start_tick_forwarded", "dropped_queue")
 #: the side each line delivers to
 DEST = {"down": "gcs", "up": "vehicle"}
 
@@ -102,8 +108,8 @@ class ShimCore:
         root = as_seed_sequence(config.seed)  # resolved once: seed None = fresh entropy shared by both
         seeds = direction_seeds(root)
         procs = shim_delay_processes(config, root)
-        common = dict(fifo=config.fifo, loss=config.loss, dup=config.dup,
-                      reorder=config.reorder, outages=config.outages, max_log=config.max_log)
+        common = dict(fifo=config.fifo, loss=config.loss, dup=config.dup, reorder=config.reorder,
+                      outages=config.outages, max_log=config.max_log, max_bytes=config.max_line_bytes)
         self.lines = {d: DelayLine(procs[d], seed=seeds[d], **common) for d in ("down", "up")}
         self.codec = MavCodec(0, 0, key=config.key, sign_outgoing=False)  # verifies control messages only
         #: sides whose peer is known (configured, or claimed by :meth:`claim`)
@@ -117,6 +123,7 @@ class ShimCore:
         self.processed: list[tuple[int, float, int]] = []
         self._out: list[Send] = []
         self._held: list[tuple[float, bytes]] = []  # mode undecided: GCS datagrams
+        self._held_bytes = 0
         self._unacked: "deque[tuple[int, float]]" = deque()  # ticks forwarded to the GCS, not yet acked
         self._held_tick: "tuple | None" = None  # lockstep: the next tick, until the GCS acks its pending one
         self._start_tick: "tuple | None" = None  # tick 0, processed before any GCS had spoken
@@ -124,6 +131,7 @@ class ShimCore:
         self._start_count = {"down": 0, "up": 0}
         self._stamp_count: dict[str, dict[int, int]] = {"down": {}, "up": {}}
         self._gcs_batch: list[tuple[float, bytes]] = []
+        self._batch_bytes = 0
 
     # -- input ---------------------------------------------------------------------------------
     def claim(self, side: str, data: bytes) -> bool:
@@ -141,11 +149,13 @@ class ShimCore:
         self._out, self.processed = [], []
         if self.tick_mode is None:  # realtime: the vehicle side's first datagram decides the mode
             if side == "gcs":
-                if len(self._held) < MAX_HELD:
+                if len(self._held) < MAX_HELD and self._held_bytes + len(data) <= self.config.max_held_bytes:
                     self._held.append((t, data))
+                    self._held_bytes += len(data)
                     self.counters["held_for_vehicle"] += 1
                 else:
                     self.counters["held_dropped"] += 1
+                    self.counters["dropped_queue"] += 1
                 return self._out
             self._decide_mode(data)
         if self.tick_mode:
@@ -159,8 +169,15 @@ class ShimCore:
                 # a replay to its codec (dropped and counted as an attack)
                 self._process_tick(*start, echo=False)
         else:
-            self.lines["down" if side == "vehicle" else "up"].push(t, data)
+            self._push(self.lines["down" if side == "vehicle" else "up"], t, data)
         return self._out
+
+    def _push(self, line: DelayLine, t: float, data: bytes, key: "tuple | None" = None) -> list:
+        """``line.push`` counting a drop past the line's byte budget in ``dropped_queue``."""
+        recs = line.push(t, data, key=key)
+        if recs and recs[0].dropped == "queue":
+            self.counters["dropped_queue"] += 1
+        return recs
 
     def next_release(self) -> "float | None":
         """Free-running clock: sim time (s) of the earliest pending release; None if nothing is
@@ -184,12 +201,12 @@ class ShimCore:
         if TICK_ID in control_ids(first_vehicle_datagram):
             tick = any(m.get_msgId() == TICK_ID for m in self.codec.decode(first_vehicle_datagram, commit=False))
         self.tick_mode = tick
-        held, self._held = self._held, []
+        held, self._held, self._held_bytes = self._held, [], 0
         for t, data in held:
             if tick:
                 self._tick_datapath("gcs", data)
             else:
-                self.lines["up"].push(t, data)
+                self._push(self.lines["up"], t, data)
 
     def _tick_datapath(self, side: str, data: bytes) -> None:
         c = self.counters
@@ -207,14 +224,16 @@ class ShimCore:
                 return
             c["bad_control"] += 1
         if side == "vehicle":
-            self.lines["down"].push(self.sim_time, data, key=self._fault_key("down", self.sim_time))
+            self._push(self.lines["down"], self.sim_time, data, key=self._fault_key("down", self.sim_time))
             return
         stamp = self._gcs_stamp()
         if self.lockstep and self._unacked:
-            if len(self._gcs_batch) >= MAX_HELD:  # a GCS flooding one step without acking it
-                c["batch_dropped"] += 1
+            if len(self._gcs_batch) >= MAX_HELD or self._batch_bytes + len(data) > self.config.max_held_bytes:
+                c["batch_dropped"] += 1  # a GCS flooding one step without acking it
+                c["dropped_queue"] += 1
                 return
             self._gcs_batch.append((stamp, data))  # the GCS's step: keyed back from its ack
+            self._batch_bytes += len(data)
             return
         self._push_up(stamp, data, self._fault_key("up", stamp))
 
@@ -225,7 +244,7 @@ class ShimCore:
         return None
 
     def _push_up(self, stamp: float, data: bytes, key: tuple) -> None:
-        recs = self.lines["up"].push(stamp, data, key=key)
+        recs = self._push(self.lines["up"], stamp, data, key)
         if stamp < self.sim_time and any(not r.dropped and r.t_out <= self.sim_time for r in recs):
             self.counters["released_late"] += 1  # lockstep would have released it at a tick already processed
 
@@ -244,7 +263,7 @@ class ShimCore:
 
     def _flush_gcs_batch(self) -> None:
         """Lockstep: push the GCS datagrams held since the last tick forwarded to it, keyed back from now."""
-        batch, self._gcs_batch = self._gcs_batch, []
+        batch, self._gcs_batch, self._batch_bytes = self._gcs_batch, [], 0
         after: dict[int, int] = {}
         keys = []
         for stamp, _ in reversed(batch):
