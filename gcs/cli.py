@@ -30,8 +30,8 @@ EXAMPLES = """examples:
   # the pilot raises W_T to 6 s at t = 30 s and switches the onboard agent off at t = 90 s (through the link)
   daa-gcs --vehicle udp:127.0.0.1:14602 --scenario scenarios/head_on.yaml --set 30:DAA_WT=6 --set 90:DAA_ENABLE=0
 
-  # ask for GUIDED at t = 60 s: accepted while the pilot flies, refused (TEMPORARILY_REJECTED) while
-  # the agent does; a mode never switches the agent off (DAA_ENABLE does)
+  # ask for GUIDED at t = 60 s: accepted whoever flies (the agent still judges every pilot command and
+  # the heartbeat shows who flies); a mode never switches the agent off (DAA_ENABLE does)
   daa-gcs --vehicle udp:127.0.0.1:14602 --scenario scenarios/head_on.yaml --set 60:MODE=GUIDED
 
 connection strings (as MAVProxy): udpin:HOST:PORT listens, udpout:HOST:PORT sends; a bare udp:HOST:PORT

@@ -66,7 +66,7 @@ _WRITE_TYPES = {"PARAM_SET", "SET_MODE"}
 class SettingEvent:
     """One parameter or mode write as the step log keeps it (times are vehicle sim time, s)."""
 
-    kind: str  #: "param" or "mode"
+    kind: str  #: "param", "mode" or "traffic" (an injected intruder: ``name`` its ICAO address)
     name: str
     old: float
     new: float
@@ -271,7 +271,8 @@ class GcsServices:
             return self._mode(msg, M.MAV_CMD_DO_SET_MODE, base, custom, link, *when)
         return []
 
-    def _log(self, **kw) -> SettingEvent:
+    def log_event(self, **kw) -> SettingEvent:
+        """Keep one write for the step log (the first :data:`MAX_EVENTS`; the rest are counted)."""
         ev = SettingEvent(**kw)
         if len(self.events) < MAX_EVENTS:
             self.events.append(ev)
@@ -292,7 +293,7 @@ class GcsServices:
         elif res.status == "accepted":
             self.plant.set_policy(res.policy)
         value = res.value if status in ("accepted", "unchanged") else res.old
-        self._log(kind="param", name=name, old=res.old, new=value, status=status, link=link,
+        self.log_event(kind="param", name=name, old=res.old, new=value, status=status, link=link,
                   source=src, t_received=t_received, t_applied=t_applied, t_sent=t_sent, reason=reason)
         out = []
         if res.spec is not None:
@@ -312,7 +313,7 @@ class GcsServices:
             result, "denied")
         if link not in self.writable:
             result, status, reason = M.MAV_RESULT_DENIED, "denied_readonly", f"mode: {link} is read-only"
-        self._log(kind="mode", name=ident.mode_name(custom), old=float(current), new=float(current), status=status,
+        self.log_event(kind="mode", name=ident.mode_name(custom), old=float(current), new=float(current), status=status,
                   link=link, source=src, t_received=t_received, t_applied=t_applied, t_sent=t_sent, reason=reason)
         self.answered += 1
         sev = M.MAV_SEVERITY_INFO if result == M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_WARNING
