@@ -20,16 +20,32 @@ pilot's link.
 
 from __future__ import annotations
 
+from daa_sil.link.codec import mavlink as M
+
 from . import identity as ident
+from . import telemetry as T
 from .core import resolve_policy
 
 #: STATUSTEXT prefix of the boot's progress lines
 PREFIX = "boot: "
+#: while booting, the latest progress line goes out again with every this many heartbeats (1 a wall second),
+#: for a ground station that came in after it was said
+BOOT_TEXT_EVERY = 5
 
 
 def progress_text(text: str) -> str:
     """A preparation step as a STATUSTEXT (at most 50 characters)."""
     return (PREFIX + text)[:50]
+
+
+def boot_messages(plant, standby: bool, text: str, beat: int) -> list:
+    """The ``beat``-th boot datagram's messages: a HEARTBEAT in MAV_STATE_BOOT (STANDBY while waiting for a
+    GCS), and every :data:`BOOT_TEXT_EVERY` beats the latest progress ``text`` again."""
+    state = M.MAV_STATE_STANDBY if standby else M.MAV_STATE_BOOT
+    msgs = [T.heartbeat(plant.last_authority, bool(plant.policy.enabled), state)]
+    if text and beat % BOOT_TEXT_EVERY == 0:
+        msgs.append(T.statustext(progress_text(text), M.MAV_SEVERITY_INFO))
+    return msgs
 
 
 class BootPlant:

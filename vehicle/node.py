@@ -230,7 +230,7 @@ class VehicleNode:
 
     async def prepare(self) -> None:
         """Ready the simulation beside the link (:mod:`vehicle.prepare`), serving the link as a booting vehicle
-        meanwhile; then, with ``wait_gcs``, wait for the first ground station on the pilot's link."""
+        meanwhile."""
         from .prepare import Preparation
 
         p = self.protocol
@@ -250,6 +250,10 @@ class VehicleNode:
             p.set_plant(self.core)
             p.boot_progress("ready", self.boot_to_pilot)
             self.flush()
+
+    async def wait_for_gcs(self) -> None:
+        """``wait_gcs``: serve the link (MAV_STATE_STANDBY) until a ground station on the pilot's link speaks."""
+        p = self.protocol
         if self.opts.wait_gcs and not p.pilot_heard:
             say(f"ready; waiting for a ground station on {self.out.text} (--wait-gcs)")
             await self.waits.serve_until(lambda: p.pilot_heard, self.boot_to_pilot, standby=True)
@@ -281,9 +285,10 @@ class VehicleNode:
 
     async def run(self, on_step=None) -> None:
         """Play every step of the scenario, and on past it unless ``exit_at_end`` (see the module docstring);
-        prepares first if :meth:`prepare` has not run."""
+        prepares first if :meth:`prepare` has not run, and with ``wait_gcs`` waits for a ground station."""
         if self.core is None or self.protocol.booting:
             await self.prepare()
+        await self.wait_for_gcs()
         loop = asyncio.get_running_loop()
         p = self.protocol
         n = self.core.n_steps

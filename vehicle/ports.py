@@ -208,3 +208,20 @@ def open_ports(specs: "list[OutputSpec]", listen: Address, codec: MavCodec, guar
             port = len(ports) - 1
         outputs.append(OutputLink(s, port, ports[port].intake, dt))
     return ports, outputs
+
+
+def queue_summary(outputs: "list[OutputLink]", dropped_queue: int, shed: int) -> "str | None":
+    """One line on what the ground stations' queues dropped, what their reply budget held back and what the
+    listening outputs refused (None if nothing); ``dropped_queue`` / ``shed``: the vehicle's totals."""
+    parts = []
+    for o in outputs:
+        for p in o.peers.values():
+            c = p.counters
+            if c.dropped_queue or c.coalesced or c.deferred_steps:
+                parts.append(f"{o.name}: {c.dropped_queue} dropped, {c.coalesced} parameter lists coalesced, "
+                             f"replies held back for budget in {c.deferred_steps} steps")
+        if o.refused:
+            parts.append(f"{o.name}: {o.refused} datagrams from more ground stations than it serves refused")
+    if dropped_queue or shed:
+        parts.insert(0, f"{dropped_queue} messages past a queue's budget, {shed} more not decoded")
+    return ("queues: " + "; ".join(parts)) if parts else None

@@ -1,17 +1,14 @@
 """The vehicle's MAVLink protocol, sans-IO: datagrams in, sends, console lines and step-log rows out.
 
-:class:`VehicleProtocol` never reads a clock or touches a socket (the pattern of h11's
-``Connection`` and of :class:`daa_sil.sil.shim_core.ShimCore`). The node (:mod:`vehicle.node`) binds
-one socket per :class:`vehicle.ports.Port` and hands each datagram to :meth:`VehicleProtocol.receive`
-with the port, the sender and the arrival time (a TCP port: :meth:`~VehicleProtocol.connect`, then
-each piece of the stream to :meth:`~VehicleProtocol.receive_stream`, cut into whole packets by a
-:class:`daa_sil.link.framing.StreamFramer` per connection); it sends what
-:meth:`VehicleProtocol.take_sends` returns and prints what :meth:`VehicleProtocol.take_notices`
-returns. A test does the same with bytes.
-
-Each output serves its ground stations (:mod:`vehicle.ports`: one fixed address, every ``udpin:``
-sender heard lately, every ``tcpin:`` connection), each a :class:`vehicle.peers.Peer` with its own
-rates, queues and reply budget; every ground station of an output has the output's rights.
+:class:`VehicleProtocol` never reads a clock or touches a socket (h11's pattern, as
+:class:`daa_sil.sil.shim_core.ShimCore`). The node (:mod:`vehicle.node`) binds one socket per
+:class:`vehicle.ports.Port` and hands each datagram to :meth:`VehicleProtocol.receive` with the port,
+the sender and the arrival time (TCP: :meth:`~VehicleProtocol.connect`, then the stream to
+:meth:`~VehicleProtocol.receive_stream`, cut into packets by a :class:`daa_sil.link.framing.StreamFramer`
+per connection); it sends what :meth:`~VehicleProtocol.take_sends` returns and prints what
+:meth:`~VehicleProtocol.take_notices` returns. A test does the same with bytes. Each output serves its
+ground stations (:mod:`vehicle.ports`), each a :class:`vehicle.peers.Peer` with its own rates, queues
+and reply budget and the output's rights.
 
 What happens to a message:
 
@@ -52,13 +49,13 @@ from daa_sil.sil.outputs import PILOT_LINK, OutputSpec
 
 from . import telemetry as T
 from .announce import ModeAnnouncer
-from .boot import progress_text
+from .boot import boot_messages, progress_text
 from .identity import mode_name
 from .node_options import VehicleStats
 from .orders import VEHICLE_SYSID, Orders, is_pilot_command, is_traffic
 from .params import ParamTable
 from .peers import FULL, wire_size
-from .ports import MAIN, Notice, OutputLink, Outbox, Port, Send, open_ports
+from .ports import MAIN, Notice, OutputLink, Outbox, Port, Send, open_ports, queue_summary
 from .services import GcsServices, SettingEvent
 from .streams import STREAMED
 from .tick_rules import TickOptions, TickRules
@@ -106,6 +103,7 @@ class VehicleProtocol:
         self.framers: "dict[tuple[int, Address], StreamFramer]" = {}  #: one per TCP connection
         self._gcs_data = False  # data from the pilot link since the last step boundary
         self.pilot_heard = False  #: a ground station on the pilot link has sent a good message
+        self.boot_text, self.boot_beats = "", 0  # the boot's latest progress line, boot heartbeats sent
         self._stamp: "tuple | None" = None  # (sender, t_sent) of a SYSTEM_TIME in the datagram being read
 
     # -- what goes out ---------------------------------------------------------------------------
@@ -169,11 +167,6 @@ class VehicleProtocol:
     def listener(self, port: int) -> "OutputLink | None":
         """The listening output (``udpin:`` / ``tcpin:``) served on ``port``, if any."""
         return next((o for o in self.outputs if o.port == port and o.listens), None)
-
-    def link_of(self, addr: Address, port: int = MAIN) -> "str | None":
-        """The name of the output ``addr`` is on (``gcs``, ``tap``, ``out2``, ...), or None."""
-        o = self.output_at(addr, port)
-        return o.name if o is not None else None
 
     def receive(self, port: int, data: bytes, addr: Address, now: float) -> None:
         """One datagram on ``port`` from ``addr`` at wall ``now`` (s) (see the module docstring)."""
@@ -344,10 +337,6 @@ class VehicleProtocol:
             self.out.warn(line)
 
     # -- sending ---------------------------------------------------------------------------------
-    def _expire(self, wall: float) -> None:
-        for o in self.outputs:
-            o.expire(wall)
-
     def publish(self, t: float, out, wall: float) -> None:
         """Telemetry of the step at ``t`` (s; ``out`` the plant's step output) at wall ``wall`` (s): per
         ground station, one datagram of the messages due on its stream."""
@@ -357,7 +346,8 @@ class VehicleProtocol:
         msgs = T.step_messages(self.plant, t, out, self.home, agent_enabled=bool(pol.enabled))
         self.latest = msgs
         self._step_t, self._step_wall = t, wall
-        self._expire(wall)
+        for o in self.outputs:
+            o.expire(wall)  # udpin: ground stations silent too long
         extra = []
         new_auth = self.plant.last_authority
         text = self.mode_text.update(t, new_auth, self.plant.last_decision, mode_name(self.plant.mode()))
@@ -376,20 +366,22 @@ class VehicleProtocol:
         reads; commands are refused), then a HEARTBEAT in MAV_STATE_BOOT (STANDBY) to every ground station
         (not the pilot's link unless ``to_pilot``: a shim there must see SIM_TICK first)."""
         self._new_budget()
-        self._expire(wall)
+        for o in self.outputs:
+            o.expire(wall)  # udpin: ground stations silent too long
         self.process()
-        state = M.MAV_STATE_STANDBY if standby else M.MAV_STATE_BOOT
-        hb = T.heartbeat(self.plant.last_authority, bool(self.plant.policy.enabled), state)
+        self.boot_beats += 1
+        msgs = boot_messages(self.plant, standby, self.boot_text, self.boot_beats)
         for o in self.outputs:
             if o is self.pilot and not to_pilot:
                 continue
             for addr in o.addrs():
-                self.out.send(o.port, addr, [hb])
+                self.out.send(o.port, addr, msgs)
 
     def boot_progress(self, text: str, to_pilot: bool = True) -> None:
         """A step of the preparation: a console line and a STATUSTEXT to every ground station (in its reply
         budget, after what it asked for)."""
         self.out.warn(f"boot: {text}")
+        self.boot_text = text
         st = T.statustext(progress_text(text), M.MAV_SEVERITY_INFO)
         for o in self.outputs:
             if o is self.pilot and not to_pilot:
@@ -404,16 +396,4 @@ class VehicleProtocol:
 
     def queue_summary(self) -> "str | None":
         """One line on what the queues dropped and what the reply budget held back (None if nothing)."""
-        parts = []
-        for o in self.outputs:
-            for addr, p in o.peers.items():
-                c = p.counters
-                if c.dropped_queue or c.coalesced or c.deferred_steps:
-                    parts.append(f"{o.name}: {c.dropped_queue} dropped, {c.coalesced} parameter lists coalesced, "
-                                 f"replies held back for budget in {c.deferred_steps} steps")
-            if o.refused:
-                parts.append(f"{o.name}: {o.refused} datagrams from more than the ground stations it serves refused")
-        if self.stats.dropped_queue or self.codec.counters.shed:
-            parts.insert(0, f"{self.stats.dropped_queue} messages past a queue's budget, {self.codec.counters.shed} "
-                            f"more not decoded")
-        return ("queues: " + "; ".join(parts)) if parts else None
+        return queue_summary(self.outputs, self.stats.dropped_queue, self.codec.counters.shed)

@@ -60,6 +60,10 @@ PILOT_COMMANDS = {M.MAV_CMD_DO_REPOSITION}
 READ_TYPES = {"PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "TIMESYNC", "PING", "REQUEST_DATA_STREAM",
                "MISSION_REQUEST_LIST", "FILE_TRANSFER_PROTOCOL"}
 _WRITE_TYPES = {"PARAM_SET", "SET_MODE"}
+#: a refused PARAM_SET's PARAM_ERROR code, by the refusal's status
+PARAM_ERRORS = {"unknown": M.MAV_PARAM_ERROR_DOES_NOT_EXIST, "out_of_range": M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE,
+                "not_integer": M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, "read_only": M.MAV_PARAM_ERROR_READ_ONLY,
+                "denied_readonly": M.MAV_PARAM_ERROR_PERMISSION_DENIED}
 
 
 @dataclass
@@ -296,6 +300,10 @@ class GcsServices:
         self.log_event(kind="param", name=name, old=res.old, new=value, status=status, link=link,
                   source=src, t_received=t_received, t_applied=t_applied, t_sent=t_sent, reason=reason)
         out = []
+        error = PARAM_ERRORS.get(status)
+        if error is not None:  # the refusal first: a client that reads PARAM_ERROR completes on it (MAVSDK)
+            i = self.params.find(name)[0] if res.spec is not None else -1
+            out.append(M.MAVLink_param_error_message(*src, name.encode("ascii", "replace")[:16], i, error))
         if res.spec is not None:
             i, _ = self.params.find(name)
             out.append(T.param_value(res.spec.name, value, res.spec.ptype, len(self.params), i))
