@@ -1,8 +1,8 @@
 """``daa-gcs``: the SIL ground station: shows the delayed telemetry and flies the pilot model or a script.
 
-Prints ``READY listen=udp:HOST:PORT vehicle=...`` once bound. Runs until Ctrl-C / SIGTERM (or
-``--duration`` wall seconds), then writes its command log (JSONL, atomic) and exits 0.
-Errors are one line (``daa-gcs: error: ...``, exit 2 for bad input).
+Prints ``READY listen=udp:HOST:PORT vehicle=...`` once bound. Runs until Ctrl-C / SIGTERM (exit 130 /
+143, as ``daa-vehicle``) or ``--duration`` wall seconds (exit 0), then writes its command log (JSONL,
+atomic). Errors are one line (``daa-gcs: error: ...``, exit 2 for bad input).
 """
 
 from __future__ import annotations
@@ -119,8 +119,14 @@ async def _amain(args) -> int:
                                   config=config_of(args.config)))
     await node.start()
     loop = asyncio.get_running_loop()
+    got: dict = {}
+
+    def on_signal(signum: int) -> None:
+        got.setdefault("sig", signum)
+        node.request_stop()
+
     for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, node.request_stop)
+        loop.add_signal_handler(sig, on_signal, sig)
     if args.duration:
         loop.call_later(args.duration, node.request_stop)
     freeze_after_startup()  # the start-up's objects stay out of the steps' collections
@@ -138,6 +144,9 @@ async def _amain(args) -> int:
     for line in (node.ep.drops.summary(), node.ep.guard.summary()):
         if line:
             print(f"daa-gcs: {line}", flush=True)
+    if "sig" in got:  # Ctrl-C / SIGTERM: as daa-vehicle, 128 + the signal (130 / 143)
+        print(f"daa-gcs: stopped by signal {got['sig']}", flush=True)
+        return 128 + int(got["sig"])
     return 0
 
 

@@ -23,7 +23,12 @@ import pytest
 from interop_helpers import ROOT, free_ports, start, stop
 from test_interop_mavutil import long_scenario
 
-mavsdk = pytest.importorskip("mavsdk", reason="MAVSDK-Python is in the dev extra: pip install -e '.[dev]'")
+try:
+    import mavsdk  # noqa: F401  (a stock client: the dev extra installs it)
+except ImportError:
+    if os.environ.get("DAA_SIL_REQUIRE_INTEROP"):  # CI: a missing stock client is a failure, not a skip
+        raise
+    pytest.skip("MAVSDK-Python is in the dev extra: pip install -e '.[dev]'", allow_module_level=True)
 
 
 async def _first(agen, pred=lambda x: True, timeout: float = 10.0):

@@ -447,3 +447,53 @@ def test_vehicle_connection_string_errors_are_one_line(args, needle):
     cp = subprocess.run([sys.executable, "-m", "vehicle", str(SCENARIO), *args], capture_output=True, text=True,
                         timeout=60, cwd=ROOT)
     assert cp.returncode == 2 and cp.stderr.count("\n") == 1 and needle in cp.stderr, cp.stderr
+
+
+def test_vehicle_out_tcpin_serves_reconnects_and_clients_with_their_own_rates(tmp_path):
+    """``daa-vehicle --out tcpin:`` as SITL's 5760, with pymavlink's ``tcp:`` client: two clients at once, one
+    stopping its VFR_HUD stops it for itself only; one disconnects and connects again and is served at once.
+    On main ``tcpin:`` was refused ("only UDP is supported")."""
+    import re
+
+    from pymavlink import mavutil
+
+    proc = start(["vehicle", long_scenario(tmp_path), "--out", "tcpin:127.0.0.1:0", "--speed", "10"],
+                 tmp_path / "vehicle.log")
+    conns = []
+
+    def client():
+        c = mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=255, source_component=190,
+                                       dialect="common")
+        conns.append(c)
+        return c
+
+    try:
+        from interop_helpers import wait_for_text
+
+        ready = wait_for_text(tmp_path / "vehicle.log", "READY", 60.0, proc)
+        port = int(re.search(r"out=tcpin:127\.0\.0\.1:(\d+)", ready).group(1))
+        a, b = client(), client()
+        for c in (a, b):  # a TCP client is served from its connection on: no hello needed
+            got = recv_until(c, lambda m: m.get_type() == "HEARTBEAT", 10.0)
+            assert got and got[-1].get_type() == "HEARTBEAT" and got[-1].autopilot == 3
+        b.mav.command_long_send(1, 1, mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                mavutil.mavlink.MAVLINK_MSG_ID_VFR_HUD, -1, 0, 0, 0, 0, 0)
+        ack, _ = _ack(b, mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)
+        assert ack.result == mavutil.mavlink.MAV_RESULT_ACCEPTED
+        recv_until(b, lambda m: False, 0.3)  # the step that was under way
+        got_a = recv_until(a, lambda m: False, 1.0)
+        got_b = recv_until(b, lambda m: False, 1.0)
+        assert [m for m in got_a if m.get_type() == "VFR_HUD"] and not [m for m in got_b if m.get_type() == "VFR_HUD"]
+        assert [m for m in got_b if m.get_type() == "GLOBAL_POSITION_INT"]
+        a.close()
+        again = client()  # reconnects (a new connection, from a new port)
+        got = recv_until(again, lambda m: m.get_type() == "HEARTBEAT", 10.0)
+        assert got and got[-1].get_type() == "HEARTBEAT"
+        again.mav.param_request_read_send(1, 1, b"DAA_WT", -1)
+        v, _ = _param(again, "DAA_WT")
+        assert v is not None and v.param_value == 4.0
+    finally:
+        code = stop(proc)
+        for c in conns:
+            c.close()
+    assert code == 130, (tmp_path / "vehicle.log").read_text()[-2000:]

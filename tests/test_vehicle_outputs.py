@@ -183,3 +183,28 @@ def test_daa_sil_run_forwards_vehicle_outputs(tmp_path):
     assert f"out2=udpout:{station.addr.split(':', 1)[1]}" in log  # the READY line lists it
     res = json.loads(cp.stdout)
     assert res["interrupted"] is False and res["failure"] is None
+
+
+@pytest.mark.parametrize("kind", ["udpin", "tcpin"])
+def test_a_taken_listening_port_is_one_line_before_any_work(tmp_path, kind):
+    """``daa-sil run --vehicle-out udpin:`` (or ``tcpin:``) on a taken port: one line, exit 2, before any process
+    or directory (on main the run started, built the vehicle's simulation, and then failed as a dead vehicle,
+    exit 1); ``daa-vehicle --out`` the same: it binds before it prepares anything."""
+    busy = socket.socket(socket.AF_INET, socket.SOCK_DGRAM if kind == "udpin" else socket.SOCK_STREAM)
+    busy.bind(("127.0.0.1", 0))
+    if kind == "tcpin":
+        busy.listen(1)
+    port = busy.getsockname()[1]
+    try:
+        cp = subprocess.run([sys.executable, "-m", "daa_sil.cli", "run", str(ROOT / "scenarios" / "head_on.yaml"),
+                             "--out", str(tmp_path / "run"), "--vehicle-out", f"{kind}:127.0.0.1:{port}"],
+                            capture_output=True, text=True, timeout=120, cwd=ROOT)
+        assert cp.returncode == 2 and cp.stderr.count("\n") == 1, cp.stderr
+        assert f"--vehicle-out {kind}:127.0.0.1:{port}: cannot listen there" in cp.stderr
+        assert not (tmp_path / "run").exists()
+        cp = subprocess.run([sys.executable, "-m", "vehicle", str(ROOT / "scenarios" / "head_on.yaml"), "--out",
+                             f"{kind}:127.0.0.1:{port}"], capture_output=True, text=True, timeout=120, cwd=ROOT)
+        assert cp.returncode == 2 and cp.stderr.count("\n") == 1 and "in use" in cp.stderr, cp.stderr
+        assert "READY" not in cp.stdout and "boot" not in cp.stderr  # nothing prepared
+    finally:
+        busy.close()

@@ -146,7 +146,7 @@ def _start_recorder(opts: RunOptions, sc):
         return BackgroundRecorder(SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, connect=opts.connect,
                                               overwrite=True),
                                   preset=sc.thresholds, encounter_id=0,  # the vehicle logs encounter 0
-                                  live=live_viz(opts))
+                                  live=live_viz(opts), names=[i.callsign for i in sc.intruders])
     except OSError as exc:  # the helper process cannot start: the run goes on without a recording
         print(f"daa-sil: warning: cannot start the Rerun recorder ({exc.strerror or exc}); no recording",
               file=sys.stderr, flush=True)

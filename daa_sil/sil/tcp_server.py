@@ -16,6 +16,7 @@ Binds 127.0.0.1 by default; a taken port is a one-line :class:`UsageError`.
 from __future__ import annotations
 
 import asyncio
+import os
 import socket
 import time
 from dataclasses import dataclass
@@ -84,7 +85,8 @@ class TcpServer:
             self.server = await loop.create_server(lambda: _Client(self), bind[0], bind[1], reuse_address=True)
         except OSError as exc:
             h = f"[{bind[0]}]" if ":" in bind[0] else bind[0]
-            raise UsageError(f"cannot listen on tcpin:{h}:{bind[1]}: {exc.strerror or exc}") from None
+            why = os.strerror(exc.errno) if exc.errno else str(exc)
+            raise UsageError(f"cannot listen on tcpin:{h}:{bind[1]}: {why}") from None
 
     @property
     def local_address(self) -> Address:
