@@ -184,3 +184,42 @@ def test_signing_holds_on_tcp(plant_factory):
     p.receive_stream(1, MavCodec(255, 190, key=key).encode(M.MAVLink_param_request_read_message(1, 1, b"DAA_WT", -1)),
                      A, 0.2)
     assert [m.get_type() for m in MavCodec(255, 190, key=key).decode(p.take_sends()[0].data)] == ["PARAM_VALUE"]
+
+
+def test_a_tcp_client_that_does_not_read_has_a_bounded_buffer_and_extra_clients_are_closed():
+    """The socket side of ``tcpin:``: what waits for a client that never reads stays under the cap (the rest
+    is dropped and counted), and a connection the core refuses is closed at once."""
+    import asyncio
+    import socket
+
+    from daa_sil.sil.tcp_server import TcpServer
+
+    async def go():
+        seen = []
+        server = TcpServer(lambda addr, now: len(seen) < 1 and not seen.append(addr), lambda a, d, n: None,
+                           lambda a: None, max_buffer=64 * 1024)
+        await server.start(("127.0.0.1", 0))
+        port = server.local_address[1]
+        lazy = socket.create_connection(("127.0.0.1", port))  # connects, never reads
+        lazy.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        extra = socket.create_connection(("127.0.0.1", port))
+        for _ in range(100):
+            await asyncio.sleep(0.02)
+            if server.counters.refused:
+                break
+        chunk = bytes(1000)
+        for _ in range(20_000):  # 20 MB to a client that reads nothing
+            server.send(seen[0], chunk)
+            if server.counters.dropped_slow > 100:
+                break
+        waiting = server.clients[seen[0]].transport.get_write_buffer_size()
+        extra.settimeout(5.0)
+        closed = extra.recv(10) == b""  # the refused one: closed by the server
+        server.close()
+        lazy.close()
+        extra.close()
+        return server.counters, waiting, closed
+
+    counters, waiting, closed = asyncio.run(go())
+    assert counters.refused == 1 and closed
+    assert counters.dropped_slow > 100 and waiting <= 64 * 1024

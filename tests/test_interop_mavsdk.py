@@ -15,8 +15,9 @@ Offboard mode, which it translates to ArduPlane GUIDED (15) and which the vehicl
 from __future__ import annotations
 
 import asyncio
-import math
 import json
+import math
+import os
 
 import pytest
 

@@ -19,14 +19,15 @@ from .common_args import load_key_option
 
 EXAMPLES = """examples:
   # a vehicle listening like SITL: inject the crossing scenario's intruder around it, now
+  # (the scenarios' first intruders are all ICAO 1000, which flies already: --id-offset renumbers them)
   daa-vehicle scenarios/head_on.yaml --out udpin:127.0.0.1:14550 &
-  daa-sil inject scenarios/crossing_left.yaml --vehicle udpout:127.0.0.1:14550
+  daa-sil inject scenarios/crossing_left.yaml --vehicle udpout:127.0.0.1:14550 --id-offset 100
 
   # through its TCP server (as SITL's 5760)
-  daa-sil inject scenarios/two_intruders.yaml --vehicle tcp:127.0.0.1:5760
+  daa-sil inject scenarios/two_intruders.yaml --vehicle tcp:127.0.0.1:5760 --id-offset 200
 
   # a vehicle streaming to a writable observer port (daa-vehicle ... --out udp:127.0.0.1:14560,rw)
-  daa-sil inject scenarios/overtaking.yaml --vehicle udpin:127.0.0.1:14560
+  daa-sil inject scenarios/overtaking.yaml --vehicle udpin:127.0.0.1:14560 --id-offset 300
 """
 #: wall seconds between two hellos while waiting for the vehicle's position
 HELLO_EVERY_S = 0.5
@@ -39,6 +40,8 @@ def register(sub) -> None:
     p.add_argument("--vehicle", default="udpout:127.0.0.1:14550", metavar="CONN",
                    help="the vehicle: udpout:HOST:PORT (its udpin: output; default udpout:127.0.0.1:14550), "
                         "udpin:HOST:PORT (its ,rw output streams here) or tcp:HOST:PORT (its tcpin: output)")
+    p.add_argument("--id-offset", type=int, default=0, metavar="N",
+                   help="add N to each intruder's ICAO address (the vehicle refuses one that flies already)")
     p.add_argument("--key", type=Path, metavar="FILE", help="MAVLink 2 signing key file (as the vehicle's)")
     p.add_argument("--timeout", type=float, default=30.0, metavar="S",
                    help="wall seconds to wait for the vehicle's position, then for its answers (default 30)")
@@ -99,6 +102,13 @@ def inject(args) -> int:
     if not (0.5 <= args.timeout <= 3600):
         raise UsageError(f"--timeout must be within [0.5, 3600] s, got {args.timeout:g}")
     sc = load_scenario(args.file)
+    if args.id_offset:
+        from dataclasses import replace
+
+        ids = [i.id + args.id_offset for i in sc.intruders]
+        if not all(1 <= i <= 0xFFFFFF for i in ids):
+            raise UsageError(f"--id-offset {args.id_offset}: ICAO addresses must stay within [1, 16777215]")
+        sc = replace(sc, intruders=[replace(i, id=n) for i, n in zip(sc.intruders, ids)])
     codec = MavCodec(255, 191, key=load_key_option(args.key, "daa-sil") if args.key else None)
     try:
         link = _Link(args.vehicle)
