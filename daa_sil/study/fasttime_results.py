@@ -16,6 +16,12 @@ from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.onboard import StepOutput
 
 _I = pa.int64()
+#: commands the link released in a step besides the newest (superseded within their step, never decided
+#: on), counted with the freshness and the decision of the newest: over the whole encounter and the
+#: active phase, and by what happened to the newest (executed as sent, blended -- a maneuver's blend --,
+#: overridden)
+SUPERSEDED_COLUMNS = ("n_superseded_whole", "n_superseded", "n_superseded_exec_whole", "n_superseded_exec",
+                      "n_superseded_blend", "n_superseded_blend_intent", "n_superseded_override")
 ENCOUNTER_SCHEMA = pa.schema(
     [("group", pa.string()), ("encounter_id", _I), ("seed", _I), ("duration_s", pa.float64()),
      ("lowc", pa.bool_()), ("nmac", pa.bool_()), ("lowc_duration_s", pa.float64()), ("pi", pa.float64()),
@@ -25,7 +31,8 @@ ENCOUNTER_SCHEMA = pa.schema(
      ("n_blend_axis", _I), ("n_blend_intent", _I), ("n_daa_override", _I), ("n_stale", _I), ("n_link_lost", _I),
      ("n_by_map", _I), ("n_by_projl", _I), ("n_by_both", _I), ("n_lookup_in_box", _I),
      ("n_pilot_received_whole", _I), ("n_pilot_exec_whole", _I),
-     ("intruder_turns", pa.bool_()), ("preset", pa.string())])
+     ("intruder_turns", pa.bool_()), ("preset", pa.string()),
+     *[(c, _I) for c in SUPERSEDED_COLUMNS]])
 
 DECISION_SCHEMA = pa.schema(
     [("group", pa.string()), ("encounter_id", _I), ("t", pa.float64()), ("decision", pa.string()),
@@ -62,6 +69,7 @@ class Accumulators:
         self.n_in_box = np.zeros(n, np.int64)
         self.n_recv_whole = np.zeros(n, np.int64)
         self.n_exec_whole = np.zeros(n, np.int64)
+        self.superseded = {c: np.zeros(n, np.int64) for c in SUPERSEDED_COLUMNS}
         self.p0 = own0.position()
         self.v0 = own0.velocity()
         self.dec_parts: list[tuple[np.ndarray, float, dict]] = []
@@ -72,7 +80,8 @@ class Accumulators:
         self.dev_h = np.maximum(self.dev_h, np.hypot(d[:, 0], d[:, 1]))
         self.dev_v = np.maximum(self.dev_v, np.abs(d[:, 2]))
 
-    def add(self, out: StepOutput, dt: float) -> None:
+    def add(self, out: StepOutput, dt: float, superseded: "np.ndarray | None" = None) -> None:
+        """Accumulate one step; ``superseded`` (N,) the commands released besides the newest this step."""
         dec = out.decisions
         self.lowc |= out.lowc
         self.nmac |= out.nmac
@@ -88,6 +97,17 @@ class Accumulators:
         fresh = np.asarray(dec["pilot_cmd_fresh"], bool)
         self.n_recv_whole += fresh
         self.n_exec_whole += fresh & (~active | (code == D_PILOT))  # outside the active phase it is flown as sent
+        if superseded is not None:
+            k = np.where(fresh, np.asarray(superseded, np.int64), 0)
+            sup = self.superseded
+            sup["n_superseded_whole"] += k
+            sup["n_superseded"] += np.where(active, k, 0)
+            sup["n_superseded_exec_whole"] += np.where(~active | (code == D_PILOT), k, 0)
+            sup["n_superseded_exec"] += np.where(active & (code == D_PILOT), k, 0)
+            sup["n_superseded_blend"] += np.where(active & (code == D_BLEND), k, 0)
+            sup["n_superseded_blend_intent"] += np.where(active & (code == D_BLEND) & (np.asarray(dec["pilot_axis"]) != 0),
+                                                         k, 0)
+            sup["n_superseded_override"] += np.where(active & (code == D_DAA_OVERRIDE), k, 0)
         ia = np.flatnonzero(active)
         if ia.size:
             np.add.at(self.counts, (ia, code[ia]), 1)
@@ -168,6 +188,7 @@ def encounter_table(acc: Accumulators, lo: int, hi: int, encounters, group: str,
         "n_pilot_received_whole": pa.array(g(acc.n_recv_whole), _I), "n_pilot_exec_whole": pa.array(g(acc.n_exec_whole), _I),
         "intruder_turns": pa.array(np.asarray(encounters.intruder_turns, bool)),
         "preset": pa.array(np.full(n, preset), pa.string()),
+        **{c: pa.array(g(acc.superseded[c]), _I) for c in SUPERSEDED_COLUMNS},
     }
     return pa.Table.from_arrays(list(cols.values()), schema=ENCOUNTER_SCHEMA)
 
