@@ -190,3 +190,10 @@ def test_resume_refuses_a_reading_whose_settings_changed(tmp_path):
     meta_path.write_text(json.dumps(meta))
     with pytest.raises(UsageError, match=r"reading 'paper' has other settings .*\(outside\)"):
         run_campaign(cfg, tmp_path / "c", progress=False, resume=True)
+
+
+def test_the_step_log_names_every_provenance_code():
+    from daa_sil import steplog
+    from daa_sil.decision import DECIDED_BY_NAMES
+
+    assert steplog.DECIDED_BY == DECIDED_BY_NAMES  # 'kept' (the extension) is written, not refused

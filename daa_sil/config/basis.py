@@ -59,7 +59,7 @@ PAPER_BASIS: tuple[Basis, ...] = (
           "a state from which LoWC cannot be reached within H waits H, so a map's largest wait is its horizon: the "
           "published maximum gives H = 40 s (the wait-map histogram's maximum is then input, not a result)",
           "`paper-h60`: H = 60 s, a 60 s maximum, against the sentence"),
-    Basis("the wait time of a state", (), "W = E[T_LoWC | LoWC within H] under the waiting chain; W = H where "
+    Basis("the wait time of a state", (), "W = E[T_LoWC given LoWC within H] under the waiting chain; W = H where "
           "P(LoWC within H) < 10⁻³; W = 0 where evading is optimal or in LoWC", "inference",
           "Formulation of the MDP: \"For every state, we propagate every possible path to the LoWC state and obtain "
           "the corresponding LoWC probability. Assuming that the path is acyclic, the expected waiting time for that "
@@ -92,8 +92,7 @@ PAPER_BASIS: tuple[Basis, ...] = (
           "'time varying' means the delay changes within an encounter; how often it is redrawn is not given: every "
           "10 s is ours (a draw per packet under first-in-first-out delivery raises the mean delay to 8.3 s); the "
           "truncation is the round-trip range above",
-          "`paper-delay-per-encounter`: one draw per encounter (constant in time: against 'time varying'); the "
-          "epoch experiment (1, 10, 30 s)"),
+          "`paper-delay-per-encounter`: one draw per encounter (constant in time: against 'time varying')"),
     Basis("when the pilot streams", ("pilot_start", "pilot_stop"), "one command a step from the first telemetry it "
           "sees until safe avoidance", "text",
           "Implementation of the Wait Maps: \"The model captures pilot response from the beginning of an encounter "

@@ -163,7 +163,9 @@ def paper_setup(group: str) -> "str | None":
 
 
 #: decision-table columns the study reads (provenance needs ``decided_by`` and/or ``in_box``)
-DECISION_COLUMNS = ("group", "encounter_id", "decision", "decided_by", "in_box", "wait_in_box")
+DECISION_COLUMNS = ("group", "encounter_id", "t", "decision", "decided_by", "in_box", "wait_in_box")
+#: the authority each recorded decision gives (steps without a decision: the pilot's)
+AUTHORITY_OF = {"wait": 2, "pilot": 0, "none": 0}  # 0 pilot, 1 DAA (every other decision), 2 waiting
 
 
 def normalise_decisions(dec) -> "dict | None":
@@ -193,6 +195,8 @@ def normalise_decisions(dec) -> "dict | None":
         out["encounter_id"] = np.asarray(arr("encounter_id").to_numpy(zero_copy_only=False), np.int64)
         if "decision" in names:
             out["decision"] = np.asarray(arr("decision").to_numpy(zero_copy_only=False)).astype(str)
+        if "t" in names:
+            out["t"] = np.asarray(arr("t").to_numpy(zero_copy_only=False), float)
         if "decided_by" in names:
             col = pc.cast(arr("decided_by"), pa.string())
             out["decided_by"] = np.asarray(pc.fill_null(col, "").to_numpy(zero_copy_only=False)).astype(str)
@@ -207,6 +211,8 @@ def normalise_decisions(dec) -> "dict | None":
     out["encounter_id"] = np.asarray(dec["encounter_id"], np.int64)
     if "decision" in dec:
         out["decision"] = np.asarray(dec["decision"]).astype(str)
+    if "t" in dec:
+        out["t"] = np.asarray(dec["t"], float)
     if "decided_by" in dec:
         out["decided_by"] = np.array(["" if (b is None or b != b) else str(b) for b in dec["decided_by"]], dtype=str)
     if "in_box" in dec:
@@ -244,4 +250,21 @@ def provenance_columns(dec: "dict | None", group: str, ids: np.ndarray) -> "dict
         ib = dec["in_box"][m]
         out["n_lookup"] = count(ib >= 0)
         out["n_in_box"] = count(ib == 1)
+    if "t" in dec and "decision" in dec:
+        out["n_switches"] = authority_switches(pos[ok], dec["t"][m][ok], dec["decision"][m][ok], n)
     return out
+
+
+def authority_switches(pos: np.ndarray, t: np.ndarray, decision: np.ndarray, n: int) -> np.ndarray:
+    """Changes of authority per encounter ``(n,)``: the decisions of encounter ``pos[i]`` at step ``t[i]``
+    (s, 1 s steps) give the authority of those steps (:data:`AUTHORITY_OF`: a wait -> waiting, a pilot
+    command flown -> the pilot, any other decision -> the DAA); steps without a decision are the
+    pilot's. Each change between two consecutive steps counts one."""
+    if pos.size == 0:
+        return np.zeros(n)
+    k = np.rint(t).astype(np.int64)
+    steps = int(k.max()) + 2
+    code = np.array([AUTHORITY_OF.get(d, 1) for d in np.unique(decision)], np.int8)
+    dense = np.zeros((n, steps), np.int8)
+    dense[pos, k] = code[np.searchsorted(np.unique(decision), decision)]
+    return np.count_nonzero(dense[:, 1:] != dense[:, :-1], axis=1).astype(float)
