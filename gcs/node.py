@@ -109,13 +109,16 @@ class GcsNode:
         if self.mode == "model":
             from daa_sil.ground import GroundCore
             from daa_sil.models.streams import STREAM_PILOT, encounter_streams
-            from daa_sil.models.pilot_config import PilotConfig
             from daa_sil.sil.scenario import ownship_state
 
             seed = encounter_streams(scenario.seed if scenario is not None else 0)[STREAM_PILOT]
             # the plan the pilot returns to after the conflict: the scenario ownship's initial course
             mode = scenario.pilot.response if scenario else "guendel"
-            pcfg = rc.pilot_config(mode=mode) if rc is not None else PilotConfig(mode=mode)
+            from daa_sil.config.readings import reading_for
+            from daa_sil.models.pilot_config import PilotConfig
+
+            # the configuration's pilot under its reading; without one, the study's default reading's pilot
+            pcfg = rc.pilot_config(mode=mode) if rc is not None else reading_for().pilot_config(PilotConfig(mode=mode))
             # the same step-1 object fast-time runs for N encounters
             self.ground = GroundCore(1, [seed], pcfg, self.daa_cfg,
                                      plan=ownship_state(scenario) if scenario is not None else None)

@@ -71,13 +71,16 @@ def _blend_match(x: dict) -> str:
     if not (w and lat and s):
         return _not_run("blend_waiting", "blend_latency", "blend_searches")
     d = s["groups"].get("ID-2", {})
-    asked = ", ".join(list(d.get("failed_exact_asked", {}))[:2]) or "–"
+    asked = list(d.get("failed_exact_asked", ()))
+    tot = sum(v for _, v in asked) or 1
+    asked = ", ".join(f"{k} ({100 * v / tot:.0f} %)" for k, v in asked[:2]) or "–"
     return (f"exact (axis, direction) in ID-2 {_ci(w, 'ID-2', 'exact_match', 'pct')}, with no waiting "
             f"{_ci(w, 'ID-2-no-wait', 'exact_match', 'pct')} (difference {_ci(w, 'ID-2', 'exact_match', 'pct', diff)}): "
             f"waiting {'does not measurably lower' if _zero_in(w, 'ID-2', 'exact_match') else 'changes'} the exact "
             f"match. Latency: {_ci(lat, 'ID-2-lat0.2', 'exact_match', 'pct')} at 0.2 s, "
-            f"{_ci(lat, 'ID-2-lat10', 'exact_match', 'pct')} at 10 s. The missed searches asked most for {asked}: "
-            f"our DAA's candidates in the pilot's direction were unsafe there")
+            f"{_ci(lat, 'ID-2-lat10', 'exact_match', 'pct')} at 10 s (difference "
+            f"{_ci(lat, 'ID-2-lat10', 'exact_match', 'pct', diff)}). The searches that missed the pilot's direction "
+            f"asked for {asked} of them: no candidate of our DAA on that side was safe")
 
 
 def _zero_in(e: dict, label: str, metric: str) -> bool:
@@ -94,9 +97,9 @@ def _safety(x: dict) -> str:
             f"{_ci(s, 'unmitigated', 'alert_share_2', 'pct')} reach a corrective alert; the paper reading's ID-2 "
             f"{_ci(s, 'ID-2', 'p_lowc', 'pct')}, {_ci(s, 'ID-2', 'p_lowc_step', 'sci')} of the time (the paper: "
             f"2.81e-7 x 666.67 h = 1.87e-4). In ID-2, a LoWC begins under the DAA's authority in "
-            f"{_f(auth.get('daa'), 'pct')} of cases, the pilot's {_f(auth.get('pilot'), 'pct')}. The paper's own pair "
-            f"(ID-2 the fewest LoWC encounters, yet the higher P(LoWC)/h than B-2) needs ID-2's LoWCs to last longer: "
-            f"appendix-provenance.md")
+            f"{_f(auth.get('daa'), 'pct')} of cases, the pilot's in {_f(auth.get('pilot'), 'pct')}. The paper's own "
+            f"pair (ID-2 the fewest LoWC encounters, yet a higher P(LoWC)/h than B-2) holds only if ID-2's LoWCs last "
+            f"longer: appendix-provenance.md")
 
 
 def _pi(x: dict) -> str:
@@ -108,23 +111,26 @@ def _pi(x: dict) -> str:
     turn = sum(d.get("pi_gt_max_turning", 0) for d in g.values())
     daa = sum(d.get("pi_gt_max_daa_at_onset", 0) for d in g.values())
     q = g.get("B-2", {}).get("from_alert2_s")
+    tq = g.get("B-2", {}).get("turn_to_onset_s")
+    share = g.get("B-2", {}).get("turning_before_onset")
     return (f"{n} replayed LoWCs with PI above 3.79 over the five groups: {turn} with the intruder turning before the "
-            f"onset, {daa} begun under the DAA's authority; B-2's LoWCs begin a median "
-            f"{_f(q[1] if q else None, 'f1')} s after the corrective alert: late turns of fast intruders our DAA and "
-            f"pilot cannot escape in time")
+            f"onset, {daa} begun under the DAA's authority. In B-2, {_f(share, 'pct')} of the LoWCs follow an intruder's "
+            f"turn (a median {_f(tq[1] if tq else None, 'f1')} s before the onset) and begin a median "
+            f"{_f(q[1] if q else None, 'f1')} s after the corrective alert")
 
 
 def _deviation(x: dict) -> str:
     d, s, ft = x.get("deviation"), x.get("severity"), x.get("feet")
     if not (d and s and ft):
         return _not_run("deviation", "severity", "feet")
+    left = value(d, "B-1", "maneuvered_share")
+    need = 1690.0 / value(d, "B-1", "dev_h_maneuvered_mean") if value(d, "B-1", "dev_h_maneuvered_mean") else None
     return (f"B-1: {_ci(d, 'B-1', 'dev_h_mean', 'f0')} m (largest distance from the straight path, over all "
             f"encounters), {_ci(d, 'B-1', 'dev_h_tmean_mean', 'f0')} m as a time mean, "
-            f"{_ci(d, 'B-1', 'dev_h_maneuvered_mean', 'f0')} m over the {_ci(d, 'B-1', 'maneuvered_share', 'pct')} "
-            f"that left the plan; in feet {_ci(ft, 'B-1 (feet)', 'dev_h_mean', 'f0')} m. The paper's 1,690 m over "
-            f"every encounter needs nearly every encounter to maneuver, while only "
-            f"{_ci(s, 'unmitigated', 'alert_share_2', 'pct')} of ours reach a corrective alert; no definition "
-            f"reaches it on our encounter set")
+            f"{_ci(d, 'B-1', 'dev_h_maneuvered_mean', 'f0')} m over the {_f(left, 'pct')} that left the plan; in feet "
+            f"{_ci(ft, 'B-1 (feet)', 'dev_h_mean', 'f0')} m (the paper: 1,690 m). With our maneuvering encounters' "
+            f"deviation, the paper's mean needs {_f(need, 'pct')} of the encounters to maneuver; "
+            f"{_ci(s, 'unmitigated', 'alert_share_2', 'pct')} of ours reach a corrective alert")
 
 
 @dataclass(frozen=True)

@@ -80,11 +80,12 @@ def metric_rows(st: Study, metrics: Sequence[str]) -> list[dict]:
     return out
 
 
-def diff_rows(st: Study, ref: str, metrics: Sequence[str]) -> list[dict]:
-    """Paired differences (label minus ``ref``) of every metric, with their 95 % CIs."""
+def diff_rows(st: Study, pairs: Sequence[tuple], metrics: Sequence[str]) -> list[dict]:
+    """Paired differences ``label - ref`` for each ``(label, ref)`` of ``pairs``, every metric, with
+    their 95 % CIs."""
     out = []
-    for g in st.groups:
-        if g == ref:
+    for g, ref in pairs:
+        if g not in st.groups or ref not in st.groups:
             continue
         for m in metrics:
             if not (st.available(g, m) and st.available(ref, m)):
@@ -112,11 +113,14 @@ def diff(exp: dict, label: str, metric: str, key: str = "value") -> "float | Non
 
 
 def compare(parts: Sequence[tuple], metrics: Sequence[str], ref: "str | None" = None, counting=None,
-            replicates: int = 1000) -> dict:
-    """``{"rows", "diffs"}`` of ``parts`` (see :func:`combined_study`), differences against ``ref``
-    (default the first label)."""
+            replicates: int = 1000, pairs: "Sequence[tuple] | None" = None) -> dict:
+    """``{"n", "rows", "diffs"}`` of ``parts`` (see :func:`combined_study`): the differences of ``pairs``
+    ``(label, ref)``, default every label against ``ref`` (default the first label)."""
     st = combined_study(parts, counting, replicates)
-    return {"n": st.n, "rows": metric_rows(st, metrics), "diffs": diff_rows(st, ref or parts[0][0], metrics)}
+    if pairs is None:
+        r = ref or parts[0][0]
+        pairs = [(lab, r) for lab, _, _ in parts if lab != r]
+    return {"n": st.n, "rows": metric_rows(st, metrics), "diffs": diff_rows(st, pairs, metrics)}
 
 
 __all__ = ["PAPER_COUNTING", "load_part", "combined_study", "metric_rows", "diff_rows", "compare", "value", "diff"]

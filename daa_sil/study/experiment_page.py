@@ -85,7 +85,7 @@ def _blend_table(groups: dict) -> list[str]:
         mr, hr = d["maneuver_by_rule"], d["hold_by_rule"]
         tot = max(d["maneuver_blends"], 1)
         rules = " / ".join(f"{r} {100 * n / tot:.0f} %" for r, n in mr.items() if n)
-        asked = ", ".join(f"{k} {v}" for k, v in list(d["failed_exact_asked"].items())[:4]) or "–"
+        asked = ", ".join(f"{k} {v}" for k, v in list(d["failed_exact_asked"])[:4]) or "–"
         body.append([g, str(d["blends"]), str(d["maneuver_blends"]), rules or "–", str(d["hold_blends"]),
                      " / ".join(f"{r} {n}" for r, n in hr.items() if n) or "–", asked])
     return [markdown_table(["group", "blends", "of a maneuver", "found by (maneuvers)", "of a 'hold'",
@@ -116,9 +116,8 @@ def experiments_page(res: dict) -> str:
             continue
         L += pivot(e.get("rows", []))
         if e.get("diffs"):
-            ref = e["diffs"][0]["ref"]
-            L += [f"Paired differences, minus `{ref}`:", ""]
-            L += pivot([{**d, "label": f"{d['label']} − {ref}"} for d in e["diffs"]])
+            L += ["Paired differences (over the same encounters):", ""]
+            L += pivot([{**d, "label": f"{d['label']} − {d['ref']}"} for d in e["diffs"]])
     return "\n".join(L) + "\n"
 
 

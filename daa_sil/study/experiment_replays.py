@@ -40,25 +40,15 @@ def _share(mask) -> "float | None":
 
 
 def replay(d: Path, group: str, ids: np.ndarray):
-    """The step log of encounters ``ids`` of ``group`` in campaign ``d``, flown again (in the
-    campaign's chunks, so every encounter shares its DAA call with the same encounters as in the
-    campaign)."""
-    import pyarrow as pa
-
+    """The step log of encounters ``ids`` of ``group`` in campaign ``d``, flown again alone (one
+    encounter, one answer: the campaign's run of each; :func:`lowc_diagnostics` reports the share that
+    lost well clear again, a check of that)."""
     from daa_sil.study.campaign import simulate_group
 
     cfg, encs = _campaign(d)
     pos = np.searchsorted(np.asarray(encs.encounter_id), ids)
-    logs = []
-    for c in range(cfg.n_chunks):
-        lo, hi = cfg.chunk_range(c)
-        if not np.any((pos >= lo) & (pos < hi)):
-            continue
-        sub = encs.subset(np.arange(lo, hi))
-        logs.append(simulate_group(cfg, group, sub, np.asarray(sub.seed, np.int64), record_steps=True)[2])
-    log = pa.concat_tables(logs)
-    keep = np.isin(np.asarray(log.column("encounter_id")), ids)
-    return log.filter(keep), encs
+    sub = encs.subset(pos)
+    return simulate_group(cfg, group, sub, np.asarray(sub.seed, np.int64), record_steps=True)[2], encs
 
 
 def lowc_diagnostics(d: Path, groups: Sequence[str], limit: int = 400) -> dict:
@@ -142,7 +132,7 @@ def blend_searches(d: Path, groups: Sequence[str]) -> dict:
         out[g] = {"blends": int(blend.sum()), "maneuver_blends": int(intent.sum()), "hold_blends": int(hold.sum()),
                   "maneuver_by_rule": {r: int((intent & (col["rule"] == r)).sum()) for r in rules},
                   "hold_by_rule": {r: int((hold & (col["rule"] == r)).sum()) for r in rules},
-                  "failed_exact_asked": dict(sorted(asked.items(), key=lambda kv: -kv[1]))}
+                  "failed_exact_asked": sorted(([k, v] for k, v in asked.items()), key=lambda kv: -kv[1])}
     return out
 
 

@@ -41,7 +41,8 @@ def analyse(runs: "str | Path", seed: int, n_small: int, n_large: int, replicate
         return runs / name
 
     out: dict = {}
-    cmp = lambda parts, metrics, ref=None, counting=None: compare(parts, metrics, ref, counting, replicates)  # noqa: E731
+    def cmp(parts, metrics, ref=None, counting=None, pairs=None):
+        return compare(parts, metrics, ref, counting, replicates, pairs)
     if have(paper, exp["unmitigated"]):
         log("== severity")
         parts = [("unmitigated", exp["unmitigated"], "unmitigated")] + [(g, paper, g) for g in PAPER5]
@@ -57,7 +58,8 @@ def analyse(runs: "str | Path", seed: int, n_small: int, n_large: int, replicate
         out["feet"] = _exp("The HMD/VMD table read in feet", "what the unit alone does to the encounters and the "
                            "outcomes (against the table's metres)",
                            cmp(parts, ("dev_h_mean", "dev_v_mean", "unsafe_share", "p_lowc", "p_lowc_step",
-                                       "alert_share_2", "maneuvered_share", "no_wait", "received"), "B-1"),
+                                       "alert_share_2", "maneuvered_share", "no_wait", "received"),
+                               pairs=[(f"{g} (feet)", g) for g in PAPER5]),
                            ["paper", "paper-feet"])
     if have(paper):
         log("== deviation")
@@ -96,7 +98,9 @@ def analyse(runs: "str | Path", seed: int, n_small: int, n_large: int, replicate
         out["switches"] = _exp("Authority switches per active encounter", "how often the authority changes hands, "
                                "under the paper's Algorithm 1 and with the DAA keeping its authority until clear (our "
                                "extension), also with a pilot that sends nothing",
-                               cmp(parts, ("switches_per_active", "no_wait", "wait", "p_lowc", "unsafe_share"), "ID-2"),
+                               cmp(parts, ("switches_per_active", "no_wait", "wait", "p_lowc", "unsafe_share"),
+                                   pairs=[("B-2 (keep)", "B-2"), ("ID-2 (keep)", "ID-2"), ("ID-2 no pilot", "ID-2"),
+                                          ("ID-2 no pilot (keep)", "ID-2 no pilot")]),
                                ["paper", "paper-keep-daa", "no-command-pilot", "no-command-pilot-keep"])
     for key, name, title, why, groups in (
             ("delay_draw", "paper-delay-per-encounter", "The Gaussian delay: redrawn every 10 s or once per encounter",
@@ -118,7 +122,7 @@ def analyse(runs: "str | Path", seed: int, n_small: int, n_large: int, replicate
         if have(paper, reading(name)):
             parts = [(g, paper, g) for g in groups] + [(f"{g} ({name})", reading(name), g) for g in groups]
             out[key] = _exp(title, why, cmp(parts, SIGNATURE_METRICS + ("map_decided_share", "in_box_share", "p_lowc"),
-                                            groups[0]), ["paper", name])
+                                            pairs=[(f"{g} ({name})", g) for g in groups]), ["paper", name])
     if have(paper):
         a = cmp([(g, paper, g) for g in PAPER5], ("received", "pilot_exec", "blend", "daa_override"))
         b = cmp([(g, paper, g) for g in PAPER5], ("received", "pilot_exec", "blend", "daa_override"),
@@ -132,7 +136,8 @@ def analyse(runs: "str | Path", seed: int, n_small: int, n_large: int, replicate
         parts = [(g, paper, g) for g in ("B-2", "ID-2")]
         parts += [(f"{g} (SM {h} s)", exp[f"sm{h}"], g) for h in (35, 25) for g in ("B-2", "ID-2")]
         out["sm"] = _exp("SM(u)'s horizon", "whether the unsafe-on-arrival share depends on how far SM looks",
-                         cmp(parts, ("unsafe_share", "no_wait", "blend", "daa_override", "p_lowc"), "B-2"),
+                         cmp(parts, ("unsafe_share", "no_wait", "blend", "daa_override", "p_lowc"),
+                             pairs=[(f"{g} (SM {h} s)", g) for h in (35, 25) for g in ("B-2", "ID-2")]),
                          ["paper", "sm35", "sm25"])
     meta = {"seed": seed, "n_small": n_small, "n_large": n_large, "replicates": replicates, "missing": missing,
             "command": COMMAND.format(runs=runs, seed=seed, small=n_small, large=n_large)}

@@ -123,7 +123,7 @@ def signature_section(studies: Mapping) -> list[str]:
 
 def signature_table(dirs: Mapping[str, "str | Path"], replicates: int = 400) -> str:
     """A compact Markdown table (run x group x signature, value [95 % CI]) of campaign directories:
-    the development experiments' summary (``docs/results/dev_experiments.py``)."""
+    a quick summary of a few campaign directories."""
     from daa_sil.study.analysis import Study
     from daa_sil.study.report_format import markdown_table
     from daa_sil.study.report_input import load_block
