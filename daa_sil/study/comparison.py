@@ -70,8 +70,9 @@ class TwoSample:
         return math.isfinite(self.lo) and self.lo <= 0.0 <= self.hi
 
     def text(self, fmt) -> str:
-        return (f"ours − paper {fmt(self.diff)} [{fmt(self.lo)}, {fmt(self.hi)}] (SE ours {fmt(self.se_ours)}, "
-                f"the paper's at its N {fmt(self.se_paper)})")
+        se = lambda x: fmt(x).lstrip("+")  # noqa: E731 -- a standard error carries no sign
+        return (f"ours − paper {fmt(self.diff)} [{fmt(self.lo)}, {fmt(self.hi)}] (SE ours {se(self.se_ours)}, "
+                f"the paper's at its N {se(self.se_paper)})")
 
 
 def two_sample(value: float, se_ours: float, paper: float, n_ours: float, n_paper: float = PAPER_N_DEFAULT,

@@ -166,11 +166,12 @@ def _finite(x):
 def write_report(src, out_dir: "str | os.PathLike", baseline: str = BASELINE_GROUP, conf: float = CONF, *,
                  replicates: int = DEFAULT_REPLICATES, seed: int = DEFAULT_SEED, recount: Sequence[str] = (),
                  notes: Sequence[str] = (), experiments: "dict | None" = None,
-                 main_name: str = "report.md") -> Path:
+                 main_name: str = "report.md", all_figures: bool = True) -> Path:
     """Compute the study of ``src`` (a campaign directory, a list of them, or one results source) and
     write the main page ``out_dir/main_name``, the appendices, ``findings.json`` and the PNG figures;
     returns the main page's path. ``experiments``: the ``experiments.json`` dictionary (the attribution
-    table's figures). FileFormatError for a missing, empty or corrupt results source (nothing written)."""
+    table's figures); ``all_figures=False`` draws the figures of the first reading only. FileFormatError
+    for a missing, empty or corrupt results source (nothing written)."""
     blocks = build_blocks(src, recount)
     studies = {b.label: Study(b.enc, b.reading, dec=b.dec, replicates=replicates, seed=seed, conf=conf,
                               baseline=baseline, dt_s=float((b.meta or {}).get("dt_s") or 1.0)) for b in blocks}
@@ -178,7 +179,7 @@ def write_report(src, out_dir: "str | os.PathLike", baseline: str = BASELINE_GRO
     rows = evaluate_all(studies, consumed)
     out = ensure_dir(out_dir)
     figures = {b.label: group_figures(studies[b.label], out, "" if i == 0 else f"-{file_slug(b.label)}")
-               for i, b in enumerate(blocks)}
+               for i, b in enumerate(blocks) if i == 0 or all_figures}
     back = [f"Part of the study whose main page is [{main_name}]({main_name})."]
     atomic_write_text(out / APPENDICES[0], readings_page(blocks, studies, rows, figures, back + list(notes)))
     atomic_write_text(out / APPENDICES[1], ablations_page(studies, rows, back))

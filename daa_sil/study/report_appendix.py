@@ -82,9 +82,10 @@ def readings_page(blocks, studies: dict, rows, figures: dict, intro: Sequence[st
             continue
         L += [f"**{g}**", ""] + wide_table(["signature", "the paper's value = its arithmetic"], srows,
                                             [reading_label(x) for x in labels], scells, max_columns=8)
-    L += ["## Figures of the other readings", ""]
-    for lab, paths in list(figures.items())[1:]:
-        L += [f"*{reading_label(lab)}*", ""] + [f"![{p.stem}]({p.name})" for p in paths] + [""]
+    if len(figures) > 1:
+        L += ["## Figures of the other readings", ""]
+        for lab, paths in list(figures.items())[1:]:
+            L += [f"*{reading_label(lab)}*", ""] + [f"![{p.stem}]({p.name})" for p in paths] + [""]
     return "\n".join(L) + "\n"
 
 

@@ -86,7 +86,7 @@ def _report(args, dirs: list, experiments: "dict | None") -> None:
     t = time.monotonic()
     print("== report", flush=True)
     write_report(dirs, args.docs, replicates=args.replicates, notes=note, experiments=experiments,
-                 main_name="paper-study.md")
+                 main_name="paper-study.md", all_figures=False)
     print(f"   ({time.monotonic() - t:.0f} s)", flush=True)
 
 
