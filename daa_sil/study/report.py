@@ -182,7 +182,7 @@ def write_report(src, out_dir: "str | os.PathLike", baseline: str = BASELINE_GRO
                for i, b in enumerate(blocks) if i == 0 or all_figures}
     back = [f"Part of the study whose main page is [{main_name}]({main_name})."]
     atomic_write_text(out / APPENDICES[0], readings_page(blocks, studies, rows, figures, back + list(notes)))
-    atomic_write_text(out / APPENDICES[1], ablations_page(studies, rows, back))
+    atomic_write_text(out / APPENDICES[1], ablations_page(studies, rows, back + list(notes)))
     atomic_write_text(out / APPENDICES[2], provenance_page(blocks, studies, rows, replicates=replicates, seed=seed,
                                                           conf=conf, intro=back + list(notes)))
     atomic_write_json(out / "findings.json", findings_json(blocks, rows, replicates, seed, conf, experiments))
