@@ -71,7 +71,8 @@ def _blend_match(x: dict) -> str:
     if not (w and lat and s):
         return _not_run("blend_waiting", "blend_latency", "blend_searches")
     d = s["groups"].get("ID-2", {})
-    asked = list(d.get("failed_exact_asked", ()))
+    asked = d.get("failed_exact_asked", ())
+    asked = sorted(asked.items(), key=lambda kv: -kv[1]) if isinstance(asked, dict) else [tuple(x) for x in asked]
     tot = sum(v for _, v in asked) or 1
     asked = ", ".join(f"{k} ({100 * v / tot:.0f} %)" for k, v in asked[:2]) or "–"
     return (f"exact (axis, direction) in ID-2 {_ci(w, 'ID-2', 'exact_match', 'pct')}, with no waiting "

@@ -85,7 +85,9 @@ def _blend_table(groups: dict) -> list[str]:
         mr, hr = d["maneuver_by_rule"], d["hold_by_rule"]
         tot = max(d["maneuver_blends"], 1)
         rules = " / ".join(f"{r} {100 * n / tot:.0f} %" for r, n in mr.items() if n)
-        asked = ", ".join(f"{k} {v}" for k, v in list(d["failed_exact_asked"])[:4]) or "–"
+        fa = d["failed_exact_asked"]
+        fa = sorted(fa.items(), key=lambda kv: -kv[1]) if isinstance(fa, dict) else fa  # (an older file: a mapping)
+        asked = ", ".join(f"{k} {v}" for k, v in list(fa)[:4]) or "–"
         body.append([g, str(d["blends"]), str(d["maneuver_blends"]), rules or "–", str(d["hold_blends"]),
                      " / ".join(f"{r} {n}" for r, n in hr.items() if n) or "–", asked])
     return [markdown_table(["group", "blends", "of a maneuver", "found by (maneuvers)", "of a 'hold'",
