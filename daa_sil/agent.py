@@ -218,7 +218,8 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     as_none = (pol.value("unsafe_hold") == "no-command") & active & fresh & (p_axis == AXIS_NONE) & ~(sm_pilot > 0)
     decide = fresh & ~as_none  #: fresh commands decided as commands
 
-    ws = wait_step(t, own, intr, cfg, pol, memory, active, decide, link_lost, wait_lookup, turn_rate)  # sub-step 2
+    ws = wait_step(t, own, intr, cfg, pol, memory, active, decide, link_lost, wait_lookup, turn_rate,
+                   max_alert)  # sub-step 2
     wait = ws.wait
     bl = blend_step(own, intr, cfg, active, decide, link_lost, sm_pilot, pol.value("blending").astype(bool),
                     p_axis, p_dir, pcmd, parts)  # sub-step 3

@@ -37,7 +37,7 @@ AUTHORITIES = ("pilot", "daa", "waiting")
 AXES = ("none", "horizontal", "vertical", "speed")
 DIRECTIONS = ("none", "left", "right", "up", "down", "faster", "slower")
 REGIONS = ("none", "far", "mid", "near", "recovery")
-DECIDED_BY = ("none", "map", "projl", "both", "neither")
+DECIDED_BY = ("none", "map", "projl", "both", "neither", "kept")  # daa_sil.decision.DECIDED_BY_NAMES
 
 #: values renamed since bba2fd8, applied when a step log (or a campaign table) is read: column -> {old: new}.
 #: The waiting authority was ``hold``, the same word as the pilot's "hold the current course" command

@@ -40,18 +40,14 @@ allocation: {group: ID-2}
 
 
 def _fast_time(sc, seed):
-    from daa_sil import waitmap
-    from daa_sil.daa.config import DaaConfig
-    from daa_sil.models.pilot_config import PilotConfig
     from daa_sil.study.fasttime import simulate
-    from vehicle.core import build_policy
+    from sil_helpers import sil_fast_time
 
     legs = link_legs(sc)
-    pol = build_policy(sc)
-    fam = waitmap.family_for(None, preset="paper") if pol.wait_mode == "map" else None
-    return simulate(encounter_set(sc), pol, legs.up, legs.down, PilotConfig(mode=sc.pilot.response),
-                    DaaConfig(thresholds=sc.thresholds), fam, seeds=np.array([seed]), preset=sc.thresholds,
-                    duration_s=sc.duration_s, epoch_s=sc.link.epoch_s, record_steps=True, link_legs=legs)
+    pol, lookup, pilot, daa = sil_fast_time(sc)  # the SIL flies the study's default reading
+    return simulate(encounter_set(sc), pol, legs.up, legs.down, pilot, daa, wait_lookup=lookup, seeds=np.array([seed]),
+                    preset=sc.thresholds, duration_s=sc.duration_s, epoch_s=sc.link.epoch_s, record_steps=True,
+                    link_legs=legs)
 
 
 def test_scenario_round_trip_form(tmp_path):

@@ -53,18 +53,22 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
     kernels.get().search_into.compile()
     es = encounter_set(sc)
     policy = policy or build_policy(sc)
-    if config is not None:  # the scenario's own timeouts win over the configuration's
-        link = {k: v for k, v in config.link.items() if v is not None and getattr(sc.allocation, k) is None}
-        policy = apply_overrides(policy, wt=config.allocation["wt"], projl_lookahead=config.allocation["projl_lookahead"],
-                                 link=link)
-        waitmap = waitmap if waitmap is not None else config.waitmap["source"]
-    daa_cfg = config.daa_config(sc.thresholds) if config is not None else _preset_daa(sc.thresholds)
+    if config is None:  # the defaults: the study's default reading (its maps, its agent rules)
+        from daa_sil.config.run_config import load_config
+
+        config = load_config(None)
+    # the scenario's own timeouts win over the configuration's
+    link = {k: v for k, v in config.link.items() if v is not None and getattr(sc.allocation, k) is None}
+    policy = apply_overrides(config.onboard_policy(policy), wt=config.allocation["wt"],
+                             projl_lookahead=config.allocation["projl_lookahead"], link=link)
+    waitmap = waitmap if waitmap is not None else config.map_source
+    daa_cfg = config.daa_config(sc.thresholds)
     lookup = family = None
     if policy.wait_mode == "map":
         from daa_sil import waitmap as wm
 
-        family = wm.family_for(waitmap, preset="paper")
-        lookup = A.make_wait_lookup(family, cfg=daa_cfg)
+        family = wm.family_for(waitmap, preset="paper", horizon=config.map_horizon(waitmap))
+        lookup = A.make_wait_lookup(family, cfg=daa_cfg, outside=config.effective_reading.outside)
     core = OnboardCore(es.own, es.intr, es.intruder_controls, policy, daa_cfg, lookup, thresholds=sc.thresholds,
                        outcomes=False)  # (the step log reads lowc / nmac; the PI and minimum range are fast-time's)
     return core, es, policy, family

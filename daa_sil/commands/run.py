@@ -177,10 +177,11 @@ def _check_args(args):
 
 
 def _waitmap_source(args) -> "str | None":
-    """``--waitmap``, else the ``--config``'s wait-map source, else None (the default map)."""
+    """``--waitmap``, else the wait maps of the ``--config``'s reading, else None (the vehicle's
+    default: the study's default reading's maps)."""
     if args.waitmap is not None:
         return args.waitmap
-    return config_of(args.config).waitmap["source"] if args.config else None
+    return config_of(args.config).map_source if args.config else None
 
 
 def _options(args, scenario: Path) -> RunOptions:

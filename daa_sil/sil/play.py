@@ -357,9 +357,12 @@ def _waitmap_record(sc, source: "str | None", steplog: Path) -> "dict | None":
         described = json.loads(steplog_metadata(steplog).get("waitmap") or "null")
     except ValueError:
         described = None
-    if not isinstance(described, dict):
-        described = waitmap.describe(waitmap.family_for(source, preset="paper"))  # cached: loaded, not built
-    return {"source": source or waitmap.DEFAULT_MAP, **described}
+    from daa_sil.config.run_config import default_wait_maps
+
+    source, horizon = (source, None) if source else default_wait_maps()  # the vehicle's, when none is named
+    if not isinstance(described, dict):  # cached: loaded, not built
+        described = waitmap.describe(waitmap.family_for(source, preset="paper", horizon=horizon))
+    return {"source": source, **described}
 
 
 def prepare_waitmap(sc, source: "str | None", say: "Callable[[str], None] | None") -> None:
@@ -370,13 +373,15 @@ def prepare_waitmap(sc, source: "str | None", say: "Callable[[str], None] | None
     if sc.allocation.wait != "map":
         return
     from daa_sil import waitmap
+    from daa_sil.config.run_config import default_wait_maps
 
     t = time.monotonic()
-    if waitmap.is_cached(source, preset="paper"):
+    source, horizon = (source, None) if source else default_wait_maps()  # the vehicle's, when none is named
+    if waitmap.is_cached(source, preset="paper", horizon=horizon):
         return  # the vehicle loads (and verifies) it: loading it here too cost ~0.3 s of every run
     if say:
-        say(f"loading the MDP wait maps ({source or waitmap.DEFAULT_MAP}; the first run builds and caches them) ...")
+        say(f"loading the MDP wait maps ({source}; the first run builds and caches them) ...")
     progress = (lambda r: say(f"  built the {r:+g} deg/s map ({time.monotonic() - t:.0f} s)")) if say else None
-    waitmap.family_for(source, preset="paper", progress=progress)
+    waitmap.family_for(source, preset="paper", progress=progress, horizon=horizon)
     if say:
         say(f"wait maps ready ({time.monotonic() - t:.1f} s)")

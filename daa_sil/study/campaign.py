@@ -86,16 +86,19 @@ class BatchTask:
 
 
 @functools.lru_cache(maxsize=4)
-def _wait_family(source: str, preset: str, gamma: "float | None" = None):
+def _wait_family(source: str, preset: str, gamma: "float | None" = None, horizon: "float | None" = None):
     """The wait-map family of a campaign, loaded once per process (builds the cache if needed)."""
     from daa_sil import waitmap
 
-    return waitmap.family_for(source, preset=preset, gamma=gamma)
+    return waitmap.family_for(source, preset=preset, gamma=gamma, horizon=horizon)
 
 
 def campaign_family(config: CampaignConfig):
-    """The wait-map family a campaign's map groups read (None if no group uses the map)."""
-    return _wait_family(config.map_source, config.preset, config.gamma) if config.uses_map else None
+    """The wait-map family a campaign's map groups read (None if no group uses the map): the reading's
+    grid and horizon, the campaign's discount."""
+    if not config.uses_map:
+        return None
+    return _wait_family(config.map_source, config.preset, config.gamma, config.map_horizon)
 
 
 def campaign_wait_lookup(cfg: CampaignConfig, daa_cfg):
@@ -118,7 +121,7 @@ def simulate_group(cfg: CampaignConfig, group: str, encounters, seeds: np.ndarra
     lookup = campaign_wait_lookup(cfg, daa_cfg) if cfg.group(group).uses_map else None
     return simulate(encounters, cfg.policy(group), legs.up, legs.down, cfg.pilot_config(), daa_cfg=daa_cfg,
                     wait_lookup=lookup, seeds=seeds, preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s,
-                    group=group, record_steps=record_steps, link_legs=legs)
+                    group=group, record_steps=record_steps, link_legs=legs, epoch_s=cfg.epoch_s)
 
 
 def run_batch(task: BatchTask) -> list[ChunkResult]:
@@ -136,7 +139,7 @@ def run_batch(task: BatchTask) -> list[ChunkResult]:
     daa_cfg = cfg.daa_config()
     lookup = campaign_wait_lookup(cfg, daa_cfg) if any(cfg.group(g).uses_map for g, _ in task.units) else None
     tables = simulate_parts(parts, cfg.pilot_config(), daa_cfg=daa_cfg, wait_lookup=lookup,
-                            preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s)
+                            preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s, epoch_s=cfg.epoch_s)
     spent = time.perf_counter() - t0
     rows = sum(len(p.encounters) for p in parts)
     return [ChunkResult(g, c, enc, dec, spent * len(p.encounters) / rows, len(p.encounters))
@@ -230,6 +233,10 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
             diff = [k for k in config.to_dict() if config.to_dict()[k] != stored.to_dict()[k]]
             raise UsageError(f"--resume: {meta_path} was made with different settings ({', '.join(diff)}); "
                              f"pass the same options or omit them")
+        changed = reading_changes(load_campaign_json(out)["config"].get("readings"), config)
+        if changed:
+            raise UsageError(f"--resume: reading {config.reading!r} has other settings than when {meta_path} was "
+                             f"made ({', '.join(changed)}); start a new campaign")
         if not enc_path.is_file():
             raise FileFormatError(f"{enc_path} is missing; cannot resume this campaign")
         stored_map = load_campaign_json(out).get("waitmap")
@@ -245,7 +252,10 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
     ensure_dir(out)
     encs = sample_campaign_encounters(config, executor, parts)
     save_encounters(encs, enc_path)  # atomic
+    from daa_sil.config.basis import basis_records
+
     meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "resolved_config": config.resolved(),
+            "basis": basis_records(config.effective_reading),
             "versions": software_versions(),
             "preset": config.preset, "seed": config.seed, "status": "running",
             "seeds": {"campaign": config.seed,
@@ -258,6 +268,18 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
                        "checksums": "<group>/chunk-<chunk>.sha256", "chunk_size": config.chunk_size}}
     atomic_write_json(meta_path, meta)
     return out, config, encs
+
+
+def reading_changes(stored: "dict | None", config: CampaignConfig) -> list[str]:
+    """Settings of the campaign's reading that differ from the ones ``campaign.json`` recorded
+    (``config.readings``; a setting it lacks counts at its old default). Empty when they agree."""
+    if not isinstance(stored, dict):
+        return []
+    from daa_sil.config.readings import Reading
+
+    now = config.effective_reading.to_dict()
+    then = {**Reading(name=now["name"]).to_dict(), **stored}
+    return [k for k in now if k not in ("name", "description") and now[k] != then.get(k)]
 
 
 def _describe_family(fam) -> dict:

@@ -110,8 +110,21 @@ class CampaignConfig:
         if self.uses_map:
             from daa_sil.waitmap.source import check_source
 
-            check_source(self.map_source, self.preset, self.gamma)
+            check_source(self.map_source, self.preset, self.gamma, self.map_horizon)
         return self
+
+    @property
+    def map_horizon(self) -> "float | None":
+        """The wait maps' horizon H (s) the reading sets (None: the map preset's)."""
+        return self.effective_reading.wait_horizon_s
+
+    @property
+    def epoch_s(self) -> float:
+        """The links' delay epoch (s): the link's (:data:`daa_sil.config.settings.DELAY_EPOCH`), or one
+        draw per encounter under a reading with ``delay_draw = "encounter"``."""
+        from daa_sil.config.settings import DELAY_EPOCH
+
+        return self.effective_reading.epoch_s(DELAY_EPOCH.default, self.duration_s, self.dt_s)
 
     @property
     def map_source(self) -> str:

@@ -262,11 +262,12 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     downlink = SlotRing(n, {"own": ((6,), float, np.nan), "intr": ((m, 6), float, np.nan), "alert": ((), np.int64, 0),
                             "release": ((), float, np.inf)})
     uplink = SlotRing(n, {"release": ((), float, np.inf), "newest_sent": ((), np.int64, -1),
-                          "cmd": ((3,), float, np.nan)})
+                          "cmd": ((3,), float, np.nan), "n_sent": ((), np.int64, 0)})
     down_ptr = np.zeros(n, np.int64)
     seen = np.full(n, -1, np.int64)  # telemetry index the pilot currently sees
     up_ptr = np.zeros(n, np.int64)
     last_cmd_slot = np.full(n, -1, np.int64)  # newest command slot delivered to the vehicle
+    last_n_sent = np.zeros(n, np.int64)  # commands sent up to it (the vehicle has been released them all)
     last_down, last_up = np.full(n, -np.inf), np.full(n, -np.inf)
     down_release = lambda s, r: downlink.gather("release", s, r)  # noqa: E731
     up_release = lambda s, r: uplink.gather("release", s, r)  # noqa: E731
@@ -292,9 +293,11 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         rel_up = fifo_release(np.full((n, 1), t), d_up[:, None], prev_release=last_up)[:, 0]
         last_up = rel_up
         prev_newest = uplink.gather("newest_sent", np.full(n, k - 1))
+        prev_sent = uplink.gather("n_sent", np.full(n, k - 1))
         slot_up = uplink.open(k)
         slot_up["release"][:] = rel_up
         slot_up["newest_sent"][:] = np.where(pout.send, k, prev_newest)
+        slot_up["n_sent"][:] = prev_sent + pout.send
         slot_up["cmd"][:] = np.stack([pout.cmd.trk, pout.cmd.vs, pout.cmd.gs], axis=-1)
         # ---- 2. vehicle ----------------------------------------------------------------------
         up_ptr = _release_pointer(up_ptr, up_release, k + 1, t)
@@ -304,6 +307,10 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         released_cmd = np.where(up_ptr > 0, uplink.gather("newest_sent", newest), -1)
         received = released_cmd > last_cmd_slot
         last_cmd_slot = np.maximum(last_cmd_slot, released_cmd)
+        # commands released this step besides the newest (a FIFO burst): superseded within the step
+        n_sent = np.where(up_ptr > 0, uplink.gather("n_sent", newest), 0)
+        superseded = np.where(received, n_sent - last_n_sent - 1, 0)
+        last_n_sent = np.where(received, n_sent, last_n_sent)
         slot = np.where(received, released_cmd, -1)  # only a received command is read (its slot is held)
         c = uplink.gather("cmd", slot)
         pin = PilotInput(received=received,
@@ -313,7 +320,7 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
                          t_recv=np.where(received, uplink.gather("release", slot), np.nan), link_alive_t=link_alive)
         uplink.release(max(int(up_ptr.min()) - 1, 0))
         out = core.step(t, pin)
-        acc.add(out, dt)
+        acc.add(out, dt, superseded)
         # telemetry for t_k enters the downlink
         d_down = down.delay_at(t)
         rel_down = fifo_release(np.full((n, 1), t), d_down[:, None], prev_release=last_down)[:, 0]

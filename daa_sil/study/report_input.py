@@ -124,7 +124,8 @@ def load_block(src) -> Block:
                                       f"{type(settings).__name__}")
             meta = {"seed": cfg.get("seed", cj.get("seed")), "n_encounters": cfg.get("n_encounters"),
                     "preset": cfg.get("preset", cj.get("preset")), "groups": cfg.get("groups"),
-                    "status": cj.get("status"), "seeds": cfg.get("seeds"), "dt_s": cfg.get("dt_s")}
+                    "status": cj.get("status"), "seeds": cfg.get("seeds"), "dt_s": cfg.get("dt_s"),
+                    "basis": cj.get("basis")}
         dec = load_decisions(d)
     enc = load_results(src)
     if not enc or len(next(iter(enc.values()))) == 0:
