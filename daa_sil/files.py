@@ -63,7 +63,7 @@ TEMP_NAME_EXTRA = 14
 PATH_ROOM = 64
 
 
-def shown(text: str, limit: int = 60) -> str:
+def shown(text: str, limit: int = 160) -> str:
     """``text`` for a one-line message: undecodable bytes escaped, a long name cut in its middle."""
     try:
         safe = os.fsencode(str(text)).decode("utf-8", "backslashreplace")  # a stray byte shows as \\xff

@@ -109,7 +109,8 @@ def claim_out_dir(directory: "str | os.PathLike", option: str = "--out", *, keep
         fh.flush()
     except BaseException:
         if made_lock:
-            lock.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                lock.unlink(missing_ok=True)
         if fh is not None:
             fh.close()
         _undo(top)
@@ -117,7 +118,8 @@ def claim_out_dir(directory: "str | os.PathLike", option: str = "--out", *, keep
     try:
         yield path
     finally:
-        lock.unlink(missing_ok=True)  # still holding it: a claimer that opened this file finds it gone
+        with contextlib.suppress(OSError):  # (a directory that became unwritable keeps it: harmless, unlocked)
+            lock.unlink(missing_ok=True)  # still holding it: a claimer that opened this file finds it gone
         fh.close()
 
 
