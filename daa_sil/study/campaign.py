@@ -4,12 +4,18 @@ One code path for every executor: batches of chunks (each task several chunks of
 side by side, :mod:`daa_sil.study.campaign_plan`) are submitted to a
 :class:`concurrent.futures.Executor` and collected with ``as_completed``, whichever executor it is:
 
-* ``workers=1`` -- in-process (one worker thread, so the progress bar stays live);
+* ``workers=1`` -- in this process, in the calling thread (a task runs as it is submitted, so Ctrl-C
+  interrupts it and nothing is left running; :class:`~daa_sil.study.executors.InlineExecutor`);
 * ``workers=K`` -- :class:`~concurrent.futures.ProcessPoolExecutor` (fork; the wait maps are loaded
   once in the parent and inherited);
 * ``scheduler="local-dask"`` -- a local Dask ``LocalCluster`` with ``workers`` processes;
 * ``scheduler="tcp://host:8786"`` -- an existing Dask cluster, ``Client(addr).get_executor(pure=False)``
   (``pure=False``: otherwise identical arguments would map to one key and run once).
+
+Tasks are submitted a few at a time (:func:`in_flight`: one in this process, two per local worker,
+all at once on Dask), so the driver holds only their encounters. Ctrl-C, SIGTERM or an error stop
+the workers at once (:mod:`daa_sil.study.executors`); what was written stays, and ``resume=True``
+continues from it.
 
 Determinism: the encounter set is generated once from the campaign seed and saved as
 ``DIR/encounters.parquet``; every random stream of encounter ``i`` (pilot, uplink and downlink delay)
