@@ -238,7 +238,10 @@ class VehicleCore:
         return pa.Table.from_pydict(cols, schema=STEP_SCHEMA)
 
     def write_steplog(self, path: "str | Path", meta: dict, n_rows: "int | None" = None) -> Path:
-        """Write the first ``n_rows`` rows (all if None) atomically to ``path``."""
+        """Write the first ``n_rows`` rows (all if None) atomically to ``path``; if its directory can no
+        longer take it, to :func:`daa_sil.out_dir.rescue_path` (a warning says where). Returns where."""
+        from daa_sil.out_dir import write_or_rescue
         from daa_sil.steplog import write_steplog
 
-        return write_steplog(self.steplog_table(n_rows), path, metadata=meta)
+        table = self.steplog_table(n_rows)
+        return write_or_rescue(path, lambda p: write_steplog(table, p, metadata=meta), "step log")

@@ -75,12 +75,11 @@ class CampaignConfig:
         """Raise UsageError (one line) on a bad value; returns self."""
         if not self.groups or not all(isinstance(g, GroupSpec) for g in self.groups):
             raise UsageError("a campaign needs at least one group definition")
-        for name, val in (("--encounters", self.n_encounters), ("--chunk-size", self.chunk_size),
-                          ("--intruders", self.n_intruders)):
-            if not isinstance(val, (int, np.integer)) or isinstance(val, bool) or val <= 0:
-                raise UsageError(f"{name} must be a positive integer, got {val!r}")
-        if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool) or self.seed < 0:
-            raise UsageError(f"--seed must be a non-negative integer, got {self.seed!r}")
+        for name, val, setting in (("--encounters", self.n_encounters, ENCOUNTERS), ("--chunk-size", self.chunk_size,
+                                   CHUNK_SIZE), ("--intruders", self.n_intruders, INTRUDERS), ("--seed", self.seed, SEED)):
+            if not isinstance(val, (int, np.integer)) or isinstance(val, bool):
+                raise UsageError(f"{name} must be an integer, got {val!r}")
+            setting.check(int(val), key=name)  # both ends of its range (paper Table 6: 1..8 intruders)
         if self.preset not in PRESETS:
             raise UsageError(f"unknown --preset {self.preset!r}; allowed: {', '.join(PRESETS)}")
         DURATION.check(self.duration_s, key="duration")
