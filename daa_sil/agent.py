@@ -77,7 +77,6 @@ from daa_sil.decision import (A_DAA, A_PILOT, A_WAITING, AUTHORITY_NAMES, BY_BOT
 from daa_sil.agent_memory import AgentMemory, PilotInput
 from daa_sil.agent_steps import BlendStep, LinkStep, WaitStep, blend_step, link_step, wait_step
 from daa_sil.wait_function import WaitLookup, WaitValue, make_wait_lookup
-from daa_sil.daa_batches import check_batches, positions_by_batch
 from daa_sil.geometry.kinematics import AircraftState, Command
 
 
@@ -86,22 +85,18 @@ def _reached(own: AircraftState, cmd: Command) -> np.ndarray:
     return (np.abs(dtrk) < np.radians(0.5)) & (np.abs(dvs) < 0.25) & (np.abs(dgs) < 0.5)
 
 
-def _safety(batch_of, rows: np.ndarray, own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
+def _safety(rows: np.ndarray, own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
             horizon: float, known: "dict | None" = None) -> np.ndarray:
-    """SM(u) of ``cmd`` (one per row of ``rows``), one :func:`safety_metric` call per DAA batch.
-    ``known`` maps the bytes of a call's rows to SM values already computed by a call on exactly
-    those rows (the same batch, so the same numbers); the calls made here are added to it."""
-    out = np.empty(rows.size)
-    for pos in positions_by_batch(batch_of, rows):
-        r = rows[pos]
-        key = r.tobytes()
-        got = known.get(key) if known is not None else None
-        if got is None:
-            got = safety_metric(own[r], intr[r], cmd[pos] if pos.size != rows.size else cmd, cfg, horizon)
-            if known is not None:
-                known[key] = got
-        out[pos] = got
-    return out
+    """SM(u) of ``cmd`` (one per row of ``rows``; each row's is what a call of its own gives). ``known`` maps
+    the bytes of a call's rows to SM values already computed for the same command on exactly those rows;
+    the call made here is added to it."""
+    key = rows.tobytes()
+    got = known.get(key) if known is not None else None
+    if got is None:
+        got = safety_metric(own[rows], intr[rows], cmd, cfg, horizon)
+        if known is not None:
+            known[key] = got
+    return got
 
 
 def _alerting(t: float, own: AircraftState, intr: AircraftState, memory: AgentMemory, cfg: DaaConfig):
@@ -119,9 +114,9 @@ def _alerting(t: float, own: AircraftState, intr: AircraftState, memory: AgentMe
 
 
 def _daa_resolutions(t: float, own: AircraftState, intr: AircraftState, cfg: DaaConfig, memory: AgentMemory,
-                     ia: np.ndarray, batch_of, alert, daa_state, bands):
-    """Bands and the DAA resolution of the active rows ``ia``, one call per DAA batch: ``(command,
-    SM (s), axis, direction, [(rows, Bands)] per batch)``; nan / 0 on inactive rows."""
+                     ia: np.ndarray, alert, daa_state, bands):
+    """Bands and the DAA resolution of the active rows ``ia``, in one call: ``(command, SM (s), axis, direction,
+    [(rows, Bands)])`` (no part when no row is active); nan / 0 on inactive rows."""
     n = own.shape[0]
     nan = np.full(n, np.nan)
     sm_daa = nan.copy()
@@ -129,8 +124,8 @@ def _daa_resolutions(t: float, own: AircraftState, intr: AircraftState, cfg: Daa
     daa_axis = np.zeros(n, np.int8)
     daa_dir = np.zeros(n, np.int8)
     parts: list = []
-    for pos in positions_by_batch(batch_of, ia):
-        r = ia[pos]
+    if ia.size:
+        r = ia
         o, i_ = own[r], intr[r]
         if bands is not None:
             b = bands if r.size == n else bands[r]
@@ -150,7 +145,7 @@ def _daa_resolutions(t: float, own: AircraftState, intr: AircraftState, cfg: Daa
 def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotInput, memory: AgentMemory,
                policy: "AllocationPolicy | PolicyRows", daa_cfg: "DaaConfig | None" = None,
                wait_lookup: "WaitLookup | None" = None, bands=None, turn_rate: "np.ndarray | None" = None,
-               *, band_record: bool = True, daa_batches: "np.ndarray | None" = None) -> tuple[Command, Decision, AgentMemory]:
+               *, band_record: bool = True) -> tuple[Command, Decision, AgentMemory]:
     """One allocation step at sim time ``t`` (s) for ownship ``(N,)`` and intruders ``(N, M)``.
 
     Returns ``(command to fly, decision record, new memory)``; the record is a
@@ -161,12 +156,12 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     ``turn_rate`` ``(N, M)`` is each intruder's estimated turn rate (compass rad/s, + = right;
     default 0), which picks the wait map (:class:`daa_sil.onboard.TurnRateEstimator`).
     ``band_record=False`` leaves ``bands_trk``/``bands_trk_region`` None (nobody reads them).
-    ``daa_batches`` ``(N,)``: the DAA is called once per batch (:mod:`daa_sil.daa_batches`).
+    Every row's outputs are those of a call of its own (the DAA decides everything per encounter), so a
+    batch is stepped in one call whatever its rows are.
     """
     cfg = daa_cfg if daa_cfg is not None else DaaConfig()
     n = own.shape[0]
     pol = PolicyRows.of(policy, n)
-    batch_of = check_batches(daa_batches, n)
     horizon = cfg.sm_horizon_s
     alert, max_alert, daa_state = _alerting(t, own, intr, memory, cfg)
     lk = link_step(t, own, pilot, memory, pol)  # sub-step 1: the link
@@ -185,7 +180,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     check = (memory.authority == A_DAA) & ~((max_alert >= 2) | in_progress)
     if check.any():
         j = np.nonzero(check)[0]
-        unsafe_revert[j] = ~(_safety(batch_of, j, own, intr, lk.last_pilot[j], cfg, horizon, sm_calls) > 0)
+        unsafe_revert[j] = ~(_safety(j, own, intr, lk.last_pilot[j], cfg, horizon, sm_calls) > 0)
     # active_from "encounter" (per row): decide every step from the start until safe avoidance
     encounter_over = memory.encounter_over
     whole = np.zeros(n, bool)
@@ -195,15 +190,15 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
         whole = from_start & ~encounter_over
     active = ((max_alert >= 2) | in_progress | unsafe_revert | whole) & pol.value("enabled").astype(bool)
     ia = np.nonzero(active)[0]
-    daa_cmd, sm_daa, daa_axis, daa_dir, parts = _daa_resolutions(t, own, intr, cfg, memory, ia, batch_of, alert,
-                                                                  daa_state, bands)
+    daa_cmd, sm_daa, daa_axis, daa_dir, parts = _daa_resolutions(t, own, intr, cfg, memory, ia, alert, daa_state,
+                                                                  bands)
 
     # --- the pilot's command: its safety and its (axis, direction) ------------------------------
     sm_pilot = np.full(n, np.nan)
     fa = fresh & active
     if fa.any():
         j = np.nonzero(fa)[0]
-        sm_pilot[j] = _safety(batch_of, j, own, intr, pcmd[j], cfg, horizon, sm_calls)
+        sm_pilot[j] = _safety(j, own, intr, pcmd[j], cfg, horizon, sm_calls)
     # The pilot's (axis, direction) preference is the change from the pilot's previous course to the
     # new command, not from the current state: once the DAA or a blend has moved the ownship, a
     # repeated "hold" command would otherwise read as a turn back and flip the blend every step.
@@ -244,7 +239,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     other = active & np.isnan(sm_exec)
     if other.any():
         j = np.nonzero(other)[0]
-        sm_exec[j] = _safety(batch_of, j, own, intr, exec_cmd[j], cfg, horizon, sm_calls if wait[j].all() else None)
+        sm_exec[j] = _safety(j, own, intr, exec_cmd[j], cfg, horizon, sm_calls if wait[j].all() else None)
     e_axis, e_dir = classify_command(own, exec_cmd, cfg)
     exact = (decision == D_BLEND) & (p_axis != AXIS_NONE) & (e_axis == p_axis) & (e_dir == p_dir)
     bt, br_ = _band_record(cfg, n, parts) if band_record else (None, None)

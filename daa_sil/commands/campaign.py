@@ -186,8 +186,8 @@ def _add_run_options(r) -> None:
     r.add_argument("--duration", type=finite_float("--duration", *DURATION.range), default=None, metavar="S",
                    help=DURATION.flag_help())
     r.add_argument("--chunk-size", type=int_at_least("--chunk-size", CHUNK_SIZE.lo), default=None, metavar="C",
-                   help=f"encounters per chunk (default {CHUNK_SIZE.default}): one result file per group and chunk, and the "
-                        "encounters that share a DAA call (so part of the configuration)")
+                   help=f"encounters per chunk (default {CHUNK_SIZE.default}): one result file per group and chunk "
+                        "(results do not depend on it)")
     r.add_argument("--batch-rows", type=int_at_least("--batch-rows", 1), default=None, metavar="R",
                    help="encounter rows per task: several chunks of several groups run side by side in one "
                         "batch (default 10000, about 0.4 GiB per worker; results do not depend on it)")

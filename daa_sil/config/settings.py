@@ -108,7 +108,7 @@ SEED = Setting("seed", 0, "", 0, 2**63 - 1, "campaign seed (every encounter's st
 INTRUDERS = Setting("intruders", 1, "", 1, 8, "intruders per encounter")
 #: encounters per task: the per-step numpy overhead is paid once per chunk, so bigger chunks are
 #: faster (500 -> 2000 about 1.9x per core); one 2000-encounter chunk peaks at about 0.2 GB RSS
-CHUNK_SIZE = Setting("chunk_size", 2000, "", 1, 10_000_000, "encounters per chunk (they share a DAA call)")
+CHUNK_SIZE = Setting("chunk_size", 2000, "", 1, 10_000_000, "encounters per chunk (one result file per group and chunk)")
 #: the wait maps the map groups read: a map preset (``alerting``: the box covers the DAA alerting
 #: region, horizon 120 s), a grid spec or a ``waitmap build`` directory
 WAITMAP = Setting("source", "alerting", help="wait maps of the map groups: a map preset, a grid spec or a directory")

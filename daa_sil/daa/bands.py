@@ -61,7 +61,7 @@ from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_SPEED, AXIS_VERTICAL, REG
                      REGION_NONE, REGION_RECOVERY, DaaConfig)
 from .trajectory import PathConflicts, PathEvaluator
 from daa_sil.daa.recovery import CylinderRecovery, drop_isolated
-from daa_sil.daa.axis_paths import maneuver_paths, candidate_counts, speed_limits
+from daa_sil.daa.axis_paths import maneuver_paths, candidate_counts, row_counts, speed_limits
 from daa_sil.daa.band_regions import axis_conflict_regions, axis_regions
 
 #: False: every axis in numpy (the oracle of :func:`daa_sil.daa.band_regions.axis_regions`)
@@ -83,7 +83,11 @@ class AxisBands:
     candidates k and k+1; ``res_lo``, ``res_hi`` (N,) resolutions (nan = no conflict, -inf / +inf = no
     resolution on that side); ``preferred`` (N,) side -1/0/+1; ``recovery_time`` (N,) s (nan = no
     recovery bands, -inf = saturated); ``recovery_nfactor`` (N,) cylinder shrinks (-1 = none);
-    ``recovery_h``/``recovery_v`` (N,) m, the cylinder the recovery band keeps clear of.
+    ``recovery_h``/``recovery_v`` (N,) m, the cylinder the recovery band keeps clear of; ``own_lo``/``own_hi``
+    (N,) the first and last column of each encounter's own candidates (None: every column). A speed axis's
+    encounters have their own candidate counts: the columns past an encounter's own candidates repeat its
+    outermost one on that side, and every reading that picks a candidate looks at its own columns only
+    (:meth:`own_mask`), so it finds what it finds in a call of its own.
     """
 
     axis: int
@@ -102,6 +106,8 @@ class AxisBands:
     recovery_nfactor: "np.ndarray | None" = None
     recovery_h: "np.ndarray | None" = None
     recovery_v: "np.ndarray | None" = None
+    own_lo: "np.ndarray | None" = None
+    own_hi: "np.ndarray | None" = None
 
     def __post_init__(self):
         n = self.values.shape[0]
@@ -131,6 +137,20 @@ class AxisBands:
     def k0(self) -> int:
         """Column of the current value."""
         return int(np.nonzero(self.side == 0)[0][0])
+
+    def own_range(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(own_lo, own_hi)`` as (N,) int64 arrays (every column when not set)."""
+        n, k = self.values.shape
+        if self.own_lo is None:
+            return np.zeros(n, np.int64), np.full(n, k - 1, np.int64)
+        return np.asarray(self.own_lo, np.int64), np.asarray(self.own_hi, np.int64)
+
+    def own_mask(self) -> "np.ndarray | None":
+        """(N, K) bool: the columns that are each encounter's own candidates (None: all of them)."""
+        if self.own_lo is None:
+            return None
+        col = np.arange(self.values.shape[1])[None, :]
+        return (col >= np.asarray(self.own_lo)[:, None]) & (col <= np.asarray(self.own_hi)[:, None])
 
     def rows(self, idx) -> "AxisBands":
         """The bands of encounters ``idx`` (an index array or a boolean mask: each field is selected when
@@ -313,16 +333,27 @@ def _first_on_side(ok, side, want: int, k0: int):
 def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig, alert: np.ndarray,
                sizes: "tuple[int, int] | None" = None,
                lists: "tuple[np.ndarray, np.ndarray] | None" = None) -> AxisBands:
-    """Bands of one axis (AXIS_* code) for ownship ``(N,)`` and intruders ``(N, M)``; ``sizes`` = candidates
-    per side (default from this batch); ``lists`` = (NEAR, MID) conflict-aircraft flags ``(N, M)`` used
-    with ``cfg.horizon_from_maneuver`` (default :func:`daa_sil.daa.alerting.conflict_lists`)."""
+    """Bands of one axis (AXIS_* code) for ownship ``(N,)`` and intruders ``(N, M)``; ``sizes`` = the columns
+    per side (at least the batch's :func:`candidate_counts`, the default); ``lists`` = (NEAR, MID)
+    conflict-aircraft flags ``(N, M)`` used with ``cfg.horizon_from_maneuver`` (default
+    :func:`daa_sil.daa.alerting.conflict_lists`).
+
+    Each encounter's bands are those of a call of its own: its own candidates per side
+    (:func:`daa_sil.daa.axis_paths.row_counts`; a speed axis's depend on the current speed), its paths
+    evaluated to its own last knot, its regions, recovery and resolutions over its own candidates. The
+    columns past an encounter's candidates repeat its outermost candidate on that side."""
     j_lo, j_hi = sizes if sizes is not None else candidate_counts(own, axis, cfg)
     n, m = intr.shape
+    rows = row_counts(own, axis, cfg)
+    fused = COMPILED and FUSED and cfg.recovery != "cylinder"
+    if not fused and n and not (np.all(rows[0] == j_lo) and np.all(rows[1] == j_hi)):
+        return _by_counts(own, intr, axis, cfg, alert, lists, rows, j_lo, j_hi)
     paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
     t = np.asarray(paths.t, float)[0, 0]
     side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
-    if COMPILED and FUSED and cfg.recovery != "cylinder" and paths.kin is not None:  # one pass per path, then per row
-        values, delta, t_man, *rest = axis_conflict_regions(paths, own, intr, axis, cfg, alert, lists, j_lo, j_hi)
+    if fused and paths.kin is not None:  # one pass per path, then per row
+        values, delta, t_man, *rest = axis_conflict_regions(paths, own, intr, axis, cfg, alert, lists, j_lo, j_hi,
+                                                            rows)
         return AxisBands(axis, values, delta, side, t_man, *rest)
     ev = PathEvaluator(paths, intr, cfg.lookahead_s)
     pc = ev.evaluate(cfg.th)
@@ -408,14 +439,60 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     # -- resolutions ------------------------------------------------------------------------------------
     res_lo, res_hi, pref = resolutions(region, values, delta, side, t_man, k0, axis, cfg)
     return AxisBands(axis, values, delta, side, t_man, t_in_all, t_out_c, region, res_lo, res_hi, pref, gap,
-                     rec_time, rec_n, rec_h, rec_v)
+                     rec_time, rec_n, rec_h, rec_v)  # (own_lo / own_hi None: every row has every column)
 
 
-def resolutions(region, values, delta, side, t_man, k0: int, axis: int, cfg: DaaConfig):
-    """(res_lo, res_hi, preferred) of candidates ``(N, K)`` (see the module docstring)."""
+def _by_counts(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig, alert, lists, rows, j_lo: int,
+               j_hi: int) -> AxisBands:
+    """:func:`axis_bands` of a batch whose encounters have different candidate counts ``rows``, on the
+    evaluator's path (the numpy reference, the cylinder recovery): one call per set of encounters with the
+    same counts, each with exactly those candidates, then each row placed in the batch's ``j_lo`` + 1 +
+    ``j_hi`` columns with its outermost candidates repeated past its own."""
+    n, k = own.shape[0], j_lo + j_hi + 1
+    key = rows[0] * (j_hi + 1) + rows[1]
+    parts = []
+    for v in np.unique(key):
+        idx = np.flatnonzero(key == v)
+        lo, hi = int(rows[0][idx[0]]), int(rows[1][idx[0]])
+        li = None if lists is None else (lists[0][idx], lists[1][idx])
+        parts.append((idx, lo, hi, axis_bands(own[idx], intr[idx], axis, cfg, np.asarray(alert)[idx], (lo, hi), li)))
+    b0 = parts[0][3]
+
+    def widen(name: str, width: int):
+        out = None
+        for idx, lo, hi, b in parts:
+            a = np.asarray(getattr(b, name))
+            if out is None:
+                out = np.empty((n, width) if width else (n,), a.dtype)
+            if not width:
+                out[idx] = a
+                continue
+            a = np.broadcast_to(a, (idx.size, a.shape[1]))
+            c0 = j_lo - lo
+            out[idx, c0:c0 + a.shape[1]] = a
+            if name == "gap_region":  # (between repeated candidates: the outermost one's region)
+                out[idx, :c0] = np.asarray(b.region)[:, :1]
+                out[idx, c0 + a.shape[1]:] = np.asarray(b.region)[:, -1:]
+            else:
+                out[idx, :c0] = a[:, :1]
+                out[idx, c0 + a.shape[1]:] = a[:, -1:]
+        return out
+    per_row = {f.name: widen(f.name, k if f.name in ("values", "delta", "t_man", "t_in", "t_out", "region") else 0)
+               for f in fields(AxisBands) if f.name not in ("axis", "side", "gap_region", "own_lo", "own_hi")}
+    gap = None if b0.gap_region is None else widen("gap_region", k - 1)
+    side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
+    return AxisBands(axis=axis, side=side, gap_region=gap, own_lo=j_lo - rows[0], own_hi=j_lo + rows[1], **per_row)
+
+
+def resolutions(region, values, delta, side, t_man, k0: int, axis: int, cfg: DaaConfig,
+                own: "np.ndarray | None" = None):
+    """(res_lo, res_hi, preferred) of candidates ``(N, K)`` (see the module docstring); ``own`` (N, K): each
+    row's own candidates (:meth:`AxisBands.own_mask`; None: all)."""
     cur = region[:, k0]
     cur_conflict = (cur == REGION_MID) | (cur == REGION_NEAR)
     ok = (region == REGION_NONE) | (region == REGION_RECOVERY)
+    if own is not None:
+        ok &= own
     if axis == AXIS_HORIZONTAL and cfg.daidalus_grid:  # a resolution is never exactly 180 deg away
         ok &= np.abs(delta) < np.pi - 1e-9
     i_lo, f_lo = _first_on_side(ok, side, -1, k0)
@@ -467,6 +544,8 @@ CHUNK = 16384
 
 def _concat(parts: "list[AxisBands]") -> AxisBands:
     p0 = parts[0]
+    if any(p.own_lo is not None for p in parts):  # (a part without them has every column)
+        parts = [p.with_fields(own_lo=p.own_range()[0], own_hi=p.own_range()[1]) for p in parts]
     keep = lambda f: f.name in ("axis", "side") or any(getattr(p, f.name) is None for p in parts)  # noqa: E731
     return AxisBands(**{f.name: ((getattr(p0, f.name) if f.name in ("axis", "side") else None) if keep(f)
                                  else np.concatenate([getattr(p, f.name) for p in parts], axis=0))

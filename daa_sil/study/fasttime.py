@@ -27,8 +27,8 @@ contract ("Campaign result tables") and, with ``record_steps=True``, the step lo
 (:mod:`daa_sil.steplog`). :func:`simulate_parts` runs several parts side by side in one batch --
 e.g. the groups of a campaign chunk, each with its own policy and delay models -- and returns each
 part's tables exactly as :func:`simulate` of that part alone would (every random stream is per
-encounter, every step is element-wise per encounter, and the DAA is called once per part on the
-rows it would see alone: :mod:`daa_sil.daa_batches`).
+encounter, every step is element-wise per encounter, and the DAA gives each encounter's rows what a
+call of their own gives, so it is called once per step on all the rows that need it).
 
 Memory: what a link carries is kept in a :class:`~daa_sil.study.slot_ring.SlotRing` only until
 the other end has read it (about the longest delay in steps), so a batch of N encounters holds
@@ -236,14 +236,12 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     encounters = enc0 if len(parts) == 1 else concat_encounters([p.encounters for p in parts])
     n = sum(sizes)
     bounds = np.concatenate([[0], np.cumsum(sizes)])
-    batches = None if len(parts) == 1 else np.repeat(np.arange(len(parts)), sizes)  # one DAA batch per part
     policy = parts[0].policy if len(parts) == 1 else PolicyRows.stacked([p.policy for p in parts], sizes)
     streams = _streams_per_part(seeds)
     core = OnboardCore.from_encounters(encounters, policy, cfg, wait_lookup, thresholds=preset_name,
-                                       step_log=record_steps, daa_batches=batches)
+                                       step_log=record_steps)
     # the flight plan the pilot returns to: the ownship's initial straight, level course
-    ground = GroundCore(n, [x[STREAM_PILOT] for st in streams for x in st], pcfg, cfg, plan=core.own,
-                        daa_batches=batches)
+    ground = GroundCore(n, [x[STREAM_PILOT] for st in streams for x in st], pcfg, cfg, plan=core.own)
     # each part's link legs: one-way (each link its own stream) or a shared round trip (both links
     # read the uplink stream's draws: models/link_rule.py)
     legs = [p.link_legs if p.link_legs is not None else LinkLegs(p.latency_up, p.latency_down) for p in parts]
@@ -281,10 +279,7 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         obs_own = AircraftState.from_array(downlink.gather("own", obs))
         obs_intr = AircraftState.from_array(downlink.gather("intr", obs))
         fresh = np.flatnonzero(new & (obs >= 0))
-        # the display bands the states it shows itself, all in one call per DAA batch: taking the
-        # agent's bands of the same state would give the numbers of a call on other rows (the
-        # agent's active rows of that step), which differ in the DAA's last bits and, rarely, in a
-        # candidate's region -- the pilot then chose another maneuver (bba2fd8 identity, issue 21)
+        # the display bands the states it shows itself (each row's bands are what it gets alone)
         pout = ground.step(t, obs_own, obs_intr, fresh, downlink.gather("alert", obs[fresh], fresh))
         downlink.release(max(int(down_ptr.min()) - 1, 0))
         # GCS packet of step k (heartbeat + command if streaming), FIFO-released on the vehicle side

@@ -21,29 +21,31 @@ from daa_sil.daa.kernels.scalar import vertical_window
 from daa_sil.daa.kernels.signatures import A, A2, A3, IA, I8, O, F, I
 
 
-@kernel(void(I, F, A3, A, A3, A3, boolean, A2, A2, I, F, F, F, F, F, F, F, I8, O, O, O, O, O, O))
-def axis_conflicts_into(axis, rate, kin, t, ipos, ivel, vz_const, acc_h, acc_v, block, t_end, D, DD, D2, H, TT, TC,
-                        code, seg_in, seg_out, tail_in, tail_out, vlo, vhi):
-    """Paths ``kin`` (N, 2, 9) at knot times ``t`` (J+1,) against intruders ``ipos``/``ivel`` (N, M, 3):
-    segment codes and intervals (flat over (N, M, 2, J), as ``segments_into``; undecided segments are left
-    at ``(inf, -inf)``), tail intervals (flat over (N, M, 2, J+1), as ``tails_into``) over ``[0, t_end]``,
-    and with ``vz_const`` each path's vertical window ``vlo``/``vhi`` (flat over (N, M, 2); else not
-    written); ``acc_h``/``acc_v`` (N, 2) the paths' acceleration bounds (m/s^2)."""
+@kernel(void(I, F, A3, A, IA, A3, A3, boolean, A2, A2, I, F, F, F, F, F, F, F, I8, O, O, O, O, O, O))
+def axis_conflicts_into(axis, rate, kin, t, nseg, ipos, ivel, vz_const, acc_h, acc_v, block, t_end, D, DD, D2, H, TT,
+                        TC, code, seg_in, seg_out, tail_in, tail_out, vlo, vhi):
+    """Paths ``kin`` (N, 2, 9) at knot times ``t`` (J+1,), encounter ``n``'s two paths up to knot ``nseg[n]``,
+    against intruders ``ipos``/``ivel`` (N, M, 3): segment codes and intervals (flat over (N, M, 2, J), as
+    ``segments_into``; undecided segments are left at ``(inf, -inf)``, those past a path's last knot are
+    CLEAR), tail intervals (flat over (N, M, 2, J+1), as ``tails_into``; ``(inf, -inf)`` past a path's last
+    knot) over ``[0, t_end]``, and with ``vz_const`` each path's vertical window ``vlo``/``vhi`` (flat over
+    (N, M, 2); else not written); ``acc_h``/``acc_v`` (N, 2) the paths' acceleration bounds (m/s^2)."""
     N, P, M, K = kin.shape[0], kin.shape[1], ipos.shape[1], t.shape[0]
     sth, cth = turn_sincos(rate, t)
     ox, oy, oz, ovx, ovy, ovz = np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K)
     s0, s1, s2, v0, v1, v2 = np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K)
     for n in range(N):
+        Kn = nseg[n] + 1  # this encounter's knots
         for p in range(P):
             row = axis_row(kin[n], p)
             cap = row_limit_time(axis, rate, row)
-            for k in range(K):
+            for k in range(Kn):
                 ox[k], oy[k], oz[k], ovx[k], ovy[k], ovz[k] = axis_knot(axis, rate, row, cap, sth[k], cth[k], t[k])
             a_h, a_v = acc_h[n, p], acc_v[n, p]
             for m in range(M):
                 ix, iy, iz = ipos[n, m, 0], ipos[n, m, 1], ipos[n, m, 2]
                 jx, jy, jz = ivel[n, m, 0], ivel[n, m, 1], ivel[n, m, 2]
-                for k in range(K):
+                for k in range(Kn):
                     tk = t[k]
                     s0[k] = ox[k] - (ix + tk * jx)
                     s1[k] = oy[k] - (iy + tk * jy)
@@ -57,10 +59,10 @@ def axis_conflicts_into(axis, rate, kin, t, ipos, ivel, vz_const, acc_h, acc_v, 
                     w_lo, w_hi = vertical_window(s2[0], v2[0], 0.0, t_end, H, TC)
                     vlo[path], vhi[path] = w_lo, w_hi
                 if K > 1:
-                    segments_path(s0, s1, s2, t, 0, path * (K - 1), K, block, a_h, a_v, vz_const, w_lo, w_hi, t_end,
-                                  D, DD, H, TT, TC, code, seg_in, seg_out)
-                tails_path(s0, s1, s2, v0, v1, v2, t, 0, path * K, K, vz_const, w_lo, w_hi, False, t_end, D, DD, D2, TT,
-                           H, TC, tail_in, tail_out)
+                    segments_path(s0, s1, s2, t, 0, path * (K - 1), Kn, K - 1, block, a_h, a_v, vz_const, w_lo, w_hi,
+                                  t_end, D, DD, H, TT, TC, code, seg_in, seg_out)
+                tails_path(s0, s1, s2, v0, v1, v2, t, 0, path * K, Kn, K, vz_const, w_lo, w_hi, False, t_end, D, DD, D2,
+                           TT, H, TC, tail_in, tail_out)
 
 
 @kernel(void(I, F, A3, A, A3, A3, IA, O, O, O, O, O, O, O))

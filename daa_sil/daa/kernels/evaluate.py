@@ -7,19 +7,25 @@ numpy code they replace is kept as the ``*_reference`` methods of the evaluator.
 
 from __future__ import annotations
 
-from numba import boolean, int8, void
+from numba import boolean, int8, types, void
 
 from daa_sil.daa.kernels.jit import inline_ir, kernel
 from daa_sil.daa.kernels.pieces import CLEAR, INSIDE, UNDECIDED, classify
 from daa_sil.daa.kernels.scalar import INF, interval, npmax, npmin, vertical_window
-from daa_sil.daa.kernels.signatures import A, A3, O, O4, F, I
+from daa_sil.daa.kernels.signatures import A, A3, IA, O, O4, F, I
+
+_B1 = types.Array(boolean, 1, "A", readonly=True)
 
 
 @inline_ir
-def tails_path(s0, s1, s2, v0, v1, v2, tk, ib, ob, K, has_vwin, w_lo, w_hi, last_only, t_end, D, DD, D2, TT, H, TC,
-               tail_in, tail_out):
-    """The tails of one path (:func:`tails_into`): its knots at ``ib + k`` of ``s*``/``v*``/``tk``, its tails
-    written at ``ob + k``; ``(w_lo, w_hi)`` its vertical window when ``has_vwin`` (inlined by numba)."""
+def tails_path(s0, s1, s2, v0, v1, v2, tk, ib, ob, K, K_all, has_vwin, w_lo, w_hi, last_only, t_end, D, DD, D2, TT, H,
+               TC, tail_in, tail_out):
+    """The tails of one path (:func:`tails_into`): its ``K`` knots at ``ib + k`` of ``s*``/``v*``/``tk``, its tails
+    written at ``ob + k``, ``(inf, -inf)`` at its slots ``K`` .. ``K_all`` - 1 past its last knot (not with
+    ``last_only``); ``(w_lo, w_hi)`` its vertical window when ``has_vwin`` (inlined by numba)."""
+    if not last_only:
+        for k in range(K, K_all):
+            tail_in[ob + k], tail_out[ob + k] = INF, -INF
     for k in range(K - 1 if last_only else 0, K):
         i = ib + k
         t = tk[i]
@@ -41,15 +47,17 @@ def tails_path(s0, s1, s2, v0, v1, v2, tk, ib, ob, K, has_vwin, w_lo, w_hi, last
             tail_in[o], tail_out[o] = a + t, b + t
 
 
-@kernel(void(A, A, A, A, A, A, A, I, boolean, A, A, boolean, F, F, F, F, F, F, F, O, O))
-def tails_into(s0, s1, s2, v0, v1, v2, tk, K, has_vwin, vlo, vhi, last_only, t_end, D, DD, D2, TT, H, TC,
+@kernel(void(A, A, A, A, A, A, A, I, IA, _B1, A, A, boolean, F, F, F, F, F, F, F, O, O))
+def tails_into(s0, s1, s2, v0, v1, v2, tk, K, kp, von, vlo, vhi, last_only, t_end, D, DD, D2, TT, H, TC,
                tail_in, tail_out):
     """Violation interval of the straight tail from every knot (``last_only``: the last knot of each
-    path) over ``[t_k, t_end]``, absolute s; ``vlo``/``vhi`` the path's vertical window when ``has_vwin``."""
+    path) over ``[t_k, t_end]``, absolute s; path ``i`` has ``kp[i]`` of the ``K`` knots (its tails past them
+    are ``(inf, -inf)``) and, when ``von[i]``, the vertical window ``vlo[i]``/``vhi[i]``."""
     n_paths = tk.shape[0] // K
     for path in range(n_paths):
-        w_lo, w_hi = (vlo[path], vhi[path]) if has_vwin else (0.0, 0.0)
-        tails_path(s0, s1, s2, v0, v1, v2, tk, path * K, path * K, K, has_vwin, w_lo, w_hi, last_only, t_end,
+        on = von[path]
+        w_lo, w_hi = (vlo[path], vhi[path]) if on else (0.0, 0.0)
+        tails_path(s0, s1, s2, v0, v1, v2, tk, path * K, path * K, kp[path], K, on, w_lo, w_hi, last_only, t_end,
                    D, DD, D2, TT, H, TC, tail_in, tail_out)
 
 
@@ -67,11 +75,14 @@ def _piece(s0, s1, s2, tk, ia, ib, t_win_end, a_h, a_v, has_vwin, w_lo, w_hi, D,
 
 
 @inline_ir
-def segments_path(s0, s1, s2, tk, base, ob, K, block, a_h, a_v, has_vwin, w_lo, w_hi, t_end, D, DD, H, TT, TC,
+def segments_path(s0, s1, s2, tk, base, ob, K, S_all, block, a_h, a_v, has_vwin, w_lo, w_hi, t_end, D, DD, H, TT, TC,
                   code, seg_in, seg_out):
-    """The segments of one path (:func:`segments_into`): its knots at ``base + j`` of ``s*``/``tk``, its
-    codes and intervals written at ``ob + j`` (inlined by numba)."""
+    """The segments of one path (:func:`segments_into`): its ``K`` knots at ``base + j`` of ``s*``/``tk``, its
+    codes and intervals written at ``ob + j``, CLEAR ``(inf, -inf)`` at its slots ``K - 1`` .. ``S_all`` - 1
+    past its last knot (inlined by numba)."""
     S = K - 1
+    for j in range(max(S, 0), S_all):
+        code[ob + j], seg_in[ob + j], seg_out[ob + j] = CLEAR, INF, -INF
     if S > block:
         b0 = 0
         while b0 < S:
@@ -101,19 +112,21 @@ def segments_path(s0, s1, s2, tk, base, ob, K, block, a_h, a_v, has_vwin, w_lo, 
             seg_in[i], seg_out[i] = INF, -INF
 
 
-@kernel(void(A, A, A, A, I, I, A, A, boolean, A, A, F, F, F, F, F, F, int8[:], O, O))
-def segments_into(s0, s1, s2, tk, K, block, acc_h, acc_v, has_vwin, vlo, vhi, t_end, D, DD, H, TT, TC,
+@kernel(void(A, A, A, A, I, IA, I, A, A, _B1, A, A, F, F, F, F, F, F, int8[:], O, O))
+def segments_into(s0, s1, s2, tk, K, kp, block, acc_h, acc_v, von, vlo, vhi, t_end, D, DD, H, TT, TC,
                   code, seg_in, seg_out):
     """Certificate code of the maneuver between knots j and j+1 of every path (``code`` flat over
-    ``(N, M, P, K-1)``): with more than ``block`` segments, blocks of ``block`` segments first (an
-    undecided block's segments are then certified one by one); INSIDE segments get ``seg_in``/``seg_out``
-    = their knot times, the others ``(inf, -inf)`` (every entry is written); segments starting after
-    ``t_end`` are CLEAR."""
+    ``(N, M, P, K-1)``; path ``i`` has ``kp[i]`` of the ``K`` knots, and its segments past them are CLEAR):
+    with more than ``block`` segments, blocks of ``block`` segments first (an undecided block's segments are
+    then certified one by one); INSIDE segments get ``seg_in``/``seg_out`` = their knot times, the others
+    ``(inf, -inf)`` (every entry is written); segments starting after ``t_end`` are CLEAR; ``von[i]``: the
+    path's vertical window is ``vlo[i]``/``vhi[i]``."""
     n_paths = tk.shape[0] // K
     for path in range(n_paths):
-        w_lo, w_hi = (vlo[path], vhi[path]) if has_vwin else (0.0, 0.0)
-        segments_path(s0, s1, s2, tk, path * K, path * (K - 1), K, block, acc_h[path], acc_v[path], has_vwin,
-                      w_lo, w_hi, t_end, D, DD, H, TT, TC, code, seg_in, seg_out)
+        on = von[path]
+        w_lo, w_hi = (vlo[path], vhi[path]) if on else (0.0, 0.0)
+        segments_path(s0, s1, s2, tk, path * K, path * (K - 1), kp[path], K - 1, block, acc_h[path], acc_v[path],
+                      on, w_lo, w_hi, t_end, D, DD, H, TT, TC, code, seg_in, seg_out)
 
 
 @inline_ir

@@ -3,15 +3,16 @@
 The numpy reference is :meth:`daa_sil.daa.undecided.UndecidedPieces.resolve_reference` (its
 ``_bisect``, ``_classify_part``, ``_clear2``, ``_split`` and ``_clip``). The kernel keeps its phase
 structure, not only its per-piece arithmetic: the pieces of one depth are processed as one batch,
-and what the reference decides batch-wide stays batch-wide -- the number of halvings of a bisection
-(from the widest bracket of the call, per kind), the number of parts a split makes (from the longest
-piece), the clip sampling count, and whether the vertical position error ``e_z`` is used (``np.any``
-of the rows' vertical accelerations). ``ceil(log2(x))`` of a bisection's halvings is read from a
-table of the thresholds where numpy's ``log2`` passes each integer (``undecided.bisect_thresholds``),
-so it is numpy's, not libm's.
+and what the reference decides for several pieces at once is decided per encounter (group), from that
+encounter's pieces alone -- the number of halvings of a bisection (from the encounter's widest bracket,
+per kind), the number of parts a split makes (from its longest piece), the clip sampling count, and
+whether the vertical position error ``e_z`` is used (``np.any`` of its rows' vertical accelerations) --
+so that an encounter's intervals are those of a call of its own. ``ceil(log2(x))`` of a bisection's
+halvings is read from a table of the thresholds where numpy's ``log2`` passes each integer
+(``undecided.bisect_thresholds``), so it is numpy's, not libm's.
 
 Rows ``r`` are the undecided segments the call starts with; every piece split from a segment keeps
-its row (the motion, acceleration bounds, jerk, kinks and vertical window of its path).
+its row (the motion, acceleration bounds, jerk, kinks, vertical window and encounter of its path).
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ from daa_sil.daa.kernels.motion import axis_rel, axis_row, command_rel, command_
 from daa_sil.daa.kernels.pieces import CLEAR, classify, clear2
 from daa_sil.daa.kernels.scalar import INF, halve, npmax, npmin, wcv_soa
 from daa_sil.daa.kernels.signatures import A, A2, A3, IA, O, F, I, B
+
+_B1 = types.Array(boolean, 1, "A", readonly=True)
 
 
 #: motion kinds: a band axis's path (kernels.motion.rel_state) or a command (command_rel_state)
@@ -117,27 +120,35 @@ def _own_halvings(steps, mixed, flag, n_in, n_out, a, b):
 
 
 @inline
-def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, row, lo, hi, lo_in, thr, dt_in,
-            dt_out, DD, TT, H, TC, clear_pos, have_pos):
-    """``UndecidedPieces._bisect`` of the rows ``row`` (one batch): ``lo``/``hi`` halved in place. The relative
+def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, row, lo, hi, lo_in, grp, n_grp, thr,
+            dt_in, dt_out, DD, TT, H, TC, clear_pos, have_pos):
+    """``UndecidedPieces._bisect`` of the rows ``row`` (one batch): ``lo``/``hi`` halved in place, each
+    encounter (``grp`` of a row, ``n_grp`` of them) with the halvings of its own widest brackets. The relative
     position at the end of the final bracket outside the volume (``lo`` of an entry, ``hi`` of an exit) goes
     to ``clear_pos`` (3, n) when a halving put that end there (``have_pos``; else it is still the start's)."""
     n = lo.shape[0]
-    w_in, w_out = 0.0, 0.0
-    any_in, any_out = False, False
+    w_in, w_out = np.zeros(n_grp), np.zeros(n_grp)
+    any_in, any_out = np.zeros(n_grp, np.bool_), np.zeros(n_grp, np.bool_)
     for i in range(n):
+        g = grp[row[i]]
         if lo_in[i]:
-            w_out = _max_acc(w_out, hi[i] - lo[i])
-            any_out = True
+            w_out[g] = _max_acc(w_out[g], hi[i] - lo[i])
+            any_out[g] = True
         else:
-            w_in = _max_acc(w_in, hi[i] - lo[i])
-            any_in = True
-    n_in, n_out = _halvings(w_in, dt_in, thr), _halvings(w_out, dt_out, thr)
-    mixed = n_in != n_out and any_in and any_out
-    steps = max(n_in, n_out) if n else 0
+            w_in[g] = _max_acc(w_in[g], hi[i] - lo[i])
+            any_in[g] = True
+    g_in, g_out = np.zeros(n_grp, np.int64), np.zeros(n_grp, np.int64)
+    g_mixed = np.zeros(n_grp, np.bool_)
+    for g in range(n_grp):
+        if any_in[g] or any_out[g]:
+            g_in[g], g_out[g] = _halvings(w_in[g], dt_in, thr), _halvings(w_out[g], dt_out, thr)
+            g_mixed[g] = g_in[g] != g_out[g] and any_in[g] and any_out[g]
     for i in range(n):
         a, b, flag = lo[i], hi[i], lo_in[i]
         r = row[i]
+        g = grp[r]
+        n_in, n_out, mixed = g_in[g], g_out[g], g_mixed[g]
+        steps = max(n_in, n_out)
         mrow = _motion_row(kind, axis, rate, kin, ph, enc, ipv, mi, ii, r)
         have_pos[i] = False
         for k in range(_own_halvings(steps, mixed, flag, n_in, n_out, a, b)):
@@ -153,16 +164,18 @@ def _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii,
 
 
 @inline
-def _any_nonzero(acc_v, row, sel):
+def _any_nonzero(acc_v, row, sel, grp, n_grp):
+    """Per encounter: ``np.any`` of the vertical accelerations of its rows among pieces ``sel``."""
+    out = np.zeros(n_grp, np.bool_)
     for i in sel:
         if acc_v[row[i]] != 0.0:
-            return True
-    return False
+            out[grp[row[i]]] = True
+    return out
 
 
 @inline
 def _classify_part(a_h, a_v, anyv, has_vwin, w_lo, w_hi, ta, tb, x0, y0, z0, x1, y1, z1, D, DD, H, TT, TC):
-    """``UndecidedPieces._classify_part`` of one piece (``anyv``: ``np.any`` of the batch's a_v)."""
+    """``UndecidedPieces._classify_part`` of one piece (``anyv``: ``np.any`` of its encounter's a_v)."""
     h = tb - ta
     lo, hi = 0.0, 0.0
     if has_vwin:
@@ -173,19 +186,19 @@ def _classify_part(a_h, a_v, anyv, has_vwin, w_lo, w_hi, ta, tb, x0, y0, z0, x1,
 
 
 @inline
-def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, final, row, ta, tb, thr, dt_in,
-          dt_out, clip_dt, DD, TT, H, TC, row_in, row_out):
-    """``UndecidedPieces._clip`` of pieces ``final``: sampled every ``clip_dt``, the first and last
-    violating samples bracketed and bisected (entries, then exits, each as one batch)."""
+def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, final, row, ta, tb, grp, n_grp, thr,
+          dt_in, dt_out, clip_dt, DD, TT, H, TC, row_in, row_out):
+    """``UndecidedPieces._clip`` of pieces ``final``: sampled every ``clip_dt`` (each encounter's count from
+    its longest piece), the first and last violating samples bracketed and bisected (entries, then exits,
+    each as one batch)."""
     nf = final.shape[0]
-    hmax = 0.0
+    hmax = np.zeros(n_grp)
+    seen = np.zeros(n_grp, np.bool_)
     for c in range(nf):
         i = final[c]
-        hmax = (tb[i] - ta[i]) if c == 0 else _max_acc(hmax, tb[i] - ta[i])
-    qf = np.ceil(hmax / clip_dt - 1e-9)
-    if not (qf >= 1):
-        return
-    q = int(qf)
+        g = grp[row[i]]
+        hmax[g] = (tb[i] - ta[i]) if not seen[g] else _max_acc(hmax[g], tb[i] - ta[i])
+        seen[g] = True
     b1, t1 = np.empty(nf), np.empty(nf)  # entry brackets (before, first sample inside)
     t2, a2 = np.empty(nf), np.empty(nf)  # exit brackets (last sample inside, after)
     hrow = np.empty(nf, np.int64)
@@ -193,6 +206,10 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, f
     for c in range(nf):
         i = final[c]
         r = row[i]
+        qf = np.ceil(hmax[grp[r]] / clip_dt - 1e-9)
+        if not (qf >= 1):
+            continue
+        q = int(qf)
         mrow = _motion_row(kind, axis, rate, kin, ph, enc, ipv, mi, ii, r)
         h = tb[i] - ta[i]
         first, lastk = -1, -1
@@ -222,9 +239,9 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, f
     l1, h1, l2, h2, hr = b1[:nh].copy(), t1[:nh].copy(), t2[:nh].copy(), a2[:nh].copy(), hrow[:nh].copy()
     pos, have = np.empty((3, nh)), np.empty(nh, np.bool_)  # (not read)
     _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, hr, l1, h1, np.zeros(nh, np.bool_),
-            thr, dt_in, dt_out, DD, TT, H, TC, pos, have)
+            grp, n_grp, thr, dt_in, dt_out, DD, TT, H, TC, pos, have)
     _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, hr, l2, h2, np.ones(nh, np.bool_),
-            thr, dt_in, dt_out, DD, TT, H, TC, pos, have)
+            grp, n_grp, thr, dt_in, dt_out, DD, TT, H, TC, pos, have)
     for c in range(nh):
         r = hr[c]
         row_in[r], row_out[r] = _update(row_in[r], row_out[r], 0.5 * (l1[c] + h1[c]), 0.5 * (l2[c] + h2[c]))
@@ -232,19 +249,21 @@ def _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, f
 
 @kernel(void(I, I, F, A2, A3, A2, F, F, F, A2, IA, IA,
              A, A, A, A, A, A, A, IA, IA,
-             A, A, B, A, B, A2, B, A, A,
-             B, A, I, I, F, F, F, F, F,
+             A, A, B, A, B, A2, _B1, A, A,
+             IA, I, B, A, I, I, F, F, F, F, F,
              F, F, F, F, F, O, O, types.Array(float64, 1, "C"), types.Array(int64, 1, "C"),
              types.Array(boolean, 1, "C"), types.Array(int64, 1, "C")))
 def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii,
                  s0, s1, s2, v0, v1, v2, tk, seg, ka,
-                 acc_h, acc_v, has_jerk, jerk, has_kink, kink, has_vwin, vlo, vhi,
+                 acc_h, acc_v, has_jerk, jerk, has_kink, kink, von, vlo, vhi, grp, n_grp,
                  exits, thr, max_depth, max_split, dt_in, dt_out, clip_dt, v2tol, p8tol,
                  D, DD, H, TT, TC, seg_in, seg_out, fbuf, ibuf, bbuf, need):
     """Resolve the undecided segments ``seg`` (flat segment ids; ``ka`` their first knots' flat indices
     into the knot arrays ``s*``/``v*``/``tk``) into ``seg_in``/``seg_out`` (the reference's docstring).
     Row ``r``'s motion is row ``mi[r]`` of ``kin_all`` (``kind`` axis) or of ``ph_all``/``enc_all`` (command),
-    against intruder row ``ii[r]`` of ``ipv_all``; ``acc_h`` ... ``vhi`` are per row. The working arrays are
+    against intruder row ``ii[r]`` of ``ipv_all``; ``acc_h`` ... ``vhi`` are per row (``von``: the row's path has a
+    vertical window ``vlo``/``vhi``), ``grp`` each row's encounter, numbered 0 .. ``n_grp`` - 1 (an encounter's
+    batch-wide choices are made from its own pieces). The working arrays are
     taken from ``fbuf``/``ibuf``/``bbuf`` (float, int, bool; arrays kept by the caller from call to call) as far
     as they reach, else allocated; ``need`` (3,) gets the sizes the call would have taken from each."""
     R = seg.shape[0]
@@ -306,10 +325,10 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi
                 i = crs[c]
                 lo[c], hi[c], lo_in[c], crow[c] = ta[i], tb[i], not fb[i], row[i]
             clear_pos, have_pos = _take(fbuf, cur, 0, 3 * nc).reshape((3, nc)), _take(bbuf, cur, 2, nc)
-            _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, crow, lo, hi, lo_in, thr,
-                    dt_in, dt_out, DD, TT, H, TC, clear_pos, have_pos)
+            _bisect(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, crow, lo, hi, lo_in, grp,
+                    n_grp, thr, dt_in, dt_out, DD, TT, H, TC, clear_pos, have_pos)
             # certify the other side of the crossing clear: before an entry, after an exit
-            anyv = _any_nonzero(acc_v, row, crs)
+            anyv = _any_nonzero(acc_v, row, crs, grp, n_grp)
             for c in range(nc):
                 i = crs[c]
                 r = row[i]
@@ -325,7 +344,7 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi
                     x0, y0, z0, x1, y1, z1 = pa[0, i], pa[1, i], pa[2, i], mx, my, mz
                 else:
                     x0, y0, z0, x1, y1, z1 = mx, my, mz, pb[0, i], pb[1, i], pb[2, i]
-                code = _classify_part(acc_h[r], acc_v[r], anyv, has_vwin, vlo[r], vhi[r], c_a, c_b,
+                code = _classify_part(acc_h[r], acc_v[r], anyv[grp[r]], von[r], vlo[r], vhi[r], c_a, c_b,
                                       x0, y0, z0, x1, y1, z1, D, DD, H, TT, TC)
                 if code == CLEAR or settled[i]:
                     tc = 0.5 * (lo[c] + hi[c])
@@ -341,19 +360,19 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi
                 jj[nj] = i
                 nj += 1
         if nj and depth > 0:  # (at depth 0 these are the segments the first-order test left undecided)
-            anyv = _any_nonzero(acc_v, row, jj[:nj])
+            anyv = _any_nonzero(acc_v, row, jj[:nj], grp, n_grp)
             keep = 0
             for c in range(nj):
                 i = jj[c]
                 r = row[i]
-                code = _classify_part(acc_h[r], acc_v[r], anyv, has_vwin, vlo[r], vhi[r], ta[i], tb[i],
+                code = _classify_part(acc_h[r], acc_v[r], anyv[grp[r]], von[r], vlo[r], vhi[r], ta[i], tb[i],
                                       pa[0, i], pa[1, i], pa[2, i], pb[0, i], pb[1, i], pb[2, i], D, DD, H, TT, TC)
                 if code != CLEAR:
                     jj[keep] = i
                     keep += 1
             nj = keep
         if nj and has_jerk:  # the tighter second-order certificate (true end velocities)
-            anyv = _any_nonzero(acc_v, row, jj[:nj])
+            anyv = _any_nonzero(acc_v, row, jj[:nj], grp, n_grp)
             keep = 0
             for c in range(nj):
                 i = jj[c]
@@ -366,7 +385,7 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi
                         kt = kink[r, e]
                         across = across or ((kt > ta[i]) and (kt < tb[i]))
                     e_v = e_v + (acc_h[r] * h * 0.5 if across else 0.0)
-                e_z = acc_v[r] * h * h * 0.125 if anyv else 0.0
+                e_z = acc_v[r] * h * h * 0.125 if anyv[grp[r]] else 0.0
                 if not clear2(pa[0, i], pa[1, i], pa[2, i], pb[0, i], pb[1, i], pb[2, i], ua[0, i], ua[1, i],
                               ub[0, i], ub[1, i], h, acc_h[r] * h * h * 0.125, e_v, e_z, D, DD, H, TT, TC):
                     jj[keep] = i
@@ -384,7 +403,7 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi
                     split[i] = True
             if nf:
                 _clip(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi, ii, final[:nf], row, ta, tb,
-                      thr, dt_in, dt_out, clip_dt, DD, TT, H, TC, row_in, row_out)
+                      grp, n_grp, thr, dt_in, dt_out, clip_dt, DD, TT, H, TC, row_in, row_out)
         # -- split what is left into the fewest equal parts that settle ------------------------------------
         ns = 0
         for i in range(L):
@@ -392,18 +411,25 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi
                 ns += 1
         if ns == 0:
             break
-        mx_ratio = -INF
-        first = True
+        mx_ratio = np.zeros(n_grp)  # each encounter's longest piece, in settle times
+        seen = np.zeros(n_grp, np.bool_)
         for i in range(L):
             if split[i]:
+                g = grp[row[i]]
                 x = (tb[i] - ta[i]) / settle[row[i]]
-                mx_ratio = x if first else _max_acc(mx_ratio, x)
-                first = False
-        c = np.ceil(mx_ratio - 1e-9)
-        qf = c if c > 2 else 2.0
-        qf = qf if qf < max_split else float(max_split)
-        q = int(qf)
-        NL = ns * q
+                mx_ratio[g] = x if not seen[g] else _max_acc(mx_ratio[g], x)
+                seen[g] = True
+        g_q = np.zeros(n_grp, np.int64)
+        for g in range(n_grp):
+            if seen[g]:
+                c = np.ceil(mx_ratio[g] - 1e-9)
+                qf = c if c > 2 else 2.0
+                qf = qf if qf < max_split else float(max_split)
+                g_q[g] = int(qf)
+        NL = 0
+        for i in range(L):
+            if split[i]:
+                NL += g_q[grp[row[i]]]
         n_row = _take(ibuf, cur, 1, NL)
         n_ta, n_tb = _take(fbuf, cur, 0, NL), _take(fbuf, cur, 0, NL)
         n_pa, n_pb = _take(fbuf, cur, 0, 3 * NL).reshape((3, NL)), _take(fbuf, cur, 0, 3 * NL).reshape((3, NL))
@@ -414,6 +440,7 @@ def resolve_into(kind, axis, rate, kin, ph, enc, max_turn, h_acc, v_acc, ipv, mi
             if not split[i]:
                 continue
             r = row[i]
+            q = g_q[grp[r]]
             t_prev, h = ta[i], tb[i] - ta[i]
             px, py, pz, wx, wy, f_prev = pa[0, i], pa[1, i], pa[2, i], ua[0, i], ua[1, i], fa[i]
             mrow = _motion_row(kind, axis, rate, kin, ph, enc, ipv, mi, ii, r)
