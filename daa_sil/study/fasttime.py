@@ -9,7 +9,9 @@ At step ``k`` (``t_k = k dt``, ``dt = 1 s``, ``T = 240 s``; ``docs/architecture.
    bands only where the observed alert reaches ``PilotConfig.alert_level_min``) and the pilot model
    decides. The GCS sends a packet every step (a heartbeat,
    plus the streamed command when the pilot has one) stamped ``t_k``; packets are released on the
-   vehicle side at ``max(t_k + d_up(t_k), previous release)``.
+   vehicle side at ``max(t_k + d_up(t_k), previous release)``. What crosses the link is what the
+   MAVLink link carries (:mod:`daa_sil.link.setpoint`): the command's float32 setpoints, and the
+   ownship's float32 position and vertical speed in the telemetry, so the SIL flies the same numbers.
 2. **Vehicle** -- :meth:`daa_sil.onboard.OnboardCore.step` with the newest command released at or
    before ``t_k`` (``received`` iff a command was released since the previous step; the link is
    alive as of the newest released packet), which decides, publishes telemetry for ``t_k``
@@ -68,6 +70,7 @@ from daa_sil.geometry.thresholds import get_thresholds
 # the encounter's random streams (defined with the models: the SIL's GCS and shim use them too)
 from daa_sil.models.streams import STREAM_DOWN, STREAM_PILOT, STREAM_UP, encounter_streams
 from daa_sil.link.delayline import fifo_release
+from daa_sil.link.setpoint import observed_own, wire_command
 from daa_sil.models.delay_process import BatchedDelay
 from daa_sil.models.encounters import concat_encounters
 from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel
@@ -290,7 +293,8 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         slot_up = uplink.open(k)
         slot_up["release"][:] = rel_up
         slot_up["newest_sent"][:] = np.where(pout.send, k, prev_newest)
-        slot_up["cmd"][:] = np.stack([pout.cmd.trk, pout.cmd.vs, pout.cmd.gs], axis=-1)
+        wire = wire_command(pout.cmd)  # (the setpoints as PILOT_MANEUVER carries them: float32, track in deg)
+        slot_up["cmd"][:] = np.stack([wire.trk, wire.vs, wire.gs], axis=-1)
         # ---- 2. vehicle ----------------------------------------------------------------------
         up_ptr = _release_pointer(up_ptr, up_release, k + 1, t)
         newest = np.maximum(up_ptr - 1, 0)
@@ -315,7 +319,7 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         last_down = rel_down
         slot_down = downlink.open(k)
         slot_down["release"][:] = rel_down
-        slot_down["own"][:] = out.own.as_array()
+        slot_down["own"][:] = observed_own(out.own)  # (what LOCAL_POSITION_NED carries of the ownship)
         slot_down["intr"][:] = out.intruders.as_array()
         slot_down["alert"][:] = out.telemetry.alert_level.max(axis=1) if m else 0
         if log is not None:
