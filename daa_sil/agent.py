@@ -85,18 +85,42 @@ def _reached(own: AircraftState, cmd: Command) -> np.ndarray:
     return (np.abs(dtrk) < np.radians(0.5)) & (np.abs(dvs) < 0.25) & (np.abs(dgs) < 0.5)
 
 
-def _safety(rows: np.ndarray, own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
-            horizon: float, known: "dict | None" = None) -> np.ndarray:
-    """SM(u) of ``cmd`` (one per row of ``rows``; each row's is what a call of its own gives). ``known`` maps
-    the bytes of a call's rows to SM values already computed for the same command on exactly those rows;
-    the call made here is added to it."""
-    key = rows.tobytes()
-    got = known.get(key) if known is not None else None
-    if got is None:
-        got = safety_metric(own[rows], intr[rows], cmd, cfg, horizon)
-        if known is not None:
-            known[key] = got
-    return got
+#: False: every SM(u) the agent needs is computed, none reused (the reference the tests compare with)
+REUSE_SM = True
+
+
+def _same_command(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(R,) bool: rows of ``(R, 3)`` commands equal field by field, bit for bit (nan equal to nan)."""
+    same = (a.view(np.int64) == b.view(np.int64)) | (np.isnan(a) & np.isnan(b))
+    return same.all(axis=1)
+
+
+class _SafetyOnce:
+    """SM(u) of the step's state (``own``, ``intr``) for the commands the agent asks about, each (row,
+    command) computed once: a later request for the same command of a row (bit for bit) takes the value
+    computed before. Exact, as each row's SM is what a call of its own gives whatever rows share a call."""
+
+    def __init__(self, own: AircraftState, intr: AircraftState, cfg: DaaConfig, horizon: float):
+        self.own, self.intr, self.cfg, self.horizon = own, intr, cfg, horizon
+        self.known: list = []  #: (rows ascending, (R, 3) commands, (R,) SM) of the calls made
+
+    def __call__(self, rows: np.ndarray, cmd: Command) -> np.ndarray:
+        """SM (s) of ``cmd`` (one per row of ``rows``, ascending row indices)."""
+        want = np.stack([np.broadcast_to(np.asarray(c, float), rows.shape) for c in (cmd.trk, cmd.vs, cmd.gs)], -1)
+        out = np.full(rows.size, np.nan)
+        todo = np.ones(rows.size, bool)
+        for k_rows, k_cmd, k_sm in self.known if REUSE_SM else ():
+            pos = np.minimum(np.searchsorted(k_rows, rows), k_rows.size - 1)
+            hit = todo & (k_rows[pos] == rows)
+            hit[hit] = _same_command(k_cmd[pos[hit]], want[hit])
+            out[hit] = k_sm[pos[hit]]
+            todo &= ~hit
+        if todo.any():
+            r = rows[todo]
+            got = safety_metric(self.own[r], self.intr[r], cmd if todo.all() else cmd[todo], self.cfg, self.horizon)
+            out[todo] = got
+            self.known.append((r, want[todo], got))
+        return out
 
 
 def _alerting(t: float, own: AircraftState, intr: AircraftState, memory: AgentMemory, cfg: DaaConfig):
@@ -173,14 +197,13 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     # Once the onboard DAA (or a blend) holds authority, handing back to the pilot's course is only
     # done when that course is safe: otherwise the ownship would fly back into the conflict it just
     # resolved as soon as the alert clears, and alternate between the two every step.
-    # SM of the last pilot command by the rows of each call: a later call on exactly the same rows
-    # (same state and command) takes these numbers (always so at N = 1, the SIL vehicle)
-    sm_calls: dict = {}
+    # SM(u) of this state, once per row and command (the revert check's, the pilot's, the executed one's)
+    safety = _SafetyOnce(own, intr, cfg, horizon)
     unsafe_revert = np.zeros(n, bool)
     check = (memory.authority == A_DAA) & ~((max_alert >= 2) | in_progress)
     if check.any():
         j = np.nonzero(check)[0]
-        unsafe_revert[j] = ~(_safety(j, own, intr, lk.last_pilot[j], cfg, horizon, sm_calls) > 0)
+        unsafe_revert[j] = ~(safety(j, lk.last_pilot[j]) > 0)
     # active_from "encounter" (per row): decide every step from the start until safe avoidance
     encounter_over = memory.encounter_over
     whole = np.zeros(n, bool)
@@ -198,7 +221,7 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     fa = fresh & active
     if fa.any():
         j = np.nonzero(fa)[0]
-        sm_pilot[j] = _safety(j, own, intr, pcmd[j], cfg, horizon, sm_calls)
+        sm_pilot[j] = safety(j, pcmd[j])
     # The pilot's (axis, direction) preference is the change from the pilot's previous course to the
     # new command, not from the current state: once the DAA or a blend has moved the ownship, a
     # repeated "hold" command would otherwise read as a turn back and flip the blend every step.
@@ -234,12 +257,12 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
 
     # --- safety of what is executed -------------------------------------------------------------
     # pilot: its SM; blend / DAA: the chosen band candidate's SM (same trajectory model); hold: the
-    # last pilot command's SM (computed, or taken from a call on exactly these rows)
+    # last pilot command's SM (computed, or the one computed for it already this step)
     sm_exec = np.where(pilot_ok, sm_pilot, np.where(blend, bl.sm, np.where(use_daa, sm_daa, np.nan)))
     other = active & np.isnan(sm_exec)
     if other.any():
         j = np.nonzero(other)[0]
-        sm_exec[j] = _safety(j, own, intr, exec_cmd[j], cfg, horizon, sm_calls if wait[j].all() else None)
+        sm_exec[j] = safety(j, exec_cmd[j])
     e_axis, e_dir = classify_command(own, exec_cmd, cfg)
     exact = (decision == D_BLEND) & (p_axis != AXIS_NONE) & (e_axis == p_axis) & (e_dir == p_dir)
     bt, br_ = _band_record(cfg, n, parts) if band_record else (None, None)

@@ -179,3 +179,32 @@ def test_agent_steps_of_an_encounter_do_not_depend_on_its_batch(seed, preset, n,
         batch = _agent_run(own[rows], intr[rows], cmd[rows], policy, cfg, w)
         for pos, i in enumerate(rows):
             _assert_agent_row(alone[i], batch, pos, f"{preset} {group} {what} row {i}")
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2 ** 31), preset=st.sampled_from(PRESETS), n=st.integers(1, 6), m=st.integers(1, 2),
+       group=st.sampled_from(["B-1", "IC-1", "ID-2"]))
+def test_sm_reused_within_a_step_equals_sm_computed_again(seed, preset, n, m, group, monkeypatch):
+    """SM(u) is computed once per row, state and command in a step (the revert check's, the pilot's, the
+    executed command's): every output equals that of an agent that computes each of them afresh."""
+    import daa_sil.agent as agent_mod
+
+    cfg = DaaConfig.for_preset(preset)
+    own, intr, cmd = _encounters(seed, n, m, cfg)
+    policy = policy_for_group(group)
+    reused = _agent_run(own, intr, cmd, policy, cfg, 10.0)
+    monkeypatch.setattr(agent_mod, "REUSE_SM", False)
+    again = _agent_run(own, intr, cmd, policy, cfg, 10.0)
+    for pos in range(n):
+        _assert_agent_row([(c[pos:pos + 1], d, mm) for c, d, mm in _rows(again, pos)], reused, pos, f"{preset} {group}")
+
+
+def _rows(run, pos):
+    """One row's (command, decision record, memory) of each step of ``run``, as a run of that row alone."""
+    out = []
+    for c, d, mm in run:
+        rec = {k: (None if v is None else np.asarray(v)[pos:pos + 1]) for k, v in d.items()}
+        mem = AgentMemory(*(None if getattr(mm, f.name) is None or f.name == "daa_state" else
+                            np.asarray(getattr(mm, f.name))[pos:pos + 1] for f in fields(AgentMemory)))
+        out.append((c, rec, mem))
+    return out
