@@ -429,7 +429,7 @@ def test_command_state_kernel_identical():
 # the undecided pieces' loop (kernels.resolve) against the numpy loop it replaces
 # --------------------------------------------------------------------------------------------------
 from daa_sil.daa import undecided  # noqa: E402
-from daa_sil.daa.kernels import resolve as resolve_kernel  # noqa: E402
+from daa_sil.daa.kernels import resolve_parts as resolve_kernel  # noqa: E402
 
 
 def test_bisection_halvings_are_numpys_log2():
@@ -446,7 +446,7 @@ def test_bisection_halvings_are_numpys_log2():
     for dt in (undecided.BISECT_DT_IN, undecided.BISECT_DT_OUT, 0.01, 0.3):
         for w in widths:
             ref = int(np.ceil(np.log2(max(np.max(np.array([w]), initial=0.0), dt) / dt)))
-            assert resolve_kernel._halvings(np.max(np.array([w]), initial=0.0), dt, thr) == ref, (w, dt)
+            assert resolve_kernel.halvings(np.max(np.array([w]), initial=0.0), dt, thr) == ref, (w, dt)
 
 
 def _resolved_three_ways(paths, intr, th, t_end, **kw):

@@ -55,17 +55,18 @@ def _regions(conflicts: tuple, alert, lists, t: np.ndarray, own: AircraftState, 
     region = np.empty((n, k), np.int8)
     gap = np.empty((n, max(k - 1, 0)), np.int8)
     res_lo, res_hi, pref = np.empty(n), np.empty(n), np.empty(n, np.int8)
-    rest = (hfm, near, mid, alert2, np.asarray(t, float), float(cfg.lookahead_s), float(cfg.alert_time_warning_s),
-            float(cfg.alert_time_corrective_s), j_lo, j_hi, jl_row, jh_row, bool(cfg.daidalus_grid), axis,
-            np.asarray(cur, float),
-            float(rate), float(lim[0]), float(lim[1]), bool(cfg.daidalus_grid and axis != AXIS_HORIZONTAL),
-            float(clip[0]), float(clip[1]), float(cfg.sm_horizon_s), float(cfg.recovery_stability_s), np.pi - 1e-9,
-            TWO_PI, values, delta, t_man, t_in_all, t_out_c, region, gap, res_lo, res_hi, pref)
     flat = [np.ascontiguousarray(a).reshape(-1) for a in conflicts]
     from_paths = len(flat) == 4
     if not from_paths:
         flat += [_NO_TIMES, _NO_TIMES]
-    kernels.get().axis_regions_into(*flat, from_paths, m, float(cfg.lookahead_s), *rest)
+    times = (float(cfg.lookahead_s), float(cfg.alert_time_warning_s), float(cfg.alert_time_corrective_s),
+             float(cfg.sm_horizon_s), float(cfg.recovery_stability_s), np.pi - 1e-9, TWO_PI)
+    ax = (bool(cfg.daidalus_grid), axis, float(rate), float(lim[0]), float(lim[1]),
+          bool(cfg.daidalus_grid and axis != AXIS_HORIZONTAL), float(clip[0]), float(clip[1]))
+    kernels.get().axis_regions_into(tuple(flat), from_paths, m, float(cfg.lookahead_s), hfm, (near, mid, alert2),
+                                    np.asarray(t, float), times, (j_lo, j_hi), (jl_row, jh_row), ax,
+                                    np.asarray(cur, float), (values, delta, t_man, t_in_all, t_out_c), (region, gap),
+                                    (res_lo, res_hi), pref)
     if one:
         delta, t_man = np.broadcast_to(delta, (n, k)), np.broadcast_to(t_man, (n, k))
     nan = np.full(n, np.nan)
@@ -116,9 +117,10 @@ def axis_conflict_regions(paths: ManeuverPaths, own: AircraftState, intr: Aircra
         tail_in, tail_out = ws.take("tail_in", n_paths * knots), ws.take("tail_out", n_paths * knots)
         vlo, vhi = ws.take("vlo", n_paths), ws.take("vhi", n_paths)
         k = kernels.get()
-        k.axis_conflicts_into(kin[1], kin[2], kin[3], t, nseg, ipos, ivel, bool(paths.vz_const), paths.acc_h,
-                              paths.acc_v, BLOCK, t_end, D, D * D, D ** 2, float(th.zthr), float(th.tthr),
-                              float(th.tcoa), code, seg_in, seg_out, tail_in, tail_out, vlo, vhi)
+        k.axis_conflicts_into((kin[1], kin[2], kin[3], t, nseg), (ipos, ivel), (paths.acc_h, paths.acc_v),
+                              bool(paths.vz_const), BLOCK, t_end,
+                              (D, D * D, D ** 2, float(th.zthr), float(th.tthr), float(th.tcoa)),
+                              (code, seg_in, seg_out), (tail_in, tail_out), (vlo, vhi))
         todo = np.flatnonzero(code == UNDECIDED)
         if todo.size:
             r = todo.size

@@ -197,11 +197,12 @@ def search_maneuver(own: AircraftState, intr: AircraftState, axis, direction, cf
         idx, rule = np.empty(n, np.int64), np.empty(n, np.int8)
         src = [a.source() for a in bands.axes()]
         rows = [np.arange(n) if r is None else r for _, r in src]
-        field = lambda name: [getattr(b, name) for b, _ in src]  # noqa: E731
+        field = lambda name: tuple(getattr(b, name) for b, _ in src)  # noqa: E731
         own = [b.own_range() for b, _ in src]
-        kernels.get().search_into(*field("delta"), *field("t_man"), *field("t_in"), *field("t_out"), *rows,
-                                  *(o[0] for o in own), *(o[1] for o in own), *(a.side for a in bands.axes()),
-                                  ax.astype(np.int64), side.astype(np.int64), ref_t, rates, horizon, idx, rule)
+        kernels.get().search_into(field("delta"), field("t_man"), field("t_in"), field("t_out"), tuple(rows),
+                                  tuple(o[0] for o in own), tuple(o[1] for o in own),
+                                  tuple(np.asarray(a.side, np.int64) for a in bands.axes()), ax.astype(np.int64),
+                                  side.astype(np.int64), ref_t, rates, horizon, idx, rule)
         if return_t_in:
             return cand.command(idx), rule, cand.at("t_in", idx)
         return cand.command(idx), rule
@@ -240,16 +241,16 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
         # one pass per row, the bands read in place (kernels.select.resolution_into)
         chosen = np.empty(n, np.int64)
         rows = [np.arange(n) if r is None else r for _, r in src]
-        field = lambda name: [getattr(b, name) for b, _ in src]  # noqa: E731
+        field = lambda name: tuple(getattr(b, name) for b, _ in src)  # noqa: E731
         if prev is not None:
             p_ax, p_dir = (np.asarray(a).astype(np.int64) for a in prev)
             p_side = np.asarray(DIR_SIDE, np.int64)[p_dir]
         else:
             p_ax = p_side = np.zeros(n, np.int64)
         own = [b.own_range() for b, _ in src]
-        kernels.get().resolution_into(*field("region"), *field("t_man"), *field("preferred"), *field("t_in"),
-                                      *field("t_out"), *rows, *(o[0] for o in own), *(o[1] for o in own),
-                                      *(a.side for a in axes), in_conflict, prev is not None,
+        kernels.get().resolution_into(field("region"), field("t_man"), field("preferred"), field("t_in"),
+                                      field("t_out"), tuple(rows), tuple(o[0] for o in own), tuple(o[1] for o in own),
+                                      tuple(np.asarray(a.side, np.int64) for a in axes), in_conflict, prev is not None,
                                       p_ax, p_side, np.array([axis_code(a) for a in cfg.resolution_axes], np.int64),
                                       chosen)
     else:

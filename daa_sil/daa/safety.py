@@ -125,10 +125,12 @@ def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverP
     k = kernels.get()
     n = own.shape[0]
     phases, enc, plan = np.empty((n, 3, 9)), np.empty((n, 7)), np.empty((n, plan_cols.N_PLAN))
-    if k.command_plan_into(*flat, float(perf.max_turn_rate), float(perf.horizontal_accel), float(perf.vertical_accel),
-                           float(perf.min_gs), float(perf.max_gs), float(perf.max_vs), float(cfg.turn_rate),
-                           float(cfg.vertical_accel), float(cfg.horizontal_accel), float(cfg.knot_trk),
-                           float(cfg.knot_vs), float(cfg.knot_gs), STRAIGHT_TURN_RATE, _EPS, phases, enc, plan):
+    if k.command_plan_into(tuple(flat[:6]), tuple(flat[6:9]),
+                           (float(perf.max_turn_rate), float(perf.horizontal_accel), float(perf.vertical_accel),
+                            float(perf.min_gs), float(perf.max_gs), float(perf.max_vs)),
+                           (float(cfg.turn_rate), float(cfg.vertical_accel), float(cfg.horizontal_accel)),
+                           (float(cfg.knot_trk), float(cfg.knot_vs), float(cfg.knot_gs)), STRAIGHT_TURN_RATE, _EPS,
+                           phases, enc, plan):
         return command_paths_reference(own, cmd, cfg)  # a turn rate the numpy motion treats as straight
     h = plan[:, plan_cols.H]
     j_max = int(plan[:, plan_cols.N_KNOTS].max()) if n else 0

@@ -4,27 +4,14 @@ clear a second-order certificate or sampling every CLIP_DT (the rules in docs/da
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 
-from daa_sil.daa.certify import CLEAR, P_TOL, V_TOL, settle_time, classify_pieces, clear_second_order
+from daa_sil.daa.certify import CLEAR, settle_time, classify_pieces, clear_second_order
 from daa_sil.daa.intervals import as_vector, wcv_soa
 from daa_sil.daa import kernels
-from daa_sil.daa.scratch import scratch
-
-#: most parts an undecided segment is split into (as many as its parts' chords need to meet V_TOL / P_TOL)
-MAX_SPLIT = 16
-#: s, how closely an entry into / an exit from the volume on the true path is located (bisection brackets;
-#: entries decide when a candidate conflicts, exits only rank recovery candidates)
-BISECT_DT_IN = 0.04
-BISECT_DT_OUT = 0.1
-#: s, sampling interval of the true predicate inside a short piece whose ends are clear but which is not
-#: certified clear (a clip of the volume shorter than this can be missed)
-CLIP_DT = 0.01
-#: most rounds of splitting an undecided piece
-MAX_DEPTH = 8
-
+# the tolerances and the compiled call (offered here too: the tests and the evaluator read them from here)
+from daa_sil.daa.resolve_call import (BISECT_DT_IN, BISECT_DT_OUT, CLIP_DT, MAX_DEPTH, MAX_SPLIT, bisect_thresholds,
+                                      resolve_segments)
 
 def segment_knots(flat_seg: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """Path (flat n, m, p) and first-knot flat index of the knot-to-knot segments ``flat_seg`` (flat indices
@@ -146,8 +133,8 @@ class UndecidedPieces:
         rows = self._kin_rows(path)
         if rows is not None:
             D = float(th.dthr)
-            rows[1](*rows[2], lo, hi, lo_in, steps, n_in, n_out, mixed, D * D, float(th.tthr), float(th.zthr),
-                    float(th.tcoa))
+            rows[1](*rows[2], lo, hi, lo_in, steps, n_in, n_out, mixed,
+                    (D * D, float(th.tthr), float(th.zthr), float(th.tcoa)))
             return lo, hi
         f = self._mover(path)
         own = np.where(mixed, np.where(lo_in, n_out, n_in), steps)  # the halvings that may move each bracket
@@ -362,103 +349,11 @@ class UndecidedPieces:
         _update(seg_in, seg_out, sid[rows], 0.5 * (l1 + h1), 0.5 * (l2 + h2))
 
 
-def resolve_segments(kin: tuple, ipv: np.ndarray, m: int, p: int, path: np.ndarray, s: tuple, v: tuple,
-                     tk: np.ndarray, flat_seg: np.ndarray, ka: np.ndarray, acc_h: np.ndarray, acc_v: np.ndarray,
-                     jerk, kink, vwin, exits: bool, th, seg_in: np.ndarray, seg_out: np.ndarray) -> None:
-    """:meth:`UndecidedPieces.resolve` in one call of :func:`daa_sil.daa.kernels.resolve.resolve_into`.
-
-    ``kin`` the paths' motion (:attr:`daa_sil.daa.trajectory.ManeuverPaths.kin`), ``ipv`` (N * M, 6) the
-    intruders' positions and velocities at t = 0 (m, m/s), ``m``/``p`` intruders and paths per encounter;
-    per undecided segment (row): ``path`` its flat (n, m, p) path, ``flat_seg`` its flat segment id (into
-    ``seg_in``/``seg_out``, updated), ``ka`` the flat index of its first knot into the relative states
-    ``s``/``v`` (three flat component arrays each) and knot times ``tk`` (s), ``acc_h``/``acc_v`` (m/s^2),
-    ``jerk`` (m/s^3) and ``kink`` (s) of its path (None: none), ``vwin`` its path's vertical window
-    ``(lo, hi, on)`` (s; ``on`` whether the path has one, None: every path; ``vwin`` None: none). The rows of
-    one encounter (``path // (m * p)``) make their batch-wide choices together, apart from the others."""
-    r = path.size
-    n = path // (m * p)
-    if kin[0] == "axis":
-        rows = n * p + path % p
-        motion = (0, kin[1], kin[2], kin[3].reshape(-1, kin[3].shape[-1]), _NO_PHASES, _NO_ROWS, 0.0, 0.0, 0.0)
-    else:
-        rows = n
-        motion = (1, 0, 0.0, _NO_ROWS, kin[1], kin[2], *kin[3:])
-    none = np.zeros(r)
-    if vwin is None:
-        vlo, vhi, von = none, none, np.zeros(r, bool)
-    else:
-        vlo, vhi = vwin[0], vwin[1]
-        von = np.ones(r, bool) if vwin[2] is None else np.asarray(vwin[2], bool)
-    grp, n_grp = encounter_groups(n)
-    D = float(th.dthr)
-    need = np.zeros(3, np.int64)
-    with scratch() as ws:
-        work = [ws.buffer(name, dtype) for name, dtype in zip(_WORK, _WORK_TYPES)]
-        _resolve_call(motion, ipv, rows, path, p, s, v, tk, flat_seg, ka, acc_h, acc_v, jerk, kink, none, r, von,
-                      vlo, vhi, grp, n_grp, exits, th, D, seg_in, seg_out, work, need)
-        for name, size, dtype in zip(_WORK, need, _WORK_TYPES):  # large enough for the next call of this size
-            if size > ws.buffer(name, dtype).size:
-                ws.take(name, int(size), dtype)
-
-
-def encounter_groups(enc: np.ndarray) -> tuple[np.ndarray, int]:
-    """``(group, count)``: each row's encounter ``enc`` numbered 0, 1, ... in order of first appearance."""
-    enc = np.asarray(enc, np.int64)
-    if not enc.size:
-        return enc, 0
-    if np.all(enc[1:] >= enc[:-1]):  # (sorted, as the flat segment ids are: no sort)
-        new = np.empty(enc.size, bool)
-        new[0] = True
-        np.not_equal(enc[1:], enc[:-1], out=new[1:])
-        grp = np.cumsum(new) - 1
-        return grp, int(grp[-1]) + 1
-    _, first, inv = np.unique(enc, return_index=True, return_inverse=True)
-    return np.argsort(np.argsort(first))[inv], int(first.size)
-
-
-def _resolve_call(motion, ipv, rows, path, p, s, v, tk, flat_seg, ka, acc_h, acc_v, jerk, kink, none, r, von,
-                  vlo, vhi, grp, n_grp, exits, th, D, seg_in, seg_out, work, need) -> None:
-    """The call of ``resolve_into`` of :func:`resolve_segments`."""
-    kernels.get().resolve_into(
-        *motion, ipv, rows, path // p, *s, *v, tk, flat_seg.astype(np.int64, copy=False),
-        ka.astype(np.int64, copy=False), acc_h, acc_v, jerk is not None,
-        none if jerk is None else np.asarray(jerk, float), kink is not None,
-        none[:, None] if kink is None else np.asarray(kink, float).reshape(r, -1), von, vlo, vhi, grp, n_grp,
-        bool(exits), bisect_thresholds(), MAX_DEPTH, MAX_SPLIT, BISECT_DT_IN, BISECT_DT_OUT, CLIP_DT, 2.0 * V_TOL,
-        8.0 * P_TOL, D, D * D, float(th.zthr), float(th.tthr), float(th.tcoa), seg_in, seg_out, *work, need)
-
-
-#: the resolution kernel's working arrays (:mod:`daa_sil.daa.scratch`, kept from call to call): floats, ints, flags
-_WORK = ("resolve_f", "resolve_i", "resolve_b")
-_WORK_TYPES = (np.float64, np.int64, np.bool_)
-
-#: placeholder motion rows for the kind of path a call does not use
-_NO_ROWS = np.zeros((0, 9))
-_NO_PHASES = np.zeros((0, 3, 9))
-
-
-@functools.lru_cache(maxsize=None)
-def bisect_thresholds(count: int = 64) -> np.ndarray:
-    """``thr[n]`` (n < ``count``): the smallest float ``x`` with ``np.log2(x) > n``, so that the number of
-    ``thr`` at or below ``x`` is ``int(np.ceil(np.log2(x)))`` for ``1 <= x < 2**count`` -- numpy's log2,
-    whatever its last bit, found by bisecting the floats between ``2**n`` and ``2**(n + 1)``."""
-    out = np.empty(count)
-    for n in range(count):
-        a, b = int(np.float64(2.0 ** n).view(np.int64)), int(np.float64(2.0 ** (n + 1)).view(np.int64))
-        if not (np.log2(np.int64(a).view(np.float64)) <= n < np.log2(np.int64(b).view(np.float64))):
-            raise ArithmeticError(f"numpy's log2 is not exact at 2**{n} / 2**{n + 1}")
-        while b - a > 1:
-            mid = (a + b) // 2
-            if np.log2(np.int64(mid).view(np.float64)) > n:
-                b = mid
-            else:
-                a = mid
-        out[n] = np.int64(b).view(np.float64)
-    out.setflags(write=False)
-    return out
-
-
 def _update(seg_in, seg_out, sid, t_in, t_out) -> None:
     """seg_in[sid] = min(seg_in[sid], t_in), seg_out[sid] = max(...) (repeated ids allowed)."""
     np.minimum.at(seg_in, sid, t_in)
     np.maximum.at(seg_out, sid, t_out)
+
+
+__all__ = ["UndecidedPieces", "segment_knots", "piece_index", "resolve_segments", "bisect_thresholds",
+           "MAX_SPLIT", "BISECT_DT_IN", "BISECT_DT_OUT", "CLIP_DT", "MAX_DEPTH"]

@@ -37,22 +37,32 @@ def _argmin_step(best, bi, c, k, done, first):
 
 
 @inline
-def _own(k, K_h, K_v, lo_h, lo_v, lo_g, hi_h, hi_v, hi_g, rh, rv, rg):
-    """Is column ``k`` (track, vertical speed, ground speed) one of the row's own candidates."""
+def _own(k, K_h, K_v, own):
+    """Is column ``k`` (track, vertical speed, ground speed) one of the row's own candidates (``own``: the
+    row's first and last own column of each axis, six ints)."""
     if k < K_h:
-        return lo_h[rh] <= k <= hi_h[rh]
+        return own[0] <= k <= own[1]
     if k < K_h + K_v:
-        return lo_v[rv] <= k - K_h <= hi_v[rv]
-    return lo_g[rg] <= k - K_h - K_v <= hi_g[rg]
+        return own[2] <= k - K_h <= own[3]
+    return own[4] <= k - K_h - K_v <= own[5]
 
 
 @inline
-def _best_effort(i_h, i_v, i_g, o_h, o_v, o_g, rh, rv, rg, K_h, K_v, K, lo_h, lo_v, lo_g, hi_h, hi_v, hi_g):
+def _own_row(lo_h, lo_v, lo_g, hi_h, hi_v, hi_g, rh, rv, rg):
+    """The row's own columns of each axis, read once per row as a tuple of ints (:func:`_own`)."""
+    return lo_h[rh], hi_h[rh], lo_v[rv], hi_v[rv], lo_g[rg], hi_g[rg]
+
+
+@inline
+def _best_effort(tin, tout, rh, rv, rg, K_h, K_v, K, own):
     """The best-effort candidate of one row (``np.argmax``, the first nan wins) over the three axes' own
-    candidates: latest first LoWC (capped at 1e6 s), then earliest regain of well clear."""
+    candidates (``own``: :func:`_own_row`; ``tin``/``tout`` the axes' ``t_in`` / ``t_out``): latest first LoWC
+    (capped at 1e6 s), then earliest regain of well clear."""
+    i_h, i_v, i_g = tin
+    o_h, o_v, o_g = tout
     best, bi, done, first = 0.0, 0, False, True
     for k in range(K):
-        if not _own(k, K_h, K_v, lo_h, lo_v, lo_g, hi_h, hi_v, hi_g, rh, rv, rg):
+        if not _own(k, K_h, K_v, own):
             continue
         if k < K_h:
             ti, to = i_h[rh, k], o_h[rh, k]
@@ -72,15 +82,26 @@ def _best_effort(i_h, i_v, i_g, o_h, o_v, o_g, rh, rv, rg, K_h, K_v, K, lo_h, lo
     return bi
 
 
-@kernel(void(A2, A2, A2, A2, A2, A2, A2, A2, A2, A2, A2, A2, IA, IA, IA, IA, IA, IA, IA, IA, IA, IA, IA, IA, IA,
-             IA, A2, A, F, types.Array(int64, 1, "C"), types.Array(int8, 1, "C")), lazy=True)
-def search_into(d_h, d_v, d_g, m_h, m_v, m_g, i_h, i_v, i_g, o_h, o_v, o_g, r_h, r_v, r_g, lo_h, lo_v, lo_g, hi_h,
-                hi_v, hi_g, side_h, side_v, side_g, ax, side, ref_t, rates, horizon, idx, rule):
+#: per-axis records (track, vertical speed, ground speed): float fields, row indices / own columns / sides
+_F3, _I3 = types.UniTuple(A2, 3), types.UniTuple(IA, 3)
+
+
+@kernel(void(_F3, _F3, _F3, _F3, _I3, _I3, _I3, _I3, IA, IA, A2, A, F, types.Array(int64, 1, "C"),
+             types.Array(int8, 1, "C")), lazy=True)
+def search_into(d, m, tin, tout, r, lo, hi, sides, ax, side, ref_t, rates, horizon, idx, rule):
     """Candidate index (columns: track, then vertical speed, then ground speed, as ``_Candidates``) and rule
-    per row ``n``: the axes' ``delta`` (``d_*``), ``t_man`` (``m_*``), ``t_in`` (``i_*``) and ``t_out``
-    (``o_*``) read at rows ``r_*[n]``; ``side_*`` the axes' candidate sides; ``ax``/``side`` the row's wanted
-    axis code and side; ``ref_t`` (N, 4) the reference's change per axis code in s of maneuvering,
-    ``rates`` (4,) per axis code; ``lo_*``/``hi_*`` each row's own columns of each axis (read at ``r_*[n]``)."""
+    per row ``n``: the axes' ``delta`` (``d``), ``t_man`` (``m``), ``t_in`` (``tin``) and ``t_out`` (``tout``) read at
+    rows ``r[a][n]`` (each a tuple over the three axes); ``sides`` the axes' candidate sides; ``ax``/``side`` the
+    row's wanted axis code and side; ``ref_t`` (N, 4) the reference's change per axis code in s of
+    maneuvering, ``rates`` (4,) per axis code; ``lo``/``hi`` each row's own columns of each axis (read at
+    ``r[a][n]``)."""
+    d_h, d_v, d_g = d
+    m_h, m_v, m_g = m
+    i_h, i_v, i_g = tin
+    r_h, r_v, r_g = r
+    lo_h, lo_v, lo_g = lo
+    hi_h, hi_v, hi_g = hi
+    side_h, side_v, side_g = sides
     K_h, K_v = side_h.shape[0], side_v.shape[0]
     K = K_h + K_v + side_g.shape[0]
     for n in range(idx.shape[0]):
@@ -90,8 +111,9 @@ def search_into(d_h, d_v, d_g, m_h, m_v, m_g, i_h, i_v, i_g, o_h, o_v, o_g, r_h,
         first = True
         a_n, s_n = ax[n], side[n]
         rh, rv, rg = r_h[n], r_v[n], r_g[n]
+        own = _own_row(lo_h, lo_v, lo_g, hi_h, hi_v, hi_g, rh, rv, rg)
         for k in range(K):
-            if not _own(k, K_h, K_v, lo_h, lo_v, lo_g, hi_h, hi_v, hi_g, rh, rv, rg):
+            if not _own(k, K_h, K_v, own):
                 continue
             if k < K_h:
                 a, j, r = 1, k, r_h[n]
@@ -119,8 +141,7 @@ def search_into(d_h, d_v, d_g, m_h, m_v, m_g, i_h, i_v, i_g, o_h, o_v, o_g, r_h,
         elif K > 0 and math.isfinite(b3):
             idx[n], rule[n] = j3, _ANY
         else:  # best effort: latest first LoWC, then earliest regain of well clear (np.argmax, the first nan wins)
-            idx[n], rule[n] = _best_effort(i_h, i_v, i_g, o_h, o_v, o_g, rh, rv, rg, K_h, K_v, K, lo_h, lo_v, lo_g, hi_h,
-                                           hi_v, hi_g), _BEST_EFFORT
+            idx[n], rule[n] = _best_effort(tin, tout, rh, rv, rg, K_h, K_v, K, own), _BEST_EFFORT
 
 
 _REGION_NONE, _REGION_RECOVERY = 0, 4
@@ -149,16 +170,21 @@ def _axis_pick(reg, tm, side, r, want, pref, lo, hi):
     return 0, False
 
 
-@kernel(void(_R2, _R2, _R2, A2, A2, A2, _R1, _R1, _R1, A2, A2, A2, A2, A2, A2, IA, IA, IA, IA, IA, IA, IA, IA, IA,
-             IA, IA, IA, _B1, boolean, IA, IA, IA, types.Array(int64, 1, "C")))
-def resolution_into(g_h, g_v, g_g, m_h, m_v, m_g, p_h, p_v, p_g, i_h, i_v, i_g, o_h, o_v, o_g, r_h, r_v, r_g,
-                    lo_h, lo_v, lo_g, hi_h, hi_v, hi_g, side_h, side_v, side_g, in_conflict, has_prev, p_ax, p_side,
-                    res_axes, chosen):
+@kernel(void(types.UniTuple(_R2, 3), _F3, types.UniTuple(_R1, 3), _F3, _F3, _I3, _I3, _I3, _I3, _B1, boolean, IA,
+             IA, IA, types.Array(int64, 1, "C")))
+def resolution_into(g, m, p, tin, tout, r, lo, hi, sides, in_conflict, has_prev, p_ax, p_side, res_axes, chosen):
     """The candidate ``resolution.resolve`` chooses per row ``n`` (columns: track, vertical speed, ground speed;
-    -1: none, not in conflict): the axes' ``region`` (``g_*``), ``t_man`` (``m_*``), ``preferred`` (``p_*``),
-    ``t_in`` (``i_*``) and ``t_out`` (``o_*``) read at rows ``r_*[n]``; ``p_ax``/``p_side`` the previous
-    resolution's axis code and side (with ``has_prev``), ``res_axes`` the axis codes in priority order;
-    ``lo_*``/``hi_*`` each row's own columns of each axis (read at ``r_*[n]``)."""
+    -1: none, not in conflict): the axes' ``region`` (``g``), ``t_man`` (``m``), ``preferred`` (``p``), ``t_in``
+    (``tin``) and ``t_out`` (``tout``) read at rows ``r[a][n]`` (each a tuple over the three axes); ``p_ax``/``p_side``
+    the previous resolution's axis code and side (with ``has_prev``), ``res_axes`` the axis codes in priority
+    order; ``lo``/``hi`` each row's own columns of each axis (read at ``r[a][n]``)."""
+    g_h, g_v, g_g = g
+    m_h, m_v, m_g = m
+    p_h, p_v, p_g = p
+    r_h, r_v, r_g = r
+    lo_h, lo_v, lo_g = lo
+    hi_h, hi_v, hi_g = hi
+    side_h, side_v, side_g = sides
     K_h, K_v = side_h.shape[0], side_v.shape[0]
     K = K_h + K_v + side_g.shape[0]
     for n in range(chosen.shape[0]):
@@ -206,5 +232,5 @@ def resolution_into(g_h, g_v, g_g, m_h, m_v, m_g, p_h, p_v, p_g, i_h, i_v, i_g, 
                         ch = start + j
         # 3. best effort: latest first LoWC, then earliest regain of well clear
         if ch < 0:
-            ch = _best_effort(i_h, i_v, i_g, o_h, o_v, o_g, rh, rv, rg, K_h, K_v, K, lo_h, lo_v, lo_g, hi_h, hi_v, hi_g)
+            ch = _best_effort(tin, tout, rh, rv, rg, K_h, K_v, K, _own_row(lo_h, lo_v, lo_g, hi_h, hi_v, hi_g, rh, rv, rg))
         chosen[n] = ch

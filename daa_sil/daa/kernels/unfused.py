@@ -28,11 +28,16 @@ def rel_states_into(axis, rate, kin, ipv, t, out):
         out[0, i], out[1, i], out[2, i], out[3, i], out[4, i], out[5, i] = rel_state(axis, rate, kin, ipv, i, t[i])
 
 
-@kernel(void(I, F, A2, A2, O, O, _B1, IA, IA, IA, _B1, F, F, F, F))
-def bisect_into(axis, rate, kin, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed, DD, TT, H, TC):
+#: the volume of the predicate ``(D * D, TTHR, ZTHR, TCOA)``
+_VOL4 = types.UniTuple(F, 4)
+
+
+@kernel(void(I, F, A2, A2, O, O, _B1, IA, IA, IA, _B1, _VOL4))
+def bisect_into(axis, rate, kin, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed, vol):
     """Halve row ``i``'s ``[lo, hi]`` ``steps[i]`` times keeping the predicate ``lo_in`` at ``lo``; with
     ``mixed[i]``, a row starting inside stops after ``n_out[i]`` halvings and one starting outside after
-    ``n_in[i]`` (``_bisect``: the counts are the row's encounter's)."""
+    ``n_in[i]`` (``_bisect``: the counts are the row's encounter's); ``vol`` = ``(D * D, TTHR, ZTHR, TCOA)``."""
+    DD, TT, H, TC = vol
     for i in range(lo.shape[0]):
         a, b, flag = lo[i], hi[i], lo_in[i]
         for k in range(steps[i]):
@@ -51,10 +56,10 @@ def command_rel_states_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, t, out):
             ph_rows, enc, ipv, i, t[i], max_turn, h_acc, v_acc)
 
 
-@kernel(void(A3, A2, F, F, F, A2, O, O, _B1, IA, IA, IA, _B1, F, F, F, F))
-def command_bisect_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed,
-                        DD, TT, H, TC):
+@kernel(void(A3, A2, F, F, F, A2, O, O, _B1, IA, IA, IA, _B1, _VOL4))
+def command_bisect_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed, vol):
     """:func:`bisect_into` on command paths."""
+    DD, TT, H, TC = vol
     for i in range(lo.shape[0]):
         a, b, flag = lo[i], hi[i], lo_in[i]
         for k in range(steps[i]):
