@@ -40,9 +40,20 @@ def run(script: str, args: list[str], cwd: Path, timeout: float = 900.0) -> subp
 
 def test_every_benchmark_is_covered():
     scripts = {p.name for p in BENCH.glob("*.py")}
-    # compare_campaigns.py and check_identity.py are tested below; sil_probe.py (bench_sil.py's) and
-    # baseline_paths.py (where the baseline is installed) are helpers
-    assert scripts - set(CASES) == {"compare_campaigns.py", "check_identity.py", "sil_probe.py", "baseline_paths.py"}
+    # compare_campaigns.py, check_identity.py and bench_daidalus.py are tested below; sil_probe.py (bench_sil.py's)
+    # and baseline_paths.py (where the baseline is installed) are helpers
+    assert scripts - set(CASES) == {"compare_campaigns.py", "check_identity.py", "bench_daidalus.py", "sil_probe.py",
+                                    "baseline_paths.py"}
+
+
+def test_bench_daidalus_without_a_jar_says_so_in_one_line(tmp_path):
+    """Without the DAIDALUS jar (which this repository does not hold) or with a path that is not one: one line,
+    exit 2, before anything is run."""
+    for args in ([], ["--daidalus-jar", str(tmp_path / "missing.jar")]):
+        res = run("bench_daidalus.py", args, tmp_path)
+        assert res.returncode == 2 and res.stdout == "", res.stdout + res.stderr
+        lines = res.stderr.strip().splitlines()
+        assert len(lines) == 1 and "--daidalus-jar" in lines[0] and "Traceback" not in res.stderr
 
 
 def test_check_identity_against_itself_and_without_a_baseline(tmp_path):

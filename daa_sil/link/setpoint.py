@@ -17,16 +17,20 @@ import numpy as np
 from daa_sil.geometry.kinematics import AircraftState, Command
 
 
-def wire_command(cmd: Command) -> Command:
-    """The command (rad, m/s, arrays (N,)) the vehicle receives for ``cmd`` sent as ``PILOT_MANEUVER``."""
-    trk = np.asarray(cmd.trk, float)
+def wire_command(cmd: Command, rows: "np.ndarray | None" = None) -> Command:
+    """The command (rad, m/s, arrays (N,)) the vehicle receives for ``cmd`` sent as ``PILOT_MANEUVER``; with
+    ``rows`` (indices), only those rows' (the others nan: nothing was sent)."""
+    trk, vs, gs = (np.asarray(a, float) for a in (cmd.trk, cmd.vs, cmd.gs))
+    if rows is not None:
+        out = Command(np.full(trk.shape, np.nan), np.full(trk.shape, np.nan), np.full(trk.shape, np.nan))
+        if rows.size:
+            sent = wire_command(Command(trk[rows], vs[rows], gs[rows]))
+            out.trk[rows], out.vs[rows], out.gs[rows] = sent.trk, sent.vs, sent.gs
+        return out
     with np.errstate(invalid="ignore", over="ignore"):
-        deg = np.where(np.isfinite(trk), np.mod(np.degrees(trk), 360.0), np.nan)
-        wire_deg = deg.astype(np.float32).astype(float)
-        out_trk = np.where(np.isfinite(wire_deg), np.radians(wire_deg), np.nan)
-        vs = np.asarray(cmd.vs, float).astype(np.float32).astype(float)
-        gs = np.asarray(cmd.gs, float).astype(np.float32).astype(float)
-    return Command(out_trk, vs, gs)
+        deg = np.mod(np.degrees(trk), 360.0)  # (nan and +-inf give nan)
+        wire_trk = np.radians(deg.astype(np.float32).astype(float))
+        return Command(wire_trk, vs.astype(np.float32).astype(float), gs.astype(np.float32).astype(float))
 
 
 def observed_own(own: AircraftState) -> np.ndarray:

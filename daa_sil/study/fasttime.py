@@ -293,7 +293,7 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         slot_up = uplink.open(k)
         slot_up["release"][:] = rel_up
         slot_up["newest_sent"][:] = np.where(pout.send, k, prev_newest)
-        wire = wire_command(pout.cmd)  # (the setpoints as PILOT_MANEUVER carries them: float32, track in deg)
+        wire = wire_command(pout.cmd, np.flatnonzero(pout.send))  # (as PILOT_MANEUVER carries them: float32)
         slot_up["cmd"][:] = np.stack([wire.trk, wire.vs, wire.gs], axis=-1)
         # ---- 2. vehicle ----------------------------------------------------------------------
         up_ptr = _release_pointer(up_ptr, up_release, k + 1, t)
