@@ -208,3 +208,26 @@ def _rows(run, pos):
                             np.asarray(getattr(mm, f.name))[pos:pos + 1] for f in fields(AgentMemory)))
         out.append((c, rec, mem))
     return out
+
+
+def test_cylinder_bands_on_the_one_pass_path_equal_the_evaluators(monkeypatch):
+    """The ``daidalus`` preset (cylinder recovery): every row banded by the one-pass kernels, the saturated
+    ones again on the evaluator's path, equals every row on the evaluator's path (``bands.FUSED = False``)."""
+    import daa_sil.daa.bands as bands_mod
+
+    cfg = DaaConfig.for_preset("daidalus")
+    checked = 0
+    for seed in (3, 4, 5):
+        own, intr, _ = _encounters(seed, 24, 2, cfg)
+        fused = compute_bands(own, intr, cfg)
+        monkeypatch.setattr(bands_mod, "FUSED", False)
+        ref = compute_bands(own, intr, cfg)
+        monkeypatch.setattr(bands_mod, "FUSED", True)
+        for a, b in zip(fused.axes(), ref.axes()):
+            for f in fields(AxisBands):
+                x, y = getattr(a, f.name), getattr(b, f.name)
+                if f.name in ("axis", "own_lo", "own_hi") or (x is None and y is None):
+                    continue
+                assert _same(np.asarray(x), np.asarray(y)), (seed, a.name, f.name)
+            checked += int(np.sum(np.isfinite(np.asarray(a.recovery_time))))
+    assert checked > 0  # (some rows did search a recovery)

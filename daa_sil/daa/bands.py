@@ -114,7 +114,7 @@ def _first_on_side(ok, side, want: int, k0: int):
 
 def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig, alert: np.ndarray,
                sizes: "tuple[int, int] | None" = None,
-               lists: "tuple[np.ndarray, np.ndarray] | None" = None) -> AxisBands:
+               lists: "tuple[np.ndarray, np.ndarray] | None" = None, evaluator: bool = False) -> AxisBands:
     """Bands of one axis (AXIS_* code) for ownship ``(N,)`` and intruders ``(N, M)``; ``sizes`` = the columns
     per side (at least the batch's :func:`candidate_counts`, the default); ``lists`` = (NEAR, MID)
     conflict-aircraft flags ``(N, M)`` used with ``cfg.horizon_from_maneuver`` (default
@@ -123,11 +123,18 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     Each encounter's bands are those of a call of its own: its own candidates per side
     (:func:`daa_sil.daa.axis_paths.row_counts`; a speed axis's depend on the current speed), its paths
     evaluated to its own last knot, its regions, recovery and resolutions over its own candidates. The
-    columns past an encounter's candidates repeat its outermost candidate on that side."""
+    columns past an encounter's candidates repeat its outermost candidate on that side.
+
+    The cylinder recovery (``daidalus``) runs on the evaluator's path (``evaluator``); the one-pass kernels
+    make every row's bands first, and only the rows whose axis saturates (no conflict-free candidate)
+    are made again on that path (:func:`_cylinder_rows`): a row's bands do not depend on its batch."""
     j_lo, j_hi = sizes if sizes is not None else candidate_counts(own, axis, cfg)
     n, m = intr.shape
     rows = row_counts(own, axis, cfg)
-    fused = COMPILED and FUSED and cfg.recovery != "cylinder"
+    fused = COMPILED and FUSED and not evaluator
+    if fused and cfg.recovery == "cylinder":
+        return _cylinder_rows(own, intr, axis, cfg, alert, lists, rows, j_lo, j_hi)
+    fused = fused and cfg.recovery != "cylinder"
     if not fused and n and not (np.all(rows[0] == j_lo) and np.all(rows[1] == j_hi)):
         return _by_counts(own, intr, axis, cfg, alert, lists, rows, j_lo, j_hi)
     paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
@@ -237,7 +244,8 @@ def _by_counts(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
         idx = np.flatnonzero(key == v)
         lo, hi = int(rows[0][idx[0]]), int(rows[1][idx[0]])
         li = None if lists is None else (lists[0][idx], lists[1][idx])
-        parts.append((idx, lo, hi, axis_bands(own[idx], intr[idx], axis, cfg, np.asarray(alert)[idx], (lo, hi), li)))
+        parts.append((idx, lo, hi, axis_bands(own[idx], intr[idx], axis, cfg, np.asarray(alert)[idx], (lo, hi), li,
+                                              evaluator=True)))
     b0 = parts[0][3]
 
     def widen(name: str, width: int):
@@ -264,6 +272,33 @@ def _by_counts(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     gap = None if b0.gap_region is None else widen("gap_region", k - 1)
     side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
     return AxisBands(axis=axis, side=side, gap_region=gap, own_lo=j_lo - rows[0], own_hi=j_lo + rows[1], **per_row)
+
+
+def _cylinder_rows(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig, alert, lists, rows,
+                   j_lo: int, j_hi: int) -> AxisBands:
+    """:func:`axis_bands` with the cylinder recovery: the one-pass kernels for every row (as without
+    recovery: a row with a conflict-free candidate has none), then the rows without a NONE candidate of their
+    own -- saturated for the cylinder search, or relabelled by the kernels' earliest exit -- made again on the
+    evaluator's path, which searches their recovery."""
+    n, m = intr.shape
+    paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
+    side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
+    values, delta, t_man, *rest = axis_conflict_regions(paths, own, intr, axis, cfg, alert, lists, j_lo, j_hi, rows)
+    ab = AxisBands(axis, values, delta, side, t_man, *rest)
+    free = ab.region == REGION_NONE
+    mask = ab.own_mask()
+    idx = np.flatnonzero(~np.any(free if mask is None else free & mask, axis=1)) if m else np.zeros(0, int)
+    if not idx.size:
+        return ab
+    li = None if lists is None else (lists[0][idx], lists[1][idx])
+    sub = axis_bands(own[idx], intr[idx], axis, cfg, np.asarray(alert)[idx], (j_lo, j_hi), li, evaluator=True)
+    for f in fields(AxisBands):
+        if f.name in ("axis", "side", "own_lo", "own_hi") or getattr(ab, f.name) is None:
+            continue
+        if axis == AXIS_HORIZONTAL and f.name in ("delta", "t_man"):  # (one row for every encounter, the same)
+            continue
+        getattr(ab, f.name)[idx] = getattr(sub, f.name)
+    return ab
 
 
 def resolutions(region, values, delta, side, t_man, k0: int, axis: int, cfg: DaaConfig,
