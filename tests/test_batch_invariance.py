@@ -231,3 +231,32 @@ def test_cylinder_bands_on_the_one_pass_path_equal_the_evaluators(monkeypatch):
                 assert _same(np.asarray(x), np.asarray(y)), (seed, a.name, f.name)
             checked += int(np.sum(np.isfinite(np.asarray(a.recovery_time))))
     assert checked > 0  # (some rows did search a recovery)
+
+
+def test_cylinder_recovery_search_compiled_equals_numpy(monkeypatch):
+    """The bisection of the cylinder recovery time (``kernels.recovery.pivot_search_into``) against its numpy
+    reference (``recovery.COMPILED = False``): every field of the daidalus preset's bands, on batches where
+    rows do recover (and the conformance set's saturated encounters, below)."""
+    import daa_sil.daa.recovery as recovery_mod
+    from daa_sil.daa.conformance import read_records, states
+    from pathlib import Path
+
+    cfg = DaaConfig.for_preset("daidalus")
+    recs = read_records(Path(__file__).resolve().parent / "data" / "daidalus_do365b.jsonl.xz")
+    pick = [i for i, r in enumerate(recs) if r["track_recovery"]["recovery_bands_computed"]][:40]
+    own_c, intr_c = states([recs[i] for i in pick])
+    batches = [_encounters(seed, 24, 2, cfg)[:2] for seed in (3, 4)] + [(own_c, intr_c)]
+    recovered = 0
+    for own, intr in batches:
+        got = compute_bands(own, intr, cfg)
+        monkeypatch.setattr(recovery_mod, "COMPILED", False)
+        ref = compute_bands(own, intr, cfg)
+        monkeypatch.setattr(recovery_mod, "COMPILED", True)
+        for a, b in zip(got.axes(), ref.axes()):
+            for f in fields(AxisBands):
+                x, y = getattr(a, f.name), getattr(b, f.name)
+                if f.name == "axis" or (x is None and y is None):
+                    continue
+                assert _same(np.asarray(x), np.asarray(y)), (a.name, f.name)
+            recovered += int(np.sum(np.isfinite(np.asarray(a.recovery_time))))
+    assert recovered > 40

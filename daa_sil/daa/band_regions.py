@@ -101,37 +101,48 @@ def axis_conflict_regions(paths: ManeuverPaths, own: AircraftState, intr: Aircra
     then ``candidates()`` then :func:`axis_regions`, without their (N, M, 2, J+1) arrays of relative
     states and candidates' conflicts. ``rows``: each encounter's own candidates per side (:func:`axis_regions`);
     its paths are evaluated up to knot ``max`` of the two, as in a call of its own."""
+    with scratch() as ws:  # (every array taken from it is consumed in this call)
+        out = axis_path_conflicts(paths, intr, cfg.th, float(cfg.lookahead_s), np.maximum(rows[0], rows[1]), ws.take)
+        return _regions(out, alert, lists, paths.axis_times(), own, intr, axis, cfg, j_lo, j_hi, rows)
+
+
+def axis_path_conflicts(paths: ManeuverPaths, intr: AircraftState, th, t_end: float, nseg: np.ndarray,
+                        take=None) -> tuple:
+    """``(tail_in, tail_out, seg_in, seg_out)`` flat over ``(N, M, 2, J+1)`` / ``(N, M, 2, J)`` of the band axis
+    ``paths`` against ``intr`` for volume ``th`` over ``[0, t_end]``, encounter ``n``'s paths up to knot
+    ``nseg[n]``, in one pass per path (``kernels.axis_pass.axis_conflicts_into``; the undecided segments by
+    :func:`daa_sil.daa.undecided.resolve_segments` on their knots' states alone): the numbers of
+    ``PathEvaluator(paths, intr, t_end).evaluate(th)``. ``take(name, size[, dtype])``: where the arrays come
+    from (default: new ones)."""
+    if take is None:
+        take = lambda name, size, dtype=float: np.empty(size, dtype)  # noqa: E731
     n, m = intr.shape
-    nseg = np.maximum(rows[0], rows[1])
     kin = paths.kin
     t = paths.axis_times()
     knots = t.shape[0]
     ipos, ivel = intr.position(), intr.velocity()
-    th = cfg.th
     D = float(th.dthr)
-    t_end = float(cfg.lookahead_s)
     n_paths = n * m * 2
-    with scratch() as ws:  # (every array taken from it is consumed in this call)
-        code = ws.take("code", n_paths * (knots - 1), np.int8)
-        seg_in, seg_out = ws.take("seg_in", n_paths * (knots - 1)), ws.take("seg_out", n_paths * (knots - 1))
-        tail_in, tail_out = ws.take("tail_in", n_paths * knots), ws.take("tail_out", n_paths * knots)
-        vlo, vhi = ws.take("vlo", n_paths), ws.take("vhi", n_paths)
-        k = kernels.get()
-        k.axis_conflicts_into((kin[1], kin[2], kin[3], t, nseg), (ipos, ivel), (paths.acc_h, paths.acc_v),
-                              bool(paths.vz_const), BLOCK, t_end,
-                              (D, D * D, D ** 2, float(th.zthr), float(th.tthr), float(th.tcoa)),
-                              (code, seg_in, seg_out), (tail_in, tail_out), (vlo, vhi))
-        todo = np.flatnonzero(code == UNDECIDED)
-        if todo.size:
-            r = todo.size
-            knot = [np.empty(2 * r) for _ in range(7)]  # s (3), v (3), t at the segments' two knots
-            k.axis_segment_knots_into(kin[1], kin[2], kin[3], t, ipos, ivel, todo, *knot)
-            path = todo // (knots - 1)
-            e, p = path // (m * 2), path % 2
-            sub = lambda a: None if a is None else a[e, p]  # noqa: E731
-            ipv = np.concatenate([ipos, ivel], axis=-1).reshape(-1, 6)
-            resolve_segments(kin, ipv, m, 2, path, tuple(knot[:3]), tuple(knot[3:6]), knot[6], todo,
-                             np.arange(0, 2 * r, 2), paths.acc_h[e, p], paths.acc_v[e, p], sub(paths.jerk_h),
-                             sub(paths.kink_t), (vlo[path], vhi[path], None) if paths.vz_const else None, True, th,
-                             seg_in, seg_out)
-        return _regions((tail_in, tail_out, seg_in, seg_out), alert, lists, t, own, intr, axis, cfg, j_lo, j_hi, rows)
+    code = take("code", n_paths * (knots - 1), np.int8)
+    seg_in, seg_out = take("seg_in", n_paths * (knots - 1)), take("seg_out", n_paths * (knots - 1))
+    tail_in, tail_out = take("tail_in", n_paths * knots), take("tail_out", n_paths * knots)
+    vlo, vhi = take("vlo", n_paths), take("vhi", n_paths)
+    k = kernels.get()
+    k.axis_conflicts_into((kin[1], kin[2], kin[3], t, np.asarray(nseg, np.int64)), (ipos, ivel),
+                          (paths.acc_h, paths.acc_v), bool(paths.vz_const), BLOCK, float(t_end),
+                          (D, D * D, D ** 2, float(th.zthr), float(th.tthr), float(th.tcoa)),
+                          (code, seg_in, seg_out), (tail_in, tail_out), (vlo, vhi))
+    todo = np.flatnonzero(code == UNDECIDED)
+    if todo.size:
+        r = todo.size
+        knot = [np.empty(2 * r) for _ in range(7)]  # s (3), v (3), t at the segments' two knots
+        k.axis_segment_knots_into(kin[1], kin[2], kin[3], t, ipos, ivel, todo, *knot)
+        path = todo // (knots - 1)
+        e, p = path // (m * 2), path % 2
+        sub = lambda a: None if a is None else a[e, p]  # noqa: E731
+        ipv = np.concatenate([ipos, ivel], axis=-1).reshape(-1, 6)
+        resolve_segments(kin, ipv, m, 2, path, tuple(knot[:3]), tuple(knot[3:6]), knot[6], todo,
+                         np.arange(0, 2 * r, 2), paths.acc_h[e, p], paths.acc_v[e, p], sub(paths.jerk_h),
+                         sub(paths.kink_t), (vlo[path], vhi[path], None) if paths.vz_const else None, True, th,
+                         seg_in, seg_out)
+    return tail_in, tail_out, seg_in, seg_out

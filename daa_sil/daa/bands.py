@@ -206,7 +206,7 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
             corr = PathConflicts(pc.seg_in[rows], pc.seg_out[rows], pc.tail_in[rows], pc.tail_out[rows],
                                  pc.t[rows], pc.t_end)
             g, rt, nf, hh, vv = CylinderRecovery(paths.subset(rows), intr[rows], corr, listed, horizon, cfg, order,
-                                          runs).run()
+                                                 runs, (j_lo, j_hi), fused=COMPILED and FUSED).run()
             rec_green[rows] = g
             rec_time[rows], rec_n[rows], rec_h[rows], rec_v[rows] = rt, nf, hh, vv
         region = np.where(rec_green, REGION_RECOVERY, region).astype(np.int8)

@@ -87,8 +87,11 @@ class ManeuverPaths:
         idx = np.asarray(idx)
         base = self.state_at
         sub = lambda a: None if a is None else a[idx]  # noqa: E731
-        pos, vel = self.knot_states()
         vz = self.vz_const if np.ndim(self.vz_const) == 0 else np.asarray(self.vz_const)[idx]
+        if self.pos is None and self.kin is not None and self.kin[0] == "axis":  # (knot states made from kin)
+            return ManeuverPaths(None, None, self.t, lambda n, p: base(idx[n], p), self.acc_h[idx], self.acc_v[idx], vz,
+                                 sub(self.jerk_h), sub(self.kink_t), _kin_subset(self.kin, idx), sub(self.n_seg))
+        pos, vel = self.knot_states()
         return ManeuverPaths(tuple(a[idx] for a in pos), tuple(a[idx] for a in vel), self.knot_times()[idx],
                              lambda n, p: base(idx[n], p),
                              self.acc_h[idx], self.acc_v[idx], vz, sub(self.jerk_h), sub(self.kink_t),
@@ -141,6 +144,15 @@ class PathConflicts:
             edge = np.full(shape[:-1] + (1,), np.inf)
             return np.concatenate([edge, pre_in], axis=-1), np.concatenate([-edge, pre_out], axis=-1)
         return np.full(shape, np.inf), np.full(shape, -np.inf)
+
+    def prefix_in(self) -> np.ndarray:
+        """The first entries of :meth:`prefix` alone (the same numbers, without the last exits)."""
+        shape = self.tail_in.shape
+        out = np.empty(shape)
+        out[..., 0] = np.inf
+        if shape[-1] > 1:
+            np.minimum.accumulate(self.seg_in, axis=-1, out=out[..., 1:])
+        return out
 
     def candidates(self) -> tuple[np.ndarray, np.ndarray]:
         """First violation and last exit of candidate k (maneuver to knot k, then straight) over
