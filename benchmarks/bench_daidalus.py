@@ -19,8 +19,8 @@ is printed with the load. The driver's alert levels are checked against the refe
 
 Without a JDK (``javac``/``java``) or the jar, it says so in one line and exits 2. Build the jar from
 DAIDALUS's public sources (github.com/nasa/daidalus, ``Java/``: ``make lib``); nothing of DAIDALUS is kept
-in this repository. ``--baseline DIR``: also time our side of a baseline checkout (its ``.venv``) in the
-same rounds, for the ratio to it.
+in this repository. ``--baseline DIR`` (default ``/work/baseline`` when it is there; ``none``: no baseline):
+also time our side of a baseline checkout (its ``.venv``) in the same rounds, for the ratio to it.
 """
 
 from __future__ import annotations
@@ -131,8 +131,9 @@ def main(argv: "list[str] | None" = None) -> int:
     ap.add_argument("--rounds", type=int, default=4, help="alternated rounds (default 4)")
     ap.add_argument("--seconds", type=float, default=6.0, help="seconds DAIDALUS is timed per round (default 6)")
     ap.add_argument("--cpu", type=int, default=0, help="the CPU both sides run on (default 0)")
-    ap.add_argument("--baseline", type=Path, default=None, metavar="DIR",
-                    help="a baseline checkout with its own .venv: our side of it timed in the same rounds")
+    ap.add_argument("--baseline", default=None, metavar="DIR",
+                    help="a baseline checkout with its own .venv: our side of it timed in the same rounds "
+                         "(default /work/baseline when it is there; 'none': no baseline)")
     args = ap.parse_args(argv)
     if args.daidalus_jar is None or not args.daidalus_jar.is_file():
         fail(f"needs --daidalus-jar PATH, a DAIDALUS v2.0.4 jar (got {args.daidalus_jar}); build it from "
@@ -141,6 +142,12 @@ def main(argv: "list[str] | None" = None) -> int:
         fail("needs a JDK (javac and java on PATH)")
     if args.rounds < 1 or args.seconds <= 0:
         fail("--rounds must be at least 1 and --seconds positive")
+    sys.path.insert(0, str(HERE))
+    from baseline_paths import BASELINE_DIR
+
+    if args.baseline is None:
+        args.baseline = BASELINE_DIR if (BASELINE_DIR / ".venv" / "bin" / "python").exists() else "none"
+    args.baseline = None if str(args.baseline) == "none" else Path(args.baseline)
     conf = args.conf
     if conf is None:
         guess = args.daidalus_jar.resolve().parent.parent.parent / "Configurations" / "DO_365B_no_SUM.conf"
