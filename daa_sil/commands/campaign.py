@@ -189,8 +189,8 @@ def _add_run_options(r) -> None:
     r.add_argument("--duration", type=finite_float("--duration", *DURATION.range), default=None, metavar="S",
                    help=DURATION.flag_help())
     r.add_argument("--chunk-size", type=setting_int("--chunk-size", CHUNK_SIZE), default=None, metavar="C",
-                   help=f"encounters per chunk (default {CHUNK_SIZE.default}): one result file per group and chunk, and the "
-                        "encounters that share a DAA call (so part of the configuration)")
+                   help=f"encounters per chunk (default {CHUNK_SIZE.default}): one result file per group and chunk "
+                        "(results do not depend on it)")
     r.add_argument("--batch-rows", type=setting_int("--batch-rows", BATCH_ROWS), default=None, metavar="R",
                    help="encounter rows per task: several chunks of several groups run side by side in one "
                         f"batch (default {BATCH_ROWS.default}, about 0.4 GiB per worker; results do not depend on it)")

@@ -113,7 +113,7 @@ SEED = Setting("seed", 0, "", 0, 2**63 - 1, "campaign seed (every encounter's st
 INTRUDERS = Setting("intruders", 1, "", 1, 8, "intruders per encounter")
 #: encounters per task: the per-step numpy overhead is paid once per chunk, so bigger chunks are
 #: faster (500 -> 2000 about 1.9x per core); one 2000-encounter chunk peaks at about 0.2 GB RSS
-CHUNK_SIZE = Setting("chunk_size", 2000, "", 1, 10_000_000, "encounters per chunk (they share a DAA call)")
+CHUNK_SIZE = Setting("chunk_size", 2000, "", 1, 10_000_000, "encounters per chunk (one result file per group and chunk)")
 #: encounter rows per task of a campaign (several chunks of several groups side by side): peak memory
 #: grows with them (:mod:`daa_sil.study.campaign_plan`); results do not depend on them
 BATCH_ROWS = Setting("batch_rows", 10_000, "", 1, 10_000_000, "encounter rows per task (results do not depend on it)")

@@ -20,13 +20,12 @@ continues from it.
 Determinism: the encounter set is generated once from the campaign seed and saved as
 ``DIR/encounters.parquet``; every random stream of encounter ``i`` (pilot, uplink and downlink delay)
 comes from the encounter's own seed (:func:`encounter_seeds`), the same for every group (common
-random numbers), never from the chunk, and the DAA is called once per chunk of a group on exactly
-that chunk's rows (:mod:`daa_sil.daa_batches`: its last bits depend on the rows of a call). Results
-therefore do not depend on batching, worker count, executor or interruption: a killed campaign
-resumed with ``resume=True`` skips complete chunks (each checked against its checksum file; a
-damaged one is named in a warning and computed again) and ends with exactly the tables of an
-uninterrupted run. The chunk size decides which encounters share a DAA call, so it is part of the
-configuration (``campaign.json``, checked on resume).
+random numbers), never from the chunk, and the DAA gives every encounter what a call of its own
+gives. Results therefore do not depend on chunking, batching, worker count, executor or
+interruption: a killed campaign resumed with ``resume=True`` skips complete chunks (each checked
+against its checksum file; a damaged one is named in a warning and computed again) and ends with
+exactly the tables of an uninterrupted run. The chunk size names the result files, so it is
+recorded (``campaign.json``) and checked on resume.
 
 Layout of ``DIR``::
 

@@ -27,9 +27,8 @@ from typing import Sequence
 from daa_sil.config.settings import BATCH_ROWS
 from daa_sil.errors import UsageError
 
-#: encounter rows per task by default: the five paper groups of one 2,000-encounter chunk. The DAA,
-#: most of a step's time, is called per chunk anyway (:mod:`daa_sil.daa_batches`), so larger tasks
-#: gain little (a few %) and lose more on a kill
+#: encounter rows per task by default: the five paper groups of one 2,000-encounter chunk (results do
+#: not depend on it; larger tasks gain little and lose more on a kill)
 DEFAULT_BATCH_ROWS = BATCH_ROWS.default
 
 
