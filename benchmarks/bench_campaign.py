@@ -1,4 +1,4 @@
-"""Benchmark the fast-time campaign: wall time and peak memory, against bba2fd8 in the same run.
+"""Benchmark the fast-time campaign: wall time and peak memory, against a baseline commit in the same run.
 
 Usage::
 
@@ -8,11 +8,11 @@ Usage::
 
 Every campaign runs as ``daa-sil campaign run`` in a subprocess (``--reading literal``, pinned: a
 benchmark must not change what it measures when a default moves), reading its wall time and the
-peak RSS of its largest process (driver or worker; ``wait4``). The baseline is the code at bba2fd8
+peak RSS of its largest process (driver or worker; ``wait4``). The baseline is a commit (``/work/baseline``)
 installed apart (``--baseline-python``, default ``/work/baseline/.venv/bin/python``, with its own
 cache ``--baseline-cache``), run on the same configuration in the same run, alternating with this
 code so both see the same machine load; the 1-minute load average is printed with every figure.
-Target (issue 21): 10,000 x 5 groups <= 40 s on 2 workers (stretch 20 s); peak memory <= 1 GiB per
+Target: 10,000 x 5 groups <= 15 s on 2 workers; peak memory <= 1 GiB per
 worker. Results of both runs are compared (``identical: yes`` when the baseline ran).
 """
 
@@ -72,7 +72,7 @@ def _identical(a: Path, b: Path) -> str:
 
 
 def measure(n: int, m: int, args, env_new: dict, env_base: "dict | None") -> dict:
-    """This code (and bba2fd8, alternating) on one configuration; returns the figures."""
+    """This code (and the baseline, alternating) on one configuration; returns the figures."""
     out = {}
     with tempfile.TemporaryDirectory(prefix="bench-campaign-") as tmp:
         tmp = Path(tmp)
@@ -110,11 +110,11 @@ def main() -> None:
                     help="instead of the figure: a table of wall time and peak RSS at these encounter counts")
     ap.add_argument("--repeat", type=int, default=1, help="runs per configuration and code, best kept (default 1)")
     ap.add_argument("--baseline-python", type=Path, default=BASELINE_PYTHON,
-                    help=f"python of bba2fd8 installed apart (default {BASELINE_PYTHON})")
+                    help=f"python of the baseline commit installed apart (default {BASELINE_PYTHON})")
     ap.add_argument("--baseline-cache", type=Path, default=BASELINE_CACHE,
                     help=f"DAA_SIL_CACHE of the baseline (default {BASELINE_CACHE})")
     ap.add_argument("--no-baseline", action="store_true", help="measure this code only")
-    ap.add_argument("--baseline-label", default="bba2fd8", help="what the baseline python runs (printed)")
+    ap.add_argument("--baseline-label", default="baseline", help="what the baseline python runs (printed)")
     args = ap.parse_args()
     intruders = [int(x) for x in args.intruders.split(",")]
     sizes = [int(x) for x in args.scaling.split(",")] if args.scaling else [args.encounters]
@@ -123,12 +123,12 @@ def main() -> None:
     env_base = None
     if not args.no_baseline and args.baseline_python == BASELINE_PYTHON and not BASELINE_PYTHON.is_file():
         print(f"bench_campaign: no baseline at {BASELINE_PYTHON}: this code only, no ratio "
-              f"(--baseline-python PY to compare; CONTRIBUTING.md says how to install bba2fd8 apart)")
+              f"(--baseline-python PY to compare; CONTRIBUTING.md says how to install a baseline apart)")
         args.no_baseline = True
     if not args.no_baseline:
         if not args.baseline_python.is_file():
             raise SystemExit(f"bench_campaign: no baseline python at {args.baseline_python} "
-                             f"(install bba2fd8 apart, pass --baseline-python, or --no-baseline)")
+                             f"(install a baseline apart, pass --baseline-python, or --no-baseline)")
         env_base = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
         env_base["DAA_SIL_CACHE"] = str(args.baseline_cache)
     print(f"[load] 1-minute load average {_load():.2f} on {os.cpu_count()} cores; reading literal; "
@@ -149,7 +149,7 @@ def main() -> None:
                 line += (f"; {args.baseline_label} same run {_fmt(r['base'])}: ratio x{r['base']['wall'] / new['wall']:.2f} "
                          f"wall, x{r['base']['cpu'] / new['cpu']:.2f} CPU (identical: {r['identical']})")
             tag = "[campaign]" if not args.scaling else "[scaling]"
-            target = "; target 40 s (stretch 20 s), <= 1 GiB per worker" if not args.scaling else ""
+            target = "; target 15 s, <= 1 GiB per worker" if not args.scaling else ""
             print(f"{tag} {line}{target}", flush=True)
 
 

@@ -41,6 +41,7 @@ def synth_campaign(d: Path, n: int, seed: int = 0) -> Path:
     import pyarrow.parquet as pq
 
     from daa_sil.study.fasttime import ENCOUNTER_SCHEMA
+    from daa_sil.study.fasttime_results import SUPERSEDED_COLUMNS
 
     rng = np.random.default_rng(seed)
     active = rng.random(n) < 0.15
@@ -77,6 +78,12 @@ def synth_campaign(d: Path, n: int, seed: int = 0) -> Path:
                      "n_by_both": np.zeros(n, np.int64), "n_lookup_in_box": rng.binomial(steps, 0.1),
                      "n_pilot_received_whole": cols["n_pilot_received"] + rng.poisson(5, n),
                      "n_pilot_exec_whole": pexec + rng.poisson(2, n)})
+        # commands superseded within their step, the highest alert level, other deviation definitions
+        sup = rng.poisson(1.0, n)
+        cols.update({c: sup if c.endswith("whole") else np.zeros(n, np.int64) for c in SUPERSEDED_COLUMNS})
+        cols.update({"max_alert_level": rng.integers(0, 4, n), "dev_h_tmean_m": cols["dev_h_m"] / 2,
+                     "dev_v_tmean_m": cols["dev_v_m"] / 2, "dev_xtrack_m": cols["dev_h_m"] * 0.9,
+                     "dev_h_end_m": cols["dev_h_m"]})
         missing = [f.name for f in ENCOUNTER_SCHEMA if f.name not in cols]
         if missing:
             raise SystemExit(f"bench_report: the synthetic table lacks {missing} (ENCOUNTER_SCHEMA changed)")

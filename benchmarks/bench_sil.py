@@ -248,10 +248,15 @@ LATE_TARGET_MS = 50.0
 
 
 def _launch(scenario: Path, out: Path, clock: list, env: "dict | None" = None) -> subprocess.Popen:
-    out.mkdir(parents=True, exist_ok=True)
+    out.parent.mkdir(parents=True, exist_ok=True)  # next to the run's --out, which must be empty when it starts
     return subprocess.Popen([sys.executable, "-m", "daa_sil.cli", "run", str(scenario), "--out", str(out), "--json"]
-                            + clock, stdout=open(out / "stdout.json", "w"), stderr=open(out / "stderr.txt", "w"),
-                            cwd=ROOT, env={**os.environ, **(env or {})})
+                            + clock, stdout=open(_console(out, "stdout.json"), "w"),
+                            stderr=open(_console(out, "stderr.txt"), "w"), cwd=ROOT, env={**os.environ, **(env or {})})
+
+
+def _console(out: Path, name: str) -> Path:
+    """Where the console output of the run into ``out`` goes: ``OUT.stdout.json`` / ``OUT.stderr.txt``."""
+    return out.parent / f"{out.name}.{name}"
 
 
 def _evaluate(out: Path, rc: int, ref_rows: list, ref: dict) -> dict:
@@ -261,7 +266,7 @@ def _evaluate(out: Path, rc: int, ref_rows: list, ref: dict) -> dict:
     try:
         res = json.loads((out / "result.json").read_text())
     except (OSError, ValueError):
-        ev["error"] = (out / "stderr.txt").read_text()[-300:]
+        ev["error"] = _console(out, "stderr.txt").read_text()[-300:]
         return ev
     from daa_sil.steplog import cells_equal, steplog_metadata
 

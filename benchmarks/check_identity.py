@@ -26,6 +26,7 @@ examples::
 
     python benchmarks/check_identity.py                               # every bba2fd8 reading x 7 groups x 2,000
     python benchmarks/check_identity.py --readings literal --encounters 200 --sil --conformance
+    python benchmarks/check_identity.py --readings paper=paper-contradicted,extended --allow-added-columns
     python benchmarks/check_identity.py --baseline /tmp/start --baseline-cache ~/.cache/daa-sil \\
         --baseline-python .venv/bin/python                            # an earlier commit's sources (a worktree)
 """
@@ -76,11 +77,15 @@ class Side:
         return rc == 0
 
 
-def compare(a: Path, b: Path) -> bool:
-    """True when the result tables (or step logs) under ``a`` and ``b`` are identical."""
+def compare(a: Path, b: Path, allow_added: bool = False) -> bool:
+    """True when the result tables (or step logs) under ``a`` and ``b`` are identical (with
+    ``allow_added``, on the columns both have; the new side's added columns are listed)."""
     from daa_sil.study.campaign_compare import compare_dirs
 
-    res = compare_dirs(a, b)
+    res = compare_dirs(a, b, allow_added=allow_added)
+    if res.added:
+        names = sorted({x.split(": ", 1)[1] for x in res.added})
+        print(f"    columns only in the new side (not compared): {', '.join(names)}")
     for line in res.differences[:8]:
         print(f"    {line}")
     if len(res.differences) > 8:
@@ -90,16 +95,18 @@ def compare(a: Path, b: Path) -> bool:
 
 def check_campaigns(sides: list, args, work: Path) -> list:
     out = []
-    for r in args.readings:
+    for spec in args.readings:
         dirs = []
         t0 = time.perf_counter()
-        for s in sides:
+        base_name, _, new_name = spec.partition("=")  # BASE=NEW: the reading's name on each side
+        r = spec.replace("=", "-as-")
+        for s, name in zip(sides, (base_name, new_name or base_name)):
             d = work / f"{s.name}-campaign-{r}"
             ok = s.run(["campaign", "run", "--groups", args.groups, "--encounters", str(args.encounters), "--seed",
-                        str(args.seed), "--reading", r, "--workers", str(args.workers), "--out", str(d), "--no-progress"],
-                       work / f"{s.name}-campaign-{r}.log")
+                        str(args.seed), "--reading", name, "--workers", str(args.workers), "--out", str(d),
+                        "--no-progress"], work / f"{s.name}-campaign-{r}.log")
             dirs.append(d if ok else None)
-        same = all(d is not None for d in dirs) and compare(*dirs)
+        same = all(d is not None for d in dirs) and compare(*dirs, allow_added=args.allow_added_columns)
         print(f"campaign {r:13s} {args.groups} x {args.encounters}: {'identical' if same else 'DIFFERENT'} "
               f"({time.perf_counter() - t0:.0f} s)", flush=True)
         out.append(same)
@@ -115,7 +122,8 @@ def check_sil(sides: list, args, work: Path) -> list:
             d = work / f"{s.name}-sil-{sc}"
             dirs.append(d if s.run(["run", str(path), "--out", str(d)], work / f"{s.name}-sil-{sc}.log")
                         else None)
-        same = all(d is not None for d in dirs) and compare(dirs[0] / "steplog.parquet", dirs[1] / "steplog.parquet")
+        same = all(d is not None for d in dirs) and compare(dirs[0] / "steplog.parquet", dirs[1] / "steplog.parquet",
+                                                            allow_added=args.allow_added_columns)
         print(f"SIL {sc:18s} step log: {'identical' if same else 'DIFFERENT'}", flush=True)
         out.append(same)
     return out
@@ -145,7 +153,11 @@ def main(argv: "list[str] | None" = None) -> int:
     ap.add_argument("--baseline-cache", default=str(BASELINE_CACHE),
                     help=f"DAA_SIL_CACHE of the baseline (default {BASELINE_CACHE}; none: this environment's)")
     ap.add_argument("--readings", type=lambda s: [r for r in s.split(",") if r], default=list(BBA2FD8_READINGS),
-                    help=f"comma-separated readings, by their names at the baseline (default: {','.join(BBA2FD8_READINGS)})")
+                    help=f"comma-separated readings, by their names at the baseline, or BASE=NEW where the reading is "
+                         f"named otherwise here (default: {','.join(BBA2FD8_READINGS)})")
+    ap.add_argument("--allow-added-columns", action="store_true",
+                    help="columns only this checkout writes are listed, not counted as differences (the shared "
+                         "columns are still compared bit for bit)")
     ap.add_argument("--groups", default=GROUPS, help=f"groups (default {GROUPS})")
     ap.add_argument("--encounters", type=int, default=2000, help="encounters per group (default 2000)")
     ap.add_argument("--seed", type=int, default=7, help="campaign seed (default 7)")

@@ -77,7 +77,6 @@ from daa_sil.decision import (A_DAA, A_PILOT, A_WAITING, AUTHORITY_NAMES, BY_BOT
 from daa_sil.agent_memory import AgentMemory, PilotInput
 from daa_sil.agent_steps import BlendStep, LinkStep, WaitStep, blend_step, link_step, wait_step
 from daa_sil.wait_function import WaitLookup, WaitValue, make_wait_lookup
-from daa_sil.daa_batches import check_batches, positions_by_batch
 from daa_sil.geometry.kinematics import AircraftState, Command
 
 
@@ -86,22 +85,42 @@ def _reached(own: AircraftState, cmd: Command) -> np.ndarray:
     return (np.abs(dtrk) < np.radians(0.5)) & (np.abs(dvs) < 0.25) & (np.abs(dgs) < 0.5)
 
 
-def _safety(batch_of, rows: np.ndarray, own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
-            horizon: float, known: "dict | None" = None) -> np.ndarray:
-    """SM(u) of ``cmd`` (one per row of ``rows``), one :func:`safety_metric` call per DAA batch.
-    ``known`` maps the bytes of a call's rows to SM values already computed by a call on exactly
-    those rows (the same batch, so the same numbers); the calls made here are added to it."""
-    out = np.empty(rows.size)
-    for pos in positions_by_batch(batch_of, rows):
-        r = rows[pos]
-        key = r.tobytes()
-        got = known.get(key) if known is not None else None
-        if got is None:
-            got = safety_metric(own[r], intr[r], cmd[pos] if pos.size != rows.size else cmd, cfg, horizon)
-            if known is not None:
-                known[key] = got
-        out[pos] = got
-    return out
+#: False: every SM(u) the agent needs is computed, none reused (the reference the tests compare with)
+REUSE_SM = True
+
+
+def _same_command(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(R,) bool: rows of ``(R, 3)`` commands equal field by field, bit for bit (nan equal to nan)."""
+    same = (a.view(np.int64) == b.view(np.int64)) | (np.isnan(a) & np.isnan(b))
+    return same.all(axis=1)
+
+
+class _SafetyOnce:
+    """SM(u) of the step's state (``own``, ``intr``) for the commands the agent asks about, each (row,
+    command) computed once: a later request for the same command of a row (bit for bit) takes the value
+    computed before. Exact, as each row's SM is what a call of its own gives whatever rows share a call."""
+
+    def __init__(self, own: AircraftState, intr: AircraftState, cfg: DaaConfig, horizon: float):
+        self.own, self.intr, self.cfg, self.horizon = own, intr, cfg, horizon
+        self.known: list = []  #: (rows ascending, (R, 3) commands, (R,) SM) of the calls made
+
+    def __call__(self, rows: np.ndarray, cmd: Command) -> np.ndarray:
+        """SM (s) of ``cmd`` (one per row of ``rows``, ascending row indices)."""
+        want = np.stack([np.broadcast_to(np.asarray(c, float), rows.shape) for c in (cmd.trk, cmd.vs, cmd.gs)], -1)
+        out = np.full(rows.size, np.nan)
+        todo = np.ones(rows.size, bool)
+        for k_rows, k_cmd, k_sm in self.known if REUSE_SM else ():
+            pos = np.minimum(np.searchsorted(k_rows, rows), k_rows.size - 1)
+            hit = todo & (k_rows[pos] == rows)
+            hit[hit] = _same_command(k_cmd[pos[hit]], want[hit])
+            out[hit] = k_sm[pos[hit]]
+            todo &= ~hit
+        if todo.any():
+            r = rows[todo]
+            got = safety_metric(self.own[r], self.intr[r], cmd if todo.all() else cmd[todo], self.cfg, self.horizon)
+            out[todo] = got
+            self.known.append((r, want[todo], got))
+        return out
 
 
 def _alerting(t: float, own: AircraftState, intr: AircraftState, memory: AgentMemory, cfg: DaaConfig):
@@ -119,9 +138,9 @@ def _alerting(t: float, own: AircraftState, intr: AircraftState, memory: AgentMe
 
 
 def _daa_resolutions(t: float, own: AircraftState, intr: AircraftState, cfg: DaaConfig, memory: AgentMemory,
-                     ia: np.ndarray, batch_of, alert, daa_state, bands):
-    """Bands and the DAA resolution of the active rows ``ia``, one call per DAA batch: ``(command,
-    SM (s), axis, direction, [(rows, Bands)] per batch)``; nan / 0 on inactive rows."""
+                     ia: np.ndarray, alert, daa_state, bands):
+    """Bands and the DAA resolution of the active rows ``ia``, in one call: ``(command, SM (s), axis, direction,
+    [(rows, Bands)])`` (no part when no row is active); nan / 0 on inactive rows."""
     n = own.shape[0]
     nan = np.full(n, np.nan)
     sm_daa = nan.copy()
@@ -129,8 +148,8 @@ def _daa_resolutions(t: float, own: AircraftState, intr: AircraftState, cfg: Daa
     daa_axis = np.zeros(n, np.int8)
     daa_dir = np.zeros(n, np.int8)
     parts: list = []
-    for pos in positions_by_batch(batch_of, ia):
-        r = ia[pos]
+    if ia.size:
+        r = ia
         o, i_ = own[r], intr[r]
         if bands is not None:
             b = bands if r.size == n else bands[r]
@@ -150,7 +169,7 @@ def _daa_resolutions(t: float, own: AircraftState, intr: AircraftState, cfg: Daa
 def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotInput, memory: AgentMemory,
                policy: "AllocationPolicy | PolicyRows", daa_cfg: "DaaConfig | None" = None,
                wait_lookup: "WaitLookup | None" = None, bands=None, turn_rate: "np.ndarray | None" = None,
-               *, band_record: bool = True, daa_batches: "np.ndarray | None" = None) -> tuple[Command, Decision, AgentMemory]:
+               *, band_record: bool = True) -> tuple[Command, Decision, AgentMemory]:
     """One allocation step at sim time ``t`` (s) for ownship ``(N,)`` and intruders ``(N, M)``.
 
     Returns ``(command to fly, decision record, new memory)``; the record is a
@@ -161,12 +180,12 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     ``turn_rate`` ``(N, M)`` is each intruder's estimated turn rate (compass rad/s, + = right;
     default 0), which picks the wait map (:class:`daa_sil.onboard.TurnRateEstimator`).
     ``band_record=False`` leaves ``bands_trk``/``bands_trk_region`` None (nobody reads them).
-    ``daa_batches`` ``(N,)``: the DAA is called once per batch (:mod:`daa_sil.daa_batches`).
+    Every row's outputs are those of a call of its own (the DAA decides everything per encounter), so a
+    batch is stepped in one call whatever its rows are.
     """
     cfg = daa_cfg if daa_cfg is not None else DaaConfig()
     n = own.shape[0]
     pol = PolicyRows.of(policy, n)
-    batch_of = check_batches(daa_batches, n)
     horizon = cfg.sm_horizon_s
     alert, max_alert, daa_state = _alerting(t, own, intr, memory, cfg)
     lk = link_step(t, own, pilot, memory, pol)  # sub-step 1: the link
@@ -178,14 +197,13 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     # Once the onboard DAA (or a blend) holds authority, handing back to the pilot's course is only
     # done when that course is safe: otherwise the ownship would fly back into the conflict it just
     # resolved as soon as the alert clears, and alternate between the two every step.
-    # SM of the last pilot command by the rows of each call: a later call on exactly the same rows
-    # (same state and command) takes these numbers (always so at N = 1, the SIL vehicle)
-    sm_calls: dict = {}
+    # SM(u) of this state, once per row and command (the revert check's, the pilot's, the executed one's)
+    safety = _SafetyOnce(own, intr, cfg, horizon)
     unsafe_revert = np.zeros(n, bool)
     check = (memory.authority == A_DAA) & ~((max_alert >= 2) | in_progress)
     if check.any():
         j = np.nonzero(check)[0]
-        unsafe_revert[j] = ~(_safety(batch_of, j, own, intr, lk.last_pilot[j], cfg, horizon, sm_calls) > 0)
+        unsafe_revert[j] = ~(safety(j, lk.last_pilot[j]) > 0)
     # active_from "encounter" (per row): decide every step from the start until safe avoidance
     encounter_over = memory.encounter_over
     whole = np.zeros(n, bool)
@@ -195,15 +213,15 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
         whole = from_start & ~encounter_over
     active = ((max_alert >= 2) | in_progress | unsafe_revert | whole) & pol.value("enabled").astype(bool)
     ia = np.nonzero(active)[0]
-    daa_cmd, sm_daa, daa_axis, daa_dir, parts = _daa_resolutions(t, own, intr, cfg, memory, ia, batch_of, alert,
-                                                                  daa_state, bands)
+    daa_cmd, sm_daa, daa_axis, daa_dir, parts = _daa_resolutions(t, own, intr, cfg, memory, ia, alert, daa_state,
+                                                                  bands)
 
     # --- the pilot's command: its safety and its (axis, direction) ------------------------------
     sm_pilot = np.full(n, np.nan)
     fa = fresh & active
     if fa.any():
         j = np.nonzero(fa)[0]
-        sm_pilot[j] = _safety(batch_of, j, own, intr, pcmd[j], cfg, horizon, sm_calls)
+        sm_pilot[j] = safety(j, pcmd[j])
     # The pilot's (axis, direction) preference is the change from the pilot's previous course to the
     # new command, not from the current state: once the DAA or a blend has moved the ownship, a
     # repeated "hold" command would otherwise read as a turn back and flip the blend every step.
@@ -218,7 +236,8 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     as_none = (pol.value("unsafe_hold") == "no-command") & active & fresh & (p_axis == AXIS_NONE) & ~(sm_pilot > 0)
     decide = fresh & ~as_none  #: fresh commands decided as commands
 
-    ws = wait_step(t, own, intr, cfg, pol, memory, active, decide, link_lost, wait_lookup, turn_rate)  # sub-step 2
+    ws = wait_step(t, own, intr, cfg, pol, memory, active, decide, link_lost, wait_lookup, turn_rate,
+                   max_alert)  # sub-step 2
     wait = ws.wait
     bl = blend_step(own, intr, cfg, active, decide, link_lost, sm_pilot, pol.value("blending").astype(bool),
                     p_axis, p_dir, pcmd, parts)  # sub-step 3
@@ -239,12 +258,12 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
 
     # --- safety of what is executed -------------------------------------------------------------
     # pilot: its SM; blend / DAA: the chosen band candidate's SM (same trajectory model); hold: the
-    # last pilot command's SM (computed, or taken from a call on exactly these rows)
+    # last pilot command's SM (computed, or the one computed for it already this step)
     sm_exec = np.where(pilot_ok, sm_pilot, np.where(blend, bl.sm, np.where(use_daa, sm_daa, np.nan)))
     other = active & np.isnan(sm_exec)
     if other.any():
         j = np.nonzero(other)[0]
-        sm_exec[j] = _safety(batch_of, j, own, intr, exec_cmd[j], cfg, horizon, sm_calls if wait[j].all() else None)
+        sm_exec[j] = safety(j, exec_cmd[j])
     e_axis, e_dir = classify_command(own, exec_cmd, cfg)
     exact = (decision == D_BLEND) & (p_axis != AXIS_NONE) & (e_axis == p_axis) & (e_dir == p_dir)
     bt, br_ = _band_record(cfg, n, parts) if band_record else (None, None)

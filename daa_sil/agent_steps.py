@@ -19,7 +19,7 @@ import numpy as np
 from daa_sil.agent_memory import AgentMemory, PilotInput
 from daa_sil.allocation import PolicyRows
 from daa_sil.daa import DaaConfig, proj_lowc, search_maneuver, sm_from_tin
-from daa_sil.decision import BY_BOTH, BY_MAP, BY_NEITHER, BY_NONE, BY_PROJL
+from daa_sil.decision import A_DAA, BY_BOTH, BY_KEPT, BY_MAP, BY_NEITHER, BY_NONE, BY_PROJL
 from daa_sil.geometry.kinematics import AircraftState, Command
 from daa_sil.wait_function import WaitLookup, WaitValue, wait_values
 
@@ -66,8 +66,10 @@ class WaitStep:
 
 def wait_step(t: float, own: AircraftState, intr: AircraftState, cfg: DaaConfig, pol: PolicyRows, memory: AgentMemory,
               active: np.ndarray, decide: np.ndarray, link_lost: np.ndarray, wait_lookup: "WaitLookup | None",
-              turn_rate) -> WaitStep:
-    """Sub-step 2: wait (hold the pilot's last command) iff w(S) >= W_T and no ProjL within N."""
+              turn_rate, max_alert: "np.ndarray | None" = None) -> WaitStep:
+    """Sub-step 2: wait (hold the pilot's last command) iff w(S) >= W_T and no ProjL within N. A row
+    whose policy keeps the DAA's authority (``daa_authority = "until-clear"``) does not wait while the
+    DAA held authority last step and an intruder still raises an alert (``max_alert`` (N,) >= 1)."""
     n = own.shape[0]
     ia = np.nonzero(active)[0]
     projl = np.zeros(n, bool)
@@ -95,6 +97,11 @@ def wait_step(t: float, own: AircraftState, intr: AircraftState, cfg: DaaConfig,
         # the first that holds of: not decided here, both vetoes, the map's, ProjL's, neither
         decided_by = np.where(~nc, BY_NONE, np.where(veto_map & veto_projl, BY_BOTH, np.where(
             veto_map, BY_MAP, np.where(veto_projl, BY_PROJL, BY_NEITHER)))).astype(np.int8)
+        keep = pol.value("daa_authority") == "until-clear"
+        if keep.any() and max_alert is not None:  # the extension: the DAA keeps its authority until clear
+            kept = wait & keep & (memory.authority == A_DAA) & (np.asarray(max_alert) >= 1)
+            wait = wait & ~kept
+            decided_by = np.where(kept, BY_KEPT, decided_by).astype(np.int8)
     else:  # no row decides a wait (every idle step): no veto, no wait
         veto_map = veto_projl = wait = np.zeros(n, bool)
         decided_by = np.full(n, BY_NONE, np.int8)

@@ -79,8 +79,10 @@ def _adopt(prog: "str | None") -> None:
         adopt(prog)
 
 
-def _interrupted(prog: str, exc: KeyboardInterrupt) -> int:
-    """One line for Ctrl-C / SIGTERM / SIGHUP (what was cut short, if the command said); exit 128 + signal."""
+def _interrupted(prog: str, exc: KeyboardInterrupt, whole_process: bool = False) -> int:
+    """One line for Ctrl-C / SIGTERM / SIGHUP (what was cut short, if the command said); exit 128 + signal.
+    ``whole_process``: this is the process's own command (not a call from Python), so a further signal
+    while the interpreter shuts down ends it at once (:func:`_end_on_further_signals`)."""
     from daa_sil.sil.children import interrupt_signum
 
     detail = str(exc) if str(exc).startswith("interrupted") else "interrupted"
@@ -88,12 +90,32 @@ def _interrupted(prog: str, exc: KeyboardInterrupt) -> int:
         print(f"{prog}: {detail}", file=sys.stderr, flush=True)
     except OSError:  # a closed terminal (SIGHUP)
         pass
-    return 128 + interrupt_signum(exc)
+    code = 128 + interrupt_signum(exc)
+    if whole_process:
+        _end_on_further_signals(code)
+    return code
+
+
+def _end_on_further_signals(code: int) -> None:
+    """After the interrupt's line the command has stopped its workers and children and the interpreter
+    is shutting down: another Ctrl-C (a user pressing it twice) is ignored, instead of a traceback from
+    the exit handler it would interrupt; SIGTERM or SIGHUP end the process at once with ``code``."""
+    import signal
+
+    def end_now(signum, frame):
+        os._exit(code)
+
+    for name, handler in (("SIGINT", signal.SIG_IGN), ("SIGTERM", end_now), ("SIGHUP", end_now)):
+        try:
+            signal.signal(getattr(signal, name), handler)
+        except (AttributeError, ValueError):  # no such signal here, or not the main thread
+            pass
 
 
 def main(argv: "list[str] | None" = None) -> int:
     _adopt(None)
     freeze_at_exit()  # the interpreter's shutdown skips traversing numba's objects (daa_sil.process_gc)
+    whole = argv is None  # the console script (not a call from Python, e.g. a test)
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv[0] if argv else None)
     try:
@@ -105,7 +127,7 @@ def main(argv: "list[str] | None" = None) -> int:
         print(f"daa-sil: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt as exc:
-        return _interrupted("daa-sil", exc)
+        return _interrupted("daa-sil", exc, whole_process=whole)
     except BrokenPipeError:
         return 0
     return int(rc or 0)

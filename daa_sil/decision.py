@@ -20,8 +20,9 @@ from daa_sil.daa.config import AXIS_NAMES, DIR_NAMES, RULE_NAMES
 
 DECISION_NAMES = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
 (D_NONE, D_WAIT, D_NO_WAIT, D_PILOT, D_BLEND, D_DAA_OVERRIDE, D_DAA, D_STALE, D_LINK_LOST) = range(9)
-DECIDED_BY_NAMES = ("none", "map", "projl", "both", "neither")
-BY_NONE, BY_MAP, BY_PROJL, BY_BOTH, BY_NEITHER = range(5)
+#: ``kept``: the DAA kept the authority it held (policy ``daa_authority = "until-clear"``)
+DECIDED_BY_NAMES = ("none", "map", "projl", "both", "neither", "kept")
+BY_NONE, BY_MAP, BY_PROJL, BY_BOTH, BY_NEITHER, BY_KEPT = range(6)
 AUTHORITY_NAMES = ("pilot", "daa", "waiting")
 A_PILOT, A_DAA, A_WAITING = range(3)
 
@@ -102,4 +103,4 @@ def decode(decisions: Mapping) -> dict:
 
 __all__ = ["Decision", "DECISION_FIELDS", "DECISION_NAMES", "DECIDED_BY_NAMES", "AUTHORITY_NAMES", "CODE_NAMES",
            "decode", "D_NONE", "D_WAIT", "D_NO_WAIT", "D_PILOT", "D_BLEND", "D_DAA_OVERRIDE", "D_DAA", "D_STALE",
-           "D_LINK_LOST", "BY_NONE", "BY_MAP", "BY_PROJL", "BY_BOTH", "BY_NEITHER", "A_PILOT", "A_DAA", "A_WAITING"]
+           "D_LINK_LOST", "BY_NONE", "BY_MAP", "BY_PROJL", "BY_BOTH", "BY_NEITHER", "BY_KEPT", "A_PILOT", "A_DAA", "A_WAITING"]

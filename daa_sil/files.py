@@ -16,11 +16,12 @@ import contextlib
 import errno
 import json
 import os
+import stat
 import tempfile
 from pathlib import Path
 from typing import Iterator
 
-from .errors import OutputError
+from .errors import OutputError, UsageError
 
 #: errno values that mean "no room for this file"
 _FULL = {errno.ENOSPC: "disk full", errno.EFBIG: "file size limit reached", errno.EDQUOT: "disk quota exceeded"}
@@ -53,6 +54,100 @@ def ensure_dir(path: "str | os.PathLike") -> Path:
     os.close(fd)
     os.unlink(probe)
     return p
+
+
+#: bytes the temporary name of an atomic write adds to its target's name (``.NAME.XXXXXXXX.tmp``)
+TEMP_NAME_EXTRA = 14
+#: bytes kept free below the system's path limit for what a command writes inside an output directory
+#: (``logs/vehicle.log``, ``ID-2-projl/.decisions-00000.parquet.XXXXXXXX.tmp``, ...)
+PATH_ROOM = 64
+
+
+def shown(text: str, limit: int = 160) -> str:
+    """``text`` for a one-line message: undecodable bytes escaped, a long name cut in its middle."""
+    try:
+        safe = os.fsencode(str(text)).decode("utf-8", "backslashreplace")  # a stray byte shows as \\xff
+    except UnicodeEncodeError:
+        safe = str(text).encode("utf-8", "backslashreplace").decode("utf-8")
+    return safe if len(safe) <= limit else f"{safe[:limit // 2]}...{safe[-(limit // 2 - 3):]}"
+
+
+def _limit(path: "str | os.PathLike", name: str, default: int) -> int:
+    try:
+        return int(os.pathconf(path, name))
+    except (OSError, ValueError):
+        return default
+
+
+def check_output_path(path: "str | os.PathLike", option: str, *, directory: bool = False) -> Path:
+    """Check, before any work, that ``path`` can be written as an output (a directory when
+    ``directory``, else a file written atomically); creates nothing. Returns ``Path(path)``.
+
+    * the name is UTF-8 (every format we write, every message and the child processes' command lines
+      carry it) and holds no NUL: otherwise a one-line :class:`UsageError`;
+    * every component not yet there fits the file system's name limit (``NAME_MAX``, 255 bytes on
+      most; an output file leaves room for its temporary name, :data:`TEMP_NAME_EXTRA`) and the whole
+      path its path limit: UsageError (exit 2), before any call that would fail with ``ENAMETOOLONG``;
+    * no component is a regular file, an existing target is of the right kind, and the nearest
+      existing directory lets a file be created (probed with a file that is removed at once, since
+      ``os.access`` says yes to root on read-only mounts): :class:`OutputError` (exit 1).
+    """
+    text = os.fsdecode(os.fspath(path))
+    if not text:
+        raise UsageError(f"{option} is empty; give a path")
+    if "\0" in text:
+        raise UsageError(f"{option} {shown(text)}: a path cannot hold a NUL byte")
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        raise UsageError(f"{option} {shown(text)}: the name is not valid UTF-8 (the step log, result.json and "
+                         f"every message record it as text); choose a UTF-8 name") from None
+    full = Path(os.path.abspath(text))
+    path_max = _limit("/", "PC_PATH_MAX", 4096)
+    if len(os.fsencode(str(full))) + PATH_ROOM > path_max:
+        raise UsageError(f"{option} {shown(text)}: the path is {len(os.fsencode(str(full)))} bytes long; this system "
+                         f"takes {path_max} with room for the files inside ({path_max - PATH_ROOM} at most)")
+    kind = "directory" if directory else "file"
+    here, parts = Path(full.anchor), full.parts[1:]
+    missing: tuple = ()
+    for i, name in enumerate(parts):
+        nxt, last = here / name, i == len(parts) - 1
+        try:
+            st = os.stat(nxt)
+        except FileNotFoundError:
+            missing = parts[i:]
+            break
+        except OSError as exc:
+            if exc.errno == errno.ENAMETOOLONG:
+                raise UsageError(f"{option} {shown(text)}: the name {shown(name, 40)} is {len(os.fsencode(name))} "
+                                 f"bytes long; the file system takes at most {_limit(here, 'PC_NAME_MAX', 255)}") from None
+            raise OutputError(f"cannot create output {kind} {shown(text)}: {exc.strerror or exc}") from None
+        if not last and not stat.S_ISDIR(st.st_mode):
+            raise OutputError(f"cannot create output {kind} {shown(text)}: {nxt} is a file (Not a directory)")
+        if last and directory and not stat.S_ISDIR(st.st_mode):
+            raise OutputError(f"cannot create output directory {shown(text)}: it exists and is not a directory")
+        if last and not directory and stat.S_ISDIR(st.st_mode):
+            raise UsageError(f"{option} {shown(text)} is a directory, not a file path")
+        here = nxt if stat.S_ISDIR(st.st_mode) else here
+    name_max = _limit(here, "PC_NAME_MAX", 255)
+    checked = missing or (() if directory else parts[-1:])
+    for i, name in enumerate(checked):
+        room = TEMP_NAME_EXTRA if (not directory and i == len(checked) - 1) else 0
+        if len(os.fsencode(name)) + room > name_max:
+            what = f"at most {name_max - room} for an output file (its temporary name adds {room})" if room else \
+                f"at most {name_max}"
+            raise UsageError(f"{option} {shown(text)}: the name {shown(name, 40)} is {len(os.fsencode(name))} bytes "
+                             f"long; the file system takes {what}")
+    try:  # a file can be created where the output goes (or, for a new path, in its nearest existing directory)
+        fd, probe = tempfile.mkstemp(prefix=".daa-sil-probe.", suffix=".tmp", dir=here)
+    except OSError as exc:
+        why = exc.strerror or str(exc)
+        if here == full:
+            raise OutputError(f"output directory {shown(text)} is not writable: {why}") from None
+        raise OutputError(f"cannot create output {kind} {shown(text)}: {here} is not writable ({why})") from None
+    os.close(fd)
+    os.unlink(probe)
+    return Path(text)
 
 
 @contextlib.contextmanager
@@ -122,6 +217,17 @@ def remove_stale_temps(directory: "str | os.PathLike", recursive: bool = True) -
     for p in found:
         p.unlink(missing_ok=True)
     return found
+
+
+def local_file(path: "str | os.PathLike", mode: str = "rb"):
+    """A pyarrow file of the local ``path`` (``pq.write_table(table, local_file(p, "wb"))``).
+
+    pyarrow reads a string path with a colon in it (``run-12:30/steplog.parquet``) as a URI and
+    fails ("Unrecognized filesystem type in URI"); a file object is never parsed, so an output
+    directory is a path whatever characters it holds."""
+    import pyarrow as pa
+
+    return pa.OSFile(os.fspath(path), mode)
 
 
 def atomic_write_bytes(path: "str | os.PathLike", data: bytes, overwrite: bool = True) -> Path:

@@ -31,12 +31,11 @@ class GroundCore:
     """The remote pilots of N encounters and their displays (step 1; module docstring)."""
 
     def __init__(self, n: int, seeds: "Sequence | None", pilot_cfg: "PilotConfig | None", daa_cfg,
-                 plan: "AircraftState | None" = None, daa_batches: "np.ndarray | None" = None):
+                 plan: "AircraftState | None" = None):
         """``seeds``: the pilot stream of each encounter; ``plan`` (N,): the course each pilot returns to
-        after the conflict; ``daa_batches`` (N,): the DAA batch of each encounter (one bands call per batch,
-        :mod:`daa_sil.daa_batches`)."""
-        self.pilot = PilotModel(n, seeds, pilot_cfg, plan=plan, daa_cfg=daa_cfg, daa_batches=daa_batches)
-        self.display = PilotDisplay(n, daa_cfg, self.pilot.cfg.alert_level_min, daa_batches=daa_batches)
+        after the conflict."""
+        self.pilot = PilotModel(n, seeds, pilot_cfg, plan=plan, daa_cfg=daa_cfg)
+        self.display = PilotDisplay(n, daa_cfg, self.pilot.cfg.alert_level_min)
 
     def step(self, t: float, own: AircraftState, intr: "AircraftState | None", fresh: np.ndarray,
              alert: np.ndarray) -> PilotOutput:

@@ -178,7 +178,7 @@ class OnboardCore:
                  daa_cfg=None, wait_lookup=None, *, thresholds: "Thresholds | str | None" = None,
                  t0: float = 0.0, dt: float = 1.0, perf: "Performance | None" = None,
                  intruder_perf: "Performance | None" = None, memory=None, step_log: bool = True,
-                 daa_batches: "np.ndarray | None" = None, outcomes: bool = True):
+                 outcomes: bool = True):
         from . import agent
         from .daa.config import DEFAULT_CONFIG
 
@@ -205,7 +205,6 @@ class OnboardCore:
         self.turn_estimator = TurnRateEstimator((self.n, self.m))
         self.step_log = bool(step_log)
         self.outcomes = bool(outcomes)
-        self.daa_batches = daa_batches
 
     @classmethod
     def from_encounters(cls, encounters, policy, daa_cfg=None, wait_lookup=None, **kw) -> "OnboardCore":
@@ -257,7 +256,7 @@ class OnboardCore:
         turn_est = self.turn_estimator.update(t, intr0)
         cmd, dec, self.memory = self._agent.agent_step(t, own0, intr0, pilot_input, self.memory, self.policy_rows(),
                                                        self.daa_cfg, self.wait_lookup, turn_rate=turn_est,
-                                                       band_record=self.step_log, daa_batches=self.daa_batches)
+                                                       band_record=self.step_log)
         alert = np.asarray(dec["alert_level"], dtype=np.int8).reshape(self.n, self.m)
         geom = None
         if self.step_log:

@@ -5,10 +5,15 @@ processes go through :mod:`daa_sil.sil.children`."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
 import types
+from typing import Iterator, Sequence
+
+#: signals that stop a command: Ctrl-C, and SIGTERM / SIGHUP, which our commands take as Ctrl-C
+STOP_SIGNALS = tuple(getattr(signal, s) for s in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, s))
 
 
 def usable_cpus() -> int:
@@ -61,3 +66,20 @@ def start_spawned(proc) -> None:
             signal.signal(signal.SIGINT, old)
         if main is not None:
             sys.modules["__main__"] = main
+
+
+@contextlib.contextmanager
+def signals_ignored(signals: Sequence[int] = STOP_SIGNALS) -> Iterator[None]:
+    """Ignore ``signals`` (default Ctrl-C, SIGTERM and SIGHUP) while the block runs, so that stopping
+    workers or children cannot be cut short by a second Ctrl-C; the previous handlers come back
+    afterwards. Only the main thread may set handlers: elsewhere a no-op."""
+    try:
+        old = {s: signal.signal(s, signal.SIG_IGN) for s in signals}
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)

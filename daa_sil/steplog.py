@@ -25,7 +25,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .errors import FileFormatError, UsageError
-from .files import atomic_path
+from .files import atomic_path, local_file
 
 #: schema version stored in the file metadata under ``daa_sil.steplog``
 STEPLOG_VERSION = "2"
@@ -37,7 +37,7 @@ AUTHORITIES = ("pilot", "daa", "waiting")
 AXES = ("none", "horizontal", "vertical", "speed")
 DIRECTIONS = ("none", "left", "right", "up", "down", "faster", "slower")
 REGIONS = ("none", "far", "mid", "near", "recovery")
-DECIDED_BY = ("none", "map", "projl", "both", "neither")
+DECIDED_BY = ("none", "map", "projl", "both", "neither", "kept")  # daa_sil.decision.DECIDED_BY_NAMES
 
 #: values renamed since bba2fd8, applied when a step log (or a campaign table) is read: column -> {old: new}.
 #: The waiting authority was ``hold``, the same word as the pilot's "hold the current course" command
@@ -211,8 +211,8 @@ def write_steplog(table: pa.Table, path: "str | os.PathLike", metadata: "Mapping
     for k, v in (metadata or {}).items():
         meta[str(k).encode()] = str(v).encode()
     table = table.replace_schema_metadata(meta)
-    with atomic_path(path, overwrite=overwrite) as tmp:
-        pq.write_table(table, tmp, compression="zstd")
+    with atomic_path(path, overwrite=overwrite) as tmp, local_file(tmp, "wb") as fh:
+        pq.write_table(table, fh, compression="zstd")
     return Path(path)
 
 
@@ -231,9 +231,19 @@ def read_steplog(path: "str | os.PathLike") -> pa.Table:
     """Read a step log written by :func:`write_steplog` and check its schema and version."""
     p = Path(path)
     try:
-        pf = pq.ParquetFile(p)
+        src = local_file(p)
     except FileNotFoundError:
         raise FileFormatError(f"step log {p} does not exist") from None
+    except (OSError, pa.ArrowException) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise FileFormatError(f"step log {p} is not a readable Parquet file: {msg}") from None
+    with src:
+        return _read_open(src, p)
+
+
+def _read_open(src, p: Path) -> pa.Table:
+    try:
+        pf = pq.ParquetFile(src)
     except (OSError, pa.ArrowException) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise FileFormatError(f"step log {p} is not a readable Parquet file: {msg}") from None
@@ -275,7 +285,8 @@ def steplog_metadata(table_or_path: "pa.Table | str | os.PathLike") -> dict[str,
     if isinstance(table_or_path, pa.Table):
         meta = table_or_path.schema.metadata or {}
     else:
-        meta = pq.read_schema(table_or_path).metadata or {}
+        with local_file(table_or_path) as fh:
+            meta = pq.read_schema(fh).metadata or {}
     return {k.decode(): v.decode() for k, v in meta.items()}
 
 

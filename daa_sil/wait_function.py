@@ -93,14 +93,23 @@ def make_wait_lookup(family, cfg: "DaaConfig | None" = None, outside: str = "cla
     from the map of its estimated turn rate (compass rad/s, + = right, passed to the family in the
     paper sense, + = left). The wait of the **most threatening** intruder is used: the one with the
     earliest straight-line LoWC over the DAA lookahead (ties: the smallest range). ``outside``
-    (:data:`~daa_sil.config.choices.OUTSIDE_BOX`): a state outside the map's box reads the nearest
-    state of the box (``clamp``) or w = H, the map's horizon (``far``: the map does not model that
-    intruder; the ProjL veto still applies, and a LoWC in progress is always within ProjL's look-ahead).
+    (:data:`~daa_sil.config.choices.OUTSIDE_BOX`): a state outside the map's box reads
+
+    * ``clamp`` -- the nearest state of the box;
+    * ``far`` -- w = H, the map's horizon (the map does not model that intruder; the ProjL veto still
+      applies, and a LoWC in progress is always within ProjL's look-ahead);
+    * ``approach`` -- w = min(H, t_in + w(s_in)): ``t_in`` (s) the time the relative position needs,
+      on straight lines at the current velocities, to enter the box, ``s_in`` the state there (same
+      speeds and heading); w = H when it never enters. The wait then falls by one second per second
+      as the intruder closes on the box, and meets the map's own value at its edge (the paper: "The
+      decrease in the wait time is observed as the relative X distance reduces"). ``p_lowc`` is the
+      entry state's (0 when it never enters).
     """
     cfg = cfg or DaaConfig()
     if outside not in OUTSIDE_BOX:
         raise UsageError(f"outside must be one of {', '.join(OUTSIDE_BOX)}, got {outside!r}")
     horizon = float(family.params.horizon) if outside == "far" else None
+    box = box_bounds(family.grid) if outside == "approach" else None
     from daa_sil.geometry import wellclear as wc
     from daa_sil.daa.alerting import relative_state
 
@@ -113,6 +122,10 @@ def make_wait_lookup(family, cfg: "DaaConfig | None" = None, outside: str = "cla
         res = family.lookup(paper, -rate)
         if horizon is not None:
             res.wait_s = np.where(np.asarray(res.in_box, bool), res.wait_s, horizon)
+        if box is not None:
+            one_s_on = to_paper_state(own.position()[:, None] + own.velocity()[:, None], own.velocity()[:, None],
+                                      intr.position() + intr.velocity(), intr.velocity())
+            res.wait_s, res.p_lowc = approach_wait(family, paper, one_s_on[..., :3] - paper[..., :3], -rate, res, box)
         s, v = relative_state(own, intr)
         t_in, _ = wc.violation_interval(s, v, cfg.th, 0.0, cfg.lookahead_s)
         key = np.minimum(t_in, 1e9) * 1e6 + wc.horizontal_range(s)
@@ -125,5 +138,46 @@ def make_wait_lookup(family, cfg: "DaaConfig | None" = None, outside: str = "cla
     return lookup
 
 
+def box_bounds(grid) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo, hi)`` (3,) of a grid's box in (dx, dy, dh), m."""
+    return (np.array([grid.axes[a].lo for a in range(3)], float), np.array([grid.axes[a].hi for a in range(3)], float))
+
+
+def box_entry_time(pos: np.ndarray, vel: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Time (s) until the straight line ``pos + vel t`` (``(..., 3)``, m and m/s) enters the box
+    ``[lo, hi]``: 0 inside it, ``inf`` when it never enters at t >= 0 (slab method)."""
+    pos, vel = np.asarray(pos, float), np.asarray(vel, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (lo - pos) / vel, (hi - pos) / vel
+    still = vel == 0.0
+    inside = (pos >= lo) & (pos <= hi)
+    near = np.where(still, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
+    far = np.where(still, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
+    t_in, t_out = near.max(axis=-1), far.min(axis=-1)
+    enters = (t_in <= t_out) & (t_out >= 0.0)
+    return np.where(enters, np.maximum(t_in, 0.0), np.inf)
+
+
+def approach_wait(family, paper: np.ndarray, vrel: np.ndarray, rate_paper: np.ndarray, res, box) -> tuple:
+    """The ``approach`` rule's ``(wait_s, p_lowc)`` (``(N, M)``) given the clamped lookup ``res`` at the
+    paper states ``paper`` (``(N, M, 6)``) with relative velocities ``vrel`` (``(N, M, 3)``, m/s, the
+    paper frame) and the map turn rates ``rate_paper`` (rad/s, + = left): inside the box the map's
+    values; outside ``min(H, t_in + w(entry state))`` and the entry state's ``p_lowc`` (``H`` and 0
+    when the state never enters)."""
+    horizon = float(family.params.horizon)
+    inside = np.asarray(res.in_box, bool)
+    t_in = box_entry_time(paper[..., :3], vrel, *box)
+    enter = ~inside & np.isfinite(t_in)
+    wait = np.where(inside, res.wait_s, horizon).astype(float)
+    p = np.where(inside, res.p_lowc, 0.0).astype(float)
+    if enter.any():
+        entry = paper[enter].copy()
+        entry[:, :3] += vrel[enter] * t_in[enter][:, None]
+        got = family.lookup(entry, np.broadcast_to(rate_paper, enter.shape)[enter])
+        wait[enter] = np.minimum(horizon, t_in[enter] + np.asarray(got.wait_s, float))
+        p[enter] = got.p_lowc
+    return wait, p
+
+
 __all__ = ["WaitValue", "WaitLookup", "WAIT_FUNCTIONS", "wait_none", "wait_constant", "wait_always", "wait_map",
-           "wait_values", "make_wait_lookup"]
+           "wait_values", "make_wait_lookup", "box_bounds", "box_entry_time", "approach_wait"]

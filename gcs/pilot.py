@@ -142,6 +142,7 @@ def make_pilot(sc, mode: str, daa_cfg, config=None):
     to after the conflict), and ``config``'s pilot changes."""
     if mode != "model":
         return ScriptedPilot(sc.pilot.commands if sc is not None else ())
+    from daa_sil.config.readings import reading_for
     from daa_sil.ground import GroundCore
     from daa_sil.models.pilot_config import PilotConfig
     from daa_sil.models.streams import STREAM_PILOT, encounter_streams
@@ -149,7 +150,9 @@ def make_pilot(sc, mode: str, daa_cfg, config=None):
 
     seed = encounter_streams(sc.seed if sc is not None else 0)[STREAM_PILOT]
     response = sc.pilot.response if sc else "guendel"
-    pcfg = config.pilot_config(mode=response) if config is not None else PilotConfig(mode=response)
+    # the configuration's pilot under its reading; without one, the study's default reading's pilot
+    pcfg = (config.pilot_config(mode=response) if config is not None
+            else reading_for().pilot_config(PilotConfig(mode=response)))
     ground = GroundCore(1, [seed], pcfg, daa_cfg, plan=ownship_state(sc) if sc is not None else None)
     from daa_sil.daa import kernels
 

@@ -66,3 +66,13 @@ def recv_until(conn, pred, timeout: float) -> list:
         if pred(m):
             return out
     return out
+
+
+def corrective_reading(tmp: Path) -> list:
+    """``--config`` arguments that make a vehicle fly the ``extended`` reading (the agent decides from the
+    corrective alert, the alerting-region maps): the interop tests check the MAVLink protocol with a stock
+    ground station that sends no pilot commands, which under the default reading (``paper``: the agent
+    decides from the start of the encounter) would leave the agent waiting (CRUISE) from t = 0."""
+    path = Path(tmp) / "extended.yaml"
+    path.write_text("reading: {name: extended}\n")
+    return ["--config", str(path)]

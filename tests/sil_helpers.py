@@ -42,3 +42,22 @@ def child_pid(out: Path, name: str) -> int:
             found.append(int(d.name))
     assert len(found) == 1, f"expected one {name} process for {out}, found {found}"
     return found[0]
+
+
+def sil_fast_time(sc):
+    """What the SIL flies for scenario ``sc`` under the default configuration (the study's default
+    reading: its policy rules, wait maps and pilot), as fast-time arguments: ``(policy, wait_lookup
+    or None, pilot config, DAA config)``."""
+    from daa_sil import waitmap
+    from daa_sil.config.run_config import load_config
+    from daa_sil.wait_function import make_wait_lookup
+    from vehicle.core import build_policy
+
+    cfg = load_config(None)
+    pol = cfg.onboard_policy(build_policy(sc))
+    daa = cfg.daa_config(sc.thresholds)
+    lookup = None
+    if pol.wait_mode == "map":
+        fam = waitmap.family_for(cfg.map_source, preset="paper", horizon=cfg.map_horizon())
+        lookup = make_wait_lookup(fam, daa, outside=cfg.effective_reading.outside)
+    return pol, lookup, cfg.pilot_config(mode=sc.pilot.response), daa

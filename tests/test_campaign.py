@@ -36,9 +36,9 @@ def _assert_same(a: dict, b: dict) -> None:
 
 @pytest.mark.parametrize("argv, message", [
     (["--groups", "B-1,B-9"], "unknown group 'B-9'"),
-    (["--encounters", "0"], "--encounters must be a positive integer"),
-    (["--encounters", "-3"], "--encounters must be a positive integer"),
-    (["--chunk-size", "x"], "--chunk-size must be a positive integer"),
+    (["--encounters", "0"], "--encounters must be an integer within [1, 10,000,000], got 0"),
+    (["--encounters", "-3"], "--encounters must be an integer within [1, 10,000,000], got -3"),
+    (["--chunk-size", "x"], "--chunk-size must be an integer, got 'x'"),
     (["--preset", "nope"], "unknown --preset"),
     (["--waitmap", "nosuchgrid"], "--waitmap 'nosuchgrid'"),
     (["--wt", "-1"], "--wt must be within"),
@@ -62,7 +62,7 @@ def test_unwritable_out_and_non_empty_out(tmp_path, capsys):
     blocker.write_text("x")
     rc = main(["campaign", "run", "--out", str(blocker / "sub"), "--encounters", "2"])
     err = capsys.readouterr().err
-    assert rc == 2 and "cannot be created" in err
+    assert rc == 2 and "cannot create output directory" in err and "Not a directory" in err
     full = tmp_path / "full"
     full.mkdir()
     (full / "keep.txt").write_text("mine")

@@ -63,7 +63,7 @@ def test_cold_start_together_then_damaged_cache(tmp_path):
 
 #: the kernels only some configurations call, loaded at their first call
 LAZY = ("wcv_soa_into", "classify_into", "clear2_into", "candidates_into", "segment_into", "axis_relative_knots_into",
-        "axis_knots_into", "search_into")
+        "axis_knots_into", "search_into", "pivot_search_into")
 
 #: with a warm cache: how many lazy kernels get() left unloaded, then one called
 LAZY_PROBE = """

@@ -21,7 +21,7 @@ import os
 
 import pytest
 
-from interop_helpers import ROOT, free_ports, start, stop
+from interop_helpers import ROOT, free_ports, start, stop, corrective_reading
 from test_interop_mavutil import long_scenario
 
 try:
@@ -53,7 +53,7 @@ def test_mavsdk_reads_the_picture_and_sets_a_parameter(tmp_path):
 
     sc = load_scenario(ROOT / "scenarios" / "head_on.yaml")
     (port,) = free_ports(1)
-    veh = start(["vehicle", long_scenario(tmp_path), "--out", f"udp:127.0.0.1:{port}", "--speed", "2",
+    veh = start(["vehicle", long_scenario(tmp_path), *corrective_reading(tmp_path), "--out", f"udp:127.0.0.1:{port}", "--speed", "2",
                  "--steplog", tmp_path / "steplog.parquet"], tmp_path / "vehicle.log")
     result = {}
 
@@ -128,7 +128,7 @@ def test_mavsdk_sees_the_agent_use_a_wt_it_set(tmp_path):
     from daa_sil.steplog import read_steplog
 
     (port,) = free_ports(1)
-    veh = start(["vehicle", long_scenario(tmp_path), "--out", f"udp:127.0.0.1:{port}", "--speed", "2",
+    veh = start(["vehicle", long_scenario(tmp_path), *corrective_reading(tmp_path), "--out", f"udp:127.0.0.1:{port}", "--speed", "2",
                  "--steplog", tmp_path / "steplog.parquet"], tmp_path / "vehicle.log")
     texts: list = []
 

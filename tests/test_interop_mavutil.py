@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from interop_helpers import ROOT, free_ports, recv_until, start, stop
+from interop_helpers import ROOT, free_ports, recv_until, start, stop, corrective_reading
 
 SCENARIO = ROOT / "scenarios" / "head_on.yaml"
 
@@ -42,7 +42,7 @@ def link(tmp_path_factory):
                                       dialect="common")
     tapc = mavutil.mavlink_connection(f"udpin:127.0.0.1:{tap}", source_system=254, source_component=190,
                                       dialect="common")
-    proc = start(["vehicle", long_scenario(tmp), "--out", f"udp:127.0.0.1:{port}", "--tap", f"udp:127.0.0.1:{tap}",
+    proc = start(["vehicle", long_scenario(tmp), *corrective_reading(tmp), "--out", f"udp:127.0.0.1:{port}", "--tap", f"udp:127.0.0.1:{tap}",
                   "--speed", "5", "--steplog", tmp / "steplog.parquet"], tmp / "vehicle.log")
     try:
         assert recv_until(conn, lambda m: m.get_type() == "HEARTBEAT", 30.0), "no HEARTBEAT from the vehicle"
@@ -305,7 +305,7 @@ def test_do_reposition_is_a_pilot_command(tmp_path):
                                       dialect="common")
     proc = None
     try:
-        proc = start(["vehicle", scenario, "--out", f"udp:127.0.0.1:{port}", "--speed", "5",
+        proc = start(["vehicle", scenario, *corrective_reading(tmp_path), "--out", f"udp:127.0.0.1:{port}", "--speed", "5",
                       "--steplog", tmp_path / "steplog.parquet"], tmp_path / "vehicle.log")
         assert recv_until(conn, lambda x: x.get_type() == "HEARTBEAT", 30.0), (tmp_path / "vehicle.log").read_text()
         pos = recv_until(conn, lambda x: x.get_type() == "LOCAL_POSITION_NED", 3.0)[-1]
@@ -391,7 +391,7 @@ def test_vehicle_out_udpin_answers_every_gcs_and_a_restarted_one(tmp_path):
     from pymavlink import mavutil
 
     (port,) = free_ports(1)
-    proc = start(["vehicle", long_scenario(tmp_path), "--out", f"udpin:127.0.0.1:{port}", "--speed", "10",
+    proc = start(["vehicle", long_scenario(tmp_path), *corrective_reading(tmp_path), "--out", f"udpin:127.0.0.1:{port}", "--speed", "10",
                   "--steplog", tmp_path / "steplog.parquet"], tmp_path / "vehicle.log")
     conns = []
 

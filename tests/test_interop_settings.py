@@ -15,7 +15,7 @@ import struct
 
 import pytest
 
-from interop_helpers import ROOT, free_ports, start, stop, wait_for_text
+from interop_helpers import ROOT, free_ports, start, stop, wait_for_text, corrective_reading
 from vehicle.params import ParamTable, float32
 
 
@@ -85,13 +85,14 @@ def _lockstep_run(tmp, settings: list[str]) -> "tuple[dict, list]":
     procs = [shim]
     try:
         wait_for_text(tmp / "shim.log", "vehicle side", 30.0, shim)
-        gcs = start(["gcs", "--listen", "udp:127.0.0.1:0", "--vehicle", f"udp:127.0.0.1:{pg}", "--scenario", sc,
+        gcs = start(["gcs", *corrective_reading(tmp), "--listen", "udp:127.0.0.1:0", "--vehicle", f"udp:127.0.0.1:{pg}",
+                     "--scenario", sc,
                      "--clock", "lockstep", "--no-display", "--log", tmp / "gcs.jsonl",
                      *[a for s in settings for a in ("--set", s)]], tmp / "gcs.log")
         procs.append(gcs)
         wait_for_text(tmp / "gcs.log", "READY", 30.0, gcs)
-        veh = start(["vehicle", sc, "--out", f"udp:127.0.0.1:{pv}", "--clock", "lockstep", "--exit-at-end",
-                     "--steplog", tmp / "steplog.parquet"], tmp / "vehicle.log")
+        veh = start(["vehicle", sc, *corrective_reading(tmp), "--out", f"udp:127.0.0.1:{pv}", "--clock", "lockstep",
+                     "--exit-at-end", "--steplog", tmp / "steplog.parquet"], tmp / "vehicle.log")
         procs.append(veh)
         veh.wait(120)
         assert veh.returncode == 0, (tmp / "vehicle.log").read_text()[-3000:]

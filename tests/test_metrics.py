@@ -241,7 +241,8 @@ def test_a_new_counting_is_one_table_entry(monkeypatch):
     from daa_sil.study.report_input import parse_recount
 
     keys, tab = C.COUNT_SOURCES["received"]
-    monkeypatch.setitem(C.COUNT_SOURCES, "received", (keys, {**tab, ("overridden", "active", "all"): ("n_daa_override",)}))
+    monkeypatch.setitem(C.COUNT_SOURCES, "received",
+                        (keys, {**tab, ("overridden", "active", "all", "dropped"): ("n_daa_override",)}))
     assert "overridden" in C.counting_options()["received"]
     assert parse_recount("ov:received=overridden") == ("ov", {"received": "overridden"})
     t = table("B-2", 4, lowc_idx=(), n_daa_override=np.array([1, 2, 3, 6]))

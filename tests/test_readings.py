@@ -43,25 +43,36 @@ def test_bundles_and_what_they_change():
 
 def test_the_paper_reading_and_its_alternatives():
     p = reading_for("paper")
-    assert (p.waitmap, p.outside, p.latency, p.pilot_start, p.pilot_stop, p.hold_commands, p.unsafe_hold) == (
-        "paper", "clamp", "round-trip", "detection", "safe-avoidance", True, "no-command")
-    assert (p.window, p.received, p.blends, p.units, p.wait_rule, p.agent_active) == (
-        "whole", "pilot+blend", "all", "metres", None, "encounter")
+    assert (p.waitmap, p.wait_horizon_s, p.outside, p.latency, p.pilot_start, p.pilot_stop, p.hold_commands,
+            p.unsafe_hold) == ("paper", 40.0, "approach", "round-trip", "detection", "safe-avoidance", True, "blend")
+    assert (p.window, p.received, p.blends, p.superseded, p.units, p.wait_rule, p.agent_active, p.delay_draw,
+            p.daa_authority) == ("whole", "pilot+blend", "all", "fate", "metres", None, "encounter", "epoch",
+                                 "per-step")
     pc = p.pilot_config()
     assert (pc.stream_level_min, pc.alert_level_min, pc.stream_until) == (0, 2, "safe-avoidance")
-    assert p.policy_overrides() == {"unsafe_hold": "no-command", "active_from": "encounter"}
+    assert p.policy_overrides() == {"active_from": "encounter"}
+    assert p.epoch_s(10.0, 240.0, 1.0) == 10.0
+    assert reading_for("paper-delay-per-encounter").epoch_s(10.0, 240.0, 1.0) == 242.0
+    assert reading_for("paper-keep-daa").policy_overrides() == {"active_from": "encounter",
+                                                                "daa_authority": "until-clear"}
     # each alternative changes exactly the setting it is named for
-    alt = {"paper-outside-far": {"outside"}, "paper-one-way": {"latency"}, "paper-countdown": {"wait_rule"},
-           "paper-hold-blend": {"unsafe_hold", "blends"}, "paper-no-hold": {"hold_commands"},
-           "paper-preventive": {"pilot_engage"}, "paper-alerting": {"waitmap"}, "paper-feet": {"units"},
-           "paper-corrective": {"agent_active"}}
+    alt = {"paper-outside-far": {"outside"}, "paper-clamp": {"outside"}, "paper-hold-none": {"unsafe_hold"},
+           "paper-h60": {"wait_horizon_s"}, "paper-one-per-step": {"superseded"},
+           "paper-delay-per-encounter": {"delay_draw"}, "paper-keep-daa": {"daa_authority"},
+           "paper-one-way": {"latency"}, "paper-countdown": {"wait_rule"},
+           "paper-hold-blend": {"blends"}, "paper-no-hold": {"hold_commands"},
+           "paper-preventive": {"pilot_engage"}, "paper-alerting": {"waitmap", "wait_horizon_s"},
+           "paper-feet": {"units"}, "paper-corrective": {"agent_active"},
+           "paper-contradicted": {"outside", "unsafe_hold", "wait_horizon_s", "superseded"}}
     for name, keys in alt.items():
         d = reading_for(name).to_dict()
         assert {k for k, v in d.items() if v != p.to_dict()[k]} - {"name", "description"} == keys, name
-    assert reading_for("paper-countdown").policy_overrides()["wait_rule"] == "countdown"
-    pp = reading_for("paper-preventive").pilot_config()
-    assert (pp.alert_level_min, pp.stream_level_min) == (1, 0)  # hold from the start, maneuvers from preventive
-    assert "active_from" not in reading_for("paper-corrective").policy_overrides()
+    # the readings that keep an older behaviour keep their simulation key, so their results are the old ones
+    assert reading_for("paper-contradicted").simulation_key() == (
+        "metres", "detection", None, "safe-avoidance", True, "no-command", "paper", "clamp", "round-trip", None,
+        "encounter")
+    assert reading_for("paper-hold-blend").simulation_key() == p.simulation_key()  # counting only
+    assert reading_for("paper-one-per-step").simulation_key() == p.simulation_key()
 
 
 def test_old_names_are_accepted_with_a_notice_and_mean_the_same_reading(capsys):
@@ -85,11 +96,21 @@ def test_campaign_defaults_to_the_paper_reading_and_records_it(tmp_path, capsys)
     assert meta["config"]["reading"] == "paper"
     assert (r["waitmap"], r["latency"], r["pilot_start"], r["pilot_stop"]) == (
         "paper", "round-trip", "detection", "safe-avoidance")
-    assert (r["window"], r["received"], r["unsafe_hold"]) == ("whole", "pilot+blend", "no-command")
-    assert meta["waitmap"]["source"] == "paper"
+    assert (r["window"], r["received"], r["unsafe_hold"], r["outside"], r["superseded"]) == (
+        "whole", "pilot+blend", "blend", "approach", "fate")
+    assert meta["waitmap"]["source"] == "paper" and meta["waitmap"]["params"]["horizon"] == 40.0
     assert meta["resolved_config"]["pilot"]["stream_until"] == "safe-avoidance"
-    assert meta["resolved_config"]["policies"]["ID-2"]["unsafe_hold"] == "no-command"
+    assert meta["resolved_config"]["policies"]["ID-2"]["unsafe_hold"] == "blend"
     assert meta["resolved_config"]["policies"]["B-2"]["active_from"] == "encounter"
+    # the basis of every setting, machine-readable: the one definition the study page prints
+    from daa_sil.config.basis import PAPER_BASIS
+
+    basis = meta["basis"]
+    assert [b["setting"] for b in basis] == [b.setting for b in PAPER_BASIS]
+    assert not any(b["differs"] for b in basis)
+    assert {b["kind"] for b in basis} == {"text", "inference", "choice"}
+    outside = next(b for b in basis if b["keys"] == ["outside"])
+    assert outside["kind"] == "inference" and "relative X distance reduces" in outside["quote"]
     assert "reading paper" in capsys.readouterr().err
     # the encounter sampler checked start states with the run's preset, not EncounterConfig's do365 default
     from daa_sil.models.encounter_files import load_encounters

@@ -356,9 +356,9 @@ def _campaign_copy(camp: Path, d: Path, damage: "str | None") -> Path:
 
 CAMPAIGN_CASES = {
     # id: (damage to a copy of a finished campaign or None = fresh dir, extra argv, code, needles)
-    "workers-0": (None, ["--workers", "0"], 2, ["--workers must be a positive integer, got 0"]),
-    "workers-text": (None, ["--workers", "two"], 2, ["--workers must be a positive integer, got 'two'"]),
-    "encounters-0": (None, ["--encounters", "0"], 2, ["--encounters must be a positive integer"]),
+    "workers-0": (None, ["--workers", "0"], 2, ["--workers must be within [1, ", "got 0"]),
+    "workers-text": (None, ["--workers", "two"], 2, ["--workers must be an integer, got 'two'"]),
+    "encounters-0": (None, ["--encounters", "0"], 2, ["--encounters must be an integer within [1, 10,000,000]"]),
     "bad-group": (None, ["--groups", "B-1,B-9"], 2, ["unknown group 'B-9'", "allowed: B-1"]),
     "scheduler-empty": (None, ["--scheduler", ""], 2, ["--scheduler must be an address"]),
     "scheduler-malformed": (None, ["--scheduler", "bogus"], 2, ["--scheduler must be an address", "'bogus'"]),
@@ -407,7 +407,7 @@ def test_campaign_out_is_a_file_or_below_one(blocker, tmp_path):
     rc, _, err = cli(RUN + ["--out", blocker])
     assert_one_line_error(rc, err, 2, "exists and is not a directory")
     rc, _, err = cli(RUN + ["--out", blocker / "sub"])
-    assert_one_line_error(rc, err, 2, "cannot be created")
+    assert_one_line_error(rc, err, 2, "cannot create output directory", "Not a directory")
     assert blocker.read_text() == "not a directory\n"
 
 

@@ -10,7 +10,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from daa_sil.errors import FileFormatError, UsageError
-from daa_sil.study.report import ablation_rows, write_report
+from daa_sil.study.report import APPENDICES, ablation_rows, write_report
 from daa_sil.study.report_figures import FIGURES
 from daa_sil.study.report_input import build_blocks, parse_recount
 from daa_sil.study.analysis import Study
@@ -56,6 +56,15 @@ def _campaign(d, groups, n=60, reading=None, settings=None, seed=0, decisions=No
     return d
 
 
+def _pages(main) -> str:
+    """The main page and its appendices, as one text."""
+    return "\n".join([main.read_text()] + [(main.parent / a).read_text() for a in APPENDICES])
+
+
+def _widest(text: str) -> int:
+    return max((line.count("|") - 1 for line in text.splitlines() if line.startswith("|")), default=0)
+
+
 PAPER5 = [("B-1", False, {"nmac": True}), ("B-2", False, {}), ("IC-1", True, {}), ("ID-1", True, {}),
           ("ID-2", True, {})]
 
@@ -63,25 +72,30 @@ PAPER5 = [("B-1", False, {"nmac": True}), ("B-2", False, {}), ("IC-1", True, {})
 def test_report_renders_findings_tables_and_figures(tmp_path):
     d = _campaign(tmp_path / "camp", PAPER5)
     out = write_report(d, tmp_path / "rep", replicates=500)
-    text = out.read_text()
+    main = out.read_text()
+    text = _pages(out)
     for f in FIGURES:
-        assert (tmp_path / "rep" / f).stat().st_size > 1000 and f in text
-    for title in ("Findings of the paper", "Verdict rules", "Table 3", "Table 4", "Table 5", "Table 7", "Table 8",
-                  "Penetration integral", "Paired comparisons", "Ablation", "Decision provenance", "Methods"):
+        assert (tmp_path / "rep" / f).stat().st_size > 1000 and f in main
+    # the main page: the reading against the paper
+    for title in ("## Headline tally", "## Every finding of the paper", "## Where the misses come from",
+                  "## Signatures", "## Verdict words and rules", "consistent (not shown)", "uninformative"):
+        assert title in main, title
+    # the appendices: readings, ablations, provenance
+    for title in ("Table 3", "Table 4", "Table 5", "Table 7", "Table 8", "Penetration integral", "Paired comparisons",
+                  "Ablation", "Decision provenance", "Methods", "## Where the paper contradicts itself", "16.51 %"):
         assert title in text, title
+    assert all(f"]({a})" in main for a in APPENDICES)
     assert "bootstrap seed 14" in text and "500 replicates" in text
+    # a reader's page: no table wider than 12 columns; the main page short
+    assert _widest(text) <= 12 and len(main.splitlines()) <= 800
     data = json.loads((tmp_path / "rep" / "findings.json").read_text())
     assert data["bootstrap"] == {"replicates": 500, "seed": 14, "conf": 0.95}
     by = {(f["id"], f["group"]): f["outcomes"]["default"] for f in data["findings"]}
     assert by[("nmac", "B-1")]["verdict"] == "not reproduced"  # we planted one NMAC in B-1
     assert by[("nmac", "B-2")]["verdict"] == "reproduced"
     assert by[("override-integrated", "ID-2")]["verdict"] == "by construction"  # counted apart
-    # the sections a reviewer needs: signatures, the verdict classes, the paper's inconsistencies
-    for title in ("## Signatures", "Headline tally: empirical findings only", "### Verdict words",
-                  "consistent (not shown)", "## Where the paper contradicts itself", "16.51 %"):
-        assert title in text, title
     # the paper's no-wait count in ID-2 (10,278 in 10,000) is shown per encounter
-    assert "1.03" in text
+    assert "1.03" in main
     # no decision provenance columns: skipped with a note, not an error
     assert "skipped — the decision tables carry no" in text or "skipped" in text
 
@@ -90,10 +104,12 @@ def test_two_readings_side_by_side_and_a_recount(tmp_path):
     a = _campaign(tmp_path / "lit", PAPER5, reading="literal", settings={"units": "m"}, seed=1)
     b = _campaign(tmp_path / "ft", PAPER5, reading="feet", settings={"units": "ft", "received": "pilot+blend"}, seed=2)
     out = write_report([a, b], tmp_path / "rep", replicates=300, recount=["exec:received=executed"])
-    text = out.read_text()
+    text = (tmp_path / "rep" / "appendix-readings.md").read_text()
     header = next(line for line in text.splitlines() if line.startswith("| # | finding"))
+    assert "| the paper's value |" in header  # the published value: never a column named like a reading
     for lab in ("literal", "feet", "literal+exec", "feet+exec"):
-        assert f"{lab}: ours [95 % CI]" in header and f"{lab}: verdict" in header
+        assert f"| `{lab}` |" in header + " |" or f"| `{lab}`" in header
+    assert _widest(_pages(out)) <= 12
     data = json.loads((tmp_path / "rep" / "findings.json").read_text())
     rec = next(f for f in data["findings"] if f["id"] == "received" and f["group"] == "ID-2")["outcomes"]
     # received counted three ways from the same columns: arrived > pilot + blend > executed as sent
@@ -109,7 +125,7 @@ def test_two_readings_side_by_side_and_a_recount(tmp_path):
 def test_seeds_of_one_reading_are_compared(tmp_path):
     a = _campaign(tmp_path / "s0", PAPER5, reading="literal", seed=0)
     b = _campaign(tmp_path / "s7", PAPER5, reading="literal", seed=7)
-    text = write_report([a, b], tmp_path / "rep", replicates=300).read_text()
+    text = _pages(write_report([a, b], tmp_path / "rep", replicates=300))
     assert "literal (seed 0)" in text and "literal (seed 7)" in text
     assert "## Agreement between campaign seeds" in text and "findings agree within the CI" in text
 
@@ -119,7 +135,7 @@ def test_a_smaller_run_of_the_same_seed_is_not_compared_as_another_seed(tmp_path
     big = _campaign(tmp_path / "big", PAPER5, n=60, reading="literal", seed=0)
     small = _campaign(tmp_path / "small", PAPER5, n=30, reading="literal", seed=0)
     other = _campaign(tmp_path / "other", PAPER5, n=30, reading="literal", seed=7)
-    text = write_report([big, small, other], tmp_path / "rep", replicates=200).read_text()
+    text = _pages(write_report([big, small, other], tmp_path / "rep", replicates=200))
     heads = [line for line in text.splitlines() if line.startswith("### literal") and " vs " in line]
     assert "literal (seed 0, 60 enc.)" in text and "literal (seed 0, 30 enc.)" in text
     assert heads == ["### literal (seed 0, 60 enc.) vs literal (seed 7)"], heads
@@ -141,7 +157,7 @@ def test_ablation_and_provenance_sections(tmp_path):
     groups = [("B-2", False, {}), ("ID-2", True, {}), ("ID-2-projl", True, {"no_wait_scale": 1.0}),
               ("ID-2-map", True, {"no_wait_scale": 3.0}), ("my-group", True, {})]
     d = _campaign(tmp_path / "abl", groups, n=200, decisions=_decisions(0.2))
-    text = write_report(d, tmp_path / "rep", replicates=500).read_text()
+    text = _pages(write_report(d, tmp_path / "rep", replicates=500))
     assert "### default: what the map adds to ProjL (ID-2 minus ID-2-projl)" in text
     assert "what ProjL adds to the map (ID-2 minus ID-2-map)" in text
     assert "my-group" in text  # an unknown group is shown, not a crash
@@ -166,7 +182,7 @@ def test_identical_ablation_says_the_map_adds_nothing(tmp_path):
     (d / "ID-2-projl").mkdir()
     t = t.set_column(0, "group", pa.array(["ID-2-projl"] * t.num_rows))
     pq.write_table(t, d / "ID-2-projl" / "encounters-00000.parquet")
-    text = write_report(d, tmp_path / "rep", replicates=300).read_text()
+    text = _pages(write_report(d, tmp_path / "rep", replicates=300))
     assert "The map adds nothing measurable to ProjL here." in text
 
 

@@ -130,8 +130,8 @@ def test_a_planted_override_is_not_reproduced(campaign, tmp_path):
     assert o["paper"]["verdict"] == "by construction"
     assert o["planted"]["verdict"] == "not reproduced" and "2 in 1 of 80" in o["planted"]["text"]
     assert "a defect" in o["planted"]["evidence"]
-    header, _ = _table_rows((tmp_path / "rep" / "report.md").read_text())
-    assert "planted: verdict" in header and "paper: verdict" in header
+    header, _ = _table_rows((tmp_path / "rep" / "appendix-readings.md").read_text())
+    assert "| `paper` |" in header and "| `planted` |" in header + " |" and "the paper's value" in header
 
 
 def test_report_labels_tell_apart_one_reading_on_two_sizes_of_one_seed():

@@ -76,11 +76,8 @@ def test_link_loss_hands_control_to_daa_within_timeout(tmp_path):
 
 
 def test_lockstep_is_deterministic_and_matches_fast_time(tmp_path):
-    from daa_sil import waitmap
-    from daa_sil.daa.config import DaaConfig
     from daa_sil.study.fasttime import simulate
-    from daa_sil.models.pilot_config import PilotConfig
-    from vehicle.core import build_policy
+    from sil_helpers import sil_fast_time
 
     path = ROOT / "scenarios" / "head_on.yaml"
     sc = load_scenario(path)
@@ -92,11 +89,9 @@ def test_lockstep_is_deterministic_and_matches_fast_time(tmp_path):
         seqs.append([(a, d) for a, d in zip(t.column("t").to_pylist(), t.column("decision").to_pylist()) if d != "none"])
     assert seqs[0] == seqs[1] and len(seqs[0]) > 0
     up, down = delay_models(sc)
-    pol = build_policy(sc)
-    fam = waitmap.default_family(preset="paper") if pol.wait_mode == "map" else None
-    _, _, steps = simulate(encounter_set(sc), pol, up, down, PilotConfig(mode=sc.pilot.response),
-                           DaaConfig(thresholds=sc.thresholds), fam, seeds=np.array([sc.seed]), preset=sc.thresholds,
-                           duration_s=sc.duration_s, epoch_s=sc.link.epoch_s, record_steps=True)
+    pol, lookup, pilot, daa = sil_fast_time(sc)  # the SIL flies the study's default reading
+    _, _, steps = simulate(encounter_set(sc), pol, up, down, pilot, daa, wait_lookup=lookup, seeds=np.array([sc.seed]),
+                           preset=sc.thresholds, duration_s=sc.duration_s, epoch_s=sc.link.epoch_s, record_steps=True)
     fast = [(a, d) for a, d in zip(steps.column("t").to_pylist(), steps.column("decision").to_pylist()) if d != "none"]
     assert fast == seqs[0]
 

@@ -137,8 +137,11 @@ def test_run_does_not_load_a_cached_family_and_records_the_vehicles(tmp_path, mo
 
     sc = load_scenario(ROOT / "scenarios" / "head_on.yaml")
     assert sc.allocation.wait == "map"
-    fam = waitmap.family_for(None, preset="paper")  # cached now (built on first use)
-    expected = {"source": waitmap.DEFAULT_MAP, **json.loads(json.dumps(waitmap.describe(fam)))}
+    from daa_sil.config.run_config import default_wait_maps
+
+    source, horizon = default_wait_maps()  # the vehicle flies the study's default reading's maps
+    fam = waitmap.family_for(source, preset="paper", horizon=horizon)  # cached now (built on first use)
+    expected = {"source": source, **json.loads(json.dumps(waitmap.describe(fam)))}
 
     def refuse(*a, **k):
         raise AssertionError("the driver loaded the wait-map family")
@@ -148,7 +151,7 @@ def test_run_does_not_load_a_cached_family_and_records_the_vehicles(tmp_path, mo
     res = play.run_sil(play.RunOptions(ROOT / "scenarios" / "head_on.yaml", tmp_path / "run"))
     assert res["waitmap"] == expected
     described = json.loads(steplog_metadata(tmp_path / "run" / "steplog.parquet")["waitmap"])
-    assert {"source": waitmap.DEFAULT_MAP, **described} == expected
+    assert {"source": source, **described} == expected
 
 
 def test_waitmap_record_falls_back_to_loading_without_the_step_log_entry(tmp_path):
@@ -163,8 +166,11 @@ def test_waitmap_record_falls_back_to_loading_without_the_step_log_entry(tmp_pat
     sc = load_scenario(ROOT / "scenarios" / "head_on.yaml")
     path = write_steplog(pa.Table.from_pylist([], schema=STEP_SCHEMA), tmp_path / "s.parquet")
     rec = play._waitmap_record(sc, None, path)
-    fam = waitmap.family_for(None, preset="paper")
-    assert rec["content_hashes"] == [m.content_hash for m in fam.maps] and rec["source"] == waitmap.DEFAULT_MAP
+    from daa_sil.config.run_config import default_wait_maps
+
+    source, horizon = default_wait_maps()
+    fam = waitmap.family_for(source, preset="paper", horizon=horizon)
+    assert rec["content_hashes"] == [m.content_hash for m in fam.maps] and rec["source"] == source
 
 
 def _commands(parser) -> set:

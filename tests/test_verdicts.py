@@ -1,6 +1,8 @@
 """Each verdict word from hand-made findings on hand-made studies: reproduced, consistent (not shown),
-direction holds, not reproduced and by construction, with the rules that separate them (exact zero
-test, TOST against a margin, Holm across the pairs of one table, bounds and bands straddled)."""
+direction holds, not reproduced, by construction, uninformative, nested and input, with the rules that
+separate them (two samples for values, exact zero test, TOST against a margin, Holm across the pairs of
+one table, bounds and bands straddled, a band wider than the paper's own number allows, a relation at
+another size)."""
 
 from dataclasses import replace
 
@@ -142,6 +144,112 @@ def test_by_construction_is_counted_apart_and_a_failure_is_a_defect():
     assert c[F.BY_CONSTRUCTION] == 1 and sum(c[v] for v in F.EMPIRICAL) == 1
 
 
-def test_verdict_words_are_exactly_the_five():
+def test_verdict_words_are_exactly_these():
     assert F.VERDICTS == ("reproduced", "consistent (not shown)", "direction holds", "not reproduced",
-                          "by construction")
+                          "by construction", "uninformative", "nested", "input")
+    assert F.APART == ("by construction", "uninformative", "nested", "input")
+
+
+def test_a_value_is_compared_as_two_samples_not_against_our_interval():
+    """10,000 encounters of ours, the paper's 10,000: the difference's standard error is sqrt(2) times
+    ours. A paper value 1.3 z-errors from ours lies outside our CI (the old rule: not reproduced) but
+    inside the two-sample interval (reproduced); at 1.5 it is outside both."""
+    n = 10_000
+    rng = np.random.default_rng(3)
+    x = rng.poisson(8.0, n)
+    st = Study(group("B-1", n=n, n_no_wait=x), replicates=2000, seed=5)
+    se = x.std(ddof=1) / np.sqrt(n)  # the hand-worked standard error of a mean
+    z = 1.959964
+    for k, verdict in ((1.3, F.REPRODUCED), (1.5, F.NOT_REPRODUCED)):
+        f = finding(kind="value", group="B-1", paper={"value": float(x.mean() + k * z * se)})
+        o = V.evaluate(f, st)
+        assert not (o.lo <= f.paper_value() <= o.hi)  # outside our own interval either way
+        assert o.verdict == verdict, (k, o)
+        assert "the paper's at its N" in o.evidence
+
+
+def _remote(factor, n=N):
+    """LoWC durations giving a P(LoWC)/h of ``factor`` x the paper's ID-2 value (2.81e-7 at 666.67 h)."""
+    rng = np.random.default_rng(9)
+    lowc = np.arange(n) < 40
+    share = 2.81e-7 * 666.67 * factor  # the fraction of time in LoWC
+    dur = np.where(lowc, rng.exponential(1.0, n), 0.0)
+    dur *= share * 240.0 * n / dur.sum()
+    return study(group("ID-2", n=n, lowc=lowc, lowc_duration_s=dur))
+
+
+def test_a_remote_style_band_is_uninformative_and_not_counted_as_reproduced():
+    """P(LoWC)/h at 7x the paper's ID-2 value still lies in the FAA 'Remote' band (1e-7 .. 1e-5): the
+    band passes values the paper's own number rules out, so the pass is counted apart, not as a
+    reproduction. Far outside the band (Frequent) it is still a miss."""
+    band = finding(kind="category", metric="p_lowc_per_hr_paper_h", group="ID-2", category="Remote",
+                   summarises="p-lowc-hr")
+    value = finding(id="p-lowc-hr", kind="value", metric="p_lowc_per_hr_paper_h", group="ID-2",
+                    paper={"key": "lowc_per_flight_hour.{group}.p"})
+    st = _remote(7.0)
+    o = V.evaluate(band, st)
+    assert 1e-7 <= o.lo and o.hi < 1e-5  # inside the band: the old rule said reproduced
+    assert o.verdict == F.UNINFORMATIVE and "rules out" in o.evidence
+    assert V.evaluate(value, st).verdict == F.NOT_REPRODUCED  # the number itself is missed
+    c = V.tally([(band, {"r": o})], "r")
+    assert c[F.REPRODUCED] == 0 and c[F.UNINFORMATIVE] == 1 and sum(c[v] for v in F.EMPIRICAL) == 0
+    assert V.evaluate(band, _remote(1e4)).verdict == F.NOT_REPRODUCED  # 2.8e-3/h: outside the band, a miss
+    # without a number it summarises, a band is judged as before
+    assert V.evaluate(replace(band, summarises=""), st).verdict == F.REPRODUCED
+
+
+def test_a_relation_at_another_size_is_direction_holds():
+    """'IC-1 has a slightly higher number of reception than ID-2': the paper's tables give
+    (924,574 - 921,993) / 10,000 = 0.258 per encounter. At 8.8 per encounter the relation holds at
+    34 times that size: direction holds. At 0.26 it is reproduced."""
+    f = finding(kind="ordering", metric="received", ordering={"subject": "IC-1", "relation": "more",
+                                                              "others": ["ID-2"]},
+                size={"key": "pilot_command_reception.{group}.received", "per_encounter": True})
+    base = np.full(N, 90)
+    for extra, verdict in ((np.full(N, 9) - (np.arange(N) % 5 == 0), F.DIRECTION),
+                           ((np.arange(N) % 100 < 26).astype(int), F.REPRODUCED)):
+        st = study(group("IC-1", n_pilot_received=base + extra), group("ID-2", n_pilot_received=base))
+        o = V.evaluate(f, st)
+        assert o.verdict == verdict, o
+    assert "not the paper's size" in V.evaluate(f, study(group("IC-1", n_pilot_received=base + 9),
+                                                         group("ID-2", n_pilot_received=base))).evidence
+
+
+def test_the_tost_margin_is_the_papers_detectable_difference():
+    """The margin of 'almost the same' is the smallest paired difference the paper's 10,000 encounters
+    could detect (two-sided 5 %, 80 % power): (1.96 + 0.84) x SE at N = 10,000, here from the
+    delta method on the per-encounter deviations, computed by hand."""
+    rng = np.random.default_rng(1)
+    b = rng.gamma(2.0, 80.0, N)
+    a = b * 1.0 + rng.normal(0.0, 40.0, N)
+    st = study(group("B-2", dev_h_m=b), group("IC-1", dev_h_m=a))
+    f = finding(kind="equivalence", metric="dev_h_mean", group="IC-1", change={"kind": "ratio", "vs": "B-2"},
+                margin_rule="detectable", margin_reason="hand-made")
+    m, _ = V.equivalence_margin(f, st)
+    r = a.mean() / b.mean()
+    se_ratio = np.sqrt(np.var(a - r * b, ddof=1) / N) / b.mean() * 100.0  # % (delta method)
+    assert m == pytest.approx((1.959964 + 0.841621) * se_ratio * np.sqrt(N / 10_000), rel=0.1)
+    o = V.evaluate(f, st)
+    assert f"±{m:.2f} %" in o.evidence
+
+
+def _all_groups(**per_group):
+    return study(*(group(g, **per_group.get(g, {})) for g in ("B-1", "B-2", "IC-1", "ID-1", "ID-2")))
+
+
+def test_nested_claims_are_tested_together_and_inputs_counted_apart():
+    """'The maximum PI is 3.79' (pooled over the five groups) implies 'no PI > 10': one claim, counted
+    once. A number a setting was inferred from is input, whatever our value."""
+    lowc = np.zeros(N, bool)
+    lowc[:3] = True
+    pi = np.where(lowc, 12.0, 0.0)  # three LoWCs above 10 in ID-1
+    st = _all_groups(**{"ID-1": dict(lowc=lowc, pi=pi, lowc_duration_s=lowc * 5.0)})
+    rows = V.evaluate_all({"r": st}, consumed={"r": {("received", "B-1")}})
+    got = {(f.id, f.group): o for f, outs in rows for o in [outs["r"]]}
+    assert got[("pi-max", None)].verdict in (F.CONSISTENT, F.NOT_REPRODUCED)
+    assert "3 in 3 of 10,000 enc." in got[("pi-max", None)].text  # pooled: 5 x 2,000 encounters
+    sev = got[("pi-severe", None)]
+    assert sev.verdict == F.NESTED and "tested with it" in sev.evidence
+    assert got[("received", "B-1")].verdict == F.INPUT and "inferred" in got[("received", "B-1")].evidence
+    c = V.tally(rows, "r")
+    assert c[F.NESTED] == 1 and c[F.INPUT] == 1

@@ -119,14 +119,10 @@ def check_steplog_path(path: Path) -> None:
     """``--steplog``: a one-line usage error now, not after the whole flight, if it cannot be written
     (its directory is created if missing and probed with a file, as ``daa-sil run --out`` is)."""
     from daa_sil.errors import OutputError
-    from daa_sil.files import ensure_dir
+    from daa_sil.files import check_output_path, ensure_dir
 
-    if path.is_dir():
-        raise UsageError(f"--steplog {path} is a directory, not a file path")
-    blocker = next((p for p in path.parents if p.exists()), None)
-    if blocker is not None and not blocker.is_dir():
-        raise UsageError(f"--steplog {path}: {blocker} is a file, not a directory")
-    try:
+    try:  # name (UTF-8, length), kind, writable: before the flight, not after it
+        check_output_path(path, "--steplog")
         ensure_dir(path.parent)
     except OutputError as exc:
         raise UsageError(f"--steplog {path}: {exc}") from None

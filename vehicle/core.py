@@ -52,37 +52,40 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
     # too, lazy elsewhere: a blend can come at any step, and a parameter can switch blending on mid-run
     kernels.get().search_into.compile()
     es = encounter_set(sc)
+    config = run_config(config)
     policy = resolve_policy(sc, policy, config)
-    if config is not None:
-        waitmap = waitmap if waitmap is not None else config.waitmap["source"]
-    daa_cfg = config.daa_config(sc.thresholds) if config is not None else _preset_daa(sc.thresholds)
+    waitmap = waitmap if waitmap is not None else config.map_source
+    daa_cfg = config.daa_config(sc.thresholds)
     lookup = family = None
     if policy.wait_mode == "map":
         from daa_sil import waitmap as wm
 
-        family = wm.family_for(waitmap, preset="paper")
-        lookup = A.make_wait_lookup(family, cfg=daa_cfg)
+        family = wm.family_for(waitmap, preset="paper", horizon=config.map_horizon(waitmap))
+        lookup = A.make_wait_lookup(family, cfg=daa_cfg, outside=config.effective_reading.outside)
     core = OnboardCore(es.own, es.intr, es.intruder_controls, policy, daa_cfg, lookup, thresholds=sc.thresholds,
                        outcomes=False)  # (the step log reads lowc / nmac; the PI and minimum range are fast-time's)
     return core, es, policy, family
 
 
-def resolve_policy(sc: Scenario, policy=None, config=None) -> AllocationPolicy:
-    """The agent's policy for ``sc``: ``policy`` or the scenario's (:func:`build_policy`), with the run
-    configuration's W_T, ProjL N and link timeouts (the scenario's own timeouts win over the
-    configuration's). Cheap (no kernels, no maps): the booting vehicle answers parameters from it."""
-    policy = policy or build_policy(sc)
+def run_config(config=None):
+    """``config``, or the defaults: the study's default reading (its maps, its agent rules)."""
     if config is not None:
-        link = {k: v for k, v in config.link.items() if v is not None and getattr(sc.allocation, k) is None}
-        policy = apply_overrides(policy, wt=config.allocation["wt"], projl_lookahead=config.allocation["projl_lookahead"],
-                                 link=link)
-    return policy
+        return config
+    from daa_sil.config.run_config import load_config
+
+    return load_config(None)
 
 
-def _preset_daa(name: str):
-    from daa_sil.daa.config import DaaConfig
-
-    return DaaConfig.for_preset(name)
+def resolve_policy(sc: Scenario, policy=None, config=None) -> AllocationPolicy:
+    """The agent's policy for ``sc``: ``policy`` or the scenario's (:func:`build_policy`) with the run
+    configuration's reading rules, W_T, ProjL N and link timeouts (``config`` None: the defaults,
+    :func:`run_config`; the scenario's own timeouts win over the configuration's). Cheap (no kernels, no
+    maps): the booting vehicle answers parameters from it."""
+    config = run_config(config)
+    policy = policy or build_policy(sc)
+    link = {k: v for k, v in config.link.items() if v is not None and getattr(sc.allocation, k) is None}
+    return apply_overrides(config.onboard_policy(policy), wt=config.allocation["wt"],
+                           projl_lookahead=config.allocation["projl_lookahead"], link=link)
 
 
 def link_delay_processes(sc: Scenario) -> "dict | None":
@@ -268,7 +271,10 @@ class VehicleCore:
         return pa.Table.from_pydict(cols, schema=STEP_SCHEMA)
 
     def write_steplog(self, path: "str | Path", meta: dict, n_rows: "int | None" = None) -> Path:
-        """Write the first ``n_rows`` rows (all if None) atomically to ``path``."""
+        """Write the first ``n_rows`` rows (all if None) atomically to ``path``; if its directory can no
+        longer take it, to :func:`daa_sil.out_dir.rescue_path` (a warning says where). Returns where."""
+        from daa_sil.out_dir import write_or_rescue
         from daa_sil.steplog import write_steplog
 
-        return write_steplog(self.steplog_table(n_rows), path, metadata=meta)
+        table = self.steplog_table(n_rows)
+        return write_or_rescue(path, lambda p: write_steplog(table, p, metadata=meta), "step log")

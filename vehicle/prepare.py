@@ -30,11 +30,14 @@ from typing import Callable
 MAP_PROGRESS_STEP = 0.1
 
 
-def waitmap_source(opts) -> "str | None":
-    """The wait-map source the vehicle will fly: ``--waitmap``, else the configuration's, else the default."""
-    if opts.waitmap is not None:
-        return opts.waitmap
-    return opts.config.waitmap["source"] if opts.config is not None else None
+def waitmap_source(opts) -> "tuple[str, float | None]":
+    """The wait maps the vehicle will fly, as :func:`vehicle.core.build_onboard` reads them: ``(source,
+    horizon)`` -- ``--waitmap``, else the configuration's (the default reading's without one)."""
+    from .core import run_config
+
+    config = run_config(opts.config)
+    source = opts.waitmap if opts.waitmap is not None else config.map_source
+    return source, config.map_horizon(source)
 
 
 def cold_parts(sc, opts, policy) -> "list[str]":
@@ -45,7 +48,8 @@ def cold_parts(sc, opts, policy) -> "list[str]":
     if policy.wait_mode == "map":
         from daa_sil.waitmap.source import is_cached
 
-        if not is_cached(waitmap_source(opts), preset="paper"):
+        source, horizon = waitmap_source(opts)
+        if not is_cached(source, preset="paper", horizon=horizon):
             cold.append("maps")
     return cold
 
@@ -104,8 +108,8 @@ class Preparation:
         if "kernels" not in cold:
             argv.append("--no-kernels")
         if "maps" in cold:
-            src = waitmap_source(self.opts)
-            argv += ["--maps"] + ([src] if src is not None else [])
+            src, horizon = waitmap_source(self.opts)
+            argv += ["--maps", str(src)] + (["--horizon", repr(float(horizon))] if horizon is not None else [])
         self.proc = spawn(argv, "daa-prepare", stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                           stdin=subprocess.DEVNULL)
         proc = self.proc
@@ -131,8 +135,8 @@ def main(argv: "list[str] | None" = None) -> int:
     adopt("daa-prepare")
     p = argparse.ArgumentParser(prog="python -m vehicle.prepare", description=main.__doc__)
     p.add_argument("--no-kernels", action="store_true", help="the kernels are cached already")
-    p.add_argument("--maps", nargs="?", const="", default=None, metavar="SOURCE",
-                   help="build the wait maps of SOURCE (a --waitmap value; none: the default maps)")
+    p.add_argument("--maps", default=None, metavar="SOURCE", help="build the wait maps of SOURCE (a --waitmap value)")
+    p.add_argument("--horizon", type=float, default=None, metavar="S", help="their wait-time horizon H (s)")
     args = p.parse_args(argv)
 
     def say(text: str) -> None:
@@ -159,7 +163,7 @@ def main(argv: "list[str] | None" = None) -> int:
                 shown[0] = frac
                 say(f"wait maps {100 * frac:.0f} %")
 
-        waitmap.family_for(args.maps or None, preset="paper", progress=progress)
+        waitmap.family_for(args.maps, preset="paper", progress=progress, horizon=args.horizon)
         say(f"wait maps ready ({time.monotonic() - t0:.0f} s)")
     return 0
 

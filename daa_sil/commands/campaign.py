@@ -5,17 +5,19 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import shlex
 import sys
 from pathlib import Path
 
 from ..errors import UsageError
-from daa_sil.config.settings import (CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA, INTRUDERS, PRESET, PROJL_HORIZON, SEED,
-                                     WAIT_THRESHOLD)
+from daa_sil.config.settings import (BATCH_ROWS, BOOTSTRAP_REPLICATES, CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA,
+                                     INTRUDERS, PRESET, PROJL_HORIZON, SEED, WAIT_THRESHOLD, WORKERS_PER_CORE)
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.files import to_jsonable
+from daa_sil.sil.children import Interrupted, interrupt_signum, interruptible
 from daa_sil.config.readings import DEFAULT_READING, READINGS, parse_reading_settings, readings_help
 from daa_sil.geometry.thresholds import PRESETS
-from .common_args import finite_float, int_at_least
+from .common_args import add_allow_large, finite_float, int_at_least, setting_int, workers_option
 
 RUN_EXAMPLES = """examples:
   # the paper's study (reading 'paper'): 10,000 encounters x 5 groups (B-1, B-2, IC-1, ID-1, ID-2), T = 240 s
@@ -111,7 +113,7 @@ def register(sub) -> None:
     r = verbs.add_parser("run", help="run or resume a campaign", description="Run or resume a campaign.",
                          epilog=RUN_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     _add_run_options(r)
-    r.set_defaults(func=run_cmd)
+    r.set_defaults(func=interruptible(run_cmd))  # SIGTERM / SIGHUP stop it as Ctrl-C does
 
     sw = verbs.add_parser("sweep", help="the study at several values of one setting (sensitivity)",
                           description="Run the study once per value of one setting into one directory "
@@ -124,7 +126,7 @@ def register(sub) -> None:
     sw.add_argument("--collate", nargs="+", default=None, metavar="SWEEP_DIR",
                     help="instead of running: one sensitivity.md page from these sweep directories into --out")
     _add_run_options(sw)
-    sw.set_defaults(func=sweep_cmd)
+    sw.set_defaults(func=interruptible(sweep_cmd))
 
     rep = verbs.add_parser("report", help="Markdown + PNG report of one or more campaign directories",
                            description="Write every finding of the paper with our value, its encounter-level "
@@ -134,8 +136,8 @@ def register(sub) -> None:
     rep.add_argument("dirs", nargs="+", metavar="DIR",
                      help="campaign directories (from 'campaign run'), one per reading")
     rep.add_argument("--out", default=None, metavar="DIR2", help="report directory (default: FIRST_DIR/report)")
-    rep.add_argument("--replicates", type=int_at_least("--replicates", 100), default=None, metavar="B",
-                     help="bootstrap replicates (default 2000)")
+    rep.add_argument("--replicates", type=setting_int("--replicates", BOOTSTRAP_REPLICATES), default=None,
+                     metavar="B", help=BOOTSTRAP_REPLICATES.flag_help("bootstrap replicates"))
     rep.add_argument("--bootstrap-seed", type=int_at_least("--bootstrap-seed", 0), default=None, metavar="S",
                      help="bootstrap seed (default 14)")
     rep.add_argument("--recount", action="append", default=[], metavar="NAME:key=value[,...]",
@@ -168,7 +170,7 @@ def _add_run_options(r) -> None:
                    help="latency of every group: const:4, gauss:5,3, uniform:1,8 (default: each group's); "
                         "the reading's rule applies it (paper: the round trip, half on each link; extended: "
                         "one-way on both links)")
-    r.add_argument("--intruders", type=int_at_least("--intruders", INTRUDERS.lo), default=None, metavar="M",
+    r.add_argument("--intruders", type=setting_int("--intruders", INTRUDERS), default=None, metavar="M",
                    help=INTRUDERS.flag_help())
     r.add_argument("--reading", default=None, metavar="NAME",
                    help=f"a named reading of the paper's simulator (default {DEFAULT_READING}; see 'Readings' "
@@ -179,24 +181,31 @@ def _add_run_options(r) -> None:
                         "unsafe_hold=blend|no-command, waitmap=paper|alerting|..., outside=clamp|far, "
                         "latency=one-way|round-trip, wait_rule=threshold|countdown, window=active|whole, "
                         "received=arrived|pilot+blend|executed, blends=all|maneuvers")
-    r.add_argument("--encounters", type=int_at_least("--encounters", ENCOUNTERS.lo), default=None, metavar="N",
-                   help=f"encounters per group (default {ENCOUNTERS.default})")
-    r.add_argument("--seed", type=int_at_least("--seed", SEED.lo), default=None, metavar="S",
+    r.add_argument("--encounters", type=setting_int("--encounters", ENCOUNTERS), default=None, metavar="N",
+                   help=ENCOUNTERS.flag_help() + "; a campaign whose estimated peak memory exceeds the machine's "
+                                                  "is refused before it starts (see --allow-large)")
+    r.add_argument("--seed", type=setting_int("--seed", SEED), default=None, metavar="S",
                    help=f"campaign seed (default {SEED.default})")
     r.add_argument("--duration", type=finite_float("--duration", *DURATION.range), default=None, metavar="S",
                    help=DURATION.flag_help())
-    r.add_argument("--chunk-size", type=int_at_least("--chunk-size", CHUNK_SIZE.lo), default=None, metavar="C",
-                   help=f"encounters per chunk (default {CHUNK_SIZE.default}): one result file per group and chunk, and the "
-                        "encounters that share a DAA call (so part of the configuration)")
-    r.add_argument("--batch-rows", type=int_at_least("--batch-rows", 1), default=None, metavar="R",
+    r.add_argument("--chunk-size", type=setting_int("--chunk-size", CHUNK_SIZE), default=None, metavar="C",
+                   help=f"encounters per chunk (default {CHUNK_SIZE.default}): one result file per group and chunk "
+                        "(results do not depend on it)")
+    r.add_argument("--batch-rows", type=setting_int("--batch-rows", BATCH_ROWS), default=None, metavar="R",
                    help="encounter rows per task: several chunks of several groups run side by side in one "
-                        "batch (default 10000, about 0.4 GiB per worker; results do not depend on it)")
-    r.add_argument("--out", required=True, metavar="DIR", help="output directory (must be empty unless --resume)")
-    r.add_argument("--workers", type=int_at_least("--workers", 1), default=None, metavar="K",
-                   help="worker processes (1 = in-process; default 1); not with a remote --scheduler")
+                        f"batch (default {BATCH_ROWS.default}, about 0.4 GiB per worker; results do not depend on it)")
+    r.add_argument("--out", required=True, metavar="DIR",
+                   help="output directory (must be empty unless --resume or --force; held by this run while it "
+                        "writes, so a second run into it is refused)")
+    r.add_argument("--workers", type=workers_option(), default=None, metavar="K",
+                   help=f"worker processes (1 = in-process; default 1; at most {WORKERS_PER_CORE} per core); not "
+                        "with a remote --scheduler")
     r.add_argument("--scheduler", default=None, metavar="ADDRESS|local-dask",
                    help="run on a Dask cluster at ADDRESS (tcp://host:8786) or a local one (local-dask)")
     r.add_argument("--resume", action="store_true", help="continue the campaign in DIR (skips complete chunks)")
+    r.add_argument("--force", action="store_true",
+                   help="replace the campaign in a non-empty DIR (its campaign.json, encounter set and chunk files)")
+    add_allow_large(r, "the campaign")
     r.add_argument("--preset", default=None, help=f"threshold preset: {', '.join(PRESETS)} (default {PRESET.default})")
     add_config_argument(r)
     r.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -264,14 +273,32 @@ def check_scheduler(scheduler: "str | None", workers: "int | None") -> None:
                          "uses the cluster's own workers (drop --workers)")
 
 
+def _check_resume_force(args) -> None:
+    if args.resume and args.force:
+        raise UsageError("--resume continues what is in --out and --force replaces it: give one of them")
+
+
+def _interrupted(exc: KeyboardInterrupt, detail: str) -> Interrupted:
+    """The one line a Ctrl-C (or SIGTERM / SIGHUP) of a campaign ends with: what is kept, how to go on."""
+    return Interrupted(interrupt_signum(exc), detail)
+
+
 def run_cmd(args) -> int:
     from daa_sil.study.campaign import run_campaign
 
+    _check_resume_force(args)
     cfg = _config_from_args(args)
     check_scheduler(args.scheduler, args.workers)
     batch = {"batch_rows": args.batch_rows} if args.batch_rows is not None else {}
-    summary = run_campaign(cfg, args.out, workers=args.workers or 1, scheduler=args.scheduler, resume=args.resume,
-                           progress=not args.no_progress and not args.json, **batch)
+    written = []
+    try:
+        summary = run_campaign(cfg, args.out, workers=args.workers or 1, scheduler=args.scheduler, resume=args.resume,
+                               progress=not args.no_progress and not args.json, on_chunk=written.append,
+                               allow_large=args.allow_large, force=args.force, **batch)
+    except KeyboardInterrupt as exc:
+        out = shlex.quote(str(args.out))
+        raise _interrupted(exc, f"({len(written)} chunks written in this run are kept in {args.out}); continue with: "
+                                f"daa-sil campaign run --out {out} --resume") from None
     rate = summary.encounter_steps / summary.wall_s if summary.wall_s > 0 else float("nan")
     info = {"out": str(summary.out_dir), "groups": list(cfg.group_names), "encounters": cfg.n_encounters,
             "seed": cfg.seed, "preset": cfg.preset, "chunks_total": summary.chunks_total,
@@ -287,6 +314,8 @@ def run_cmd(args) -> int:
               f"({len(cfg.groups)} groups x {cfg.n_encounters} encounters, preset {cfg.preset}, wait maps "
               f"{cfg.map_source}, reading {cfg.effective_reading.name}) in "
               f"{summary.wall_s:.1f} s ({rate:,.0f} encounter-steps/s)", file=sys.stderr)
+        print(f"next: daa-sil campaign report {shlex.quote(str(summary.out_dir))}   (findings, tables and figures "
+              f"next to the paper's)", file=sys.stderr)
     return 0
 
 
@@ -301,6 +330,7 @@ def sweep_cmd(args) -> int:
         return 0
     if not args.vary:
         raise UsageError("campaign sweep needs --vary NAME=V1,V2,... (or --collate SWEEP_DIR ...)")
+    _check_resume_force(args)
     vary = sweep.parse_vary(args.vary)
     given = getattr(args, vary.field if vary.field != "n_intruders" else "intruders", None)
     if vary.field in ("waitmap", "gamma", "wt", "latency", "reading") and given is not None:
@@ -308,9 +338,14 @@ def sweep_cmd(args) -> int:
     base = _config_from_args(args)  # the sweep directory has no campaign.json: defaults + the options given
     check_scheduler(args.scheduler, args.workers)
     quiet = args.no_progress or args.json
-    meta = sweep.run_sweep(base, vary, args.out, workers=args.workers or 1, scheduler=args.scheduler,
-                           resume=args.resume, progress=not quiet, batch_rows=args.batch_rows,
-                           say=None if args.json else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
+    try:
+        meta = sweep.run_sweep(base, vary, args.out, workers=args.workers or 1, scheduler=args.scheduler,
+                               resume=args.resume, progress=not quiet, batch_rows=args.batch_rows,
+                               allow_large=args.allow_large, force=args.force,
+                               say=None if args.json else (lambda m: print(f"daa-sil: {m}", file=sys.stderr, flush=True)))
+    except KeyboardInterrupt as exc:
+        raise _interrupted(exc, f"(the points and chunks finished so far are kept in {args.out}); continue with the "
+                                f"same command and --resume") from None
     if args.json:
         print(json.dumps(to_jsonable({"out": args.out, "vary": meta["vary"], "values": meta["values"]}), sort_keys=True))
     else:
@@ -334,6 +369,13 @@ def report_cmd(args) -> int:
     for spec in args.recount:
         parse_recount(spec)  # one-line error before anything is read or written
     out = Path(args.out) if args.out else dirs[0] / "report"
+    from daa_sil.errors import OutputError
+    from daa_sil.files import check_output_path
+
+    try:  # a bad name (UTF-8, length) now; an unwritable directory when the report is written (exit 1)
+        check_output_path(out, "--out", directory=True)
+    except OutputError:
+        pass
     reps = args.replicates or DEFAULT_REPLICATES
     seed = DEFAULT_SEED if args.bootstrap_seed is None else args.bootstrap_seed
     path = report.write_report(dirs if len(dirs) > 1 else dirs[0], out, replicates=reps, seed=seed,

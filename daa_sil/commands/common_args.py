@@ -4,7 +4,12 @@ parser of every console script, and the options the node scripts share (speed, s
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import math
+import os
+import sys
+from typing import Iterator
 
 from ..errors import UsageError
 
@@ -55,6 +60,47 @@ def int_at_least(name: str, lo: int):
     return conv
 
 
+def setting_int(name: str, setting):
+    """argparse ``type=`` factory: an integer within ``setting``'s range
+    (:class:`daa_sil.config.settings.Setting`, where the range is defined once), one line otherwise."""
+
+    def conv(text: str) -> int:
+        try:
+            val = int(text)
+        except ValueError:
+            raise UsageError(f"{name} must be an integer, got {text!r}") from None
+        return setting.check(val, key=name)
+
+    conv.__name__ = name
+    return conv
+
+
+def workers_option(name: str = "--workers"):
+    """argparse ``type=`` factory: a worker count within ``[1, WORKERS_PER_CORE x usable cores]``
+    (:func:`daa_sil.resources.check_workers`)."""
+
+    def conv(text: str) -> int:
+        from ..resources import check_workers
+
+        try:
+            val = int(text)
+        except ValueError:
+            raise UsageError(f"{name} must be an integer, got {text!r}") from None
+        return check_workers(val, name)
+
+    conv.__name__ = name
+    return conv
+
+
+def add_allow_large(p: argparse.ArgumentParser, what: str) -> None:
+    """``--allow-large``: run even when the memory estimate exceeds the machine's memory."""
+    from ..resources import MEMORY_SHARE
+
+    p.add_argument("--allow-large", action="store_true",
+                   help=f"run even when the estimated peak memory of {what} exceeds {MEMORY_SHARE * 100:.0f} %% of "
+                        "this machine's memory (without it such a run is refused before anything starts)")
+
+
 def parse_vector(text: str, n: int, name: str, units: str = "") -> list[float]:
     """Parse ``"a,b,c"`` into ``n`` finite floats or raise a one-line UsageError naming ``name``."""
     parts = [p.strip() for p in str(text).split(",")]
@@ -90,3 +136,63 @@ def finite_float(name: str, lo: float | None = None, hi: float | None = None):
 
     conv.__name__ = name
     return conv
+
+
+class _KeepPlaying:
+    """``sys.stdout`` for :func:`stdout_may_close`: writes through until the reader goes away, then
+    says so once on stderr and drops the rest (fd 1 becomes ``/dev/null``, so the interpreter's own
+    flush at exit does not fail either)."""
+
+    def __init__(self, real, prog: str, out) -> None:
+        self.real, self.prog, self.out, self.closed_reader = real, prog, out, False
+
+    def _gone(self) -> None:
+        if self.closed_reader:
+            return
+        self.closed_reader = True
+        try:
+            fd = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(fd, self.real.fileno())
+            os.close(fd)
+        except (OSError, ValueError, AttributeError):  # not a real file (a test's StringIO)
+            pass
+        print(f"{self.prog}: note: standard output was closed; playing on, the results are in {self.out}",
+              file=sys.stderr, flush=True)
+
+    def write(self, text: str) -> int:
+        if not self.closed_reader:
+            try:
+                return self.real.write(text)
+            except OSError as exc:
+                if exc.errno not in (errno.EPIPE, errno.EINVAL):
+                    raise
+                self._gone()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.closed_reader:
+            try:
+                self.real.flush()
+            except OSError as exc:
+                if exc.errno not in (errno.EPIPE, errno.EINVAL):
+                    raise
+                self._gone()
+
+    def __getattr__(self, name):
+        return getattr(self.real, name)
+
+
+@contextlib.contextmanager
+def stdout_may_close(prog: str, out) -> Iterator[None]:
+    """While the block runs, a standard output whose reader goes away (``daa-sil demo --out D | true``,
+    ``| head -3``) does not stop the command: one note on stderr, the rest of stdout is dropped, and the
+    run plays on to its files in ``out`` and its usual exit status (the run is the product; its
+    commentary on stdout is not)."""
+    real = sys.stdout
+    guard = _KeepPlaying(real, prog, out)
+    sys.stdout = guard
+    try:
+        yield
+    finally:
+        if sys.stdout is guard:
+            sys.stdout = real

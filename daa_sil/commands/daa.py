@@ -10,6 +10,7 @@ import numpy as np
 from ..daa import ALERT_NAMES, AXIS_NAMES, DIR_NAMES, DaaConfig, compute_bands, resolve
 from ..errors import UsageError
 from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.config.settings import INTRUDERS
 from daa_sil.files import to_jsonable
 from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.geometry.thresholds import PRESETS
@@ -83,6 +84,9 @@ def _res(v) -> "float | str | None":
 
 def run(args) -> int:
     own = parse_state(args.own, "--own")
+    if len(args.intruder) > INTRUDERS.hi:  # as every other input: a scenario, a campaign
+        raise UsageError(f"--intruder is given {len(args.intruder)} times; at most {INTRUDERS.hi} intruders "
+                         f"(the range of every input, {INTRUDERS.help})")
     intr = np.array([parse_state(s, "--intruder") for s in args.intruder])
     rc = load_config(args.config) if args.config else None
     preset = args.preset or (rc.thresholds if rc else "do365")

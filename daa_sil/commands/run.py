@@ -14,15 +14,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
 from daa_sil.config.config_option import add_config_argument, config_of
 from daa_sil.errors import OutputError, UsageError
-from .common_args import check_speed, load_key_option
+from .common_args import add_allow_large, check_speed, load_key_option, stdout_may_close
 from daa_sil.sil.children import interruptible
 from daa_sil.sil.summary import PROGRESS_EVERY_S, demo_legend, human_summary, pilot_story
 from daa_sil.sil.play import RunOptions, check_faults_allowed, prepare_waitmap, run_sil
+from daa_sil.sil.run_files import remove_run_outputs
+from daa_sil.files import check_output_path
+from daa_sil.out_dir import check_not_busy, claim_out_dir
 
 
 EXAMPLES = """examples:
@@ -78,7 +82,13 @@ def _viz_available() -> bool:
 
 
 def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
-    p.add_argument("--out", default=default_out, metavar="DIR", help=f"output directory (default {default_out})")
+    p.add_argument("--out", default=default_out, metavar="DIR",
+                   help=f"output directory (default {default_out}); held by this run while it writes, refused when "
+                        "another run holds it or it is not empty (see --force). MAVLink outputs (udp:..., tcpin:...) "
+                        "go to --vehicle-out")
+    p.add_argument("--force", action="store_true",
+                   help="replace a previous run's outputs in a non-empty --out (result.json, the step log, the logs)")
+    add_allow_large(p, "building the --waitmap grid on first use")
     p.add_argument("--clock", choices=("lockstep", "realtime"), default="lockstep",
                    help="lockstep: as fast as the processes go, deterministic (default); realtime: wall clock x --speed")
     p.add_argument("--speed", type=float, default=1.0, metavar="X", help="realtime speed factor (default 1)")
@@ -130,9 +140,28 @@ def register(sub) -> None:
     d.set_defaults(func=interruptible(demo), scenario=None)
 
 
+#: connection strings of MAVLink tools (pymavlink / MAVProxy / SITL): an ``--out`` starting so is one
+MAVLINK_SCHEMES = ("udp", "udpin", "udpout", "udpbcast", "tcp", "tcpin", "serial", "mcast", "ws", "wss", "wsserver")
+_MAVLINK = re.compile(rf"^(?:{'|'.join(MAVLINK_SCHEMES)}):", re.IGNORECASE)
+
+
+def check_out_option(out: str) -> Path:
+    """``--out`` of ``run``/``demo`` before anything runs: a MAVLink connection string is refused in
+    one line pointing at ``--vehicle-out`` (exit 2); otherwise the directory is checked as every output
+    is (:func:`daa_sil.files.check_output_path`). Creates nothing."""
+    text = str(out)
+    if _MAVLINK.match(text):
+        raise UsageError(f"--out {text!r} looks like a MAVLink connection, but --out of 'daa-sil run' is the output "
+                         f"directory; send the vehicle's MAVLink to a ground station with --vehicle-out {text} "
+                         f"(for a directory of that name, write ./{text})")
+    return check_output_path(text, "--out", directory=True)
+
+
 def _check_args(args):
     """Every check that can fail before a process starts (one line, exit 2); returns the scenario of
     ``args.scenario`` loaded (None without one: the demo's)."""
+    check_out_option(args.out)
+    check_not_busy(args.out)
     check_speed(args.speed)
     if args.config:
         config_of(args.config)  # a bad file fails here, one line, before any process starts
@@ -164,8 +193,7 @@ def _check_args(args):
             raise UsageError(f"--rrd {str(rrd)!r} should end in .rrd")
         from ..viz import check_rrd_path
 
-        if rrd.is_dir():
-            raise UsageError(f"--rrd {str(rrd)!r} is a directory, not an .rrd file path")
+        check_output_path(rrd, "--rrd")  # name, length, UTF-8; a directory: one line
         if rrd.resolve().parent != Path(args.out).resolve():  # --out is created by the run
             check_rrd_path(rrd, overwrite=True)  # a missing/unwritable directory fails before any process starts
     if args.scenario is None:
@@ -178,10 +206,11 @@ def _check_args(args):
 
 
 def _waitmap_source(args) -> "str | None":
-    """``--waitmap``, else the ``--config``'s wait-map source, else None (the default map)."""
+    """``--waitmap``, else the wait maps of the ``--config``'s reading, else None (the vehicle's
+    default: the study's default reading's maps)."""
     if args.waitmap is not None:
         return args.waitmap
-    return config_of(args.config).waitmap["source"] if args.config else None
+    return config_of(args.config).map_source if args.config else None
 
 
 def _options(args, scenario: Path) -> RunOptions:
@@ -208,6 +237,11 @@ def _finish(args, result: dict, sc, legend: "str | None" = None) -> int:
             print(legend)
     exp = result.get("expectation") or {}
     rc = 0 if exp.get("ok", True) is True else 1
+    saved = result.get("rescued")
+    if saved:  # the run is complete, but not where it was asked to be
+        where = " and ".join(f"{what} in {path}" for what, path in (("the step log", saved["steplog"]),
+                                                                   ("result.json", saved["result"])) if path)
+        raise OutputError(f"{saved['reason']}; {where}")
     if getattr(args, "serve_web", False):
         _serve_web(args, result)
     return rc
@@ -237,14 +271,19 @@ def _say(prefix: str, args):
     return lambda m: print(f"{prefix}: {m}", file=sys.stderr, flush=True)
 
 
-def run(args) -> int:
-    from daa_sil.files import ensure_dir
+def _claim(args):
+    """Hold ``--out`` for this run (:func:`daa_sil.out_dir.claim_out_dir`; ``--force`` replaces a
+    previous run's outputs there)."""
+    return claim_out_dir(args.out, replace=remove_run_outputs if args.force else None,
+                         hint="pass --force to replace the run in it, or choose a new directory")
 
+
+def run(args) -> int:
     sc = _check_args(args)  # (loaded once here, and handed on)
-    ensure_dir(args.out)  # an unusable --out fails here, before the maps are built or anything starts
-    prepare_waitmap(sc, _waitmap_source(args), _say("daa-sil", args))
-    result = run_sil(_options(args, args.scenario), scenario=sc)
-    return _finish(args, result, sc)
+    with _claim(args), stdout_may_close("daa-sil", args.out):  # an unusable --out fails here, before anything starts
+        prepare_waitmap(sc, _waitmap_source(args), _say("daa-sil", args), allow_large=args.allow_large)
+        result = run_sil(_options(args, args.scenario), scenario=sc)
+        return _finish(args, result, sc)
 
 
 def demo_scenario_path() -> Path:
@@ -256,20 +295,20 @@ def demo_scenario_path() -> Path:
 
 
 def demo(args) -> int:
-    from daa_sil.files import ensure_dir
     from daa_sil.sil.scenario import load_scenario
 
     _check_args(args)
     path = demo_scenario_path()
     sc = load_scenario(path)
-    if not args.json:
-        print(f"daa-sil demo: {sc.description.strip().splitlines()[0]}", flush=True)
-    ensure_dir(args.out)
-    say = _say("daa-sil demo", args)
-    prepare_waitmap(sc, _waitmap_source(args), say and (lambda m: print(f"daa-sil demo: {m}", flush=True)))
-    result = run_sil(_options(args, path), scenario=sc)
-    if not args.json:
-        print(pilot_story(Path(args.out)))
-    return _finish(args, result, sc, legend=demo_legend(result, sc, Path(args.out)))
+    with _claim(args), stdout_may_close("daa-sil demo", args.out):
+        if not args.json:
+            print(f"daa-sil demo: {sc.description.strip().splitlines()[0]}", flush=True)
+        say = _say("daa-sil demo", args)
+        prepare_waitmap(sc, _waitmap_source(args), say and (lambda m: print(f"daa-sil demo: {m}", flush=True)),
+                        allow_large=args.allow_large)
+        result = run_sil(_options(args, path), scenario=sc)
+        if not args.json:
+            print(pilot_story(Path(args.out)))
+        return _finish(args, result, sc, legend=demo_legend(result, sc, Path(args.out)))
 
 

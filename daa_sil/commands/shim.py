@@ -130,6 +130,10 @@ def config_from_args(args) -> ShimConfig:
                          "e.g. --delay const:4")
     if args.seed < 0:
         raise UsageError(f"--seed must be >= 0, got {args.seed}")
+    if args.stats_json:
+        from daa_sil.files import check_output_path
+
+        check_output_path(args.stats_json, "--stats-json")  # name, length, UTF-8, writable: before binding
     if rt:
         legs = link_legs(parse_delay_spec(rt), "round-trip")
         up_model, down_model = legs.up, legs.down

@@ -76,6 +76,18 @@ def register(sub) -> None:
     r.set_defaults(func=interruptible(run_replay))
 
 
+def output_name_ok(path, option: str) -> None:
+    """A bad output name (not UTF-8, too long) is a one-line usage error now; whether its directory can
+    be written is found out after the input was read (bad input is reported first)."""
+    from daa_sil.errors import OutputError
+    from daa_sil.files import check_output_path
+
+    try:
+        check_output_path(path, option)
+    except OutputError:
+        pass
+
+
 def sink_options(args):
     """SinkOptions from the CLI flags (UsageError if none is chosen)."""
     from ..viz import SinkOptions
@@ -85,6 +97,9 @@ def sink_options(args):
     check_web_viewer_arguments(args)
     if args.rrd and not str(args.rrd).endswith(".rrd"):
         raise UsageError(f"--rrd {args.rrd!r} should end in .rrd")
+    for option, path in (("--rrd", args.rrd), ("--save-steplog", getattr(args, "save_steplog", None))):
+        if path:
+            output_name_ok(path, option)
     return SinkOptions(rrd=args.rrd, spawn=args.spawn_viewer, connect=args.connect, serve_web=args.serve_web,
                        bind=args.bind, web_port=args.web_port, grpc_port=args.grpc_port, overwrite=args.force)
 

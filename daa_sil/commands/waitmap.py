@@ -14,7 +14,8 @@ from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.files import to_jsonable
 from daa_sil.geometry.thresholds import PRESETS
 from ..waitmap.model import WAIT_DEFINITIONS
-from .common_args import finite_float, int_at_least
+from daa_sil.config.settings import WORKERS_PER_CORE
+from .common_args import add_allow_large, finite_float, workers_option
 
 BUILD_EX = """examples:
   daa-sil waitmap build --out maps/paper                      # the paper grid, 5 turn-rate maps
@@ -107,9 +108,11 @@ def register(sub) -> None:
                    help="wait time stored: paper (default) or until_evade")
     b.add_argument("--p-min", type=finite_float("--p-min", 1e-9, 0.5), default=1e-3, metavar="P",
                    help="LoWC-probability floor: states below it are no threat, W = H (default 0.001)")
-    b.add_argument("--workers", type=int_at_least("--workers", 1), default=None, metavar="K",
-                   help="maps built at once, one process each (default: min(cores, maps))")
+    b.add_argument("--workers", type=workers_option(), default=None, metavar="K",
+                   help=f"maps built at once, one process each (default: min(cores, maps); at most "
+                        f"{WORKERS_PER_CORE} per core)")
     b.add_argument("--force", action="store_true", help="overwrite existing maps in DIR")
+    add_allow_large(b, "the build (about 0.5 kB per grid state for each map being built)")
     b.add_argument("--json", action="store_true", help="print a JSON summary instead of paths")
     b.set_defaults(func=run_build)
 
@@ -161,9 +164,10 @@ def run_build(args) -> int:
     from rich.progress import Progress
 
     from .. import waitmap
-    from daa_sil.files import ensure_dir
+    from daa_sil.files import check_output_path
+    from daa_sil.out_dir import check_not_busy, claim_out_dir
     from ..waitmap.model import params_hash
-    from ..waitmap.build import default_workers
+    from ..waitmap.build import build_memory, default_workers
     from ..waitmap.store import FAMILY_INDEX, map_filename, read_meta, write_family_index
 
     rc = load_config(args.config) if args.config else None
@@ -177,7 +181,11 @@ def run_build(args) -> int:
                                       wait_definition=args.definition, p_min=args.p_min)
     if args.horizon is not None:
         params = params.with_(horizon=args.horizon)
-    out = Path(args.out)
+    out = check_output_path(args.out, "--out", directory=True)  # name, length, kind, writable: one line
+    workers = args.workers or default_workers(len(rates))
+    build_memory(grid, len(rates), workers).check(args.allow_large, "use a smaller --grid, fewer --turn-rates "
+                                                                    "or fewer --workers")
+    check_not_busy(out)
     if not args.force:
         clash = [out / map_filename(r) for r in rates] + [out / FAMILY_INDEX]
         clash = [c for c in clash if c.exists()]
@@ -185,16 +193,15 @@ def run_build(args) -> int:
             from ..errors import OutputError
 
             raise OutputError(f"{clash[0]} exists; refusing to overwrite (use --force or another --out)")
-    ensure_dir(out)
-    (out / FAMILY_INDEX).unlink(missing_ok=True)  # --force: the old index must not describe new maps
-    workers = args.workers or default_workers(len(rates))
-    with Progress(transient=True) as prog:
-        task = prog.add_task(f"building {len(rates)} maps on {grid.size:,} states ({workers} processes)",
-                             total=len(rates))
-        paths = waitmap.build_members(grid, params, rates, out, workers=workers,
-                                      progress=lambda r: prog.advance(task))
-    write_family_index(out, [(r, p, read_meta(p)["content_hash"]) for r, p in zip(rates, paths)],
-                       params_hash(grid.to_dict(), params, rates), rates)
+    with claim_out_dir(out, keep=True):  # other files may stay; a second build into DIR meanwhile is refused
+        (out / FAMILY_INDEX).unlink(missing_ok=True)  # --force: the old index must not describe new maps
+        with Progress(transient=True) as prog:
+            task = prog.add_task(f"building {len(rates)} maps on {grid.size:,} states ({workers} processes)",
+                                 total=len(rates))
+            paths = waitmap.build_members(grid, params, rates, out, workers=workers,
+                                          progress=lambda r: prog.advance(task))
+        write_family_index(out, [(r, p, read_meta(p)["content_hash"]) for r, p in zip(rates, paths)],
+                           params_hash(grid.to_dict(), params, rates), rates)
     fam = waitmap.load_family(out)
     paths = [out / map_filename(m.turn_rate_deg) for m in fam.maps]
     if args.json:
@@ -260,8 +267,12 @@ def run_check(args) -> int:
 
 
 def run_plot(args) -> int:
+    from daa_sil.files import check_output_path
     from ..waitmap.plots import write_plots
 
+    check_output_path(args.out, "--out", directory=True)
+    if args.rerun:
+        check_output_path(args.rerun, "--rerun")
     fam = _load_any(args.map)
     for p in write_plots(fam, Path(args.out), vi=args.vi, dh=args.dh, vh=args.vh, overwrite=args.force):
         print(p)

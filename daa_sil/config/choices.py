@@ -10,9 +10,11 @@ WAIT_RULES = ("threshold", "countdown")
 #: a fresh, unsafe "hold" (a pilot command without a maneuver intent): ``blend`` it like any command
 #: (Algorithm 1), or treat it as ``no-command`` (the agent decides wait / no wait)
 UNSAFE_HOLDS = ("blend", "no-command")
-#: the wait read for a state outside the wait map's box: ``clamp`` (the nearest state of the box) or
-#: ``far`` (the map does not model that intruder: w = H)
-OUTSIDE_BOX = ("clamp", "far")
+#: the wait read for a state outside the wait map's box: ``clamp`` (the nearest state of the box),
+#: ``far`` (the map does not model that intruder: w = H) or ``approach`` (the time the relative state
+#: needs, on a straight line, to enter the box plus the wait at its entry point, at most H; H where
+#: it never enters): :func:`daa_sil.wait_function.make_wait_lookup`
+OUTSIDE_BOX = ("clamp", "far", "approach")
 #: when the pilot model stops streaming: ``alert`` (when its alert clears) or ``safe-avoidance``
 #: (when its display shows no alert and every intruder past its closest point of approach)
 PILOT_STOPS = ("alert", "safe-avoidance")
@@ -22,4 +24,15 @@ PILOT_STOPS = ("alert", "safe-avoidance")
 #: its closest point of approach), and from any later corrective alert
 AGENT_ACTIVE = ("corrective", "encounter")
 
-__all__ = ["WAIT_RULES", "UNSAFE_HOLDS", "OUTSIDE_BOX", "PILOT_STOPS", "AGENT_ACTIVE"]
+#: what the agent does on a step without a fresh command once the onboard DAA holds authority:
+#: ``per-step`` (Algorithm 1 every step: wait or not by Eq. 11 afresh) or ``until-clear`` (our
+#: extension: the DAA keeps authority on such steps until no intruder raises any alert; a fresh
+#: pilot command is still decided by Algorithm 1)
+DAA_AUTHORITY = ("per-step", "until-clear")
+
+#: how a link delay drawn from a distribution varies: one draw per ``epoch`` (the link's delay epoch,
+#: :data:`daa_sil.config.settings.DELAY_EPOCH`) or one draw per ``encounter`` (constant over it)
+DELAY_DRAWS = ("epoch", "encounter")
+
+__all__ = ["WAIT_RULES", "UNSAFE_HOLDS", "OUTSIDE_BOX", "PILOT_STOPS", "AGENT_ACTIVE", "DAA_AUTHORITY",
+           "DELAY_DRAWS"]

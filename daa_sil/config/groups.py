@@ -49,6 +49,8 @@ class GroupSpec:
     blending: bool = True
     wait_rule: str = "threshold"
     description: str = ""
+    #: False: the agent never takes authority (no DAA: the pilot's last command is always flown)
+    enabled: bool = True
 
     def __hash__(self) -> int:  # the latency mapping is not hashable; hash the JSON form
         return hash((self.name, json.dumps(self.to_dict(), sort_keys=True)))
@@ -74,7 +76,7 @@ class GroupSpec:
                                 else CONSTANT_WAIT.default,
                                 wait_threshold_s=self.wait_threshold_s, projl=self.projl,
                                 projl_horizon_s=self.projl_horizon_s, blending=self.blending,
-                                wait_rule=self.wait_rule, name=self.name)
+                                wait_rule=self.wait_rule, name=self.name, enabled=self.enabled)
 
     def with_(self, **changes) -> "GroupSpec":
         return replace(self, **changes)
@@ -110,7 +112,7 @@ class GroupSpec:
                    wait_threshold_s=_number(d, WAIT_THRESHOLD, at),
                    projl=_flag(d, "projl", True, at), projl_horizon_s=_number(d, PROJL_HORIZON, at),
                    blending=_flag(d, "blending", True, at), wait_rule=str(d.get("wait_rule", "threshold")),
-                   description=str(d.get("description", "")))
+                   description=str(d.get("description", "")), enabled=_flag(d, "enabled", True, at))
         spec.delay_model()  # validates latency
         spec.policy()  # validates wait_rule
         return spec

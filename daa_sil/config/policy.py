@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Mapping, TypeVar
 
-from daa_sil.config.choices import AGENT_ACTIVE, UNSAFE_HOLDS, WAIT_RULES
+from daa_sil.config.choices import AGENT_ACTIVE, DAA_AUTHORITY, UNSAFE_HOLDS, WAIT_RULES
 from daa_sil.config.settings import CONSTANT_WAIT, LINK_TIMEOUT, PROJL_HORIZON, STALE_COMMAND, WAIT_THRESHOLD
 from daa_sil.errors import UsageError
 
@@ -36,6 +36,9 @@ class AllocationPolicy:
     #: :data:`AGENT_ACTIVE`: the agent decides from the corrective alert (``corrective``) or over the
     #: whole encounter, from its start until safe avoidance (``encounter``)
     active_from: str = "corrective"
+    #: :data:`DAA_AUTHORITY`: on a step without a fresh command, Algorithm 1 afresh (``per-step``), or
+    #: the DAA keeps an authority it holds until no intruder raises any alert (``until-clear``)
+    daa_authority: str = "per-step"
     #: False = the agent never takes authority: the pilot's last command is always flown, the
     #: decision is always ``none`` (alert levels are still computed); the SIL's ``DAA_ENABLE 0``
     enabled: bool = True
@@ -49,6 +52,8 @@ class AllocationPolicy:
             raise UsageError(f"unsafe_hold must be one of {', '.join(UNSAFE_HOLDS)}, got {self.unsafe_hold!r}")
         if self.active_from not in AGENT_ACTIVE:
             raise UsageError(f"active_from must be one of {', '.join(AGENT_ACTIVE)}, got {self.active_from!r}")
+        if self.daa_authority not in DAA_AUTHORITY:
+            raise UsageError(f"daa_authority must be one of {', '.join(DAA_AUTHORITY)}, got {self.daa_authority!r}")
 
 
 T = TypeVar("T")

@@ -2,9 +2,10 @@
 or leaves open, as data.
 
 A :class:`Reading` is a small bundle of explicit settings; it is recorded in ``campaign.json``
-(``config.reading`` and ``config.readings``) and the report shows readings side by side.
-``docs/results/paper-study.md`` ("The readings") quotes the sentence each setting of the ``paper``
-reading rests on; this docstring names the settings.
+(``config.reading``, ``config.readings`` and, for every setting, its basis: ``basis``, from
+:mod:`daa_sil.config.basis`, the one definition the study page prints too). The report shows
+readings side by side. This docstring names the settings; :mod:`daa_sil.config.basis` says what each
+value of the ``paper`` reading rests on.
 
 Settings that change the **simulation** (one campaign each):
 
@@ -16,8 +17,8 @@ Settings that change the **simulation** (one campaign each):
   agent's active phase), ``preventive`` (from the first, preventive alert: it also maneuvers from
   then) or ``detection`` ("hold" from the first telemetry, maneuvering from the corrective alert);
 * ``pilot_engage`` -- the alert level from which the pilot maneuvers: unset (``preventive`` for the
-  ``preventive`` start, else ``corrective``) or ``corrective`` / ``preventive`` (a ``detection`` pilot
-  streams "hold" from the first telemetry either way);
+  ``preventive`` start, else ``corrective``), ``corrective`` / ``preventive``, or ``never`` (the
+  pilot never maneuvers: with ``hold_commands`` false it sends nothing; the unmitigated experiment);
 * ``pilot_stop`` -- when it stops: ``alert`` (a maneuvering pilot when its alert clears; a
   ``detection`` pilot's "hold" runs to the end of the encounter) or ``safe-avoidance`` (the
   paper's "The model captures pilot response from the beginning of an encounter till safe
@@ -26,19 +27,27 @@ Settings that change the **simulation** (one campaign each):
 * ``hold_commands`` -- the GCS streams "hold" as a pilot command until the pilot's first maneuver
   (true) or sends only maneuvers (false);
 * ``unsafe_hold`` -- what the agent does with a fresh "hold" (a command without a maneuver intent)
-  that is unsafe: ``blend`` (Algorithm 1 as for any command) or ``no-command`` (as if no command
-  had arrived: the agent decides wait / no wait);
+  that is unsafe: ``blend`` (Algorithm 1 as for any command: blended in the integrated groups,
+  overridden in the baselines) or ``no-command`` (as if no command had arrived: the agent decides
+  wait / no wait);
 * ``waitmap`` -- the wait maps' grid: ``paper`` (the simulation-parameters paragraph's ranges and
   bins) or unset (the campaign's ``--waitmap``, default ``alerting``, our extension);
-* ``outside`` -- the wait read for a state outside the map's box: ``clamp`` (the nearest state of
-  the box: "the agent matches the current state with a state in the wait map") or ``far`` (the map
-  does not model that intruder: w = H; ProjL still vetoes);
+* ``wait_horizon_s`` -- the wait maps' horizon H (s), the largest wait a map holds: unset (the map
+  preset's: 60 s for ``paper``) or a number (40 s: "The maximum wait time is 40 seconds");
+* ``outside`` -- the wait read for a state outside the map's box
+  (:data:`daa_sil.config.choices.OUTSIDE_BOX`): ``clamp`` (the nearest state of the box), ``far``
+  (w = H) or ``approach`` (the straight-line time to enter the box plus the wait at the entry
+  point, at most H);
 * ``latency`` -- :data:`daa_sil.models.latency.LATENCY_RULES`: ``one-way`` (a group's value on each
   link) or ``round-trip`` (the group's value is the round trip, split evenly between the links);
+* ``delay_draw`` -- a Gaussian (any drawn) delay is redrawn every delay epoch (``epoch``, 10 s) or
+  drawn once per encounter (``encounter``);
 * ``wait_rule`` -- unset (each group's, ``threshold``: Eq. "W(k)" every step) or ``countdown``
   (the wait read from the map is a budget counted from the start of a wait, :mod:`daa_sil.agent`);
 * ``agent_active`` -- when the agent decides: from the ``corrective`` alert (its active phase) or over
-  the whole ``encounter``, from its start until safe avoidance (:data:`daa_sil.config.choices.AGENT_ACTIVE`).
+  the whole ``encounter``, from its start until safe avoidance (:data:`daa_sil.config.choices.AGENT_ACTIVE`);
+* ``daa_authority`` -- ``per-step`` (Algorithm 1 every step) or ``until-clear`` (our extension: the
+  DAA keeps an authority it holds, on steps without a fresh command, until no alert is raised).
 
 Settings that change only the **counting** (the report recounts the same results):
 
@@ -47,7 +56,10 @@ Settings that change only the **counting** (the report recounts the same results
   paper's arithmetic: the pilot-command-reception table equals the command-execution table's
   "Pilot" column, plus "Blending" in the integrated groups) or ``executed`` (executed as sent);
 * ``blends`` -- ``all`` blends, or ``maneuvers`` only (blends of a command carrying a maneuver
-  intent; a blended "hold" is then counted in no column).
+  intent; a blended "hold" is then counted in no column);
+* ``superseded`` -- a command the link releases in the same step as a newer one (a FIFO burst after
+  the delay drops): ``dropped`` (only the newest counts) or ``fate`` (every released command counts,
+  an older one with the fate of the newest: executed as sent, blended or overridden with it).
 
 Old names stay accepted (:data:`ALIASES`): ``literal`` is ``extended`` and gives exactly the results
 it gave under its old name.
@@ -58,7 +70,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields, replace
 
 from daa_sil.config.choices import OUTSIDE_BOX as OUTSIDE
-from daa_sil.config.choices import AGENT_ACTIVE, PILOT_STOPS, UNSAFE_HOLDS, WAIT_RULES
+from daa_sil.config.choices import AGENT_ACTIVE, DAA_AUTHORITY, DELAY_DRAWS, PILOT_STOPS, UNSAFE_HOLDS, WAIT_RULES
 from daa_sil.errors import UsageError
 from daa_sil.geometry.units import FT
 from daa_sil.models.link_rule import LATENCY_RULES as LATENCIES
@@ -68,6 +80,8 @@ PILOT_STARTS = ("corrective", "preventive", "detection")
 WINDOWS = ("active", "whole")
 RECEIVED = ("arrived", "pilot+blend", "executed")
 BLENDS = ("all", "maneuvers")
+SUPERSEDED = ("dropped", "fate")
+PILOT_ENGAGES = ("corrective", "preventive", "never")
 #: the reading a campaign runs when none is named
 DEFAULT_READING = "paper"
 #: old reading names -> their current names (accepted with a one-line notice)
@@ -86,26 +100,37 @@ class Reading:
     hold_commands: bool = True
     unsafe_hold: str = "blend"
     waitmap: "str | None" = None
+    wait_horizon_s: "float | None" = None
     outside: str = "clamp"
     latency: str = "one-way"
+    delay_draw: str = "epoch"
     wait_rule: "str | None" = None
     agent_active: str = "corrective"
+    daa_authority: str = "per-step"
     window: str = "active"
     received: str = "arrived"
     blends: str = "all"
+    superseded: str = "dropped"
     description: str = ""
 
     def __post_init__(self):
         for key, allowed in (("units", UNITS), ("pilot_start", PILOT_STARTS), ("pilot_stop", PILOT_STOPS),
                              ("unsafe_hold", UNSAFE_HOLDS), ("outside", OUTSIDE), ("latency", LATENCIES),
                              ("window", WINDOWS), ("received", RECEIVED), ("blends", BLENDS),
-                             ("agent_active", AGENT_ACTIVE)):
+                             ("agent_active", AGENT_ACTIVE), ("delay_draw", DELAY_DRAWS),
+                             ("daa_authority", DAA_AUTHORITY), ("superseded", SUPERSEDED)):
             if getattr(self, key) not in allowed:
                 raise UsageError(f"reading {self.name}: {key} must be one of {', '.join(allowed)}, "
                                  f"got {getattr(self, key)!r}")
-        if self.pilot_engage is not None and self.pilot_engage not in ("corrective", "preventive"):
-            raise UsageError(f"reading {self.name}: pilot_engage must be corrective or preventive, "
+        if self.pilot_engage is not None and self.pilot_engage not in PILOT_ENGAGES:
+            raise UsageError(f"reading {self.name}: pilot_engage must be one of {', '.join(PILOT_ENGAGES)}, "
                              f"got {self.pilot_engage!r}")
+        if self.wait_horizon_s is not None:
+            h = self.wait_horizon_s
+            if isinstance(h, bool) or not isinstance(h, (int, float)) or not 1.0 <= float(h) <= 600.0:
+                raise UsageError(f"reading {self.name}: wait_horizon_s must be a number of seconds within [1, 600] "
+                                 f"(or unset), got {h!r}")
+            object.__setattr__(self, "wait_horizon_s", float(h))
         if self.wait_rule is not None and self.wait_rule not in WAIT_RULES:
             raise UsageError(f"reading {self.name}: wait_rule must be one of {', '.join(WAIT_RULES)}, "
                              f"got {self.wait_rule!r}")
@@ -125,7 +150,7 @@ class Reading:
 
         base = base if base is not None else PilotConfig()
         engage = self.pilot_engage or ("preventive" if self.pilot_start == "preventive" else "corrective")
-        level = 1 if engage == "preventive" else 2
+        level = {"preventive": 1, "corrective": 2, "never": NEVER_LEVEL}[engage]
         stream = 0 if self.pilot_start == "detection" else None
         return replace(base, alert_level_min=level, stream_level_min=stream, stream_hold=self.hold_commands,
                        stream_until=self.pilot_stop)
@@ -137,15 +162,29 @@ class Reading:
             out["active_from"] = self.agent_active
         if self.wait_rule is not None:
             out["wait_rule"] = self.wait_rule
+        if self.daa_authority != "per-step":
+            out["daa_authority"] = self.daa_authority
         return out
+
+    def epoch_s(self, epoch_s: float, duration_s: float, dt_s: float) -> float:
+        """The delay epoch (s) a campaign's links use: ``epoch_s`` (the link's), or, with
+        ``delay_draw = "encounter"``, one epoch longer than the encounter (one draw: the first draw
+        of the same stream, so the two readings pair encounter by encounter)."""
+        return float(epoch_s) if self.delay_draw == "epoch" else float(duration_s) + 2.0 * float(dt_s)
 
     def simulation_key(self) -> tuple:
         """The settings that change what is simulated (two readings with the same key share results)."""
-        return (self.units, self.pilot_start, self.pilot_engage, self.pilot_stop, self.hold_commands,
-                self.unsafe_hold, self.waitmap, self.outside, self.latency, self.wait_rule, self.agent_active)
+        key = (self.units, self.pilot_start, self.pilot_engage, self.pilot_stop, self.hold_commands,
+               self.unsafe_hold, self.waitmap, self.outside, self.latency, self.wait_rule, self.agent_active)
+        extra = tuple((k, getattr(self, k)) for k, default in _NEW_SIMULATION_SETTINGS if getattr(self, k) != default)
+        return key + extra if extra else key
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+    def counting(self) -> dict:
+        """The counting settings (``window``, ``received``, ``blends``, ``superseded``)."""
+        return {k: getattr(self, k) for k in COUNTING_KEYS}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Reading":
@@ -156,31 +195,64 @@ class Reading:
         return cls(**d)
 
 
-_PAPER = dict(waitmap="paper", latency="round-trip", pilot_start="detection", pilot_stop="safe-avoidance",
-              unsafe_hold="no-command", agent_active="encounter", window="whole", received="pilot+blend")
+#: a pilot alert level no DAA alert reaches (``pilot_engage = "never"``: the pilot never maneuvers)
+NEVER_LEVEL = 9
+#: the counting settings of a reading (the rest change the simulation)
+COUNTING_KEYS = ("window", "received", "blends", "superseded")
+#: simulation settings added after the first readings, with the value that leaves a reading's results as
+#: they were: a reading at these values keeps its old simulation key (and its results)
+_NEW_SIMULATION_SETTINGS = (("wait_horizon_s", None), ("delay_draw", "epoch"), ("daa_authority", "per-step"))
+
+#: the paper reading's settings; :mod:`daa_sil.config.basis` gives each its basis
+_PAPER = dict(waitmap="paper", wait_horizon_s=40.0, latency="round-trip", pilot_start="detection",
+              pilot_stop="safe-avoidance", unsafe_hold="blend", outside="approach", agent_active="encounter",
+              window="whole", received="pilot+blend", superseded="fate")
+#: the settings of ``paper`` that the text contradicts or that lose commands, as they are in
+#: ``paper-contradicted`` (each also alone, in its own reading)
+_CONTRADICTED = dict(outside="clamp", unsafe_hold="no-command", wait_horizon_s=None, superseded="dropped")
 
 #: named bundles, ``paper`` first (the default), then its alternatives, then the older readings
 READINGS: dict[str, Reading] = {r.name: r for r in (
     Reading("paper", **_PAPER,
-            description="the paper's method: paper grid, round trip split between the links, pilot streams and agent "
-                        "decides from the start till safe avoidance, unsafe 'hold' = no command, received = pilot + blend"),
+            description="the paper's method: paper grid with H = 40 s, outside the box the time to reach it plus "
+                        "the wait there, round trip split between the links, pilot streams and agent decides from "
+                        "the start till safe avoidance, an unsafe command (a 'hold' too) blended or overridden, "
+                        "received = pilot + blend counting every released command"),
     Reading("paper-outside-far", **{**_PAPER, "outside": "far"},
             description="as paper, but a state outside the map's box reads w = H (ProjL still vetoes)"),
+    Reading("paper-clamp", **{**_PAPER, "outside": "clamp"},
+            description="as paper, but a state outside the map's box reads the nearest state of the box (the wait "
+                        "then stops decreasing as the intruder approaches: against the text)"),
+    Reading("paper-hold-none", **{**_PAPER, "unsafe_hold": "no-command"},
+            description="as paper, but an unsafe 'hold' counts as no command (wait / no wait): against Algorithm 1"),
+    Reading("paper-h60", **{**_PAPER, "wait_horizon_s": None},
+            description="as paper, but the maps' horizon H = 60 s (a 60 s maximum wait: against the text's 40 s)"),
+    Reading("paper-one-per-step", **{**_PAPER, "superseded": "dropped"},
+            description="as paper, but a command superseded by a newer one in the same step is not counted"),
+    Reading("paper-contradicted", **{**_PAPER, **_CONTRADICTED},
+            description="as paper with the four settings above at their contradicted values together: clamp, an "
+                        "unsafe 'hold' as no command, H = 60 s, one command counted per step"),
+    Reading("paper-delay-per-encounter", **{**_PAPER, "delay_draw": "encounter"},
+            description="as paper, but a Gaussian delay drawn once per encounter (constant over it: against "
+                        "'the time varying latency groups')"),
+    Reading("paper-keep-daa", **{**_PAPER, "daa_authority": "until-clear"},
+            description="our extension of paper: the DAA, once in authority, keeps it on steps without a fresh "
+                        "command until no alert is raised"),
     Reading("paper-one-way", **{**_PAPER, "latency": "one-way"},
             description="as paper, but each group's delay applied one-way on both links (doubles the round trip)"),
     Reading("paper-countdown", **{**_PAPER, "wait_rule": "countdown"},
             description="as paper, but the wait read from the map is a budget counted down from the start of a wait"),
-    Reading("paper-hold-blend", **{**_PAPER, "unsafe_hold": "blend", "blends": "maneuvers"},
-            description="as paper, but an unsafe 'hold' is blended like any command and blends are counted "
-                        "over maneuvers only"),
+    Reading("paper-hold-blend", **{**_PAPER, "blends": "maneuvers"},
+            description="as paper, counting blends over maneuvers only (a blended 'hold' counts in no column)"),
     Reading("paper-no-hold", **{**_PAPER, "hold_commands": False},
             description="as paper, but the GCS sends no 'hold' (only the pilot's maneuvers)"),
     Reading("paper-preventive", **{**_PAPER, "pilot_engage": "preventive"},
             description="as paper, but the pilot maneuvers from the preventive alert"),
     Reading("paper-corrective", **{**_PAPER, "agent_active": "corrective"},
             description="as paper, but the agent decides only from the corrective alert (its active phase) on"),
-    Reading("paper-alerting", **{**_PAPER, "waitmap": None},
-            description="as paper, on our alerting-region wait-map grid (the campaign's --waitmap, default alerting)"),
+    Reading("paper-alerting", **{**_PAPER, "waitmap": None, "wait_horizon_s": None},
+            description="as paper, on our alerting-region wait-map grid (the campaign's --waitmap, default "
+                        "alerting, its own horizon)"),
     Reading("paper-feet", **{**_PAPER, "units": "feet"},
             description="as paper, HMD/VMD ranges in feet (contradicts the table's metres; measures the unit alone)"),
     Reading("extended",
@@ -236,8 +308,13 @@ def parse_reading_settings(text: "str | None") -> dict:
             if val.lower() not in ("true", "false", "yes", "no"):
                 raise UsageError(f"--reading-set hold_commands must be true or false, got {val!r}")
             out[key] = val.lower() in ("true", "yes")
-        elif key in ("waitmap", "wait_rule") and val.lower() in ("", "none", "default"):
+        elif key in ("waitmap", "wait_rule", "pilot_engage", "wait_horizon_s") and val.lower() in ("", "none", "default"):
             out[key] = None
+        elif key == "wait_horizon_s":
+            try:
+                out[key] = float(val)
+            except ValueError:
+                raise UsageError(f"--reading-set wait_horizon_s must be a number of seconds, got {val!r}") from None
         else:
             out[key] = val
     return out
@@ -245,10 +322,11 @@ def parse_reading_settings(text: "str | None") -> dict:
 
 def readings_help() -> str:
     """One line per reading: its name and what it is (``campaign run --help``)."""
-    return "\n".join(f"  {r.name:18s} {r.description}" for r in READINGS.values()) + "\n" + "\n".join(
-        f"  {old:18s} old name of '{new}' (accepted, with a notice)" for old, new in ALIASES.items())
+    return "\n".join(f"  {r.name:26s} {r.description}" for r in READINGS.values()) + "\n" + "\n".join(
+        f"  {old:26s} old name of '{new}' (accepted, with a notice)" for old, new in ALIASES.items())
 
 
 __all__ = ["Reading", "READINGS", "ALIASES", "DEFAULT_READING", "reading_for", "canonical_name",
            "parse_reading_settings", "readings_help", "UNITS", "PILOT_STARTS", "PILOT_STOPS", "UNSAFE_HOLDS", "AGENT_ACTIVE",
-           "OUTSIDE", "LATENCIES", "WAIT_RULES", "WINDOWS", "RECEIVED", "BLENDS"]
+           "OUTSIDE", "LATENCIES", "WAIT_RULES", "WINDOWS", "RECEIVED", "BLENDS", "SUPERSEDED", "PILOT_ENGAGES",
+           "DAA_AUTHORITY", "DELAY_DRAWS", "COUNTING_KEYS", "NEVER_LEVEL"]

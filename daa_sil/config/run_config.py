@@ -97,10 +97,43 @@ class RunConfig:
         return DaaConfig.for_preset(thresholds or self.thresholds, **self.daa)
 
     def pilot_config(self, **changes):
-        """The :class:`~daa_sil.models.pilot_config.PilotConfig` with ``pilot`` (and ``changes``) applied."""
+        """The :class:`~daa_sil.models.pilot_config.PilotConfig` with ``pilot`` (and ``changes``) applied,
+        then the reading's pilot settings (when it streams, maneuvers and stops; the SIL GCS flies it)."""
         from daa_sil.models.pilot_config import PilotConfig
 
-        return PilotConfig(**{**self.pilot, **changes})
+        return self.effective_reading.pilot_config(PilotConfig(**{**self.pilot, **changes}))
+
+    # --- the reading, for the SIL (the study applies it in CampaignConfig) ---------------------------
+    @property
+    def effective_reading(self):
+        """The named :class:`~daa_sil.config.readings.Reading` with its overrides (``reading`` section;
+        default ``paper``, the study's)."""
+        from daa_sil.config.readings import reading_for
+
+        return reading_for(str(self.reading["name"]), **dict(self.reading["set"]))
+
+    def onboard_policy(self, policy):
+        """``policy`` (an :class:`~daa_sil.config.policy.AllocationPolicy`) with the reading's agent
+        rules (an unsafe 'hold', when the agent decides, the DAA's authority; the wait rule to a group
+        that waits): what the SIL vehicle flies, as a campaign of the same reading."""
+        from dataclasses import replace as _replace
+
+        from daa_sil.config.policy import apply_overrides
+
+        r = self.effective_reading
+        policy = apply_overrides(policy, wait_rule=r.wait_rule)
+        changes = {k: v for k, v in r.policy_overrides().items() if k != "wait_rule"}
+        return _replace(policy, **changes) if changes else policy
+
+    @property
+    def map_source(self) -> str:
+        """The wait maps the SIL reads: the reading's grid, else ``waitmap.source``."""
+        return self.effective_reading.waitmap or str(self.waitmap["source"])
+
+    def map_horizon(self, source: "str | None" = None) -> "float | None":
+        """The reading's wait-map horizon H (s) for ``source`` (None unless it is the reading's own grid)."""
+        r = self.effective_reading
+        return r.wait_horizon_s if r.waitmap is not None and (source is None or source == r.waitmap) else None
 
     # --- YAML -------------------------------------------------------------------------------------
     def to_dict(self, full: bool = False) -> dict:
@@ -138,6 +171,13 @@ def preset(name: str) -> RunConfig:
     if key not in PRESET_NAMES:
         raise UsageError(f"unknown configuration preset {name!r}; allowed: {', '.join(PRESET_NAMES)} or a YAML file")
     return RunConfig(base=key, thresholds=key, source=f"preset {key}")
+
+
+def default_wait_maps() -> "tuple[str, float | None]":
+    """``(source, horizon H in s or None)`` of the wait maps the SIL vehicle reads when nothing names
+    them: the default configuration's reading's (the study's default reading)."""
+    cfg = preset(PRESET.default)
+    return cfg.map_source, cfg.map_horizon()
 
 
 def load_config(spec: "str | Path | None") -> RunConfig:
@@ -264,5 +304,5 @@ def _check(cfg: RunConfig, where: str) -> None:
             raise UsageError(f"{where}: {what}: bad value ({exc})") from None
 
 
-__all__ = ["RunConfig", "PRESET_NAMES", "preset", "load_config", "config_from_dict", "save_config",
+__all__ = ["RunConfig", "PRESET_NAMES", "preset", "load_config", "default_wait_maps", "config_from_dict", "save_config",
            "add_config_argument"]

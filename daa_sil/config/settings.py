@@ -58,8 +58,13 @@ class Setting:
             at = f"{where}: " if where else ""
             lo, hi = self.range
             kind = "an integer" if self.integer else "a number"
-            raise UsageError(f"{at}{key or self.name} must be {kind} within [{lo:g}, {hi:g}], got {value!r}")
+            raise UsageError(f"{at}{key or self.name} must be {kind} within [{self.shown(lo)}, {self.shown(hi)}], "
+                             f"got {value!r}")
         return int(value) if self.integer else float(value)
+
+    def shown(self, x: float) -> str:
+        """A bound as people read it: ``10,000,000`` for a count, ``120`` or ``1e-06`` for a number."""
+        return f"{int(x):,}" if self.integer else f"{x:g}"
 
     def field(self, **kw) -> Any:
         """A dataclass field with this default, the setting in its metadata (``metadata["setting"]``)."""
@@ -78,7 +83,7 @@ class Setting:
     def flag_help(self, what: str = "") -> str:
         """Help text of a command-line flag: the help (or ``what``), unit, range and default."""
         unit = f", {self.unit}" if self.unit else ""
-        rng = f" within [{self.lo:g}, {self.hi:g}]" if self.lo is not None and self.hi is not None else ""
+        rng = f" within [{self.shown(self.lo)}, {self.shown(self.hi)}]" if self.lo is not None and self.hi is not None else ""
         return f"{what or self.help}{unit}{rng} (default {self.default})"
 
 
@@ -108,7 +113,19 @@ SEED = Setting("seed", 0, "", 0, 2**63 - 1, "campaign seed (every encounter's st
 INTRUDERS = Setting("intruders", 1, "", 1, 8, "intruders per encounter")
 #: encounters per task: the per-step numpy overhead is paid once per chunk, so bigger chunks are
 #: faster (500 -> 2000 about 1.9x per core); one 2000-encounter chunk peaks at about 0.2 GB RSS
-CHUNK_SIZE = Setting("chunk_size", 2000, "", 1, 10_000_000, "encounters per chunk (they share a DAA call)")
+CHUNK_SIZE = Setting("chunk_size", 2000, "", 1, 10_000_000, "encounters per chunk (one result file per group and chunk)")
+#: encounter rows per task of a campaign (several chunks of several groups side by side): peak memory
+#: grows with them (:mod:`daa_sil.study.campaign_plan`); results do not depend on them
+BATCH_ROWS = Setting("batch_rows", 10_000, "", 1, 10_000_000, "encounter rows per task (results do not depend on it)")
+#: worker processes (campaign, wait-map build): at most this many per usable core. More only adds
+#: processes that wait for a core and memory (one worker holds 0.3-1 GB), and on 2 cores 1,000
+#: workers (1,049 processes) ended in a broken process pool
+WORKERS_PER_CORE = 4
+#: points on one axis of a wait-map grid (a grid file or an inline spec): 1,000 is 80 times the
+#: paper's 12; the grid's product of axes is bounded by the memory estimate of the build
+GRID_AXIS_POINTS = Setting("n", 12, "", 2, 1000, "points on one wait-map grid axis")
+#: bootstrap replicates of a report's confidence intervals (each is a weight vector over the encounters)
+BOOTSTRAP_REPLICATES = Setting("replicates", 2000, "", 100, 100_000, "bootstrap replicates of every CI")
 #: the wait maps the map groups read: a map preset (``alerting``: the box covers the DAA alerting
 #: region, horizon 120 s), a grid spec or a ``waitmap build`` directory
 WAITMAP = Setting("source", "alerting", help="wait maps of the map groups: a map preset, a grid spec or a directory")
@@ -141,5 +158,6 @@ def describe() -> dict:
 
 
 __all__ = ["Setting", "WAIT_THRESHOLD", "PROJL_HORIZON", "CONSTANT_WAIT", "STALE_COMMAND", "LINK_TIMEOUT",
-           "DELAY_EPOCH", "DURATION", "ENCOUNTERS", "SEED", "INTRUDERS", "CHUNK_SIZE", "WAITMAP", "GAMMA", "PRESET", "STANDARD_PRESET", "SCENARIO_GROUP", "SCENARIO_LINK", "ALL",
+           "DELAY_EPOCH", "DURATION", "ENCOUNTERS", "SEED", "INTRUDERS", "CHUNK_SIZE", "BATCH_ROWS", "WORKERS_PER_CORE",
+           "GRID_AXIS_POINTS", "BOOTSTRAP_REPLICATES", "WAITMAP", "GAMMA", "PRESET", "STANDARD_PRESET", "SCENARIO_GROUP", "SCENARIO_LINK", "ALL",
            "describe"]

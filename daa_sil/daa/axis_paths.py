@@ -42,7 +42,8 @@ def _track_counts(trk_range: float, trk_step: float, daidalus_grid: bool) -> tup
 
 
 def candidate_counts(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[int, int]:
-    """Number of candidates on the low and high side of ``axis`` for this batch of ownships (>= 0 each)."""
+    """Number of candidates on the low and high side of ``axis`` for this batch of ownships (>= 0 each): the
+    most any of them has (:func:`row_counts`), the columns of the batch's bands."""
     if axis == AXIS_HORIZONTAL:
         return _track_counts(float(cfg.trk_range), float(cfg.trk_step), bool(cfg.daidalus_grid))
     cur, lo, hi, step = ((own.vs, -cfg.max_vs, cfg.max_vs, cfg.vs_step) if axis == AXIS_VERTICAL
@@ -50,6 +51,25 @@ def candidate_counts(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[int
     j_lo = int(np.ceil(np.max(cur - lo, initial=0.0) / step - 1e-9))
     j_hi = int(np.ceil(np.max(hi - cur, initial=0.0) / step - 1e-9))
     return max(j_lo, 0), max(j_hi, 0)
+
+
+def row_counts(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Each ownship's own number of candidates on the low and high side of ``axis``, ``(N,)`` int64 each: the
+    counts :func:`candidate_counts` gives for that ownship alone (a speed axis's reach its limits from the
+    current value; a track axis's are the configuration's)."""
+    n = own.shape[0]
+    if axis == AXIS_HORIZONTAL:
+        j_lo, j_hi = _track_counts(float(cfg.trk_range), float(cfg.trk_step), bool(cfg.daidalus_grid))
+        return np.full(n, j_lo, np.int64), np.full(n, j_hi, np.int64)
+    cur, lo, hi, step = ((own.vs, -cfg.max_vs, cfg.max_vs, cfg.vs_step) if axis == AXIS_VERTICAL
+                         else (own.gs, cfg.min_gs, cfg.max_gs, cfg.gs_step))
+    cur = np.asarray(cur, float)
+
+    def side(gap):  # int(np.ceil(np.max(gap, initial=0.0) / step - 1e-9)) of one ownship, then max(., 0)
+        with np.errstate(invalid="ignore"):
+            c = np.ceil(np.maximum(gap, 0.0) / step - 1e-9)
+        return np.where((c > 0) & (c < 2 ** 62), c, 0).astype(np.int64)  # (a non-finite state: the batch's count raises)
+    return side(cur - lo), side(hi - cur)
 
 
 def _axis_state_soa(axis: int, cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, sgn, t, with_value: bool = False) -> tuple:

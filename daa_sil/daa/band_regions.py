@@ -23,10 +23,11 @@ _NO_TIMES = np.zeros(0)
 
 
 def _regions(conflicts: tuple, alert, lists, t: np.ndarray, own: AircraftState, intr: AircraftState, axis: int,
-             cfg: DaaConfig, j_lo: int, j_hi: int) -> tuple:
+             cfg: DaaConfig, j_lo: int, j_hi: int, rows: "tuple[np.ndarray, np.ndarray] | None") -> tuple:
     """:func:`axis_regions` from ``conflicts``: the candidates' ``(t_in, t_out)`` (N, M, 2, J+1), or the paths'
     ``(tail_in, tail_out, seg_in, seg_out)`` flat (``kernels.regions.axis_regions_into``)."""
     n, m = own.shape[0], intr.shape[1]
+    jl_row, jh_row = rows if rows is not None else (np.full(n, j_lo, np.int64), np.full(n, j_hi, np.int64))
     k = j_lo + j_hi + 1
     hfm = bool(cfg.horizon_from_maneuver)
     if hfm:
@@ -54,73 +55,94 @@ def _regions(conflicts: tuple, alert, lists, t: np.ndarray, own: AircraftState, 
     region = np.empty((n, k), np.int8)
     gap = np.empty((n, max(k - 1, 0)), np.int8)
     res_lo, res_hi, pref = np.empty(n), np.empty(n), np.empty(n, np.int8)
-    rest = (hfm, near, mid, alert2, np.asarray(t, float), float(cfg.lookahead_s), float(cfg.alert_time_warning_s),
-            float(cfg.alert_time_corrective_s), j_lo, j_hi, bool(cfg.daidalus_grid), axis, np.asarray(cur, float),
-            float(rate), float(lim[0]), float(lim[1]), bool(cfg.daidalus_grid and axis != AXIS_HORIZONTAL),
-            float(clip[0]), float(clip[1]), float(cfg.sm_horizon_s), float(cfg.recovery_stability_s), np.pi - 1e-9,
-            TWO_PI, values, delta, t_man, t_in_all, t_out_c, region, gap, res_lo, res_hi, pref)
     flat = [np.ascontiguousarray(a).reshape(-1) for a in conflicts]
     from_paths = len(flat) == 4
     if not from_paths:
         flat += [_NO_TIMES, _NO_TIMES]
-    kernels.get().axis_regions_into(*flat, from_paths, m, float(cfg.lookahead_s), *rest)
+    times = (float(cfg.lookahead_s), float(cfg.alert_time_warning_s), float(cfg.alert_time_corrective_s),
+             float(cfg.sm_horizon_s), float(cfg.recovery_stability_s), np.pi - 1e-9, TWO_PI)
+    ax = (bool(cfg.daidalus_grid), axis, float(rate), float(lim[0]), float(lim[1]),
+          bool(cfg.daidalus_grid and axis != AXIS_HORIZONTAL), float(clip[0]), float(clip[1]))
+    kernels.get().axis_regions_into(tuple(flat), from_paths, m, float(cfg.lookahead_s), hfm, (near, mid, alert2),
+                                    np.asarray(t, float), times, (j_lo, j_hi), (jl_row, jh_row), ax,
+                                    np.asarray(cur, float), (values, delta, t_man, t_in_all, t_out_c), (region, gap),
+                                    (res_lo, res_hi), pref)
     if one:
         delta, t_man = np.broadcast_to(delta, (n, k)), np.broadcast_to(t_man, (n, k))
     nan = np.full(n, np.nan)
+    uniform = rows is None or (np.all(jl_row == j_lo) and np.all(jh_row == j_hi))
     return (values, delta, t_man, t_in_all, t_out_c, region, res_lo, res_hi, pref, gap if cfg.daidalus_grid else None,
-            nan, np.full(n, -1, np.int16), nan.copy(), nan.copy())
+            nan, np.full(n, -1, np.int16), nan.copy(), nan.copy(), None if uniform else j_lo - jl_row,
+            None if uniform else j_lo + jh_row)
 
 
 def axis_regions(t_in: np.ndarray, t_out: np.ndarray, alert, lists, t: np.ndarray, own: AircraftState,
-                 intr: AircraftState, axis: int, cfg: DaaConfig, j_lo: int, j_hi: int) -> tuple:
+                 intr: AircraftState, axis: int, cfg: DaaConfig, j_lo: int, j_hi: int,
+                 rows: "tuple[np.ndarray, np.ndarray] | None" = None) -> tuple:
     """``(values, delta, t_man, t_in, t_out, region, res_lo, res_hi, preferred, gap_region, recovery_time,
-    recovery_nfactor, recovery_h, recovery_v)`` of one axis (the :class:`daa_sil.daa.bands.AxisBands` fields
+    recovery_nfactor, recovery_h, recovery_v, own_lo, own_hi)`` of one axis (the :class:`daa_sil.daa.bands.AxisBands` fields
     after ``side``, s / rad / m/s; no recovery cylinder) from ``t_in``/``t_out`` (N, M, 2, J+1, s), the alert
     levels ``alert`` (N, M), the conflict lists ``lists`` (with ``cfg.horizon_from_maneuver``; computed for
     ownship ``own`` and intruders ``intr`` when None) and the knot times ``t`` (J+1,) s; ``gap_region`` is
     None off the DAIDALUS grid. A track axis's ``delta`` and ``t_man`` are the same for every encounter: one
-    row broadcast to (N, K), read-only."""
-    return _regions((t_in, t_out), alert, lists, t, own, intr, axis, cfg, j_lo, j_hi)
+    row broadcast to (N, K), read-only. ``rows``: each encounter's own candidates per side ``(N,)`` (at most
+    ``j_lo``/``j_hi``; default all), its paths' conflicts up to knot ``max`` of the two; the columns past them
+    repeat its outermost candidate (``kernels.regions.axis_regions_into``)."""
+    return _regions((t_in, t_out), alert, lists, t, own, intr, axis, cfg, j_lo, j_hi, rows)
 
 
 def axis_conflict_regions(paths: ManeuverPaths, own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig,
-                          alert, lists, j_lo: int, j_hi: int) -> tuple:
+                          alert, lists, j_lo: int, j_hi: int, rows: "tuple[np.ndarray, np.ndarray]") -> tuple:
     """:func:`axis_regions` of the band axis ``paths`` (``axis_paths.maneuver_paths``) against ``intr`` for
     ``cfg.th`` over the lookahead, the conflicts computed in one pass per path
     (``kernels.axis_pass.axis_conflicts_into``; undecided segments by
     :func:`daa_sil.daa.undecided.resolve_segments` on their knots' states alone) and read per row by the
     regions kernel: the same numbers as ``PathEvaluator(paths, intr, cfg.lookahead_s).evaluate(cfg.th)``
     then ``candidates()`` then :func:`axis_regions`, without their (N, M, 2, J+1) arrays of relative
-    states and candidates' conflicts."""
+    states and candidates' conflicts. ``rows``: each encounter's own candidates per side (:func:`axis_regions`);
+    its paths are evaluated up to knot ``max`` of the two, as in a call of its own."""
+    with scratch() as ws:  # (every array taken from it is consumed in this call)
+        out = axis_path_conflicts(paths, intr, cfg.th, float(cfg.lookahead_s), np.maximum(rows[0], rows[1]), ws.take)
+        return _regions(out, alert, lists, paths.axis_times(), own, intr, axis, cfg, j_lo, j_hi, rows)
+
+
+def axis_path_conflicts(paths: ManeuverPaths, intr: AircraftState, th, t_end: float, nseg: np.ndarray,
+                        take=None) -> tuple:
+    """``(tail_in, tail_out, seg_in, seg_out)`` flat over ``(N, M, 2, J+1)`` / ``(N, M, 2, J)`` of the band axis
+    ``paths`` against ``intr`` for volume ``th`` over ``[0, t_end]``, encounter ``n``'s paths up to knot
+    ``nseg[n]``, in one pass per path (``kernels.axis_pass.axis_conflicts_into``; the undecided segments by
+    :func:`daa_sil.daa.undecided.resolve_segments` on their knots' states alone): the numbers of
+    ``PathEvaluator(paths, intr, t_end).evaluate(th)``. ``take(name, size[, dtype])``: where the arrays come
+    from (default: new ones)."""
+    if take is None:
+        take = lambda name, size, dtype=float: np.empty(size, dtype)  # noqa: E731
     n, m = intr.shape
     kin = paths.kin
     t = paths.axis_times()
     knots = t.shape[0]
     ipos, ivel = intr.position(), intr.velocity()
-    th = cfg.th
     D = float(th.dthr)
-    t_end = float(cfg.lookahead_s)
     n_paths = n * m * 2
-    with scratch() as ws:  # (every array taken from it is consumed in this call)
-        code = ws.take("code", n_paths * (knots - 1), np.int8)
-        seg_in, seg_out = ws.take("seg_in", n_paths * (knots - 1)), ws.take("seg_out", n_paths * (knots - 1))
-        tail_in, tail_out = ws.take("tail_in", n_paths * knots), ws.take("tail_out", n_paths * knots)
-        vlo, vhi = ws.take("vlo", n_paths), ws.take("vhi", n_paths)
-        k = kernels.get()
-        k.axis_conflicts_into(kin[1], kin[2], kin[3], t, ipos, ivel, bool(paths.vz_const), paths.acc_h, paths.acc_v, BLOCK,
-                              t_end, D, D * D, D ** 2, float(th.zthr), float(th.tthr), float(th.tcoa), code, seg_in,
-                              seg_out, tail_in, tail_out, vlo, vhi)
-        todo = np.flatnonzero(code == UNDECIDED)
-        if todo.size:
-            r = todo.size
-            knot = [np.empty(2 * r) for _ in range(7)]  # s (3), v (3), t at the segments' two knots
-            k.axis_segment_knots_into(kin[1], kin[2], kin[3], t, ipos, ivel, todo, *knot)
-            path = todo // (knots - 1)
-            e, p = path // (m * 2), path % 2
-            sub = lambda a: None if a is None else a[e, p]  # noqa: E731
-            ipv = np.concatenate([ipos, ivel], axis=-1).reshape(-1, 6)
-            resolve_segments(kin, ipv, m, 2, path, tuple(knot[:3]), tuple(knot[3:6]), knot[6], todo,
-                             np.arange(0, 2 * r, 2), paths.acc_h[e, p], paths.acc_v[e, p], sub(paths.jerk_h),
-                             sub(paths.kink_t), (vlo[path], vhi[path]) if paths.vz_const else None, True, th, seg_in,
-                             seg_out)
-        return _regions((tail_in, tail_out, seg_in, seg_out), alert, lists, t, own, intr, axis, cfg, j_lo, j_hi)
+    code = take("code", n_paths * (knots - 1), np.int8)
+    seg_in, seg_out = take("seg_in", n_paths * (knots - 1)), take("seg_out", n_paths * (knots - 1))
+    tail_in, tail_out = take("tail_in", n_paths * knots), take("tail_out", n_paths * knots)
+    vlo, vhi = take("vlo", n_paths), take("vhi", n_paths)
+    k = kernels.get()
+    k.axis_conflicts_into((kin[1], kin[2], kin[3], t, np.asarray(nseg, np.int64)), (ipos, ivel),
+                          (paths.acc_h, paths.acc_v), bool(paths.vz_const), BLOCK, float(t_end),
+                          (D, D * D, D ** 2, float(th.zthr), float(th.tthr), float(th.tcoa)),
+                          (code, seg_in, seg_out), (tail_in, tail_out), (vlo, vhi))
+    todo = np.flatnonzero(code == UNDECIDED)
+    if todo.size:
+        r = todo.size
+        knot = [np.empty(2 * r) for _ in range(7)]  # s (3), v (3), t at the segments' two knots
+        k.axis_segment_knots_into(kin[1], kin[2], kin[3], t, ipos, ivel, todo, *knot)
+        path = todo // (knots - 1)
+        e, p = path // (m * 2), path % 2
+        sub = lambda a: None if a is None else a[e, p]  # noqa: E731
+        ipv = np.concatenate([ipos, ivel], axis=-1).reshape(-1, 6)
+        resolve_segments(kin, ipv, m, 2, path, tuple(knot[:3]), tuple(knot[3:6]), knot[6], todo,
+                         np.arange(0, 2 * r, 2), paths.acc_h[e, p], paths.acc_v[e, p], sub(paths.jerk_h),
+                         sub(paths.kink_t), (vlo[path], vhi[path], None) if paths.vz_const else None, True, th,
+                         seg_in, seg_out)
+    return tail_in, tail_out, seg_in, seg_out

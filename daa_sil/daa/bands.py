@@ -51,223 +51,25 @@ Which preset gets which rule (issue 15), and why:
 
 from __future__ import annotations
 
-from dataclasses import MISSING, dataclass, fields
+from dataclasses import fields
 
 import numpy as np
 
 from daa_sil.geometry.kinematics import TWO_PI, AircraftState
 from .alerting import alert_levels, conflict_lists
-from .config import (AXIS_HORIZONTAL, AXIS_NAMES, AXIS_SPEED, AXIS_VERTICAL, REGION_MID, REGION_NAMES, REGION_NEAR,
-                     REGION_NONE, REGION_RECOVERY, DaaConfig)
+from .config import (AXIS_HORIZONTAL, AXIS_SPEED, AXIS_VERTICAL, REGION_MID, REGION_NEAR, REGION_NONE, REGION_RECOVERY,
+                     DaaConfig)
 from .trajectory import PathConflicts, PathEvaluator
 from daa_sil.daa.recovery import CylinderRecovery, drop_isolated
-from daa_sil.daa.axis_paths import maneuver_paths, candidate_counts, speed_limits
+from daa_sil.daa.axis_paths import maneuver_paths, candidate_counts, row_counts, speed_limits
 from daa_sil.daa.band_regions import axis_conflict_regions, axis_regions
+from daa_sil.daa.band_types import AxisBands, Bands, gap_regions  # (the types, defined apart; offered here too)
 
 #: False: every axis in numpy (the oracle of :func:`daa_sil.daa.band_regions.axis_regions`)
 COMPILED = True
 #: False (with COMPILED): the conflicts through :class:`PathEvaluator` and its (N, M, 2, J+1) arrays, then
 #: :func:`daa_sil.daa.band_regions.axis_regions` (the oracle of :func:`~daa_sil.daa.band_regions.axis_conflict_regions`)
 FUSED = True
-
-
-@dataclass
-class AxisBands:
-    """Candidates of one axis for N encounters; K candidates ordered from the low side to the high side.
-
-    ``values`` (N, K) absolute (track rad [0, 2pi) / vs m/s / gs m/s; a speed candidate past a limit is
-    shown at the limit); ``delta`` (N, K) signed change from the current value (rad or m/s; track:
-    - = left); ``side`` (K,) -1/0/+1; ``t_man`` (N, K) s to reach; ``t_in`` (N, K) first LoWC with any
-    intruder over the lookahead (inf = none); ``t_out`` (N, K) last exit from a conflicting violation;
-    ``region`` (N, K) REGION_* codes; ``gap_region`` (N, K-1) region of the open interval between
-    candidates k and k+1; ``res_lo``, ``res_hi`` (N,) resolutions (nan = no conflict, -inf / +inf = no
-    resolution on that side); ``preferred`` (N,) side -1/0/+1; ``recovery_time`` (N,) s (nan = no
-    recovery bands, -inf = saturated); ``recovery_nfactor`` (N,) cylinder shrinks (-1 = none);
-    ``recovery_h``/``recovery_v`` (N,) m, the cylinder the recovery band keeps clear of.
-    """
-
-    axis: int
-    values: np.ndarray
-    delta: np.ndarray
-    side: np.ndarray
-    t_man: np.ndarray
-    t_in: np.ndarray
-    t_out: np.ndarray
-    region: np.ndarray
-    res_lo: np.ndarray
-    res_hi: np.ndarray
-    preferred: np.ndarray
-    gap_region: "np.ndarray | None" = None
-    recovery_time: "np.ndarray | None" = None
-    recovery_nfactor: "np.ndarray | None" = None
-    recovery_h: "np.ndarray | None" = None
-    recovery_v: "np.ndarray | None" = None
-
-    def __post_init__(self):
-        n = self.values.shape[0]
-        for name, fill in (("recovery_time", np.nan), ("recovery_nfactor", -1), ("recovery_h", np.nan),
-                           ("recovery_v", np.nan)):
-            if getattr(self, name) is None:
-                setattr(self, name, np.full(n, fill, np.int16 if name == "recovery_nfactor" else float))
-
-    @property
-    def name(self) -> str:
-        return AXIS_NAMES[self.axis]
-
-    def with_fields(self, **changes) -> "AxisBands":
-        """A plain :class:`AxisBands` with ``changes`` and this one's other fields (``dataclasses.replace``,
-        which a rows view of :meth:`rows` cannot take: its constructor is not the dataclass's)."""
-        kw = {f.name: getattr(self, f.name) for f in fields(AxisBands)}
-        kw.update(changes)
-        return AxisBands(**kw)
-
-    def gaps(self) -> np.ndarray:
-        """``gap_region`` (computed from ``region`` by :func:`gap_regions` when not given)."""
-        if self.gap_region is None:
-            self.gap_region = gap_regions(self.region)
-        return self.gap_region
-
-    @property
-    def k0(self) -> int:
-        """Column of the current value."""
-        return int(np.nonzero(self.side == 0)[0][0])
-
-    def rows(self, idx) -> "AxisBands":
-        """The bands of encounters ``idx`` (an index array or a boolean mask: each field is selected when
-        it is first read, and :meth:`sub` / :meth:`pick` select from this object's fields directly)."""
-        arr = np.asarray(idx) if isinstance(idx, (np.ndarray, list)) else None
-        if arr is None or arr.ndim != 1 or arr.dtype.kind not in "biu":  # (a slice, a scalar: selected now)
-            keep = lambda f: f.name in ("axis", "side") or getattr(self, f.name) is None  # noqa: E731
-            return AxisBands(**{f.name: (getattr(self, f.name) if keep(f) else getattr(self, f.name)[idx])
-                                for f in fields(self)})
-        return _AxisRows(self, np.flatnonzero(arr) if arr.dtype.kind == "b" else arr)
-
-    def source(self) -> "tuple[AxisBands, np.ndarray | None]":
-        """``(bands, rows)``: these bands are ``bands``' encounters ``rows`` (an integer array), read in place
-        (a :meth:`rows` view); ``rows`` None: ``bands`` is this object."""
-        return self, None
-
-    def sub(self, name: str, rows) -> np.ndarray:
-        """Field ``name`` of encounters ``rows`` (``self.<name>[rows]``, without selecting the whole field of
-        a :meth:`rows` first; None for a field that is None)."""
-        value = getattr(self, name)
-        return None if value is None else value[rows]
-
-    def pick(self, name: str, rows, cols) -> np.ndarray:
-        """``self.<name>[rows, cols]`` (as :meth:`sub`)."""
-        return getattr(self, name)[rows, cols]
-
-    def intervals(self, i: int = 0) -> list[tuple[float, float, str]]:
-        """Bands of encounter ``i`` as ``[(lo, hi, region_name), ...]`` in SI units, low side first.
-
-        Contiguous candidates with the same region are merged; duplicates at a saturated limit
-        collapse. Track intervals are in compass radians and may wrap through north.
-        """
-        vals, reg = self.values[i], self.region[i]
-        keep = np.ones(len(vals), bool)
-        keep[1:] = ~np.isclose(vals[1:], vals[:-1], rtol=0.0, atol=1e-9)
-        vals, reg = vals[keep], reg[keep]
-        out: list[tuple[float, float, str]] = []
-        start = 0
-        for j in range(1, len(vals) + 1):
-            if j == len(vals) or reg[j] != reg[start]:
-                out.append((float(vals[start]), float(vals[j - 1]), REGION_NAMES[int(reg[start])]))
-                start = j
-        return out
-
-    def band_intervals(self, i: int = 0) -> list[tuple[float, float, str]]:
-        """DAIDALUS-style bands of encounter ``i``: ``[(lo, hi, region_name), ...]`` whose bounds are
-        candidate values and whose regions are those of the intervals between candidates (so they cover
-        the whole candidate range without gaps); low side first, SI units, tracks may wrap."""
-        vals, gap = self.values[i], self.gaps()[i]
-        width = np.abs(np.diff(self.delta[i]))
-        out: list[tuple[float, float, str]] = []
-        for j in range(len(gap)):
-            if width[j] <= 1e-12:
-                continue
-            name = REGION_NAMES[int(gap[j])]
-            if out and out[-1][2] == name:
-                out[-1] = (out[-1][0], float(vals[j + 1]), name)
-            else:
-                out.append((float(vals[j]), float(vals[j + 1]), name))
-        return out
-
-
-#: the :class:`AxisBands` fields that are per encounter (``axis`` and ``side`` are not), and those of them
-#: without a default (the others are class attributes too, so :class:`_AxisRows` selects them at once)
-_ROW_FIELDS = frozenset(f.name for f in fields(AxisBands)) - {"axis", "side"}
-_LAZY_FIELDS = frozenset(f.name for f in fields(AxisBands) if f.default is MISSING) & _ROW_FIELDS
-
-
-class _AxisRows(AxisBands):
-    """:meth:`AxisBands.rows`: the bands of encounters ``idx`` (integer array) of ``base``; a per-encounter
-    field is ``base``'s at ``idx`` (a copy, as ``base.<field>[idx]``), made when it is first read, and
-    :meth:`sub` / :meth:`pick` of a field not made select from ``base`` at once."""
-
-    def __init__(self, base: AxisBands, idx: np.ndarray):  # (not the dataclass's: the fields come from ``base``)
-        self._base, self._idx = base, idx
-        self.axis, self.side = base.axis, base.side
-        for name in _ROW_FIELDS - _LAZY_FIELDS:
-            setattr(self, name, base.sub(name, idx))
-
-    def __getattr__(self, name: str):  # (called only for a field not made yet)
-        if name not in _ROW_FIELDS or "_base" not in self.__dict__:
-            raise AttributeError(name)
-        value = self._base.sub(name, self._idx)
-        setattr(self, name, value)
-        return value
-
-    def source(self) -> "tuple[AxisBands, np.ndarray | None]":
-        base, idx = self._base.source()
-        return base, (self._idx if idx is None else idx[self._idx])
-
-    def sub(self, name: str, rows) -> np.ndarray:
-        if name in self.__dict__ or name not in _ROW_FIELDS:
-            return super().sub(name, rows)
-        return self._base.sub(name, self._idx[rows])
-
-    def pick(self, name: str, rows, cols) -> np.ndarray:
-        if name in self.__dict__ or name not in _ROW_FIELDS:
-            return getattr(self, name)[rows, cols]
-        return self._base.pick(name, self._idx[rows], cols)
-
-
-def gap_regions(region: np.ndarray) -> np.ndarray:
-    """Region (N, K-1) of the open interval between neighbouring candidates from their regions: the
-    more severe of the two; RECOVERY only between two RECOVERY candidates; NONE between NONE and
-    RECOVERY."""
-    a, b = region[:, :-1].astype(np.int16), region[:, 1:].astype(np.int16)
-    ca, cb = np.where(a == REGION_RECOVERY, 0, a), np.where(b == REGION_RECOVERY, 0, b)
-    worse = np.maximum(ca, cb)
-    both_rec = (a == REGION_RECOVERY) & (b == REGION_RECOVERY)
-    return np.where(both_rec, REGION_RECOVERY, worse).astype(np.int8)
-
-
-@dataclass
-class Bands:
-    """Bands of the three axes plus the alert levels ``(N, M)`` they were computed with (an axis
-    :func:`compute_bands` was not asked for is None)."""
-
-    trk: "AxisBands | None"
-    vs: "AxisBands | None"
-    gs: "AxisBands | None"
-    alert: np.ndarray
-    preset: str
-
-    def axes(self) -> tuple[AxisBands, AxisBands, AxisBands]:
-        return (self.trk, self.vs, self.gs)
-
-    def axis(self, code: int) -> AxisBands:
-        return {AXIS_HORIZONTAL: self.trk, AXIS_VERTICAL: self.vs, AXIS_SPEED: self.gs}[code]
-
-    def in_conflict(self) -> np.ndarray:
-        """(N,) bool: the current trajectory (k = 0) is in a conflict region (MID or worse) or RECOVERY."""
-        r = self.trk.region[:, self.trk.k0]
-        return r >= REGION_MID
-
-    def __getitem__(self, idx) -> "Bands":
-        rows = lambda ab: None if ab is None else ab.rows(idx)  # noqa: E731  (an axis not computed stays None)
-        return Bands(rows(self.trk), rows(self.vs), rows(self.gs), self.alert[idx], self.preset)
 
 
 def _side_order(arr, j_lo: int, j_hi: int):
@@ -312,17 +114,35 @@ def _first_on_side(ok, side, want: int, k0: int):
 
 def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig, alert: np.ndarray,
                sizes: "tuple[int, int] | None" = None,
-               lists: "tuple[np.ndarray, np.ndarray] | None" = None) -> AxisBands:
-    """Bands of one axis (AXIS_* code) for ownship ``(N,)`` and intruders ``(N, M)``; ``sizes`` = candidates
-    per side (default from this batch); ``lists`` = (NEAR, MID) conflict-aircraft flags ``(N, M)`` used
-    with ``cfg.horizon_from_maneuver`` (default :func:`daa_sil.daa.alerting.conflict_lists`)."""
+               lists: "tuple[np.ndarray, np.ndarray] | None" = None, evaluator: bool = False) -> AxisBands:
+    """Bands of one axis (AXIS_* code) for ownship ``(N,)`` and intruders ``(N, M)``; ``sizes`` = the columns
+    per side (at least the batch's :func:`candidate_counts`, the default); ``lists`` = (NEAR, MID)
+    conflict-aircraft flags ``(N, M)`` used with ``cfg.horizon_from_maneuver`` (default
+    :func:`daa_sil.daa.alerting.conflict_lists`).
+
+    Each encounter's bands are those of a call of its own: its own candidates per side
+    (:func:`daa_sil.daa.axis_paths.row_counts`; a speed axis's depend on the current speed), its paths
+    evaluated to its own last knot, its regions, recovery and resolutions over its own candidates. The
+    columns past an encounter's candidates repeat its outermost candidate on that side.
+
+    The cylinder recovery (``daidalus``) runs on the evaluator's path (``evaluator``); the one-pass kernels
+    make every row's bands first, and only the rows whose axis saturates (no conflict-free candidate)
+    are made again on that path (:func:`_cylinder_rows`): a row's bands do not depend on its batch."""
     j_lo, j_hi = sizes if sizes is not None else candidate_counts(own, axis, cfg)
     n, m = intr.shape
+    rows = row_counts(own, axis, cfg)
+    fused = COMPILED and FUSED and not evaluator
+    if fused and cfg.recovery == "cylinder":
+        return _cylinder_rows(own, intr, axis, cfg, alert, lists, rows, j_lo, j_hi)
+    fused = fused and cfg.recovery != "cylinder"
+    if not fused and n and not (np.all(rows[0] == j_lo) and np.all(rows[1] == j_hi)):
+        return _by_counts(own, intr, axis, cfg, alert, lists, rows, j_lo, j_hi)
     paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
     t = np.asarray(paths.t, float)[0, 0]
     side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
-    if COMPILED and FUSED and cfg.recovery != "cylinder" and paths.kin is not None:  # one pass per path, then per row
-        values, delta, t_man, *rest = axis_conflict_regions(paths, own, intr, axis, cfg, alert, lists, j_lo, j_hi)
+    if fused and paths.kin is not None:  # one pass per path, then per row
+        values, delta, t_man, *rest = axis_conflict_regions(paths, own, intr, axis, cfg, alert, lists, j_lo, j_hi,
+                                                            rows)
         return AxisBands(axis, values, delta, side, t_man, *rest)
     ev = PathEvaluator(paths, intr, cfg.lookahead_s)
     pc = ev.evaluate(cfg.th)
@@ -386,7 +206,7 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
             corr = PathConflicts(pc.seg_in[rows], pc.seg_out[rows], pc.tail_in[rows], pc.tail_out[rows],
                                  pc.t[rows], pc.t_end)
             g, rt, nf, hh, vv = CylinderRecovery(paths.subset(rows), intr[rows], corr, listed, horizon, cfg, order,
-                                          runs).run()
+                                                 runs, (j_lo, j_hi), fused=COMPILED and FUSED).run()
             rec_green[rows] = g
             rec_time[rows], rec_n[rows], rec_h[rows], rec_v[rows] = rt, nf, hh, vv
         region = np.where(rec_green, REGION_RECOVERY, region).astype(np.int8)
@@ -408,14 +228,88 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     # -- resolutions ------------------------------------------------------------------------------------
     res_lo, res_hi, pref = resolutions(region, values, delta, side, t_man, k0, axis, cfg)
     return AxisBands(axis, values, delta, side, t_man, t_in_all, t_out_c, region, res_lo, res_hi, pref, gap,
-                     rec_time, rec_n, rec_h, rec_v)
+                     rec_time, rec_n, rec_h, rec_v)  # (own_lo / own_hi None: every row has every column)
 
 
-def resolutions(region, values, delta, side, t_man, k0: int, axis: int, cfg: DaaConfig):
-    """(res_lo, res_hi, preferred) of candidates ``(N, K)`` (see the module docstring)."""
+def _by_counts(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig, alert, lists, rows, j_lo: int,
+               j_hi: int) -> AxisBands:
+    """:func:`axis_bands` of a batch whose encounters have different candidate counts ``rows``, on the
+    evaluator's path (the numpy reference, the cylinder recovery): one call per set of encounters with the
+    same counts, each with exactly those candidates, then each row placed in the batch's ``j_lo`` + 1 +
+    ``j_hi`` columns with its outermost candidates repeated past its own."""
+    n, k = own.shape[0], j_lo + j_hi + 1
+    key = rows[0] * (j_hi + 1) + rows[1]
+    parts = []
+    for v in np.unique(key):
+        idx = np.flatnonzero(key == v)
+        lo, hi = int(rows[0][idx[0]]), int(rows[1][idx[0]])
+        li = None if lists is None else (lists[0][idx], lists[1][idx])
+        parts.append((idx, lo, hi, axis_bands(own[idx], intr[idx], axis, cfg, np.asarray(alert)[idx], (lo, hi), li,
+                                              evaluator=True)))
+    b0 = parts[0][3]
+
+    def widen(name: str, width: int):
+        out = None
+        for idx, lo, hi, b in parts:
+            a = np.asarray(getattr(b, name))
+            if out is None:
+                out = np.empty((n, width) if width else (n,), a.dtype)
+            if not width:
+                out[idx] = a
+                continue
+            a = np.broadcast_to(a, (idx.size, a.shape[1]))
+            c0 = j_lo - lo
+            out[idx, c0:c0 + a.shape[1]] = a
+            if name == "gap_region":  # (between repeated candidates: the outermost one's region)
+                out[idx, :c0] = np.asarray(b.region)[:, :1]
+                out[idx, c0 + a.shape[1]:] = np.asarray(b.region)[:, -1:]
+            else:
+                out[idx, :c0] = a[:, :1]
+                out[idx, c0 + a.shape[1]:] = a[:, -1:]
+        return out
+    per_row = {f.name: widen(f.name, k if f.name in ("values", "delta", "t_man", "t_in", "t_out", "region") else 0)
+               for f in fields(AxisBands) if f.name not in ("axis", "side", "gap_region", "own_lo", "own_hi")}
+    gap = None if b0.gap_region is None else widen("gap_region", k - 1)
+    side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
+    return AxisBands(axis=axis, side=side, gap_region=gap, own_lo=j_lo - rows[0], own_hi=j_lo + rows[1], **per_row)
+
+
+def _cylinder_rows(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig, alert, lists, rows,
+                   j_lo: int, j_hi: int) -> AxisBands:
+    """:func:`axis_bands` with the cylinder recovery: the one-pass kernels for every row (as without
+    recovery: a row with a conflict-free candidate has none), then the rows without a NONE candidate of their
+    own -- saturated for the cylinder search, or relabelled by the kernels' earliest exit -- made again on the
+    evaluator's path, which searches their recovery."""
+    n, m = intr.shape
+    paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
+    side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
+    values, delta, t_man, *rest = axis_conflict_regions(paths, own, intr, axis, cfg, alert, lists, j_lo, j_hi, rows)
+    ab = AxisBands(axis, values, delta, side, t_man, *rest)
+    free = ab.region == REGION_NONE
+    mask = ab.own_mask()
+    idx = np.flatnonzero(~np.any(free if mask is None else free & mask, axis=1)) if m else np.zeros(0, int)
+    if not idx.size:
+        return ab
+    li = None if lists is None else (lists[0][idx], lists[1][idx])
+    sub = axis_bands(own[idx], intr[idx], axis, cfg, np.asarray(alert)[idx], (j_lo, j_hi), li, evaluator=True)
+    for f in fields(AxisBands):
+        if f.name in ("axis", "side", "own_lo", "own_hi") or getattr(ab, f.name) is None:
+            continue
+        if axis == AXIS_HORIZONTAL and f.name in ("delta", "t_man"):  # (one row for every encounter, the same)
+            continue
+        getattr(ab, f.name)[idx] = getattr(sub, f.name)
+    return ab
+
+
+def resolutions(region, values, delta, side, t_man, k0: int, axis: int, cfg: DaaConfig,
+                own: "np.ndarray | None" = None):
+    """(res_lo, res_hi, preferred) of candidates ``(N, K)`` (see the module docstring); ``own`` (N, K): each
+    row's own candidates (:meth:`AxisBands.own_mask`; None: all)."""
     cur = region[:, k0]
     cur_conflict = (cur == REGION_MID) | (cur == REGION_NEAR)
     ok = (region == REGION_NONE) | (region == REGION_RECOVERY)
+    if own is not None:
+        ok &= own
     if axis == AXIS_HORIZONTAL and cfg.daidalus_grid:  # a resolution is never exactly 180 deg away
         ok &= np.abs(delta) < np.pi - 1e-9
     i_lo, f_lo = _first_on_side(ok, side, -1, k0)
@@ -467,7 +361,13 @@ CHUNK = 16384
 
 def _concat(parts: "list[AxisBands]") -> AxisBands:
     p0 = parts[0]
+    if any(p.own_lo is not None for p in parts):  # (a part without them has every column)
+        parts = [p.with_fields(own_lo=p.own_range()[0], own_hi=p.own_range()[1]) for p in parts]
     keep = lambda f: f.name in ("axis", "side") or any(getattr(p, f.name) is None for p in parts)  # noqa: E731
     return AxisBands(**{f.name: ((getattr(p0, f.name) if f.name in ("axis", "side") else None) if keep(f)
                                  else np.concatenate([getattr(p, f.name) for p in parts], axis=0))
                         for f in fields(p0)})
+
+
+__all__ = ["AxisBands", "Bands", "gap_regions", "axis_bands", "compute_bands", "resolutions", "COMPILED", "FUSED",
+           "CHUNK"]

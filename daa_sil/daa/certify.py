@@ -35,8 +35,8 @@ def classify_pieces(x0, y0, z0, x1, y1, z1, h, th: Thresholds, e_p, e_v, e_z=0.0
     lo, hi = (v[0], v[0]) if window is None else (as_vector(window[0], n), as_vector(window[1], n))
     out = np.empty(n, np.int8)
     D = float(th.dthr)
-    kernels.get().classify_into(*v, lo, hi, window is not None, D, D * D, float(th.zthr), float(th.tthr),
-                                float(th.tcoa), out)
+    kernels.get().classify_into(tuple(v[:3]), tuple(v[3:6]), v[6], tuple(v[7:10]), (lo, hi), window is not None,
+                                (D, D * D, float(th.zthr), float(th.tthr), float(th.tcoa)), out)
     return out
 
 
@@ -139,8 +139,9 @@ def clear_second_order(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, th: Thresh
     n = np.shape(h)[0]
     out = np.empty(n, bool)
     D = float(th.dthr)
-    comp = (as_vector(a, n) for a in (x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, e_p, e_v, e_z))
-    kernels.get().clear2_into(*comp, D, D * D, float(th.zthr), float(th.tthr), float(th.tcoa), out)
+    c = [as_vector(a, n) for a in (x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, e_p, e_v, e_z)]
+    kernels.get().clear2_into(tuple(c[0:3]), tuple(c[3:6]), tuple(c[6:8]), tuple(c[8:10]), c[10], tuple(c[11:14]),
+                              (D, D * D, float(th.zthr), float(th.tthr), float(th.tcoa)), out)
     return out
 
 

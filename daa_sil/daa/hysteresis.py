@@ -231,7 +231,8 @@ def _filter_axis(t: float, ab: AxisBands, st: AxisState, cfg: DaaConfig) -> tupl
     gap = ab.gaps().copy()
     if altered.any():
         gap[altered] = gap_regions(region[altered])
-    res_lo, res_hi, pref = resolutions(region, ab.values, ab.delta, ab.side, ab.t_man, ab.k0, ab.axis, cfg)
+    res_lo, res_hi, pref = resolutions(region, ab.values, ab.delta, ab.side, ab.t_man, ab.k0, ab.axis, cfg,
+                                       ab.own_mask())
     res_lo, res_hi, pref, st = _resolution_hysteresis(t, ab, region, res_lo, res_hi, st, cfg)
     new = ab.with_fields(region=region, gap_region=gap, res_lo=res_lo, res_hi=res_hi, preferred=pref)
     return new, st

@@ -65,8 +65,8 @@ def interval_soa(sx, sy, sz, vx, vy, vz, length, th: Thresholds, window=None) ->
     lo, hi = (v[0], v[0]) if window is None else (as_vector(window[0], n), as_vector(window[1], n))
     t_in, t_out = np.empty(n), np.empty(n)
     D = float(th.dthr)
-    kernels.get().interval_into(*v, lo, hi, window is not None, D, D * D, D ** 2, float(th.tthr), float(th.zthr),
-                                float(th.tcoa), t_in, t_out)
+    kernels.get().interval_into(tuple(v[:6]), v[6], (lo, hi), window is not None,
+                                (D, D * D, D ** 2, float(th.tthr), float(th.zthr), float(th.tcoa)), (t_in, t_out))
     return t_in, t_out
 
 

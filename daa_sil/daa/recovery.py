@@ -6,12 +6,19 @@ from __future__ import annotations
 
 import numpy as np
 
+from daa_sil.daa import kernels
+from daa_sil.daa.band_regions import axis_path_conflicts
 from daa_sil.daa.config import (
     DaaConfig,
 )
 from daa_sil.daa.trajectory import ManeuverPaths, PathConflicts, PathEvaluator
 from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.geometry.thresholds import Thresholds
+
+
+#: False: the bisection of each cylinder's recovery time in numpy (``CylinderRecovery._at_pivot``, the oracle of
+#: the compiled ``kernels.recovery.pivot_search_into``)
+COMPILED = True
 
 
 def drop_isolated(green: np.ndarray) -> np.ndarray:
@@ -37,8 +44,11 @@ class CylinderRecovery:
     """
 
     def __init__(self, paths: ManeuverPaths, intr: AircraftState, corrective: PathConflicts, listed, horizon,
-                 cfg: DaaConfig, order, runs):
+                 cfg: DaaConfig, order, runs, shape: "tuple[int, int] | None" = None, fused: bool = False):
         self.paths, self.intr, self.cfg, self.order, self.runs = paths, intr, cfg, order, runs
+        self.shape = shape  #: (j_lo, j_hi) of ``order`` (the compiled bisection's column order)
+        #: the cylinders evaluated in one pass per path (``band_regions.axis_path_conflicts``; False: the evaluator)
+        self.fused = fused and paths.kin is not None and paths.kin[0] == "axis"
         L = cfg.lookahead_s
         shape = corrective.tail_in.shape
         self.tk = np.broadcast_to(corrective.t, shape)
@@ -55,10 +65,23 @@ class CylinderRecovery:
     def _cylinder(self, rows, h: float, v: float):
         """The (h, v) cylinder's first entries on the maneuvers, its tails, and 'red as the conflict
         detector over [0, window]' for rows ``rows``."""
-        cyl = PathEvaluator(self.paths.subset(rows), self.intr[rows], self.cfg.lookahead_s).evaluate(_cylinder(h, v))
-        pre_in = cyl.prefix()[0]
+        cyl = self._conflicts(rows, _cylinder(h, v))
+        pre_in = cyl.prefix_in()
         red_only = (pre_in < self.window[rows]) | (cyl.tail_in < np.minimum(cyl.tail_out, self.window[rows]))
         return pre_in, cyl.tail_in, cyl.tail_out, red_only
+
+    def _conflicts(self, rows, th: Thresholds) -> PathConflicts:
+        """The intervals of volume ``th`` of the paths of rows ``rows`` over the lookahead."""
+        paths, L = self.paths.subset(rows), self.cfg.lookahead_s
+        if not self.fused:
+            return PathEvaluator(paths, self.intr[rows], L).evaluate(th)
+        n, m = rows.size, self.intr.shape[1]
+        knots = paths.axis_times().shape[0]
+        ti, to, si, so = axis_path_conflicts(paths, self.intr[rows], th, L, np.full(n, knots - 1, np.int64))
+        shape = (n, m, 2, knots)
+        seg = shape[:3] + (knots - 1,)
+        return PathConflicts(si.reshape(seg), so.reshape(seg), ti.reshape(shape), to.reshape(shape),
+                             np.broadcast_to(paths.axis_times(), shape), L)
 
     def _at_pivot(self, rows, cyl, pivot) -> np.ndarray:
         """Green where the candidate avoids the cylinder on [0, B] and the corrective volume after B."""
@@ -70,6 +93,37 @@ class CylinderRecovery:
         red |= (tk < B) & (t_in < np.minimum(t_out, B))
         red = np.where(B > self.horizon[rows], red_only, red)  # past the aircraft's horizon: the cylinder only
         return self._green(red, rows)
+
+    def _search_reference(self, sr, cs) -> tuple[np.ndarray, np.ndarray]:
+        """``(recovery time (s), green (len(sr), K))`` of rows ``sr`` with their cylinder ``cs``: bisect (to 0.5 s)
+        the earliest time B at which some candidate avoids the cylinder on [0, B] and the corrective volume
+        after B; the recovery time is B + the stability time (at most the lookahead)."""
+        L = self.cfg.lookahead_s
+        red_p = np.zeros(sr.size)
+        green_p = np.full(sr.size, L + 1.0)
+        pivot = np.full(sr.size, L)
+        going = green_p - red_p > 0.5
+        while going.any():
+            solid = ~self._at_pivot(sr, cs, pivot).any(axis=1)
+            red_p = np.where(going & solid, pivot, red_p)
+            green_p = np.where(going & ~solid, pivot, green_p)
+            pivot = np.where(going, 0.5 * (red_p + green_p), pivot)
+            going = green_p - red_p > 0.5
+        rt = np.where(green_p <= L, np.minimum(L, green_p + self.cfg.recovery_stability_s), red_p)
+        return rt, self._at_pivot(sr, cs, rt)
+
+    def _search(self, sr, cs) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_search_reference` in one compiled pass (``kernels.recovery.pivot_search_into``)."""
+        pre_in, t_in, t_out, red_only = cs
+        j_lo, j_hi = self.shape
+        rt, green = np.empty(sr.size), np.empty((sr.size, j_lo + j_hi + 1), bool)
+        corr = (self.c_pre_out, self.c_in, self.c_out, self.tk, self.window)
+        kernels.get().pivot_search_into(
+            tuple(np.asarray(a, float) for a in corr), np.asarray(sr, np.int64), (pre_in, t_in, t_out),
+            np.asarray(red_only, bool), self.horizon[:, :, 0, 0], np.ascontiguousarray(self.listed[:, :, 0, 0]),
+            (int(j_lo), int(j_hi)), bool(self.runs is drop_isolated), (float(self.cfg.lookahead_s),
+                                                                        float(self.cfg.recovery_stability_s)), rt, green)
+        return rt, green
 
     def run(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(recovery green (R, K), time, nfactor, h, v); rows without recovery have no green candidate
@@ -94,18 +148,7 @@ class CylinderRecovery:
             if some.any():
                 sr = rows[some]
                 cs = tuple(a[some] for a in cyl)
-                red_p = np.zeros(sr.size)
-                green_p = np.full(sr.size, L + 1.0)
-                pivot = np.full(sr.size, L)
-                going = green_p - red_p > 0.5
-                while going.any():
-                    solid = ~self._at_pivot(sr, cs, pivot).any(axis=1)
-                    red_p = np.where(going & solid, pivot, red_p)
-                    green_p = np.where(going & ~solid, pivot, green_p)
-                    pivot = np.where(going, 0.5 * (red_p + green_p), pivot)
-                    going = green_p - red_p > 0.5
-                rt = np.where(green_p <= L, np.minimum(L, green_p + cfg.recovery_stability_s), red_p)
-                g = self._at_pivot(sr, cs, rt)
+                rt, g = self._search(sr, cs) if COMPILED and self.shape is not None else self._search_reference(sr, cs)
                 ok = g.any(axis=1)
                 done = sr[ok]
                 green[done], r_time[done], nfac[done], r_h[done], r_v[done] = g[ok], rt[ok], n, h, v

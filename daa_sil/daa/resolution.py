@@ -125,6 +125,12 @@ class _Candidates:
         """Field ``name`` of encounters ``rows`` (as ``self.<name>[rows]``)."""
         return np.concatenate([a.sub(name, rows) for a in self._ab], axis=1)
 
+    @cached_property
+    def own_cols(self) -> np.ndarray:
+        """(N, K) bool: each encounter's own candidates (``AxisBands.own_mask``)."""
+        return np.concatenate([np.ones(a.values.shape, bool) if a.own_mask() is None else a.own_mask()
+                               for a in self._ab], axis=1)
+
     def command(self, idx: np.ndarray) -> Command:
         """Command of candidate ``idx`` (N,): the candidate's axis set, the other axes held."""
         ax, val = self.axis[idx], self.at("values", idx)
@@ -137,7 +143,8 @@ class _Candidates:
         if rows.size == 0:
             return np.zeros(0, int)
         t_in = np.minimum(self.rows("t_in", rows), 1e6)
-        return np.argmax(t_in * 1e3 - np.maximum(self.rows("t_out", rows), 0.0), axis=-1)
+        score = t_in * 1e3 - np.maximum(self.rows("t_out", rows), 0.0)
+        return np.argmax(np.where(self.own_cols[rows], score, -np.inf), axis=-1)  # (another row's column never wins)
 
 
 def _pick(mask, cost):
@@ -190,14 +197,16 @@ def search_maneuver(own: AircraftState, intr: AircraftState, axis, direction, cf
         idx, rule = np.empty(n, np.int64), np.empty(n, np.int8)
         src = [a.source() for a in bands.axes()]
         rows = [np.arange(n) if r is None else r for _, r in src]
-        field = lambda name: [getattr(b, name) for b, _ in src]  # noqa: E731
-        kernels.get().search_into(*field("delta"), *field("t_man"), *field("t_in"), *field("t_out"), *rows,
-                                  *(a.side for a in bands.axes()), ax.astype(np.int64), side.astype(np.int64), ref_t,
-                                  rates, horizon, idx, rule)
+        field = lambda name: tuple(getattr(b, name) for b, _ in src)  # noqa: E731
+        own = [b.own_range() for b, _ in src]
+        kernels.get().search_into(field("delta"), field("t_man"), field("t_in"), field("t_out"), tuple(rows),
+                                  tuple(o[0] for o in own), tuple(o[1] for o in own),
+                                  tuple(np.asarray(a.side, np.int64) for a in bands.axes()), ax.astype(np.int64),
+                                  side.astype(np.int64), ref_t, rates, horizon, idx, rule)
         if return_t_in:
             return cand.command(idx), rule, cand.at("t_in", idx)
         return cand.command(idx), rule
-    safe = cand.t_in > horizon
+    safe = (cand.t_in > horizon) & cand.own_cols
     cand_t = cand.delta / rates[cand.axis]
     dist = np.abs(cand_t - ref_t[:, cand.axis])
     on_axis = (cand.axis[None, :] == ax[:, None]) & (ax[:, None] != AXIS_NONE)
@@ -232,14 +241,16 @@ def resolve(own: AircraftState, intr: AircraftState, cfg: "DaaConfig | None" = N
         # one pass per row, the bands read in place (kernels.select.resolution_into)
         chosen = np.empty(n, np.int64)
         rows = [np.arange(n) if r is None else r for _, r in src]
-        field = lambda name: [getattr(b, name) for b, _ in src]  # noqa: E731
+        field = lambda name: tuple(getattr(b, name) for b, _ in src)  # noqa: E731
         if prev is not None:
             p_ax, p_dir = (np.asarray(a).astype(np.int64) for a in prev)
             p_side = np.asarray(DIR_SIDE, np.int64)[p_dir]
         else:
             p_ax = p_side = np.zeros(n, np.int64)
-        kernels.get().resolution_into(*field("region"), *field("t_man"), *field("preferred"), *field("t_in"),
-                                      *field("t_out"), *rows, *(a.side for a in axes), in_conflict, prev is not None,
+        own = [b.own_range() for b, _ in src]
+        kernels.get().resolution_into(field("region"), field("t_man"), field("preferred"), field("t_in"),
+                                      field("t_out"), tuple(rows), tuple(o[0] for o in own), tuple(o[1] for o in own),
+                                      tuple(np.asarray(a.side, np.int64) for a in axes), in_conflict, prev is not None,
                                       p_ax, p_side, np.array([axis_code(a) for a in cfg.resolution_axes], np.int64),
                                       chosen)
     else:
@@ -269,7 +280,7 @@ def _resolve_numpy(cand: _Candidates, bands: Bands, cfg: DaaConfig, n: int, in_c
         r = np.flatnonzero((p_ax != AXIS_NONE) & in_conflict)
         if r.size:
             region = cand.rows("region", r)
-            okr = (region == REGION_NONE) | (region == REGION_RECOVERY)
+            okr = ((region == REGION_NONE) | (region == REGION_RECOVERY)) & cand.own_cols[r]
             m = okr & (cand.axis[None, :] == p_ax[r, None]) & (cand.side[None, :] == p_side[r, None]) & moving
             i, f = _pick(m, cand.rows("t_man", r))
             chosen[r] = np.where(f, i, chosen[r])
@@ -287,7 +298,7 @@ def _resolve_numpy(cand: _Candidates, bands: Bands, cfg: DaaConfig, n: int, in_c
                 r = np.flatnonzero((chosen < 0) & in_conflict & (allow_reversal | (p_ax != a)))
                 if not r.size:
                     continue
-                ok = (ab.sub("region", r) == want) & (ab.side != 0)[None, :]
+                ok = (ab.sub("region", r) == want) & (ab.side != 0)[None, :] & cand.own_cols[r, cols]
                 pref = ab.sub("preferred", r).astype(int)
                 m_side = (ab.side[None, :] == pref[:, None]) | (pref[:, None] == 0)
                 t_man = ab.sub("t_man", r)

@@ -111,7 +111,9 @@ class _CommandMotion:
 def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverPaths:
     """The single path (P = 1) of each ownship flying ``cmd`` kinematically (as
     :func:`daa_sil.geometry.kinematics.fly_command`), with knots at the spacing of the axes the command changes
-    (the finest one if several), so a single-axis command has the knots of its band candidate.
+    (the finest one if several), so a single-axis command has the knots of its band candidate. Each path
+    ends at its own last knot (``n_seg``: the end of its maneuver) and has its own ``vz_const``, so that an
+    encounter's path is the one a call of its own makes, whatever the other encounters' commands.
 
     Planned in one compiled pass (``kernels.command_plan``) for a batch of ownships ``(N,)``; the numpy
     code (:func:`command_paths_reference`, also where ``COMPILED`` is False) gives the same numbers."""
@@ -123,10 +125,12 @@ def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverP
     k = kernels.get()
     n = own.shape[0]
     phases, enc, plan = np.empty((n, 3, 9)), np.empty((n, 7)), np.empty((n, plan_cols.N_PLAN))
-    if k.command_plan_into(*flat, float(perf.max_turn_rate), float(perf.horizontal_accel), float(perf.vertical_accel),
-                           float(perf.min_gs), float(perf.max_gs), float(perf.max_vs), float(cfg.turn_rate),
-                           float(cfg.vertical_accel), float(cfg.horizontal_accel), float(cfg.knot_trk),
-                           float(cfg.knot_vs), float(cfg.knot_gs), STRAIGHT_TURN_RATE, _EPS, phases, enc, plan):
+    if k.command_plan_into(tuple(flat[:6]), tuple(flat[6:9]),
+                           (float(perf.max_turn_rate), float(perf.horizontal_accel), float(perf.vertical_accel),
+                            float(perf.min_gs), float(perf.max_gs), float(perf.max_vs)),
+                           (float(cfg.turn_rate), float(cfg.vertical_accel), float(cfg.horizontal_accel)),
+                           (float(cfg.knot_trk), float(cfg.knot_vs), float(cfg.knot_gs)), STRAIGHT_TURN_RATE, _EPS,
+                           phases, enc, plan):
         return command_paths_reference(own, cmd, cfg)  # a turn rate the numpy motion treats as straight
     h = plan[:, plan_cols.H]
     j_max = int(plan[:, plan_cols.N_KNOTS].max()) if n else 0
@@ -145,8 +149,9 @@ def command_paths(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverP
     col = lambda c: plan[:, c, None]  # noqa: E731  ((N, 1): one path per encounter)
     return ManeuverPaths((px[:, None], py[:, None], pz[:, None]), (vx[:, None], vy[:, None], vz[:, None]),
                          t[:, None], state_at, col(plan_cols.ACC_H), col(plan_cols.ACC_V),
-                         vz_const=not np.any(plan[:, plan_cols.T_VS] > _EPS), jerk_h=col(plan_cols.JERK),
-                         kink_t=plan[:, None, plan_cols.KINK_TRK:plan_cols.KINK_GS + 1], kin=kin)
+                         vz_const=~(plan[:, plan_cols.T_VS] > _EPS), jerk_h=col(plan_cols.JERK),
+                         kink_t=plan[:, None, plan_cols.KINK_TRK:plan_cols.KINK_GS + 1], kin=kin,
+                         n_seg=plan[:, plan_cols.N_KNOTS].astype(np.int64))
 
 
 def command_paths_reference(own: AircraftState, cmd: Command, cfg: DaaConfig) -> ManeuverPaths:
@@ -185,8 +190,8 @@ def command_paths_reference(own: AircraftState, cmd: Command, cfg: DaaConfig) ->
 
     return ManeuverPaths((px[:, None], py[:, None], pz[:, None]), (vx[:, None], vy[:, None], vz[:, None]),
                          t[:, None], state_at,
-                         acc_h[:, None], acc_v[:, None], vz_const=not np.any(t_vs > eps), jerk_h=jerk[:, None],
-                         kink_t=kink[:, None], kin=kin)
+                         acc_h[:, None], acc_v[:, None], vz_const=~(t_vs > eps), jerk_h=jerk[:, None],
+                         kink_t=kink[:, None], kin=kin, n_seg=n_knots.astype(np.int64))
 
 
 def command_conflicts(own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
@@ -197,9 +202,10 @@ def command_conflicts(own: AircraftState, intr: AircraftState, cmd: Command, cfg
     late by up to one knot interval during the maneuver)."""
     paths = command_paths(own, cmd, cfg)
     pc = path_conflicts(paths, intr, cfg.th, t_end, tails="last", exits=exits)
-    pre_in, pre_out = pc.prefix()
-    t_in = np.minimum(pre_in[..., -1], pc.tail_in[..., -1])
-    t_out = np.maximum(pre_out[..., -1], pc.tail_out[..., -1])
+    pre_in, pre_out = pc.prefix()  # (the segments past a path's last knot are clear: the last prefix is its own)
+    last = paths.n_seg[:, None, None, None]  # the tail from each path's own last knot
+    t_in = np.minimum(pre_in[..., -1], np.take_along_axis(pc.tail_in, last, -1)[..., 0])
+    t_out = np.maximum(pre_out[..., -1], np.take_along_axis(pc.tail_out, last, -1)[..., 0])
     t_in = np.where(t_in <= t_end, t_in, np.inf)
     t_out = np.where(np.isfinite(t_in), np.minimum(t_out, t_end), -np.inf)
     return t_in[..., 0], t_out[..., 0]

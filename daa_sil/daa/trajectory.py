@@ -33,9 +33,6 @@ are absolute (s from now); no violation is ``(inf, -inf)``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable
-
 import numpy as np
 
 from daa_sil.geometry import wellclear as wc
@@ -45,145 +42,11 @@ from daa_sil.daa.intervals import relative_at_knots, row_blocks, interval_soa
 from daa_sil.daa.certify import CLEAR, INSIDE, UNDECIDED, classify_pieces
 from daa_sil.daa import kernels
 from daa_sil.daa.undecided import UndecidedPieces, piece_index
+from daa_sil.daa.paths import ManeuverPaths, PathConflicts, StateAt  # (the data, defined apart; offered here too)
 
 #: knot-to-knot segments examined together first (a block far from the volume is clear as a whole)
 BLOCK = 4
 _NONE = np.zeros(0)
-
-#: ``state_at(n, p) -> f`` with ``f(t) -> (x, y, z, vx, vy, vz)``: the true ownship state on path ``p[i]`` of
-#: encounter ``n[i]`` at time ``t[i]`` (the per-path parameters are gathered once, then ``f`` is cheap)
-StateAt = Callable[[np.ndarray, np.ndarray], Callable[[np.ndarray], tuple]]
-
-
-# --------------------------------------------------------------------------------------------------
-# maneuver paths
-# --------------------------------------------------------------------------------------------------
-@dataclass
-class ManeuverPaths:
-    """P maneuver paths per encounter sampled at knots, and the exact ownship state at any time.
-
-    ``pos``/``vel`` ownship position / velocity at the knots as three component arrays (x, y, z) each
-    broadcastable to ``(N, P, K)``; ``t`` knot times broadcastable to ``(N, P, K)`` (s); ``state_at(n, p)`` a function of time giving the true ownship position and
-    velocity (six component arrays) on paths ``p`` of encounters ``n`` (flat index arrays, :data:`StateAt`); ``acc_h``/``acc_v`` ``(N, P)`` bounds
-    on the ownship's horizontal / vertical acceleration along the path, m/s^2 (the chord of a piece of
-    duration h is then within ``acc h^2 / 8`` of the path and its velocity within ``acc_h h / 2``);
-    ``vz_const``: the vertical speed is the same all along every path (turns and speed changes);
-    ``jerk_h``/``kink_t`` bound how far the velocity between two instants is from the line between its
-    true values there (``jerk h^2 / 8``, or ``acc_h h / 2`` across a kink), used to exclude clips.
-    ``pos``/``vel`` None: computed from ``kin`` (a band axis's) when first asked for (:meth:`knot_states`; the
-    evaluator computes the relative states at the knots from ``kin`` directly).
-    """
-
-    pos: "tuple | None"
-    vel: "tuple | None"
-    t: np.ndarray
-    state_at: StateAt
-    acc_h: np.ndarray
-    acc_v: np.ndarray
-    vz_const: bool = False
-    jerk_h: "np.ndarray | None" = None  #: (N, P) bound on |d^2 v / dt^2| (m/s^3) away from kinks (None = unknown)
-    kink_t: "np.ndarray | None" = None  #: (N, P) or (N, P, Q) s, times the horizontal acceleration jumps (inf = never)
-    #: the paths' motion as data for the compiled kernels, which then evaluate ``state_at`` themselves
-    #: (None: they call it): ``("axis", axis code, rate, (N, P, 9) rows of KIN_FIELDS)`` for a band axis's
-    #: maneuvers, ``("command", (N, 3, 9) PHASE_FIELDS, (N, 7) ENC_FIELDS, max turn rate, horizontal and
-    #: vertical acceleration)`` for a command (:mod:`daa_sil.daa.kernels.motion`)
-    kin: "tuple | None" = None
-
-    @property
-    def shape(self) -> tuple[int, int, int]:
-        knots = () if self.pos is None else self.pos + self.vel
-        return np.broadcast_shapes(*(np.shape(a) for a in knots), np.shape(self.t), np.shape(self.acc_h) + (1,))
-
-    def knot_states(self) -> tuple[tuple, tuple]:
-        """``(pos, vel)``, computed from ``kin`` (:func:`daa_sil.daa.kernels.motion.axis_knots_into`) the first
-        time when they were left to it."""
-        if self.pos is None:
-            out = np.empty((6,) + self.shape)
-            kernels.get().axis_knots_into(self.kin[1], self.kin[2], self.kin[3], self.axis_times(), out)
-            self.pos, self.vel = tuple(out[:3]), tuple(out[3:])
-        return self.pos, self.vel
-
-    def axis_times(self) -> np.ndarray:
-        """The knot times (K,) s, the same on every path (a band axis's paths)."""
-        return np.asarray(self.t, float).reshape(-1)
-
-    def stacked(self) -> tuple[np.ndarray, np.ndarray]:
-        """Position and velocity at the knots as ``(N, P, K, 3)`` arrays."""
-        shape = self.shape
-        return tuple(np.stack([np.broadcast_to(a, shape) for a in c], axis=-1) for c in self.knot_states())
-
-    def knot_times(self) -> np.ndarray:
-        return np.broadcast_to(np.asarray(self.t, float), self.shape)
-
-    def subset(self, idx: np.ndarray) -> "ManeuverPaths":
-        """The paths of encounters ``idx`` (state_at keeps addressing the original encounters)."""
-        idx = np.asarray(idx)
-        base = self.state_at
-        sub = lambda a: None if a is None else a[idx]  # noqa: E731
-        pos, vel = self.knot_states()
-        return ManeuverPaths(tuple(a[idx] for a in pos), tuple(a[idx] for a in vel), self.knot_times()[idx],
-                             lambda n, p: base(idx[n], p),
-                             self.acc_h[idx], self.acc_v[idx], self.vz_const, sub(self.jerk_h), sub(self.kink_t),
-                             _kin_subset(self.kin, idx))
-
-
-def _kin_subset(kin: "tuple | None", idx: np.ndarray) -> "tuple | None":
-    """:attr:`ManeuverPaths.kin` of encounters ``idx``."""
-    if kin is None:
-        return None
-    if kin[0] == "axis":
-        return kin[:3] + (kin[3][idx],)
-    return (kin[0], kin[1][idx], kin[2][idx]) + kin[3:]
-
-
-@dataclass
-class PathConflicts:
-    """Violation intervals (absolute s) of P paths against M intruders, ``t_end`` the horizon.
-
-    ``seg_in``/``seg_out`` ``(N, M, P, K-1)``: first entry and last exit on the true maneuver between
-    knots j and j+1; ``tail_in``/``tail_out`` ``(N, M, P, K)``: the straight tail from knot k over
-    ``[t_k, t_end]``; ``t`` ``(N, 1, P, K)`` knot times.
-    """
-
-    seg_in: np.ndarray
-    seg_out: np.ndarray
-    tail_in: np.ndarray
-    tail_out: np.ndarray
-    t: np.ndarray
-    t_end: float
-
-    def prefix(self) -> tuple[np.ndarray, np.ndarray]:
-        """First entry / last exit on the maneuver up to knot k, ``(N, M, P, K)`` (k = 0: none)."""
-        shape = self.tail_in.shape
-        if shape[-1] > 1:
-            pre_in = np.minimum.accumulate(self.seg_in, axis=-1)
-            pre_out = np.maximum.accumulate(self.seg_out, axis=-1)
-            edge = np.full(shape[:-1] + (1,), np.inf)
-            return np.concatenate([edge, pre_in], axis=-1), np.concatenate([-edge, pre_out], axis=-1)
-        return np.full(shape, np.inf), np.full(shape, -np.inf)
-
-    def candidates(self) -> tuple[np.ndarray, np.ndarray]:
-        """First violation and last exit of candidate k (maneuver to knot k, then straight) over
-        ``[0, t_end]``, ``(N, M, P, K)``; no violation is ``(inf, -inf)`` (compiled)."""
-        shape = self.tail_in.shape
-        t_in, t_out = np.empty(shape), np.empty(shape)
-        flat = lambda a: np.ascontiguousarray(a).reshape(-1)  # noqa: E731
-        kernels.get().candidates_into(flat(self.tail_in), flat(self.tail_out), flat(self.seg_in), flat(self.seg_out),
-                                      shape[-1], float(self.t_end), t_in.reshape(-1), t_out.reshape(-1))
-        return t_in, t_out
-
-    def candidates_reference(self) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`candidates` in numpy (the kernel's test oracle)."""
-        t_in, t_out = self.tail_in.copy(), self.tail_out.copy()
-        if t_in.shape[-1] > 1:  # min / max with the prefix (k = 0 has none)
-            np.minimum(t_in[..., 1:], np.minimum.accumulate(self.seg_in, axis=-1), out=t_in[..., 1:])
-            np.maximum(t_out[..., 1:], np.maximum.accumulate(self.seg_out, axis=-1), out=t_out[..., 1:])
-        none = ~(t_in <= self.t_end)
-        t_in[none] = np.inf
-        np.minimum(t_out, self.t_end, out=t_out)
-        t_out[none] = -np.inf
-        return t_in, t_out
-
 
 class PathEvaluator:
     """Relative geometry of maneuver paths against straight-line intruders, evaluated for any volume.
@@ -203,6 +66,7 @@ class PathEvaluator:
         self.shape = (n, m, p, k)
         tt = paths.knot_times()[:, None]  # (N, 1, P, K)
         self.t = tt
+        self.intr = intr
         self.ipos, self.ivel = intr.position(), intr.velocity()  # (N, M, 3)
         #: relative position ownship - intruder at the knots and relative velocity of the tails, per
         #: component (N, M, P, K), contiguous
@@ -232,8 +96,10 @@ class PathEvaluator:
         n, m, p, k = self.shape
         tt = np.broadcast_to(self.t, self.shape)
         seg_shape = (n, m, p, max(k - 1, 0))
+        if not compiled and self._reference_groups() is not None:
+            return self._evaluate_by_groups(th)
         self._vwin = None
-        if self.paths.vz_const:  # relative altitude linear in time on every path: one vertical window each
+        if self.paths.vz_const_any():  # relative altitude linear in time on a path: one vertical window each
             self._vwin = wc.vertical_window(self.s[2][..., :1], self.v[2][..., :1], 0.0, self.t_end, th.zthr, th.tcoa)
         full_tails = self.with_tails is True
         tail = (lambda fill: np.empty(self.shape)) if full_tails else (lambda fill: np.full(self.shape, fill))  # noqa: E731
@@ -255,32 +121,84 @@ class PathEvaluator:
             self._tails(th, pc, want)
         return pc
 
+    def _reference_groups(self) -> "list[tuple[int, bool, np.ndarray]] | None":
+        """``[(knots, vz_const, encounters)]`` when the paths' knot counts (``n_seg``) or vertical windows
+        (``vz_const`` per encounter) differ between encounters, else None."""
+        ns, vz = self.paths.n_seg, self.paths.vz_const
+        n, _, _, k = self.shape
+        if (ns is None or np.all(ns == k - 1)) and np.ndim(vz) == 0:
+            return None
+        knots = np.full(n, k, np.int64) if ns is None else np.asarray(ns, np.int64) + 1
+        flat = np.broadcast_to(np.asarray(vz, bool), (n,))
+        key = knots * 2 + flat
+        return [(int(v) // 2, bool(v % 2), np.flatnonzero(key == v)) for v in np.unique(key)]
+
+    def _evaluate_by_groups(self, th: Thresholds) -> PathConflicts:
+        """:meth:`evaluate_reference` of paths whose encounters have their own knot counts or vertical
+        windows: each set of encounters alike evaluated on its own (what each encounter gets in a call of
+        its own), the knots past its count clear and without tails."""
+        n, m, p, k = self.shape
+        fill = lambda shape, v: np.full(shape, v)  # noqa: E731
+        seg = (n, m, p, max(k - 1, 0))
+        pc = PathConflicts(fill(seg, np.inf), fill(seg, -np.inf), fill(self.shape, np.inf), fill(self.shape, -np.inf),
+                           self.t, self.t_end)
+        for knots, vz, enc in self._reference_groups():
+            paths = self.paths.subset(enc).truncated(knots, vz)
+            ev = PathEvaluator(paths, self.intr[enc], self.t_end, self.with_tails, self.exits)
+            ev.fused = self.fused
+            sub = ev.evaluate_reference(th)
+            pc.seg_in[enc, ..., :knots - 1], pc.seg_out[enc, ..., :knots - 1] = sub.seg_in, sub.seg_out
+            if self.with_tails == "last":  # (the tail of each path's own last knot)
+                pc.tail_in[enc, ..., knots - 1] = sub.tail_in[..., -1]
+                pc.tail_out[enc, ..., knots - 1] = sub.tail_out[..., -1]
+            elif self.with_tails:
+                pc.tail_in[enc, ..., :knots], pc.tail_out[enc, ..., :knots] = sub.tail_in, sub.tail_out
+        return pc
+
     def _vwin_flat(self):
-        """(lo, hi, present): the per-path vertical windows as flat arrays."""
+        """(lo, hi, on): the per-path vertical windows and which paths have one, as flat arrays."""
+        n_paths = int(np.prod(self.shape[:3]))
         if self._vwin is None:
-            return _NONE, _NONE, False
-        return self._vwin[0].reshape(-1), self._vwin[1].reshape(-1), True
+            return _NONE, _NONE, np.zeros(n_paths, bool)
+        return self._vwin[0].reshape(-1), self._vwin[1].reshape(-1), self._vwin_on(n_paths)
+
+    def _vwin_on(self, n_paths: int) -> np.ndarray:
+        """(n_paths,) bool: which flat paths have a vertical window (their vertical speed is constant)."""
+        vz = self.paths.vz_const
+        if np.ndim(vz) == 0:
+            return np.full(n_paths, bool(vz))
+        n, m, p, _ = self.shape
+        return np.ascontiguousarray(np.broadcast_to(np.asarray(vz, bool)[:, None, None], (n, m, p))).reshape(-1)
+
+    def _knots_per_path(self) -> np.ndarray:
+        """(n_paths,) int64: each flat path's own number of knots (``n_seg + 1``, or all)."""
+        n, m, p, k = self.shape
+        ns = self.paths.n_seg
+        if ns is None:
+            return np.full(n * m * p, k, np.int64)
+        return np.ascontiguousarray(np.broadcast_to((np.asarray(ns, np.int64) + 1)[:, None, None], (n, m, p))).reshape(-1)
 
     def _tails_compiled(self, th: Thresholds, pc: PathConflicts) -> None:
         """:meth:`_tails` (every knot, or the last one with ``tails="last"``) in one compiled pass."""
-        lo, hi, has = self._vwin_flat()
+        lo, hi, on = self._vwin_flat()
         D = float(th.dthr)
-        kernels.get().tails_into(*(c.reshape(-1) for c in self.s), *(c.reshape(-1) for c in self.v),
-                                 self._flat_times(), self.shape[3], has, lo, hi, self.with_tails == "last", self.t_end,
-                                 D, D * D, D ** 2, float(th.tthr), float(th.zthr), float(th.tcoa),
-                                 pc.tail_in.reshape(-1), pc.tail_out.reshape(-1))
+        kernels.get().tails_into(tuple(c.reshape(-1) for c in self.s), tuple(c.reshape(-1) for c in self.v),
+                                 self._flat_times(), self.shape[3], self._knots_per_path(), on, lo, hi,
+                                 self.with_tails == "last", self.t_end,
+                                 (D, D * D, D ** 2, float(th.tthr), float(th.zthr), float(th.tcoa)),
+                                 (pc.tail_in.reshape(-1), pc.tail_out.reshape(-1)))
 
     def _segments_compiled(self, th: Thresholds, pc: PathConflicts) -> None:
         """:meth:`_segments` with the certificates in one compiled pass (undecided pieces: :meth:`UndecidedPieces.resolve`)."""
         n, m, p, k = self.shape
-        lo, hi, has = self._vwin_flat()
+        lo, hi, on = self._vwin_flat()
         tab = self._path_tables()
         code = np.empty(n * m * p * (k - 1), np.int8)
         seg_in, seg_out = pc.seg_in.reshape(-1), pc.seg_out.reshape(-1)
         D = float(th.dthr)
-        kernels.get().segments_into(*(c.reshape(-1) for c in self.s), self._flat_times(), k, BLOCK, tab["acc_h"],
-                                    tab["acc_v"], has, lo, hi, self.t_end, D, D * D, float(th.zthr), float(th.tthr),
-                                    float(th.tcoa), code, seg_in, seg_out)
+        kernels.get().segments_into(tuple(c.reshape(-1) for c in self.s), self._flat_times(), k, self._knots_per_path(),
+                                    BLOCK, tab["acc_h"], tab["acc_v"], on, lo, hi, self.t_end,
+                                    (D, D * D, float(th.zthr), float(th.tthr), float(th.tcoa)), (code, seg_in, seg_out))
         todo = np.flatnonzero(code == UNDECIDED)
         if todo.size:
             self._undecided().resolve(todo, th, seg_in, seg_out)
@@ -332,10 +250,9 @@ class PathEvaluator:
         acc_h = self.paths.acc_h[:, None, :, None]
         e_p = np.ascontiguousarray(np.broadcast_to(acc_h * h * h * 0.125, h.shape)).ravel()
         e_v = np.ascontiguousarray(np.broadcast_to(acc_h * h * 0.5, h.shape)).ravel()
-        if np.any(self.paths.acc_v):
-            e_z = np.ascontiguousarray(np.broadcast_to(self.paths.acc_v[:, None, :, None] * h * h * 0.125, h.shape)).ravel()
-        else:
-            e_z = 0.0
+        any_v = self._any_v_encounter()[:, None, None, None]  # (each encounter's np.any, as in a call of its own)
+        e_z = np.ascontiguousarray(np.broadcast_to(np.where(any_v, self.paths.acc_v[:, None, :, None] * h * h * 0.125,
+                                                            0.0), h.shape)).ravel()
         win = None
         if self._vwin is not None:
             lo, hi = self._vwin
@@ -373,10 +290,18 @@ class PathEvaluator:
         if todo.size:
             self._undecided().resolve(todo, th, pc.seg_in.reshape(-1), pc.seg_out.reshape(-1))
 
+    def _any_v_encounter(self) -> np.ndarray:
+        """(N,) bool: does some path of the encounter accelerate vertically (whether the vertical error bound
+        is used: ``np.any`` of a call of its own)."""
+        return np.any(np.asarray(self.paths.acc_v) != 0, axis=-1)
+
     def _undecided(self) -> UndecidedPieces:
         """The true paths as the resolution of undecided pieces reads them (this evaluation's window)."""
+        on = None
+        if self._vwin is not None and np.ndim(self.paths.vz_const):
+            on = self._vwin_on(int(np.prod(self.shape[:3])))
         return UndecidedPieces(self.paths, self.ipos, self.ivel, self.s, self.v, self._flat_times(),
-                               self._path_tables(), self._vwin, self.exits, self.compiled, self.fused)
+                               self._path_tables(), self._vwin, self.exits, self.compiled, self.fused, on)
 
     def _flat_times(self) -> np.ndarray:
         """Knot times as a flat contiguous (N*M*P*K) array (cached)."""
@@ -404,7 +329,7 @@ class PathEvaluator:
         if self._vwin is not None:
             lo, hi = self._vwin[0].reshape(-1)[path], self._vwin[1].reshape(-1)[path]
             win = (np.maximum(lo, t0) - t0, np.minimum(hi, t0 + h) - t0)
-        e_z = a_v * h * h * 0.125 if np.any(a_v) else 0.0
+        e_z = np.where(self._any_v_encounter()[tab["n"][path]], a_v * h * h * 0.125, 0.0)
         s = [c.reshape(-1) for c in self.s]
         return classify_pieces(s[0][ka], s[1][ka], s[2][ka], s[0][ka + 1], s[1][ka + 1], s[2][ka + 1], h, th,
                                a_h * h * h * 0.125, a_h * h * 0.5, e_z, win)
@@ -416,8 +341,4 @@ def path_conflicts(paths: ManeuverPaths, intr: AircraftState, th: Thresholds, t_
     return PathEvaluator(paths, intr, t_end, tails, exits).evaluate(th)
 
 
-# --------------------------------------------------------------------------------------------------
-# commands (SM)
-# --------------------------------------------------------------------------------------------------
-
-
+__all__ = ["BLOCK", "ManeuverPaths", "PathConflicts", "PathEvaluator", "StateAt", "path_conflicts"]

@@ -4,27 +4,14 @@ clear a second-order certificate or sampling every CLIP_DT (the rules in docs/da
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 
-from daa_sil.daa.certify import CLEAR, P_TOL, V_TOL, settle_time, classify_pieces, clear_second_order
+from daa_sil.daa.certify import CLEAR, settle_time, classify_pieces, clear_second_order
 from daa_sil.daa.intervals import as_vector, wcv_soa
 from daa_sil.daa import kernels
-from daa_sil.daa.scratch import scratch
-
-#: most parts an undecided segment is split into (as many as its parts' chords need to meet V_TOL / P_TOL)
-MAX_SPLIT = 16
-#: s, how closely an entry into / an exit from the volume on the true path is located (bisection brackets;
-#: entries decide when a candidate conflicts, exits only rank recovery candidates)
-BISECT_DT_IN = 0.04
-BISECT_DT_OUT = 0.1
-#: s, sampling interval of the true predicate inside a short piece whose ends are clear but which is not
-#: certified clear (a clip of the volume shorter than this can be missed)
-CLIP_DT = 0.01
-#: most rounds of splitting an undecided piece
-MAX_DEPTH = 8
-
+# the tolerances and the compiled call (offered here too: the tests and the evaluator read them from here)
+from daa_sil.daa.resolve_call import (BISECT_DT_IN, BISECT_DT_OUT, CLIP_DT, MAX_DEPTH, MAX_SPLIT, bisect_thresholds,
+                                      resolve_segments)
 
 def segment_knots(flat_seg: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """Path (flat n, m, p) and first-knot flat index of the knot-to-knot segments ``flat_seg`` (flat indices
@@ -49,14 +36,21 @@ class UndecidedPieces:
     intruders' positions (m) and velocities (m/s) at t = 0; ``s``/``v`` the relative positions and
     velocities at the knots per component (N, M, P, K); ``t_flat`` the knot times (s) flat; ``tables`` the
     per-path lookups (encounter ``n``, path ``p``, flat ``nm``, ``acc_h``, ``acc_v``, ``jerk``, ``kink``);
-    ``vwin`` the per-path vertical windows (or None); ``exits`` whether last exits are searched;
-    ``compiled`` / ``fused`` the compiled pieces and the fused loop (False: the numpy reference).
+    ``vwin`` the per-path vertical windows (or None) and ``vwin_on`` which flat paths have one (None: all);
+    ``exits`` whether last exits are searched; ``compiled`` / ``fused`` the compiled pieces and the fused
+    loop (False: the numpy reference).
+
+    What the resolution decides for several pieces at once -- a bisection's number of halvings, a split's
+    number of parts, the clip sampling count, whether the vertical error bound is used -- is decided per
+    encounter (``tables["n"]``), from that encounter's pieces alone: each encounter's intervals are those of
+    a call of its own, whatever else shares the call.
     """
 
     def __init__(self, paths, ipos: np.ndarray, ivel: np.ndarray, s, v, t_flat: np.ndarray, tables: dict,
-                 vwin, exits: bool, compiled: bool = True, fused: bool = True):
+                 vwin, exits: bool, compiled: bool = True, fused: bool = True, vwin_on=None):
         self.paths, self.ipos, self.ivel, self.s, self.v = paths, ipos, ivel, s, v
         self.t_flat, self.tables, self.vwin, self.exits = t_flat, tables, vwin, exits
+        self.vwin_on = vwin_on
         self.compiled, self.fused = compiled, fused
         self._ipv = None  # intruder position and velocity per flat (n, m), (N * M, 6)
         self._intr_flat = None  # intruder position / velocity components, flat (N * M)
@@ -105,35 +99,67 @@ class UndecidedPieces:
         """True relative state (6 component arrays) of flat paths ``path`` at times ``t``."""
         return self._mover(path)(t)
 
+    def _group(self, path) -> np.ndarray:
+        """The encounter (index into this evaluation's N) of each flat path ``path``: the rows whose batch-wide
+        choices are made together (each encounter's are what a call of its own makes)."""
+        return self.tables["n"][path]
+
+    def _halvings(self, path, lo, hi, lo_in):
+        """Per row: ``(steps, n_in, n_out, mixed)`` of :meth:`_bisect`, each encounter's from its own rows: the
+        halvings of an entry (exit) from the widest entry (exit) bracket of the encounter, and ``mixed`` when
+        the encounter bisects both kinds with different counts."""
+        g = self._group(path)
+        steps, n_in, n_out = (np.zeros(lo.size, np.int64) for _ in range(3))
+        mixed = np.zeros(lo.size, bool)
+        for e in np.unique(g):
+            sel = g == e
+            w, flag = hi[sel] - lo[sel], lo_in[sel]
+
+            def count(mask, dt):
+                return int(np.ceil(np.log2(max(np.max(w[mask], initial=0.0), dt) / dt)))
+            a, b = count(~flag, BISECT_DT_IN), count(flag, BISECT_DT_OUT)
+            n_in[sel], n_out[sel], steps[sel] = a, b, max(a, b)
+            mixed[sel] = a != b and flag.any() and not flag.all()
+        return steps, n_in, n_out, mixed
+
     def _bisect(self, th, path, lo, hi, lo_in):
         """Bracket ``(lo, hi)`` (s) of a crossing of the violation boundary on the true path between times
         ``lo`` and ``hi`` (the predicate is ``lo_in`` at ``lo`` and the opposite at ``hi``; bool or array), at
-        most BISECT_DT_IN (an entry) or BISECT_DT_OUT (an exit) wide."""
+        most BISECT_DT_IN (an entry) or BISECT_DT_OUT (an exit) wide. The number of halvings is the
+        encounter's (:meth:`_halvings`)."""
         lo, hi = lo.copy(), hi.copy()
         lo_in = np.broadcast_to(np.asarray(lo_in, bool), lo.shape)
-
-        def steps(mask, dt):
-            return int(np.ceil(np.log2(max(np.max(hi[mask] - lo[mask], initial=0.0), dt) / dt)))
-        n_in, n_out = steps(~lo_in, BISECT_DT_IN), steps(lo_in, BISECT_DT_OUT)
-        mixed = n_in != n_out and lo_in.any() and not lo_in.all()
+        steps, n_in, n_out, mixed = self._halvings(path, lo, hi, lo_in)
         rows = self._kin_rows(path)
         if rows is not None:
             D = float(th.dthr)
-            rows[1](*rows[2], lo, hi, lo_in, max(n_in, n_out) if lo.size else 0, n_in, n_out, bool(mixed), D * D,
-                        float(th.tthr), float(th.zthr), float(th.tcoa))
+            rows[1](*rows[2], lo, hi, lo_in, steps, n_in, n_out, mixed,
+                    (D * D, float(th.tthr), float(th.zthr), float(th.tcoa)))
             return lo, hi
         f = self._mover(path)
-        for k in range(max(n_in, n_out) if lo.size else 0):
+        own = np.where(mixed, np.where(lo_in, n_out, n_in), steps)  # the halvings that may move each bracket
+        for k in range(int(steps.max()) if lo.size else 0):
             mid = 0.5 * (lo + hi)
             same = wcv_soa(*f(mid), th) == lo_in
-            if mixed:  # the same number of halvings per kind as when they are bisected apart
-                live = np.where(lo_in, k < n_out, k < n_in)
-                lo = np.where(same & live, mid, lo)
-                hi = np.where(~same & live, mid, hi)
-            else:
-                lo = np.where(same, mid, lo)
-                hi = np.where(same, hi, mid)
+            live = k < own
+            lo = np.where(same & live, mid, lo)
+            hi = np.where(~same & live, mid, hi)
         return lo, hi
+
+    def _any_v(self, pth) -> np.ndarray:
+        """Per row: does any row of its encounter among ``pth`` have a vertical acceleration (``np.any`` of a
+        call of its own: whether the vertical error bound is used)."""
+        g = self._group(pth)
+        any_g = np.zeros(self.s[0].shape[0], bool)
+        any_g[g[self.tables["acc_v"][pth] != 0]] = True
+        return any_g[g]
+
+    def _per_encounter_max(self, pth, x) -> np.ndarray:
+        """Per row: ``np.max`` of ``x`` over the rows of its encounter (nan wins)."""
+        g = self._group(pth)
+        out = np.full(self.s[0].shape[0], -np.inf)
+        np.maximum.at(out, g, x)
+        return out[g]
 
     def resolve(self, flat_seg, th, seg_in, seg_out) -> None:
         """Undecided segments on the true path (module docstring); updates the flat ``seg_in``/``seg_out``.
@@ -153,7 +179,8 @@ class UndecidedPieces:
                          tuple(c.reshape(-1) for c in self.v), self.t_flat, flat_seg, ka, tab["acc_h"][path],
                          tab["acc_v"][path], None if jerk is None else jerk[path],
                          None if kink is None else kink[path],
-                         None if self.vwin is None else (self.vwin[0].reshape(-1)[path], self.vwin[1].reshape(-1)[path]),
+                         None if self.vwin is None else (self.vwin[0].reshape(-1)[path], self.vwin[1].reshape(-1)[path],
+                                                         None if self.vwin_on is None else self.vwin_on[path]),
                          self.exits, th, seg_in, seg_out)
 
     def resolve_reference(self, flat_seg, th, seg_in, seg_out) -> None:
@@ -224,12 +251,16 @@ class UndecidedPieces:
         tab = self.tables
         h = tb - ta
         a_h, a_v = tab["acc_h"][pth], tab["acc_v"][pth]
-        win = None
-        if self.vwin is not None:
-            vlo, vhi = self.vwin[0].reshape(-1)[pth], self.vwin[1].reshape(-1)[pth]
-            win = (np.maximum(vlo, ta) - ta, np.minimum(vhi, tb) - ta)
-        e_z = a_v * h * h * 0.125 if np.any(a_v) else 0.0
-        return classify_pieces(*pa, *pb, h, th, a_h * h * h * 0.125, a_h * h * 0.5, e_z, win)
+        e_z = np.where(self._any_v(pth), a_v * h * h * 0.125, 0.0)
+        args = (*pa, *pb, h, th, a_h * h * h * 0.125, a_h * h * 0.5, e_z)
+        if self.vwin is None:
+            return classify_pieces(*args)
+        vlo, vhi = self.vwin[0].reshape(-1)[pth], self.vwin[1].reshape(-1)[pth]
+        code = classify_pieces(*args, (np.maximum(vlo, ta) - ta, np.minimum(vhi, tb) - ta))
+        if self.vwin_on is None:
+            return code
+        on = self.vwin_on[pth]  # (a path whose vertical speed changes has no window: its own chord's)
+        return code if on.all() else np.where(on, code, classify_pieces(*args))
 
     def _clear2(self, th, pth, ta, tb, pa, pb, ua, ub) -> np.ndarray:
         """Second-order CLEAR certificate of pieces (see :func:`clear_second_order`)."""
@@ -241,129 +272,88 @@ class UndecidedPieces:
             kt = tab["kink"][pth]
             across = (kt > ta) & (kt < tb) if kt.ndim == 1 else ((kt > ta[:, None]) & (kt < tb[:, None])).any(axis=-1)
             e_v = e_v + np.where(across, a_h * h * 0.5, 0.0)
-        e_z = a_v * h * h * 0.125 if np.any(a_v) else 0.0
+        e_z = np.where(self._any_v(pth), a_v * h * h * 0.125, 0.0)
         return clear_second_order(*pa, *pb, *ua, *ub, h, th, a_h * h * h * 0.125, e_v, e_z)
 
     def _split(self, th, sid, pth, ta, tb, pa, pb, fa, fb, ua, ub):
-        """Split pieces into the fewest equal parts that settle (at least 2, at most MAX_SPLIT), with
-        exact states and flags at the new ends."""
+        """Split pieces into the fewest equal parts that settle (at least 2, at most MAX_SPLIT; the count is
+        the encounter's, from its longest piece), with exact states and flags at the new ends."""
         tab = self.tables
         settle = settle_time(tab["acc_h"][pth], tab["acc_v"][pth])
-        q = int(min(MAX_SPLIT, max(2, np.ceil(np.max((tb - ta) / settle) - 1e-9))))
+        ratio = self._per_encounter_max(pth, (tb - ta) / settle)
+        q = np.minimum(MAX_SPLIT, np.maximum(2, np.ceil(ratio - 1e-9))).astype(np.int64)  # (nan: 2, as min/max)
+        q = np.where(np.isnan(ratio), 2, q)
         L = sid.size
-        ts = ta[:, None] + (tb - ta)[:, None] * (np.arange(1, q) / q)[None, :]  # (L, q-1)
-        st = self._state(np.repeat(pth, q - 1), ts.ravel())
-        flag = wcv_soa(*st, th).reshape(L, q - 1)
-        times = np.concatenate([ta[:, None], ts, tb[:, None]], axis=1)
-        pos = [np.concatenate([pa[c][:, None], st[c].reshape(L, q - 1), pb[c][:, None]], axis=1) for c in range(3)]
-        flags = np.concatenate([fa[:, None], flag, fb[:, None]], axis=1)
-        vel = [np.concatenate([ua[c][:, None], st[3 + c].reshape(L, q - 1), ub[c][:, None]], axis=1) for c in range(2)]
-        rep = lambda a: np.repeat(a, q)  # noqa: E731
-        return (rep(sid), rep(pth), times[:, :-1].ravel(), times[:, 1:].ravel(), [c[:, :-1].ravel() for c in pos],
-                [c[:, 1:].ravel() for c in pos], flags[:, :-1].ravel(), flags[:, 1:].ravel(),
-                [c[:, :-1].ravel() for c in vel], [c[:, 1:].ravel() for c in vel])
+        inner = q - 1  # new ends inside each piece
+        rep = np.repeat(np.arange(L), inner)
+        k = np.arange(rep.size) - np.repeat(np.cumsum(inner) - inner, inner) + 1  # 1 .. q - 1
+        ts = ta[rep] + (tb - ta)[rep] * (k / q[rep])
+        st = self._state(pth[rep], ts)
+        flag = wcv_soa(*st, th)
+        # every piece's q + 1 ends in a row: start, the inner ends, end
+        first = np.cumsum(q + 1) - (q + 1)
+        slot = first[rep] + k
+        last = first + q
+
+        def ends(a0, inner_vals, a1):
+            out = np.empty(int((q + 1).sum()), np.asarray(a0).dtype)
+            out[first], out[slot], out[last] = a0, inner_vals, a1
+            return out
+        times = ends(ta, ts, tb)
+        pos = [ends(pa[c], st[c], pb[c]) for c in range(3)]
+        flags = ends(fa, flag, fb)
+        vel = [ends(ua[c], st[3 + c], ub[c]) for c in range(2)]
+        start = np.ones(times.size, bool)
+        start[last] = False
+        stop = np.ones(times.size, bool)
+        stop[first] = False
+        rp = lambda a: np.repeat(a, q)  # noqa: E731
+        return (rp(sid), rp(pth), times[start], times[stop], [c[start] for c in pos], [c[stop] for c in pos],
+                flags[start], flags[stop], [c[start] for c in vel], [c[stop] for c in vel])
 
     def _clip(self, th, sid, pth, ta, tb, pa, pb, seg_in, seg_out) -> None:
         """Short pieces whose ends are clear but which are not certified clear (a clip of the volume may
-        lie inside): the true predicate sampled every CLIP_DT, and around the first and last violating
-        samples the entry and exit found by bisection on the true path."""
+        lie inside): the true predicate sampled every CLIP_DT (the sample count is the encounter's, from its
+        longest piece), and around the first and last violating samples the entry and exit found by
+        bisection on the true path."""
         h = tb - ta
-        q = int(np.ceil(np.max(h) / CLIP_DT - 1e-9))
-        if q < 1:
+        with np.errstate(invalid="ignore"):
+            qf = np.ceil(self._per_encounter_max(pth, h) / CLIP_DT - 1e-9)
+        rows_all, t_first, t_last, before, after = [], [], [], [], []
+        for qv in np.unique(qf[qf >= 1]):  # (each encounter's pieces share one count)
+            q = int(qv)
+            sel = np.flatnonzero(qf == qv)
+            frac = (np.arange(q) + 0.5) / q
+            ts = ta[sel, None] + h[sel, None] * frac[None, :]  # (L, q)
+            L = sel.size
+            hit = wcv_soa(*self._state(np.repeat(pth[sel], q), ts.ravel()), th).reshape(L, q)
+            rows = np.flatnonzero(hit.any(axis=1))
+            if not rows.size:
+                continue
+            first = np.argmax(hit[rows], axis=1)
+            last = q - 1 - np.argmax(hit[rows, ::-1], axis=1)
+            rows_all.append(sel[rows])
+            t_first.append(ts[rows, first])
+            t_last.append(ts[rows, last])
+            before.append(np.where(first > 0, ts[rows, np.maximum(first - 1, 0)], ta[sel[rows]]))
+            after.append(np.where(last < q - 1, ts[rows, np.minimum(last + 1, q - 1)], tb[sel[rows]]))
+        if not rows_all:
             return
-        frac = (np.arange(q) + 0.5) / q
-        ts = ta[:, None] + h[:, None] * frac[None, :]  # (L, q)
-        L = sid.size
-        hit = wcv_soa(*self._state(np.repeat(pth, q), ts.ravel()), th).reshape(L, q)
-        rows = np.flatnonzero(hit.any(axis=1))
-        if not rows.size:
-            return
-        first = np.argmax(hit[rows], axis=1)
-        last = q - 1 - np.argmax(hit[rows, ::-1], axis=1)
-        t_first, t_last = ts[rows, first], ts[rows, last]
-        before = np.where(first > 0, ts[rows, np.maximum(first - 1, 0)], ta[rows])
-        after = np.where(last < q - 1, ts[rows, np.minimum(last + 1, q - 1)], tb[rows])
+        rows = np.concatenate(rows_all)
+        order = np.argsort(rows, kind="stable")  # (the pieces' order, as one batch)
+        rows = rows[order]
+        cat = lambda parts: np.concatenate(parts)[order]  # noqa: E731
+        t_first, t_last, before, after = cat(t_first), cat(t_last), cat(before), cat(after)
         l1, h1 = self._bisect(th, pth[rows], before, t_first, lo_in=False)
         l2, h2 = self._bisect(th, pth[rows], t_last, after, lo_in=True)
         _update(seg_in, seg_out, sid[rows], 0.5 * (l1 + h1), 0.5 * (l2 + h2))
-
-
-def resolve_segments(kin: tuple, ipv: np.ndarray, m: int, p: int, path: np.ndarray, s: tuple, v: tuple,
-                     tk: np.ndarray, flat_seg: np.ndarray, ka: np.ndarray, acc_h: np.ndarray, acc_v: np.ndarray,
-                     jerk, kink, vwin, exits: bool, th, seg_in: np.ndarray, seg_out: np.ndarray) -> None:
-    """:meth:`UndecidedPieces.resolve` in one call of :func:`daa_sil.daa.kernels.resolve.resolve_into`.
-
-    ``kin`` the paths' motion (:attr:`daa_sil.daa.trajectory.ManeuverPaths.kin`), ``ipv`` (N * M, 6) the
-    intruders' positions and velocities at t = 0 (m, m/s), ``m``/``p`` intruders and paths per encounter;
-    per undecided segment (row): ``path`` its flat (n, m, p) path, ``flat_seg`` its flat segment id (into
-    ``seg_in``/``seg_out``, updated), ``ka`` the flat index of its first knot into the relative states
-    ``s``/``v`` (three flat component arrays each) and knot times ``tk`` (s), ``acc_h``/``acc_v`` (m/s^2),
-    ``jerk`` (m/s^3) and ``kink`` (s) of its path (None: none), ``vwin`` its path's vertical window
-    ``(lo, hi)`` (s; None: none)."""
-    r = path.size
-    n = path // (m * p)
-    if kin[0] == "axis":
-        rows = n * p + path % p
-        motion = (0, kin[1], kin[2], kin[3].reshape(-1, kin[3].shape[-1]), _NO_PHASES, _NO_ROWS, 0.0, 0.0, 0.0)
-    else:
-        rows = n
-        motion = (1, 0, 0.0, _NO_ROWS, kin[1], kin[2], *kin[3:])
-    none = np.zeros(r)
-    vlo, vhi, has_vwin = (none, none, False) if vwin is None else (vwin[0], vwin[1], True)
-    D = float(th.dthr)
-    need = np.zeros(3, np.int64)
-    with scratch() as ws:
-        work = [ws.buffer(name, dtype) for name, dtype in zip(_WORK, _WORK_TYPES)]
-        _resolve_call(motion, ipv, rows, path, p, s, v, tk, flat_seg, ka, acc_h, acc_v, jerk, kink, none, r, has_vwin,
-                      vlo, vhi, exits, th, D, seg_in, seg_out, work, need)
-        for name, size, dtype in zip(_WORK, need, _WORK_TYPES):  # large enough for the next call of this size
-            if size > ws.buffer(name, dtype).size:
-                ws.take(name, int(size), dtype)
-
-
-def _resolve_call(motion, ipv, rows, path, p, s, v, tk, flat_seg, ka, acc_h, acc_v, jerk, kink, none, r, has_vwin,
-                  vlo, vhi, exits, th, D, seg_in, seg_out, work, need) -> None:
-    """The call of ``resolve_into`` of :func:`resolve_segments`."""
-    kernels.get().resolve_into(
-        *motion, ipv, rows, path // p, *s, *v, tk, flat_seg.astype(np.int64, copy=False),
-        ka.astype(np.int64, copy=False), acc_h, acc_v, jerk is not None,
-        none if jerk is None else np.asarray(jerk, float), kink is not None,
-        none[:, None] if kink is None else np.asarray(kink, float).reshape(r, -1), has_vwin, vlo, vhi, bool(exits),
-        bisect_thresholds(), MAX_DEPTH, MAX_SPLIT, BISECT_DT_IN, BISECT_DT_OUT, CLIP_DT, 2.0 * V_TOL, 8.0 * P_TOL, D,
-        D * D, float(th.zthr), float(th.tthr), float(th.tcoa), seg_in, seg_out, *work, need)
-
-
-#: the resolution kernel's working arrays (:mod:`daa_sil.daa.scratch`, kept from call to call): floats, ints, flags
-_WORK = ("resolve_f", "resolve_i", "resolve_b")
-_WORK_TYPES = (np.float64, np.int64, np.bool_)
-
-#: placeholder motion rows for the kind of path a call does not use
-_NO_ROWS = np.zeros((0, 9))
-_NO_PHASES = np.zeros((0, 3, 9))
-
-
-@functools.lru_cache(maxsize=None)
-def bisect_thresholds(count: int = 64) -> np.ndarray:
-    """``thr[n]`` (n < ``count``): the smallest float ``x`` with ``np.log2(x) > n``, so that the number of
-    ``thr`` at or below ``x`` is ``int(np.ceil(np.log2(x)))`` for ``1 <= x < 2**count`` -- numpy's log2,
-    whatever its last bit, found by bisecting the floats between ``2**n`` and ``2**(n + 1)``."""
-    out = np.empty(count)
-    for n in range(count):
-        a, b = int(np.float64(2.0 ** n).view(np.int64)), int(np.float64(2.0 ** (n + 1)).view(np.int64))
-        if not (np.log2(np.int64(a).view(np.float64)) <= n < np.log2(np.int64(b).view(np.float64))):
-            raise ArithmeticError(f"numpy's log2 is not exact at 2**{n} / 2**{n + 1}")
-        while b - a > 1:
-            mid = (a + b) // 2
-            if np.log2(np.int64(mid).view(np.float64)) > n:
-                b = mid
-            else:
-                a = mid
-        out[n] = np.int64(b).view(np.float64)
-    out.setflags(write=False)
-    return out
 
 
 def _update(seg_in, seg_out, sid, t_in, t_out) -> None:
     """seg_in[sid] = min(seg_in[sid], t_in), seg_out[sid] = max(...) (repeated ids allowed)."""
     np.minimum.at(seg_in, sid, t_in)
     np.maximum.at(seg_out, sid, t_out)
+
+
+__all__ = ["UndecidedPieces", "segment_knots", "piece_index", "resolve_segments", "bisect_thresholds",
+           "MAX_SPLIT", "BISECT_DT_IN", "BISECT_DT_OUT", "CLIP_DT", "MAX_DEPTH"]

@@ -289,7 +289,8 @@ def _moved_compiled(kernel: str, state: AircraftState, inputs: tuple, dt, limits
     if flat is None:
         return None
     out = _outputs(s.x.size)
-    getattr(k, kernel)(*flat, float(dt), *map(float, limits), STRAIGHT_TURN_RATE, *out, *extra)
+    getattr(k, kernel)(tuple(flat[:6]), tuple(flat[6:9]), float(dt), tuple(map(float, limits)), STRAIGHT_TURN_RATE,
+                       out, *extra)
     return AircraftState.adopt(*(a.reshape(s.shape) for a in out))
 
 

@@ -147,9 +147,9 @@ def encounter_geometry(s, v, th: "Thresholds | str | None" = None, lookahead: fl
     out = {name: np.empty(shape) for name in ("range_m", "hmd_m", "dh_m", "tau_mod_s")}
     out["wcv"] = np.empty(shape, bool)
     D = float(th.dthr)
-    k.geometry_into(*(a[..., i].reshape(-1) for a in (s, v) for i in range(3)), float(lookahead), D, D * D, D,
-                    th.dthr ** 2, float(th.tthr), float(th.zthr), float(th.tcoa),
-                    *(out[n].reshape(-1) for n in ("range_m", "hmd_m", "dh_m", "tau_mod_s", "wcv")))
+    k.geometry_into(tuple(a[..., i].reshape(-1) for a in (s, v) for i in range(3)),
+                    (float(lookahead), D, D * D, D, th.dthr ** 2, float(th.tthr), float(th.zthr), float(th.tcoa)),
+                    tuple(out[n].reshape(-1) for n in ("range_m", "hmd_m", "dh_m", "tau_mod_s", "wcv")))
     return out
 
 

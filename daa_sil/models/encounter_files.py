@@ -11,7 +11,7 @@ import numpy as np
 
 from daa_sil.config.settings import DURATION
 from daa_sil.errors import FileFormatError
-from daa_sil.files import atomic_path
+from daa_sil.files import atomic_path, local_file
 from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.models.encounters import SEGMENT_FIELDS, FORMAT_NAME, FORMAT_VERSION, PARAM_NAMES, EncounterSet
 
@@ -44,8 +44,8 @@ def save_encounters(es: EncounterSet, path: "str | os.PathLike") -> Path:
     meta = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "m": m, "s": s, "root_seed": es.root_seed,
             "duration_s": es.duration_s, "dt_s": es.dt_s, "config": es.config}
     table = pa.table(cols).replace_schema_metadata({"daa_sil": json.dumps(meta)})
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp)
+    with atomic_path(path) as tmp, local_file(tmp, "wb") as fh:
+        pq.write_table(table, fh)
     return Path(path)
 
 
@@ -59,7 +59,8 @@ def load_encounters(path: "str | os.PathLike") -> EncounterSet:
     if not p.is_file():
         raise FileFormatError(f"{p}: no such encounter file")
     try:
-        table = pq.read_table(p)
+        with local_file(p) as fh:
+            table = pq.read_table(fh)
     except (OSError, pa.ArrowException, ValueError) as exc:
         raise FileFormatError(f"{p} is not a readable Parquet file: {str(exc).splitlines()[0] if str(exc) else exc}") from None
     raw = (table.schema.metadata or {}).get(b"daa_sil")

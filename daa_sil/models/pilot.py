@@ -104,10 +104,8 @@ class PilotModel:
     """
 
     def __init__(self, n: int, seeds: "Sequence | None" = None, cfg: "PilotConfig | None" = None,
-                 plan: "AircraftState | None" = None, daa_cfg=None, daa_batches: "np.ndarray | None" = None):
+                 plan: "AircraftState | None" = None, daa_cfg=None):
         self.cfg = (cfg or PilotConfig()).validate()
-        #: (N,) DAA batch of each pilot (:mod:`daa_sil.daa_batches`): the return check's SM is one call per batch
-        self.daa_batches = daa_batches
         if not isinstance(n, (int, np.integer)) or n < 1:
             raise UsageError(f"number of pilots must be a positive integer, got {n!r}")
         self.n = int(n)
@@ -324,14 +322,8 @@ class PilotModel:
         vs = np.where(done, 0.0, np.clip(dz / c.recover_capture_s, -rate, rate))
         if intr is not None and intr.shape[1]:
             from daa_sil.daa import DaaConfig, safety_metric
-            from daa_sil.daa_batches import positions_by_batch
 
-            back = Command(p_trk, vs, p_gs)
-            clear = np.zeros(i.size, bool)
-            for pos in positions_by_batch(self.daa_batches, i):
-                whole = pos.size == i.size
-                clear[pos] = safety_metric(own[i[pos]], intr[i[pos]], back if whole else back[pos],
-                                           self.daa_cfg or DaaConfig()) > 0
+            clear = safety_metric(own[i], intr[i], Command(p_trk, vs, p_gs), self.daa_cfg or DaaConfig()) > 0
             if not clear.all():
                 act[i[~clear]] = False
                 i, p_trk, p_gs, vs, done = i[clear], p_trk[clear], p_gs[clear], vs[clear], done[clear]

@@ -14,10 +14,14 @@ _REGION_LEVEL = np.array([0.0, 2.0, 3.0, 4.0, 1.0])  # daa REGION_NONE, FAR, MID
 
 def _side_candidate(ax, want: int) -> tuple[np.ndarray, np.ndarray]:
     """Closest candidate (min time to reach) on side ``want`` among those with the side's lowest
-    level (0/1 merged); returns (value, level) with nan/inf where the side is empty."""
+    level (0/1 merged), of each encounter's own candidates; returns (value, level) with nan/inf where the
+    side is empty."""
     lvl = _REGION_LEVEL[np.asarray(ax.region, int)]
     merged = np.where(lvl <= 1, 0.0, lvl)
     on = (np.asarray(ax.side) == want)[None, :]
+    own = ax.own_mask()
+    if own is not None:
+        on = on & own
     best = np.where(on, merged, np.inf).min(axis=1)
     cost = np.where(on & (merged == best[:, None]), ax.t_man, np.inf)
     k = np.argmin(cost, axis=1)
@@ -61,15 +65,14 @@ class PilotDisplay:
     Per pilot: the vehicle's DAIDALUS alert level sent with that telemetry, well clear violated on
     the observed states and, at or above ``alert_level_min``, the DAA bands' candidates of the
     observed states (``cfg`` a :class:`daa_sil.daa.config.DaaConfig`); below it the last bands stay.
-    ``daa_batches`` (N,): the bands are computed once per DAA batch (:mod:`daa_sil.daa_batches`).
+    The bands of all the pilots refreshed at a step are one call (each row's are what it gets alone).
     """
 
     #: the band fields of :class:`Guidance` the display shows
     KEYS = ("left_trk", "left_level", "right_trk", "right_level", "up_vs", "up_level", "down_vs", "down_level")
 
-    def __init__(self, n: int, cfg, alert_level_min: int, daa_batches: "np.ndarray | None" = None):
+    def __init__(self, n: int, cfg, alert_level_min: int):
         self.cfg = cfg
-        self.daa_batches = daa_batches  #: (N,) DAA batch of each pilot: bands one call per batch
         self.alert_level_min = int(alert_level_min)
         nan = np.full(n, np.nan)
         #: what every pilot sees now, updated row by row (:meth:`guidance` hands out copies)
@@ -104,14 +107,11 @@ class PilotDisplay:
         g.alert_level[rows] = alert
         # (wellclear.wcv, in the one compiled pass of the step's geometry where the kernels are loaded)
         g.wcv[rows] = encounter_geometry(*relative_state(own, intr), self.cfg.th)["wcv"].any(axis=1)
-        sel = alert >= self.alert_level_min
-        from daa_sil.daa_batches import positions_by_batch
-
-        k = np.flatnonzero(sel)
-        for pos in positions_by_batch(self.daa_batches, rows[k]):
-            got = guidance_values(display_bands(own[k[pos]], intr[k[pos]], self.cfg))
+        k = np.flatnonzero(alert >= self.alert_level_min)
+        if k.size:
+            got = guidance_values(display_bands(own[k], intr[k], self.cfg))
             for key in self.KEYS:
-                getattr(g, key)[rows[k[pos]]] = got[key]
+                getattr(g, key)[rows[k]] = got[key]
 
     def guidance(self) -> Guidance:
         """The current :class:`Guidance` of every pilot (N,): a copy, unchanged by later refreshes."""

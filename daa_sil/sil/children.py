@@ -37,6 +37,7 @@ import time
 from contextlib import contextmanager
 from typing import Callable, Iterator, Sequence
 
+
 #: ``prctl`` options (linux/prctl.h)
 PR_SET_PDEATHSIG = 1
 PR_GET_PDEATHSIG = 2
@@ -114,21 +115,6 @@ def interruptible(command: Callable) -> Callable:
             return command(*args, **kwargs)
 
     return run
-
-
-@contextmanager
-def signals_ignored(signals: Sequence[int] = (signal.SIGINT,) + INTERRUPT_SIGNALS) -> Iterator[None]:
-    """Ignore Ctrl-C, SIGTERM and SIGHUP while the block runs (stopping the children must not be cut
-    short); main thread only, else a no-op."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = {s: signal.signal(s, signal.SIG_IGN) for s in signals}
-    try:
-        yield
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
 
 
 # --------------------------------------------------------------------------------------------

@@ -22,6 +22,8 @@ from typing import Callable
 
 from daa_sil.errors import DaaSilError, UsageError
 from daa_sil.sil.children import Interrupted, interrupt_signum, signal_name
+from daa_sil.sil.prepare import prepare_kernels, prepare_waitmap  # noqa: F401 -- prepare_waitmap: run's API
+from daa_sil.sil.run_files import rescued_steplog
 from daa_sil.sil.summary import ProgressLine, gcs_ticks_skipped, realtime_report, summarize_steplog
 from daa_sil.sil.supervise import (
     READY_TIMEOUT_S,
@@ -178,25 +180,6 @@ def _gcs_argv(opts: RunOptions, out: Path, listen: str, gcs_side: str, clock_arg
         ["--config", str(opts.config)] if opts.config is not None else [])
 
 
-def prepare_kernels(say: "Callable[[str], None] | None") -> None:
-    """Compile the DAA kernels here when their cache is cold, before the vehicle and the GCS start: they
-    then load them instead of compiling on the same cores against their READY timeouts (docs/daa.md,
-    "Compiled kernels"). Nothing is imported when the cache is warm."""
-    from daa_sil.jit_cache import COLD_COMPILE_TIME, cache_dir, is_warm
-
-    if is_warm():
-        return
-    t = time.monotonic()
-    if say:
-        say(f"compiling the DAA kernels (first run: {COLD_COMPILE_TIME}; cached in {cache_dir()}) ...")
-    from daa_sil.daa import kernels
-
-    kernels.get()
-
-    if say:
-        say(f"DAA kernels ready ({time.monotonic() - t:.1f} s)")
-
-
 def _preload(*modules: str) -> None:
     """Import ``modules`` (in order) in a daemon thread: while the vehicle is the only process still
     starting up, a core is free, and the end of the run then does not wait for the imports."""
@@ -212,9 +195,11 @@ def _preload(*modules: str) -> None:
 
 def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, recorder) -> dict:
     from daa_sil.files import atomic_write_json
+    from daa_sil.out_dir import rescue_path, write_or_rescue
 
     prepare_kernels(lambda m: _say(opts, m))
     t0 = time.monotonic()
+    t0_wall = time.time()
     interrupted: "KeyboardInterrupt | None" = None
     failure: "str | None" = None
     monitor: "RunMonitor | None" = None
@@ -281,6 +266,9 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
         except KeyboardInterrupt as exc:
             interrupted = exc
     wall = time.monotonic() - t0
+    rescued = rescued_steplog(steplog, t0_wall)
+    if rescued is not None:  # the vehicle could not write into --out any more: it saved the log elsewhere
+        steplog = rescued
     if not steplog.exists():
         if interrupted is not None:
             raise Interrupted(interrupt_signum(interrupted), "before the vehicle wrote a step log")
@@ -337,13 +325,20 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
             ("helper", recorder.mode), ("prepared_before_end", recorder.prepared_in_time),
             ("finish_s", recorder.finish_s), ("wait_s", recorder.wait_s))}
         result["rrd_timing"]["live"] = (recorder.result or {}).get("live")
-    atomic_write_json(out / "result.json", result)
+    if rescued is not None:
+        result["rescued"] = {"steplog": str(steplog), "result": str(rescue_path(out / "result.json")),
+                             "reason": f"{out} could not be written when the run ended"}
+    summary_path = write_or_rescue(out / "result.json", lambda p: atomic_write_json(p, result), "summary",
+                                   say=False)  # the run's last line says where
+    if summary_path != out / "result.json" and "rescued" not in result:
+        result["rescued"] = {"steplog": None, "result": str(summary_path),
+                             "reason": f"{out} could not be written when the run ended"}
     if interrupted is not None:
         when = (f"at t = {result['duration_s']:g} s of {sc.duration_s:g} s; the expected outcome was not checked"
                 if not result["expectation"]["checked"]
                 else "while the Rerun recording was written (the run itself was complete)")
         raise Interrupted(interrupt_signum(interrupted),
-                          f"{when}; {result['steps']} steps in {steplog}, summary in {out / 'result.json'}")
+                          f"{when}; {result['steps']} steps in {steplog}, summary in {summary_path}")
     if failure:
         raise DaaSilError(failure)
     return result
@@ -363,26 +358,10 @@ def _waitmap_record(sc, source: "str | None", steplog: Path) -> "dict | None":
         described = json.loads(steplog_metadata(steplog).get("waitmap") or "null")
     except ValueError:
         described = None
-    if not isinstance(described, dict):
-        described = waitmap.describe(waitmap.family_for(source, preset="paper"))  # cached: loaded, not built
-    return {"source": source or waitmap.DEFAULT_MAP, **described}
+    from daa_sil.config.run_config import default_wait_maps
 
+    source, horizon = (source, None) if source else default_wait_maps()  # the vehicle's, when none is named
+    if not isinstance(described, dict):  # cached: loaded, not built
+        described = waitmap.describe(waitmap.family_for(source, preset="paper", horizon=horizon))
+    return {"source": source, **described}
 
-def prepare_waitmap(sc, source: "str | None", say: "Callable[[str], None] | None") -> None:
-    """Build the vehicle's wait maps before any process starts if they are not cached yet, so the
-    vehicle loads them from the cache; a bad ``--waitmap`` is a one-line usage error here. A cached
-    family is not loaded here: the vehicle loads it once and checks every map's content hash (a
-    broken file is its one-line error, relayed by the run). ``say`` gets progress lines."""
-    if sc.allocation.wait != "map":
-        return
-    from daa_sil import waitmap
-
-    t = time.monotonic()
-    if waitmap.is_cached(source, preset="paper"):
-        return  # the vehicle loads (and verifies) it: loading it here too cost ~0.3 s of every run
-    if say:
-        say(f"loading the MDP wait maps ({source or waitmap.DEFAULT_MAP}; the first run builds and caches them) ...")
-    progress = (lambda r: say(f"  built the {r:+g} deg/s map ({time.monotonic() - t:.0f} s)")) if say else None
-    waitmap.family_for(source, preset="paper", progress=progress)
-    if say:
-        say(f"wait maps ready ({time.monotonic() - t:.1f} s)")

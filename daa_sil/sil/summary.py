@@ -102,7 +102,9 @@ def human_summary(result: dict, scenario=None, out_dir: "Path | None" = None) ->
     elif exp:
         lines.append("  expected outcome: " + ("OK" if exp["ok"] else "VIOLATED: " + "; ".join(exp["violations"])))
     if out_dir is not None:
-        lines.append(f"  results: {out_dir / 'result.json'}  step log: {out_dir / 'steplog.parquet'}")
+        saved = result.get("rescued") or {}  # saved elsewhere: the directory could not take them
+        lines.append(f"  results: {saved.get('result') or out_dir / 'result.json'}  "
+                     f"step log: {saved.get('steplog') or out_dir / 'steplog.parquet'}")
     return "\n".join(lines)
 
 

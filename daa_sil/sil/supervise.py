@@ -28,7 +28,8 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from daa_sil.errors import DaaSilError
-from daa_sil.sil.children import signals_ignored, spawn
+from daa_sil.sil.children import spawn
+from daa_sil.spawned import signals_ignored
 
 #: wall-clock limits (s)
 READY_TIMEOUT_S = 60.0  # start-up guard: 20 runs starting together on 2 cores take a while

@@ -27,6 +27,10 @@ from daa_sil.study.stats import (
 )
 
 
+#: per-encounter columns a study reads when the results have them (severity, deviation definitions)
+OPTIONAL_COLUMNS = ("max_alert_level", "dev_h_tmean_m", "dev_v_tmean_m", "dev_xtrack_m", "dev_h_end_m")
+
+
 class Study:
     """Encounter-level metrics of every group of one reading (see the module docstring).
 
@@ -101,6 +105,13 @@ class Study:
             if "intruder_turns" in cols:
                 e["lowc_turning"] = (lowc & col("intruder_turns", bool, False)).astype(float)
             e["dev_h_m"], e["dev_v_m"] = col("dev_h_m"), col("dev_v_m")
+            e["maneuvered"] = (e["dev_h_m"] + e["dev_v_m"] > 1.0).astype(float)  # left the plan by over 1 m
+            for c in (x for x in OPTIONAL_COLUMNS if x in cols):
+                e[c] = col(c)
+            if "max_alert_level" in cols:
+                for lvl in (1, 2, 3):
+                    e[f"alert_ge{lvl}"] = (e["max_alert_level"] >= lvl).astype(float)
+            e["dev_h_maneuvered"] = e["dev_h_m"] * e["maneuvered"]
             if "n_active_steps" in cols:
                 e["active_steps"] = col("n_active_steps")
                 e["active_any"] = (e["active_steps"] > 0).astype(float)
@@ -338,6 +349,18 @@ def _build_metrics() -> dict:
                                          "ratio estimator over LoWC encounters", "s")
     m["lowc_s_per_hr"] = MetricSpec(_ratio("lowc_duration_s", "duration_s", 3600.0), ("lowc_duration_s",),
                                     "ratio estimator (seconds in LoWC per flight hour)", "s/h")
+    # --- severity, deviation definitions, authority switches (the experiments' page) ----------------
+    for lvl in (1, 2, 3):
+        m[f"alert_share_{lvl}"] = MetricSpec(_ratio(f"alert_ge{lvl}", "present"), (f"alert_ge{lvl}",),
+                                             "Clopper-Pearson", exact=_cp(f"alert_ge{lvl}", "present"))
+    m["maneuvered_share"] = MetricSpec(_ratio("maneuvered", "present"), ("maneuvered",), "Clopper-Pearson",
+                                       exact=_cp("maneuvered", "present"))
+    m["dev_h_maneuvered_mean"] = MetricSpec(_ratio("dev_h_maneuvered", "maneuvered"), ("dev_h_maneuvered",),
+                                            "ratio estimator over encounters that left the plan", "m")
+    for c in OPTIONAL_COLUMNS[1:]:
+        m[c[:-2] + "_mean"] = MetricSpec(_ratio(c, "present"), (c,), "mean over encounters", "m")
+    m["switches_per_active"] = MetricSpec(_ratio("n_switches", "active_any"), ("n_switches", "active_any"),
+                                          "ratio estimator over encounters ever active")
     return m
 
 

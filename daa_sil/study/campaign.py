@@ -4,23 +4,28 @@ One code path for every executor: batches of chunks (each task several chunks of
 side by side, :mod:`daa_sil.study.campaign_plan`) are submitted to a
 :class:`concurrent.futures.Executor` and collected with ``as_completed``, whichever executor it is:
 
-* ``workers=1`` -- in-process (one worker thread, so the progress bar stays live);
+* ``workers=1`` -- in this process, in the calling thread (a task runs as it is submitted, so Ctrl-C
+  interrupts it and nothing is left running; :class:`~daa_sil.study.executors.InlineExecutor`);
 * ``workers=K`` -- :class:`~concurrent.futures.ProcessPoolExecutor` (fork; the wait maps are loaded
   once in the parent and inherited);
 * ``scheduler="local-dask"`` -- a local Dask ``LocalCluster`` with ``workers`` processes;
 * ``scheduler="tcp://host:8786"`` -- an existing Dask cluster, ``Client(addr).get_executor(pure=False)``
   (``pure=False``: otherwise identical arguments would map to one key and run once).
 
+Tasks are submitted a few at a time (:func:`in_flight`: one in this process, two per local worker,
+all at once on Dask), so the driver holds only their encounters. Ctrl-C, SIGTERM or an error stop
+the workers at once (:mod:`daa_sil.study.executors`); what was written stays, and ``resume=True``
+continues from it.
+
 Determinism: the encounter set is generated once from the campaign seed and saved as
 ``DIR/encounters.parquet``; every random stream of encounter ``i`` (pilot, uplink and downlink delay)
 comes from the encounter's own seed (:func:`encounter_seeds`), the same for every group (common
-random numbers), never from the chunk, and the DAA is called once per chunk of a group on exactly
-that chunk's rows (:mod:`daa_sil.daa_batches`: its last bits depend on the rows of a call). Results
-therefore do not depend on batching, worker count, executor or interruption: a killed campaign
-resumed with ``resume=True`` skips complete chunks (each checked against its checksum file; a
-damaged one is named in a warning and computed again) and ends with exactly the tables of an
-uninterrupted run. The chunk size decides which encounters share a DAA call, so it is part of the
-configuration (``campaign.json``, checked on resume).
+random numbers), never from the chunk, and the DAA gives every encounter what a call of its own
+gives. Results therefore do not depend on chunking, batching, worker count, executor or
+interruption: a killed campaign resumed with ``resume=True`` skips complete chunks (each checked
+against its checksum file; a damaged one is named in a warning and computed again) and ends with
+exactly the tables of an uninterrupted run. The chunk size names the result files, so it is
+recorded (``campaign.json``) and checked on resume.
 
 Layout of ``DIR``::
 
@@ -57,6 +62,8 @@ from daa_sil.study.executors import make_executor
 from daa_sil.study.campaign_files import CAMPAIGN_FORMAT, ChunkResult
 from daa_sil.study.campaign_config import CampaignConfig
 from daa_sil.study.campaign_plan import DEFAULT_BATCH_ROWS, plan_batches
+from daa_sil.study.campaign_sampling import (MIN_SAMPLE_PART, SAMPLE_PIECE, sample_campaign_encounters,
+                                             sample_encounter_piece)
 
 
 # --- configuration --------------------------------------------------------------------------------
@@ -86,16 +93,19 @@ class BatchTask:
 
 
 @functools.lru_cache(maxsize=4)
-def _wait_family(source: str, preset: str, gamma: "float | None" = None):
+def _wait_family(source: str, preset: str, gamma: "float | None" = None, horizon: "float | None" = None):
     """The wait-map family of a campaign, loaded once per process (builds the cache if needed)."""
     from daa_sil import waitmap
 
-    return waitmap.family_for(source, preset=preset, gamma=gamma)
+    return waitmap.family_for(source, preset=preset, gamma=gamma, horizon=horizon)
 
 
 def campaign_family(config: CampaignConfig):
-    """The wait-map family a campaign's map groups read (None if no group uses the map)."""
-    return _wait_family(config.map_source, config.preset, config.gamma) if config.uses_map else None
+    """The wait-map family a campaign's map groups read (None if no group uses the map): the reading's
+    grid and horizon, the campaign's discount."""
+    if not config.uses_map:
+        return None
+    return _wait_family(config.map_source, config.preset, config.gamma, config.map_horizon)
 
 
 def campaign_wait_lookup(cfg: CampaignConfig, daa_cfg):
@@ -118,7 +128,7 @@ def simulate_group(cfg: CampaignConfig, group: str, encounters, seeds: np.ndarra
     lookup = campaign_wait_lookup(cfg, daa_cfg) if cfg.group(group).uses_map else None
     return simulate(encounters, cfg.policy(group), legs.up, legs.down, cfg.pilot_config(), daa_cfg=daa_cfg,
                     wait_lookup=lookup, seeds=seeds, preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s,
-                    group=group, record_steps=record_steps, link_legs=legs)
+                    group=group, record_steps=record_steps, link_legs=legs, epoch_s=cfg.epoch_s)
 
 
 def run_batch(task: BatchTask) -> list[ChunkResult]:
@@ -136,17 +146,11 @@ def run_batch(task: BatchTask) -> list[ChunkResult]:
     daa_cfg = cfg.daa_config()
     lookup = campaign_wait_lookup(cfg, daa_cfg) if any(cfg.group(g).uses_map for g, _ in task.units) else None
     tables = simulate_parts(parts, cfg.pilot_config(), daa_cfg=daa_cfg, wait_lookup=lookup,
-                            preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s)
+                            preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s, epoch_s=cfg.epoch_s)
     spent = time.perf_counter() - t0
     rows = sum(len(p.encounters) for p in parts)
     return [ChunkResult(g, c, enc, dec, spent * len(p.encounters) / rows, len(p.encounters))
             for (g, c), p, (enc, dec) in zip(task.units, parts, tables)]
-
-
-# --- files ----------------------------------------------------------------------------------------
-
-
-# --- executors ------------------------------------------------------------------------------------
 
 
 # --- the runner -----------------------------------------------------------------------------------
@@ -176,47 +180,14 @@ def _progress(enabled: bool):
                     disable=not enabled)
 
 
-#: fewest encounters worth a piece of their own in :func:`sample_campaign_encounters`
-MIN_SAMPLE_PART = 500
-
-
-def sample_campaign_encounters(config: CampaignConfig, executor: "cf.Executor | None" = None, parts: int = 1):
-    """The campaign's encounter set (paper Table 6, CPA at T/2), sampled in ``parts`` pieces of
-    consecutive encounters on ``executor`` when given (one piece per worker: sampling 10,000 encounters
-    takes about 9 s of one core, a fifth of a five-group campaign's wall time, while the others waited).
-
-    Each encounter is drawn from its own random stream and its geometry is computed element-wise, so
-    the pieces concatenated are the set sampled at once (``tests/test_encounters.py``)."""
-    from daa_sil.models import encounters as enc_mod
-
-    kw = dict(seed=config.seed, preset=config.preset, duration_s=config.duration_s, dt_s=config.dt_s,
-              t_cpa_s=config.duration_s / 2.0,  # paper: CPA at T/2
-              n_intruders=config.n_intruders, **config.effective_reading.encounter_overrides())
-    n = config.n_encounters
-    bounds = np.linspace(0, n, max(1, min(int(parts), n // MIN_SAMPLE_PART)) + 1).astype(np.int64)
-    if executor is None or bounds.size <= 2:
-        return enc_mod.sample_encounters(n, **kw)
-    futs = [executor.submit(sample_encounter_piece, int(hi - lo), int(lo), kw) for lo, hi in zip(bounds[:-1], bounds[1:])]
-    return enc_mod.concat_encounters([f.result() for f in futs])
-
-
-def sample_encounter_piece(n: int, start: int, kw: dict):
-    """Encounters ``start .. start+n-1`` on a worker, which loads the compiled kernels first (it does for
-    its chunks anyway): the realised-CPA integration then flies the compiled ``advance``, the same numbers
-    (2,000 encounters: 1.8 -> 0.7 s CPU)."""
-    from daa_sil.daa import kernels
-    from daa_sil.models import encounters as enc_mod
-
-    kernels.get()
-    return enc_mod.sample_encounters(n, start=start, **kw)
-
-
 def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resume: bool = False,
-                     executor: "cf.Executor | None" = None, parts: int = 1):
+                     executor: "cf.Executor | None" = None, parts: int = 1,
+                     on_piece: "Callable[[int], None] | None" = None):
     """Validate, create ``DIR``, write or check ``campaign.json`` and the encounter set.
 
     Returns ``(out_dir, config, encounter_set)``. On resume the stored config must equal ``config``.
-    A new encounter set is sampled in ``parts`` pieces on ``executor`` (:func:`sample_campaign_encounters`).
+    A new encounter set is sampled in ``parts`` pieces on ``executor`` (:func:`sample_campaign_encounters`,
+    which calls ``on_piece``).
     """
     from daa_sil.models.encounter_files import load_encounters, save_encounters
 
@@ -230,6 +201,10 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
             diff = [k for k in config.to_dict() if config.to_dict()[k] != stored.to_dict()[k]]
             raise UsageError(f"--resume: {meta_path} was made with different settings ({', '.join(diff)}); "
                              f"pass the same options or omit them")
+        changed = reading_changes(load_campaign_json(out)["config"].get("readings"), config)
+        if changed:
+            raise UsageError(f"--resume: reading {config.reading!r} has other settings than when {meta_path} was "
+                             f"made ({', '.join(changed)}); start a new campaign")
         if not enc_path.is_file():
             raise FileFormatError(f"{enc_path} is missing; cannot resume this campaign")
         stored_map = load_campaign_json(out).get("waitmap")
@@ -243,9 +218,12 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
         return out, config, encs
     fam = campaign_family(config)  # built (or loaded) before anything is written
     ensure_dir(out)
-    encs = sample_campaign_encounters(config, executor, parts)
+    encs = sample_campaign_encounters(config, executor, parts, on_piece)
     save_encounters(encs, enc_path)  # atomic
+    from daa_sil.config.basis import basis_records
+
     meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "resolved_config": config.resolved(),
+            "basis": basis_records(config.effective_reading),
             "versions": software_versions(),
             "preset": config.preset, "seed": config.seed, "status": "running",
             "seeds": {"campaign": config.seed,
@@ -260,6 +238,18 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
     return out, config, encs
 
 
+def reading_changes(stored: "dict | None", config: CampaignConfig) -> list[str]:
+    """Settings of the campaign's reading that differ from the ones ``campaign.json`` recorded
+    (``config.readings``; a setting it lacks counts at its old default). Empty when they agree."""
+    if not isinstance(stored, dict):
+        return []
+    from daa_sil.config.readings import Reading
+
+    now = config.effective_reading.to_dict()
+    then = {**Reading(name=now["name"]).to_dict(), **stored}
+    return [k for k in now if k not in ("name", "description") and now[k] != then.get(k)]
+
+
 def _describe_family(fam) -> dict:
     from daa_sil.waitmap import describe
 
@@ -269,18 +259,34 @@ def _describe_family(fam) -> dict:
 def run_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", *, workers: int = 1,
                  scheduler: "str | None" = None, resume: bool = False, progress: bool = True,
                  on_chunk: "Callable[[ChunkResult], None] | None" = None,
-                 batch_rows: int = DEFAULT_BATCH_ROWS) -> CampaignSummary:
+                 batch_rows: int = DEFAULT_BATCH_ROWS, allow_large: bool = False, force: bool = False) -> CampaignSummary:
     """Run (or resume) a campaign into ``out_dir``; see the module docstring for the layout.
     ``batch_rows``: encounter rows per task (:mod:`daa_sil.study.campaign_plan`; results do not
-    depend on it)."""
-    if not isinstance(workers, int) or workers < 1:
-        raise UsageError(f"--workers must be a positive integer, got {workers!r}")
-    plan_batches([], workers, batch_rows)  # validates batch_rows before anything starts
+    depend on it). Before anything is sampled, built, started or written: the configuration's ranges,
+    ``workers`` (:func:`daa_sil.resources.check_workers`), ``out_dir`` (a path that can be written,
+    not held by another process, empty unless ``resume``; ``force`` replaces a previous campaign's
+    files there) and the estimated peak memory (:func:`~daa_sil.study.campaign_memory.campaign_memory`;
+    ``allow_large`` runs it even beyond the machine's memory)."""
+    from daa_sil.out_dir import claim_out_dir
+    from daa_sil.resources import check_workers
+    from daa_sil.study.campaign_files import remove_campaign
+    from daa_sil.study.campaign_memory import campaign_memory
+
+    remote = bool(scheduler) and scheduler != "local-dask"
+    if not remote:
+        check_workers(workers)
+    plan_batches([], workers if isinstance(workers, int) else 1, batch_rows)  # validates batch_rows first
     t_start = time.perf_counter()
     config.validate()
-    check_out_dir(out_dir, resume)
+    check_out_dir(out_dir, resume, force)
+    campaign_memory(config, workers, batch_rows, remote=remote).check(
+        allow_large, "use fewer --encounters, --intruders, --workers or --batch-rows, a shorter --duration"
+        + (" or a smaller --waitmap grid" if config.uses_map else ""))
     # the executor starts before anything is written: a missing or unreachable scheduler leaves no files
-    with make_executor(workers, scheduler) as ex:
+    with make_executor(workers, scheduler) as ex, \
+            claim_out_dir(out_dir, keep=resume, replace=remove_campaign if force else None,
+                          hint="pass --resume to continue the campaign there, --force to replace it, or "
+                               "choose a new directory"):
         summary = _run_with(ex, config, out_dir, scheduler, resume, progress, on_chunk, workers, batch_rows)
     summary.wall_s = time.perf_counter() - t_start
     return summary
@@ -288,7 +294,21 @@ def run_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", *, worker
 
 def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resume: bool, progress: bool,
               on_chunk, workers: int, batch_rows: int) -> CampaignSummary:
-    out, config, encs = prepare_campaign(config, out_dir, resume, executor=ex, parts=workers)
+    with _progress(progress) as prog:
+        sampling = (prog.add_task("sampling   ", total=config.n_encounters)
+                    if progress and not (resume and (Path(out_dir) / "encounters.parquet").is_file()) else None)
+        out, config, encs = prepare_campaign(config, out_dir, resume, executor=ex, parts=workers,
+                                             on_piece=(lambda n: prog.advance(sampling, n)) if sampling is not None
+                                             else None)
+        if sampling is not None:
+            prog.remove_task(sampling)
+        return _run_chunks(ex, prog, config, out, encs, scheduler, resume, on_chunk, workers, batch_rows)
+
+
+def _run_chunks(ex: cf.Executor, prog, config: CampaignConfig, out: Path, encs, scheduler, resume: bool,
+                on_chunk, workers: int, batch_rows: int) -> CampaignSummary:
+    """Submit the campaign's tasks, a bounded number at a time (:func:`in_flight`), and write each
+    chunk as it comes back."""
     if resume:
         remove_stale_temps(out)  # temporaries of a writer killed mid-write
     seeds = np.asarray(encs.seed, dtype=np.int64)
@@ -314,25 +334,31 @@ def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resum
     summary = CampaignSummary(out, config, config.n_chunks * len(config.group_names), skipped, 0, 0.0, 0.0, 0,
                               chunks_damaged=damaged)
     steps_per_enc = int(round(config.duration_s / config.dt_s))
-    futs: dict[cf.Future, list] = {}
-    subsets: dict = {}
-    for units in plan_batches(todo, workers, batch_rows, min_tasks=2 * workers):
-        chunks = sorted({c for _, c, _ in units})
-        for c in chunks:
-            if c not in subsets:
-                lo, hi = config.chunk_range(c)
-                subsets[c] = encs.subset(np.arange(lo, hi))
-        task = BatchTask([(g, c) for g, c, _ in units], config, {c: subsets[c] for c in chunks},
-                         {c: seeds[slice(*config.chunk_range(c))] for c in chunks})
-        futs[ex.submit(run_batch, task)] = task.units
     todo_set = {(g, c) for g, c, _ in todo}
-    with _progress(progress) as prog:
-        bars = {}
-        for g in config.group_names:
-            done = sum(config.chunk_range(c)[1] - config.chunk_range(c)[0]
-                       for c in range(config.n_chunks) if (g, c) not in todo_set)
-            bars[g] = prog.add_task(f"group {g:5s}", total=config.n_encounters, completed=done)
-        for fut in cf.as_completed(list(futs)):
+    tasks = iter(plan_batches(todo, workers, batch_rows, min_tasks=2 * workers))
+    limit = in_flight(workers, scheduler)
+    futs: dict[cf.Future, list] = {}
+
+    def submit_more() -> None:
+        while limit is None or len(futs) < limit:
+            units = next(tasks, None)
+            if units is None:
+                return
+            chunks = sorted({c for _, c, _ in units})
+            task = BatchTask([(g, c) for g, c, _ in units], config,
+                             {c: encs.subset(np.arange(*config.chunk_range(c))) for c in chunks},
+                             {c: seeds[slice(*config.chunk_range(c))] for c in chunks})
+            futs[ex.submit(run_batch, task)] = task.units
+
+    bars = {}
+    for g in config.group_names:
+        done = sum(config.chunk_range(c)[1] - config.chunk_range(c)[0]
+                   for c in range(config.n_chunks) if (g, c) not in todo_set)
+        bars[g] = prog.add_task(f"group {g:5s}", total=config.n_encounters, completed=done)
+    submit_more()
+    while futs:
+        finished, _ = cf.wait(list(futs), return_when=cf.FIRST_COMPLETED)
+        for fut in finished:
             futs.pop(fut)
             for res in fut.result():
                 write_chunk(out, res)
@@ -342,14 +368,23 @@ def _run_with(ex: cf.Executor, config: CampaignConfig, out_dir, scheduler, resum
                 prog.advance(bars[res.group], res.n)
                 if on_chunk is not None:
                     on_chunk(res)
+        submit_more()
     meta = load_campaign_json(out)
     meta["status"] = "complete"
     atomic_write_json(out / "campaign.json", meta)
     return summary
 
 
+def in_flight(workers: int, scheduler: "str | None") -> "int | None":
+    """Tasks submitted at a time: one in this process (``workers=1``: submitting runs it), two per
+    worker in a local pool (so none waits for the driver), all at once on a Dask cluster (None)."""
+    if scheduler:
+        return None
+    return 1 if workers <= 1 else 2 * workers
+
+
 __all__ = ["GroupSpec", "parse_groups", "campaign_family", "CampaignConfig", "encounter_seeds", "campaign_wait_lookup",
            "BatchTask", "ChunkResult", "run_batch", "simulate_group", "chunk_paths", "chunk_done", "write_chunk",
            "load_campaign_json", "check_out_dir", "make_executor", "prepare_campaign", "run_campaign",
-           "sample_campaign_encounters", "sample_encounter_piece", "MIN_SAMPLE_PART",
+           "sample_campaign_encounters", "sample_encounter_piece", "MIN_SAMPLE_PART", "SAMPLE_PIECE", "in_flight",
            "CampaignSummary"]

@@ -49,13 +49,18 @@ def column_equal(a: pa.ChunkedArray, b: pa.ChunkedArray) -> bool:
     return all(cells_equal(u, v) for u, v in zip(a.to_pylist(), b.to_pylist()))
 
 
-def compare_tables(name: str, a: pa.Table, b: pa.Table) -> list[str]:
-    """Differences between two tables (empty = identical data columns)."""
+def compare_tables(name: str, a: pa.Table, b: pa.Table, added: "list | None" = None) -> list[str]:
+    """Differences between two tables (empty = identical data columns). With ``added`` (a list), a
+    column only in B is not a difference but is appended there (``name: column``): new columns of a
+    newer version, the shared ones still compared bit for bit."""
     diffs = []
     if a.num_rows != b.num_rows:
         diffs.append(f"{name}: {a.num_rows} rows vs {b.num_rows}")
     ca, cb = set(a.column_names), set(b.column_names)
     for c in sorted(ca ^ cb):
+        if added is not None and c in cb:
+            added.append(f"{name}: {c}")
+            continue
         diffs.append(f"{name}: column {c!r} only in {'A' if c in ca else 'B'}")
     if a.num_rows == b.num_rows:
         for c in a.column_names:
@@ -72,6 +77,7 @@ class Comparison:
     differences: list = field(default_factory=list)
     columns: int = 0
     tables: list = field(default_factory=list)
+    added: list = field(default_factory=list)  #: columns only in B, when they were allowed
 
     @property
     def identical(self) -> bool:
@@ -106,10 +112,11 @@ def campaign_pairs(dir_a: Path, dir_b: Path, out: "Comparison") -> "list[tuple[s
     return pairs
 
 
-def compare_dirs(dir_a: "str | Path", dir_b: "str | Path", on_table: "Callable[[str], None] | None" = None
-                 ) -> Comparison:
+def compare_dirs(dir_a: "str | Path", dir_b: "str | Path", on_table: "Callable[[str], None] | None" = None,
+                 allow_added: bool = False) -> Comparison:
     """Compare the campaign results (or SIL step logs) in ``dir_a`` and ``dir_b`` (see the module
-    docstring); ``on_table`` gets each table's one-line verdict as it is compared."""
+    docstring); ``on_table`` gets each table's one-line verdict as it is compared. ``allow_added``:
+    columns only in B are listed in :attr:`Comparison.added`, not counted as differences."""
     dir_a, dir_b = Path(dir_a), Path(dir_b)
     for d in (dir_a, dir_b):
         if not d.exists():
@@ -125,7 +132,7 @@ def compare_dirs(dir_a: "str | Path", dir_b: "str | Path", on_table: "Callable[[
             out.differences.append(f"{name}: missing in {'A' if not pa_ else 'B'}")
             continue
         ta, tb = read_table(pa_), read_table(pb_)
-        d = compare_tables(name, ta, tb)
+        d = compare_tables(name, ta, tb, out.added if allow_added else None)
         out.columns += ta.num_columns
         line = f"{name}: {ta.num_rows} rows x {ta.num_columns} columns: {'identical' if not d else 'DIFFERENT'}"
         out.tables.append(line)

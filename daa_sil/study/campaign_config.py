@@ -75,12 +75,11 @@ class CampaignConfig:
         """Raise UsageError (one line) on a bad value; returns self."""
         if not self.groups or not all(isinstance(g, GroupSpec) for g in self.groups):
             raise UsageError("a campaign needs at least one group definition")
-        for name, val in (("--encounters", self.n_encounters), ("--chunk-size", self.chunk_size),
-                          ("--intruders", self.n_intruders)):
-            if not isinstance(val, (int, np.integer)) or isinstance(val, bool) or val <= 0:
-                raise UsageError(f"{name} must be a positive integer, got {val!r}")
-        if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool) or self.seed < 0:
-            raise UsageError(f"--seed must be a non-negative integer, got {self.seed!r}")
+        for name, val, setting in (("--encounters", self.n_encounters, ENCOUNTERS), ("--chunk-size", self.chunk_size,
+                                   CHUNK_SIZE), ("--intruders", self.n_intruders, INTRUDERS), ("--seed", self.seed, SEED)):
+            if not isinstance(val, (int, np.integer)) or isinstance(val, bool):
+                raise UsageError(f"{name} must be an integer, got {val!r}")
+            setting.check(int(val), key=name)  # both ends of its range (paper Table 6: 1..8 intruders)
         if self.preset not in PRESETS:
             raise UsageError(f"unknown --preset {self.preset!r}; allowed: {', '.join(PRESETS)}")
         DURATION.check(self.duration_s, key="duration")
@@ -110,8 +109,21 @@ class CampaignConfig:
         if self.uses_map:
             from daa_sil.waitmap.source import check_source
 
-            check_source(self.map_source, self.preset, self.gamma)
+            check_source(self.map_source, self.preset, self.gamma, self.map_horizon)
         return self
+
+    @property
+    def map_horizon(self) -> "float | None":
+        """The wait maps' horizon H (s) the reading sets (None: the map preset's)."""
+        return self.effective_reading.wait_horizon_s
+
+    @property
+    def epoch_s(self) -> float:
+        """The links' delay epoch (s): the link's (:data:`daa_sil.config.settings.DELAY_EPOCH`), or one
+        draw per encounter under a reading with ``delay_draw = "encounter"``."""
+        from daa_sil.config.settings import DELAY_EPOCH
+
+        return self.effective_reading.epoch_s(DELAY_EPOCH.default, self.duration_s, self.dt_s)
 
     @property
     def map_source(self) -> str:

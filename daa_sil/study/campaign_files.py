@@ -19,7 +19,7 @@ import pyarrow.parquet as pq
 
 from daa_sil import __version__
 from daa_sil.errors import FileFormatError, UsageError
-from daa_sil.files import atomic_write_bytes, atomic_write_text
+from daa_sil.files import atomic_write_bytes, atomic_write_text, local_file
 
 #: campaign.json format version
 CAMPAIGN_FORMAT = 1
@@ -155,7 +155,8 @@ def read_results(out_dir: "str | os.PathLike", kind: str = "encounters",
     for g in names:
         for f in sorted((out / g).glob(f"{kind}-*.parquet")):
             try:
-                tables.append(pq.read_table(f))
+                with local_file(f) as fh:
+                    tables.append(pq.read_table(fh))
             except (OSError, pa.ArrowException) as exc:
                 raise FileFormatError(f"{f} is not a readable Parquet file: {str(exc).splitlines()[0]}") from None
     if not tables:
@@ -187,21 +188,37 @@ def software_versions() -> dict:
             "pyarrow": pa.__version__, "numba": version("numba"), "llvmlite": version("llvmlite")}
 
 
-def check_out_dir(out_dir: "str | os.PathLike", resume: bool) -> Path:
-    """Validate ``DIR`` before anything is written: writable, and empty unless resuming."""
-    p = Path(out_dir)
-    if p.exists() and not p.is_dir():
-        raise UsageError(f"--out {p} exists and is not a directory")
-    if p.is_dir():
-        if not os.access(p, os.W_OK | os.X_OK):
-            raise UsageError(f"--out {p} is not writable")
-        if any(p.iterdir()) and not resume:
-            raise UsageError(f"--out {p} is not empty; pass --resume to continue the campaign there "
-                             f"or choose a new directory")
-        return p
-    anc = p.absolute().parent
-    while not anc.exists():
-        anc = anc.parent
-    if not anc.is_dir() or not os.access(anc, os.W_OK | os.X_OK):
-        raise UsageError(f"--out {p} cannot be created: {anc} is not a writable directory")
+def check_out_dir(out_dir: "str | os.PathLike", resume: bool, force: bool = False) -> Path:
+    """Validate ``DIR`` before anything is written: a path that can be written
+    (:func:`daa_sil.files.check_output_path`: name, length, UTF-8, writable), not held by another
+    process (:func:`daa_sil.out_dir.check_not_busy`), and empty unless resuming or replacing (``force``)."""
+    from daa_sil.errors import OutputError
+    from daa_sil.files import check_output_path
+    from daa_sil.out_dir import check_not_busy, contents
+
+    try:
+        p = check_output_path(out_dir, "--out", directory=True)
+    except OutputError as exc:  # before anything runs: a usage error of --out (exit 2)
+        raise UsageError(str(exc)) from None
+    check_not_busy(p)
+    if contents(p) and not (resume or force):
+        raise UsageError(f"--out {p} is not empty; pass --resume to continue the campaign there, --force to "
+                         f"replace it, or choose a new directory")
     return p
+
+
+#: what a campaign writes into its directory (``--force`` removes these and nothing else)
+_CAMPAIGN_FILES = ("campaign.json", "encounters.parquet")
+_CHUNK_FILE = re.compile(r"(encounters|decisions)-\d+\.parquet|chunk-\d+\.sha256|\..+\.tmp")
+
+
+def remove_campaign(out_dir: Path) -> None:
+    """``--force``: remove a previous campaign's files from ``out_dir`` (``campaign.json``, the encounter
+    set, the group directories holding only chunk files); anything else stays."""
+    import shutil
+
+    for name in _CAMPAIGN_FILES:
+        (out_dir / name).unlink(missing_ok=True)
+    for d in out_dir.iterdir():
+        if d.is_dir() and not d.is_symlink() and all(_CHUNK_FILE.fullmatch(f.name) for f in d.iterdir()):
+            shutil.rmtree(d)

@@ -24,12 +24,12 @@ import bisect
 import math
 from typing import Sequence
 
+from daa_sil.config.settings import BATCH_ROWS
 from daa_sil.errors import UsageError
 
-#: encounter rows per task by default: the five paper groups of one 2,000-encounter chunk. The DAA,
-#: most of a step's time, is called per chunk anyway (:mod:`daa_sil.daa_batches`), so larger tasks
-#: gain little (a few %) and lose more on a kill
-DEFAULT_BATCH_ROWS = 10_000
+#: encounter rows per task by default: the five paper groups of one 2,000-encounter chunk (results do
+#: not depend on it; larger tasks gain little and lose more on a kill)
+DEFAULT_BATCH_ROWS = BATCH_ROWS.default
 
 
 def plan_batches(units: Sequence[tuple], workers: int, batch_rows: int = DEFAULT_BATCH_ROWS,
@@ -38,8 +38,9 @@ def plan_batches(units: Sequence[tuple], workers: int, batch_rows: int = DEFAULT
 
     Every unit is in exactly one task, whole (a unit's rows are never split).
     """
-    if not isinstance(batch_rows, int) or isinstance(batch_rows, bool) or batch_rows < 1:
-        raise UsageError(f"--batch-rows must be a positive integer, got {batch_rows!r}")
+    if not isinstance(batch_rows, int) or isinstance(batch_rows, bool):
+        raise UsageError(f"--batch-rows must be an integer, got {batch_rows!r}")
+    BATCH_ROWS.check(batch_rows, key="--batch-rows")
     units = list(units)
     if not units:
         return []

@@ -19,7 +19,7 @@ from daa_sil.study.metrics import paper_results
 # The encounter-level study
 # ==================================================================================================
 #: counting settings of a reading (``campaign.json`` ``config.readings`` keys) and their defaults
-COUNTING_DEFAULTS = {"received": "arrived", "window": "active", "blends": "all"}
+COUNTING_DEFAULTS = {"received": "arrived", "window": "active", "blends": "all", "superseded": "dropped"}
 
 
 #: allowed values of each counting setting, as documented for readers of a report
@@ -31,7 +31,16 @@ COUNTING_HELP = {
                "whole": "the whole encounter (commands arrive outside the agent's active phase too)"},
     "blends": {"all": "every blend", "maneuvers": "blends of a command carrying a maneuver intent only (a blended "
                                                   "'hold' counts in no column)"},
+    "superseded": {"dropped": "one command per step: a command the link released with a newer one is not counted",
+                   "fate": "every command the link released; one released with a newer one (a FIFO burst) is "
+                           "counted with the newest: executed as sent, blended or overridden with it"},
 }
+
+#: the per-encounter columns of the commands superseded within their step (``n_superseded*`` of
+#: :mod:`daa_sil.study.fasttime_results`), by window / decision, added under ``superseded = fate``
+_SUP_ARRIVED = {"active": "n_superseded", "whole": "n_superseded_whole"}
+_SUP_EXEC = {"active": "n_superseded_exec", "whole": "n_superseded_exec_whole"}
+_SUP_BLEND = {"all": "n_superseded_blend", "maneuvers": "n_superseded_blend_intent"}
 
 
 #: counted quantity -> (the counting settings it depends on, {their values: per-encounter columns summed})
@@ -42,27 +51,42 @@ def _decisions(col: str) -> tuple:
 
 
 def _received() -> tuple:
-    """received = every arrival, pilot (executed as sent) + blend, or executed only, per window and
-    blend counting (the blend counting matters only to ``pilot+blend``)."""
+    """received = every arrival, pilot (executed as sent) + blend, or executed only, per window, blend
+    counting (which matters only to ``pilot+blend``) and superseded commands."""
     exec_col = {"active": "n_pilot_exec", "whole": "n_pilot_exec_whole"}
     arrived = {"active": "n_pilot_received", "whole": "n_pilot_received_whole"}
     blend_col = {"all": "n_blend", "maneuvers": "n_blend_intent"}
     table = {}
     for w in ("active", "whole"):
         for b in ("all", "maneuvers"):
-            table[("arrived", w, b)] = (arrived[w],)
-            table[("pilot+blend", w, b)] = (exec_col[w], blend_col[b])
-            table[("executed", w, b)] = (exec_col[w],)
-    return (("received", "window", "blends"), table)
+            for sup in ("dropped", "fate"):
+                fate = sup == "fate"
+                table[("arrived", w, b, sup)] = (arrived[w],) + ((_SUP_ARRIVED[w],) if fate else ())
+                table[("pilot+blend", w, b, sup)] = (exec_col[w], blend_col[b]) + (
+                    (_SUP_EXEC[w], _SUP_BLEND[b]) if fate else ())
+                table[("executed", w, b, sup)] = (exec_col[w],) + ((_SUP_EXEC[w],) if fate else ())
+    return (("received", "window", "blends", "superseded"), table)
+
+
+def _with_superseded(keys: tuple, table: dict, extra) -> tuple:
+    """A quantity's entry with the ``superseded`` setting added: ``dropped`` as before, ``fate`` adds
+    ``extra(values)`` (the columns of the superseded commands with that fate)."""
+    out = {}
+    for opt, cols in table.items():
+        out[opt + ("dropped",)] = cols
+        out[opt + ("fate",)] = cols + (extra(dict(zip(keys, opt))),)
+    return (keys + ("superseded",), out)
 
 
 COUNT_SOURCES: dict[str, tuple[tuple[str, ...], dict[tuple[str, ...], tuple[str, ...]]]] = {
     "wait": _decisions("n_wait"),
     "no_wait": _decisions("n_no_wait"),
     "received": _received(),
-    "pilot_exec": (("window",), {("active",): ("n_pilot_exec",), ("whole",): ("n_pilot_exec_whole",)}),
-    "blend": (("blends",), {("all",): ("n_blend",), ("maneuvers",): ("n_blend_intent",)}),
-    "daa_override": _decisions("n_daa_override"),
+    "pilot_exec": _with_superseded(("window",), {("active",): ("n_pilot_exec",), ("whole",): ("n_pilot_exec_whole",)},
+                                   lambda o: _SUP_EXEC[o["window"]]),
+    "blend": _with_superseded(("blends",), {("all",): ("n_blend",), ("maneuvers",): ("n_blend_intent",)},
+                              lambda o: _SUP_BLEND[o["blends"]]),
+    "daa_override": _with_superseded(*_decisions("n_daa_override"), lambda o: "n_superseded_override"),
     "blend_intent": _decisions("n_blend_intent"),
     "blend_exact": _decisions("n_blend_exact"),
     "blend_axis": _decisions("n_blend_axis"),
@@ -139,7 +163,9 @@ def paper_setup(group: str) -> "str | None":
 
 
 #: decision-table columns the study reads (provenance needs ``decided_by`` and/or ``in_box``)
-DECISION_COLUMNS = ("group", "encounter_id", "decision", "decided_by", "in_box", "wait_in_box")
+DECISION_COLUMNS = ("group", "encounter_id", "t", "decision", "decided_by", "in_box", "wait_in_box")
+#: the authority each recorded decision gives (steps without a decision: the pilot's)
+AUTHORITY_OF = {"wait": 2, "pilot": 0, "none": 0}  # 0 pilot, 1 DAA (every other decision), 2 waiting
 
 
 def normalise_decisions(dec) -> "dict | None":
@@ -169,6 +195,8 @@ def normalise_decisions(dec) -> "dict | None":
         out["encounter_id"] = np.asarray(arr("encounter_id").to_numpy(zero_copy_only=False), np.int64)
         if "decision" in names:
             out["decision"] = np.asarray(arr("decision").to_numpy(zero_copy_only=False)).astype(str)
+        if "t" in names:
+            out["t"] = np.asarray(arr("t").to_numpy(zero_copy_only=False), float)
         if "decided_by" in names:
             col = pc.cast(arr("decided_by"), pa.string())
             out["decided_by"] = np.asarray(pc.fill_null(col, "").to_numpy(zero_copy_only=False)).astype(str)
@@ -183,6 +211,8 @@ def normalise_decisions(dec) -> "dict | None":
     out["encounter_id"] = np.asarray(dec["encounter_id"], np.int64)
     if "decision" in dec:
         out["decision"] = np.asarray(dec["decision"]).astype(str)
+    if "t" in dec:
+        out["t"] = np.asarray(dec["t"], float)
     if "decided_by" in dec:
         out["decided_by"] = np.array(["" if (b is None or b != b) else str(b) for b in dec["decided_by"]], dtype=str)
     if "in_box" in dec:
@@ -220,4 +250,21 @@ def provenance_columns(dec: "dict | None", group: str, ids: np.ndarray) -> "dict
         ib = dec["in_box"][m]
         out["n_lookup"] = count(ib >= 0)
         out["n_in_box"] = count(ib == 1)
+    if "t" in dec and "decision" in dec:
+        out["n_switches"] = authority_switches(pos[ok], dec["t"][m][ok], dec["decision"][m][ok], n)
     return out
+
+
+def authority_switches(pos: np.ndarray, t: np.ndarray, decision: np.ndarray, n: int) -> np.ndarray:
+    """Changes of authority per encounter ``(n,)``: the decisions of encounter ``pos[i]`` at step ``t[i]``
+    (s, 1 s steps) give the authority of those steps (:data:`AUTHORITY_OF`: a wait -> waiting, a pilot
+    command flown -> the pilot, any other decision -> the DAA); steps without a decision are the
+    pilot's. Each change between two consecutive steps counts one."""
+    if pos.size == 0:
+        return np.zeros(n)
+    k = np.rint(t).astype(np.int64)
+    steps = int(k.max()) + 2
+    code = np.array([AUTHORITY_OF.get(d, 1) for d in np.unique(decision)], np.int8)
+    dense = np.zeros((n, steps), np.int8)
+    dense[pos, k] = code[np.searchsorted(np.unique(decision), decision)]
+    return np.count_nonzero(dense[:, 1:] != dense[:, :-1], axis=1).astype(float)

@@ -9,7 +9,9 @@ At step ``k`` (``t_k = k dt``, ``dt = 1 s``, ``T = 240 s``; ``docs/architecture.
    bands only where the observed alert reaches ``PilotConfig.alert_level_min``) and the pilot model
    decides. The GCS sends a packet every step (a heartbeat,
    plus the streamed command when the pilot has one) stamped ``t_k``; packets are released on the
-   vehicle side at ``max(t_k + d_up(t_k), previous release)``.
+   vehicle side at ``max(t_k + d_up(t_k), previous release)``. What crosses the link is what the
+   MAVLink link carries (:mod:`daa_sil.link.setpoint`): the command's float32 setpoints, and the
+   ownship's float32 position and vertical speed in the telemetry, so the SIL flies the same numbers.
 2. **Vehicle** -- :meth:`daa_sil.onboard.OnboardCore.step` with the newest command released at or
    before ``t_k`` (``received`` iff a command was released since the previous step; the link is
    alive as of the newest released packet), which decides, publishes telemetry for ``t_k``
@@ -27,8 +29,8 @@ contract ("Campaign result tables") and, with ``record_steps=True``, the step lo
 (:mod:`daa_sil.steplog`). :func:`simulate_parts` runs several parts side by side in one batch --
 e.g. the groups of a campaign chunk, each with its own policy and delay models -- and returns each
 part's tables exactly as :func:`simulate` of that part alone would (every random stream is per
-encounter, every step is element-wise per encounter, and the DAA is called once per part on the
-rows it would see alone: :mod:`daa_sil.daa_batches`).
+encounter, every step is element-wise per encounter, and the DAA gives each encounter's rows what a
+call of their own gives, so it is called once per step on all the rows that need it).
 
 Memory: what a link carries is kept in a :class:`~daa_sil.study.slot_ring.SlotRing` only until
 the other end has read it (about the longest delay in steps), so a batch of N encounters holds
@@ -68,6 +70,7 @@ from daa_sil.geometry.thresholds import get_thresholds
 # the encounter's random streams (defined with the models: the SIL's GCS and shim use them too)
 from daa_sil.models.streams import STREAM_DOWN, STREAM_PILOT, STREAM_UP, encounter_streams
 from daa_sil.link.delayline import fifo_release
+from daa_sil.link.setpoint import observed_own, wire_command
 from daa_sil.models.delay_process import BatchedDelay
 from daa_sil.models.encounters import concat_encounters
 from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel
@@ -236,14 +239,12 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     encounters = enc0 if len(parts) == 1 else concat_encounters([p.encounters for p in parts])
     n = sum(sizes)
     bounds = np.concatenate([[0], np.cumsum(sizes)])
-    batches = None if len(parts) == 1 else np.repeat(np.arange(len(parts)), sizes)  # one DAA batch per part
     policy = parts[0].policy if len(parts) == 1 else PolicyRows.stacked([p.policy for p in parts], sizes)
     streams = _streams_per_part(seeds)
     core = OnboardCore.from_encounters(encounters, policy, cfg, wait_lookup, thresholds=preset_name,
-                                       step_log=record_steps, daa_batches=batches)
+                                       step_log=record_steps)
     # the flight plan the pilot returns to: the ownship's initial straight, level course
-    ground = GroundCore(n, [x[STREAM_PILOT] for st in streams for x in st], pcfg, cfg, plan=core.own,
-                        daa_batches=batches)
+    ground = GroundCore(n, [x[STREAM_PILOT] for st in streams for x in st], pcfg, cfg, plan=core.own)
     # each part's link legs: one-way (each link its own stream) or a shared round trip (both links
     # read the uplink stream's draws: models/link_rule.py)
     legs = [p.link_legs if p.link_legs is not None else LinkLegs(p.latency_up, p.latency_down) for p in parts]
@@ -262,11 +263,12 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
     downlink = SlotRing(n, {"own": ((6,), float, np.nan), "intr": ((m, 6), float, np.nan), "alert": ((), np.int64, 0),
                             "release": ((), float, np.inf)})
     uplink = SlotRing(n, {"release": ((), float, np.inf), "newest_sent": ((), np.int64, -1),
-                          "cmd": ((3,), float, np.nan)})
+                          "cmd": ((3,), float, np.nan), "n_sent": ((), np.int64, 0)})
     down_ptr = np.zeros(n, np.int64)
     seen = np.full(n, -1, np.int64)  # telemetry index the pilot currently sees
     up_ptr = np.zeros(n, np.int64)
     last_cmd_slot = np.full(n, -1, np.int64)  # newest command slot delivered to the vehicle
+    last_n_sent = np.zeros(n, np.int64)  # commands sent up to it (the vehicle has been released them all)
     last_down, last_up = np.full(n, -np.inf), np.full(n, -np.inf)
     down_release = lambda s, r: downlink.gather("release", s, r)  # noqa: E731
     up_release = lambda s, r: uplink.gather("release", s, r)  # noqa: E731
@@ -281,10 +283,7 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         obs_own = AircraftState.from_array(downlink.gather("own", obs))
         obs_intr = AircraftState.from_array(downlink.gather("intr", obs))
         fresh = np.flatnonzero(new & (obs >= 0))
-        # the display bands the states it shows itself, all in one call per DAA batch: taking the
-        # agent's bands of the same state would give the numbers of a call on other rows (the
-        # agent's active rows of that step), which differ in the DAA's last bits and, rarely, in a
-        # candidate's region -- the pilot then chose another maneuver (bba2fd8 identity, issue 21)
+        # the display bands the states it shows itself (each row's bands are what it gets alone)
         pout = ground.step(t, obs_own, obs_intr, fresh, downlink.gather("alert", obs[fresh], fresh))
         downlink.release(max(int(down_ptr.min()) - 1, 0))
         # GCS packet of step k (heartbeat + command if streaming), FIFO-released on the vehicle side
@@ -292,10 +291,13 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         rel_up = fifo_release(np.full((n, 1), t), d_up[:, None], prev_release=last_up)[:, 0]
         last_up = rel_up
         prev_newest = uplink.gather("newest_sent", np.full(n, k - 1))
+        prev_sent = uplink.gather("n_sent", np.full(n, k - 1))
         slot_up = uplink.open(k)
         slot_up["release"][:] = rel_up
         slot_up["newest_sent"][:] = np.where(pout.send, k, prev_newest)
-        slot_up["cmd"][:] = np.stack([pout.cmd.trk, pout.cmd.vs, pout.cmd.gs], axis=-1)
+        slot_up["n_sent"][:] = prev_sent + pout.send
+        wire = wire_command(pout.cmd, np.flatnonzero(pout.send))  # (as PILOT_MANEUVER carries them: float32)
+        slot_up["cmd"][:] = np.stack([wire.trk, wire.vs, wire.gs], axis=-1)
         # ---- 2. vehicle ----------------------------------------------------------------------
         up_ptr = _release_pointer(up_ptr, up_release, k + 1, t)
         newest = np.maximum(up_ptr - 1, 0)
@@ -304,6 +306,10 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
         released_cmd = np.where(up_ptr > 0, uplink.gather("newest_sent", newest), -1)
         received = released_cmd > last_cmd_slot
         last_cmd_slot = np.maximum(last_cmd_slot, released_cmd)
+        # commands released this step besides the newest (a FIFO burst): superseded within the step
+        n_sent = np.where(up_ptr > 0, uplink.gather("n_sent", newest), 0)
+        superseded = np.where(received, n_sent - last_n_sent - 1, 0)
+        last_n_sent = np.where(received, n_sent, last_n_sent)
         slot = np.where(received, released_cmd, -1)  # only a received command is read (its slot is held)
         c = uplink.gather("cmd", slot)
         pin = PilotInput(received=received,
@@ -313,14 +319,14 @@ def _run(parts: list, pilot_cfg, daa_cfg, wait_family, *, preset, duration_s, dt
                          t_recv=np.where(received, uplink.gather("release", slot), np.nan), link_alive_t=link_alive)
         uplink.release(max(int(up_ptr.min()) - 1, 0))
         out = core.step(t, pin)
-        acc.add(out, dt)
+        acc.add(out, dt, superseded)
         # telemetry for t_k enters the downlink
         d_down = down.delay_at(t)
         rel_down = fifo_release(np.full((n, 1), t), d_down[:, None], prev_release=last_down)[:, 0]
         last_down = rel_down
         slot_down = downlink.open(k)
         slot_down["release"][:] = rel_down
-        slot_down["own"][:] = out.own.as_array()
+        slot_down["own"][:] = observed_own(out.own)  # (what LOCAL_POSITION_NED carries of the ownship)
         slot_down["intr"][:] = out.intruders.as_array()
         slot_down["alert"][:] = out.telemetry.alert_level.max(axis=1) if m else 0
         if log is not None:

@@ -16,6 +16,18 @@ from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.onboard import StepOutput
 
 _I = pa.int64()
+#: commands the link released in a step besides the newest (superseded within their step, never decided
+#: on), counted with the freshness and the decision of the newest: over the whole encounter and the
+#: active phase, and by what happened to the newest (executed as sent, blended -- a maneuver's blend --,
+#: overridden)
+#: the encounter's severity and its trajectory deviation under other definitions than ``dev_h_m`` /
+#: ``dev_v_m`` (the largest distance from the unperturbed straight path p0 + v0 t): the highest alert
+#: level raised; the time-mean horizontal / vertical distance from that path; the largest cross-track
+#: distance from the planned track (the along-track lag of a slower or returning ownship left out); the
+#: horizontal distance at the end of the encounter
+EXTRA_COLUMNS = ("max_alert_level", "dev_h_tmean_m", "dev_v_tmean_m", "dev_xtrack_m", "dev_h_end_m")
+SUPERSEDED_COLUMNS = ("n_superseded_whole", "n_superseded", "n_superseded_exec_whole", "n_superseded_exec",
+                      "n_superseded_blend", "n_superseded_blend_intent", "n_superseded_override")
 ENCOUNTER_SCHEMA = pa.schema(
     [("group", pa.string()), ("encounter_id", _I), ("seed", _I), ("duration_s", pa.float64()),
      ("lowc", pa.bool_()), ("nmac", pa.bool_()), ("lowc_duration_s", pa.float64()), ("pi", pa.float64()),
@@ -25,7 +37,9 @@ ENCOUNTER_SCHEMA = pa.schema(
      ("n_blend_axis", _I), ("n_blend_intent", _I), ("n_daa_override", _I), ("n_stale", _I), ("n_link_lost", _I),
      ("n_by_map", _I), ("n_by_projl", _I), ("n_by_both", _I), ("n_lookup_in_box", _I),
      ("n_pilot_received_whole", _I), ("n_pilot_exec_whole", _I),
-     ("intruder_turns", pa.bool_()), ("preset", pa.string())])
+     ("intruder_turns", pa.bool_()), ("preset", pa.string()),
+     *[(c, _I) for c in SUPERSEDED_COLUMNS], ("max_alert_level", _I),
+     *[(c, pa.float64()) for c in EXTRA_COLUMNS[1:]]])
 
 DECISION_SCHEMA = pa.schema(
     [("group", pa.string()), ("encounter_id", _I), ("t", pa.float64()), ("decision", pa.string()),
@@ -62,17 +76,32 @@ class Accumulators:
         self.n_in_box = np.zeros(n, np.int64)
         self.n_recv_whole = np.zeros(n, np.int64)
         self.n_exec_whole = np.zeros(n, np.int64)
+        self.superseded = {c: np.zeros(n, np.int64) for c in SUPERSEDED_COLUMNS}
+        self.max_alert = np.zeros(n, np.int64)
+        self.dev_sum = np.zeros((n, 2))  # time integrals of the horizontal / vertical deviation (m s)
+        self.dev_xtrack = np.zeros(n)
+        self.dev_end = np.zeros(n)
+        self.t_sum = 0.0
         self.p0 = own0.position()
         self.v0 = own0.velocity()
         self.dec_parts: list[tuple[np.ndarray, float, dict]] = []
 
-    def deviation(self, own: AircraftState, t: float) -> None:
-        """Max deviation (m) of the ownship from its unperturbed straight path p0 + v0 t."""
+    def deviation(self, own: AircraftState, t: float, dt: float = 0.0) -> None:
+        """Max deviation (m) of the ownship from its unperturbed straight path p0 + v0 t; with ``dt`` > 0
+        (s) also the time integrals, the cross-track maximum and the last value (:data:`EXTRA_COLUMNS`)."""
         d = own.position() - (self.p0 + self.v0 * t)
-        self.dev_h = np.maximum(self.dev_h, np.hypot(d[:, 0], d[:, 1]))
+        h = np.hypot(d[:, 0], d[:, 1])
+        self.dev_h = np.maximum(self.dev_h, h)
         self.dev_v = np.maximum(self.dev_v, np.abs(d[:, 2]))
+        if dt > 0:
+            self.dev_sum += np.stack([h, np.abs(d[:, 2])], axis=1) * dt
+            self.t_sum += dt
+            u = self.v0[:, :2] / np.maximum(np.hypot(self.v0[:, 0], self.v0[:, 1]), 1e-9)[:, None]
+            self.dev_xtrack = np.maximum(self.dev_xtrack, np.abs(d[:, 0] * u[:, 1] - d[:, 1] * u[:, 0]))
+        self.dev_end = h  # the last call: at the end of the encounter
 
-    def add(self, out: StepOutput, dt: float) -> None:
+    def add(self, out: StepOutput, dt: float, superseded: "np.ndarray | None" = None) -> None:
+        """Accumulate one step; ``superseded`` (N,) the commands released besides the newest this step."""
         dec = out.decisions
         self.lowc |= out.lowc
         self.nmac |= out.nmac
@@ -82,12 +111,24 @@ class Accumulators:
         closer = out.seg_min_range_m < self.min_range
         self.min_range = np.where(closer, out.seg_min_range_m, self.min_range)
         self.vsep_at_min = np.where(closer, out.seg_vsep_m, self.vsep_at_min)
-        self.deviation(out.own, out.t)
+        self.deviation(out.own, out.t, dt)
+        self.max_alert = np.maximum(self.max_alert, np.asarray(dec["max_alert"], np.int64))
         active = np.asarray(dec["active"], bool)
         code = np.asarray(dec["decision"], np.int64)
         fresh = np.asarray(dec["pilot_cmd_fresh"], bool)
         self.n_recv_whole += fresh
         self.n_exec_whole += fresh & (~active | (code == D_PILOT))  # outside the active phase it is flown as sent
+        if superseded is not None:
+            k = np.where(fresh, np.asarray(superseded, np.int64), 0)
+            sup = self.superseded
+            sup["n_superseded_whole"] += k
+            sup["n_superseded"] += np.where(active, k, 0)
+            sup["n_superseded_exec_whole"] += np.where(~active | (code == D_PILOT), k, 0)
+            sup["n_superseded_exec"] += np.where(active & (code == D_PILOT), k, 0)
+            sup["n_superseded_blend"] += np.where(active & (code == D_BLEND), k, 0)
+            sup["n_superseded_blend_intent"] += np.where(active & (code == D_BLEND) & (np.asarray(dec["pilot_axis"]) != 0),
+                                                         k, 0)
+            sup["n_superseded_override"] += np.where(active & (code == D_DAA_OVERRIDE), k, 0)
         ia = np.flatnonzero(active)
         if ia.size:
             np.add.at(self.counts, (ia, code[ia]), 1)
@@ -168,6 +209,11 @@ def encounter_table(acc: Accumulators, lo: int, hi: int, encounters, group: str,
         "n_pilot_received_whole": pa.array(g(acc.n_recv_whole), _I), "n_pilot_exec_whole": pa.array(g(acc.n_exec_whole), _I),
         "intruder_turns": pa.array(np.asarray(encounters.intruder_turns, bool)),
         "preset": pa.array(np.full(n, preset), pa.string()),
+        **{c: pa.array(g(acc.superseded[c]), _I) for c in SUPERSEDED_COLUMNS},
+        "max_alert_level": pa.array(g(acc.max_alert), _I),
+        "dev_h_tmean_m": pa.array(g(acc.dev_sum[:, 0]) / max(acc.t_sum, 1e-300)),
+        "dev_v_tmean_m": pa.array(g(acc.dev_sum[:, 1]) / max(acc.t_sum, 1e-300)),
+        "dev_xtrack_m": pa.array(g(acc.dev_xtrack)), "dev_h_end_m": pa.array(g(acc.dev_end)),
     }
     return pa.Table.from_arrays(list(cols.values()), schema=ENCOUNTER_SCHEMA)
 

@@ -4,15 +4,25 @@ verdict on our runs are in :mod:`daa_sil.study.verdicts`.
 
 The verdict words, everywhere (the report prints each rule):
 
-* **reproduced** -- our data show the paper's finding (its value inside our 95 % CI, the bound or
-  band shown, the ordering shown, equivalence shown, zero observed);
+* **reproduced** -- our data show the paper's finding: our value and the paper's agree as two samples
+  (the interval of their difference, with the paper's error estimated at its N, includes 0), or the
+  bound, band, ordering (at the paper's size where it gives one) or equivalence is shown, or zero
+  observed;
 * **consistent (not shown)** -- our data do not contradict the finding but do not show it either
   (a CI straddling the bound, the band's edge or the equivalence margin; a count the exact test
   cannot tell from the paper's 0; an ordering not significant after Holm's correction);
 * **direction holds** -- a change with the paper's sign, our CI excluding 0, but not the paper's size;
+  or an ordering that holds at a size the paper's numbers rule out;
 * **not reproduced** -- our data contradict the finding;
 * **by construction** -- a check the code makes true whatever the data (counted apart from the
-  empirical findings; if it ever fails, it is *not reproduced*: a defect).
+  empirical findings; if it ever fails, it is *not reproduced*: a defect);
+* **uninformative** -- a check whose pass region holds values the paper's own number for the same
+  statistic rules out (the FAA 'Remote' band, two decades wide): passing it shows nothing, so it is
+  counted apart (failing it is still *not reproduced*);
+* **nested** -- a claim implied by another that is tested with it (one claim, counted once: under the
+  other);
+* **input** -- a published number a setting of the reading was inferred from (``daa_sil.config.basis``):
+  agreeing with it is no reproduction, so it is counted apart.
 
 *not testable* is no verdict: a group the finding needs was not run, or its statistic is undefined.
 """
@@ -35,8 +45,13 @@ CONSISTENT = "consistent (not shown)"
 DIRECTION = "direction holds"
 NOT_REPRODUCED = "not reproduced"
 BY_CONSTRUCTION = "by construction"
+UNINFORMATIVE = "uninformative"
+NESTED = "nested"
+INPUT = "input"
 #: the verdict words, in the report's order
-VERDICTS = (REPRODUCED, CONSISTENT, DIRECTION, NOT_REPRODUCED, BY_CONSTRUCTION)
+VERDICTS = (REPRODUCED, CONSISTENT, DIRECTION, NOT_REPRODUCED, BY_CONSTRUCTION, UNINFORMATIVE, NESTED, INPUT)
+#: the verdicts counted apart from the empirical findings
+APART = (BY_CONSTRUCTION, UNINFORMATIVE, NESTED, INPUT)
 #: the empirical verdicts: the headline tally counts only these
 EMPIRICAL = (REPRODUCED, CONSISTENT, DIRECTION, NOT_REPRODUCED)
 #: no verdict: a group the finding needs was not run, or its statistic is undefined
@@ -101,9 +116,18 @@ class Finding:
     ordering: dict = field(default_factory=dict)
     #: why the check is true by construction ("" = an empirical finding)
     by_construction: str = ""
-    #: equivalence margin of a "no change" claim (in the statistic's unit) and its reason
+    #: equivalence margin of a "no change" claim (in the statistic's unit, or None when the rule
+    #: ``detectable`` computes it) and its reason
     margin: "float | None" = None
     margin_reason: str = ""
+    #: ``detectable``: the margin is the smallest difference the paper's study could detect
+    margin_rule: str = ""
+    #: an ordering's size: where the paper's tables give both groups' values (``key``, ``per_encounter``)
+    size: dict = field(default_factory=dict)
+    #: a band that summarises another finding's number (its id): the band is judged against it
+    summarises: str = ""
+    #: the id of the claim that implies this one (tested with it)
+    nested_in: str = ""
 
     @property
     def label(self) -> str:
@@ -151,7 +175,8 @@ class Finding:
         if self.kind == "zero":
             return "0"
         if self.kind == "equivalence":
-            return f"no change (±{self.margin:g} %)"
+            return "no change (± the paper's detectable difference)" if self.margin_rule else \
+                f"no change (±{self.margin:g} %)"
         if self.kind == "bound":
             return f"< {fmt(self.bound)}"
         if self.kind == "category":
@@ -162,6 +187,15 @@ class Finding:
             rel = {"fewest": "fewest of", "most": "most of", "more": "more than"}[o["relation"]]
             return f"{o['subject']} {rel} {', '.join(o['others'])}"
         return fmt(self.paper_value(), self.value_format)
+
+
+def paper_group_value(spec: dict, group: str) -> float:
+    """The paper's number of ``group`` for a ``{key, per_encounter, scale}`` spec (an ordering's size)."""
+    pr = paper_results()
+    v = _lookup(pr, spec["key"], group)
+    if spec.get("per_encounter"):
+        v /= float(pr.get("encounters_per_group", 10000))
+    return float(v) * float(spec.get("scale", 1.0))
 
 
 def _lookup(pr: dict, key: str, group: "str | None") -> float:
@@ -190,15 +224,20 @@ def load_findings() -> list[Finding]:
                                   f"allowed: {', '.join(KINDS)}")
         if f["metric"] not in METRICS:
             raise FileFormatError(f"paper_findings.yaml: {f['id']}: unknown metric {f['metric']!r}")
-        if f["kind"] == "equivalence" and not (isinstance(f.get("margin"), (int, float)) and f["margin"] > 0
+        margin = f.get("margin")
+        detectable = margin == "detectable"
+        if f["kind"] == "equivalence" and not ((detectable or (isinstance(margin, (int, float)) and margin > 0))
                                                 and f.get("margin_reason")):
-            raise FileFormatError(f"paper_findings.yaml: {f['id']}: an equivalence needs a margin > 0 and its reason")
+            raise FileFormatError(f"paper_findings.yaml: {f['id']}: an equivalence needs a margin (> 0, or "
+                                  f"'detectable') and its reason")
         base = dict(id=f["id"], claim=f["claim"], source=f.get("source", ""), kind=f["kind"], metric=f["metric"],
                     change=dict(f.get("change", {})), paper=dict(f.get("paper", {})), bound=f.get("bound"),
                     category=f.get("category"), ordering=dict(f.get("ordering", {})),
                     by_construction=str(f.get("by_construction", "") or ""),
-                    margin=float(f["margin"]) if f.get("margin") is not None else None,
-                    margin_reason=str(f.get("margin_reason", "") or ""))
+                    margin=None if detectable or margin is None else float(margin),
+                    margin_reason=str(f.get("margin_reason", "") or ""), margin_rule="detectable" if detectable else "",
+                    size=dict(f.get("size", {})), summarises=str(f.get("summarises", "") or ""),
+                    nested_in=str(f.get("nested_in", "") or ""))
         if "groups" in f:
             out += [Finding(**base, group=g) for g in f["groups"]]
         elif "pooled" in f:
@@ -212,5 +251,6 @@ def untestable_statements() -> list[dict]:
     return list(_raw().get("untestable", []))
 
 
-__all__ = ["Finding", "load_findings", "untestable_statements", "VERDICTS", "EMPIRICAL", "KINDS", "REPRODUCED",
-           "CONSISTENT", "DIRECTION", "NOT_REPRODUCED", "BY_CONSTRUCTION", "NOT_TESTABLE", "EVENT_COLUMNS", "fmt"]
+__all__ = ["Finding", "load_findings", "untestable_statements", "VERDICTS", "EMPIRICAL", "APART", "KINDS", "REPRODUCED",
+           "CONSISTENT", "DIRECTION", "NOT_REPRODUCED", "BY_CONSTRUCTION", "UNINFORMATIVE", "NESTED", "INPUT",
+           "NOT_TESTABLE", "EVENT_COLUMNS", "fmt", "paper_group_value"]

@@ -53,12 +53,12 @@ def group_figures(st: Study, out: Path, suffix: str = "") -> list[Path]:
         v, e = err(key)
         ax[0].bar(x + (k - 0.5) * w, v, w, yerr=e, color=col, label=f"ours: {key.replace('_', '-')}", capsize=3)
         ax[0].scatter(x + (k - 0.5) * w, paper_vals("waiting_status", key, True), marker="x",
-                      color="k", zorder=3, label="paper" if k == 0 else None)
+                      color="k", zorder=3, label="the paper (published)" if k == 0 else None)
     ax[0].set_title("(a) wait / no-wait (allocate to DAA)")
     v, e = err("received")
     ax[1].bar(x, v, 0.6, yerr=e, color="tab:blue", capsize=3, label="ours")
     ax[1].scatter(x, paper_vals("pilot_command_reception", "received", True), marker="x", color="k", zorder=3,
-                  label="paper")
+                  label="the paper (published)")
     ax[1].set_title("(b) pilot commands received")
     bottom = np.zeros(len(groups))
     pbottom = np.zeros(len(groups))
@@ -88,7 +88,7 @@ def group_figures(st: Study, out: Path, suffix: str = "") -> list[Path]:
     v, e = err("p_lowc_per_hr_paper_h")
     ax[1].bar(x, np.where(v > 0, v, np.nan), 0.6, yerr=e, color="tab:red", capsize=3,
               label="ours (paper Eq. at 666.67 h)")
-    ax[1].scatter(x, paper_vals("lowc_per_flight_hour", "p"), marker="x", color="k", zorder=3, label="paper")
+    ax[1].scatter(x, paper_vals("lowc_per_flight_hour", "p"), marker="x", color="k", zorder=3, label="the paper (published)")
     for _, (lo, _hi) in pr["faa_likelihood"].items():
         if lo > 0:
             ax[1].axhline(lo, color="0.6", lw=0.6, ls="--")
@@ -99,7 +99,7 @@ def group_figures(st: Study, out: Path, suffix: str = "") -> list[Path]:
     v, e = err("pi_paper_mean" if st.has_pi_paper else "pi_mean")
     ax[2].bar(x - w / 2, v, w, yerr=e, color="tab:gray", capsize=3, label="mean PI")
     ax[2].bar(x + w / 2, np.nan_to_num([st.pi_max(g) for g in groups]), w, color="k", label="max PI")
-    ax[2].axhline(1.0, color="tab:blue", ls="--", lw=0.8, label="paper: mean < 1")
+    ax[2].axhline(1.0, color="tab:blue", ls="--", lw=0.8, label="the paper: mean < 1")
     ax[2].set_title("(c) penetration integral of LoWC encounters (s)")
     ax[2].legend(fontsize=7)
     for a in ax:
@@ -112,7 +112,7 @@ def group_figures(st: Study, out: Path, suffix: str = "") -> list[Path]:
     fig, ax = plt.subplots(figsize=(6, 4))
     v, e = err("exact_match")
     ax.bar(x, 100 * v, 0.6, yerr=100 * e, color="tab:purple", capsize=3, label="ours")
-    ax.axhline(pr.get("blending_exact_match_pct", 84), color="k", ls="--", label="paper (84 %)")
+    ax.axhline(pr.get("blending_exact_match_pct", 84), color="k", ls="--", label="the paper (84 %)")
     ax.set_xticks(x, groups)
     ax.set_ylim(0, 105)
     ax.set_ylabel("% of blends with the pilot's (axis, direction)")

@@ -19,6 +19,29 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     return "\n".join(out)
 
 
+#: the widest table a page prints (columns)
+MAX_COLUMNS = 12
+
+
+def wide_table(fixed: Sequence[str], rows: Sequence[Sequence[str]], names: Sequence[str],
+               cells: Sequence[Sequence[str]], max_columns: int = MAX_COLUMNS) -> list[str]:
+    """Markdown lines of a table of ``fixed`` columns (``rows``) and one column per entry of ``names``
+    (``cells[j][i]``: column j, row i), split into tables of at most ``max_columns`` columns, each
+    repeating the fixed columns."""
+    per = max(1, max_columns - len(fixed))
+    out: list[str] = []
+    for a in range(0, max(len(names), 1), per):
+        ns = list(names[a:a + per])
+        body = [list(r) + [cells[a + j][i] for j in range(len(ns))] for i, r in enumerate(rows)]
+        out += [markdown_table(list(fixed) + ns, body), ""]
+    return out
+
+
+def reading_label(label: str) -> str:
+    """A reading's column name: in code font, so the reading called ``paper`` never reads as the paper."""
+    return f"`{label}`"
+
+
 def estimate_text(e: Estimate, kind: str = "g3") -> str:
     """An estimate as text, ``value [lo, hi]`` in the number format ``kind`` (a note when it has one; – when undefined)."""
     if e is None or not math.isfinite(e.value):

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Sequence
 
 from daa_sil.errors import FileFormatError, UsageError
+from daa_sil.files import local_file
 from daa_sil.study.counting import (
     DECISION_COLUMNS,
     CountingRules,
@@ -24,7 +25,8 @@ def _read_parquet(path: Path, columns=None):
     import pyarrow.parquet as pq
 
     try:
-        return pq.read_table(path, columns=columns)
+        with local_file(path) as fh:
+            return pq.read_table(fh, columns=columns)
     except (OSError, pa.ArrowException, ValueError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise FileFormatError(f"{path} is not a readable Parquet file: {msg}") from None
@@ -76,7 +78,8 @@ def load_decisions(d: Path):
     if not files:
         return None
     try:
-        names = pq.read_schema(files[0]).names
+        with local_file(files[0]) as fh:
+            names = pq.read_schema(fh).names
     except Exception as exc:  # noqa: BLE001 -- pyarrow raises several types for a bad footer
         raise FileFormatError(f"{files[0]} is not a readable Parquet file: {str(exc).splitlines()[0]}") from None
     if not any(c in names for c in ("decided_by", "in_box")):
@@ -124,7 +127,8 @@ def load_block(src) -> Block:
                                       f"{type(settings).__name__}")
             meta = {"seed": cfg.get("seed", cj.get("seed")), "n_encounters": cfg.get("n_encounters"),
                     "preset": cfg.get("preset", cj.get("preset")), "groups": cfg.get("groups"),
-                    "status": cj.get("status"), "seeds": cfg.get("seeds"), "dt_s": cfg.get("dt_s")}
+                    "status": cj.get("status"), "seeds": cfg.get("seeds"), "dt_s": cfg.get("dt_s"),
+                    "basis": cj.get("basis")}
         dec = load_decisions(d)
     enc = load_results(src)
     if not enc or len(next(iter(enc.values()))) == 0:

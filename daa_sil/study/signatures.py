@@ -11,7 +11,9 @@ Per group (the paper's tables are totals over 10,000 encounters; ``paper_results
   command is fresh; the waiting-status table) / commands received (the reception table);
 * **commands received per encounter** -- the reception table / 10,000;
 * **waits per received command** -- the waiting-status table's waits / received;
-* **share of encounters ever active** and **mean active steps of those**: not given by the paper.
+* **share of encounters ever active** and **mean active steps of those**: not given by the paper;
+* **authority switches per active encounter**: how often the authority changes between the pilot, the
+  waiting agent and the DAA from one step to the next (from the decision table): not given by the paper.
 
 Ours use the reading's counting (:mod:`daa_sil.study.counting`): the same arithmetic on our counts.
 """
@@ -80,6 +82,8 @@ SIGNATURES = (
               _per_received("waiting_status", "wait")),
     Signature("active", "share of encounters ever active", "active_share", "pct", _not_given),
     Signature("active_steps", "mean active steps of an active encounter", "active_steps_mean", "g3", _not_given),
+    Signature("switches", "authority switches per active encounter (pilot, waiting, DAA)", "switches_per_active", "g3",
+              _not_given),
 )
 
 
@@ -123,7 +127,7 @@ def signature_section(studies: Mapping) -> list[str]:
 
 def signature_table(dirs: Mapping[str, "str | Path"], replicates: int = 400) -> str:
     """A compact Markdown table (run x group x signature, value [95 % CI]) of campaign directories:
-    the development experiments' summary (``docs/results/dev_experiments.py``)."""
+    a quick summary of a few campaign directories."""
     from daa_sil.study.analysis import Study
     from daa_sil.study.report_format import markdown_table
     from daa_sil.study.report_input import load_block

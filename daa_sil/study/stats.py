@@ -45,11 +45,12 @@ from typing import Iterator, Mapping
 import numpy as np
 from scipy import stats as sps
 
+from daa_sil.config.settings import BOOTSTRAP_REPLICATES
 from daa_sil.errors import UsageError
 
 CONF = 0.95
-#: bootstrap replicates per report unless told otherwise
-DEFAULT_REPLICATES = 2000
+#: bootstrap replicates per report unless told otherwise (its range: ``campaign report --replicates``)
+DEFAULT_REPLICATES = BOOTSTRAP_REPLICATES.default
 #: bootstrap seed per report unless told otherwise (recorded in every report)
 DEFAULT_SEED = 14
 #: replicates per weight block (fixed: the weights of a seed must not depend on memory settings)

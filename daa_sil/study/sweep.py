@@ -120,37 +120,61 @@ def _point(base, vary: Vary, value):
 
 def run_sweep(base, vary: Vary, out_dir: "str | Path", *, workers: int = 1, scheduler: "str | None" = None,
               resume: bool = False, progress: bool = True, say: "Callable[[str], None] | None" = None,
-              batch_rows: "int | None" = None) -> dict:
+              batch_rows: "int | None" = None, allow_large: bool = False, force: bool = False) -> dict:
     """Run (or resume) every point of a sweep, then write its table and figures. Returns sweep.json.
-    ``batch_rows``: encounter rows per task of each campaign (default the campaign runner's)."""
+    ``batch_rows``: encounter rows per task of each campaign (default the campaign runner's). Every
+    point's memory estimate is checked before the first starts (``allow_large`` as in
+    :func:`~daa_sil.study.campaign.run_campaign`); ``force`` replaces a previous sweep in ``out_dir``."""
     from .campaign import run_campaign
+    from .campaign_memory import campaign_memory
+    from .campaign_plan import DEFAULT_BATCH_ROWS
+    from daa_sil.out_dir import claim_out_dir, contents
     from daa_sil.study.campaign_files import check_out_dir
-    from daa_sil.files import atomic_write_json, ensure_dir, to_jsonable
+    from daa_sil.files import atomic_write_json, to_jsonable
 
     configs = point_configs(base, vary)
     out = Path(out_dir)
-    check_out_dir(out, resume)
+    check_out_dir(out, resume, force)
+    remote = bool(scheduler) and scheduler != "local-dask"
+    for cfg, v in zip(configs, vary.values):
+        try:
+            campaign_memory(cfg, workers, batch_rows or DEFAULT_BATCH_ROWS, remote=remote).check(
+                allow_large, "use fewer --encounters, --intruders, --workers or --batch-rows")
+        except UsageError as exc:
+            raise UsageError(f"--vary {vary.name}={v}: {exc}") from None
     meta_path = out / "sweep.json"
     meta = {"format": SWEEP_FORMAT, "vary": vary.name, "field": vary.field, "values": list(vary.values),
             "base": base.to_dict(), "points": [{"value": v, "dir": f"points/{vary.slug(v)}"} for v in vary.values]}
     meta = json.loads(json.dumps(to_jsonable(meta)))
-    if meta_path.is_file():
+    if meta_path.is_file() and not force:
         stored = json.loads(meta_path.read_text(encoding="utf-8"))
         diff = [k for k in ("vary", "values", "base") if stored.get(k) != meta[k]]
         if diff:
             raise UsageError(f"--resume: {meta_path} was made with different settings ({', '.join(diff)}); "
                              f"pass the same --vary and options or choose a new --out")
-    ensure_dir(out)
-    atomic_write_json(meta_path, meta)
-    for cfg, point in zip(configs, meta["points"]):
-        d = out / point["dir"]
-        again = d.is_dir() and any(d.iterdir())
-        if say:
-            say(f"{vary.name} = {point['value']}: {'resuming' if again else 'running'} {d}")
-        run_campaign(cfg, d, workers=workers, scheduler=scheduler, resume=again, progress=progress,
-                     **({"batch_rows": batch_rows} if batch_rows is not None else {}))
-    write_summary(out)
+    with claim_out_dir(out, keep=resume, replace=remove_sweep if force else None,
+                       hint="pass --resume to continue the sweep there, --force to replace it, or choose a new directory"):
+        atomic_write_json(meta_path, meta)
+        for cfg, point in zip(configs, meta["points"]):
+            d = out / point["dir"]
+            again = bool(contents(d))
+            if say:
+                say(f"{vary.name} = {point['value']}: {'resuming' if again else 'running'} {d}")
+            run_campaign(cfg, d, workers=workers, scheduler=scheduler, resume=again, progress=progress,
+                         allow_large=True,  # checked above, every point
+                         **({"batch_rows": batch_rows} if batch_rows is not None else {}))
+        write_summary(out)
     return meta
+
+
+def remove_sweep(out: Path) -> None:
+    """``--force``: remove a previous sweep's files from ``out`` (``sweep.json``, its table and figures,
+    ``points/``); anything else stays."""
+    import shutil
+
+    for f in ("sweep.json", "sweep.csv", "sweep.md", *(p.name for p in out.glob("sensitivity_*.png"))):
+        (out / f).unlink(missing_ok=True)
+    shutil.rmtree(out / "points", ignore_errors=True)
 
 
 def _load(out: Path) -> dict:

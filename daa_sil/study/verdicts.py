@@ -1,31 +1,44 @@
 """Verdict rules: each finding of the paper (:mod:`daa_sil.study.findings`) tested on the study of one
 reading (:class:`daa_sil.study.analysis.Study`). Every rule can come out "no"; no rule has a hand-set
 threshold: the level is the report's (95 %) for every interval and test, and the one other number, an
-equivalence margin, is stated with its reason in ``paper_findings.yaml``.
+equivalence margin, comes from a stated reason in ``paper_findings.yaml``.
+
+The paper's numbers are estimates from its own 10,000 encounters per group: a value or a change is
+compared as **two samples** (:mod:`daa_sil.study.comparison`), never by asking whether the paper's
+number lies inside our interval (which narrows as our N grows while the paper's error stays).
 
 The rules (:data:`RULES`, printed in the report):
 
-* **value** -- reproduced if the paper's value lies in our 95 % CI; else not reproduced.
-* **change** -- reproduced if the paper's value lies in our CI; direction holds if not, but our change
-  has the paper's sign and our CI excludes 0; else not reproduced.
-* **equivalence** ("no change") -- two one-sided tests (TOST) at 5 % against the stated margin:
-  reproduced if our 90 % CI lies inside ±margin; not reproduced if our 95 % CI lies wholly outside
-  it; else consistent (not shown) (e.g. a CI containing 0 but wider than the margin).
+* **value** -- reproduced if the 95 % interval of ours minus the paper's (the paper's standard error
+  estimated from our per-encounter variance at its N) includes 0; else not reproduced.
+* **change** -- reproduced as a value; direction holds if not, but our change has the paper's sign and
+  our CI excludes 0; else not reproduced.
+* **equivalence** ("no change") -- two one-sided tests (TOST) at 5 % against the margin: reproduced if
+  our 90 % CI lies inside ±margin; not reproduced if our 95 % CI lies wholly outside it; else
+  consistent (not shown). The margin is the paper's minimum detectable difference (a study cannot
+  call "almost the same" a difference it could not see), or a number with its reason.
 * **zero** ("none happened") -- reproduced if we observe none (exact upper bounds stated); else our
-  encounters with one, k of n, against the paper's 0 of its 10,000 by Fisher's exact two-sided test:
-  consistent (not shown) if p >= 0.05, not reproduced if p < 0.05. The counts are printed, with the
-  smallest k the test could tell from 0 (about 6 of 10,000: rates below a few in 10^4 cannot be told
-  apart with N = 10,000).
-* **bound** ("below B") -- reproduced if our upper 95 % limit is below B; not reproduced if our lower
-  limit is at or above B; else consistent (not shown).
-* **category** (an FAA likelihood band) -- reproduced if our whole CI lies in the band (a boundary
-  belongs to the more frequent band); not reproduced if it lies wholly outside; else consistent (not
-  shown).
+  encounters with one, k of n, against the paper's 0 of its 10,000 per group (pooled findings: over
+  all their groups) by Fisher's exact two-sided test: consistent (not shown) if p >= 0.05, not
+  reproduced if p < 0.05.
+* **bound** ("below B") -- reproduced if our upper 95 % limit is below B; not reproduced if our value
+  exceeds B by more than the two samples' combined error (the paper's value below B is an estimate
+  too); else consistent (not shown).
+* **category** (an FAA likelihood band) -- reproduced if our whole CI lies in the band; not reproduced if
+  it lies wholly outside; else consistent (not shown). A band that summarises a number the paper
+  gives (``summarises``) and holds values the two-sample test of that number rejects is
+  **uninformative**: a pass or a straddle is counted apart, a failure still counts.
 * **ordering** ("X has the fewest / most / more than Y") -- each pair tested over the encounters both
   groups flew (exact McNemar for encounter events, a paired-bootstrap test of the difference
   otherwise), the p-values of all pairs of all orderings from one table or figure corrected together
   by Holm's method: reproduced if every pair is significant in the stated direction; not reproduced if
-  any is significant the other way; else consistent (not shown).
+  any is significant the other way; else consistent (not shown). Where the paper's tables give both
+  groups' values (``size``), a relation that holds is reproduced only at the paper's size (the two
+  samples' difference test); at another size it is *direction holds*.
+* **nested** -- a claim implied by another (``nested_in``) is tested with it: one claim, counted once,
+  under the other.
+* **input** -- a number a setting of the reading was inferred from (``campaign.json`` ``basis``) is
+  counted apart, whatever our value.
 * **by construction** -- a finding marked ``by_construction`` in ``paper_findings.yaml`` (with why):
   its kind's rule is applied; if it holds the verdict is *by construction* (counted apart from the
   empirical findings), if not *not reproduced* (the construction has a defect).
@@ -42,76 +55,48 @@ from scipy.stats import fisher_exact
 from daa_sil.errors import FileFormatError
 from daa_sil.study.analysis import Study
 from daa_sil.study.counting import COUNT_SOURCES
-from daa_sil.study.findings import (BY_CONSTRUCTION, CONSISTENT, DIRECTION, EVENT_COLUMNS, NOT_REPRODUCED,
-                                    NOT_TESTABLE, REPRODUCED, Finding, fmt, load_findings)
+from daa_sil.study.comparison import (accepted_range, detectable_difference, n_paper, standard_error, two_sample,
+                                     wider_than)
+from daa_sil.study.findings import (BY_CONSTRUCTION, CONSISTENT, DIRECTION, EVENT_COLUMNS, INPUT, NESTED,
+                                    NOT_REPRODUCED, NOT_TESTABLE, REPRODUCED, UNINFORMATIVE, Finding, fmt,
+                                    load_findings)
+from daa_sil.study.outcome import Outcome
+from daa_sil.study.verdict_orderings import bootstrap_p, holm, ordering, ordering_pairs
 from daa_sil.study.metrics import Estimate, faa_category, paper_results
 from daa_sil.study.stats import Sample, clopper_pearson, zero_upper_bounds
 
 RULES = {
-    "value": "reproduced if the paper's value is inside our 95 % CI; otherwise not reproduced",
-    "change": "reproduced if the paper's value is inside our 95 % CI; direction holds if not, but the sign is "
-              "the paper's and our CI excludes 0; otherwise not reproduced",
-    "equivalence": "two one-sided tests at 5 % against the margin stated in paper_findings.yaml: reproduced if our "
-                   "90 % CI lies inside ±margin; not reproduced if our 95 % CI lies wholly outside it; otherwise "
-                   "consistent (not shown)",
+    "value": "two samples: reproduced if the 95 % interval of ours minus the paper's (the paper's standard error "
+             "estimated from our per-encounter variance at its N) includes 0; otherwise not reproduced",
+    "change": "as a value; direction holds if not, but the sign is the paper's and our CI excludes 0; otherwise not "
+              "reproduced",
+    "equivalence": "two one-sided tests at 5 % against the margin: reproduced if our 90 % CI lies inside ±margin; not "
+                   "reproduced if our 95 % CI lies wholly outside it; otherwise consistent (not shown). The margin is "
+                   "the paper's minimum detectable difference (two-sided 5 %, 80 % power, from our paired "
+                   "per-encounter differences at its N): 'almost the same' cannot mean less than its study could see",
     "zero": "reproduced if we observe none (exact upper bounds stated); otherwise Fisher's exact two-sided test of our "
-            "k of n encounters against the paper's 0 of 10,000: consistent (not shown) if p ≥ 0.05, not reproduced if "
-            "p < 0.05 (with N = 10,000 the test cannot tell rates below a few in 10⁴ from 0; counts shown)",
-    "bound": "reproduced if our upper 95 % limit is below the bound; not reproduced if our lower limit is at or "
-             "above it; otherwise consistent (not shown)",
+            "k of n encounters against the paper's 0 of 10,000 per group (pooled over a pooled finding's groups): "
+            "consistent (not shown) if p ≥ 0.05, not reproduced if p < 0.05 (with N = 10,000 the test cannot tell "
+            "rates below a few in 10⁴ from 0; counts shown)",
+    "bound": "reproduced if our upper 95 % limit is below the bound; not reproduced if our value exceeds it by more "
+             "than the two samples' combined 95 % error; otherwise consistent (not shown)",
     "category": "reproduced if our whole 95 % CI lies inside the band; not reproduced if it lies wholly outside; "
-                "otherwise consistent (not shown)",
+                "otherwise consistent (not shown). A band that holds values the two-sample test of the number it "
+                "summarises rejects is uninformative: a pass or a straddle is counted apart",
     "ordering": "each pair over the same encounters (exact McNemar for LoWC / NMAC encounters, paired-bootstrap test "
                 "of the difference otherwise), the p-values of all pairs of the orderings of one table or figure "
                 "Holm-corrected together: reproduced if every pair is significant in the stated direction; not "
-                "reproduced if any is significant the other way; otherwise consistent (not shown)",
+                "reproduced if any is significant the other way; otherwise consistent (not shown). Where the paper "
+                "gives both values, a relation that holds at another size (two samples) is direction holds",
+    "nested": "a claim implied by another is tested with it: one claim, counted once under the other",
+    "input": "a number a setting of the reading was inferred from is counted apart, whatever our value",
     "by construction": "a check the code makes true whatever the data (why: in paper_findings.yaml): its kind's "
                        "rule is applied; by construction if it holds (counted apart from the empirical findings), "
                        "not reproduced if it fails (a defect)",
 }
 
 
-@dataclass(frozen=True)
-class Outcome:
-    """One finding under one reading: our value and interval (as text and numbers), the verdict
-    and the evidence for it."""
-
-    verdict: str
-    text: str
-    evidence: str = ""
-    value: float = math.nan
-    lo: float = math.nan
-    hi: float = math.nan
-
-    @property
-    def has_interval(self) -> bool:
-        return math.isfinite(self.lo) or math.isfinite(self.hi)
-
-
 # --- statistics the rules need --------------------------------------------------------------------
-def holm(pvalues) -> np.ndarray:
-    """Holm-adjusted p-values (step-down, monotone, capped at 1), in the input order."""
-    p = np.asarray(pvalues, float)
-    m = p.size
-    if m == 0:
-        return p
-    order = np.argsort(p, kind="stable")
-    adj = np.minimum(1.0, np.maximum.accumulate((m - np.arange(m)) * p[order]))
-    out = np.empty(m)
-    out[order] = adj
-    return out
-
-
-def bootstrap_p(smp: Sample) -> float:
-    """Two-sided paired-bootstrap p-value of "the difference is 0": twice the smaller share of
-    resamples on either side of 0 (at least 1 / (B + 1))."""
-    r = smp.reps[np.isfinite(smp.reps)]
-    if r.size == 0 or not math.isfinite(smp.value):
-        return math.nan
-    tail = min(np.count_nonzero(r <= 0), np.count_nonzero(r >= 0))
-    return float(min(1.0, max(2.0 * tail / r.size, 1.0 / (r.size + 1))))
-
-
 def zero_test(k: int, n: int, n_paper: int, alpha: float) -> tuple[float, int]:
     """Fisher's exact two-sided p-value of k of n against 0 of ``n_paper``, and the smallest k that
     would give p < ``alpha`` (the test's reach)."""
@@ -137,10 +122,22 @@ def evaluate(f: Finding, st: Study, holm_p: "dict | None" = None) -> Outcome:
                    f"{out.evidence}", out.value, out.lo, out.hi)
 
 
+def _n_ours(f: Finding, st: Study) -> float:
+    """Our encounters per group behind finding ``f`` (the paper's N is per group too)."""
+    groups = (f.group,) if f.group else tuple(f.pooled)
+    return float(min(st.n_encounters(g) for g in groups))
+
+
+def _two_sample(f: Finding, st: Study, est: Estimate):
+    """Ours minus the paper's value of ``f`` as two samples (:func:`daa_sil.study.comparison.two_sample`)."""
+    se = standard_error(finding_sample(f, st).reps)
+    return two_sample(est.value, se, f.paper_value(), _n_ours(f, st), n_paper(), st.conf)
+
+
 def _evaluate(f: Finding, st: Study, holm_p) -> Outcome:
     missing = [g for g in f.groups_needed if g not in st.groups]
     if f.kind == "ordering":
-        return _ordering(f, st, missing, holm_p)
+        return ordering(f, st, missing, holm_p)
     if missing:
         return Outcome(NOT_TESTABLE, "–", f"group(s) {', '.join(missing)} not in this reading")
     if not all(st.available(g, f.metric) for g in f.groups_needed):
@@ -155,7 +152,9 @@ def _evaluate(f: Finding, st: Study, holm_p) -> Outcome:
     res = dict(value=est.value, lo=est.lo, hi=est.hi)
     if f.kind in ("value", "change"):
         p = f.paper_value()
-        if est.lo <= p <= est.hi:
+        two = _two_sample(f, st, est)
+        ev = "; ".join(x for x in (two.text(lambda x: fmt(x, f.value_format)), ev) if x)
+        if two.matches:
             return Outcome(REPRODUCED, txt, ev, **res)
         if f.kind == "change" and p != 0 and np.sign(est.value) == np.sign(p) and (est.lo > 0 or est.hi < 0):
             return Outcome(DIRECTION, txt, ev, **res)
@@ -164,15 +163,38 @@ def _evaluate(f: Finding, st: Study, holm_p) -> Outcome:
         return _equivalence(f, st, est, txt)
     if f.kind == "bound":
         b = float(f.bound)
-        verdict = REPRODUCED if est.hi < b else (NOT_REPRODUCED if est.lo >= b else CONSISTENT)
+        se = standard_error(finding_sample(f, st).reps)
+        over = two_sample(est.value, se, b, _n_ours(f, st), n_paper(), st.conf)  # ours minus the bound
+        ev = "; ".join(x for x in (f"ours − the bound {fmt(over.diff)}, lower two-sample limit {fmt(over.lo)}", ev) if x)
+        verdict = REPRODUCED if est.hi < b else (NOT_REPRODUCED if over.lo > 0 else CONSISTENT)
         return Outcome(verdict, txt, ev, **res)
     if f.kind == "category":
-        lo_b, hi_b = paper_results()["faa_likelihood"][f.category]
-        inside = est.lo >= lo_b and est.hi < hi_b
-        outside = est.hi < lo_b or est.lo >= hi_b
-        ev = f"CI from {faa_category(est.lo)} to {faa_category(est.hi)}" + (f"; {ev}" if ev else "")
-        return Outcome(REPRODUCED if inside else (NOT_REPRODUCED if outside else CONSISTENT), txt, ev, **res)
+        return _category(f, st, est, txt, ev, res)
     raise FileFormatError(f"finding {f.id}: unknown kind {f.kind!r}")
+
+
+def _category(f: Finding, st: Study, est: Estimate, txt: str, ev: str, res: dict) -> Outcome:
+    lo_b, hi_b = paper_results()["faa_likelihood"][f.category]
+    inside = est.lo >= lo_b and est.hi < hi_b
+    outside = est.hi < lo_b or est.lo >= hi_b
+    ev = f"CI from {faa_category(est.lo)} to {faa_category(est.hi)}" + (f"; {ev}" if ev else "")
+    verdict = REPRODUCED if inside else (NOT_REPRODUCED if outside else CONSISTENT)
+    if f.summarises and verdict != NOT_REPRODUCED:
+        ref = next((g for g in load_findings() if g.id == f.summarises and g.group == f.group), None)
+        if ref is not None and ref.paper_value() is not None:
+            se = standard_error(finding_sample(f, st).reps)
+            acc = accepted_range(ref.paper_value(), se, _n_ours(f, st), n_paper(), st.conf)
+            if wider_than((lo_b, hi_b), acc):
+                k = FORMATS_SCI
+                return Outcome(UNINFORMATIVE, txt,
+                               f"the band [{fmt(lo_b, k)}, {fmt(hi_b, k)}) holds values the paper's own number "
+                               f"({fmt(ref.paper_value(), k)}, finding {ref.id}) rules out: estimates of ours from "
+                               f"{fmt(acc[0], k)} to {fmt(acc[1], k)} match it; {verdict} here shows nothing; {ev}",
+                               **res)
+    return Outcome(verdict, txt, ev, **res)
+
+
+FORMATS_SCI = "sci"
 
 
 def _change_sample(f: Finding, st: Study) -> Sample:
@@ -202,11 +224,23 @@ def _estimate(f: Finding, st: Study) -> Estimate:
     return st._boot_estimate(finding_sample(f, st), f"mean over {', '.join(f.pooled)} (paired bootstrap)")
 
 
+def equivalence_margin(f: Finding, st: Study) -> tuple[float, str]:
+    """The margin of an equivalence finding (in its unit, %) and its reason: the number stated, or the
+    paper's minimum detectable difference from our paired change at its N (``margin_rule``)."""
+    if not f.margin_rule:
+        return float(f.margin), f.margin_reason
+    smp = _change_sample(f, st)
+    m = detectable_difference(standard_error(smp.reps), _n_ours(f, st), n_paper(), st.conf)
+    return m, f"{f.margin_reason}: {fmt(m, 'f2')} %"
+
+
 def _equivalence(f: Finding, st: Study, est: Estimate, txt: str) -> Outcome:
-    m = float(f.margin)
+    m, reason = equivalence_margin(f, st)
     lo90, hi90 = _change_sample(f, st).interval(1.0 - 2.0 * (1.0 - st.conf))
     res = dict(value=est.value, lo=est.lo, hi=est.hi)
-    ev = (f"90 % CI [{fmt(lo90, 'pctv')}, {fmt(hi90, 'pctv')}] against the margin ±{m:g} % ({f.margin_reason})")
+    ev = f"90 % CI [{fmt(lo90, 'pctv')}, {fmt(hi90, 'pctv')}] against the margin ±{fmt(m, 'f2')} % ({reason})"
+    if not math.isfinite(m):
+        return Outcome(NOT_TESTABLE, txt, "no margin: the change's standard error is undefined")
     if -m < lo90 and hi90 < m:
         return Outcome(REPRODUCED, txt, "equivalent (TOST): " + ev, **res)
     if est.lo >= m or est.hi <= -m:
@@ -230,84 +264,39 @@ def _zero_column(metric: str) -> str:
 
 def _zero(f: Finding, st: Study) -> Outcome:
     col = _zero_column(f.metric)
-    e = st.per_enc[f.group]
-    ok = e["present"] > 0
-    k = float(e[col][ok].sum())
-    n = int(ok.sum())
-    k_enc = int(np.count_nonzero(e[col][ok] > 0))
+    groups = (f.group,) if f.group else tuple(f.pooled)
+    k = k_enc = n = 0
+    for g in groups:
+        e = st.per_enc[g]
+        ok = e["present"] > 0
+        k += float(e[col][ok].sum())
+        n += int(ok.sum())
+        k_enc += int(np.count_nonzero(e[col][ok] > 0))
+    over = f" over {', '.join(groups)}" if len(groups) > 1 else ""
     if k == 0:
         one, two = zero_upper_bounds(n, st.conf)
         return Outcome(REPRODUCED,
-                       f"0 of {n:,} enc. (share ≤ {fmt(one, 'pct2')} one-sided, ≤ {fmt(two, 'pct2')} two-sided)",
+                       f"0 of {n:,} enc.{over} (share ≤ {fmt(one, 'pct2')} one-sided, ≤ {fmt(two, 'pct2')} two-sided)",
                        f"exact upper bounds on the share of encounters with one: {one:.3g} (one-sided "
                        f"{100 * st.conf:.0f} %), {two:.3g} (upper limit of the two-sided interval)",
                        0.0, 0.0, two)
-    n_paper = int(paper_results().get("encounters_per_group", 10000))
+    n_p = n_paper() * len(groups)
     alpha = 1.0 - st.conf
-    p, k_min = zero_test(k_enc, n, n_paper, alpha)
+    p, k_min = zero_test(k_enc, n, n_p, alpha)
     lo, hi = clopper_pearson(k_enc, n, st.conf)
     verdict = NOT_REPRODUCED if p < alpha else CONSISTENT
-    return Outcome(verdict, f"{fmt(k, 'int')} in {k_enc:,} of {n:,} enc. [{fmt(lo, 'pct')}, {fmt(hi, 'pct')}]",
-                   f"{k_enc} of {n:,} encounters vs the paper's 0 of {n_paper:,}: Fisher's exact two-sided p = "
+    return Outcome(verdict, f"{fmt(k, 'int')} in {k_enc:,} of {n:,} enc.{over} [{fmt(lo, 'pct')}, {fmt(hi, 'pct')}]",
+                   f"{k_enc} of {n:,} encounters vs the paper's 0 of {n_p:,}: Fisher's exact two-sided p = "
                    f"{p:.2g}; the test reaches p < {alpha:g} only from {k_min} encounters (Clopper-Pearson interval of "
                    f"our share in brackets)", float(k), lo, hi)
 
 
-# --- orderings ------------------------------------------------------------------------------------
-def ordering_pairs(f: Finding, st: Study) -> list[dict]:
-    """Each pair of an ordering: ``{group, value (subject minus other), p, text}`` over the encounters
-    both flew (groups not in the study are left out)."""
-    o = f.ordering
-    subj = o["subject"]
-    out = []
-    event = EVENT_COLUMNS.get(f.metric)
-    for g in (x for x in o["others"] if x in st.groups):
-        if event:
-            m = st.mcnemar(subj, g, event)
-            val = float(m.a_only - m.b_only)
-            out.append({"group": g, "value": val, "p": float(m.p_value),
-                        "text": f"vs {g}: {int(val):+d} enc. ({m.a_only}/{m.b_only} discordant, McNemar p = "
-                                f"{m.p_value:.2g}"})
-        else:
-            smp = st.change_sample(subj, f.metric, g, "difference")
-            lo, hi = smp.interval(st.conf)
-            out.append({"group": g, "value": float(smp.value), "p": bootstrap_p(smp),
-                        "text": f"vs {g}: {fmt(smp.value)} [{fmt(lo)}, {fmt(hi)}] per enc. (paired-bootstrap p = "
-                                f"{bootstrap_p(smp):.2g}"})
-    return out
-
-
-def _ordering(f: Finding, st: Study, missing, holm_p) -> Outcome:
-    o = f.ordering
-    if o["subject"] in missing:
-        return Outcome(NOT_TESTABLE, "–", f"group {o['subject']} not in this reading")
-    pairs = ordering_pairs(f, st)
-    if not pairs:
-        return Outcome(NOT_TESTABLE, "–", f"none of {', '.join(o['others'])} in this reading")
-    if holm_p is None:
-        adj = holm([p["p"] for p in pairs])
-        holm_p = {(f.id, p["group"]): a for p, a in zip(pairs, adj)}
-    sign = -1.0 if o["relation"] == "fewest" else 1.0
-    alpha = 1.0 - st.conf
-    status, parts = [], []
-    for p in pairs:
-        a = holm_p[(f.id, p["group"])]
-        parts.append(f"{p['text']}, Holm {a:.2g})")
-        if not (math.isfinite(a) and a < alpha) or p["value"] == 0:
-            status.append("open")
-        elif np.sign(p["value"]) == sign:
-            status.append("holds")
-        else:
-            status.append("contradicted")
-    verdict = (NOT_REPRODUCED if "contradicted" in status
-               else REPRODUCED if all(s == "holds" for s in status) else CONSISTENT)
-    ev = "; ".join(parts) + (f"; not run: {', '.join(missing)}" if missing else "")
-    return Outcome(verdict, "; ".join(parts), ev)
-
-
-def evaluate_all(studies: dict) -> list[tuple[Finding, dict]]:
+def evaluate_all(studies: dict, consumed: "dict | None" = None) -> list[tuple[Finding, dict]]:
     """``[(finding, {reading label: Outcome})]`` for every finding; the ordering pairs of one source
-    (table or figure) are Holm-corrected together within each reading."""
+    (table or figure) are Holm-corrected together within each reading. ``consumed`` maps a reading
+    label to the ``(finding id, group)`` its settings were inferred from (:func:`daa_sil.config.basis.
+    consumed_findings`): those are *input*. A finding ``nested_in`` another takes the verdict
+    *nested* (its own outcome in the evidence)."""
     found = load_findings()
     rows = [(f, {}) for f in found]
     for label, st in studies.items():
@@ -319,8 +308,21 @@ def evaluate_all(studies: dict) -> list[tuple[Finding, dict]]:
         holm_p = {}
         for fam in families.values():
             holm_p.update(dict(zip([k for k, _ in fam], holm([p for _, p in fam]))))
+        used = (consumed or {}).get(label, set())
         for f, outs in rows:
-            outs[label] = evaluate(f, st, holm_p if f.kind == "ordering" else None)
+            o = evaluate(f, st, holm_p if f.kind == "ordering" else None)
+            if (f.id, f.group) in used and o.verdict != NOT_TESTABLE:
+                o = Outcome(INPUT, o.text, f"a setting of this reading was inferred from this number (campaign.json "
+                            f"'basis'): not a reproduction; by the rule it would be {o.verdict}; {o.evidence}",
+                            o.value, o.lo, o.hi)
+            outs[label] = o
+        for f, outs in rows:
+            if f.nested_in and outs[label].verdict != NOT_TESTABLE:
+                o = outs[label]
+                parent = next((pf for pf, po in rows if pf.id == f.nested_in and not pf.group), None)
+                pv = parent and rows[[r[0] for r in rows].index(parent)][1][label].verdict
+                outs[label] = Outcome(NESTED, o.text, f"implied by '{f.nested_in}' and tested with it ({pv}); on its "
+                                      f"own: {o.verdict}; {o.evidence}", o.value, o.lo, o.hi)
     return rows
 
 
@@ -333,4 +335,4 @@ def tally(rows, label: str) -> dict:
 
 
 __all__ = ["RULES", "Outcome", "evaluate", "evaluate_all", "ordering_pairs", "finding_sample", "holm", "bootstrap_p",
-           "zero_test", "tally"]
+           "zero_test", "tally", "equivalence_margin", "n_paper"]

@@ -71,6 +71,28 @@ def default_workers(n_maps: int, states: int = MIN_STATES_FOR_PROCESSES) -> int:
     return max(1, min(usable_cpus(), int(n_maps)))
 
 
+#: bytes per state of one map being built (transitions, value iteration, wait times): measured 280-520
+#: per state (paper grid 72,000 states 517, alerting 1.16 M 280, 2.3 M 304; RSS over the process's own)
+BUILD_STATE_BYTES = 520
+#: bytes per state of a finished map held in memory (four float64 arrays and the LoWC flags)
+MAP_STATE_BYTES = 40
+#: what a builder process holds before its map: the interpreter, numpy and scipy (measured 60-100 MB)
+BUILDER_BASE_BYTES = 120 * 2**20
+
+
+def build_memory(grid: Grid, n_maps: int, workers: "int | None" = None):
+    """The estimated peak memory of building ``n_maps`` maps of ``grid`` in ``workers`` processes
+    (default :func:`default_workers`) and loading the family: a
+    :class:`daa_sil.resources.MemoryEstimate` to ``check()`` before anything is allocated."""
+    from ..resources import MemoryEstimate
+
+    n = default_workers(n_maps, grid.size) if workers is None else max(1, min(int(workers), int(n_maps)))
+    builders = n * (BUILDER_BASE_BYTES + grid.size * BUILD_STATE_BYTES)
+    return MemoryEstimate(f"building {n_maps} wait map{'s' if n_maps != 1 else ''} of {grid.size:,} states",
+                          ((f"{n} builder{'s' if n > 1 else ''} x {grid.size:,} states", builders),
+                           ("the finished maps", grid.size * n_maps * MAP_STATE_BYTES)))
+
+
 def build_members(grid: Grid, params: MdpParams, turn_rates: Sequence[float], directory: "str | os.PathLike",
                   workers: "int | None" = None,
                   progress: "Callable[[float], None] | None" = None) -> list[Path]:

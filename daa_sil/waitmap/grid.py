@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..config.settings import GRID_AXIS_POINTS
 from ..errors import FileFormatError, UsageError
 
 AXES = ("dx", "dy", "dh", "vi", "vh", "theta")
@@ -213,24 +214,21 @@ def _axis_from_spec(name: str, spec, base: Axis) -> Axis:
     try:
         if name == "theta":
             n = spec.get("n") if isinstance(spec, dict) else spec
-            if isinstance(n, bool) or int(n) != n or int(n) < 2:
-                raise UsageError(f"{where}: n must be an integer >= 2, got {n!r}")
-            return _theta_axis(int(n))
+            return _theta_axis(GRID_AXIS_POINTS.check(n, where, "n"))
         if isinstance(spec, (int, float)) and not isinstance(spec, bool):
             spec = {"n": spec}
         if not isinstance(spec, dict):
             raise UsageError(f"{where}: expected a mapping with min/max/n or points, got {spec!r}")
         if "points" in spec:
+            GRID_AXIS_POINTS.check(len(spec["points"]), where, "the number of points")
             pts = [float(v) for v in spec["points"]]
             return Axis(name, tuple(pts))
         lo = float(spec.get("min", base.lo))
         hi = float(spec.get("max", base.hi))
-        n = spec.get("n", base.n)
-        if isinstance(n, bool) or int(n) != n or int(n) < 2:
-            raise UsageError(f"{where}: n must be an integer >= 2, got {n!r}")
+        n = GRID_AXIS_POINTS.check(spec.get("n", base.n), where, "n")  # before any array is made
         if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
             raise UsageError(f"{where}: need finite min < max, got {lo} .. {hi}")
-        return _linear_axis(name, lo, hi, int(n))
+        return _linear_axis(name, lo, hi, n)
     except (TypeError, ValueError):
         raise UsageError(f"{where}: bad value {spec!r}") from None
 

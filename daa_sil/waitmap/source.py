@@ -55,39 +55,47 @@ def default_family(preset: str = "paper", grid: "Grid | str | None" = None, para
 
 
 def is_cached(source: "str | os.PathLike | None", preset: str = "paper", gamma: "float | None" = None,
-              turn_rates=PAPER_TURN_RATES) -> bool:
+              turn_rates=PAPER_TURN_RATES, horizon: "float | None" = None) -> bool:
     """True if :func:`family_for` would load the family (a directory, or a built cache entry)."""
-    g, p = check_source(source, preset, gamma)
+    g, p = check_source(source, preset, gamma, horizon)
     if g is None:
         return True
     return entry_ready(params_hash(g.to_dict(), p, turn_rates), turn_rates)
 
 
 def family_for(source: "str | os.PathLike | None", preset: str = "paper", gamma: "float | None" = None,
-               progress: "Callable[[float], None] | None" = None) -> WaitMapFamily:
+               progress: "Callable[[float], None] | None" = None, horizon: "float | None" = None) -> WaitMapFamily:
     """The wait-map family of a ``--waitmap`` value: a family directory written by ``waitmap build``,
     or a map preset / grid spec (built and cached). ``preset`` is the run's LoWC threshold preset;
-    a directory built for another preset is refused. ``gamma`` overrides the discount (presets only)."""
+    a directory built for another preset is refused. ``gamma`` overrides the discount and ``horizon``
+    the wait-time horizon H (s; a reading's ``wait_horizon_s``), both for presets only."""
     if source is not None and Path(str(source)).is_dir():
         if gamma is not None:
             raise UsageError("--gamma applies to a map preset, not to a prebuilt wait-map directory")
+        if horizon is not None:
+            raise UsageError("a reading's wait_horizon_s applies to a map preset, not to a prebuilt wait-map directory")
         fam = load_family(source)
         if fam.params.preset != preset:
             raise UsageError(f"wait maps in {source} were built for the {fam.params.preset!r} threshold preset; "
                              f"this run uses {preset!r} (rebuild with 'daa-sil waitmap build --preset {preset}')")
         return fam
-    g, p = check_source(source, preset, gamma)
+    g, p = check_source(source, preset, gamma, horizon)
     return default_family(preset, g, p, progress=progress)
 
 
-def check_source(source: "str | os.PathLike | None", preset: str = "paper", gamma: "float | None" = None):
+def check_source(source: "str | os.PathLike | None", preset: str = "paper", gamma: "float | None" = None,
+                 horizon: "float | None" = None):
     """Validate a ``--waitmap`` value without building anything: ``(grid, params)`` of a map preset or
-    grid spec, or ``(None, None)`` for an existing directory; one-line UsageError otherwise."""
+    grid spec (with ``gamma`` / ``horizon`` H, s, overriding the preset's), or ``(None, None)`` for an
+    existing directory; one-line UsageError otherwise."""
     if source is not None and Path(str(source)).is_dir():
         return None, None
     name = DEFAULT_MAP if source is None else str(source)
+    over = {"gamma": float(gamma)} if gamma is not None else {}
+    if horizon is not None:
+        over["horizon"] = float(horizon)
     try:
-        return map_params(name, preset, **({"gamma": float(gamma)} if gamma is not None else {}))
+        return map_params(name, preset, **over)
     except UsageError:
         raise UsageError(f"--waitmap {name!r} is not a map preset ({', '.join(MAP_PRESETS)}), a grid spec "
                          f"(paper,dx=24,...), a grid YAML file or a directory from 'daa-sil waitmap build'") from None

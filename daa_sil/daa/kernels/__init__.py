@@ -20,7 +20,7 @@ from types import SimpleNamespace
 from daa_sil.jit_cache import READY_MARKER, cache_dir, is_warm, mark_ready
 
 _MODULES = ("elementwise", "evaluate", "motion", "regions", "resolve", "axis_pass", "select", "flight",
-            "command_plan")
+            "command_plan", "recovery")
 #: a cold cache: compiled first, here, as the helper's modules import them (the helper then loads them)
 SHARED_MODULES = ("motion", "flight")
 #: a cold cache: compiled by a helper process while this one compiles the rest (:func:`compile_part`)

@@ -22,17 +22,24 @@ from daa_sil.daa.kernels.signatures import A, F, O2
 INF = math.inf
 
 
-@kernel(boolean(A, A, A, A, A, A, A, A, A, F, F, F, F, F, F, F, F, F, F, F, F, F, F,
-                types.Array(types.float64, 3, "C"), O2, O2))
-def command_plan_into(x, y, z, gs, trk, vs, cmd_trk, cmd_vs, cmd_gs, max_turn, h_acc, v_acc, min_gs, max_gs, max_vs,
-                      turn_rate, cfg_v_acc, cfg_h_acc, knot_trk, knot_vs, knot_gs, straight, eps, phases, enc, plan):
+@kernel(boolean(types.UniTuple(A, 6), types.UniTuple(A, 3), types.UniTuple(F, 6), types.UniTuple(F, 3),
+                types.UniTuple(F, 3), F, F, types.Array(types.float64, 3, "C"), O2, O2))
+def command_plan_into(own, cmd, perf, rates, knot, straight, eps, phases, enc, plan):
     """Per encounter ``i``: the motion's phases ``phases[i]`` (3, 9: start time, x, y, gs, trk, turn rate,
     acceleration, sine and cosine of the start track; ``_CommandMotion``), its constants ``enc[i]`` (7:
     track change, commanded track, speed change, target speed, altitude, vertical speed, target vertical
     speed) and ``plan[i]`` (columns: :mod:`daa_sil.daa.kernels.plan_layout`). The first six inputs are the ownship, the next
     three the command (nan = keep), then the performance limits and the configuration's rates and knot
     spacings. Returns True when some phase turns slower than ``straight`` (rad/s) without being straight:
-    the numpy motion then treats it as straight, and the caller must use the numpy reference."""
+    the numpy motion then treats it as straight, and the caller must use the numpy reference. Records:
+    ``own`` = ``(x, y, z, gs, trk, vs)``, ``cmd`` = ``(trk, vs, gs)``, ``perf`` = ``(max_turn, h_acc, v_acc,
+    min_gs, max_gs, max_vs)``, ``rates`` = ``(turn_rate, v_acc, h_acc)`` and ``knot`` = ``(trk, vs, gs)`` of the
+    configuration."""
+    x, y, z, gs, trk, vs = own
+    cmd_trk, cmd_vs, cmd_gs = cmd
+    max_turn, h_acc, v_acc, min_gs, max_gs, max_vs = perf
+    turn_rate, cfg_v_acc, cfg_h_acc = rates
+    knot_trk, knot_vs, knot_gs = knot
     exotic = False
     for i in range(phases.shape[0]):
         g, tr, v = at(gs, i), at(trk, i), at(vs, i)

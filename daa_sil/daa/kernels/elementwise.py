@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-from numba import boolean, int8, void
+from numba import boolean, int8, types, void
 
 from daa_sil.daa.kernels.jit import inline, kernel
 from daa_sil.daa.kernels.pieces import classify, clear2
@@ -19,10 +19,15 @@ from daa_sil.daa.kernels.scalar import EPS, interval, npmax, npmin, vertical_win
 from daa_sil.daa.kernels.signatures import A, O, I8, F
 
 
-@kernel(void(A, A, A, A, A, A, A, A, A, boolean, F, F, F, F, F, F, O, O))
-def interval_into(sx, sy, sz, vx, vy, vz, length, wlo, whi, has_win, D, DD, D2, TT, H, TC, t_in, t_out):
-    """Violation interval of each straight line over ``[0, length]`` (vertical window ``wlo``/``whi``
-    when ``has_win``) into ``t_in``/``t_out``."""
+@kernel(void(types.UniTuple(A, 6), A, types.UniTuple(A, 2), boolean, types.UniTuple(F, 6), types.UniTuple(O, 2)))
+def interval_into(rel, length, win, has_win, ivol, out):
+    """Violation interval of each straight line ``rel`` = ``(sx, sy, sz, vx, vy, vz)`` over ``[0, length]``
+    (vertical window ``win`` = ``(wlo, whi)`` when ``has_win``; ``ivol`` = ``(D, D * D, D ** 2, TTHR, ZTHR,
+    TCOA)``) into ``out`` = ``(t_in, t_out)``."""
+    sx, sy, sz, vx, vy, vz = rel
+    wlo, whi = win
+    D, DD, D2, TT, H, TC = ivol
+    t_in, t_out = out
     for i in range(sx.shape[0]):
         if has_win:
             lo, hi = wlo[i], whi[i]
@@ -39,21 +44,37 @@ def wcv_soa_into(sx, sy, sz, vx, vy, vz, DD, TT, H, TC, out):
         out[i] = wcv_soa(sx[i], sy[i], sz[i], vx[i], vy[i], vz[i], DD, TT, H, TC)
 
 
-@kernel(void(A, A, A, A, A, A, A, A, A, A, A, A, boolean, F, F, F, F, F, int8[:]), lazy=True)
-def classify_into(x0, y0, z0, x1, y1, z1, h, e_p, e_v, e_z, wlo, whi, has_win, D, DD, H, TT, TC, out):
-    """CLEAR / INSIDE / UNDECIDED code of each chord piece into ``out``."""
+#: records: relative positions ``(x, y, z)`` and horizontal velocities ``(x, y)`` (arrays), error bounds
+#: ``(e_p, e_v, e_z)`` (arrays), the volume ``(D, D * D, ZTHR, TTHR, TCOA)``
+_XYZ, _XY, _ERR, _VOL = types.UniTuple(A, 3), types.UniTuple(A, 2), types.UniTuple(A, 3), types.UniTuple(F, 5)
+
+
+@kernel(void(_XYZ, _XYZ, A, _ERR, _XY, boolean, _VOL, int8[:]), lazy=True)
+def classify_into(p0, p1, h, err, win, has_win, vol, out):
+    """CLEAR / INSIDE / UNDECIDED code of each chord piece (from ``p0`` to ``p1`` in ``h`` s, error bounds
+    ``err``, vertical window ``win`` = ``(lo, hi)`` when ``has_win``) into ``out``."""
+    x0, y0, z0 = p0
+    x1, y1, z1 = p1
+    e_p, e_v, e_z = err
+    wlo, whi = win
     for i in range(x0.shape[0]):
         lo, hi = (wlo[i], whi[i]) if has_win else (0.0, 0.0)
-        out[i] = classify(x0[i], y0[i], z0[i], x1[i], y1[i], z1[i], h[i], e_p[i], e_v[i], e_z[i], lo, hi, has_win,
-                          D, DD, H, TT, TC)
+        out[i] = classify((x0[i], y0[i], z0[i]), (x1[i], y1[i], z1[i]), h[i], e_p[i], e_v[i], e_z[i], lo, hi,
+                          has_win, vol)
 
 
-@kernel(void(A, A, A, A, A, A, A, A, A, A, A, A, A, A, F, F, F, F, F, boolean[:]), lazy=True)
-def clear2_into(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, e_p, e_v, e_z, D, DD, H, TT, TC, out):
-    """Second-order CLEAR certificate of each piece into ``out``."""
+@kernel(void(_XYZ, _XYZ, _XY, _XY, A, _ERR, _VOL, boolean[:]), lazy=True)
+def clear2_into(p0, p1, u0, u1, h, err, vol, out):
+    """Second-order CLEAR certificate of each piece (relative positions ``p0``/``p1`` and horizontal velocities
+    ``u0``/``u1`` at its ends, ``h`` s, error bounds ``err``) into ``out``."""
+    x0, y0, z0 = p0
+    x1, y1, z1 = p1
+    u0x, u0y = u0
+    u1x, u1y = u1
+    e_p, e_v, e_z = err
     for i in range(x0.shape[0]):
-        out[i] = clear2(x0[i], y0[i], z0[i], x1[i], y1[i], z1[i], u0x[i], u0y[i], u1x[i], u1y[i], h[i], e_p[i],
-                        e_v[i], e_z[i], D, DD, H, TT, TC)
+        out[i] = clear2((x0[i], y0[i], z0[i]), (x1[i], y1[i], z1[i]), (u0x[i], u0y[i]), (u1x[i], u1y[i]), h[i],
+                        e_p[i], e_v[i], e_z[i], vol)
 
 
 #: daa.config DIR_* codes by (axis code, side + 1) (daa.config.side_to_dir's table)
@@ -140,13 +161,17 @@ def t_cpa(sx, sy, vx, vy):
     return -(sx * vx + sy * vy) / a if a > EPS else 0.0
 
 
-@kernel(void(A, A, A, A, A, A, F, F, F, F, F, F, F, F, O, O, O, O, boolean[:]))
-def geometry_into(sx, sy, sz, vx, vy, vz, lookahead, dmod, dmod_sq, dthr, dthr_sq, tthr, zthr, tcoa, range_out,
-                  hmd_out, dh_out, tau_out, wcv_out):
+@kernel(void(types.UniTuple(A, 6), types.UniTuple(F, 8), types.Tuple((O, O, O, O, boolean[:]))))
+def geometry_into(rel, consts, out):
     """``wellclear.encounter_geometry`` of each relative state: horizontal range (m), HMD within ``lookahead``
     (m), height difference (m), modified tau with DMOD ``dmod`` (s, nan when diverging outside DMOD) and the
     well-clear violation (``dthr`` .. ``tcoa``). ``dmod_sq`` is ``dmod * dmod`` and ``dthr_sq`` is
-    ``dthr ** 2``, as the numpy code computes them in Python."""
+    ``dthr ** 2``, as the numpy code computes them in Python. ``rel`` = ``(sx, sy, sz, vx, vy, vz)``, ``consts`` =
+    ``(lookahead, dmod, dmod_sq, dthr, dthr_sq, tthr, zthr, tcoa)``, ``out`` = ``(range, hmd, dh, tau_mod,
+    wcv)``."""
+    sx, sy, sz, vx, vy, vz = rel
+    lookahead, dmod, dmod_sq, dthr, dthr_sq, tthr, zthr, tcoa = consts
+    range_out, hmd_out, dh_out, tau_out, wcv_out = out
     for i in range(sx.shape[0]):
         x, y, z, u, w, h = sx[i], sy[i], sz[i], vx[i], vy[i], vz[i]
         r = math.hypot(x, y)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from numba import boolean, void
+from numba import boolean, types, void
 
 from daa_sil.daa.kernels.jit import inline, kernel
 from daa_sil.daa.kernels.scalar import npmax, npmin, npsign, vertical_toward
@@ -66,12 +66,21 @@ def zero_signed(a):
     return a == 0.0 and math.copysign(1.0, a) < 0.0
 
 
-@kernel(void(A, A, A, A, A, A, A, A, A, F, F, F, F, F, F, O, O, O, O, O, O, boolean[:]))
-def advance_into(x, y, z, gs, trk, vs, turn_rate, accel, vertical_accel, dt, max_turn, min_gs, max_gs, max_vs,
-                 straight, ox, oy, oz, ogs, otrk, ovs, second):
-    """``kinematics.advance``: every element moved by ``dt`` s. ``second[0]`` is set when the speed-limit
-    segment was flown (numpy's batch-wide rule: some element has time left after its speed limit, or a
-    zero-length segment would change a bit somewhere)."""
+#: records: a state ``(x, y, z, gs, trk, vs)`` (arrays, each of one element or N), per-element inputs (three
+#: arrays), the outputs (six arrays of N)
+_STATE, _INPUTS, _OUT = types.UniTuple(A, 6), types.UniTuple(A, 3), types.UniTuple(O, 6)
+
+
+@kernel(void(_STATE, _INPUTS, F, types.UniTuple(F, 4), F, _OUT, boolean[:]))
+def advance_into(state, inputs, dt, limits, straight, out, second):
+    """``kinematics.advance``: every element of ``state`` moved by ``dt`` s with its ``inputs`` = ``(turn_rate,
+    accel, vertical_accel)`` into ``out``; ``limits`` = ``(max_turn, min_gs, max_gs, max_vs)``. ``second[0]`` is
+    set when the speed-limit segment was flown (numpy's batch-wide rule: some element has time left after
+    its speed limit, or a zero-length segment would change a bit somewhere)."""
+    x, y, z, gs, trk, vs = state
+    turn_rate, accel, vertical_accel = inputs
+    max_turn, min_gs, max_gs, max_vs = limits
+    ox, oy, oz, ogs, otrk, ovs = out
     n = ox.shape[0]
     any_rest, keeps = False, True
     for i in range(n):
@@ -127,10 +136,14 @@ def toward(g, tr, v, ct, cv, cg, max_turn, h_acc, min_gs, max_gs, max_vs):
     return ct, tgt_gs, tgt_vs, dpsi, w, t_turn, dgs, acc, t_spd
 
 
-@kernel(void(A, A, A, A, A, A, A, A, A, F, F, F, F, F, F, F, F, O, O, O, O, O, O))
-def fly_command_into(x, y, z, gs, trk, vs, cmd_trk, cmd_vs, cmd_gs, dt, max_turn, h_acc, v_acc, min_gs, max_gs,
-                     max_vs, straight, ox, oy, oz, ogs, otrk, ovs):
-    """``kinematics.fly_command``: every element flown ``dt`` s toward its command (nan = keep)."""
+@kernel(void(_STATE, _INPUTS, F, types.UniTuple(F, 6), F, _OUT))
+def fly_command_into(state, cmd, dt, limits, straight, out):
+    """``kinematics.fly_command``: every element of ``state`` flown ``dt`` s toward its command ``cmd`` = ``(trk,
+    vs, gs)`` (nan = keep) into ``out``; ``limits`` = ``(max_turn, h_acc, v_acc, min_gs, max_gs, max_vs)``."""
+    x, y, z, gs, trk, vs = state
+    cmd_trk, cmd_vs, cmd_gs = cmd
+    max_turn, h_acc, v_acc, min_gs, max_gs, max_vs = limits
+    ox, oy, oz, ogs, otrk, ovs = out
     for i in range(ox.shape[0]):
         g, tr, v = at(gs, i), at(trk, i), at(vs, i)
         ct, tgt_gs, tgt_vs, dpsi, w, t_turn, dgs, acc, t_spd = toward(

@@ -15,9 +15,13 @@ CLEAR, INSIDE, UNDECIDED = 0, 1, 2
 
 
 @inline
-def classify(x0, y0, z0, x1, y1, z1, h, e_p, e_v, e_z, lo, hi, has_win, D, DD, H, TT, TC):
-    """:func:`daa_sil.daa.certify.classify_pieces` of one piece -> CLEAR / INSIDE / UNDECIDED; ``(lo,
-    hi)`` its vertical window when ``has_win``; ``DD`` = ``D * D``."""
+def classify(p0, p1, h, e_p, e_v, e_z, lo, hi, has_win, vol):
+    """:func:`daa_sil.daa.certify.classify_pieces` of one piece from relative position ``p0`` to ``p1`` (each
+    ``(x, y, z)``) -> CLEAR / INSIDE / UNDECIDED; ``(lo, hi)`` its vertical window when ``has_win``; ``vol`` the
+    volume ``(D, D * D, H, TT, TC)``."""
+    x0, y0, z0 = p0
+    x1, y1, z1 = p1
+    D, DD, H, TT, TC = vol
     half = 0.5 * TT
     inv = 1.0 / (h if h > 0 else 1.0)
     if not has_win:
@@ -100,8 +104,15 @@ def line_min2(ax, ay, bx, by, lo, hi):
 
 
 @inline
-def clear2(x0, y0, z0, x1, y1, z1, u0x, u0y, u1x, u1y, h, e_p, e_v, e_z, D, DD, H, TT, TC):
-    """:func:`daa_sil.daa.certify.clear_second_order` of one piece -> bool."""
+def clear2(p0, p1, u0, u1, h, e_p, e_v, e_z, vol):
+    """:func:`daa_sil.daa.certify.clear_second_order` of one piece -> bool (``p0``/``p1`` the relative positions
+    ``(x, y, z)`` at its ends, ``u0``/``u1`` the horizontal relative velocities ``(x, y)`` there, ``vol`` as
+    :func:`classify`)."""
+    x0, y0, z0 = p0
+    x1, y1, z1 = p1
+    u0x, u0y = u0
+    u1x, u1y = u1
+    D, DD, H, TT, TC = vol
     half = 0.5 * TT
     inv = 1.0 / (h if h > 0 else 1.0)
     lo, hi = vertical_window(z0, (z1 - z0) * inv, 0.0, h, H + e_z, TC)

@@ -16,7 +16,9 @@ from numba import boolean, float64, types, void
 from daa_sil.daa.kernels.jit import kernel
 from daa_sil.daa.kernels.motion import command_rel_state, rel_state
 from daa_sil.daa.kernels.scalar import halve, wcv_soa
-from daa_sil.daa.kernels.signatures import A, A2, A3, O, F, I
+from daa_sil.daa.kernels.signatures import A, A2, A3, IA, O, F, I
+
+_B1 = types.Array(boolean, 1, "A", readonly=True)
 
 
 @kernel(void(I, F, A2, A2, A, types.Array(float64, 2, "C")))
@@ -26,17 +28,23 @@ def rel_states_into(axis, rate, kin, ipv, t, out):
         out[0, i], out[1, i], out[2, i], out[3, i], out[4, i], out[5, i] = rel_state(axis, rate, kin, ipv, i, t[i])
 
 
-@kernel(void(I, F, A2, A2, O, O, types.Array(boolean, 1, "A", readonly=True), I, I, I, boolean, F, F, F, F))
-def bisect_into(axis, rate, kin, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed, DD, TT, H, TC):
-    """Halve ``[lo, hi]`` ``steps`` times keeping the predicate ``lo_in`` at ``lo``; with ``mixed``, rows
-    starting inside stop after ``n_out`` halvings and the others after ``n_in`` (``_bisect``)."""
+#: the volume of the predicate ``(D * D, TTHR, ZTHR, TCOA)``
+_VOL4 = types.UniTuple(F, 4)
+
+
+@kernel(void(I, F, A2, A2, O, O, _B1, IA, IA, IA, _B1, _VOL4))
+def bisect_into(axis, rate, kin, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed, vol):
+    """Halve row ``i``'s ``[lo, hi]`` ``steps[i]`` times keeping the predicate ``lo_in`` at ``lo``; with
+    ``mixed[i]``, a row starting inside stops after ``n_out[i]`` halvings and one starting outside after
+    ``n_in[i]`` (``_bisect``: the counts are the row's encounter's); ``vol`` = ``(D * D, TTHR, ZTHR, TCOA)``."""
+    DD, TT, H, TC = vol
     for i in range(lo.shape[0]):
         a, b, flag = lo[i], hi[i], lo_in[i]
-        for k in range(steps):
+        for k in range(steps[i]):
             mid = 0.5 * (a + b)
             sx, sy, sz, vx, vy, vz = rel_state(axis, rate, kin, ipv, i, mid)
             same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
-            a, b = halve(a, b, mid, same, k, mixed, flag, n_in, n_out)
+            a, b = halve(a, b, mid, same, k, mixed[i], flag, n_in[i], n_out[i])
         lo[i], hi[i] = a, b
 
 
@@ -48,15 +56,15 @@ def command_rel_states_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, t, out):
             ph_rows, enc, ipv, i, t[i], max_turn, h_acc, v_acc)
 
 
-@kernel(void(A3, A2, F, F, F, A2, O, O, types.Array(boolean, 1, "A", readonly=True), I, I, I, boolean, F, F, F, F))
-def command_bisect_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed,
-                        DD, TT, H, TC):
+@kernel(void(A3, A2, F, F, F, A2, O, O, _B1, IA, IA, IA, _B1, _VOL4))
+def command_bisect_into(ph_rows, enc, max_turn, h_acc, v_acc, ipv, lo, hi, lo_in, steps, n_in, n_out, mixed, vol):
     """:func:`bisect_into` on command paths."""
+    DD, TT, H, TC = vol
     for i in range(lo.shape[0]):
         a, b, flag = lo[i], hi[i], lo_in[i]
-        for k in range(steps):
+        for k in range(steps[i]):
             mid = 0.5 * (a + b)
             sx, sy, sz, vx, vy, vz = command_rel_state(ph_rows, enc, ipv, i, mid, max_turn, h_acc, v_acc)
             same = wcv_soa(sx, sy, sz, vx, vy, vz, DD, TT, H, TC) == flag
-            a, b = halve(a, b, mid, same, k, mixed, flag, n_in, n_out)
+            a, b = halve(a, b, mid, same, k, mixed[i], flag, n_in[i], n_out[i])
         lo[i], hi[i] = a, b

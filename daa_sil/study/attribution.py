@@ -1,0 +1,210 @@
+"""The attribution table: every miss of a reading (a finding *not reproduced*, or reproduced only in
+direction) in a cluster, with its named cause, the experiment that tests the cause and what the
+experiment showed -- filled from ``experiments.json`` (:mod:`daa_sil.study.experiment_suite`).
+
+:data:`CLUSTERS` is the one definition: each cluster lists its finding ids, one of :data:`CAUSES`, the
+cause in words, the experiments (keys of ``experiments.json``) and a function that words what they
+showed from their figures. Every finding of ``paper_findings.yaml`` that is not true by construction
+belongs to exactly one cluster (``tests/test_attribution.py``), so no miss is left without a row;
+:func:`attribution_rows` lists any miss outside every cluster as *unattributed* (a defect of this table).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+from daa_sil.study.experiment_analysis import diff, value
+from daa_sil.study.findings import DIRECTION, NOT_REPRODUCED, fmt
+
+#: the named causes a miss can have
+CAUSES = ("our DAA", "our pilot", "the encounter set", "the paper's vagueness", "the paper's inconsistency",
+          "a defect")
+#: the verdicts that are misses
+MISSES = (NOT_REPRODUCED, DIRECTION)
+
+
+def _f(x, kind: str = "g3") -> str:
+    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else fmt(x, kind)
+
+
+def _ci(e: dict, label: str, metric: str, kind: str = "g3", which=value) -> str:
+    v = which(e, label, metric)
+    if v is None:
+        return "–"
+    lo, hi = which(e, label, metric, "lo"), which(e, label, metric, "hi")
+    return f"{_f(v, kind)} [{_f(lo, kind)}, {_f(hi, kind)}]" if lo is not None and hi is not None else _f(v, kind)
+
+
+def _not_run(*keys) -> str:
+    return f"not run ({', '.join(keys)} missing from experiments.json)"
+
+
+def _allocation(x: dict) -> str:
+    lr, dd, out = x.get("latency_rule"), x.get("delay_draw"), x.get("outside")
+    if not (lr and dd and out):
+        return _not_run("latency_rule", "delay_draw", "outside")
+    return (f"B-1's DAA allocations are the steps before its first command arrives: {_ci(lr, 'B-1', 'no_wait')} per "
+            f"encounter with the 4 s round trip, {_ci(lr, 'B-1 (paper-one-way)', 'no_wait')} with 4 s on each link "
+            f"(the paper: 7.88). B-2: {_ci(dd, 'B-2', 'no_wait')}, with one draw per encounter "
+            f"{_ci(dd, 'B-2 (paper-delay-per-encounter)', 'no_wait')} (the paper: 8.72). ID-2: "
+            f"{_ci(out, 'ID-2', 'no_wait')}, with the box's edge read for a far state "
+            f"{_ci(out, 'ID-2 (paper-clamp)', 'no_wait')} (the paper: 1.03)")
+
+
+def _reception(x: dict) -> str:
+    h, c = x.get("hold"), x.get("counting")
+    if not (h and c):
+        return _not_run("hold", "counting")
+    return (f"received per encounter (B-2): {_ci(h, 'B-2', 'received')}; without the 'hold' stream "
+            f"{_ci(h, 'B-2 (paper-no-hold)', 'received')}; counting one command per step "
+            f"{_ci(c, 'B-2 (one per step)', 'received')} (the paper: 79.4). Our pilot streams one command a second "
+            f"from its first telemetry until safe avoidance; the stream's length, which the paper does not give, sets "
+            f"the counts. DAA overrides (B-2): {_ci(h, 'B-2', 'daa_override')} per encounter, "
+            f"{_ci(x.get('hold_none') or {}, 'B-2 (paper-hold-none)', 'daa_override')} with an unsafe 'hold' as no "
+            f"command (the paper: 0.76)")
+
+
+def _blend_match(x: dict) -> str:
+    w, lat, s = x.get("blend_waiting"), x.get("blend_latency"), x.get("blend_searches")
+    if not (w and lat and s):
+        return _not_run("blend_waiting", "blend_latency", "blend_searches")
+    d = s["groups"].get("ID-2", {})
+    asked = d.get("failed_exact_asked", ())
+    asked = sorted(asked.items(), key=lambda kv: -kv[1]) if isinstance(asked, dict) else [tuple(x) for x in asked]
+    tot = sum(v for _, v in asked) or 1
+    asked = ", ".join(f"{k} ({100 * v / tot:.0f} %)" for k, v in asked[:2]) or "–"
+    return (f"exact (axis, direction) in ID-2 {_ci(w, 'ID-2', 'exact_match', 'pct')}, with no waiting "
+            f"{_ci(w, 'ID-2-no-wait', 'exact_match', 'pct')} (difference {_ci(w, 'ID-2', 'exact_match', 'pct', diff)}): "
+            f"waiting {'does not measurably lower' if _zero_in(w, 'ID-2', 'exact_match') else 'changes'} the exact "
+            f"match. Latency: {_ci(lat, 'ID-2-lat0.2', 'exact_match', 'pct')} at 0.2 s, "
+            f"{_ci(lat, 'ID-2-lat10', 'exact_match', 'pct')} at 10 s (difference "
+            f"{_ci(lat, 'ID-2-lat10', 'exact_match', 'pct', diff)}). The searches that missed the pilot's direction "
+            f"asked for {asked} of them: no candidate of our DAA on that side was safe")
+
+
+def _zero_in(e: dict, label: str, metric: str) -> bool:
+    lo, hi = diff(e, label, metric, "lo"), diff(e, label, metric, "hi")
+    return lo is not None and hi is not None and lo <= 0.0 <= hi
+
+
+def _safety(x: dict) -> str:
+    s, lw = x.get("severity"), x.get("lowc")
+    if not (s and lw):
+        return _not_run("severity", "lowc")
+    auth = lw["groups"].get("ID-2", {}).get("authority_at_onset", {})
+    return (f"unmitigated, {_ci(s, 'unmitigated', 'p_lowc', 'pct')} of our encounters lose well clear and "
+            f"{_ci(s, 'unmitigated', 'alert_share_2', 'pct')} reach a corrective alert; the paper reading's ID-2 "
+            f"{_ci(s, 'ID-2', 'p_lowc', 'pct')}, {_ci(s, 'ID-2', 'p_lowc_step', 'sci')} of the time (the paper: "
+            f"2.81e-7 x 666.67 h = 1.87e-4). In ID-2, a LoWC begins under the DAA's authority in "
+            f"{_f(auth.get('daa'), 'pct')} of cases, the pilot's in {_f(auth.get('pilot'), 'pct')}. The paper's own "
+            f"pair (ID-2 the fewest LoWC encounters, yet a higher P(LoWC)/h than B-2) holds only if ID-2's LoWCs last "
+            f"longer: appendix-provenance.md")
+
+
+def _pi(x: dict) -> str:
+    lw = x.get("lowc")
+    if not lw:
+        return _not_run("lowc")
+    g = lw["groups"]
+    n = sum(d.get("pi_gt_max", 0) for d in g.values())
+    turn = sum(d.get("pi_gt_max_turning", 0) for d in g.values())
+    daa = sum(d.get("pi_gt_max_daa_at_onset", 0) for d in g.values())
+    q = g.get("B-2", {}).get("from_alert2_s")
+    tq = g.get("B-2", {}).get("turn_to_onset_s")
+    share = g.get("B-2", {}).get("turning_before_onset")
+    return (f"{n} replayed LoWCs with PI above 3.79 over the five groups: {turn} with the intruder turning before the "
+            f"onset, {daa} begun under the DAA's authority. In B-2, {_f(share, 'pct')} of the LoWCs follow an intruder's "
+            f"turn (a median {_f(tq[1] if tq else None, 'f1')} s before the onset) and begin a median "
+            f"{_f(q[1] if q else None, 'f1')} s after the corrective alert")
+
+
+def _deviation(x: dict) -> str:
+    d, s, ft = x.get("deviation"), x.get("severity"), x.get("feet")
+    if not (d and s and ft):
+        return _not_run("deviation", "severity", "feet")
+    left = value(d, "B-1", "maneuvered_share")
+    need = 1690.0 / value(d, "B-1", "dev_h_maneuvered_mean") if value(d, "B-1", "dev_h_maneuvered_mean") else None
+    return (f"B-1: {_ci(d, 'B-1', 'dev_h_mean', 'f0')} m (largest distance from the straight path, over all "
+            f"encounters), {_ci(d, 'B-1', 'dev_h_tmean_mean', 'f0')} m as a time mean, "
+            f"{_ci(d, 'B-1', 'dev_h_maneuvered_mean', 'f0')} m over the {_f(left, 'pct')} that left the plan; in feet "
+            f"{_ci(ft, 'B-1 (feet)', 'dev_h_mean', 'f0')} m (the paper: 1,690 m). With our maneuvering encounters' "
+            f"deviation, the paper's mean needs {_f(need, 'pct')} of the encounters to maneuver; "
+            f"{_ci(s, 'unmitigated', 'alert_share_2', 'pct')} of ours reach a corrective alert")
+
+
+@dataclass(frozen=True)
+class Cluster:
+    """One cluster of findings with its named cause (see the module docstring)."""
+
+    key: str
+    title: str
+    findings: tuple
+    causes: tuple  #: of :data:`CAUSES`
+    because: str
+    experiments: tuple  #: keys of experiments.json
+    showed: Callable[[dict], str]
+
+    def __post_init__(self):
+        bad = [c for c in self.causes if c not in CAUSES]
+        if bad:
+            raise ValueError(f"cluster {self.key}: unknown cause {bad[0]!r}; allowed: {', '.join(CAUSES)}")
+
+
+CLUSTERS: tuple[Cluster, ...] = (
+    Cluster("allocation", "waiting status (waits, DAA allocations, their reduction)",
+            ("wait", "no-wait", "no-wait-reduction", "no-wait-reduction-average"), ("the paper's vagueness",),
+            "what a group's latency value measures and how the Gaussian delay varies in time decide how many steps pass "
+            "without a command; the text gives neither", ("latency_rule", "delay_draw", "outside"), _allocation),
+    Cluster("reception", "command reception and execution counts",
+            ("received", "received-increase", "received-increase-average", "received-ic1-over-id2", "pilot-executed",
+             "override", "blend"), ("our pilot", "the paper's vagueness"),
+            "the counts are the pilot's stream: one command a second from its first telemetry till safe avoidance "
+            "(the paper: 'from the beginning of an encounter till safe avoidance', its length not given)",
+            ("hold", "counting", "hold_none"), _reception),
+    Cluster("blend-match", "Algorithm 2's (axis, direction) match",
+            ("exact-match", "axis-match", "neither-match"), ("our DAA",),
+            "Algorithm 2 searches our DAA's candidates; where none in the pilot's direction is safe it takes the axis "
+            "or any safe maneuver", ("blend_searches", "blend_waiting", "blend_latency"), _blend_match),
+    Cluster("safety", "LoWC and NMAC: counts, orderings, the turning share, P(LoWC) per flight hour",
+            ("nmac", "lowc-fewest-id2", "lowc-most-b2", "lowc-turning", "p-lowc-hr", "p-lowc-hr-remote",
+             "p-lowc-hr-increase"), ("the encounter set", "the paper's inconsistency"),
+            "how many encounters come close is the encounter set's (the paper gives only its parameter table); the "
+            "paper's LoWC statements do not fit one another", ("severity", "lowc"), _safety),
+    Cluster("pi", "penetration integral", ("pi-mean", "pi-max", "pi-severe"), ("our DAA", "our pilot"),
+            "the severe LoWCs are late turns of fast intruders: what our DAA and pilot do in the last seconds",
+            ("lowc",), _pi),
+    Cluster("deviation", "trajectory deviation", ("dev-h", "dev-v", "dev-h-change", "dev-v-change"),
+            ("the encounter set", "the paper's vagueness"),
+            "the paper does not define its deviation; on our encounters few maneuver at all",
+            ("deviation", "severity", "feet"), _deviation),
+)
+
+
+def cluster_of(finding_id: str) -> "Cluster | None":
+    return next((c for c in CLUSTERS if finding_id in c.findings), None)
+
+
+def attribution_rows(rows, label: str, experiments: "dict | None", command: str = "") -> list[dict]:
+    """One row per cluster (its misses under reading ``label``: ``id — group``), plus one per miss that no
+    cluster holds (cause *unattributed*). ``rows`` from :func:`daa_sil.study.verdicts.evaluate_all`;
+    ``experiments`` the ``experiments`` mapping of ``experiments.json`` (None: not run)."""
+    exps = experiments or {}
+    out, seen = [], set()
+    for c in CLUSTERS:
+        misses = [f"{f.id}" + (f" — {f.group}" if f.group else "") + f" ({outs[label].verdict})"
+                  for f, outs in rows if f.id in c.findings and outs[label].verdict in MISSES]
+        seen.update(c.findings)
+        out.append({"cluster": c.title, "key": c.key, "misses": misses, "causes": list(c.causes),
+                    "because": c.because, "experiments": list(c.experiments), "command": command,
+                    "showed": c.showed(exps) if exps else _not_run(*c.experiments)})
+    for f, outs in rows:
+        if f.id not in seen and not f.by_construction and outs[label].verdict in MISSES:
+            out.append({"cluster": "unattributed", "key": "unattributed", "misses": [f"{f.id} — {f.group}"],
+                        "causes": [], "because": "no cluster holds this finding: a defect of the attribution table",
+                        "experiments": [], "command": "", "showed": ""})
+    return out
+
+
+__all__ = ["CAUSES", "MISSES", "Cluster", "CLUSTERS", "cluster_of", "attribution_rows"]
