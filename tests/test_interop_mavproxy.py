@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pytest
 
-from interop_helpers import free_ports, start, stop, wait_for_text
+from interop_helpers import corrective_reading, free_ports, start, stop, wait_for_text
 from test_interop_mavutil import long_scenario
 
 pytestmark = pytest.mark.slow
@@ -53,7 +53,8 @@ def test_mavproxy_attaches_shows_the_picture_and_sets_wt(tmp_path):
                      tmp_path / "shim.log")
         procs.append(shim)
         wait_for_text(tmp_path / "shim.log", "vehicle side", 30.0, shim)
-        veh = start(["vehicle", long_scenario(tmp_path), "--out", f"udp:127.0.0.1:{pv}", "--speed", "2",
+        veh = start(["vehicle", long_scenario(tmp_path), *corrective_reading(tmp_path), "--out", f"udp:127.0.0.1:{pv}",
+                     "--speed", "2",
                      "--steplog", tmp_path / "steplog.parquet"], tmp_path / "vehicle.log")
         procs.append(veh)
         # CI runs this first on a fresh machine: the vehicle then builds and caches the default alerting
@@ -151,7 +152,8 @@ def test_mavproxy_guided_is_accepted_while_the_agent_waits_and_while_daa_flies(t
     log = tmp_path / "mavproxy.log"
     procs = []
     try:
-        veh = start(["vehicle", long_scenario(tmp_path), "--out", f"udpin:127.0.0.1:{port}", "--speed", "2",
+        veh = start(["vehicle", long_scenario(tmp_path), *corrective_reading(tmp_path), "--out",
+                     f"udpin:127.0.0.1:{port}", "--speed", "2",
                      "--wait-gcs", "--steplog", tmp_path / "steplog.parquet"], tmp_path / "vehicle.log")
         procs.append(veh)
         wait_for_text(tmp_path / "vehicle.log", "READY", 300.0, veh)

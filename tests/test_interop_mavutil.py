@@ -45,8 +45,10 @@ def link(tmp_path_factory):
     proc = start(["vehicle", long_scenario(tmp), *corrective_reading(tmp), "--out", f"udp:127.0.0.1:{port}", "--tap", f"udp:127.0.0.1:{tap}",
                   "--speed", "5", "--steplog", tmp / "steplog.parquet"], tmp / "vehicle.log")
     try:
-        assert recv_until(conn, lambda m: m.get_type() == "HEARTBEAT", 30.0), "no HEARTBEAT from the vehicle"
-        recv_until(tapc, lambda m: m.get_type() == "HEARTBEAT", 10.0)
+        # the vehicle is on the link while it boots (MAV_STATE_BOOT): the tests start once it flies (ACTIVE)
+        active = lambda m: m.get_type() == "HEARTBEAT" and m.system_status == 4  # noqa: E731
+        assert recv_until(conn, active, 120.0), "no ACTIVE HEARTBEAT from the vehicle"
+        recv_until(tapc, active, 10.0)
         yield conn, tapc, proc, tmp
     finally:
         stop(proc)
