@@ -122,7 +122,9 @@ def vehicle_run(side: Side, scen: Path, datagrams: int, work: Path) -> dict:
     sock.bind(("127.0.0.1", 0))
     steplog = work / f"{side.name}-{datagrams}.parquet"
     proc = side.start(["-m", "vehicle", str(scen), "--out", f"udp:127.0.0.1:{sock.getsockname()[1]}",
-                       "--clock", "realtime", "--steplog", str(steplog), "--quiet"])
+                       "--clock", "realtime", "--steplog", str(steplog), "--quiet"]
+                      # this checkout's vehicle flies on past its scenario unless told (the baseline's always ended)
+                      + (["--exit-at-end"] if side.name == "this" else []))
     peak = [0.0]
     try:
         m = _read_line(proc.stdout, r"READY listen=udp:([\d.]+):(\d+)")

@@ -26,6 +26,7 @@ COMMAND_MODULES = [
     "daa_sil.commands.waitmap",
     "daa_sil.commands.shim",
     "daa_sil.commands.run",
+    "daa_sil.commands.inject",
     "daa_sil.commands.campaign",
     "daa_sil.commands.viz",
 ]
@@ -33,7 +34,8 @@ COMMAND_MODULES = [
 COMMANDS = {"config": "daa_sil.commands.config", "geometry": "daa_sil.commands.geometry",
             "daa": "daa_sil.commands.daa", "conformance": "daa_sil.commands.conformance",
             "waitmap": "daa_sil.commands.waitmap", "shim": "daa_sil.commands.shim", "run": "daa_sil.commands.run",
-            "demo": "daa_sil.commands.run", "campaign": "daa_sil.commands.campaign", "viz": "daa_sil.commands.viz"}
+            "demo": "daa_sil.commands.run", "inject": "daa_sil.commands.inject", "campaign": "daa_sil.commands.campaign",
+            "viz": "daa_sil.commands.viz"}
 
 EPILOG = """examples:
   # the demo: a head-on encounter, 4 s link delay, vehicle / delay shim / GCS over MAVLink

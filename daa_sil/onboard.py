@@ -104,6 +104,13 @@ class TurnRateEstimator:
         self._t: list[float] = []
         self.shape = tuple(shape)
 
+    def add_columns(self, trk: np.ndarray) -> None:
+        """New intruders (compass tracks now, rad, ``(N, k)``): their history is their track now, so their
+        estimates are 0 until they are observed turning."""
+        trk = np.asarray(trk, float)
+        self._trk = [np.concatenate([a, trk], axis=1) for a in self._trk]
+        self.shape = (self.shape[0], self.shape[1] + trk.shape[1])
+
     def update(self, t: float, intruders: AircraftState) -> np.ndarray:
         """Add the observation at ``t`` and return the current estimates ``(N, M)``, rad/s."""
         self._trk.append(np.array(intruders.trk, float))
@@ -205,6 +212,24 @@ class OnboardCore:
         return cls(encounters.own, encounters.intr, encounters.intruder_controls, policy, daa_cfg, wait_lookup,
                    dt=encounters.dt_s, **kw)
 
+
+    def add_intruders(self, intruders: AircraftState) -> None:
+        """Fly ``intruders`` (``(N, k)`` states at the current time) from this step on as well: their scripts
+        are straight flight at constant speed (no turn, no acceleration). For traffic that appears in
+        flight (the SIL vehicle's injected intruders); fast-time never calls it."""
+        k = intruders.shape[1]
+        if intruders.x.ndim != 2 or intruders.shape[0] != self.n or k < 1:
+            raise ValueError(f"intruders must be (N={self.n}, k >= 1); got {intruders.shape}")
+        self.intruders = AircraftState(*(np.concatenate([getattr(self.intruders, f), getattr(intruders, f)], axis=1)
+                                         for f in ("x", "y", "z", "gs", "trk", "vs")))
+        base, n = self.controls, self.n
+
+        def controls(t: float):
+            return tuple(np.concatenate([c, np.zeros((n, k))], axis=1) for c in base(t))
+
+        self.controls = controls
+        self.m += k
+        self.turn_estimator.add_columns(intruders.trk)
 
     def policy_rows(self):
         """:attr:`policy` as a :class:`~daa_sil.allocation.PolicyRows` of the N rows, made again only when

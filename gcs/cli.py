@@ -1,8 +1,8 @@
 """``daa-gcs``: the SIL ground station: shows the delayed telemetry and flies the pilot model or a script.
 
-Prints ``READY listen=udp:HOST:PORT vehicle=...`` once bound. Runs until Ctrl-C / SIGTERM (or
-``--duration`` wall seconds), then writes its command log (JSONL, atomic) and exits 0.
-Errors are one line (``daa-gcs: error: ...``, exit 2 for bad input).
+Prints ``READY listen=udp:HOST:PORT vehicle=...`` once bound. Runs until Ctrl-C / SIGTERM (exit 130 /
+143, as ``daa-vehicle``) or ``--duration`` wall seconds (exit 0), then writes its command log (JSONL,
+atomic). Errors are one line (``daa-gcs: error: ...``, exit 2 for bad input).
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ EXAMPLES = """examples:
   # the pilot raises W_T to 6 s at t = 30 s and switches the onboard agent off at t = 90 s (through the link)
   daa-gcs --vehicle udp:127.0.0.1:14602 --scenario scenarios/head_on.yaml --set 30:DAA_WT=6 --set 90:DAA_ENABLE=0
 
-  # ask for GUIDED at t = 60 s: accepted while the pilot flies, refused (TEMPORARILY_REJECTED) while
-  # the agent does; a mode never switches the agent off (DAA_ENABLE does)
+  # ask for GUIDED at t = 60 s: accepted whoever flies (the agent still judges every pilot command and
+  # the heartbeat shows who flies); a mode never switches the agent off (DAA_ENABLE does)
   daa-gcs --vehicle udp:127.0.0.1:14602 --scenario scenarios/head_on.yaml --set 60:MODE=GUIDED
 
 connection strings (as MAVProxy): udpin:HOST:PORT listens, udpout:HOST:PORT sends; a bare udp:HOST:PORT
@@ -119,8 +119,14 @@ async def _amain(args) -> int:
                                   config=config_of(args.config)))
     await node.start()
     loop = asyncio.get_running_loop()
+    got: dict = {}
+
+    def on_signal(signum: int) -> None:
+        got.setdefault("sig", signum)
+        node.request_stop()
+
     for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, node.request_stop)
+        loop.add_signal_handler(sig, on_signal, sig)
     if args.duration:
         loop.call_later(args.duration, node.request_stop)
     freeze_after_startup()  # the start-up's objects stay out of the steps' collections
@@ -138,6 +144,9 @@ async def _amain(args) -> int:
     for line in (node.ep.drops.summary(), node.ep.guard.summary()):
         if line:
             print(f"daa-gcs: {line}", flush=True)
+    if "sig" in got:  # Ctrl-C / SIGTERM: as daa-vehicle, 128 + the signal (130 / 143)
+        print(f"daa-gcs: stopped by signal {got['sig']}", flush=True)
+        return 128 + int(got["sig"])
     return 0
 
 

@@ -71,6 +71,7 @@ async def play(clock: str, inject=None) -> dict:
     try:
         await gcs.start()
         await veh.start()
+        await veh.prepare()  # the simulation ready before the test talks to it
 
         def on_step(node, _out):
             if inject is not None and node.k == INJECT_STEP:

@@ -64,13 +64,14 @@ def test_daa_gcs_help_switches_the_agent_off_with_daa_enable():
         assert ("DAA_ENABLE", 0.0) in [(n, v) for _, n, v in sets], sets
         res = ParamTable("do365").set("DAA_ENABLE", 0.0, policy_for_group("ID-1"))
         assert res.status == "accepted" and res.policy.enabled is False  # what the vehicle does with it
-    # the old example's MODE=GUIDED is refused while the agent flies, so it switched nothing off
+    # the example's MODE=GUIDED is accepted while the agent flies, but switches nothing off: the agent
+    # still decides who flies (the heartbeat stays AVOID_ADSB), DAA_ENABLE is the switch
     result, _ = identity.mode_request(identity.M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, identity.GUIDED,
                                       identity.AVOID_ADSB)
-    assert result == identity.M.MAV_RESULT_TEMPORARILY_REJECTED
+    assert result == identity.M.MAV_RESULT_ACCEPTED
     for comment, argv in lines:
         if any(re.search(r"MODE=", a) for a in argv):
-            assert "refused" in comment and "switches the onboard agent off" not in comment, comment
+            assert "never switches the agent off" in comment and "switches the onboard agent off" not in comment, comment
 
 
 @pytest.mark.parametrize("text", ["tcp:127.0.0.1:5760", "tcpin:0.0.0.0:5760", "serial:/dev/ttyUSB0"])

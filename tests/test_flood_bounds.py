@@ -63,6 +63,7 @@ async def _vehicle_behind(station: socket.socket, steps: int = 40, speed: float 
     host, port = station.getsockname()
     veh = VehicleNode(sc, VehicleOptions(out=f"udp:{host}:{port}", clock="realtime", speed=speed))
     await veh.start()
+    await veh.prepare()  # the simulation ready before the test talks to it
     return veh, asyncio.create_task(veh.run())
 
 
@@ -257,6 +258,7 @@ def test_a_stalled_shim_is_named_as_the_shim():
                                              tick_timeout_s=3.0, tick_retry_s=0.5))
         await gcs.start()
         await veh.start()
+        await veh.prepare()  # the simulation ready before the test talks to it
         loop = asyncio.get_running_loop()
 
         def stall(node, _out):

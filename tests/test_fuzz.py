@@ -103,6 +103,7 @@ async def play(total: int, corpus=None, seed: int = 9) -> dict:
     veh = VehicleNode(sc, VehicleOptions(out=format_udp_address(shim.vehicle_side), clock="lockstep",
                                          tick_timeout_s=60.0))
     await veh.start()
+    await veh.prepare()  # the simulation ready before the test talks to it
     stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     stranger.bind(("127.0.0.1", 0))
     stranger.setblocking(False)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import signal
+from pathlib import Path
 
 import pytest
 
@@ -325,3 +327,34 @@ print(repr((first, rest)), file=sys.stderr)
     first, rest = ast.literal_eval(res.stderr.strip().splitlines()[-1])
     assert first == "line 0\n"
     assert rest == "line 1\nline 2\nline 3\nline 4\n"
+
+
+@pytest.mark.parametrize("sig,code", [(signal.SIGINT, 130), (signal.SIGTERM, 143), (None, 0)])
+def test_daa_gcs_exits_as_daa_vehicle_does(tmp_path, sig, code):
+    """Ctrl-C 130 and SIGTERM 143 (exit 0 on main, where daa-vehicle gave 130), ``--duration`` 0; the
+    command log is written either way."""
+    import subprocess
+    import sys
+    import time
+
+    from daa_sil.sil.supervise import free_udp_ports
+
+    root = Path(__file__).resolve().parents[1]
+    (port,) = free_udp_ports(1)
+    argv = [sys.executable, "-m", "gcs", "--scenario", str(root / "scenarios" / "head_on.yaml"), "--listen",
+            "udp:127.0.0.1:0", "--vehicle", f"udp:127.0.0.1:{port}", "--no-display", "--log", str(tmp_path / "c.jsonl")]
+    proc = subprocess.Popen(argv + (["--duration", "1"] if sig is None else []), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, cwd=root)
+    try:
+        ready = proc.stdout.readline()
+        assert ready.startswith("READY"), ready
+        if sig is not None:
+            time.sleep(0.2)
+            proc.send_signal(sig)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == code, out
+    assert (tmp_path / "c.jsonl").exists() and "Traceback" not in out

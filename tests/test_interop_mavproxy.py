@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pytest
 
-from interop_helpers import free_ports, start, stop, wait_for_text
+from interop_helpers import corrective_reading, free_ports, start, stop, wait_for_text
 from test_interop_mavutil import long_scenario
 
 pytestmark = pytest.mark.slow
@@ -53,7 +53,8 @@ def test_mavproxy_attaches_shows_the_picture_and_sets_wt(tmp_path):
                      tmp_path / "shim.log")
         procs.append(shim)
         wait_for_text(tmp_path / "shim.log", "vehicle side", 30.0, shim)
-        veh = start(["vehicle", long_scenario(tmp_path), "--out", f"udp:127.0.0.1:{pv}", "--speed", "2",
+        veh = start(["vehicle", long_scenario(tmp_path), *corrective_reading(tmp_path), "--out", f"udp:127.0.0.1:{pv}",
+                     "--speed", "2",
                      "--steplog", tmp_path / "steplog.parquet"], tmp_path / "vehicle.log")
         procs.append(veh)
         # CI runs this first on a fresh machine: the vehicle then builds and caches the default alerting
@@ -115,3 +116,71 @@ def test_mavproxy_attaches_shows_the_picture_and_sets_wt(tmp_path):
     modes = [(e["name"], e["status"]) for e in ev if e["kind"] == "mode"]
     assert ("GUIDED", "accepted") in modes and ("RTL", "denied") in modes
 
+
+
+def _text_after(path: Path, start: int, text: str, timeout: float, proc=None) -> int:
+    """Wait until ``text`` appears in ``path`` at or after character ``start``; returns where it ends."""
+    import time
+
+    end = time.monotonic() + timeout
+    content = ""
+    while time.monotonic() < end:
+        content = path.read_text() if path.exists() else ""
+        i = content.find(text, start)
+        if i >= 0:
+            return i + len(text)
+        if proc is not None and proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    raise AssertionError(f"{text!r} not in {path.name} after {start} within {timeout} s; it holds:\n{content[-3000:]}")
+
+
+def test_mavproxy_guided_is_accepted_while_the_agent_waits_and_while_daa_flies(tmp_path):
+    """The pilot's flow in a stock MAVProxy attached straight to the vehicle over ``udpin:`` (as SITL):
+    ``mode GUIDED`` and ``guided LAT LON ALT`` (DO_REPOSITION) while the agent waits (CRUISE) and while the
+    DAA flies (AVOID_ADSB): both ACCEPTED, and the step log shows each command received and judged by
+    SM(u). On main ``mode GUIDED`` was TEMPORARILY_REJECTED in both states."""
+    from daa_sil.geometry.frames import enu_to_geodetic
+    from daa_sil.sil.scenario import load_scenario
+    from daa_sil.steplog import read_steplog, steplog_metadata
+    from test_interop_mavutil import SCENARIO
+
+    exe = _mavproxy()
+    (port,) = free_ports(1)
+    sc = load_scenario(SCENARIO)
+    lat, lon, _ = enu_to_geodetic(0.0, 40000.0, 1000.0, sc.origin.lat_deg, sc.origin.lon_deg, sc.origin.alt_m)
+    log = tmp_path / "mavproxy.log"
+    procs = []
+    try:
+        veh = start(["vehicle", long_scenario(tmp_path), *corrective_reading(tmp_path), "--out",
+                     f"udpin:127.0.0.1:{port}", "--speed", "2",
+                     "--wait-gcs", "--steplog", tmp_path / "steplog.parquet"], tmp_path / "vehicle.log")
+        procs.append(veh)
+        wait_for_text(tmp_path / "vehicle.log", "READY", 300.0, veh)
+        env = dict(os.environ, HOME=str(tmp_path))
+        mp = subprocess.Popen([exe, f"--master=udpout:127.0.0.1:{port}", f"--state-basedir={tmp_path}",
+                               f"--default-modules={MODULES}"], stdin=subprocess.PIPE, stdout=open(log, "w"),
+                              stderr=subprocess.STDOUT, text=True, cwd=tmp_path, env=env, start_new_session=True)
+        procs.append(mp)
+        at = _text_after(log, 0, "Detected vehicle 1:1", 60.0, mp)
+        for mode in ("CRUISE", "AVOID_ADSB"):
+            at = _text_after(log, at, f"{mode} authority", 120.0, mp)
+            for line, answer in (("mode GUIDED", "DO_SET_MODE: ACCEPTED"),
+                                 (f"guided {float(lat):.7f} {float(lon):.7f} 1000", "DO_REPOSITION: ACCEPTED")):
+                mp.stdin.write(line + "\n")
+                mp.stdin.flush()
+                at = _text_after(log, at, answer, 30.0, mp)
+        _text_after(log, at, "AP: ", 60.0, mp)  # a few steps more (the next text), so the last one is logged
+    finally:
+        for p in reversed(procs):
+            stop(p)
+    text = log.read_text()
+    assert "Traceback" not in text, text[-3000:]
+    rows = read_steplog(tmp_path / "steplog.parquet").to_pydict()
+    got = [i for i, r in enumerate(rows["pilot_cmd_received"]) if r]
+    assert len(got) == 2, got
+    for i, before in zip(got, ("waiting", "daa")):
+        assert rows["authority"][i - 1] == before, (i, rows["authority"][i - 3:i + 1])
+        assert rows["decision"][i] in ("pilot", "blend", "daa_override") and rows["sm_pilot"][i] == rows["sm_pilot"][i]
+    ev = json.loads(steplog_metadata(tmp_path / "steplog.parquet")["settings"])
+    assert [e["status"] for e in ev if e["kind"] == "mode"] == ["accepted", "accepted"]

@@ -91,8 +91,8 @@ def _lockstep_run(tmp, settings: list[str]) -> "tuple[dict, list]":
                      *[a for s in settings for a in ("--set", s)]], tmp / "gcs.log")
         procs.append(gcs)
         wait_for_text(tmp / "gcs.log", "READY", 30.0, gcs)
-        veh = start(["vehicle", sc, *corrective_reading(tmp), "--out", f"udp:127.0.0.1:{pv}", "--clock", "lockstep", "--steplog",
-                     tmp / "steplog.parquet"], tmp / "vehicle.log")
+        veh = start(["vehicle", sc, *corrective_reading(tmp), "--out", f"udp:127.0.0.1:{pv}", "--clock", "lockstep",
+                     "--exit-at-end", "--steplog", tmp / "steplog.parquet"], tmp / "vehicle.log")
         procs.append(veh)
         veh.wait(120)
         assert veh.returncode == 0, (tmp / "vehicle.log").read_text()[-3000:]

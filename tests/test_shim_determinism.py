@@ -99,7 +99,7 @@ def _play(path: Path, out: Path, vehicle_delay_s: float) -> dict:
         _read_until(gcs, gcs.stdout, lambda line: line.startswith("READY"), "the GCS")
         time.sleep(vehicle_delay_s)  # the GCS greets the shim meanwhile (wall-clock traffic)
         veh = subprocess.run([sys.executable, "-m", "vehicle", str(path), "--listen", "udp:127.0.0.1:0",
-                              "--out", sides["vehicle_side"], "--tap", "none", "--quiet",
+                              "--out", sides["vehicle_side"], "--tap", "none", "--quiet", "--exit-at-end",
                               "--steplog", str(out / "steplog.parquet"), *LOCKSTEP],
                              cwd=ROOT, capture_output=True, text=True, timeout=HANG_GUARD_S)
         assert veh.returncode == 0, veh.stdout[-2000:] + veh.stderr[-2000:]

@@ -20,7 +20,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SANS_IO = ("daa_sil.sil.shim_core", "daa_sil.sil.lockstep", "daa_sil.sil.silence", "daa_sil.sil.intake",
-           "vehicle.protocol", "vehicle.tick_rules", "vehicle.services", "gcs.protocol", "gcs.pilot", "gcs.view")
+           "vehicle.protocol", "vehicle.tick_rules", "vehicle.services", "vehicle.orders", "vehicle.ports",
+           "vehicle.peers", "vehicle.boot", "vehicle.announce", "vehicle.traffic", "gcs.protocol", "gcs.pilot",
+           "gcs.view")
 IO_MODULES = ("asyncio", "socket", "selectors", "daa_sil.sil.shim", "daa_sil.sil.shim_socket",
               "daa_sil.sil.endpoint", "daa_sil.sil.rtclock")
 

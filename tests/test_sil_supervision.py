@@ -206,6 +206,7 @@ async def test_standalone_vehicle_and_gcs_report_a_shim_that_stops(monkeypatch, 
     v = VehicleNode(sc, VehicleOptions(out=v_side, clock="realtime", speed=20.0,
                                        tick_sync="wait", tick_timeout_s=30.0))
     await v.start()
+    await v.prepare()
     v.core.n_steps = 40  # 2 s of wall time at 20x
 
     def on_step(node, out):

@@ -129,7 +129,9 @@ def test_hostile_datagrams_do_not_crash_the_vehicle(vehicle_and_client):
     conn, proc = vehicle_and_client
     msgs = _collect(conn, 10.0, want=lambda m: m.get_type() == "HEARTBEAT")
     assert msgs
-    ready = proc.stdout.readline()  # READY listen=udp:127.0.0.1:PORT ...
+    ready = proc.stdout.readline()  # (the boot line, on stderr, comes first) READY listen=udp:127.0.0.1:PORT ...
+    while ready and not ready.startswith("READY"):
+        ready = proc.stdout.readline()
     assert ready.startswith("READY listen=udp:127.0.0.1:")
     vaddr = ("127.0.0.1", int(ready.split()[1].rsplit(":", 1)[1]))
     sk = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -157,4 +159,4 @@ def test_vehicle_cli_bad_input_is_one_line(tmp_path):
     assert cp.stderr.strip() == f"daa-vehicle: error: {tmp_path / 'missing.yaml'}: scenario file not found"
     cp = subprocess.run([sys.executable, "-m", "vehicle", str(ROOT / "scenarios" / "head_on.yaml"), "--out", "tcp:x:1"],
                         capture_output=True, text=True, timeout=60, cwd=ROOT)
-    assert cp.returncode == 2 and cp.stderr.count("\n") == 1 and "udp:HOST:PORT" in cp.stderr
+    assert cp.returncode == 2 and cp.stderr.count("\n") == 1 and "tcpin:HOST:PORT" in cp.stderr

@@ -4,8 +4,8 @@
   further one gets the telemetry with its **own** stream rates, may read, is **read-only** unless
   marked ``,rw`` (then its parameter writes apply, and the other observers hear of them), and never
   flies pilot commands;
-* a ``udpin:`` output answers its first sender and warns about (and drops) a second one -- the same
-  as the vehicle's ``--out udpin:`` (tests/test_interop_mavutil.py) and the GCS's ``--vehicle udpin:``;
+* a ``udpin:`` output answers every ground station that spoke to it lately, each with its own stream
+  and reply budget (as the vehicle's ``--out udpin:``, tests/test_interop_mavutil.py);
 * ``daa-sil run --vehicle-out`` forwards outputs to the vehicle it starts;
 * the syntax errors are one line.
 """
@@ -82,6 +82,7 @@ def test_each_output_has_its_own_rates_and_is_read_only_unless_marked(capfd):
         veh = VehicleNode(sc, VehicleOptions(out=gcs.addr, also_out=(ro.addr, rw.addr + ",rw", f"udpin:127.0.0.1:{din}"),
                                              clock="realtime", speed=5.0))
         await veh.start()
+        await veh.prepare()  # the simulation ready before the test talks to it
         task = asyncio.create_task(veh.run())
         try:
             assert [o.name for o in veh.outputs] == ["gcs", "out2", "out3", "out4"]
@@ -112,13 +113,14 @@ def test_each_output_has_its_own_rates_and_is_read_only_unless_marked(capfd):
             rw.send(M.MAVLink_pilot_maneuver_message(int(veh.t * 1000), 1, 1, 1, 90.0, 0.0, 55.0), veh.ep.local_address)
             await _until(lambda: veh.stats.commands_from_observers_ignored == 1, everyone, "the command ignored")
             assert veh.gate.counters.accepted == 0
-            # udpin output: the first sender gets the stream, a second one is warned about and dropped
+            # udpin output: every sender is a ground station of its own; a second one is answered too
             first.send(M.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3), ("127.0.0.1", din))
             await _until(lambda: first.of("GLOBAL_POSITION_INT"), (first,), "the udpin output streaming")
             second.send(M.MAVLink_param_request_list_message(1, 1), ("127.0.0.1", din))
-            await _until(lambda: veh.outputs[3].intake.counters.datagrams_rejected_peer == 1, (first, second),
-                         "the second sender dropped")
-            assert not second.of("PARAM_VALUE")
+            await _until(lambda: len(second.of("PARAM_VALUE")) == 8, (first, second), "the second sender answered")
+            await _until(lambda: second.of("GLOBAL_POSITION_INT"), (first, second), "the second one's stream")
+            assert not first.of("PARAM_VALUE")  # the list went to who asked for it
+            assert veh.outputs[3].intake.counters.datagrams_rejected_peer == 0
             return veh, [(e.link, e.name, e.status) for e in veh.services.events]
         finally:
             veh.request_stop()
@@ -136,9 +138,7 @@ def test_each_output_has_its_own_rates_and_is_read_only_unless_marked(capfd):
             s.sock.close()
     assert events == [("out2", "DAA_WT", "denied_readonly"), ("out3", "DAA_WT", "accepted")]
     err = capfd.readouterr().err
-    warned = [x for x in err.splitlines() if "dropping datagrams from" in x]
-    assert len(warned) == 1 and f"from {second.addr} (PARAM_REQUEST_LIST from system 255)" in warned[0]
-    assert "out4: the first sender" in warned[0]
+    assert "dropping datagrams from" not in err
 
 
 @pytest.mark.parametrize("outs,tap,needle", [
@@ -146,7 +146,8 @@ def test_each_output_has_its_own_rates_and_is_read_only_unless_marked(capfd):
     (["udp:127.0.0.1:14550", "udp:127.0.0.1:14560,write"], None, "only ',rw' (writable) or ',ro'"),
     (["udp:127.0.0.1:14550", "udp:127.0.0.1:14550"], None, "are the same address"),
     (["udp:127.0.0.1:14550", "udp:127.0.0.1:14560"], "udp:127.0.0.1:14560", "are the same address"),
-    (["udp:127.0.0.1:14550", "tcp:127.0.0.1:5760"], None, "only UDP is supported"),
+    (["udp:127.0.0.1:14550", "tcp:127.0.0.1:5760"], None, "would connect out as a TCP client"),
+    (["udp:127.0.0.1:14550", "tcpin:127.0.0.1:5760,rw"], "tcpin:127.0.0.1:5761", "is a TCP server"),
 ])
 def test_output_syntax_errors_are_one_line(outs, tap, needle):
     with pytest.raises(UsageError, match=re.escape(needle)):
@@ -182,3 +183,28 @@ def test_daa_sil_run_forwards_vehicle_outputs(tmp_path):
     assert f"out2=udpout:{station.addr.split(':', 1)[1]}" in log  # the READY line lists it
     res = json.loads(cp.stdout)
     assert res["interrupted"] is False and res["failure"] is None
+
+
+@pytest.mark.parametrize("kind", ["udpin", "tcpin"])
+def test_a_taken_listening_port_is_one_line_before_any_work(tmp_path, kind):
+    """``daa-sil run --vehicle-out udpin:`` (or ``tcpin:``) on a taken port: one line, exit 2, before any process
+    or directory (on main the run started, built the vehicle's simulation, and then failed as a dead vehicle,
+    exit 1); ``daa-vehicle --out`` the same: it binds before it prepares anything."""
+    busy = socket.socket(socket.AF_INET, socket.SOCK_DGRAM if kind == "udpin" else socket.SOCK_STREAM)
+    busy.bind(("127.0.0.1", 0))
+    if kind == "tcpin":
+        busy.listen(1)
+    port = busy.getsockname()[1]
+    try:
+        cp = subprocess.run([sys.executable, "-m", "daa_sil.cli", "run", str(ROOT / "scenarios" / "head_on.yaml"),
+                             "--out", str(tmp_path / "run"), "--vehicle-out", f"{kind}:127.0.0.1:{port}"],
+                            capture_output=True, text=True, timeout=120, cwd=ROOT)
+        assert cp.returncode == 2 and cp.stderr.count("\n") == 1, cp.stderr
+        assert f"--vehicle-out {kind}:127.0.0.1:{port}: cannot listen there" in cp.stderr
+        assert not (tmp_path / "run").exists()
+        cp = subprocess.run([sys.executable, "-m", "vehicle", str(ROOT / "scenarios" / "head_on.yaml"), "--out",
+                             f"{kind}:127.0.0.1:{port}"], capture_output=True, text=True, timeout=120, cwd=ROOT)
+        assert cp.returncode == 2 and cp.stderr.count("\n") == 1 and "in use" in cp.stderr, cp.stderr
+        assert "READY" not in cp.stdout and "boot" not in cp.stderr  # nothing prepared
+    finally:
+        busy.close()

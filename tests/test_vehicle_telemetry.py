@@ -39,8 +39,8 @@ def test_base_mode_as_arduplane():
 
 @pytest.mark.parametrize("base,custom,current,result", [
     (1, 15, 15, M.MAV_RESULT_ACCEPTED),
-    (1, 15, 14, M.MAV_RESULT_TEMPORARILY_REJECTED),
-    (1, 15, 7, M.MAV_RESULT_TEMPORARILY_REJECTED),
+    (1, 15, 14, M.MAV_RESULT_ACCEPTED),  # the agent flies (AVOID_ADSB): the pilot's commands go to it all the same
+    (1, 15, 7, M.MAV_RESULT_ACCEPTED),  # the agent waits (CRUISE); on main both were TEMPORARILY_REJECTED
     (1, 14, 15, M.MAV_RESULT_DENIED),
     (1, 7, 15, M.MAV_RESULT_DENIED),
     (1, 11, 15, M.MAV_RESULT_DENIED),

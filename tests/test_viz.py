@@ -463,3 +463,21 @@ def test_background_recorder_killed_helper_is_a_warning(tmp_path, table):
     assert list(out.iterdir()) == [], "neither the .rrd nor the temporary file"
     with pytest.raises(OutputError, match="missing or not writable"):
         BackgroundRecorder(viz.SinkOptions(rrd=tmp_path / "no" / "dir" / "x.rrd"))
+
+
+def test_intruders_are_labelled_by_callsign(tmp_path, table):
+    """A SIL step log names its intruders (``intruders`` metadata): the points' labels and the plots' series
+    say ``HEAD1 13.8 km``, not ``#0 13.8 km`` (as on main); a step log without names keeps ``#0``."""
+    import json
+
+    named = table.replace_schema_metadata({**(table.schema.metadata or {}),
+                                           b"intruders": json.dumps([{"icao": 1000, "callsign": "HEAD1"}])})
+    labels = read_rrd(write(named, tmp_path / "named.rrd"))["/world/intruders/0"].column("Points3D:labels").to_pylist()
+    rng = list_col(table, "range_m")
+    assert labels[0] == [f"HEAD1 {rng[0] / 1000.0:.1f} km"], labels[0]
+    assert all(lb[0].startswith("HEAD1 ") for lb in labels)
+    series = [ch for ch in rr.chunk.RrdReader(tmp_path / "named.rrd").stream()
+              if ch.is_static and ch.entity_path == "/plots/range/0"]
+    assert "range HEAD1 [m]" in str(series[0].to_record_batch().to_pydict())
+    plain = read_rrd(write(table, tmp_path / "plain.rrd"))["/world/intruders/0"].column("Points3D:labels").to_pylist()
+    assert plain[0][0].startswith("#0 ")

@@ -284,7 +284,8 @@ def test_vehicle_keeps_running_without_a_recorder(tmp_path):
     scenario = _short_scenario(tmp_path, duration_s=20)
     log = tmp_path / "steps.parquet"
     cp = subprocess.run([sys.executable, "-m", "vehicle", str(scenario), "--out", f"udp:127.0.0.1:{_free_port()}",
-                         "--speed", "50", "--live", f"udp:127.0.0.1:{_free_port()}", "--steplog", str(log), "--quiet"],
+                         "--speed", "50", "--live", f"udp:127.0.0.1:{_free_port()}", "--steplog", str(log), "--quiet",
+                         "--exit-at-end"],
                         capture_output=True, text=True, timeout=PROC_LIMIT_S, cwd=ROOT)
     assert cp.returncode == 0, cp.stderr
     assert "done, 20 steps" in cp.stdout and "live rows sent" in cp.stdout

@@ -1,10 +1,13 @@
 """``daa-vehicle SCENARIO``: the SIL vehicle process (ownship, intruders, onboard DAA + allocation agent).
 
 Like a SITL autopilot it streams telemetry to a GCS at ``--out`` and takes pilot commands from
-that peer. Prints ``READY listen=udp:HOST:PORT out=...`` once bound (orchestrators read it), one
-progress line per 10 sim seconds unless ``--quiet``, and a one-line summary at the end. Errors are
-one line (``daa-vehicle: error: ...``, exit 2 for bad input, 1 for a failed run); Ctrl-C / SIGTERM
-write the step log so far and exit 130 / 143.
+that link. It binds its sockets first and, while it prepares (a cold first start compiles the DAA
+kernels and builds the wait maps), sends HEARTBEAT in MAV_STATE_BOOT, answers parameters and reports
+its progress in STATUSTEXT. Prints ``READY listen=udp:HOST:PORT out=...`` once ready (orchestrators
+read it), one progress line per 10 sim seconds unless ``--quiet``, and a one-line summary at the end.
+It flies on past the scenario's last step until stopped, unless ``--exit-at-end``. Errors are one
+line (``daa-vehicle: error: ...``, exit 2 for bad input, 1 for a failed run); Ctrl-C / SIGTERM write
+the step log so far and exit 130 / 143.
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import signal
+import sys
 from pathlib import Path
 
 from daa_sil.cli import run_guarded
@@ -36,15 +40,26 @@ EXAMPLES = """examples:
   # 10x real time, undelayed truth copy for QGroundControl on 14550
   daa-vehicle scenarios/crossing_left.yaml --out udp:127.0.0.1:14601 --speed 10 --tap udp:127.0.0.1:14550
 
-  # like SITL: listen on 14550 and stream to whichever GCS (MAVProxy --master udpout:...) speaks first
+  # like SITL: listen on 14550 and stream to every GCS that spoke there in the last 5 s
+  # (MAVProxy --master udpout:127.0.0.1:14550; restart it at will)
   daa-vehicle scenarios/head_on.yaml --out udpin:127.0.0.1:14550
+
+  # a TCP server as SITL's 5760 (MAVProxy --master tcp:127.0.0.1:5760, QGC's TCP link), several clients
+  # at once, each with its own rates; start the clock only once a GCS has spoken
+  daa-vehicle scenarios/head_on.yaml --out tcpin:127.0.0.1:5760 --wait-gcs
+
+  # the scenario only: exit after its last step (what daa-sil run does)
+  daa-vehicle scenarios/head_on.yaml --exit-at-end
 
   # more ground stations, as SITL's --out: the shim (the pilot's link), QGC read-only on 14550,
   # a MAVProxy on 14560 that may also set parameters and modes (,rw; undelayed!)
   daa-vehicle scenarios/head_on.yaml --out udp:127.0.0.1:14601 --out udp:127.0.0.1:14550 --out udp:127.0.0.1:14560,rw
 
 connection strings (as MAVProxy): udpin:HOST:PORT listens, udpout:HOST:PORT sends, a bare udp:HOST:PORT
-listens for --listen and sends for --out / --tap.
+listens for --listen and sends for --out / --tap; tcpin:HOST:PORT (--out only) serves TCP clients.
+
+after the scenario: the vehicle flies on (the ownship on its last command or its plan, the intruders
+straight on) until Ctrl-C; ADSB_VEHICLE sent to it on a writable output adds an intruder (daa-sil inject).
 
 outputs: the first --out is the pilot's link (GCS or delay shim): pilot commands and settings travel
 on it. Every further --out (and --tap) is an observer with its own stream rates that may read
@@ -59,9 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", type=Path, help="scenario YAML file")
     p.add_argument("--out", action="append", default=None, metavar="CONN[,rw]",
                    help="repeatable. The first: the GCS (or delay shim) to stream to and take commands from "
-                        "(default udp:127.0.0.1:14550); udpin:HOST:PORT listens there and answers the first GCS "
-                        "that sends. Each further one: an observer with its own rates, read-only unless ,rw "
-                        "(see 'outputs' below)")
+                        "(default udp:127.0.0.1:14550); udpin:HOST:PORT listens there and answers every GCS heard "
+                        "in the last 5 s; tcpin:HOST:PORT serves TCP clients. Each further one: an observer with its "
+                        "own rates, read-only unless ,rw (see 'outputs' below)")
     p.add_argument("--listen", default=None, metavar="udp:HOST:PORT",
                    help="local socket (default udp:127.0.0.1:0 = OS-chosen port; not with --out udpin:)")
     p.add_argument("--tap", default=None, metavar="udp:HOST:PORT|none",
@@ -90,6 +105,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "for the shim's (or a direct GCS's) answer only if it gives them (a stock GCS does not); "
                         "wait = start the clock only once tick 0 is acknowledged (daa-sil run), so the run makes "
                         "the same decisions as lockstep")
+    p.add_argument("--exit-at-end", action="store_true",
+                   help="exit after the scenario's last step (default: fly on until stopped)")
+    p.add_argument("--wait-gcs", action="store_true",
+                   help="once ready, wait (MAV_STATE_STANDBY) for a ground station on the first --out before the "
+                        "clock starts")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     add_config_argument(p)
     return p
@@ -147,13 +167,13 @@ def _options(args):
                           speed=args.speed, key=key, steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live,
                           waitmap=args.waitmap, config=load_config(args.config) if args.config else None,
                           tap_writable=args.tap_writable, start_timeout_s=args.start_timeout,
-                          tick_sync=args.tick_sync, on_clock_start=clock_start)
+                          tick_sync=args.tick_sync, on_clock_start=clock_start, exit_at_end=args.exit_at_end,
+                          wait_gcs=args.wait_gcs)
 
 
 async def _amain(args) -> int:
     import numpy as np
 
-    from daa_sil.sil.connstr import describe
     from daa_sil.sil.endpoint import format_udp_address
     from daa_sil.sil.scenario import load_scenario
     from vehicle.node import VehicleNode
@@ -161,12 +181,10 @@ async def _amain(args) -> int:
     sc = load_scenario(args.scenario)
     opts = _options(args)
     if sc.faults:
-        import sys
-
         print(f"daa-vehicle: note: the scenario's faults ({'; '.join(f.describe() for f in sc.faults)}) are "
               f"carried out by `daa-sil run --clock realtime`, not by daa-vehicle", file=sys.stderr, flush=True)
     node = VehicleNode(sc, opts)
-    await node.start()
+    await node.start()  # every socket bound first: a taken port is one line, before any work
     loop = asyncio.get_running_loop()
     task = asyncio.current_task()
     got = {}
@@ -178,10 +196,9 @@ async def _amain(args) -> int:
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, on_signal, sig)
-    freeze_after_startup()  # the start-up's objects stay out of the steps' collections
-    observers = " ".join(f"{o.name}={describe(o.spec.conn)}{',rw' if o.spec.writable else ''}" for o in node.outputs[1:])
-    print(f"READY listen={node.local_address} out={describe(node.out) if node.out.listens else format_udp_address(node.out.addr)} clock={opts.clock} "
-          f"scenario={sc.name} steps={node.core.n_steps}" + (f" {observers}" if observers else ""), flush=True)
+    out_text = node.bound_address(node.outputs[0]) if node.out.listens else format_udp_address(node.out.addr)
+    observers = " ".join(f"{o.name}={node.bound_address(o)}{',rw' if o.spec.writable else ''}" for o in node.outputs[1:])
+    end = {"told": False}
 
     def progress(nd, out):
         if not args.quiet and nd.k % 10 == 0:
@@ -189,14 +206,24 @@ async def _amain(args) -> int:
             near = f"{np.min(rng):.0f}m" if rng.size and np.isfinite(rng).any() else "n/a"
             print(f"t={nd.t:5.0f}s authority={nd.core.last_authority:5s} decision={nd.core.last_decision} "
                   f"range={near}", flush=True)
+        if not opts.exit_at_end and not end["told"] and nd.k >= nd.core.n_steps - 1:
+            end["told"] = True
+            print(f"daa-vehicle: t = {nd.t:g} s, the scenario's last step: flying on until stopped (Ctrl-C); "
+                  f"--exit-at-end stops here", file=sys.stderr, flush=True)
 
     try:
+        print(f"daa-vehicle: booting: listening ({node.local_address}, out={node.bound_address(node.outputs[0])}), "
+              f"preparing the simulation", file=sys.stderr, flush=True)
+        await node.prepare()  # beside the link: boot heartbeats, parameters, progress in STATUSTEXT
+        freeze_after_startup()  # the start-up's objects stay out of the steps' collections
+        print(f"READY listen={node.local_address} out={out_text} clock={opts.clock} "
+              f"scenario={sc.name} steps={node.core.n_steps}" + (f" {observers}" if observers else ""), flush=True)
         await node.run(on_step=progress)
     except asyncio.CancelledError:
         path = node.write_steplog()
         node.close()
         sig = got.get("sig", signal.SIGINT)
-        print(f"daa-vehicle: stopped by signal {sig} at t = {node.t:g} s"
+        print(f"daa-vehicle: stopped by signal {sig} " + ("while booting" if node.core is None else f"at t = {node.t:g} s")
               + (f"; step log ({node.stats.steps} steps) in {path}" if path else ""), flush=True)
         return 128 + int(sig)
     except BaseException:

@@ -52,15 +52,8 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
     # too, lazy elsewhere: a blend can come at any step, and a parameter can switch blending on mid-run
     kernels.get().search_into.compile()
     es = encounter_set(sc)
-    policy = policy or build_policy(sc)
-    if config is None:  # the defaults: the study's default reading (its maps, its agent rules)
-        from daa_sil.config.run_config import load_config
-
-        config = load_config(None)
-    # the scenario's own timeouts win over the configuration's
-    link = {k: v for k, v in config.link.items() if v is not None and getattr(sc.allocation, k) is None}
-    policy = apply_overrides(config.onboard_policy(policy), wt=config.allocation["wt"],
-                             projl_lookahead=config.allocation["projl_lookahead"], link=link)
+    config = run_config(config)
+    policy = resolve_policy(sc, policy, config)
     waitmap = waitmap if waitmap is not None else config.map_source
     daa_cfg = config.daa_config(sc.thresholds)
     lookup = family = None
@@ -74,10 +67,25 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
     return core, es, policy, family
 
 
-def _preset_daa(name: str):
-    from daa_sil.daa.config import DaaConfig
+def run_config(config=None):
+    """``config``, or the defaults: the study's default reading (its maps, its agent rules)."""
+    if config is not None:
+        return config
+    from daa_sil.config.run_config import load_config
 
-    return DaaConfig.for_preset(name)
+    return load_config(None)
+
+
+def resolve_policy(sc: Scenario, policy=None, config=None) -> AllocationPolicy:
+    """The agent's policy for ``sc``: ``policy`` or the scenario's (:func:`build_policy`) with the run
+    configuration's reading rules, W_T, ProjL N and link timeouts (``config`` None: the defaults,
+    :func:`run_config`; the scenario's own timeouts win over the configuration's). Cheap (no kernels, no
+    maps): the booting vehicle answers parameters from it."""
+    config = run_config(config)
+    policy = policy or build_policy(sc)
+    link = {k: v for k, v in config.link.items() if v is not None and getattr(sc.allocation, k) is None}
+    return apply_overrides(config.onboard_policy(policy), wt=config.allocation["wt"],
+                           projl_lookahead=config.allocation["projl_lookahead"], link=link)
 
 
 def link_delay_processes(sc: Scenario) -> "dict | None":
@@ -111,8 +119,18 @@ def track_intervals(values_deg: np.ndarray, regions: np.ndarray) -> tuple[list, 
             [REGION_NAMES[i] for i in b["bands_trk_region"][0, :c].tolist()])
 
 
+#: step-log rows kept in memory (a day at 1 s steps); a vehicle that flies on past its scenario keeps
+#: flying, and its step log holds the first MAX_ROWS steps (``rows_dropped`` counts the rest)
+MAX_ROWS = 86_400
+
+
 class VehicleCore:
-    """Scenario + OnboardCore (N = 1) + pilot-command intake + step-log rows + telemetry encoding."""
+    """Scenario + OnboardCore (N = 1) + pilot-command intake + step-log rows + telemetry encoding.
+
+    Steps may go on past the scenario's ``n_steps``: the ownship flies its last command (or its plan),
+    the intruders fly on straight once their scripts end, and :meth:`inject_intruder` adds traffic."""
+
+    booting = False  #: (:class:`vehicle.boot.BootPlant` is the plant before this one is ready)
 
     def __init__(self, sc: Scenario, policy=None, waitmap: "str | None" = None, config=None):
         self.sc = sc
@@ -133,6 +151,8 @@ class VehicleCore:
         self.last_authority = "pilot"
         self.last_decision = "none"
         self.rows: list[dict] = []
+        self.last_row: "dict | None" = None  #: the newest step's row (also past MAX_ROWS)
+        self.rows_dropped = 0
         self.delay_up_s = math.nan
         self.delay_down_s = math.nan
         self._delay_procs = link_delay_processes(sc)
@@ -187,8 +207,21 @@ class VehicleCore:
         dec = out.decisions  # (N = 1: its coded fields are named one value at a time, see _row)
         self.last_authority = A.AUTHORITY_NAMES[int(dec.authority[0])]
         self.last_decision = A.DECISION_NAMES[int(dec.decision[0])]
-        self.rows.append(self._row(out, dec))
+        self.last_row = self._row(out, dec)
+        if len(self.rows) < MAX_ROWS:
+            self.rows.append(self.last_row)
+        else:
+            self.rows_dropped += 1
         return out
+
+    def inject_intruder(self, intr) -> None:
+        """Fly a :class:`vehicle.traffic.Intruder` from this step on (straight, constant velocity)."""
+        from daa_sil.geometry.kinematics import AircraftState
+
+        self.core.add_intruders(AircraftState(*(np.full((1, 1), float(v)) for v in (intr.x, intr.y, intr.z, intr.gs,
+                                                                                        intr.trk, intr.vs))))
+        self.icao.append(int(intr.icao))
+        self.callsigns.append(str(intr.callsign))
 
     def _row(self, out, dec) -> dict:
         o, it, g = out.own, out.intruders, out.geometry

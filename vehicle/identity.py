@@ -19,11 +19,13 @@ waiting (agent waits)   CRUISE (7)      holds the last course, climb rate and sp
 (LOITER would read "Hold" in MAVSDK, but an ArduPlane in LOITER circles; ours flies straight on.)
 
 Mode requests (``MAV_CMD_DO_SET_MODE``, the ``SET_MODE`` message): the agent decides authority
-every step (the paper's Algorithm 1), and a ground station cannot override it, so
+every step (the paper's Algorithm 1), and a ground station cannot override it; but a received pilot
+command is always judged by SM(u), so a mode request must not stand in its way:
 
-* ``GUIDED`` (the pilot's own mode) is ``ACCEPTED`` while the pilot has authority (nothing to
-  change; clients such as MAVSDK ask for it before a DO_REPOSITION) and ``TEMPORARILY_REJECTED``
-  while the agent holds it (AVOID_ADSB / CRUISE: it hands back when the conflict is resolved);
+* ``GUIDED`` (the pilot's own mode) is ``ACCEPTED`` whatever the authority: it says "my commands are
+  coming" (MAVSDK's ``goto_location`` asks for it before its DO_REPOSITION, MAVProxy's ``mode
+  GUIDED`` before ``guided``). The pilot's commands then go to the agent, which flies them if safe
+  (or blends them); the heartbeat keeps showing who flies (AVOID_ADSB / CRUISE while the agent does);
 * ``AVOID_ADSB`` and ``CRUISE`` are ``DENIED``: only the agent enters them;
 * any other mode, or a request without ``MAV_MODE_FLAG_CUSTOM_MODE_ENABLED``: ``DENIED``.
 
@@ -76,7 +78,7 @@ def mode_request(base: int, custom: int, current: int) -> "tuple[int, str]":
     if custom == GUIDED:
         if int(current) == GUIDED:
             return M.MAV_RESULT_ACCEPTED, "mode GUIDED: the pilot has authority"
-        return M.MAV_RESULT_TEMPORARILY_REJECTED, f"GUIDED refused: DAA agent flies ({mode_name(current)})"
+        return M.MAV_RESULT_ACCEPTED, f"GUIDED: agent judges commands ({mode_name(current)} now)"
     if custom in (AVOID_ADSB, CRUISE):
         return M.MAV_RESULT_DENIED, f"mode {mode_name(custom)}: set by the DAA agent only"
     return M.MAV_RESULT_DENIED, f"mode {mode_name(custom)} not available; use GUIDED"

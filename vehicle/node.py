@@ -12,8 +12,16 @@ truth advances. The step log is written atomically at the end, on Ctrl-C and on 
 
 Everything a message does -- parameters, modes, rates, the command gate, acks, the tick protocol --
 is the protocol core's (:mod:`vehicle.protocol`); this module moves bytes and time only: each
-datagram goes to :meth:`VehicleProtocol.receive` as it arrives, the core's sends go out, its
-console lines are printed.
+datagram goes to :meth:`VehicleProtocol.receive` as it arrives (a ``tcpin:`` output's stream to
+:meth:`VehicleProtocol.receive_stream`, :class:`daa_sil.sil.tcp_server.TcpServer`), the core's sends go
+out, its console lines are printed.
+
+Start: :meth:`VehicleNode.start` binds every socket first (a taken port is one line, at once), then
+:meth:`VehicleNode.prepare` readies the simulation beside the link (:mod:`vehicle.prepare`) while the
+core, on a :class:`vehicle.boot.BootPlant`, sends its boot heartbeat once a wall second and answers;
+with ``wait_gcs`` the clock then waits for the first ground station on the pilot's link. The
+simulation clock starts after that. Without ``exit_at_end`` the vehicle flies on past the scenario's
+last step until stopped.
 
 Outputs (:mod:`daa_sil.sil.outputs`): the first ``--out`` is the pilot's link (``gcs``); further
 ``--out`` and ``--tap`` are observers with their own stream rates, read-only unless marked writable.
@@ -22,6 +30,7 @@ Outputs (:mod:`daa_sil.sil.outputs`): the first ``--out`` is the pilot's link (`
 from __future__ import annotations
 
 import asyncio
+import itertools
 import sys
 import time
 from pathlib import Path
@@ -32,7 +41,9 @@ from daa_sil.sil.endpoint import MavEndpoint, format_udp_address, open_endpoint
 from daa_sil.sil.msgguard import MessageGuard
 from daa_sil.sil.outputs import output_specs
 
+from .boot import BootPlant
 from .core import VehicleCore
+from .node_loop import NodeLoop
 from .node_options import VehicleOptions, VehicleStats
 from .node_steplog import StepTiming, steplog_meta
 from .protocol import MAIN, VEHICLE_COMPID, VEHICLE_SYSID, OutputLink, VehicleProtocol
@@ -56,7 +67,9 @@ class VehicleNode:
     def __init__(self, scenario, opts: VehicleOptions, core: "VehicleCore | None" = None):
         self.sc = scenario
         self.opts = opts
-        self.core = core if core is not None else VehicleCore(scenario, waitmap=opts.waitmap, config=opts.config)
+        #: the simulation: given, or made by :meth:`prepare` (None until then)
+        self.core: "VehicleCore | None" = core
+        self.boot = BootPlant(scenario, opts.config)
         self.specs = output_specs([opts.out, *opts.also_out], opts.tap, opts.tap_writable)
         self.out = self.specs[0].conn
         self.listen = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))
@@ -66,16 +79,20 @@ class VehicleNode:
         ticks = TickOptions(opts.clock, opts.speed, opts.tick_timeout_s, opts.tick_retry_s, opts.start_timeout_s,
                             opts.tick_sync)
         #: the protocol: parameters, modes, rates, the command gate, acks, the tick protocol
-        self.protocol = VehicleProtocol(self.core, self.specs, self.listen.addr, self.codec, ticks, guard=self.guard,
-                                        out_text=self.out.text)
-        self.eps: "list[MavEndpoint]" = []  #: one socket per protocol port (filled by :meth:`start`)
+        self.protocol = VehicleProtocol(core if core is not None else self.boot, self.specs, self.listen.addr,
+                                        self.codec, ticks, guard=self.guard, out_text=self.out.text)
+        #: one socket per protocol port (filled by :meth:`start`): a MavEndpoint, or a TcpServer for tcpin:
+        self.eps: list = []
+        #: the boot telemetry goes to the pilot's link too, unless a tick partner (a shim) may be there
+        self.boot_to_pilot = opts.clock == "realtime" and opts.tick_sync == "auto"
         #: set by :meth:`request_stop` (SIGINT / SIGTERM): the loop stops at the next step or wait even if
         #: the task's cancellation was lost (Python 3.11's ``asyncio.wait_for`` can swallow a cancel that
         #: arrives together with the awaited message)
         self.stop_requested = False
         self.timing = StepTiming()  #: realtime: per-step lateness and readiness (ms)
-        self.wall0 = 0.0  #: loop time of step 0's deadline (realtime)
-        self._wake: "asyncio.Event | None" = None
+        #: the waits (for ticks, deadlines, while booting)
+        self.waits = NodeLoop(self.protocol, self.flush, self._check_stop, opts,
+                              lambda: self.ep.last_refused if self.ep is not None else None)
         self.live = None
         if opts.live:
             from daa_sil.sil.live import LiveSender
@@ -119,9 +136,17 @@ class VehicleNode:
         return self.protocol.outputs[0].addr
 
     @property
-    def endpoints(self) -> "list[MavEndpoint]":
-        """Every socket of the vehicle, the main one first."""
+    def endpoints(self) -> list:
+        """Every socket of the vehicle, the main one first (a TcpServer for each tcpin: output)."""
         return list(self.eps)
+
+    def bound_address(self, out) -> str:
+        """Where output ``out`` (an :class:`vehicle.ports.OutputLink`) listens or sends, as bound."""
+        from daa_sil.sil.connstr import describe
+
+        if not out.listens:
+            return describe(out.spec.conn)
+        return describe(out.spec.conn, self.eps[out.port].local_address[1])
 
     def sim_now(self) -> float:
         """Vehicle sim time now (s)."""
@@ -130,24 +155,47 @@ class VehicleNode:
     # -- lifecycle -------------------------------------------------------------------------------
     async def start(self) -> None:
         """Bind one socket per protocol port: the main one (``--listen``, or the first ``--out`` if it is
-        ``udpin:``) and one per further ``udpin:`` output."""
-        self._wake = asyncio.Event()
-        for i, port in enumerate(self.protocol.ports):
-            ep = await open_endpoint(self.codec, port.bind, intake=port.intake,
-                                     on_datagram=lambda data, addr, now, i=i: self._on_datagram(i, data, addr, now))
-            self.eps.append(ep)
+        ``udpin:``) and one per further ``udpin:`` / ``tcpin:`` output. A taken port: one-line UsageError."""
+        from daa_sil.sil.tcp_server import TcpServer
+
+        p = self.protocol
+        try:
+            for i, port in enumerate(p.ports):
+                if port.transport == "tcp":
+                    ep = TcpServer(lambda addr, now, i=i: p.connect(i, addr, now),
+                                   lambda addr, data, now, i=i: self._on_stream(i, data, addr, now),
+                                   lambda addr, i=i: p.disconnect(i, addr))
+                    self.eps.append(ep)
+                    await ep.start(port.bind)
+                    continue
+                ep = await open_endpoint(self.codec, port.bind, intake=port.intake,
+                                         on_datagram=lambda data, addr, now, i=i: self._on_datagram(i, data, addr, now))
+                self.eps.append(ep)
+        except BaseException:
+            self.close()
+            raise
 
     def _on_datagram(self, port: int, data: bytes, addr, now: float) -> None:
         self.protocol.receive(port, data, addr, now)
         self.flush()
-        self._wake.set()
+        self.waits.wake.set()
+
+    def _on_stream(self, port: int, data: bytes, addr, now: float) -> None:
+        self.protocol.receive_stream(port, data, addr, now)
+        self.flush()
+        self.waits.wake.set()
 
     def flush(self) -> None:
         """Send what the protocol has to send and print its lines."""
         p = self.protocol
         for s in p.take_sends():
             ep = self.eps[s.port] if s.port < len(self.eps) else None
-            if ep is None or ep.transport is None or ep.transport.is_closing():
+            if ep is None:
+                continue
+            if not isinstance(ep, MavEndpoint):  # a TCP client: the bytes go into its stream
+                ep.send(s.addr, s.data)
+                continue
+            if ep.transport is None or ep.transport.is_closing():
                 continue
             if s.counted:
                 ep.send_datagram(s.data, s.addr, s.messages)
@@ -163,6 +211,11 @@ class VehicleNode:
         """Messages dropped on every socket: codec rejections, unexpected peers, overflow, malformed content."""
         return self.protocol.dropped()
 
+    @property
+    def wall0(self) -> float:
+        """Loop time of step 0's deadline (realtime)."""
+        return self.waits.wall0
+
     def request_stop(self) -> None:
         """Stop playing: :meth:`run` raises ``asyncio.CancelledError`` at its next step or wait."""
         self.stop_requested = True
@@ -175,96 +228,42 @@ class VehicleNode:
     def local_address(self) -> str:
         return format_udp_address(self.ep.local_address)
 
+    async def prepare(self) -> None:
+        """Ready the simulation beside the link (:mod:`vehicle.prepare`), serving the link as a booting vehicle
+        meanwhile."""
+        from .prepare import Preparation
+
+        p = self.protocol
+        if self.core is None:
+            prep = Preparation(self.sc, self.opts, self.boot.policy,
+                               lambda text: (p.boot_progress(text, self.boot_to_pilot), self.flush()))
+            task = asyncio.ensure_future(prep.run())
+            task.add_done_callback(lambda _: self.waits.wake.set())
+            try:
+                await self.waits.serve_until(task.done, self.boot_to_pilot)
+                self.core = task.result()
+            finally:
+                if not task.done():
+                    prep.cancel()
+                    task.cancel()
+        if p.booting:
+            p.set_plant(self.core)
+            p.boot_progress("ready", self.boot_to_pilot)
+            self.flush()
+
+    async def wait_for_gcs(self) -> None:
+        """``wait_gcs``: serve the link (MAV_STATE_STANDBY) until a ground station on the pilot's link speaks."""
+        p = self.protocol
+        if self.opts.wait_gcs and not p.pilot_heard:
+            say(f"ready; waiting for a ground station on {self.out.text} (--wait-gcs)")
+            await self.waits.serve_until(lambda: p.pilot_heard, self.boot_to_pilot, standby=True)
+            say("a ground station spoke: the clock starts")
+
     def close(self) -> None:
         for ep in self.eps:
             ep.close()
         if self.live is not None:
             self.live.close()
-
-    # -- waiting ---------------------------------------------------------------------------------
-    async def _wait(self, timeout: float) -> None:
-        """Until a datagram arrives or ``timeout`` (s) passes."""
-        if not self._wake.is_set():
-            try:
-                await asyncio.wait_for(self._wake.wait(), max(0.0, timeout))
-            except asyncio.TimeoutError:
-                pass
-        self._wake.clear()
-
-    def _drain(self) -> None:
-        self.protocol.process()
-        self.flush()
-
-    async def await_ready(self, k: int, t: float, need_ack: bool = False, send: bool = True) -> None:
-        """Send SIM_TICK(k) (unless ``send`` is False: already sent) and handle messages until step ``k``
-        may run, sending it again when the rules say; :class:`vehicle.tick_rules.TickTimeout` past the limit."""
-        loop = asyncio.get_running_loop()
-        p = self.protocol
-        w = p.ticks.wait(k, t, loop.time(), need_ack)
-        if send:
-            p.send_tick(k, t)
-            self.flush()
-        while not w.ready():
-            self._check_stop()
-            if p.pending(MAIN):
-                p.process(MAIN)
-                self.flush()
-                continue
-            now = loop.time()
-            if now >= w.next_timer():
-                for kk, tt in w.on_timer(now, self.ep.last_refused):
-                    p.send_tick(kk, tt)
-                self.flush()
-                continue
-            await self._wait(w.next_timer() - now)
-
-    async def receive_until(self, when: float, until=None) -> None:
-        """Handle messages until loop time ``when`` (or until ``until()`` is true)."""
-        loop = asyncio.get_running_loop()
-        p = self.protocol
-        while until is None or not until():
-            self._check_stop()
-            if p.pending(MAIN):
-                p.process(MAIN)
-                self.flush()
-                continue
-            left = when - loop.time()
-            if left <= 0:
-                return
-            await self._wait(left)
-
-    async def realtime_tick(self, k: int, t: float, period: float) -> float:
-        """Realtime step ``k``: send its tick a lead before the deadline, then wait for the partner's
-        answer (at most a grace past the deadline; without a partner, until the deadline). Returns the
-        step's deadline (loop time)."""
-        loop = asyncio.get_running_loop()
-        p = self.protocol
-        rules = p.ticks
-        lead = rules.lead_s(period)
-        if k == 0:
-            if self.opts.tick_sync == "wait":
-                await self.await_ready(0, t)  # (re-)sends tick 0 until the GCS (behind the shim) answers
-            else:
-                p.send_tick(0, t)
-                self.flush()
-            self.wall0 = loop.time() + lead
-            if callable(self.opts.on_clock_start):
-                self.opts.on_clock_start(self.wall0)
-        else:
-            rules.note_late_ack(k)
-            await self.receive_until(self.wall0 + t / self.opts.speed - lead)
-            self._drain()
-            p.send_tick(k, t)
-            self.flush()
-        due = self.wall0 + t / self.opts.speed
-        p.check_silence(loop.time())
-        self.flush()
-        until, stop_early = rules.confirm_deadline(due, period)
-        await self.receive_until(until, until=(lambda: rules.confirmed(k)) if stop_early else None)
-        rules.note_unconfirmed(k)
-        p.check_silence(loop.time())
-        self.flush()
-        return due
 
     def _sharpen(self) -> None:
         """Realtime: like the shim, wake at deadlines without timer coalescing, and ask for a short EEVDF
@@ -285,25 +284,29 @@ class VehicleNode:
         self.flush()
 
     async def run(self, on_step=None) -> None:
-        """Play every step of the scenario (see the module docstring)."""
+        """Play every step of the scenario, and on past it unless ``exit_at_end`` (see the module docstring);
+        prepares first if :meth:`prepare` has not run, and with ``wait_gcs`` waits for a ground station."""
+        if self.core is None or self.protocol.booting:
+            await self.prepare()
+        await self.wait_for_gcs()
         loop = asyncio.get_running_loop()
         p = self.protocol
         n = self.core.n_steps
         lockstep = self.opts.clock == "lockstep"
         period = self.core.dt / self.opts.speed
-        self.wall0 = loop.time()
+        self.waits.wall0 = loop.time()
         if not lockstep:
             self._sharpen()
-        for k in range(n):
+        for k in (range(n) if self.opts.exit_at_end else itertools.count()):
             self._check_stop()
             p.begin_step(k)
             t = p.t
             if lockstep:
-                self._drain()
-                await self.await_ready(k, t)
+                self.waits.drain()
+                await self.waits.await_ready(k, t)
             else:
-                due = await self.realtime_tick(k, t, period)
-            self._drain()
+                due = await self.waits.realtime_tick(k, t, period)
+            self.waits.drain()
             out = self.core.step(t)
             if not lockstep:  # computed ahead (inputs complete once the tick is echoed): out at the deadline
                 self.timing.ready(1000.0 * (loop.time() - due))
@@ -313,25 +316,25 @@ class VehicleNode:
                 self._check_stop()
             self.publish(t, out)
             if self.live is not None:
-                self.live.send(self.core.rows[-1])  # non-blocking; failures are counted, never raised
+                self.live.send(self.core.last_row)  # non-blocking; failures are counted, never raised
             self.stats.steps = k + 1
             if not lockstep:
                 self.timing.published(1000.0 * (loop.time() - due), self.stats)
             if on_step is not None:
                 on_step(self, out)
             await asyncio.sleep(0)
-        if lockstep and n:
+        if lockstep and n and self.opts.exit_at_end:
             # the GCS ran its last step in parallel: done once it acknowledged it (as every other tick)
-            await self.await_ready(n - 1, (n - 1) * self.core.dt, need_ack=True, send=False)
+            await self.waits.await_ready(n - 1, (n - 1) * self.core.dt, need_ack=True, send=False)
 
     def write_steplog(self) -> "Path | None":
         """Write the step log so far (atomic Parquet; only the steps published); returns its path or None."""
-        if self.opts.steplog is None or self.stats.steps == 0:
+        if self.opts.steplog is None or self.stats.steps == 0 or self.core is None:
             return None
         if self.timing.late_ms:
             self.stats.late_p99_ms = self.timing.p99_ms()
         meta = steplog_meta(self.sc, self.opts, self.core, self.stats, signed=self.codec.signed,
                             gate=self.gate.counters.__dict__, link=self.ep.stats() if self.ep else {},
                             live=self.live.stats.__dict__ if self.live is not None else None,
-                            timing=self.timing, wall0=self.wall0, events=self.services.events)
+                            timing=self.timing, wall0=self.waits.wall0, events=self.services.events)
         return self.core.write_steplog(self.opts.steplog, meta, n_rows=self.stats.steps)

@@ -36,6 +36,12 @@ class VehicleOptions:
     tick_sync: str = "auto"
     #: called once with the wall (``time.monotonic``) instant of step 0's deadline when the clock starts
     on_clock_start: "object | None" = None
+    #: stop after the scenario's last step (``daa-sil run``); False: fly on until stopped (``daa-vehicle``'s
+    #: default: the ownship on its last command or its plan, the intruders straight on)
+    exit_at_end: bool = True
+    #: once ready, wait (MAV_STATE_STANDBY) for the first message from a ground station on the pilot's link
+    #: before the clock starts
+    wait_gcs: bool = False
 
 
 @dataclass
@@ -46,6 +52,8 @@ class VehicleStats:
     gcs_requests_answered: int = 0
     #: pilot commands from an observer output (the tap, a further --out): never flown
     commands_from_observers_ignored: int = 0
+    #: pilot commands that arrived while the vehicle was booting (refused: nothing flies yet)
+    commands_while_booting: int = 0
     foreign_messages_ignored: int = 0
     #: messages from an address that is no output of the socket they came in on, dropped
     other_address_ignored: int = 0

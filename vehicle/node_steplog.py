@@ -70,6 +70,8 @@ def steplog_meta(sc, opts, core, stats, *, signed: bool, gate: dict, link: dict,
                                               **stats.extra})
     # parameter / mode writes: kind, name, old, new, status, link, source, t_received, t_applied, t_sent
     meta["settings"] = json.dumps([e.as_dict() for e in events], sort_keys=True)
+    # every intruder flown, by step-log index (the scenario's, then injected ones): viewers label them so
+    meta["intruders"] = json.dumps([{"icao": i, "callsign": c} for i, c in zip(core.icao, core.callsigns)])
     meta["config"] = json.dumps(config_record(sc, opts, core), sort_keys=True, default=str)
     if core.waitmap_record is not None:  # what `daa-sil run` records, without loading the maps again
         meta["waitmap"] = json.dumps(core.waitmap_record, sort_keys=True)

@@ -60,13 +60,17 @@ PILOT_COMMANDS = {M.MAV_CMD_DO_REPOSITION}
 READ_TYPES = {"PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "TIMESYNC", "PING", "REQUEST_DATA_STREAM",
                "MISSION_REQUEST_LIST", "FILE_TRANSFER_PROTOCOL"}
 _WRITE_TYPES = {"PARAM_SET", "SET_MODE"}
+#: a refused PARAM_SET's PARAM_ERROR code, by the refusal's status
+PARAM_ERRORS = {"unknown": M.MAV_PARAM_ERROR_DOES_NOT_EXIST, "out_of_range": M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE,
+                "not_integer": M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, "read_only": M.MAV_PARAM_ERROR_READ_ONLY,
+                "denied_readonly": M.MAV_PARAM_ERROR_PERMISSION_DENIED}
 
 
 @dataclass
 class SettingEvent:
     """One parameter or mode write as the step log keeps it (times are vehicle sim time, s)."""
 
-    kind: str  #: "param" or "mode"
+    kind: str  #: "param", "mode" or "traffic" (an injected intruder: ``name`` its ICAO address)
     name: str
     old: float
     new: float
@@ -271,7 +275,8 @@ class GcsServices:
             return self._mode(msg, M.MAV_CMD_DO_SET_MODE, base, custom, link, *when)
         return []
 
-    def _log(self, **kw) -> SettingEvent:
+    def log_event(self, **kw) -> SettingEvent:
+        """Keep one write for the step log (the first :data:`MAX_EVENTS`; the rest are counted)."""
         ev = SettingEvent(**kw)
         if len(self.events) < MAX_EVENTS:
             self.events.append(ev)
@@ -292,9 +297,13 @@ class GcsServices:
         elif res.status == "accepted":
             self.plant.set_policy(res.policy)
         value = res.value if status in ("accepted", "unchanged") else res.old
-        self._log(kind="param", name=name, old=res.old, new=value, status=status, link=link,
+        self.log_event(kind="param", name=name, old=res.old, new=value, status=status, link=link,
                   source=src, t_received=t_received, t_applied=t_applied, t_sent=t_sent, reason=reason)
         out = []
+        error = PARAM_ERRORS.get(status)
+        if error is not None:  # the refusal first: a client that reads PARAM_ERROR completes on it (MAVSDK)
+            i = self.params.find(name)[0] if res.spec is not None else -1
+            out.append(M.MAVLink_param_error_message(*src, name.encode("ascii", "replace")[:16], i, error))
         if res.spec is not None:
             i, _ = self.params.find(name)
             out.append(T.param_value(res.spec.name, value, res.spec.ptype, len(self.params), i))
@@ -312,7 +321,7 @@ class GcsServices:
             result, "denied")
         if link not in self.writable:
             result, status, reason = M.MAV_RESULT_DENIED, "denied_readonly", f"mode: {link} is read-only"
-        self._log(kind="mode", name=ident.mode_name(custom), old=float(current), new=float(current), status=status,
+        self.log_event(kind="mode", name=ident.mode_name(custom), old=float(current), new=float(current), status=status,
                   link=link, source=src, t_received=t_received, t_applied=t_applied, t_sent=t_sent, reason=reason)
         self.answered += 1
         sev = M.MAV_SEVERITY_INFO if result == M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_WARNING

@@ -89,11 +89,11 @@ class Kin:
     turn_rate: float = 0.0
 
 
-def heartbeat(authority: str, agent_enabled: bool = True) -> "M.MAVLink_message":
-    """Vehicle HEARTBEAT as an ArduPlane: the authority's mode in ``custom_mode`` (:mod:`vehicle.identity`)."""
+def heartbeat(authority: str, agent_enabled: bool = True, state: int = M.MAV_STATE_ACTIVE) -> "M.MAVLink_message":
+    """Vehicle HEARTBEAT as an ArduPlane: the authority's mode in ``custom_mode`` (:mod:`vehicle.identity`);
+    ``state`` the MAV_STATE (BOOT while the vehicle prepares, STANDBY while it waits for a GCS)."""
     mode = ident.mode_of(authority, agent_enabled)
-    return M.MAVLink_heartbeat_message(ident.VEHICLE_TYPE, ident.AUTOPILOT, ident.base_mode(mode), mode,
-                                       M.MAV_STATE_ACTIVE, 3)
+    return M.MAVLink_heartbeat_message(ident.VEHICLE_TYPE, ident.AUTOPILOT, ident.base_mode(mode), mode, state, 3)
 
 
 def _geo(k: Kin, origin, geo):
@@ -300,7 +300,7 @@ def step_messages(vc, t: float, out, home: Kin, agent_enabled: bool = True) -> "
     The turn rate for ATTITUDE is the one flown over the step: the track change from the state at
     ``t`` (``out.own``) to the core's state at ``t + dt``, over ``dt``.
     """
-    row = vc.rows[-1]
+    row = vc.last_row
     origin = vc.sc.origin
     own0, own1 = out.own, vc.core.own
     dtrk = (float(own1.trk[0]) - float(own0.trk[0]) + math.pi) % (2 * math.pi) - math.pi

@@ -174,10 +174,11 @@ def _check_args(args):
 
         parse_udp_address(args.tap, "--tap")
     if args.vehicle_outs:
-        from daa_sil.sil.outputs import output_specs
+        from daa_sil.sil.outputs import check_listening, output_specs
 
         # the shim's side is the vehicle's first --out; these follow it (a malformed one: one line, exit 2)
-        output_specs(["udp:127.0.0.1:1", *args.vehicle_outs], args.tap, option_of_extra="--vehicle-out")
+        specs = output_specs(["udp:127.0.0.1:1", *args.vehicle_outs], args.tap, option_of_extra="--vehicle-out")
+        check_listening(specs[1:], "--vehicle-out")  # a taken udpin: / tcpin: port: now, not after the vehicle started
     if getattr(args, "connect", None):
         from ..viz import url_host_port
 

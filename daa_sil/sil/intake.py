@@ -226,15 +226,10 @@ class Intake:
         ``admit(msg_id, size)``: a packet it refuses is skipped before decoding (``shed``:
         :meth:`daa_sil.link.codec.MavCodec.decode`)."""
         c = self.counters
-        c.datagrams_received += 1
         addr = (addr[0], addr[1])
         if not self.peer_allowed(addr):
-            c.datagrams_rejected_peer += 1
-            good = self.codec.decode(data, commit=False)
-            c.rejected_peer += len(good)
-            what = f"{good[0].get_type()} from system {good[0].get_srcSystem()}" if good else "no valid MAVLink"
-            self.drops.note(addr, what, now)
-            return []
+            return self.reject(data, addr, now)
+        c.datagrams_received += 1
         msgs = self.codec.decode(data, admit=admit)
         if not msgs:
             return []
@@ -247,6 +242,20 @@ class Intake:
         if self.peer is None and self.learn_peer and not (self.lock_peer and self.listed(addr)):
             self.peer = addr
         return [Received(now, addr, m) for m in msgs]
+
+    def reject(self, data: bytes, addr: Address, now: float) -> "list[Received]":
+        """Drop a datagram from ``addr`` that its receiver will not take (a stranger, or one past its room for
+        senders): decoded without changing any signing state, counted (``rejected_peer`` for its good
+        packets, codec reasons for the rest) and reported; returns ``[]``."""
+        c = self.counters
+        c.datagrams_received += 1
+        c.datagrams_rejected_peer += 1
+        addr = (addr[0], addr[1])
+        good = self.codec.decode(data, commit=False)
+        c.rejected_peer += len(good)
+        what = f"{good[0].get_type()} from system {good[0].get_srcSystem()}" if good else "no valid MAVLink"
+        self.drops.note(addr, what, now)
+        return []
 
     def stats(self) -> dict:
         """Counters of the socket and of its codec in one dict (``dropped`` = every rejected packet)."""

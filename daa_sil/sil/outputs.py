@@ -14,8 +14,10 @@
 
 CONN is a connection string (:mod:`daa_sil.sil.connstr`): ``udp:`` / ``udpout:`` sends to HOST:PORT
 from the vehicle's main socket (and takes replies from exactly that address); ``udpin:`` listens on
-HOST:PORT and answers the first sender, warning about (and dropping) any other. ``,ro`` says
-read-only explicitly. The first ``--out`` may not be marked: it is the pilot's, always writable.
+HOST:PORT and answers every ground station heard there in the last few seconds (pymavlink's ``udpin``
+rule); ``tcpin:`` serves TCP clients on HOST:PORT (as SITL's 5760), each with its own rates. Every
+ground station of an output has the output's rights. ``,ro`` says read-only explicitly. The first
+``--out`` may not be marked: it is the pilot's, always writable.
 """
 
 from __future__ import annotations
@@ -43,6 +45,10 @@ class OutputSpec:
     @property
     def listens(self) -> bool:
         return self.conn.listens
+
+    @property
+    def tcp(self) -> bool:
+        return self.conn.tcp
 
     @cached_property
     def addr(self) -> "tuple[str, int]":
@@ -77,14 +83,35 @@ def output_specs(outs: "list[str] | tuple[str, ...]", tap: "str | None" = None,
         if i == 0 and mark is not None:
             raise UsageError(f"--out {text!r}: the first --out is the pilot's link and always writable; "
                              f"mark only the further outputs")
-        specs.append(OutputSpec(PILOT_LINK if i == 0 else f"out{i + 1}", parse_connection(conn_text, option, SEND),
-                                bool(mark)))
+        specs.append(OutputSpec(PILOT_LINK if i == 0 else f"out{i + 1}",
+                                parse_connection(conn_text, option, SEND, allow_tcp=True), bool(mark)))
     if tap is not None:
         specs.append(OutputSpec(TAP, parse_connection(tap, "--tap", SEND, allow=(SEND,)), bool(tap_writable)))
     seen: dict = {}
     for s in specs:
-        key = (s.listens, s.addr)
+        key = (s.listens, s.conn.transport, s.addr)
         if key in seen:
             raise UsageError(f"{s.name} ({s.conn.text}) and {seen[key]} are the same address; give each output its own")
         seen[key] = s.name
     return specs
+
+
+def check_listening(specs: "list[OutputSpec]", option: str = "--out") -> None:
+    """Bind (and close at once) the port of every listening output (``udpin:`` / ``tcpin:``): a taken one is a
+    one-line UsageError now, before a run starts any process or any work."""
+    import socket
+
+    for s in specs:
+        if not s.listens or s.addr[1] == 0:
+            continue
+        family = socket.AF_INET6 if ":" in s.addr[0] else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_STREAM if s.tcp else socket.SOCK_DGRAM)
+        try:
+            if s.tcp:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the vehicle's server binds
+            sock.bind(s.addr)
+        except OSError as exc:
+            raise UsageError(f"{option} {s.conn.text}: cannot listen there ({exc.strerror or exc}); is another vehicle "
+                             f"or ground station using that port?") from None
+        finally:
+            sock.close()

@@ -104,6 +104,11 @@ def run_sil(opts: RunOptions, scenario=None) -> dict:
 
     sc = scenario if scenario is not None else load_scenario(opts.scenario_path)
     check_faults_allowed(sc, opts.clock, opts.scenario_path)
+    if opts.vehicle_outs:  # a taken udpin: / tcpin: port: one line now, not after the vehicle started
+        from daa_sil.sil.outputs import check_listening, output_specs
+
+        check_listening(output_specs(["udp:127.0.0.1:1", *opts.vehicle_outs], option_of_extra="--vehicle-out")[1:],
+                        "--vehicle-out")
     out = ensure_dir(opts.out_dir)
     steplog = out / "steplog.parquet"
     for stale in (steplog, out / "result.json"):
@@ -143,7 +148,7 @@ def _start_recorder(opts: RunOptions, sc):
         return BackgroundRecorder(SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, connect=opts.connect,
                                               overwrite=True),
                                   preset=sc.thresholds, encounter_id=0,  # the vehicle logs encounter 0
-                                  live=live_viz(opts))
+                                  live=live_viz(opts), names=[i.callsign for i in sc.intruders])
     except OSError as exc:  # the helper process cannot start: the run goes on without a recording
         print(f"daa-sil: warning: cannot start the Rerun recorder ({exc.strerror or exc}); no recording",
               file=sys.stderr, flush=True)
@@ -216,6 +221,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
                      "--tick-timeout", f"{opts.tick_timeout_s:g}",
                      # tick 0: the GCS may still be starting (the monitor below notices a dead one at once)
                      "--start-timeout", f"{max(opts.tick_timeout_s, START_TIMEOUT_S):g}"] + clock_args + key_args
+            vargs.append("--exit-at-end")  # the run is the scenario (a standalone vehicle flies on)
             if opts.clock == "realtime":
                 vargs += ["--tick-sync", "wait"]  # start once tick 0 is acked: the GCS plays from step 0
             if opts.waitmap is not None:

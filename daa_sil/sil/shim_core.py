@@ -39,7 +39,9 @@ caller should call :meth:`ShimCore.release`.
 
 Until the vehicle's first datagram decides the mode (realtime), GCS datagrams are held
 (``held_for_vehicle``, at most ``MAX_HELD`` datagrams and ``max_held_bytes`` bytes, then
-``held_dropped``) and replayed after it.
+``held_dropped``) and replayed after it. A vehicle that is still booting (a datagram of HEARTBEATs in
+``MAV_STATE_BOOT`` or ``STANDBY`` and STATUSTEXTs: :mod:`vehicle.boot`) decides nothing: such datagrams
+go to the GCS at once (``boot_relayed``); there is no sim clock yet to delay them by.
 
 Every queue has a byte budget: each delay line ``max_line_bytes`` in flight, the start-up hold and a
 lockstep step's held GCS datagrams ``max_held_bytes`` (:class:`daa_sil.sil.shim_config.ShimConfig`).
@@ -86,7 +88,9 @@ MAX_COUNTED_STAMPS = 64
 #: the protocol's counters (the socket side adds its own)
 COUNTERS = ("rejected_claim", "ticks", "acks", "bad_control", "mixed_control", "clock_backwards", "tick_echoes",
             "held_for_vehicle", "held_dropped", "batch_dropped", "gcs_lagged", "gcs_unresponsive", "released_late",
-            "ticks_held", "start_tick_forwarded", "dropped_queue")
+            "ticks_held", "start_tick_forwarded", "dropped_queue", "boot_relayed")
+#: MAV_STATE of a vehicle that is not flying its scenario yet (booting, or waiting for its GCS)
+BOOT_STATES = (1, 3)  # MAV_STATE_BOOT, MAV_STATE_STANDBY
 #: the side each line delivers to
 DEST = {"down": "gcs", "up": "vehicle"}
 
@@ -157,6 +161,10 @@ class ShimCore:
                     self.counters["held_dropped"] += 1
                     self.counters["dropped_queue"] += 1
                 return self._out
+            if self._booting(data):
+                self.counters["boot_relayed"] += 1
+                self._out.append(Send("gcs", data))
+                return self._out
             self._decide_mode(data)
         if self.tick_mode:
             self._tick_datapath(side, data)
@@ -193,6 +201,15 @@ class ShimCore:
         self._release("down", t)
         self._release("up", t)
         return self._out
+
+    def _booting(self, data: bytes) -> bool:
+        """Is this vehicle datagram only a booting vehicle's HEARTBEAT (BOOT / STANDBY) and STATUSTEXTs?"""
+        if control_ids(data) != {-1}:
+            return False
+        msgs = self.codec.decode(data, commit=False)
+        return bool(msgs) and all(
+            (m.get_type() == "HEARTBEAT" and m.system_status in BOOT_STATES) or m.get_type() == "STATUSTEXT"
+            for m in msgs)
 
     # -- tick clock ----------------------------------------------------------------------------
     def _decide_mode(self, first_vehicle_datagram: bytes) -> None:

@@ -7,7 +7,8 @@ Entities (ENU, ``rr.ViewCoordinates.RIGHT_HAND_Z_UP``; timelines ``sim_time`` (d
 violation), ``cmd/pilot``, ``cmd/daa``, ``cmd/exec`` (commanded tracks as arrows), ``bands``
 (track bands as coloured arcs: near red, mid orange, far yellow, recovery cyan, none green).
 ``world/ownship_trail``, ``world/intruders/<id>`` (+ ``/trail``, ``/velocity``); ``<id>`` is the
-intruder's index in the step log's list columns. ``decisions`` (text log: one line per decision with
+intruder's index in the step log's list columns; its label and series names are its callsign (``names``,
+from the step log's ``intruders`` metadata or the scenario; ``#<id>`` without one) and its range. ``decisions`` (text log: one line per decision with
 its reason, plus LoWC/NMAC events). ``status/decision``, ``status/authority`` (state lanes).
 ``plots/range/<id>``, ``plots/hmd/<id>``, ``plots/dh/<id>``, ``plots/tau_mod/<id>``,
 ``plots/alert/<id>``, ``plots/wait/wait_s`` (wait-map value used), ``plots/wait/map/<id>`` (with
@@ -31,8 +32,10 @@ class StepEmitter:
     """Turns :class:`StepColumns` batches into ``send_columns`` calls; keeps trails across batches."""
 
     def __init__(self, rec, th: Thresholds, wait_lookup: "Callable[[np.ndarray], np.ndarray] | None" = None,
-                 trail_s: float = TRAIL_S):
+                 trail_s: float = TRAIL_S, names: "list[str] | None" = None):
         self.rec, self.th, self.wait_lookup, self.trail_s = rec, th, wait_lookup, trail_s
+        #: each intruder's name (its callsign), by index; ``#j`` where there is none
+        self.names: "list[str]" = [str(n) for n in names] if names else []
         self.band_radius = BAND_RADIUS_FACTOR * th.dthr
         self.cmd_len = 1.15 * self.band_radius
         self.hist_t: collections.deque = collections.deque()
@@ -71,16 +74,21 @@ class StepEmitter:
         for path, (name, color) in styles.items():
             r.log(path, rr.SeriesLines(names=name, colors=[color], widths=2), static=True)
 
+    def name(self, j: int) -> str:
+        """Intruder ``j``'s label: its callsign, or ``#j``."""
+        return self.names[j] if j < len(self.names) and self.names[j] else f"#{j}"
+
     def _intruder_static(self, j: int) -> None:
         rr = rerun_module()
         r = self.rec
+        name = self.name(j)
         color = [(255, 80, 80), (255, 160, 60), (200, 100, 255), (80, 200, 255)][j % 4]
         r.log(f"world/intruders/{j}/trail", rr.LineStrips3D.from_fields(colors=[color], radii=[-1.5]), static=True)
         r.log(f"world/intruders/{j}/velocity", rr.Arrows3D.from_fields(colors=[color], radii=[-1.5]), static=True)
         for q, unit in (("range", "m"), ("hmd", "m"), ("dh", "m"), ("tau_mod", "s"), ("alert", "level")):
-            r.log(f"plots/{q}/{j}", rr.SeriesLines(names=f"{q} #{j} [{unit}]", colors=[color], widths=2), static=True)
+            r.log(f"plots/{q}/{j}", rr.SeriesLines(names=f"{q} {name} [{unit}]", colors=[color], widths=2), static=True)
         if self.wait_lookup is not None:
-            r.log(f"plots/wait/map/{j}", rr.SeriesLines(names=f"w(S) #{j} [s]", colors=[color], widths=2), static=True)
+            r.log(f"plots/wait/map/{j}", rr.SeriesLines(names=f"w(S) {name} [s]", colors=[color], widths=2), static=True)
         self.known_intruders.add(j)
 
     # per batch -----------------------------------------------------------------------------
@@ -153,7 +161,7 @@ class StepEmitter:
                 self._intruder_static(j)
             ok = np.all(np.isfinite(ipos[:, j]), axis=-1)
             colors = np.where(wcv[:, j, None], ALERT_COLORS[3], ALERT_COLORS[alert[:, j]])
-            labels = [f"#{j} {fmt_value(x / 1000.0, ' km')}" for x in rng[:, j]]
+            labels = [f"{self.name(j)} {fmt_value(x / 1000.0, ' km')}" for x in rng[:, j]]
             self._send(f"world/intruders/{j}", None,
                        rr.Points3D.columns(positions=ipos[ok, j], colors=colors[ok], radii=np.full(ok.sum(), -7.0),
                                            labels=[lb for lb, o in zip(labels, ok) if o]).partition(ok.astype(np.int64)))

@@ -19,13 +19,26 @@ from .records import StepColumns
 from .sinks import Recording, SinkOptions, WebServer
 from .warning import warn_viz
 
+def intruder_names(table) -> "list[str]":
+    """The intruders' callsigns of a step log, by index (its ``intruders`` metadata, written by the SIL
+    vehicle: scenario and injected intruders); [] without it (fast-time step logs)."""
+    import json
+
+    meta = getattr(getattr(table, "schema", None), "metadata", None) or {}
+    raw = meta.get(b"intruders")
+    try:
+        return [str(i.get("callsign") or "") for i in json.loads(raw)] if raw else []
+    except (ValueError, AttributeError, TypeError):
+        return []
+
+
 class EncounterLogger:
     """One Rerun recording of one encounter; see the :mod:`daa_sil.viz` docstring."""
 
     def __init__(self, sinks: "SinkOptions | None" = None, preset: "str | Thresholds | None" = None,
                  encounter_id: "int | str | None" = None, wait_lookup: "Callable[[np.ndarray], np.ndarray] | None" = None,
                  center: "Iterable[float] | None" = None, extent_m: float = 6000.0, flush_interval_s: float = 0.25,
-                 defer_blueprint: bool = False):
+                 defer_blueprint: bool = False, names: "list[str] | None" = None):
         self.th = get_thresholds(preset)
         self.encounter_id = encounter_id
         self.flush_interval_s = flush_interval_s
@@ -47,7 +60,7 @@ class EncounterLogger:
         self._recording = Recording(sinks, rid, bp)
         if self._recording.rec is not None:
             try:
-                self._emitter = StepEmitter(self._recording.rec, self.th, wait_lookup)
+                self._emitter = StepEmitter(self._recording.rec, self.th, wait_lookup, names=names)
             except Exception as exc:
                 self._disable(f"Rerun logging disabled: {type(exc).__name__}: {exc}")
 
@@ -118,6 +131,9 @@ class EncounterLogger:
         """Log a whole step log of one encounter (rows in step order) with ``send_columns``."""
         if self.rec is None or self._failed:
             return
+        names = intruder_names(table)
+        if names and not self._emitter.names:
+            self._emitter.names = names
         try:
             with self._lock:
                 self._emitter.emit(StepColumns.from_table(table))

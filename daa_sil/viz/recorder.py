@@ -116,7 +116,7 @@ class BackgroundRecorder:
 
     def __init__(self, sinks: SinkOptions, preset: "str | Thresholds | None" = None,
                  encounter_id: "int | None" = None, mode: str = "auto", prepare_now: bool = False,
-                 nice: int = RECORDER_NICE, live: bool = False):
+                 nice: int = RECORDER_NICE, live: bool = False, names: "list[str] | None" = None):
         self.sinks = sinks
         self.rrd_path = check_rrd_path(sinks.rrd, sinks.overwrite) if sinks.rrd else None
         if sinks.connect:
@@ -127,7 +127,7 @@ class BackgroundRecorder:
         cfg = {k: (str(v) if isinstance(v, os.PathLike) else v) for k, v in vars(sinks).items()}
         cfg.update(overwrite=True, rrd_tmp=str(self.tmp_path) if self.tmp_path else None)
         th = get_thresholds(preset)
-        self._args = {"sinks": cfg, "preset": th.name if th.name in PRESETS else None,
+        self._args = {"sinks": cfg, "preset": th.name if th.name in PRESETS else None, "names": list(names or []),
                       "encounter_id": encounter_id, "nice": nice}
         #: set once the helper is prepared. After :meth:`finish`: ``prepared_in_time`` (it was prepared
         #: when the step log came), ``finish_s`` (step log handed over -> DONE, s), ``wait_s`` (how long

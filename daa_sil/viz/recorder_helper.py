@@ -154,7 +154,8 @@ def serve_requests(args: dict, requests: IO[str], replies: IO[str]) -> int:
                 # live: the rows go to the viewer sinks; the .rrd is made from the step log at the end
                 opened = replace(sinks, rrd=None, rrd_tmp=None) if live is not None else sinks
                 logger = EncounterLogger(opened, preset=args.get("preset"), encounter_id=args.get("encounter_id"),
-                                         defer_blueprint=True, flush_interval_s=LIVE_FLUSH_S)
+                                         defer_blueprint=True, flush_interval_s=LIVE_FLUSH_S,
+                                         names=args.get("names"))
                 print("READY", file=replies, flush=True)
                 if line.strip() == "prepare":
                     continue
