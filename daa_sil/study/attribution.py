@@ -125,13 +125,20 @@ def _deviation(x: dict) -> str:
     if not (d and s and ft):
         return _not_run("deviation", "severity", "feet")
     left = value(d, "B-1", "maneuvered_share")
-    need = 1690.0 / value(d, "B-1", "dev_h_maneuvered_mean") if value(d, "B-1", "dev_h_maneuvered_mean") else None
+    man = value(d, "B-1", "dev_h_maneuvered_mean")
+    if man is None:
+        reach = "–"
+    elif man >= 1690.0:
+        reach = (f"the paper's mean needs {_f(1690.0 / man, 'pct')} of the encounters to maneuver as far as ours that "
+                 f"do")
+    else:
+        reach = ("even if every encounter maneuvered as far as ours that do, the mean would stay below the paper's "
+                 "1,690 m: no definition we tried gives its size")
     return (f"B-1: {_ci(d, 'B-1', 'dev_h_mean', 'f0')} m (largest distance from the straight path, over all "
             f"encounters), {_ci(d, 'B-1', 'dev_h_tmean_mean', 'f0')} m as a time mean, "
             f"{_ci(d, 'B-1', 'dev_h_maneuvered_mean', 'f0')} m over the {_f(left, 'pct')} that left the plan; in feet "
-            f"{_ci(ft, 'B-1 (feet)', 'dev_h_mean', 'f0')} m (the paper: 1,690 m). With our maneuvering encounters' "
-            f"deviation, the paper's mean needs {_f(need, 'pct')} of the encounters to maneuver; "
-            f"{_ci(s, 'unmitigated', 'alert_share_2', 'pct')} of ours reach a corrective alert")
+            f"{_ci(ft, 'B-1 (feet)', 'dev_h_mean', 'f0')} m (the paper: 1,690 m). {reach[0].upper()}{reach[1:]}; "
+            f"{_ci(s, 'unmitigated', 'alert_share_2', 'pct')} of our encounters reach a corrective alert")
 
 
 @dataclass(frozen=True)

@@ -102,8 +102,8 @@ def experiments_page(res: dict) -> str:
          "set, so the groups of several runs compare encounter by encounter, with a paired bootstrap). "
          f"Seed {meta.get('seed')}; {meta.get('n_small', 0):,} encounters per group, {meta.get('n_large', 0):,} for "
          "the rare-event runs (severity, feet); values with their encounter-level 95 % CIs.", "",
-         "Run again (after `docs/results/regenerate.py` has run the readings on the same seed into the same "
-         f"directory): `{meta.get('command', '')}`.", ""]
+         f"Run again: `{meta.get('command', '')}` (RUNS: the directory where `docs/results/regenerate.py` ran the "
+         "readings on the same seed; it runs this command too).", ""]
     if meta.get("missing"):
         L += [f"Not run here (their experiments are left out): {', '.join(sorted(set(meta['missing'])))}.", ""]
     for key, e in res.get("experiments", {}).items():

@@ -140,7 +140,7 @@ def analyse(runs: "str | Path", seed: int, n_small: int, n_large: int, replicate
                              pairs=[(f"{g} (SM {h} s)", g) for h in (35, 25) for g in ("B-2", "ID-2")]),
                          ["paper", "sm35", "sm25"])
     meta = {"seed": seed, "n_small": n_small, "n_large": n_large, "replicates": replicates, "missing": missing,
-            "command": COMMAND.format(runs=runs, seed=seed, small=n_small, large=n_large)}
+            "command": COMMAND.format(runs="RUNS", seed=seed, small=n_small, large=n_large)}
     return {"meta": meta, "experiments": out}
 
 

@@ -43,8 +43,11 @@ SWEEPS = (("latency", "latency=const:0.2;const:1;const:2;const:5;const:10;gauss:
 DEV_SEED = 424242
 #: the seed of the --smoke run
 SMOKE_SEED = 424243
-#: seeds used while developing the models and the analysis: never a report seed
-DEV_SEEDS = (0, 3, 5, 7, 8, 11, 13, 99, 101, 123, 2024, 99991, 99992, 20261201, DEV_SEED, SMOKE_SEED)
+#: seeds used while developing the models and the analysis (2718: the batch-invariance reference): never a
+#: report seed
+DEV_SEEDS = (0, 3, 5, 7, 8, 11, 13, 31, 99, 101, 123, 2024, 2718, 99991, 99992, 20261201, DEV_SEED, SMOKE_SEED)
+#: the file in the runs directory that records the code the campaigns were simulated with
+CODE_FILE = "code.json"
 
 
 def _run(argv: list, what: str) -> None:
@@ -70,23 +73,63 @@ def readings() -> list:
     return list(READINGS)
 
 
+def _git(*argv: str) -> str:
+    try:
+        out = subprocess.run(["git", *argv], cwd=ROOT, capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return out.stdout.strip() if out.returncode == 0 else ""
+
+
+def code_record(runs: Path) -> dict:
+    """The code the campaigns in ``runs`` were simulated with: read from ``runs/code.json``, written there
+    (the current commit, and whether the simulation code had uncommitted changes) when the first
+    campaign starts; a re-render on later code keeps the record of the code that simulated."""
+    f = runs / CODE_FILE
+    if f.is_file():
+        try:
+            return json.loads(f.read_text())
+        except (OSError, ValueError):
+            pass
+    rec = {"commit": _git("rev-parse", "HEAD") or "unknown",
+           "dirty": bool(_git("status", "--porcelain", "--", "daa_sil", "vehicle", "gcs"))}
+    runs.mkdir(parents=True, exist_ok=True)
+    f.write_text(json.dumps(rec) + "\n")
+    return rec
+
+
+def _again(args) -> str:
+    """The command that runs the study again (the runs directory as the reader's own)."""
+    sizes = "" if (args.encounters, args.alt_encounters, args.sweep_encounters) == (10000, 2000, 1000) else (
+        f" --encounters {args.encounters} --alt-encounters {args.alt_encounters} --sweep-encounters "
+        f"{args.sweep_encounters}")
+    return (f"python docs/results/regenerate.py --runs RUNS --seed {args.seed}{sizes}" + (" --smoke" if args.smoke
+                                                                                       else ""))
+
+
 def _report(args, dirs: list, experiments: "dict | None") -> None:
     from daa_sil.study.report import write_report
 
-    again = (f"python docs/results/regenerate.py --runs {args.runs} --seed {args.seed} --encounters {args.encounters} "
-             f"--alt-encounters {args.alt_encounters} --sweep-encounters {args.sweep_encounters}"
-             + (" --smoke" if args.smoke else ""))
-    note = [f"What ran: `paper` at {args.encounters:,} encounters per group on the campaign seed {args.seed}; every "
-            f"other reading, and `paper` again, at {args.alt_encounters:,} (the first encounters of the same seed); "
-            f"`paper` on the development seed {DEV_SEED} at {args.alt_encounters:,}; the experiments "
-            f"([experiments.md](experiments.md)). Run it again: `{again}` (resumable). Seeds used while developing "
-            f"(never a report seed): {', '.join(map(str, DEV_SEEDS))}."]
+    code = code_record(args.runs)
+    commit = str(code.get("commit", "unknown"))
+    sim = f"commit {commit[:10]}" + (" with uncommitted changes" if code.get("dirty") else "")
+    word = "smoke seed" if args.smoke else "report seed"
+    note = [f"What ran (simulated on {sim}): `paper` at {args.encounters:,} encounters per group on the {word} "
+            f"{args.seed}; every other reading, and `paper` again, at {args.alt_encounters:,} (the first encounters of "
+            f"the same seed); `paper` on the development seed {DEV_SEED} at {args.alt_encounters:,} (the seeds' "
+            f"agreement); the experiments ([experiments.md](experiments.md)); the sweeps "
+            f"([sensitivity.md](sensitivity.md)) at {args.sweep_encounters:,} per point; {args.replicates:,} bootstrap "
+            f"replicates. Run it again: `{_again(args)}` (RUNS: any directory; resumable; about an hour on two cores). "
+            + ("" if args.smoke else f"The report seed {args.seed} was chosen before any run and never used while "
+               "developing; ")
+            + ("T" if args.smoke else "t") + "he seeds used while developing, which regenerate.py refuses as a report "
+            f"seed: {', '.join(map(str, DEV_SEEDS))}."]
     if args.smoke:
         note.insert(0, f"SMOKE RUN ({args.encounters} encounters per group): checks the chain, not the paper.")
     t = time.monotonic()
     print("== report", flush=True)
     write_report(dirs, args.docs, replicates=args.replicates, notes=note, experiments=experiments,
-                 main_name="paper-study.md", all_figures=False)
+                 main_name="paper-study.md", all_figures=False, runs_root=args.runs)
     print(f"   ({time.monotonic() - t:.0f} s)", flush=True)
 
 
@@ -127,6 +170,7 @@ def main(argv=None) -> int:
         if getattr(args, name) < 1:
             ap.error(f"--{name.replace('_', '-')} must be at least 1")
     runs = args.runs
+    code_record(runs)  # before the first campaign: the code that simulates
     seed = ["--seed", str(args.seed)]
     experiments = None
     if not args.skip_readings:
