@@ -44,3 +44,27 @@ def test_every_run_names_what_it_tests():
     assert len({r.name for r in RUNS}) == len(RUNS)
     for r in RUNS:
         assert r.why and r.size in ("small", "large") and r.group_specs()
+
+
+def test_what_is_flown_instead_of_the_command_by_hand(tmp_path):
+    """The axes of the commands flown instead of the pilot's, counted from a hand-written decision table:
+    a blend of a maneuver and of a 'hold' told apart by the pilot's intent, overrides and allocations on
+    their own, the pilot's own executions left out."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from daa_sil.study.experiment_replays import executed_axes
+
+    (tmp_path / "IC-1").mkdir()
+    rows = [("pilot", "none", "none"), ("blend", "vertical", "vertical"), ("blend", "horizontal", "vertical"),
+            ("blend", "none", "none"), ("blend", "none", "none"), ("blend", "none", "horizontal"),
+            ("daa_override", "none", "horizontal"), ("no_wait", "none", "none")]
+    dec, pax, eax = (list(c) for c in zip(*rows))
+    pq.write_table(pa.table({"group": ["IC-1"] * len(rows), "decision": dec, "pilot_axis": pax, "exec_axis": eax}),
+                   tmp_path / "IC-1" / "decisions-00000.parquet")
+    got = executed_axes(tmp_path, ["IC-1"])["IC-1"]
+    assert got == {"blend of a maneuver": {"vertical": 2}, "blend of a 'hold'": {"none": 2, "horizontal": 1},
+                   "DAA override": {"horizontal": 1}, "DAA allocation": {"none": 1}}
+    page = experiments_page({"meta": {}, "experiments": {"exec_axes": {"title": "X", "why": "w", "runs": ["paper"],
+                                                                       "groups": {"IC-1": got}}}})
+    assert "| IC-1 | blend of a 'hold' | 3 | 67 % | 33 % | 0 % | 0 % |" in page

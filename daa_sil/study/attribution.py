@@ -141,6 +141,28 @@ def _deviation(x: dict) -> str:
             f"{_ci(s, 'unmitigated', 'alert_share_2', 'pct')} of our encounters reach a corrective alert")
 
 
+def _axes_share(x: dict, group: str, kind: str, axes: tuple) -> "float | None":
+    n = ((x.get("exec_axes") or {}).get("groups", {}).get(group) or {}).get(kind)
+    tot = sum(n.values()) if n else 0
+    return sum(n.get(a, 0) for a in axes) / tot if tot else None
+
+
+def _deviation_setups(x: dict) -> str:
+    d, a = x.get("deviation"), x.get("exec_axes")
+    if not (d and a):
+        return _not_run("deviation", "exec_axes")
+    hold_kept = _axes_share(x, "ID-2", "blend of a 'hold'", ("none",))
+    return (f"an unsafe received command is overridden in B-2 by the DAA's resolution, a turn in "
+            f"{_f(_axes_share(x, 'B-2', 'DAA override', ('horizontal',)), 'pct')} of the overrides (the current course "
+            f"kept in {_f(_axes_share(x, 'B-2', 'DAA override', ('none',)), 'pct')}); in ID-2 Algorithm 2 blends it to "
+            f"the safe candidate closest to it: a blended maneuver is a climb or descent in "
+            f"{_f(_axes_share(x, 'ID-2', 'blend of a maneuver', ('vertical',)), 'pct')}, a blended 'hold' keeps the "
+            f"course in {_f(hold_kept, 'pct')}. Paired over the same "
+            f"encounters, ID-2 deviates {_ci(d, 'ID-2', 'dev_h_mean', 'f0', diff)} m horizontally and "
+            f"{_ci(d, 'ID-2', 'dev_v_mean', 'f1', diff)} m vertically against B-1, with the same share leaving the plan "
+            f"({_ci(d, 'ID-2', 'maneuvered_share', 'pct', diff)})")
+
+
 @dataclass(frozen=True)
 class Cluster:
     """One cluster of findings with its named cause (see the module docstring)."""
@@ -182,10 +204,16 @@ CLUSTERS: tuple[Cluster, ...] = (
     Cluster("pi", "penetration integral", ("pi-mean", "pi-max", "pi-severe"), ("our DAA", "our pilot"),
             "the severe LoWCs are late turns of fast intruders: what our DAA and pilot do in the last seconds",
             ("lowc",), _pi),
-    Cluster("deviation", "trajectory deviation", ("dev-h", "dev-v", "dev-h-change", "dev-v-change"),
+    Cluster("deviation", "trajectory deviation: its size", ("dev-h", "dev-v"),
             ("the encounter set", "the paper's vagueness"),
             "the paper does not define its deviation; on our encounters few maneuver at all",
             ("deviation", "severity", "feet"), _deviation),
+    Cluster("deviation-setups", "trajectory deviation: 'almost the same for every setup'",
+            ("dev-h-change", "dev-v-change"), ("our DAA", "the paper's vagueness"),
+            "the setups fly different maneuvers instead of an unsafe command: the baselines the DAA's resolution, "
+            "mostly a turn; the integrated groups Algorithm 2's safe candidate closest to the command, mostly a "
+            "climb, a descent or the course kept. The paper does not say which safe maneuver its Algorithm 2 takes",
+            ("exec_axes", "deviation"), _deviation_setups),
 )
 
 

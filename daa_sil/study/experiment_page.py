@@ -94,6 +94,20 @@ def _blend_table(groups: dict) -> list[str]:
                             "found by ('hold')", "missed searches asked for"], body), ""]
 
 
+#: the axes of a flown command, in the order the page prints them
+AXES = ("none", "horizontal", "vertical", "speed")
+
+
+def _axes_table(groups: dict) -> list[str]:
+    body = []
+    for g, kinds in groups.items():
+        for kind, n in kinds.items():
+            tot = sum(n.values()) or 1
+            body.append([g, kind, f"{tot:,}"] + [f"{100 * n.get(a, 0) / tot:.0f} %" for a in AXES])
+    return [markdown_table(["group", "flown instead of the command", "executions", "course kept", "a turn",
+                            "a climb or descent", "a speed change"], body), ""]
+
+
 def experiments_page(res: dict) -> str:
     """The Markdown page of an ``experiments.json`` dictionary."""
     meta = res.get("meta", {})
@@ -115,6 +129,9 @@ def experiments_page(res: dict) -> str:
             continue
         if key == "blend_searches":
             L += _blend_table(e["groups"])
+            continue
+        if key == "exec_axes":
+            L += _axes_table(e["groups"])
             continue
         L += pivot(e.get("rows", []))
         if e.get("diffs"):

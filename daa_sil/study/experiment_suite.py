@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Callable
 
 from daa_sil.study.experiment_analysis import PAPER_COUNTING, compare
-from daa_sil.study.experiment_replays import blend_searches, lowc_diagnostics
+from daa_sil.study.experiment_replays import blend_searches, executed_axes, lowc_diagnostics
 from daa_sil.study.experiments import PAPER5, RUNS, run_dir
 
 #: how to run the experiments again (``{runs}`` etc. filled in by :func:`analyse`)
@@ -78,6 +78,11 @@ def analyse(runs: "str | Path", seed: int, n_small: int, n_large: int, replicate
         out["blend_searches"] = {"title": "Algorithm 2's searches", "why": "which rule found the blended maneuver, "
                                  "and what the searches that missed the pilot's (axis, direction) asked for",
                                  "runs": ["paper"], "groups": blend_searches(paper, ("IC-1", "ID-1", "ID-2"))}
+        out["exec_axes"] = {"title": "What the vehicle flies instead of the pilot's command", "why": "an unsafe "
+                            "received command is overridden by the DAA's resolution in the baselines and blended by "
+                            "Algorithm 2 in the integrated groups: the axis of what is flown instead (course kept: "
+                            "the command flown keeps the current course, which the pilot's command would have "
+                            "changed)", "runs": ["paper"], "groups": executed_axes(paper, PAPER5)}
     if have(exp["blend-no-wait"]):
         out["blend_waiting"] = _exp("Blends without waiting", next(r.why for r in RUNS if r.name == "blend-no-wait"),
                                     cmp([("ID-2", exp["blend-no-wait"], "ID-2"),
