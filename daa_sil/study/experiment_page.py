@@ -101,11 +101,13 @@ AXES = ("none", "horizontal", "vertical", "speed")
 def _axes_table(groups: dict) -> list[str]:
     body = []
     for g, kinds in groups.items():
-        for kind, n in kinds.items():
-            tot = sum(n.values()) or 1
-            body.append([g, kind, f"{tot:,}"] + [f"{100 * n.get(a, 0) / tot:.0f} %" for a in AXES])
+        for kind, k in kinds.items():
+            tot = k["n"] or 1
+            unsafe = "–" if k.get("unsafe") is None else f"{100 * k['unsafe'] / tot:.1f} %"
+            body.append([g, kind, f"{k['n']:,}"] + [f"{100 * k['axes'].get(a, 0) / tot:.0f} %" for a in AXES]
+                        + [unsafe])
     return [markdown_table(["group", "flown instead of the command", "executions", "course kept", "a turn",
-                            "a climb or descent", "a speed change"], body), ""]
+                            "a climb or descent", "a speed change", "itself unsafe (SM ≤ 0)"], body), ""]
 
 
 def experiments_page(res: dict) -> str:

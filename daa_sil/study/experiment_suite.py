@@ -112,8 +112,8 @@ def analyse(runs: "str | Path", seed: int, n_small: int, n_large: int, replicate
              "whether the delay's variation within an encounter makes B-2's and ID-2's DAA allocations",
              ("B-1", "B-2", "ID-2")),
             ("latency_rule", "paper-one-way", "A group's latency: the round trip or each link's delay",
-             "B-1's no-wait decisions are the steps before its first command arrives: one round trip", ("B-1", "B-2",
-                                                                                                        "ID-2")),
+             "B-1's no-wait decisions are the steps before its first command arrives: one round trip",
+             ("B-1", "B-2", "IC-1", "ID-1", "ID-2")),
             ("outside", "paper-clamp", "The wait outside the map's box", "the map's DAA allocations when a far state "
              "reads the box edge's wait", ("IC-1", "ID-2")),
             ("outside_far", "paper-outside-far", "The wait outside the map's box: w = H", "the other rule the text "
