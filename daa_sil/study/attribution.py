@@ -250,10 +250,20 @@ def cluster_of(finding_id: str) -> "Cluster | None":
     return next((c for c in CLUSTERS if finding_id in c.findings), None)
 
 
-def attribution_rows(rows, label: str, experiments: "dict | None", command: str = "") -> list[dict]:
+def row_commands(keys, experiments: dict, meta: "dict | None") -> list[str]:
+    """The commands behind the experiments ``keys`` of one row: the campaigns they read and the
+    experiments command (:func:`daa_sil.study.experiments.commands_for`); empty without ``meta``."""
+    from daa_sil.study.experiments import commands_for
+
+    runs = [r for k in keys for r in (experiments.get(k) or {}).get("runs", ())]
+    return commands_for(runs, meta) if meta and runs else []
+
+
+def attribution_rows(rows, label: str, experiments: "dict | None", meta: "dict | None" = None) -> list[dict]:
     """One row per cluster (its misses under reading ``label``: ``id — group``), plus one per miss that no
     cluster holds (cause *unattributed*). ``rows`` from :func:`daa_sil.study.verdicts.evaluate_all`;
-    ``experiments`` the ``experiments`` mapping of ``experiments.json`` (None: not run)."""
+    ``experiments`` the ``experiments`` mapping of ``experiments.json`` (None: not run), ``meta`` its
+    ``meta`` (seed and sizes: each row's ``commands``)."""
     exps = experiments or {}
     out, seen = [], set()
     for c in CLUSTERS:
@@ -261,14 +271,15 @@ def attribution_rows(rows, label: str, experiments: "dict | None", command: str 
                   for f, outs in rows if f.id in c.findings and outs[label].verdict in MISSES]
         seen.update(c.findings)
         out.append({"cluster": c.title, "key": c.key, "misses": misses, "causes": list(c.causes),
-                    "because": c.because, "experiments": list(c.experiments), "command": command,
+                    "because": c.because, "experiments": list(c.experiments),
+                    "commands": row_commands(c.experiments, exps, meta),
                     "showed": c.showed(exps) if exps else _not_run(*c.experiments)})
     for f, outs in rows:
         if f.id not in seen and not f.by_construction and outs[label].verdict in MISSES:
             out.append({"cluster": "unattributed", "key": "unattributed", "misses": [f"{f.id} — {f.group}"],
                         "causes": [], "because": "no cluster holds this finding: a defect of the attribution table",
-                        "experiments": [], "command": "", "showed": ""})
+                        "experiments": [], "commands": [], "showed": ""})
     return out
 
 
-__all__ = ["CAUSES", "MISSES", "Cluster", "CLUSTERS", "cluster_of", "attribution_rows"]
+__all__ = ["CAUSES", "MISSES", "Cluster", "CLUSTERS", "cluster_of", "attribution_rows", "row_commands"]

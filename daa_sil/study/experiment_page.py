@@ -116,7 +116,7 @@ def experiments_page(res: dict) -> str:
     L = ["# Experiments: why the paper reading misses the paper where it does", "",
          "Single-factor experiments on the same encounters (one campaign seed: every run draws the same encounter "
          "set, so the groups of several runs compare encounter by encounter, with a paired bootstrap). "
-         f"Seed {meta.get('seed')}; {meta.get('n_small', 0):,} encounters per group, {meta.get('n_large', 0):,} for "
+         f"Campaign seed {meta.get('seed')}; {meta.get('n_small', 0):,} encounters per group, {meta.get('n_large', 0):,} for "
          "the rare-event runs (severity, feet); values with their encounter-level 95 % CIs.", "",
          f"Run again: `{meta.get('command', '')}` (RUNS: the directory where `docs/results/regenerate.py` ran the "
          "readings on the same seed; it runs this command too).", ""]

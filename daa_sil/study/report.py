@@ -29,7 +29,7 @@ import numpy as np
 from daa_sil.config.basis import KINDS, consumed_findings
 from daa_sil.files import atomic_write_json, atomic_write_text, ensure_dir
 from daa_sil.study.analysis import Study
-from daa_sil.study.attribution import attribution_rows
+from daa_sil.study.attribution import CAUSES, attribution_rows
 from daa_sil.study.findings import APART, EMPIRICAL, NOT_TESTABLE, VERDICTS, fmt, untestable_statements
 from daa_sil.study.metrics import BASELINE_GROUP, CONF
 from daa_sil.study.report_appendix import (ABLATIONS, ablation_rows, ablations_page, provenance_page, readings_page,
@@ -87,17 +87,20 @@ def findings_lines(rows, label: str) -> list[str]:
 
 def attribution_lines(rows, label: str, experiments: "dict | None") -> list[str]:
     exps = (experiments or {}).get("experiments")
-    cmd = ((experiments or {}).get("meta") or {}).get("command", "")
+    meta = (experiments or {}).get("meta") or {}
     L = ["## Where the misses come from", "",
-         "Every finding missed (not reproduced, or only its direction) belongs to one cluster, with its named cause and "
-         "the experiment that tests it" + (f" (`{cmd}`; figures: [experiments.md](experiments.md))" if cmd else "")
-         + ". Causes: our DAA, our pilot, the encounter set, the paper's vagueness, the paper's inconsistency, a "
-         "defect.", ""]
+         "Every finding missed (not reproduced, or only its direction) belongs to one cluster, with its named cause, "
+         "the experiments that test it, the commands that make them (RUNS: the runs directory; the figures: "
+         "[experiments.md](experiments.md)) and what they showed. Causes: " + ", ".join(CAUSES) + ". A miss "
+         "outside every cluster would show as a row *unattributed*; a cluster whose experiments found no cause "
+         "says so in its row.", ""]
     body = []
-    for r in attribution_rows(rows, label, exps, cmd):
-        body.append([r["cluster"], "; ".join(r["misses"]) or "none", ", ".join(r["causes"]) or "–", r["because"],
-                     ", ".join(f"`{e}`" for e in r["experiments"]) or "–", r["showed"] or "–"])
-    return L + [markdown_table(["cluster", "misses", "cause", "in words", "experiments", "what they showed"], body), ""]
+    for r in attribution_rows(rows, label, exps, meta):
+        body.append([r["cluster"], "; ".join(r["misses"]) or "none", ", ".join(r["causes"]) or "none found",
+                     r["because"], ", ".join(f"`{e}`" for e in r["experiments"]) or "–",
+                     "; then ".join(f"`{c}`" for c in r["commands"]) or "–", r["showed"] or "–"])
+    return L + [markdown_table(["cluster", "misses", "cause", "in words", "experiments", "commands",
+                                "what they showed"], body), ""]
 
 
 #: the signatures' short names in the main page's table headers
@@ -215,7 +218,8 @@ def findings_json(blocks, rows, replicates: int, seed: int, conf: float, experim
                           "source": b.reading.source, "campaign_seed": b.seed, "basis": (b.meta or {}).get("basis"),
                           "tally": tally(rows, b.label)} for b in blocks],
             "verdicts": {"words": list(VERDICTS), "empirical": list(EMPIRICAL), "apart": list(APART)},
-            "attribution": attribution_rows(rows, blocks[0].label, (experiments or {}).get("experiments")),
+            "attribution": attribution_rows(rows, blocks[0].label, (experiments or {}).get("experiments"),
+                                            (experiments or {}).get("meta")),
             "findings": [{"id": f.id, "claim": f.label, "source": f.source, "kind": f.kind, "metric": f.metric,
                           "group": f.group, "pooled": list(f.pooled), "paper": f.paper_value(),
                           "paper_text": f.paper_text(),

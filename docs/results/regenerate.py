@@ -16,7 +16,8 @@ Runs, on the campaign seed ``--seed`` (a fresh one: never a development seed, re
 4. the report: the main page ``paper-study.md`` (``paper`` against the paper: tally, the basis of every
    setting, every finding, the attribution of every miss, signatures, figures) and its appendices;
 5. the sensitivity sweeps under ``paper`` (``--sweep-encounters`` per point) into ``sensitivity.md``;
-6. the wait-map figures of the paper and alerting grids.
+6. the wait-map figures of the maps the study reads: the paper grid at the ``paper`` reading's horizon
+   (40 s) and the alerting grid.
 
 Pages go to ``--docs`` (default ``docs/results``; ``--smoke``: ``RUNS/docs``, never over the
 committed ones). ``--skip-sweeps`` / ``--skip-readings`` / ``--skip-experiments`` leave parts out.
@@ -34,7 +35,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-GROUPS = "B-1,B-2,IC-1,ID-1,ID-2,ID-2-projl,ID-2-map"
+from daa_sil.study.experiments import READING_GROUPS  # noqa: E402 -- after the checkout is on the path
+
+GROUPS = ",".join(READING_GROUPS)
 SWEEP_GROUPS = "B-2,ID-2,ID-2-projl"
 SWEEPS = (("latency", "latency=const:0.2;const:1;const:2;const:5;const:10;gauss:5,3"),
           ("wt", "wt=2,4,8,16"), ("gamma", "gamma=0.9,0.95,0.99"), ("grid", "grid=paper,fine,alerting"),
@@ -119,7 +122,11 @@ def _report(args, dirs: list, experiments: "dict | None") -> None:
             f"the same seed); `paper` on the development seed {DEV_SEED} at {args.alt_encounters:,} (the seeds' "
             f"agreement); the experiments ([experiments.md](experiments.md)); the sweeps "
             f"([sensitivity.md](sensitivity.md)) at {args.sweep_encounters:,} per point; {args.replicates:,} bootstrap "
-            f"replicates. Run it again: `{_again(args)}` (RUNS: any directory; resumable; about an hour on two cores). "
+            f"replicates; the figures of the wait maps `paper` reads (paper grid, H = 40 s: "
+            f"[histogram](waitmap/paper/histogram.png), [slices](waitmap/paper/slices_geometries.png), "
+            f"[the ±5 °/s pair](waitmap/paper/mirror_pair.png), [3-D](waitmap/paper/map_3d.png); the alerting grid's "
+            f"in `waitmap/alerting/`; the wait-map section's own claims are compared in "
+            f"[docs/waitmap.md](../waitmap.md), not counted here). Run it again: `{_again(args)}` (RUNS: any directory; resumable; about an hour on two cores). "
             + ("" if args.smoke else f"The report seed {args.seed} was chosen before any run and never used while "
                "developing; ")
             + ("T" if args.smoke else "t") + "he seeds used while developing, which regenerate.py refuses as a report "
@@ -202,10 +209,24 @@ def main(argv=None) -> int:
             sweep_dirs.append(d)
         _run(["-m", "daa_sil.cli", "campaign", "sweep", "--collate", *map(str, sweep_dirs), "--out", str(args.docs)],
              "sensitivity page")
-    for grid in ("paper", "alerting"):
-        _run(["-m", "daa_sil.cli", "waitmap", "plot", grid, "--out", str(args.docs / "waitmap" / grid), "--force"],
-             f"wait-map figures ({grid})")
+    waitmap_figures(args.docs / "waitmap")
     return 0
+
+
+def waitmap_figures(out: Path) -> None:
+    """The figures of the wait maps the study reads: the paper grid at the ``paper`` reading's horizon
+    (its maps, from the cache its campaigns filled) and the alerting grid of ``paper-alerting``."""
+    from daa_sil.config.readings import READINGS
+    from daa_sil.waitmap import family_for
+    from daa_sil.waitmap.plots import write_plots
+
+    for grid, horizon in (("paper", READINGS["paper"].wait_horizon_s), ("alerting", None)):
+        t = time.monotonic()
+        print(f"== wait-map figures ({grid}, H = {f'{horizon:g} s' if horizon else 'the preset default'})",
+              flush=True)
+        for f in write_plots(family_for(grid, horizon=horizon), out / grid, overwrite=True):
+            print(f"   {f}", flush=True)
+        print(f"   ({time.monotonic() - t:.0f} s)", flush=True)
 
 
 if __name__ == "__main__":
