@@ -177,6 +177,9 @@ def summary_lines(rows, label: str, experiments: "dict | None") -> list[str]:
     con = _grouped(rows, label, (VERDICTS[1],))
     if con:
         L += ["- **Consistent, not shown:** " + "; ".join(con) + "."]
+    dirs = _grouped(rows, label, (VERDICTS[2],))
+    if dirs:
+        L += ["- **The direction holds, not the size:** " + "; ".join(dirs) + "."]
     for r in attribution_rows(rows, label, (experiments or {}).get("experiments")):
         if r["misses"]:
             cause = ", ".join(r["causes"]) or "none found"

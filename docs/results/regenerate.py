@@ -126,7 +126,8 @@ def _report(args, dirs: list, experiments: "dict | None") -> None:
             f"[histogram](waitmap/paper/histogram.png), [slices](waitmap/paper/slices_geometries.png), "
             f"[the ±5 °/s pair](waitmap/paper/mirror_pair.png), [3-D](waitmap/paper/map_3d.png); the alerting grid's "
             f"in `waitmap/alerting/`; the wait-map section's own claims are compared in "
-            f"[docs/waitmap.md](../waitmap.md), not counted here). Run it again: `{_again(args)}` (RUNS: any directory; resumable; about an hour on two cores). "
+            f"[docs/waitmap.md](../waitmap.md), not counted here). Run it again: `{_again(args)}` (RUNS: any "
+            f"directory; resumable; 20 to 40 minutes on two cores). "
             + ("" if args.smoke else f"The report seed {args.seed} was chosen before any run and never used while "
                "developing; ")
             + ("T" if args.smoke else "t") + "he seeds used while developing, which regenerate.py refuses as a report "
