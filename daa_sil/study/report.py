@@ -183,7 +183,8 @@ def summary_lines(rows, label: str, experiments: "dict | None") -> list[str]:
     for r in attribution_rows(rows, label, (experiments or {}).get("experiments")):
         if r["misses"]:
             cause = ", ".join(r["causes"]) or "none found"
-            L += [f"- **Missed: {r['cluster']}** ({len(r['misses'])} rows). Cause: {cause} — {r['because']}."]
+            n = len(r["misses"])
+            L += [f"- **Missed: {r['cluster']}** ({n} row{'s' if n > 1 else ''}). Cause: {cause} — {r['because']}."]
     return L + ["", "The table *Where the misses come from* below gives each cluster's experiment, its command and "
                 "what it showed.", ""]
 

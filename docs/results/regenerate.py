@@ -158,6 +158,9 @@ def main(argv=None) -> int:
     ap.add_argument("--smoke", action="store_true", help="every step at a few encounters on a development seed; "
                                                          "pages under RUNS/docs")
     ap.add_argument("--docs", type=Path, default=None, help="where the pages go (default docs/results)")
+    ap.add_argument("--render-only", action="store_true",
+                    help="only the report pages, from the finished campaigns in --runs and the experiments.json in "
+                         "--docs (no campaign, experiment, sweep or figure run)")
     args = ap.parse_args(argv)
     if args.smoke:
         args.encounters = args.encounters or 40
@@ -178,6 +181,8 @@ def main(argv=None) -> int:
         if getattr(args, name) < 1:
             ap.error(f"--{name.replace('_', '-')} must be at least 1")
     runs = args.runs
+    if args.render_only:
+        return render_only(args)
     code_record(runs)  # before the first campaign: the code that simulates
     seed = ["--seed", str(args.seed)]
     experiments = None
@@ -211,6 +216,29 @@ def main(argv=None) -> int:
         _run(["-m", "daa_sil.cli", "campaign", "sweep", "--collate", *map(str, sweep_dirs), "--out", str(args.docs)],
              "sensitivity page")
     waitmap_figures(args.docs / "waitmap")
+    return 0
+
+
+def campaign_dirs(args) -> list:
+    """The campaign directories of the report, in its column order (``paper`` first)."""
+    dirs = [args.runs / "paper"]
+    if args.alt_encounters != args.encounters:
+        dirs.append(args.runs / f"paper-{args.alt_encounters}")
+    return dirs + [args.runs / f"paper-seed{DEV_SEED}"] + [args.runs / r for r in readings()[1:]]
+
+
+def render_only(args) -> int:
+    """The report pages again from finished runs (``--render-only``): exit 2 naming what is missing."""
+    dirs = campaign_dirs(args)
+    missing = [str(d) for d in dirs if not (d / "campaign.json").is_file()]
+    exp = args.docs / "experiments.json"
+    if missing or not (args.runs / CODE_FILE).is_file():
+        what = f"{len(missing)} campaign(s), the first {missing[0]}" if missing else str(args.runs / CODE_FILE)
+        print(f"regenerate.py: --render-only needs the finished runs of a regeneration; missing: {what}",
+              file=sys.stderr)
+        return 2
+    experiments = json.loads(exp.read_text()) if exp.is_file() else None
+    _report(args, dirs, experiments)
     return 0
 
 
