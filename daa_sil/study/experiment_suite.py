@@ -118,7 +118,8 @@ def analyse(runs: "str | Path", seed: int, n_small: int, n_large: int, replicate
              "reads the box edge's wait", ("IC-1", "ID-2")),
             ("outside_far", "paper-outside-far", "The wait outside the map's box: w = H", "the other rule the text "
              "allows", ("ID-2",)),
-            ("h60", "paper-h60", "The maps' horizon 60 s", "the 40 s horizon against the earlier 60 s", ("ID-2",)),
+            ("h60", "paper-h60", "The maps' horizon 60 s", "the 40 s horizon (the published maximum wait) against 60 s",
+             ("ID-2",)),
             ("hold", "paper-no-hold", "The 'hold' stream", "the pilot without 'hold' commands", ("B-2", "ID-2")),
             ("hold_none", "paper-hold-none", "An unsafe 'hold' as no command", "the setting Algorithm 1 contradicts",
              ("B-2", "ID-2")),
