@@ -22,8 +22,9 @@ _NO_FLAGS = np.zeros((1, 1), bool)
 _NO_TIMES = np.zeros(0)
 
 
-def _regions(conflicts: tuple, alert, lists, t: np.ndarray, own: AircraftState, intr: AircraftState, axis: int,
-             cfg: DaaConfig, j_lo: int, j_hi: int, rows: "tuple[np.ndarray, np.ndarray] | None") -> tuple:
+def regions_of_conflicts(conflicts: tuple, alert, lists, t: np.ndarray, own: AircraftState, intr: AircraftState,
+                         axis: int, cfg: DaaConfig, j_lo: int, j_hi: int,
+                         rows: "tuple[np.ndarray, np.ndarray] | None") -> tuple:
     """:func:`axis_regions` from ``conflicts``: the candidates' ``(t_in, t_out)`` (N, M, 2, J+1), or the paths'
     ``(tail_in, tail_out, seg_in, seg_out)`` flat (``kernels.regions.axis_regions_into``)."""
     n, m = own.shape[0], intr.shape[1]
@@ -88,7 +89,7 @@ def axis_regions(t_in: np.ndarray, t_out: np.ndarray, alert, lists, t: np.ndarra
     row broadcast to (N, K), read-only. ``rows``: each encounter's own candidates per side ``(N,)`` (at most
     ``j_lo``/``j_hi``; default all), its paths' conflicts up to knot ``max`` of the two; the columns past them
     repeat its outermost candidate (``kernels.regions.axis_regions_into``)."""
-    return _regions((t_in, t_out), alert, lists, t, own, intr, axis, cfg, j_lo, j_hi, rows)
+    return regions_of_conflicts((t_in, t_out), alert, lists, t, own, intr, axis, cfg, j_lo, j_hi, rows)
 
 
 def axis_conflict_regions(paths: ManeuverPaths, own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfig,
@@ -103,7 +104,7 @@ def axis_conflict_regions(paths: ManeuverPaths, own: AircraftState, intr: Aircra
     its paths are evaluated up to knot ``max`` of the two, as in a call of its own."""
     with scratch() as ws:  # (every array taken from it is consumed in this call)
         out = axis_path_conflicts(paths, intr, cfg.th, float(cfg.lookahead_s), np.maximum(rows[0], rows[1]), ws.take)
-        return _regions(out, alert, lists, paths.axis_times(), own, intr, axis, cfg, j_lo, j_hi, rows)
+        return regions_of_conflicts(out, alert, lists, paths.axis_times(), own, intr, axis, cfg, j_lo, j_hi, rows)
 
 
 def axis_path_conflicts(paths: ManeuverPaths, intr: AircraftState, th, t_end: float, nseg: np.ndarray,
