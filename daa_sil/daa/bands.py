@@ -51,6 +51,7 @@ Which preset gets which rule (issue 15), and why:
 
 from __future__ import annotations
 
+import functools
 from dataclasses import fields
 
 import numpy as np
@@ -74,6 +75,15 @@ FUSED = True
 #: False (with COMPILED and FUSED): the cylinder recovery's rows made again on the evaluator's path (the
 #: oracle of :func:`daa_sil.daa.recovery.cylinder_search` and ``kernels.recovery.cylinder_finish_into``)
 CYLINDER_COMPILED = True
+
+
+@functools.lru_cache(maxsize=256)
+def column_sides(j_lo: int, j_hi: int) -> np.ndarray:
+    """The side of each column (K,) -1 / 0 / +1: ``j_lo`` low-side candidates, the current value, ``j_hi`` high-side
+    ones (read-only; made once per pair of counts)."""
+    side = np.concatenate([-np.ones(j_lo, np.int64), [0], np.ones(j_hi, np.int64)])
+    side.setflags(write=False)
+    return side
 
 
 def _side_order(arr, j_lo: int, j_hi: int):
@@ -142,12 +152,12 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     if not fused and n and not (np.all(rows[0] == j_lo) and np.all(rows[1] == j_hi)):
         return _by_counts(own, intr, axis, cfg, alert, lists, rows, j_lo, j_hi)
     paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
-    t = np.asarray(paths.t, float)[0, 0]
-    side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
+    side = column_sides(j_lo, j_hi)
     if fused and paths.kin is not None:  # one pass per path, then per row
         values, delta, t_man, *rest = axis_conflict_regions(paths, own, intr, axis, cfg, alert, lists, j_lo, j_hi,
                                                             rows)
         return AxisBands(axis, values, delta, side, t_man, *rest)
+    t = np.asarray(paths.t, float)[0, 0]
     ev = PathEvaluator(paths, intr, cfg.lookahead_s)
     pc = ev.evaluate(cfg.th)
     t_in, t_out = pc.candidates()  # (N, M, 2, J+1)
@@ -288,7 +298,7 @@ def _cylinder_rows(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaC
     path, which searches their recovery; both give a row the same numbers."""
     n, m = intr.shape
     paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
-    side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
+    side = column_sides(j_lo, j_hi)
     if cfg.horizon_from_maneuver and lists is None:
         lists = conflict_lists(own, intr, cfg)
     with scratch() as ws:  # (every array taken from it is consumed or copied in this block)
