@@ -153,7 +153,8 @@ def axis_path_conflicts(paths: ManeuverPaths, intr: AircraftState, th, t_end: fl
         sub = lambda a: None if a is None else a[e, p]  # noqa: E731
         ipv = np.concatenate([ipos, ivel], axis=-1).reshape(-1, 6)
         resolve_segments(kin, ipv, m, 2, path, (knot[0], knot[1], knot[2]), (knot[3], knot[4], knot[5]), knot[6],
-                         todo, np.arange(0, 2 * r, 2), paths.acc_h[e, p], paths.acc_v[e, p], sub(paths.jerk_h), sub(paths.kink_t),
-                         (vlo[path], vhi[path], None) if paths.vz_const else None, True, th, seg_in, seg_out)
+                         todo, np.arange(0, 2 * r, 2), paths.acc_h[e, p], paths.acc_v[e, p], sub(paths.jerk_h),
+                         sub(paths.kink_t), (vlo[path], vhi[path], None) if paths.vz_const else None, True, th, seg_in,
+                         seg_out)
     return tail_in, tail_out, seg_in, seg_out
 

@@ -51,7 +51,6 @@ Which preset gets which rule (issue 15), and why:
 
 from __future__ import annotations
 
-import functools
 from dataclasses import fields
 
 import numpy as np
@@ -65,7 +64,7 @@ from daa_sil.daa.recovery import CylinderRecovery, drop_isolated, recover_rows
 from daa_sil.daa.axis_paths import maneuver_paths, candidate_counts, row_counts, speed_limits
 from daa_sil.daa.band_regions import axis_conflict_regions, axis_path_conflicts, axis_regions, regions_of_conflicts
 from daa_sil.daa.scratch import scratch
-from daa_sil.daa.band_types import AxisBands, Bands, gap_regions  # (the types, defined apart; offered here too)
+from daa_sil.daa.band_types import AxisBands, Bands, column_sides, gap_regions  # (the types, defined apart)
 
 #: False: every axis in numpy (the oracle of :func:`daa_sil.daa.band_regions.axis_regions`)
 COMPILED = True
@@ -75,15 +74,6 @@ FUSED = True
 #: False (with COMPILED and FUSED): the cylinder recovery's rows made again on the evaluator's path (the
 #: oracle of :func:`daa_sil.daa.recovery.cylinder_search` and ``kernels.recovery.cylinder_finish_into``)
 CYLINDER_COMPILED = True
-
-
-@functools.lru_cache(maxsize=256)
-def column_sides(j_lo: int, j_hi: int) -> np.ndarray:
-    """The side of each column (K,) -1 / 0 / +1: ``j_lo`` low-side candidates, the current value, ``j_hi`` high-side
-    ones (read-only; made once per pair of counts)."""
-    side = np.concatenate([-np.ones(j_lo, np.int64), [0], np.ones(j_hi, np.int64)])
-    side.setflags(write=False)
-    return side
 
 
 def _side_order(arr, j_lo: int, j_hi: int):

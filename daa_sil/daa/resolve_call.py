@@ -55,7 +55,8 @@ def resolve_segments(kin: tuple, ipv: np.ndarray, m: int, p: int, path: np.ndarr
     else:
         vlo, vhi = vwin[0], vwin[1]
         von = np.ones(r, bool) if vwin[2] is None else np.asarray(vwin[2], bool)
-    who = (ipv, rows.astype(np.int64, copy=False), (path // p).astype(np.int64, copy=False), n.astype(np.int64, copy=False))
+    i64 = lambda a: a.astype(np.int64, copy=False)  # noqa: E731
+    who = (ipv, i64(rows), i64(path // p), i64(n))
     per_row = (flat_seg.astype(np.int64, copy=False), ka.astype(np.int64, copy=False), acc_h, acc_v,
                none if jerk is None else np.asarray(jerk, float),
                none[:, None] if kink is None else np.asarray(kink, float).reshape(r, -1), von, vlo, vhi)
@@ -67,7 +68,7 @@ def resolve_segments(kin: tuple, ipv: np.ndarray, m: int, p: int, path: np.ndarr
             mot, who, per_row, (*s, *v, tk), (jerk is not None, kink is not None, bool(exits)), bisect_thresholds(),
             _LIMITS, _TIMES, (D, D * D, float(th.zthr), float(th.tthr), float(th.tcoa)), (seg_in, seg_out),
             (*work, need))
-        for name, size, dtype, buf in zip(_WORK, need, _WORK_TYPES, work):  # large enough for the next call of this size
+        for name, size, dtype, buf in zip(_WORK, need, _WORK_TYPES, work):  # large enough for the next call this size
             if size > buf.size:
                 ws.take(name, int(size), dtype)
 
