@@ -298,3 +298,22 @@ def test_cylinder_rows_compiled_equal_the_evaluators(monkeypatch):
                 assert _same(np.asarray(x), np.asarray(y)), (a.name, f.name, own.shape)
             recovered += int(np.sum(np.asarray(a.recovery_nfactor) >= 0))
     assert recovered > 40  # (rows did search a recovery on the compiled path)
+
+
+def test_sm_equals_the_first_entries_of_command_conflicts():
+    """SM(u) reads only the first entries of the command's conflicts (``safety._command_first_entry``): the
+    same numbers as ``command_conflicts(..., exits=False)``'s ``t_in`` (its general path, which also computes
+    the exits), bit for bit, for every preset, several intruders, commands that change one, two or three
+    axes or none, batched and one at a time."""
+    from daa_sil.daa.safety import command_conflicts, sm_from_tin
+
+    for preset in PRESETS:
+        cfg = DaaConfig.for_preset(preset)
+        for seed, m in ((11, 1), (12, 3)):
+            own, intr, cmd = _encounters(seed, 30, m, cfg)
+            horizon = cfg.sm_horizon_s
+            t_in, _ = command_conflicts(own, intr, cmd, cfg, horizon + cfg.sm_margin_s, exits=False)
+            want = sm_from_tin(t_in.min(axis=-1), horizon, cfg)
+            assert _same(safety_metric(own, intr, cmd, cfg), want), (preset, seed)
+            for k in range(0, 30, 7):
+                assert _same(safety_metric(own[k:k + 1], intr[k:k + 1], cmd[k:k + 1], cfg), want[k:k + 1])
