@@ -24,20 +24,24 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from daa_sil.daa.config import AXIS_NAMES, DIR_NAMES, REGION_NAMES, RULE_NAMES
+from daa_sil.decision import AUTHORITY_NAMES, DECIDED_BY_NAMES, DECISION_NAMES
+
 from .errors import FileFormatError, UsageError
 from .files import atomic_path, local_file
 
 #: schema version stored in the file metadata under ``daa_sil.steplog``
 STEPLOG_VERSION = "2"
 
-# vocabularies of the string columns (integer codes index these tuples)
-DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
-RULES = ("-", "axis_dir", "axis", "any", "best_effort")
-AUTHORITIES = ("pilot", "daa", "waiting")
-AXES = ("none", "horizontal", "vertical", "speed")
-DIRECTIONS = ("none", "left", "right", "up", "down", "faster", "slower")
-REGIONS = ("none", "far", "mid", "near", "recovery")
-DECIDED_BY = ("none", "map", "projl", "both", "neither", "kept")  # daa_sil.decision.DECIDED_BY_NAMES
+# vocabularies of the string columns (integer codes index these tuples): the agent's and the DAA's code
+# names (daa_sil.decision.CODE_NAMES, daa_sil.daa.config), defined there once
+DECISIONS = DECISION_NAMES
+RULES = RULE_NAMES
+AUTHORITIES = AUTHORITY_NAMES
+AXES = AXIS_NAMES
+DIRECTIONS = DIR_NAMES
+REGIONS = REGION_NAMES
+DECIDED_BY = DECIDED_BY_NAMES
 
 #: values renamed since bba2fd8, applied when a step log (or a campaign table) is read: column -> {old: new}.
 #: The waiting authority was ``hold``, the same word as the pilot's "hold the current course" command

@@ -102,8 +102,10 @@ from typing import Any
 
 from daa_sil.config.settings import (CONSTANT_WAIT, DELAY_EPOCH, DURATION, SCENARIO_GROUP, SCENARIO_LINK,
                                      STANDARD_PRESET, WAIT_THRESHOLD)
+from daa_sil.decision import DECISION_NAMES
 
-DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
+#: the decision names ``expect.decisions_include`` / ``decisions_exclude`` accept: the agent's (one definition)
+DECISIONS = DECISION_NAMES
 PILOT_RESPONSES = ("deterministic", "fixed", "guendel", "no_atc", "nasa_rayleigh5")
 MAX_INTRUDERS = 8
 
