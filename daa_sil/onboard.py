@@ -17,7 +17,7 @@ lookup, the DAA configuration and the allocation policy. :meth:`OnboardCore.step
 4. evaluates LoWC and NMAC on the continuous segment ``[t_k, t_k + dt]``
    (:func:`daa_sil.geometry.wellclear.segment_events`; an event strictly between samples is detected),
    the time spent in LoWC on the segment, the minimum range on it, and the penetration integral over the segment's LoWC interval
-   (:func:`daa_sil.geometry.wellclear.segment_penetration`, with the preset's and with the paper's constants).
+   (:func:`daa_sil.geometry.penetration.segment_penetration`, with the preset's and with the paper's constants).
 
 Sans-IO: no sockets, no clock; the caller supplies ``t`` and the pilot input and moves the bytes.
 """
@@ -32,6 +32,7 @@ import numpy as np
 
 from daa_sil.decision import Decision
 from .geometry import wellclear as wc
+from daa_sil.geometry import penetration as pen
 from daa_sil.geometry.frames import wrap_pi
 from daa_sil.geometry.kinematics import AircraftState, Command, Performance, advance, fly_command
 from .daa.alerting import relative_state
@@ -284,8 +285,8 @@ class OnboardCore:
         if self.outcomes:
             out.lowc_time_s = np.where(lowc_m, np.maximum(t_out - t_in, 0.0), 0.0).max(axis=1)
             # PI on the same segment and LoWC interval that detect the LoWC (issue 14)
-            out.pi_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.pi_constants(self.th)).max(axis=1)
-            out.pi_paper_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.PAPER_PI_CONSTANTS).max(axis=1)
+            out.pi_s = pen.segment_penetration(s0, v_seg, t_in, t_out, pen.pi_constants(self.th)).max(axis=1)
+            out.pi_paper_s = pen.segment_penetration(s0, v_seg, t_in, t_out, pen.PAPER_PI_CONSTANTS).max(axis=1)
             rmin, vsep = wc.min_separation_on_segment(s0, s1)
             j = np.argmin(rmin, axis=1)
             rows = np.arange(self.n)
