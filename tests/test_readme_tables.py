@@ -50,7 +50,7 @@ def test_the_preset_table_names_the_default_of_each_input():
 
 
 def test_the_preset_table_default_of_waitmap_build(tmp_path):
-    from daa_sil.waitmap.store import load_family
+    from daa_sil.waitmap.family_files import load_family
 
     named = next(p for p, cell in preset_rows().items() if "`waitmap build`" in cell)
     with contextlib.redirect_stdout(io.StringIO()):
