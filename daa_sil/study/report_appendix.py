@@ -50,14 +50,15 @@ def sources_lines(blocks, studies: dict) -> list[str]:
 
 
 def tally_lines(rows, labels: Sequence[str]) -> list[str]:
-    """The headline tally of each reading: the empirical verdicts, then the ones counted apart."""
+    """The headline tally of each reading over every finding (the same set for each: ``findings``), split
+    into the empirical verdicts and the ones counted apart; the two parts add up to ``findings``."""
     body = []
     for lab in labels:
         c = tally(rows, lab)
-        body.append([reading_label(lab), str(sum(c[v] for v in EMPIRICAL))] + [str(c[v]) for v in EMPIRICAL]
-                    + [str(c[v]) for v in APART] + [str(c[NOT_TESTABLE])])
-    return [markdown_table(["reading", "empirical findings"] + list(EMPIRICAL) + list(APART) + [NOT_TESTABLE], body),
-            ""]
+        body.append([reading_label(lab), str(len(rows)), str(sum(c[v] for v in EMPIRICAL))]
+                    + [str(c[v]) for v in EMPIRICAL] + [str(c[v]) for v in APART] + [str(c[NOT_TESTABLE])])
+    return [markdown_table(["reading", "findings", "empirical"] + list(EMPIRICAL) + list(APART) + [NOT_TESTABLE],
+                           body), ""]
 
 
 def readings_page(blocks, studies: dict, rows, figures: dict, intro: Sequence[str] = ()) -> str:
@@ -267,7 +268,9 @@ def seed_lines(blocks, studies, rows) -> list[str]:
                          f"{fmt(d.value, k)} [{fmt(lo, k)}, {fmt(hi, k)}]", "yes" if ok else "**no**"])
         L += [f"### {a.label} vs {b.label}", "", markdown_table(["finding", a.label, b.label, "difference [95 % CI]", "agree?"],
                                                           body), "",
-              f"{len(body) - disagree} of {len(body)} findings agree within the CI; {disagree} do not.", ""]
+              f"{len(body) - disagree} of the {len(body)} findings compared agree within the CI; {disagree} do not "
+              f"(of the {len(rows)} findings, the orderings and the zero-event claims have no difference to compare, "
+              "and neither has a finding whose groups one of the two campaigns lacks).", ""]
     return L
 
 
