@@ -167,11 +167,14 @@ def summary_lines(rows, label: str, experiments: "dict | None") -> list[str]:
     c = tally(rows, label)
     n_emp = sum(c[v] for v in EMPIRICAL)
     nest = [f for f, _ in rows if f.nested_in or any(g.nested_in == f.id for g, _ in rows)]
+    extra = sum(len(f.pooled) - 1 for f in nest)
     L = ["## In short", "",
          f"The paper states {len(rows)} findings about its results: one row per claim and group, one row per "
          f"average over groups, and one row each for the {len(nest)} nested safety claims ("
          + "; ".join(f"'{f.claim}'" for f in nest) + "), which are tested together, pooled over the groups they "
-         f"cover (counted per group they would add {sum(len(f.pooled) - 1 for f in nest)} rows). Every page of this "
+         f"cover (counted per group they would add {extra} rows: {len(rows) + extra} in all, "
+         f"{len(rows) + extra - sum(1 for f, _ in rows if f.by_construction)} of them not true by construction). "
+         "Every page of this "
          f"study counts these {len(rows)}. {n_emp} are empirical: we "
          f"reproduce **{c[VERDICTS[0]]}**, {c[VERDICTS[1]]} are consistent with ours without being shown, "
          f"{c[VERDICTS[2]]} hold in direction but not in size, and **{c[VERDICTS[3]]} are not reproduced**. Counted "
