@@ -256,3 +256,14 @@ def test_report_errors(tmp_path):
     for bad, msg in (("noname", "NAME:key=value"), ("a:colour=red", "allowed keys"), ("a:received=some", "one of")):
         with pytest.raises(UsageError, match=msg):
             parse_recount(bad)
+
+
+def test_findings_json_rounds_floats_and_stores_each_basis_row_once():
+    from daa_sil.study.report_findings import basis_changes, rounded
+
+    assert rounded({"a": [0.0018427397934059897, 795163.0, 1 / 3], "b": "x"}) == {"a": [0.00184274, 795163.0, 0.333333],
+                                                                                 "b": "x"}
+    ref = [{"setting": "H", "value": 40}, {"setting": "outside", "value": "approach"}]
+    mine = [{"setting": "H", "value": 40}, {"setting": "outside", "value": "clamp"}]
+    assert basis_changes(mine, ref) == [{"setting": "outside", "value": "clamp"}]
+    assert basis_changes(ref, ref) == [] and basis_changes(None, ref) is None
