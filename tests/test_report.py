@@ -211,6 +211,12 @@ def test_ablation_and_provenance_sections(tmp_path):
     assert "### default: what the map adds to ProjL (ID-2 minus ID-2-projl)" in text
     assert "what ProjL adds to the map (ID-2 minus ID-2-map)" in text
     assert "my-group" in text  # an unknown group is shown, not a crash
+    # each ablation opens with one summary row per reading, the per-reading tables collapsed below it
+    abl = (tmp_path / "rep" / "appendix-ablations.md").read_text()
+    head = abl.index("### What ProjL adds to the map (ID-2 minus ID-2-map)")
+    summary = next(row for hdr, row in _rows(abl[head:]) if hdr[0] == "reading")
+    assert summary[0] == "`default`" and summary[1].startswith("**-")  # ID-2-map's 3x allocations: measurable
+    assert abl.index("<details>", head) < abl.index("#### default: what ProjL adds to the map", head)
     blocks = build_blocks(d)
     st = Study(blocks[0].enc, blocks[0].reading, dec=blocks[0].dec, replicates=500)
     rows = {r["metric"]: r for r in ablation_rows(st, "ID-2", "ID-2-map")}
