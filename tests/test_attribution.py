@@ -55,3 +55,27 @@ def test_each_row_carries_the_commands_of_its_experiments():
     sev = by["safety"]["commands"]
     assert sev[-1].endswith("--only unmitigated") and len(sev) == 2  # paper once, then the experiment run
     assert attribution_rows(rows, "r", exps)[0]["commands"] == []  # no meta: no command invented
+
+
+def _fig(label: str, metric: str, v: float, ref: "str | None" = None) -> dict:
+    return {"label": label, "metric": metric, "value": v, "lo": v * 0.9, "hi": v * 1.1, **({"ref": ref} if ref else {})}
+
+
+def test_deviation_rows_name_a_supported_cause_and_what_is_not_settled():
+    """The deviation size is not put down to the paper's vagueness (no definition reaches its size); the
+    row shows the feet run's deviation per encounter that left the plan, computed from the figures."""
+    dev = [c for c in CLUSTERS if c.key.startswith("deviation")]
+    assert len(dev) == 2
+    for c in dev:
+        assert "the paper's vagueness" not in c.causes and "Not settled by these runs" in c.because
+        assert "experiment that would" in c.because
+    size = next(c for c in dev if c.key == "deviation")
+    assert size.causes[0] == "the encounter set"
+    d = {"rows": [_fig("B-1", m, v) for m, v in (("dev_h_mean", 200.0), ("dev_h_tmean_mean", 100.0),
+                                                       ("dev_h_maneuvered_mean", 1000.0), ("maneuvered_share", 0.2))]}
+    sev = {"rows": [_fig("unmitigated", "alert_share_2", 0.2)]}
+    ft = {"rows": [_fig(f"{g} (feet)", m, v) for g in ("B-1", "IC-1", "ID-2")
+                     for m, v in (("dev_h_mean", 800.0), ("dev_v_mean", 50.0), ("maneuvered_share", 0.5))]}
+    text = size.showed({"deviation": d, "severity": sev, "feet": ft})
+    assert "1,600 m per encounter that left it" in text  # 800 m over all / 50 % that left
+    assert "no definition we tried gives its size" in text  # 1,000 m < 1,690 m even if all maneuvered

@@ -14,6 +14,7 @@ from daa_sil.study.report import APPENDICES, ablation_rows, write_report
 from daa_sil.study.report_figures import FIGURES
 from daa_sil.study.report_input import build_blocks, parse_recount
 from daa_sil.study.analysis import Study
+from daa_sil.study.findings import load_findings
 
 COLS = ("n_wait", "n_no_wait", "n_pilot_received", "n_pilot_exec", "n_blend", "n_blend_exact", "n_blend_axis",
         "n_daa_override")
@@ -107,6 +108,20 @@ def _headers(text: str) -> list:
             if a.startswith("|") and b.startswith("|---")]
 
 
+def _rows(text: str) -> list:
+    """(header cells, row cells) of every body row of every Markdown table of ``text``."""
+    out, hdr, lines = [], None, text.splitlines()
+    for i, line in enumerate(lines):
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if not line.startswith("|"):
+            hdr = None
+        elif i + 1 < len(lines) and lines[i + 1].startswith("|---"):
+            hdr = cells
+        elif hdr is not None and not line.startswith("|---"):
+            out.append((hdr, cells))
+    return out
+
+
 def test_main_page_opens_with_a_summary_and_names_no_machine_path(tmp_path):
     """The page a reader meets: what is reproduced and what is missed (with the cause) before the tables;
     no header named twice (the signatures side by side); campaign directories under the runs directory
@@ -125,6 +140,14 @@ def test_main_page_opens_with_a_summary_and_names_no_machine_path(tmp_path):
     sig = next(h for h in _headers(main) if h[0] == "group" and any("Tabassum & Bai" in c for c in h))
     assert "received / enc.: Tabassum & Bai" in sig and "received / enc.: ours [95 % CI]" in sig
     assert main.startswith("# Tabassum & Bai's findings against the `paper` reading")
+    # one set of findings on every page: the summary's total is each tally row's, and each row adds up to it
+    n = len(load_findings())
+    assert f"The paper states {n} findings about its results" in short
+    tallies = [row for page in sorted(out.parent.glob("*.md")) for hdr, row in _rows(page.read_text())
+               if hdr[:3] == ["reading", "findings", "empirical"]]
+    assert tallies
+    for row in tallies:
+        assert int(row[1]) == n and sum(int(c) for c in row[3:]) == n == int(row[2]) + sum(int(c) for c in row[7:]), row
 
 
 def test_two_readings_side_by_side_and_a_recount(tmp_path):
@@ -154,7 +177,7 @@ def test_seeds_of_one_reading_are_compared(tmp_path):
     b = _campaign(tmp_path / "s7", PAPER5, reading="literal", seed=7)
     text = _pages(write_report([a, b], tmp_path / "rep", replicates=300))
     assert "literal (seed 0)" in text and "literal (seed 7)" in text
-    assert "## Agreement between campaign seeds" in text and "findings agree within the CI" in text
+    assert "## Agreement between campaign seeds" in text and "findings compared agree within the CI" in text
 
 
 def test_a_smaller_run_of_the_same_seed_is_not_compared_as_another_seed(tmp_path):
@@ -188,6 +211,12 @@ def test_ablation_and_provenance_sections(tmp_path):
     assert "### default: what the map adds to ProjL (ID-2 minus ID-2-projl)" in text
     assert "what ProjL adds to the map (ID-2 minus ID-2-map)" in text
     assert "my-group" in text  # an unknown group is shown, not a crash
+    # each ablation opens with one summary row per reading, the per-reading tables collapsed below it
+    abl = (tmp_path / "rep" / "appendix-ablations.md").read_text()
+    head = abl.index("### What ProjL adds to the map (ID-2 minus ID-2-map)")
+    summary = next(row for hdr, row in _rows(abl[head:]) if hdr[0] == "reading")
+    assert summary[0] == "`default`" and summary[1].startswith("**-")  # ID-2-map's 3x allocations: measurable
+    assert abl.index("<details>", head) < abl.index("#### default: what ProjL adds to the map", head)
     blocks = build_blocks(d)
     st = Study(blocks[0].enc, blocks[0].reading, dec=blocks[0].dec, replicates=500)
     rows = {r["metric"]: r for r in ablation_rows(st, "ID-2", "ID-2-map")}
@@ -233,3 +262,14 @@ def test_report_errors(tmp_path):
     for bad, msg in (("noname", "NAME:key=value"), ("a:colour=red", "allowed keys"), ("a:received=some", "one of")):
         with pytest.raises(UsageError, match=msg):
             parse_recount(bad)
+
+
+def test_findings_json_rounds_floats_and_stores_each_basis_row_once():
+    from daa_sil.study.report_findings import basis_changes, rounded
+
+    assert rounded({"a": [0.0018427397934059897, 795163.0, 1 / 3], "b": "x"}) == {"a": [0.00184274, 795163.0, 0.333333],
+                                                                                 "b": "x"}
+    ref = [{"setting": "H", "value": 40}, {"setting": "outside", "value": "approach"}]
+    mine = [{"setting": "H", "value": 40}, {"setting": "outside", "value": "clamp"}]
+    assert basis_changes(mine, ref) == [{"setting": "outside", "value": "clamp"}]
+    assert basis_changes(ref, ref) == [] and basis_changes(None, ref) is None

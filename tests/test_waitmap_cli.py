@@ -97,10 +97,12 @@ def test_check_prints_the_papers_properties(built):
     r = run("check", str(out))
     assert r.returncode == 0, r.stderr
     assert "head-on waits < overtaking at equal range: holds" in r.stdout
-    assert "the paper's Fig. 3 shape (min <= 2, max <= 45, mode within 0-10 s): yes" in r.stdout
+    assert "the paper's Fig. 3 shape (min about 1 s (<= 2 s); max about 40 s (35-45 s); most states within " \
+        "5-10 s (> 50 %); left skewed (quartile skewness < 0)): no, fails: most states within 5-10 s" in r.stdout
     j = run("check", str(out), "--json")
     rep = json.loads(j.stdout)
-    assert rep["ok"] and rep["head_on_vs_overtaking"]["n"] > 0 and rep["paper_shape"]
+    assert rep["ok"] and rep["head_on_vs_overtaking"]["n"] > 0 and not rep["paper_shape"]
+    assert rep["shape_checks"]["min about 1 s (<= 2 s)"] and not rep["shape_checks"]["most states within 5-10 s (> 50 %)"]
 
 
 def test_build_options_reach_the_map_metadata(tmp_path):

@@ -52,14 +52,38 @@ def test_mirror_error_sees_a_broken_pair():
 
 
 def test_histogram_shape_rule():
-    fast = WaitMapFamily([_map(lambda n: 1.0 + 0.002 * _dist(n))])  # 1 .. ~5 s: the paper's shape
+    fast = WaitMapFamily([_map(lambda n: 1.0 + 0.002 * _dist(n))])  # 1 .. ~5 s: bulk below 5 s
     h = oracles.histogram(fast)
     assert h["min_s"] == pytest.approx(1.0 + 0.002 * _dist(paper_grid().nodes()).min(), rel=1e-5)
-    assert oracles.paper_shape(h)
+    assert not oracles.paper_shape(h)  # the range starts at 1 s, but most states lie below 5 s
     slow = WaitMapFamily([_map(lambda n: 20.0 + 0.004 * _dist(n))])  # bulk far above 10 s
     assert not oracles.paper_shape(oracles.histogram(slow))
     calm = WaitMapFamily([_map(lambda n: 5.0 + 0 * n[..., 0], p=1e-4)])  # below p_min: no threat
     assert oracles.histogram(calm)["n"] == 0 and not oracles.paper_shape(oracles.histogram(calm))
+
+
+def _sample(parts) -> np.ndarray:
+    """Waits (s) spread evenly over each (lo, hi, count) part."""
+    return np.concatenate([np.linspace(lo, hi, n) for lo, hi, n in parts])
+
+
+def test_shape_rules_pass_the_papers_description_and_fail_each_departure():
+    """The paper's Fig. 3 text: min 1 s, max 40 s, most states 5-10 s, left skewed. A hand-made sample
+    with all four passes; moving one feature at a time fails exactly that rule."""
+    paper_like = _sample([(1.0, 8.5, 350), (8.5, 10.0, 600), (10.0, 40.0, 50)])
+    h = oracles.histogram_of(paper_like, 40.0)
+    assert h["share_5_10"] > 0.7 and h["quartile_skew"] < 0
+    assert all(oracles.shape_checks(h).values()) and oracles.paper_shape(h)
+    # bulk at 0-5 s and a tail toward 40 s (the shape of our paper-grid maps): "most" and "left skewed" fail
+    right = oracles.histogram_of(_sample([(1.0, 5.0, 550), (5.0, 10.0, 380), (10.0, 38.0, 70)]), 40.0)
+    failed = {k for k, ok in oracles.shape_checks(right).items() if not ok}
+    assert failed == {"most states within 5-10 s (> 50 %)", "left skewed (quartile skewness < 0)"}
+    assert not oracles.paper_shape(right)
+    short = oracles.histogram_of(_sample([(1.0, 8.5, 350), (8.5, 10.0, 600), (10.0, 28.0, 50)]), 40.0)
+    assert [k for k, ok in oracles.shape_checks(short).items() if not ok] == ["max about 40 s (35-45 s)"]
+    late = oracles.histogram_of(_sample([(3.0, 8.5, 350), (8.5, 10.0, 600), (10.0, 40.0, 50)]), 40.0)
+    assert [k for k, ok in oracles.shape_checks(late).items() if not ok] == ["min about 1 s (<= 2 s)"]
+    assert not any(oracles.shape_checks(oracles.histogram_of(np.array([]), 40.0)).values())
 
 
 def test_speed_trend_shares():

@@ -256,7 +256,7 @@ READINGS: dict[str, Reading] = {r.name: r for r in (
     Reading("paper-feet", **{**_PAPER, "units": "feet"},
             description="as paper, HMD/VMD ranges in feet (contradicts the table's metres; measures the unit alone)"),
     Reading("extended",
-            description="our extension (formerly 'literal'): alerting grid, one-way delays, pilot streams from the "
+            description="our extension: alerting grid, one-way delays, pilot streams from the "
                         "corrective alert; counted over the active phase, every arrival"),
     Reading("paper-counts", window="whole", received="pilot+blend",
             description="as extended, counted like the paper: whole encounter, received = pilot + blend"),

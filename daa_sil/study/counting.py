@@ -148,8 +148,14 @@ class CountingRules:
         return table[opt]
 
     def describe(self) -> str:
+        """The reading's counting and other settings as recorded; the description (documentation, not a
+        setting) is the current one of a reading of ``daa_sil/config/readings.py`` of the same name."""
+        from daa_sil.config.readings import READINGS
+
         c = self.counting()
         rest = {k: v for k, v in self.settings.items() if k not in COUNTING_DEFAULTS and k != "columns"}
+        if "description" in rest and self.name in READINGS and READINGS[self.name].description:
+            rest["description"] = READINGS[self.name].description
         txt = ", ".join(f"{k}={v}" for k, v in c.items())
         if rest:
             txt += "; " + ", ".join(f"{k}={v}" for k, v in sorted(rest.items()))

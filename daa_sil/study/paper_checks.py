@@ -158,8 +158,10 @@ def inconsistency_section(studies: "Mapping | None" = None) -> list[str]:
           "at two speeds. On our maps a faster intruder waits less, turning or not (`docs/waitmap.md`).", "",
           "**7. The wait-time histogram's shape.** \"The histogram mirrors a left skewed Gaussian distribution. The "
           "maximum wait time is 40 seconds and the minimum wait time is 1 second. In most of the states the wait time "
-          "time ranges between 5 and 10 seconds.\" A bulk at 5–10 s in a 1–40 s range is a long right tail: right-"
-          "skewed in the usual sense; \"left skewed\" can only mean that the mass sits on the left.", ""]
+          "time ranges between 5 and 10 seconds.\" A bulk at 5–10 s in a 1–40 s range is left skewed only if more "
+          "mass lies just below 5 s than in the tail above 10 s, which a maximum of 40 s makes unusual. Our "
+          "paper-grid maps have the minimum but neither 'most states within 5–10 s' nor the left skew, and at H = 40 s "
+          "not the maximum (`daa-sil waitmap check paper`, `docs/waitmap.md`).", ""]
     return L
 
 

@@ -18,6 +18,7 @@ files, a pyarrow Table or a dict of arrays. Every file is written atomically.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from dataclasses import replace
@@ -27,7 +28,7 @@ from typing import Sequence
 import numpy as np
 
 from daa_sil.config.basis import KINDS, consumed_findings
-from daa_sil.files import atomic_write_json, atomic_write_text, ensure_dir
+from daa_sil.files import atomic_write_text, ensure_dir, to_jsonable
 from daa_sil.study.analysis import Study
 from daa_sil.study.attribution import CAUSES, attribution_rows
 from daa_sil.study.findings import APART, EMPIRICAL, NOT_TESTABLE, VERDICTS, fmt, untestable_statements
@@ -35,7 +36,7 @@ from daa_sil.study.metrics import BASELINE_GROUP, CONF
 from daa_sil.study.report_appendix import (ABLATIONS, ablation_rows, ablations_page, provenance_page, readings_page,
                                            tally_lines)
 from daa_sil.study.report_figures import file_slug, group_figures
-from daa_sil.study.report_findings import VERDICT_MEANING
+from daa_sil.study.report_findings import VERDICT_MEANING, basis_changes, rounded
 from daa_sil.study.report_format import groups_in_order, markdown_table, reading_label
 from daa_sil.study.report_input import Block, build_blocks
 from daa_sil.study.signatures import SIGNATURES, our_cell, paper_cell
@@ -166,8 +167,16 @@ def summary_lines(rows, label: str, experiments: "dict | None") -> list[str]:
 
     c = tally(rows, label)
     n_emp = sum(c[v] for v in EMPIRICAL)
+    nest = [f for f, _ in rows if f.nested_in or any(g.nested_in == f.id for g, _ in rows)]
+    extra = sum(len(f.pooled) - 1 for f in nest)
     L = ["## In short", "",
-         f"The paper states {len(rows)} findings about its results (one row per group). {n_emp} are empirical: we "
+         f"The paper states {len(rows)} findings about its results: one row per claim and group, one row per "
+         f"average over groups, and one row each for the {len(nest)} nested safety claims ("
+         + "; ".join(f"'{f.claim}'" for f in nest) + "), which are tested together, pooled over the groups they "
+         f"cover (counted per group they would add {extra} rows: {len(rows) + extra} in all, "
+         f"{len(rows) + extra - sum(1 for f, _ in rows if f.by_construction)} of them not true by construction). "
+         "Every page of this "
+         f"study counts these {len(rows)}. {n_emp} are empirical: we "
          f"reproduce **{c[VERDICTS[0]]}**, {c[VERDICTS[1]]} are consistent with ours without being shown, "
          f"{c[VERDICTS[2]]} hold in direction but not in size, and **{c[VERDICTS[3]]} are not reproduced**. Counted "
          "apart: " + ", ".join(f"{c[v]} {v}" for v in APART) + ".", ""]
@@ -217,9 +226,14 @@ def findings_json(blocks, rows, replicates: int, seed: int, conf: float, experim
     """Machine-readable: every finding, the paper's value, each reading's outcome, tallies, attribution."""
     from daa_sil.study.verdicts import tally
 
+    ref = (blocks[0].meta or {}).get("basis")
     return {"bootstrap": {"replicates": replicates, "seed": seed, "conf": conf},
+            "basis": {"reading": blocks[0].label, "rows": ref,
+                      "note": "the basis of every setting of the first reading; each reading's 'basis_changes' "
+                              "lists its rows that differ from these (all its other rows are these)"},
             "readings": [{"label": b.label, "reading": b.reading.name, "settings": dict(b.reading.settings),
-                          "source": b.reading.source, "campaign_seed": b.seed, "basis": (b.meta or {}).get("basis"),
+                          "source": b.reading.source, "campaign_seed": b.seed,
+                          "basis_changes": basis_changes((b.meta or {}).get("basis"), ref),
                           "tally": tally(rows, b.label)} for b in blocks],
             "verdicts": {"words": list(VERDICTS), "empirical": list(EMPIRICAL), "apart": list(APART)},
             "attribution": attribution_rows(rows, blocks[0].label, (experiments or {}).get("experiments"),
@@ -273,7 +287,9 @@ def write_report(src, out_dir: "str | os.PathLike", baseline: str = BASELINE_GRO
     atomic_write_text(out / APPENDICES[1], ablations_page(studies, rows, back + list(notes)))
     atomic_write_text(out / APPENDICES[2], provenance_page(blocks, studies, rows, replicates=replicates, seed=seed,
                                                           conf=conf, intro=back + list(notes)))
-    atomic_write_json(out / "findings.json", findings_json(blocks, rows, replicates, seed, conf, experiments))
+    # one finding or reading a few lines, floats to JSON_DIGITS: the committed file stays readable and small
+    atomic_write_text(out / "findings.json", json.dumps(rounded(to_jsonable(findings_json(
+        blocks, rows, replicates, seed, conf, experiments))), indent=1, sort_keys=True, ensure_ascii=False) + "\n")
     return atomic_write_text(out / main_name, render_main(blocks, studies, rows, figures=figures,
                                                           experiments=experiments, notes=notes))
 

@@ -50,14 +50,15 @@ def sources_lines(blocks, studies: dict) -> list[str]:
 
 
 def tally_lines(rows, labels: Sequence[str]) -> list[str]:
-    """The headline tally of each reading: the empirical verdicts, then the ones counted apart."""
+    """The headline tally of each reading over every finding (the same set for each: ``findings``), split
+    into the empirical verdicts and the ones counted apart; the two parts add up to ``findings``."""
     body = []
     for lab in labels:
         c = tally(rows, lab)
-        body.append([reading_label(lab), str(sum(c[v] for v in EMPIRICAL))] + [str(c[v]) for v in EMPIRICAL]
-                    + [str(c[v]) for v in APART] + [str(c[NOT_TESTABLE])])
-    return [markdown_table(["reading", "empirical findings"] + list(EMPIRICAL) + list(APART) + [NOT_TESTABLE], body),
-            ""]
+        body.append([reading_label(lab), str(len(rows)), str(sum(c[v] for v in EMPIRICAL))]
+                    + [str(c[v]) for v in EMPIRICAL] + [str(c[v]) for v in APART] + [str(c[NOT_TESTABLE])])
+    return [markdown_table(["reading", "findings", "empirical"] + list(EMPIRICAL) + list(APART) + [NOT_TESTABLE],
+                           body), ""]
 
 
 def readings_page(blocks, studies: dict, rows, figures: dict, intro: Sequence[str] = ()) -> str:
@@ -97,6 +98,7 @@ def group_table_lines(studies: dict) -> list[str]:
          "upper bounds on the share of encounters instead of an interval.", ""]
     for title, items in GROUP_TABLES:
         L += [f"### {title}", ""]
+        L0, L = L, []
         for label, metric, kind, paper_fn, total in items:
             rows = []
             for g in groups:
@@ -113,6 +115,7 @@ def group_table_lines(studies: dict) -> list[str]:
                      for lab in labels]
             L += ["**maximum PI (preset's constants; the paper: 3.79 in ID-1)**", ""]
             L += wide_table(["group"], [[g] for g in groups], [reading_label(x) for x in labels], cells)
+        L = L0 + collapsed(f"{title}: every reading", L)
     return L
 
 
@@ -143,38 +146,66 @@ def ablation_rows(st: Study, full: str, abl: str) -> list[dict]:
     return out
 
 
+def collapsed(summary: str, lines: Sequence[str]) -> list[str]:
+    """``lines`` (Markdown) inside a collapsed block titled ``summary`` (HTML details, as GitHub renders)."""
+    return ["<details>", f"<summary>{summary}</summary>", ""] + list(lines) + ["</details>", ""]
+
+
+def _ablation_detail(lab: str, st: Study, full: str, abl: str, what: str, rows: list) -> list[str]:
+    body = []
+    for r in rows:
+        m = r.get("mcnemar")
+        test = (f"McNemar {m.a_only}/{m.b_only} discordant, p = {m.p_value:.3g}" if m else "paired bootstrap")
+        body.append([r["label"], estimate_text(r["full"], r["kind"]), estimate_text(r["ablation"], r["kind"]),
+                     estimate_text(r["diff"], r["kind"]), test, "yes" if r["measurable"] else "no"])
+    L = [f"#### {lab}: {what}", "",
+         markdown_table(["metric", full, abl, f"{full} − {abl} [95 % CI]", "test", "measurable?"], body), ""]
+    nothing = [r for r in rows if not r["measurable"]]
+    why = ""
+    if st.provenance.get(full):
+        why = (f" In {full} the map decided {group_cell(st, full, 'map_decided_share', 'pct', False)} of the "
+               f"wait/no-wait decisions (the rest would be the same with \"always wait\"), and "
+               f"{group_cell(st, full, 'in_box_share', 'pct', False)} of its lookups fell inside the map's box.")
+    if rows and len(nothing) == len(rows):
+        L += [f"**The difference is not measurable on any metric**: every paired 95 % CI of {full} − {abl} "
+              f"includes 0 (and McNemar p ≥ 0.05 for LoWC encounters) over {st.n:,} encounters. "
+              + ("The map adds nothing measurable to ProjL here." if abl.endswith("projl") else
+                 "ProjL adds nothing measurable to the map here.") + why, ""]
+    else:
+        yes = ", ".join(r["label"] for r in rows if r["measurable"])
+        no = ", ".join(r["label"] for r in nothing) or "none"
+        L += [f"Measurable differences: {yes}. Not measurable (CI includes 0): {no}.{why}", ""]
+    return L
+
+
 def ablation_lines(studies: dict) -> list[str]:
-    L = ["## Ablation: what the wait map adds", ""]
+    """Per ablation, one summary row per reading (the paired differences, bold where measurable), then
+    each reading's table with both groups' values and the tests, collapsed."""
+    L = ["## Ablation: what the wait map adds", "",
+         "Per ablation, one row per reading: the paired difference over the same encounters [95 % CI], in "
+         "**bold** where it is measurable (the CI excludes 0; for LoWC encounters McNemar p < 0.05). Each "
+         "reading's table, with both groups' values and the test, is collapsed below its summary.", ""]
     any_ = False
-    for lab, st in studies.items():
-        for full, abl, what in ABLATIONS:
+    for full, abl, what in ABLATIONS:
+        summary, detail = [], []
+        for lab, st in studies.items():
             if full not in st.groups or abl not in st.groups:
                 continue
-            any_ = True
             rows = ablation_rows(st, full, abl)
-            body = []
-            for r in rows:
-                m = r.get("mcnemar")
-                test = (f"McNemar {m.a_only}/{m.b_only} discordant, p = {m.p_value:.3g}" if m else "paired bootstrap")
-                body.append([r["label"], estimate_text(r["full"], r["kind"]), estimate_text(r["ablation"], r["kind"]),
-                             estimate_text(r["diff"], r["kind"]), test, "yes" if r["measurable"] else "no"])
-            L += [f"### {lab}: {what}", "",
-                  markdown_table(["metric", full, abl, f"{full} − {abl} [95 % CI]", "test", "measurable?"], body), ""]
-            nothing = [r for r in rows if not r["measurable"]]
-            why = ""
-            if st.provenance.get(full):
-                why = (f" In {full} the map decided {group_cell(st, full, 'map_decided_share', 'pct', False)} of the "
-                       f"wait/no-wait decisions (the rest would be the same with \"always wait\"), and "
-                       f"{group_cell(st, full, 'in_box_share', 'pct', False)} of its lookups fell inside the map's box.")
-            if rows and len(nothing) == len(rows):
-                L += [f"**The difference is not measurable on any metric**: every paired 95 % CI of {full} − {abl} "
-                      f"includes 0 (and McNemar p ≥ 0.05 for LoWC encounters) over {st.n:,} encounters. "
-                      + ("The map adds nothing measurable to ProjL here." if abl.endswith("projl") else
-                         "ProjL adds nothing measurable to the map here.") + why, ""]
-            else:
-                yes = ", ".join(r["label"] for r in rows if r["measurable"])
-                no = ", ".join(r["label"] for r in nothing) or "none"
-                L += [f"Measurable differences: {yes}. Not measurable (CI includes 0): {no}.{why}", ""]
+            by = {r["metric"]: r for r in rows}
+            cells = []
+            for _, metric, kind in ABLATION_METRICS:
+                r = by.get(metric)
+                txt = estimate_text(r["diff"], r["kind"]) if r else "–"
+                cells.append(f"**{txt}**" if r and r["measurable"] else txt)
+            summary.append([reading_label(lab)] + cells)
+            detail += _ablation_detail(lab, st, full, abl, what, rows)
+        if not summary:
+            continue
+        any_ = True
+        L += [f"### {what[0].upper()}{what[1:]}", "",
+              markdown_table(["reading"] + [f"Δ {label}" for label, _, _ in ABLATION_METRICS], summary), ""]
+        L += collapsed(f"{what}: each reading's values and tests", detail)
     if not any_:
         L += ["No ablation groups in these results (run `ID-2-projl` and/or `ID-2-map` beside `ID-2`).", ""]
     return L
@@ -229,7 +260,15 @@ def ablations_page(studies: dict, rows, intro: Sequence[str] = ()) -> str:
     B-2 and the per-group tables of every reading."""
     L = ["# Appendix: ablations, decision provenance, paired comparisons, per-group tables", ""]
     L += [str(x) for x in intro] + [""]
-    L += ablation_lines(studies) + provenance_lines(studies) + paired_lines(studies) + group_table_lines(studies)
+    prov, paired = provenance_lines(studies), paired_lines(studies)
+    map_rows = [[reading_label(lab), group_cell(st, "ID-2", "map_decided_share", "pct", False),
+                 group_cell(st, "ID-2", "in_box_share", "pct", False)]
+                for lab, st in studies.items() if st.provenance.get("ID-2")]
+    L += ablation_lines(studies) + prov[:4]
+    if map_rows:
+        L += [markdown_table(["reading", "ID-2: decided by the map", "ID-2: lookups inside the box"], map_rows), ""]
+    L += collapsed("every reading's groups", prov[4:]) + paired[:4]
+    L += collapsed("every reading's groups against B-2", paired[4:]) + group_table_lines(studies)
     return "\n".join(L) + "\n"
 
 
@@ -267,7 +306,9 @@ def seed_lines(blocks, studies, rows) -> list[str]:
                          f"{fmt(d.value, k)} [{fmt(lo, k)}, {fmt(hi, k)}]", "yes" if ok else "**no**"])
         L += [f"### {a.label} vs {b.label}", "", markdown_table(["finding", a.label, b.label, "difference [95 % CI]", "agree?"],
                                                           body), "",
-              f"{len(body) - disagree} of {len(body)} findings agree within the CI; {disagree} do not.", ""]
+              f"{len(body) - disagree} of the {len(body)} findings compared agree within the CI; {disagree} do not "
+              f"(of the {len(rows)} findings, the orderings and the zero-event claims have no difference to compare, "
+              "and neither has a finding whose groups one of the two campaigns lacks).", ""]
     return L
 
 

@@ -1,7 +1,10 @@
 """What each verdict word of the report means, whatever the kind of finding (the kinds' rules are
-:data:`daa_sil.study.verdicts.RULES`; the report prints both)."""
+:data:`daa_sil.study.verdicts.RULES`; the report prints both), and the compact form of ``findings.json``."""
 
 from __future__ import annotations
+
+import json
+import math
 
 from daa_sil.study.findings import (BY_CONSTRUCTION, CONSISTENT, DIRECTION, INPUT, NESTED, NOT_REPRODUCED, REPRODUCED,
                                     UNINFORMATIVE)
@@ -27,4 +30,28 @@ VERDICT_MEANING = {
            "match: never a reproduction, so counted apart (missed anyway, it counts as not reproduced)",
 }
 
-__all__ = ["VERDICT_MEANING"]
+#: significant digits a float keeps in ``findings.json`` (the pages print three; integers stay exact)
+JSON_DIGITS = 6
+
+
+def rounded(x):
+    """``x`` (JSON-able) with every non-integral float kept to :data:`JSON_DIGITS` significant digits."""
+    if isinstance(x, float):
+        return x if x.is_integer() or not math.isfinite(x) else float(f"{x:.{JSON_DIGITS}g}")
+    if isinstance(x, dict):
+        return {k: rounded(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [rounded(v) for v in x]
+    return x
+
+
+def basis_changes(basis: "list | None", reference: "list | None") -> "list | None":
+    """The rows of a reading's ``basis`` that differ from the reference reading's (the full rows; the
+    others are the reference's, stored once): None without a basis."""
+    if basis is None:
+        return None
+    ref = {json.dumps(r, sort_keys=True) for r in reference or ()}
+    return [r for r in basis if json.dumps(r, sort_keys=True) not in ref]
+
+
+__all__ = ["VERDICT_MEANING", "JSON_DIGITS", "rounded", "basis_changes"]
