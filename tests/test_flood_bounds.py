@@ -37,6 +37,7 @@ import pytest
 from daa_sil.link.codec import MavCodec
 from daa_sil.link.codec import mavlink as M
 from daa_sil.sil.scenario import parse_scenario
+from daa_sil.sil.shim_config import HELD_BYTES, LINE_BYTES
 from hostile_helpers import SCENARIO, STEPS, play, same_rows
 
 GCS = MavCodec(255, 190)
@@ -192,9 +193,9 @@ def test_the_shim_holds_a_flood_within_its_byte_budget(clock):
         time.sleep(0.2)
         rss0 = _rss_kib(proc.pid)
         blob = GCS.encode(M.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3)) * (60_000 // 21)
-        for i in range(2000):  # 120 MB, paced so that the shim reads most of it
+        for i in range(2000):  # 120 MB, paced so that the shim reads most of it even on a loaded machine
             gcs.sendto(blob, side)
-            if i % 20 == 19:
+            if i % 4 == 3:
                 time.sleep(0.004)
         time.sleep(0.5)
         grown_mib = (_rss_kib(proc.pid) - rss0) / 1024
@@ -207,8 +208,11 @@ def test_the_shim_holds_a_flood_within_its_byte_budget(clock):
             proc.wait()
     stats = json.loads(out)
     dropped = stats["counters"].get("dropped_queue", 0)
-    print(f"shim ({clock}) grew {grown_mib:.0f} MiB under the flood; dropped_queue {dropped}")
+    read_mib = stats["counters"]["datagrams_from_gcs"] * len(blob) / 2**20
+    print(f"shim ({clock}) read {read_mib:.0f} MiB, grew {grown_mib:.0f} MiB under the flood; dropped_queue {dropped}")
     assert grown_mib < 30, f"the shim grew by {grown_mib:.0f} MiB"
+    # the flood must exceed the budget to test it (the kernel drops what a starved shim does not read)
+    assert read_mib > 2 * max(LINE_BYTES, HELD_BYTES) / 2**20, f"the shim read only {read_mib:.0f} MiB of the flood"
     assert dropped > 0 and err.count("queue") >= 1
 
 
