@@ -24,6 +24,8 @@ from daa_sil.link.codec import mavlink as M
 
 from . import identity as ident
 from . import telemetry as T
+from daa_sil.config.settings import STEP
+
 from .core import resolve_policy
 
 #: STATUSTEXT prefix of the boot's progress lines
@@ -55,9 +57,9 @@ class BootPlant:
 
     booting = True
 
-    def __init__(self, sc, config=None, dt: float = 1.0):
+    def __init__(self, sc, config=None, dt: float = STEP.default, flags=None):
         self.sc, self.dt = sc, float(dt)
-        self.policy = resolve_policy(sc, None, config)
+        self.policy = resolve_policy(sc, None, config, flags)
         self.n_steps = sc.n_steps
         self.last_authority = "pilot"
         self.last_decision = "none"
