@@ -106,7 +106,8 @@ class _SafetyOnce:
 
     def __call__(self, rows: np.ndarray, cmd: Command) -> np.ndarray:
         """SM (s) of ``cmd`` (one per row of ``rows``, ascending row indices)."""
-        want = np.stack([np.broadcast_to(np.asarray(c, float), rows.shape) for c in (cmd.trk, cmd.vs, cmd.gs)], -1)
+        want = np.empty((rows.size, 3))
+        want[:, 0], want[:, 1], want[:, 2] = cmd.trk, cmd.vs, cmd.gs
         out = np.full(rows.size, np.nan)
         todo = np.ones(rows.size, bool)
         for k_rows, k_cmd, k_sm in self.known if REUSE_SM else ():
@@ -116,10 +117,16 @@ class _SafetyOnce:
             out[hit] = k_sm[pos[hit]]
             todo &= ~hit
         if todo.any():
-            r = rows[todo]
-            got = safety_metric(self.own[r], self.intr[r], cmd if todo.all() else cmd[todo], self.cfg, self.horizon)
+            every = bool(todo.all())
+            r = rows if every else rows[todo]
+            n = self.own.shape[0]
+            if r.size == n and r[0] == 0 and r[-1] == n - 1:  # every row of the step, in order: no copies
+                o, i_ = self.own, self.intr
+            else:
+                o, i_ = self.own[r], self.intr[r]
+            got = safety_metric(o, i_, cmd if every else cmd[todo], self.cfg, self.horizon)
             out[todo] = got
-            self.known.append((r, want[todo], got))
+            self.known.append((r, want if every else want[todo], got))
         return out
 
 

@@ -36,3 +36,22 @@ def test_rows_list_the_misses_and_flag_an_unattributed_one():
     stray = replace(found[3], id="a-new-finding")
     out = attribution_rows(rows + [(stray, {"r": Outcome(NOT_REPRODUCED, "x")})], "r", None)
     assert out[-1]["key"] == "unattributed" and "a-new-finding" in out[-1]["misses"][0]
+
+
+def test_each_row_carries_the_commands_of_its_experiments():
+    """A row's commands make the campaigns its experiments read (a reading: its campaign; an experiment
+    run: experiments.py --only it) with the seed and sizes of experiments.json; 'paper' at the large size."""
+    meta = {"seed": 99, "n_small": 20, "n_large": 50}
+    exps = {"latency_rule": {"runs": ["paper", "paper-one-way"]}, "severity": {"runs": ["paper", "unmitigated"]},
+            "deviation": {"runs": ["paper"]}}
+    found = load_findings()
+    rows = [(f, {"r": Outcome(NOT_REPRODUCED, "x")}) for f in found]
+    by = {r["key"]: r for r in attribution_rows(rows, "r", exps, meta)}
+    cmds = by["allocation"]["commands"]  # latency_rule, delay_draw (absent), outside (absent)
+    assert cmds[0] == ("daa-sil campaign run --reading paper --groups B-1,B-2,IC-1,ID-1,ID-2,ID-2-projl,ID-2-map "
+                       "--encounters 50 --seed 99 --out RUNS/paper")
+    assert cmds[1].startswith("daa-sil campaign run --reading paper-one-way ") and "--encounters 20 " in cmds[1]
+    assert cmds[-1] == "python docs/results/experiments.py --runs RUNS --seed 99 --small 20 --large 50 --analyse-only"
+    sev = by["safety"]["commands"]
+    assert sev[-1].endswith("--only unmitigated") and len(sev) == 2  # paper once, then the experiment run
+    assert attribution_rows(rows, "r", exps)[0]["commands"] == []  # no meta: no command invented

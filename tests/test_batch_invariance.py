@@ -260,3 +260,60 @@ def test_cylinder_recovery_search_compiled_equals_numpy(monkeypatch):
                 assert _same(np.asarray(x), np.asarray(y)), (a.name, f.name)
             recovered += int(np.sum(np.isfinite(np.asarray(a.recovery_time))))
     assert recovered > 40
+
+
+def test_cylinder_rows_compiled_equal_the_evaluators(monkeypatch):
+    """The cylinder recovery's saturated rows made by the compiled search from their one-pass conflicts
+    (``recovery.recover_rows``) against the same rows made again on the evaluator's path
+    (``bands.CYLINDER_COMPILED = False``): every field, on the conformance set's encounters with a recovery
+    band (batched and one at a time, as the SIL calls it) and on random batches, for the ``daidalus`` preset and
+    its variants without the conflict lists' horizons, without shrinking below the first cylinder, and off the
+    DAIDALUS grid."""
+    import dataclasses
+
+    import daa_sil.daa.bands as bands_mod
+    from daa_sil.daa.conformance import read_records, states
+    from pathlib import Path
+
+    cfg = DaaConfig.for_preset("daidalus")
+    recs = read_records(Path(__file__).resolve().parent / "data" / "daidalus_do365b.jsonl.xz")
+    pick = [i for i, r in enumerate(recs) if r["track_recovery"]["recovery_bands_computed"]][:30]
+    own_c, intr_c = states([recs[i] for i in pick])
+    cases = [(cfg, own_c, intr_c)] + [(cfg, own_c[k:k + 1], intr_c[k:k + 1]) for k in range(0, len(pick), 3)]
+    for seed, variant in ((3, {}), (4, {}), (5, {"horizon_from_maneuver": False}), (6, {"ca_bands": False}),
+                          (7, {"daidalus_grid": False})):
+        c = dataclasses.replace(cfg, **variant)
+        cases.append((c, *_encounters(seed, 24, 1 + seed % 3, c)[:2]))
+    recovered = 0
+    for c, own, intr in cases:
+        got = compute_bands(own, intr, c)
+        monkeypatch.setattr(bands_mod, "CYLINDER_COMPILED", False)
+        ref = compute_bands(own, intr, c)
+        monkeypatch.setattr(bands_mod, "CYLINDER_COMPILED", True)
+        for a, b in zip(got.axes(), ref.axes()):
+            for f in fields(AxisBands):
+                x, y = getattr(a, f.name), getattr(b, f.name)
+                if f.name == "axis" or (x is None and y is None):
+                    continue
+                assert _same(np.asarray(x), np.asarray(y)), (a.name, f.name, own.shape)
+            recovered += int(np.sum(np.asarray(a.recovery_nfactor) >= 0))
+    assert recovered > 40  # (rows did search a recovery on the compiled path)
+
+
+def test_sm_equals_the_first_entries_of_command_conflicts():
+    """SM(u) reads only the first entries of the command's conflicts (``safety._command_first_entry``): the
+    same numbers as ``command_conflicts(..., exits=False)``'s ``t_in`` (its general path, which also computes
+    the exits), bit for bit, for every preset, several intruders, commands that change one, two or three
+    axes or none, batched and one at a time."""
+    from daa_sil.daa.safety import command_conflicts, sm_from_tin
+
+    for preset in PRESETS:
+        cfg = DaaConfig.for_preset(preset)
+        for seed, m in ((11, 1), (12, 3)):
+            own, intr, cmd = _encounters(seed, 30, m, cfg)
+            horizon = cfg.sm_horizon_s
+            t_in, _ = command_conflicts(own, intr, cmd, cfg, horizon + cfg.sm_margin_s, exits=False)
+            want = sm_from_tin(t_in.min(axis=-1), horizon, cfg)
+            assert _same(safety_metric(own, intr, cmd, cfg), want), (preset, seed)
+            for k in range(0, 30, 7):
+                assert _same(safety_metric(own[k:k + 1], intr[k:k + 1], cmd[k:k + 1], cfg), want[k:k + 1])

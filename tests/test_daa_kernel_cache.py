@@ -63,7 +63,8 @@ def test_cold_start_together_then_damaged_cache(tmp_path):
 
 #: the kernels only some configurations call, loaded at their first call
 LAZY = ("wcv_soa_into", "classify_into", "clear2_into", "candidates_into", "segment_into", "axis_relative_knots_into",
-        "axis_knots_into", "search_into", "pivot_search_into")
+        "axis_knots_into", "search_into", "pivot_search_into", "cylinder_prepare_into", "cylinder_step_into",
+        "cylinder_finish_into")
 
 #: with a warm cache: how many lazy kernels get() left unloaded, then one called
 LAZY_PROBE = """
@@ -80,7 +81,7 @@ print(" ".join(before), "|", lazy["wcv_soa_into"].dispatcher is not None, out.to
 
 
 def test_lazy_kernels_are_loaded_at_their_first_call():
-    """A process on a warm cache loads every kernel but the lazy ones (eight a SIL process never calls with
+    """A process on a warm cache loads every kernel but the lazy ones (twelve a SIL process never calls with
     the default configuration); the first call loads one and computes with it."""
     for _ in range(2):  # (the first run warms the cache if this machine's is cold)
         p = subprocess.run([sys.executable, "-c", LAZY_PROBE], capture_output=True, text=True, timeout=900)

@@ -44,3 +44,30 @@ def test_every_run_names_what_it_tests():
     assert len({r.name for r in RUNS}) == len(RUNS)
     for r in RUNS:
         assert r.why and r.size in ("small", "large") and r.group_specs()
+
+
+def test_what_is_flown_instead_of_the_command_by_hand(tmp_path):
+    """The axes of the commands flown instead of the pilot's, counted from a hand-written decision table:
+    a blend of a maneuver and of a 'hold' told apart by the pilot's intent, overrides and allocations on
+    their own, the pilot's own executions left out."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from daa_sil.study.experiment_replays import executed_axes
+
+    (tmp_path / "IC-1").mkdir()
+    rows = [("pilot", "none", "none"), ("blend", "vertical", "vertical"), ("blend", "horizontal", "vertical"),
+            ("blend", "none", "none"), ("blend", "none", "none"), ("blend", "none", "horizontal"),
+            ("daa_override", "none", "horizontal"), ("no_wait", "none", "none")]
+    dec, pax, eax = (list(c) for c in zip(*rows))
+    sm = [5.0, 3.0, -1.0, 30.0, float("nan"), 2.0, 0.0, 30.0]  # SM of the command flown
+    pq.write_table(pa.table({"group": ["IC-1"] * len(rows), "decision": dec, "pilot_axis": pax, "exec_axis": eax,
+                             "sm_exec": sm}), tmp_path / "IC-1" / "decisions-00000.parquet")
+    got = executed_axes(tmp_path, ["IC-1"])["IC-1"]
+    assert got == {"blend of a maneuver": {"n": 2, "axes": {"vertical": 2}, "unsafe": 1},
+                   "blend of a 'hold'": {"n": 3, "axes": {"none": 2, "horizontal": 1}, "unsafe": 1},
+                   "DAA override": {"n": 1, "axes": {"horizontal": 1}, "unsafe": 1},
+                   "DAA allocation": {"n": 1, "axes": {"none": 1}, "unsafe": 0}}
+    page = experiments_page({"meta": {}, "experiments": {"exec_axes": {"title": "X", "why": "w", "runs": ["paper"],
+                                                                       "groups": {"IC-1": got}}}})
+    assert "| IC-1 | blend of a 'hold' | 3 | 67 % | 33 % | 0 % | 0 % | 33.3 % |" in page

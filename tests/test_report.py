@@ -100,13 +100,40 @@ def test_report_renders_findings_tables_and_figures(tmp_path):
     assert "skipped — the decision tables carry no" in text or "skipped" in text
 
 
+def _headers(text: str) -> list:
+    """The header cells of every Markdown table of ``text``."""
+    lines = text.splitlines()
+    return [[c.strip() for c in a.strip().strip("|").split("|")] for a, b in zip(lines, lines[1:])
+            if a.startswith("|") and b.startswith("|---")]
+
+
+def test_main_page_opens_with_a_summary_and_names_no_machine_path(tmp_path):
+    """The page a reader meets: what is reproduced and what is missed (with the cause) before the tables;
+    no header named twice (the signatures side by side); campaign directories under the runs directory
+    shown as RUNS/..., not as this machine's path."""
+    runs = tmp_path / "runs"
+    d = _campaign(runs / "paper", PAPER5, reading="paper")
+    out = write_report([d], tmp_path / "rep", replicates=300, runs_root=runs)
+    main, text = out.read_text(), _pages(out)
+    assert main.index("## In short") < main.index("## Headline tally") < main.index("## Every finding")
+    short = main[main.index("## In short"):main.index("## Headline tally")]
+    assert "**Reproduced:** " in short and "no NMAC (B-2, IC-1, ID-1, ID-2)" in short  # B-1 had one planted
+    assert "**Missed: LoWC and NMAC" in short and "Cause: " in short
+    assert "`RUNS/paper`" in text and str(runs) not in text
+    for h in _headers(main):
+        assert len(h) == len(set(h)) and len(h) <= 12, h
+    sig = next(h for h in _headers(main) if h[0] == "group" and any("Tabassum & Bai" in c for c in h))
+    assert "received / enc.: Tabassum & Bai" in sig and "received / enc.: ours [95 % CI]" in sig
+    assert main.startswith("# Tabassum & Bai's findings against the `paper` reading")
+
+
 def test_two_readings_side_by_side_and_a_recount(tmp_path):
     a = _campaign(tmp_path / "lit", PAPER5, reading="literal", settings={"units": "m"}, seed=1)
     b = _campaign(tmp_path / "ft", PAPER5, reading="feet", settings={"units": "ft", "received": "pilot+blend"}, seed=2)
     out = write_report([a, b], tmp_path / "rep", replicates=300, recount=["exec:received=executed"])
     text = (tmp_path / "rep" / "appendix-readings.md").read_text()
     header = next(line for line in text.splitlines() if line.startswith("| # | finding"))
-    assert "| the paper's value |" in header  # the published value: never a column named like a reading
+    assert "| Tabassum & Bai |" in header  # the published value: never a column named like a reading
     for lab in ("literal", "feet", "literal+exec", "feet+exec"):
         assert f"| `{lab}` |" in header + " |" or f"| `{lab}`" in header
     assert _widest(_pages(out)) <= 12

@@ -131,7 +131,7 @@ def test_a_planted_override_is_not_reproduced(campaign, tmp_path):
     assert o["planted"]["verdict"] == "not reproduced" and "2 in 1 of 80" in o["planted"]["text"]
     assert "a defect" in o["planted"]["evidence"]
     header, _ = _table_rows((tmp_path / "rep" / "appendix-readings.md").read_text())
-    assert "| `paper` |" in header and "| `planted` |" in header + " |" and "the paper's value" in header
+    assert "| `paper` |" in header and "| `planted` |" in header + " |" and "Tabassum & Bai" in header
 
 
 def test_report_labels_tell_apart_one_reading_on_two_sizes_of_one_seed():

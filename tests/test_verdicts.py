@@ -239,7 +239,7 @@ def _all_groups(**per_group):
 
 def test_nested_claims_are_tested_together_and_inputs_counted_apart():
     """'The maximum PI is 3.79' (pooled over the five groups) implies 'no PI > 10': one claim, counted
-    once. A number a setting was inferred from is input, whatever our value."""
+    once. A number a setting was inferred from is input when we match it, a miss when we do not."""
     lowc = np.zeros(N, bool)
     lowc[:3] = True
     pi = np.where(lowc, 12.0, 0.0)  # three LoWCs above 10 in ID-1
@@ -250,6 +250,18 @@ def test_nested_claims_are_tested_together_and_inputs_counted_apart():
     assert "3 in 3 of 10,000 enc." in got[("pi-max", None)].text  # pooled: 5 x 2,000 encounters
     sev = got[("pi-severe", None)]
     assert sev.verdict == F.NESTED and "tested with it" in sev.evidence
-    assert got[("received", "B-1")].verdict == F.INPUT and "inferred" in got[("received", "B-1")].evidence
+    # B-1 receives nothing here: the inference from its 79.5 commands per encounter missed anyway -> a miss
+    miss = got[("received", "B-1")]
+    assert miss.verdict == F.NOT_REPRODUCED and "inferred" in miss.evidence and "misses" in miss.evidence
     c = V.tally(rows, "r")
-    assert c[F.NESTED] == 1 and c[F.INPUT] == 1
+    assert c[F.NESTED] == 1 and c[F.INPUT] == 0
+    # B-1 receiving about the paper's 79.5 per encounter: the number the setting came from is input, not a
+    # reproduction (the same data without the inference reproduce it)
+    rng = np.random.default_rng(3)
+    got_b1 = rng.poisson(79.5, N)
+    st = _all_groups(**{"B-1": dict(n_pilot_received=got_b1, n_pilot_exec=got_b1)})
+    f = next(f for f in F.load_findings() if f.id == "received" and f.group == "B-1")
+    assert V.evaluate(f, st).verdict == F.REPRODUCED
+    rows = V.evaluate_all({"r": st}, consumed={"r": {("received", "B-1")}})
+    inp = next(outs["r"] for f, outs in rows if (f.id, f.group) == ("received", "B-1"))
+    assert inp.verdict == F.INPUT and "not a reproduction" in inp.evidence and V.tally(rows, "r")[F.INPUT] == 1

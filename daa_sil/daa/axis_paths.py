@@ -66,8 +66,7 @@ def row_counts(own: AircraftState, axis: int, cfg: DaaConfig) -> tuple[np.ndarra
     cur = np.asarray(cur, float)
 
     def side(gap):  # int(np.ceil(np.max(gap, initial=0.0) / step - 1e-9)) of one ownship, then max(., 0)
-        with np.errstate(invalid="ignore"):
-            c = np.ceil(np.maximum(gap, 0.0) / step - 1e-9)
+        c = np.ceil(np.maximum(gap, 0.0) / step - 1e-9)  # (nan and inf raise no floating-point error here)
         return np.where((c > 0) & (c < 2 ** 62), c, 0).astype(np.int64)  # (a non-finite state: the batch's count raises)
     return side(cur - lo), side(hi - cur)
 
@@ -126,10 +125,22 @@ def _kin_table(axis: int, cfg: DaaConfig, x0, y0, z0, gs0, st, ct, vs0, sgn) -> 
     else:
         rate, lim = speed_limits(axis == AXIS_VERTICAL, cfg, sgn)
     kin = np.empty((x0.shape[0], 2, 9))
-    for j, a in enumerate((x0, y0, z0, gs0, st, ct, vs0)):
-        kin[:, :, j] = a[:, None]
+    kin[:, 0, :7] = np.stack((x0, y0, z0, gs0, st, ct, vs0), axis=1)
+    kin[:, 1, :7] = kin[:, 0, :7]
     kin[:, :, 7], kin[:, :, 8] = sgn, lim
     return "axis", axis, float(rate), kin
+
+
+@functools.lru_cache(maxsize=64)
+def knot_times(knot: float, j: int) -> np.ndarray:
+    """The knot times ``k * knot`` (s) of k = 0..j (read-only; made once per spacing and count)."""
+    t = np.arange(j + 1) * knot
+    t.setflags(write=False)
+    return t
+
+
+_SIDES = np.array([-1.0, 1.0])
+_SIDES.setflags(write=False)
 
 
 def maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int,
@@ -137,44 +148,48 @@ def maneuver_paths(own: AircraftState, axis: int, cfg: DaaConfig, j: int,
     """Low-side and high-side maneuver paths of ``axis`` at knots 0..j (P = 2; knot spacing from
     ``cfg``, s) and the axis value at each knot ``(N, 2, j+1)`` (rad, m/s; None without ``with_values``)."""
     knot = {AXIS_HORIZONTAL: cfg.knot_trk, AXIS_VERTICAL: cfg.knot_vs, AXIS_SPEED: cfg.knot_gs}[axis]
-    t = np.arange(j + 1) * knot
-    sgn = np.array([-1.0, 1.0])
+    t = knot_times(float(knot), int(j))
+    sgn = _SIDES
     n = own.shape[0]
     st, ct = np.sin(own.trk), np.cos(own.trk)
-    x0, y0, z0, gs0, vs0 = own.x.copy(), own.y.copy(), own.z.copy(), own.gs.copy(), own.vs.copy()
-    col = lambda a: a[:, None, None]  # noqa: E731
-    s3, t3 = sgn[None, :, None], t[None, None, :]
-    kin = _kin_table(axis, cfg, x0, y0, z0, gs0, st, ct, vs0, sgn)
+    kin = _kin_table(axis, cfg, own.x, own.y, own.z, own.gs, st, ct, own.vs, sgn)
+    # the path's start as the kernel's table holds it (copies of the ownship's state, sine and cosine of its track)
+    x0, y0, z0, gs0, st, ct, vs0 = (kin[3][:, 0, c] for c in range(7))
     value = None
     if COMPILED and not with_values:  # computed when asked for (ManeuverPaths.knot_states: kernels.motion's
         comp = (None,) * 6  # axis_knots_into, the same numbers as below; the evaluator does without them)
-    elif axis == AXIS_HORIZONTAL:
-        comp, value = _turn_knots(cfg, col(x0), col(y0), col(z0), col(gs0), col(st), col(ct), col(vs0), t3)
-        if with_values:
-            value = col(own.trk) + value
-            # wrap to [0, 2pi) as frames.wrap_2pi (the same numbers: |turn| <= pi, fmod there is one subtraction)
-            value = np.where(value < 0.0, value + TWO_PI, np.where(value >= TWO_PI, value - TWO_PI, value))
     else:
-        comp, value = _axis_state_soa(axis, cfg, col(x0), col(y0), col(z0), col(gs0), col(st), col(ct), col(vs0), s3,
-                                      t3, with_value=True)
+        col = lambda a: a[:, None, None]  # noqa: E731
+        s3, t3 = sgn[None, :, None], t[None, None, :]
+        if axis == AXIS_HORIZONTAL:
+            comp, value = _turn_knots(cfg, col(x0), col(y0), col(z0), col(gs0), col(st), col(ct), col(vs0), t3)
+            if with_values:
+                value = col(own.trk) + value
+                # wrap to [0, 2pi) as frames.wrap_2pi (the same numbers: |turn| <= pi, fmod there is one subtraction)
+                value = np.where(value < 0.0, value + TWO_PI, np.where(value >= TWO_PI, value - TWO_PI, value))
+        else:
+            comp, value = _axis_state_soa(axis, cfg, col(x0), col(y0), col(z0), col(gs0), col(st), col(ct), col(vs0),
+                                          s3, t3, with_value=True)
     kink = None
+    two = np.empty((3, n, 2))  # acc_h, acc_v, jerk of both sides
     if axis == AXIS_HORIZONTAL:  # constant-rate turn: |a| = V w, |da/dt| = V w^2
-        acc_h, acc_v, jerk = own.gs * cfg.turn_rate, np.zeros(n), own.gs * cfg.turn_rate ** 2
+        two[0] = (gs0 * cfg.turn_rate)[:, None]
+        two[1] = 0.0
+        two[2] = (gs0 * cfg.turn_rate ** 2)[:, None]
     elif axis == AXIS_SPEED:  # along-track acceleration until the speed limit (a kink there)
-        acc_h, acc_v, jerk = np.full(n, cfg.horizontal_accel), np.zeros(n), np.zeros(n)
+        two[0], two[1], two[2] = cfg.horizontal_accel, 0.0, 0.0
         if not cfg.daidalus_grid:
             lim = np.array([cfg.min_gs, cfg.max_gs])[None, :]
-            kink = np.maximum((lim - own.gs[:, None]) * sgn[None, :] / cfg.horizontal_accel, 0.0)
+            kink = np.maximum((lim - gs0[:, None]) * sgn[None, :] / cfg.horizontal_accel, 0.0)
     else:  # vertical acceleration: the horizontal motion is straight
-        acc_h, acc_v, jerk = np.zeros(n), np.full(n, cfg.vertical_accel), np.zeros(n)
+        two[0], two[1], two[2] = 0.0, cfg.vertical_accel, 0.0
 
     def state_at(ni, pi):  # f(t): true ownship state on paths pi of encounters ni at times t
         args = (x0[ni], y0[ni], z0[ni], gs0[ni], st[ni], ct[ni], vs0[ni], sgn[pi])
         return lambda tq: _axis_state_soa(axis, cfg, *args, tq)
 
-    two = lambda a: np.repeat(a[:, None], 2, 1)  # noqa: E731
     paths = ManeuverPaths(None if comp[0] is None else comp[:3], None if comp[0] is None else comp[3:],
-                          t[None, None, :], state_at, two(acc_h), two(acc_v),
-                          vz_const=axis != AXIS_VERTICAL, jerk_h=two(jerk), kink_t=kink,
+                          t[None, None, :], state_at, two[0], two[1],
+                          vz_const=axis != AXIS_VERTICAL, jerk_h=two[2], kink_t=kink,
                           kin=kin)
     return paths, (np.broadcast_to(value, (n, 2, j + 1)) if with_values else None)

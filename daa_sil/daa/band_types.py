@@ -4,11 +4,21 @@ are made by :mod:`daa_sil.daa.bands`."""
 
 from __future__ import annotations
 
+import functools
 from dataclasses import MISSING, dataclass, fields
 
 import numpy as np
 
 from .config import AXIS_HORIZONTAL, AXIS_NAMES, AXIS_SPEED, AXIS_VERTICAL, REGION_MID, REGION_NAMES, REGION_RECOVERY
+
+
+@functools.lru_cache(maxsize=256)
+def column_sides(j_lo: int, j_hi: int) -> np.ndarray:
+    """The side of each column (K,) -1 / 0 / +1: ``j_lo`` low-side candidates, the current value, ``j_hi`` high-side
+    ones (read-only; made once per pair of counts)."""
+    side = np.concatenate([-np.ones(j_lo, np.int64), [0], np.ones(j_hi, np.int64)])
+    side.setflags(write=False)
+    return side
 
 
 @dataclass
@@ -230,4 +240,4 @@ class Bands:
         return Bands(rows(self.trk), rows(self.vs), rows(self.gs), self.alert[idx], self.preset)
 
 
-__all__ = ["AxisBands", "Bands", "gap_regions"]
+__all__ = ["AxisBands", "Bands", "column_sides", "gap_regions"]

@@ -60,16 +60,20 @@ from .alerting import alert_levels, conflict_lists
 from .config import (AXIS_HORIZONTAL, AXIS_SPEED, AXIS_VERTICAL, REGION_MID, REGION_NEAR, REGION_NONE, REGION_RECOVERY,
                      DaaConfig)
 from .trajectory import PathConflicts, PathEvaluator
-from daa_sil.daa.recovery import CylinderRecovery, drop_isolated
+from daa_sil.daa.recovery import CylinderRecovery, drop_isolated, recover_rows
 from daa_sil.daa.axis_paths import maneuver_paths, candidate_counts, row_counts, speed_limits
-from daa_sil.daa.band_regions import axis_conflict_regions, axis_regions
-from daa_sil.daa.band_types import AxisBands, Bands, gap_regions  # (the types, defined apart; offered here too)
+from daa_sil.daa.band_regions import axis_conflict_regions, axis_path_conflicts, axis_regions, regions_of_conflicts
+from daa_sil.daa.scratch import scratch
+from daa_sil.daa.band_types import AxisBands, Bands, column_sides, gap_regions  # (the types, defined apart)
 
 #: False: every axis in numpy (the oracle of :func:`daa_sil.daa.band_regions.axis_regions`)
 COMPILED = True
 #: False (with COMPILED): the conflicts through :class:`PathEvaluator` and its (N, M, 2, J+1) arrays, then
 #: :func:`daa_sil.daa.band_regions.axis_regions` (the oracle of :func:`~daa_sil.daa.band_regions.axis_conflict_regions`)
 FUSED = True
+#: False (with COMPILED and FUSED): the cylinder recovery's rows made again on the evaluator's path (the
+#: oracle of :func:`daa_sil.daa.recovery.cylinder_search` and ``kernels.recovery.cylinder_finish_into``)
+CYLINDER_COMPILED = True
 
 
 def _side_order(arr, j_lo: int, j_hi: int):
@@ -138,12 +142,12 @@ def axis_bands(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaConfi
     if not fused and n and not (np.all(rows[0] == j_lo) and np.all(rows[1] == j_hi)):
         return _by_counts(own, intr, axis, cfg, alert, lists, rows, j_lo, j_hi)
     paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
-    t = np.asarray(paths.t, float)[0, 0]
-    side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
+    side = column_sides(j_lo, j_hi)
     if fused and paths.kin is not None:  # one pass per path, then per row
         values, delta, t_man, *rest = axis_conflict_regions(paths, own, intr, axis, cfg, alert, lists, j_lo, j_hi,
                                                             rows)
         return AxisBands(axis, values, delta, side, t_man, *rest)
+    t = np.asarray(paths.t, float)[0, 0]
     ev = PathEvaluator(paths, intr, cfg.lookahead_s)
     pc = ev.evaluate(cfg.th)
     t_in, t_out = pc.candidates()  # (N, M, 2, J+1)
@@ -278,16 +282,31 @@ def _cylinder_rows(own: AircraftState, intr: AircraftState, axis: int, cfg: DaaC
                    j_lo: int, j_hi: int) -> AxisBands:
     """:func:`axis_bands` with the cylinder recovery: the one-pass kernels for every row (as without
     recovery: a row with a conflict-free candidate has none), then the rows without a NONE candidate of their
-    own -- saturated for the cylinder search, or relabelled by the kernels' earliest exit -- made again on the
-    evaluator's path, which searches their recovery."""
+    own -- saturated for the cylinder search, or relabelled by the kernels' earliest exit -- made again: those
+    with every candidate of the batch from their one-pass conflicts by the compiled search
+    (:func:`daa_sil.daa.recovery.recover_rows`, with ``CYLINDER_COMPILED``), the others on the evaluator's
+    path, which searches their recovery; both give a row the same numbers."""
     n, m = intr.shape
     paths, _ = maneuver_paths(own, axis, cfg, max(j_lo, j_hi), with_values=False)
-    side = np.concatenate([-np.ones(j_lo, int), [0], np.ones(j_hi, int)])
-    values, delta, t_man, *rest = axis_conflict_regions(paths, own, intr, axis, cfg, alert, lists, j_lo, j_hi, rows)
-    ab = AxisBands(axis, values, delta, side, t_man, *rest)
-    free = ab.region == REGION_NONE
-    mask = ab.own_mask()
-    idx = np.flatnonzero(~np.any(free if mask is None else free & mask, axis=1)) if m else np.zeros(0, int)
+    side = column_sides(j_lo, j_hi)
+    if cfg.horizon_from_maneuver and lists is None:
+        lists = conflict_lists(own, intr, cfg)
+    with scratch() as ws:  # (every array taken from it is consumed or copied in this block)
+        out = axis_path_conflicts(paths, intr, cfg.th, float(cfg.lookahead_s), np.maximum(rows[0], rows[1]), ws.take)
+        values, delta, t_man, *rest = regions_of_conflicts(out, alert, lists, paths.axis_times(), own, intr, axis,
+                                                           cfg, j_lo, j_hi, rows)
+        ab = AxisBands(axis, values, delta, side, t_man, *rest)
+        free = ab.region == REGION_NONE
+        mask = ab.own_mask()
+        idx = np.flatnonzero(~np.any(free if mask is None else free & mask, axis=1)) if m else np.zeros(0, int)
+        if not idx.size:
+            return ab
+        full = (rows[0][idx] == j_lo) & (rows[1][idx] == j_hi) if CYLINDER_COMPILED else np.zeros(idx.size, bool)
+        fast, idx = idx[full], idx[~full]
+        if fast.size:
+            conf = tuple(a.reshape(n, m, 2, -1)[fast] for a in out)  # (copies: the scratch is reused)
+    if fast.size:
+        recover_rows(paths, intr, axis, cfg, alert, lists, conf, fast, (j_lo, j_hi), ab)
     if not idx.size:
         return ab
     li = None if lists is None else (lists[0][idx], lists[1][idx])
@@ -370,4 +389,4 @@ def _concat(parts: "list[AxisBands]") -> AxisBands:
 
 
 __all__ = ["AxisBands", "Bands", "gap_regions", "axis_bands", "compute_bands", "resolutions", "COMPILED", "FUSED",
-           "CHUNK"]
+           "CYLINDER_COMPILED", "CHUNK"]

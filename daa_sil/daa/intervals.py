@@ -166,7 +166,10 @@ def relative_at_knots(pos, vel, t, ipos: np.ndarray, ivel: np.ndarray, shape) ->
     and straight-line intruders at ``ipos`` with ``ivel`` ``(N, M, 3)`` at time 0 (compiled;
     :func:`relative_at_knots_reference` is the same in numpy)."""
     n, m, p, k = shape
-    b = lambda a: np.broadcast_to(np.asarray(a, float), (n, p, k))  # noqa: E731
+
+    def b(a):  # (N, P, K) float64 (broadcast only when it is not that already)
+        a = np.asarray(a, float)
+        return a if a.shape == (n, p, k) else np.broadcast_to(a, (n, p, k))
     s, v = [np.empty(shape) for _ in range(3)], [np.empty(shape) for _ in range(3)]
     kernels.get().relative_knots_into(*(b(c) for c in pos), *(b(c) for c in vel), b(t), np.asarray(ipos, float),
                                       np.asarray(ivel, float), *s, *v)

@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -55,11 +55,16 @@ class ManeuverPaths:
     #: vertical acceleration)`` for a command (:mod:`daa_sil.daa.kernels.motion`)
     kin: "tuple | None" = None
     n_seg: "np.ndarray | None" = None
+    _shape: "tuple | None" = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        knots = () if self.pos is None else self.pos + self.vel
-        return np.broadcast_shapes(*(np.shape(a) for a in knots), np.shape(self.t), np.shape(self.acc_h) + (1,))
+        """``(N, P, K)``; computed once (the knot states made later from ``kin`` have this shape)."""
+        if self._shape is None:
+            knots = () if self.pos is None else self.pos + self.vel
+            self._shape = np.broadcast_shapes(*(np.shape(a) for a in knots), np.shape(self.t),
+                                              np.shape(self.acc_h) + (1,))
+        return self._shape
 
     def knot_states(self) -> tuple[tuple, tuple]:
         """``(pos, vel)``, computed from ``kin`` (:func:`daa_sil.daa.kernels.motion.axis_knots_into`) the first

@@ -8,9 +8,9 @@ import numpy as np
 
 from daa_sil.daa import kernels
 from daa_sil.daa.band_regions import axis_path_conflicts
-from daa_sil.daa.config import (
-    DaaConfig,
-)
+from daa_sil.daa.scratch import scratch
+from daa_sil.daa.band_types import AxisBands
+from daa_sil.daa.config import AXIS_HORIZONTAL, DaaConfig
 from daa_sil.daa.trajectory import ManeuverPaths, PathConflicts, PathEvaluator
 from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.geometry.thresholds import Thresholds
@@ -19,6 +19,8 @@ from daa_sil.geometry.thresholds import Thresholds
 #: False: the bisection of each cylinder's recovery time in numpy (``CylinderRecovery._at_pivot``, the oracle of
 #: the compiled ``kernels.recovery.pivot_search_into``)
 COMPILED = True
+#: a placeholder for the flags a call does not read
+_NO_FLAGS = np.zeros((1, 1), bool)
 
 
 def drop_isolated(green: np.ndarray) -> np.ndarray:
@@ -161,3 +163,99 @@ class CylinderRecovery:
             h = max(th.nmac_h, h * (1.0 - cfg.ca_factor))
             v = max(th.nmac_v, v * (1.0 - cfg.ca_factor))
         return green, r_time, nfac, r_h, r_v
+
+
+def cylinder_search(paths: ManeuverPaths, intr: AircraftState, conflicts: tuple, lists: tuple, cfg: DaaConfig,
+                    shape: tuple[int, int]) -> tuple:
+    """The cylinder recovery of R rows of one band axis, compiled (``kernels.recovery``'s
+    ``cylinder_prepare_into``, ``cylinder_step_into`` per cylinder): the numbers of the evaluator's path of
+    :func:`daa_sil.daa.bands.axis_bands` (its regions before the recovery, then :class:`CylinderRecovery`),
+    without its arrays. ``paths``/``intr``: the rows' maneuver paths and intruders (R, M), every row with all
+    ``shape`` = ``(j_lo, j_hi)`` candidates; ``conflicts``: their paths' corrective-volume conflicts ``(tail_in,
+    tail_out, seg_in, seg_out)`` (R, M, 2, J+1) / (R, M, 2, J) (``band_regions.axis_path_conflicts``);
+    ``lists`` = ``(near_list, mid_list, alert2)`` (R, M): the conflict lists (with
+    ``cfg.horizon_from_maneuver``) or alert level >= 2. Returns ``(g_near, g_mid, recovery green)`` (R, K) and
+    ``(recovery time, nfactor, h, v)`` (R,) (nan / -1 / nan / nan for a row that is not saturated)."""
+    k = kernels.get()
+    r_n, m = intr.shape
+    j_lo, j_hi = shape
+    n_col = j_lo + j_hi + 1
+    tk = paths.axis_times()
+    j1 = tk.shape[0]
+    tail_in, tail_out, seg_in, seg_out = (np.ascontiguousarray(a, float) for a in conflicts)
+    dgrid = bool(cfg.daidalus_grid)
+    L = float(cfg.lookahead_s)
+    g_near, g_mid = np.empty((r_n, n_col), bool), np.empty((r_n, n_col), bool)
+    listed, horizon = np.empty((r_n, m), bool), np.empty((r_n, m))
+    c_pre_out, window = np.empty((r_n, m, 2, j1)), np.empty((r_n, m, 2, j1))
+    saturated = np.empty(r_n, bool)
+    k.cylinder_prepare_into((tail_in.reshape(-1), tail_out.reshape(-1), seg_in.reshape(-1), seg_out.reshape(-1)),
+                            bool(cfg.horizon_from_maneuver), tuple(np.asarray(a, bool) for a in lists), tk,
+                            (L, float(cfg.alert_time_warning_s), float(cfg.alert_time_corrective_s)),
+                            (int(j_lo), int(j_hi)), dgrid, (g_near, g_mid), (listed, horizon), (c_pre_out, window),
+                            saturated)
+    green = np.zeros((r_n, n_col), bool)
+    r_time = np.where(saturated, -np.inf, np.nan)
+    nfac = np.where(saturated, 0, -1).astype(np.int16)
+    r_h, r_v = r_time.copy(), r_time.copy()
+    sat = np.flatnonzero(saturated & (m > 0))
+    if not sat.size:
+        return (g_near, g_mid, green), (r_time, nfac, r_h, r_v)
+    corr = (c_pre_out, tail_in.reshape(r_n, m, 2, j1), tail_out.reshape(r_n, m, 2, j1),
+            np.broadcast_to(tk, (r_n, m, 2, j1)), window)
+    times = (L, float(cfg.recovery_stability_s))
+
+    def step(rows: np.ndarray, h: float, v: float, search: bool):
+        sub_p, sub_i = (paths, intr) if rows.size == r_n else (paths.subset(rows), intr[rows])
+        with scratch() as ws:
+            ti, to, si, _ = axis_path_conflicts(sub_p, sub_i, _cylinder(h, v), L, np.full(rows.size, j1 - 1, np.int64),
+                                                ws.take)
+            some, rt, g = np.empty(rows.size, bool), np.empty(rows.size), np.empty((rows.size, n_col), bool)
+            k.cylinder_step_into(corr, rows, (ti, to, si), horizon, listed, (int(j_lo), int(j_hi)), dgrid, times,
+                                 search, some, rt, g)
+        return some, rt, g
+
+    th = cfg.th
+    active = np.zeros(r_n, bool)
+    active[sat] = step(sat, th.nmac_h, th.nmac_v, False)[0]
+    h, v = cfg.recovery_cylinder
+    n = 0
+    while active.any() and (h > th.nmac_h or v > th.nmac_v):  # (the loop of CylinderRecovery.run)
+        rows = np.flatnonzero(active)
+        some, rt, g = step(rows, h, v, True)
+        if some.any():
+            ok = g.any(axis=1)
+            done = rows[ok]
+            green[done], r_time[done], nfac[done], r_h[done], r_v[done] = g[ok], rt[ok], n, h, v
+            active[done] = False
+            if not cfg.ca_bands:
+                active[rows[some]] = False
+        if not cfg.ca_bands:
+            active[rows[~some]] = False
+        n += 1
+        h = max(th.nmac_h, h * (1.0 - cfg.ca_factor))
+        v = max(th.nmac_v, v * (1.0 - cfg.ca_factor))
+    return (g_near, g_mid, green), (r_time, nfac, r_h, r_v)
+
+
+def recover_rows(paths: ManeuverPaths, intr: AircraftState, axis: int, cfg: DaaConfig, alert, lists, conf: tuple,
+                 fast: np.ndarray, shape: tuple[int, int], ab: AxisBands) -> None:
+    """Rows ``fast`` of the cylinder-recovery bands ``ab`` of ``axis`` made as the evaluator's path of
+    :func:`daa_sil.daa.bands.axis_bands` makes them, in place: their recovery searched by :func:`cylinder_search`
+    from their one-pass conflicts ``conf`` (rows ``fast`` only), then their regions, gap regions and resolutions
+    (``kernels.recovery.cylinder_finish_into``); their candidates' values and conflicts are the one-pass
+    kernels' (the same numbers). ``paths``/``intr``/``alert``/``lists``: the batch's (N rows); each row of
+    ``fast`` has every candidate of the batch, ``shape`` = ``(j_lo, j_hi)``."""
+    if cfg.horizon_from_maneuver:
+        flags = (lists[0][fast], lists[1][fast], _NO_FLAGS)
+    else:
+        flags = (_NO_FLAGS, _NO_FLAGS, np.asarray(alert)[fast] >= 2)
+    all_rows = fast.size == intr.shape[0]
+    sub_p, sub_i = (paths, intr) if all_rows else (paths.subset(fast), intr[fast])
+    greens, (rt, nf, hh, vv) = cylinder_search(sub_p, sub_i, conf, flags, cfg, shape)
+    gap = ab.gap_region if ab.gap_region is not None else np.empty((0, max(ab.region.shape[1] - 1, 0)), np.int8)
+    kernels.get().cylinder_finish_into(
+        greens, fast.astype(np.int64), np.asarray(ab.values, float), np.asarray(ab.delta, float),
+        np.asarray(ab.t_man, float), (int(shape[0]), axis == AXIS_HORIZONTAL, bool(cfg.daidalus_grid), np.pi - 1e-9),
+        ab.region, gap, (ab.res_lo, ab.res_hi), ab.preferred)
+    ab.recovery_time[fast], ab.recovery_nfactor[fast], ab.recovery_h[fast], ab.recovery_v[fast] = rt, nf, hh, vv

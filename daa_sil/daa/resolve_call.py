@@ -41,7 +41,7 @@ def resolve_segments(kin: tuple, ipv: np.ndarray, m: int, p: int, path: np.ndarr
     one encounter (``path // (m * p)``) make their batch-wide choices together, apart from the others."""
     r = path.size
     n = path // (m * p)
-    if r > 1 and np.any(n[1:] < n[:-1]):
+    if r > 1 and (n[1:] < n[:-1]).any():
         raise ValueError("resolve_segments: the segments must come in encounter order (ascending flat ids)")
     if kin[0] == "axis":
         rows = n * p + path % p
@@ -55,7 +55,8 @@ def resolve_segments(kin: tuple, ipv: np.ndarray, m: int, p: int, path: np.ndarr
     else:
         vlo, vhi = vwin[0], vwin[1]
         von = np.ones(r, bool) if vwin[2] is None else np.asarray(vwin[2], bool)
-    who = (ipv, np.asarray(rows, np.int64), np.asarray(path // p, np.int64), np.asarray(n, np.int64))
+    i64 = lambda a: a.astype(np.int64, copy=False)  # noqa: E731
+    who = (ipv, i64(rows), i64(path // p), i64(n))
     per_row = (flat_seg.astype(np.int64, copy=False), ka.astype(np.int64, copy=False), acc_h, acc_v,
                none if jerk is None else np.asarray(jerk, float),
                none[:, None] if kink is None else np.asarray(kink, float).reshape(r, -1), von, vlo, vhi)
@@ -65,13 +66,17 @@ def resolve_segments(kin: tuple, ipv: np.ndarray, m: int, p: int, path: np.ndarr
         work = tuple(ws.buffer(name, dtype) for name, dtype in zip(_WORK, _WORK_TYPES))
         kernels.get().resolve_into(
             mot, who, per_row, (*s, *v, tk), (jerk is not None, kink is not None, bool(exits)), bisect_thresholds(),
-            (MAX_DEPTH, MAX_SPLIT, 2.0 * V_TOL, 8.0 * P_TOL), (BISECT_DT_IN, BISECT_DT_OUT, CLIP_DT),
-            (D, D * D, float(th.zthr), float(th.tthr), float(th.tcoa)), (seg_in, seg_out), (*work, need))
-        for name, size, dtype in zip(_WORK, need, _WORK_TYPES):  # large enough for the next call of this size
-            if size > ws.buffer(name, dtype).size:
+            _LIMITS, _TIMES, (D, D * D, float(th.zthr), float(th.tthr), float(th.tcoa)), (seg_in, seg_out),
+            (*work, need))
+        for name, size, dtype, buf in zip(_WORK, need, _WORK_TYPES, work):  # large enough for the next call this size
+            if size > buf.size:
                 ws.take(name, int(size), dtype)
 
 
+#: the resolution kernel's limits and times (its records ``(MAX_DEPTH, MAX_SPLIT, 2 V_TOL, 8 P_TOL)`` and
+#: ``(BISECT_DT_IN, BISECT_DT_OUT, CLIP_DT)``)
+_LIMITS = (MAX_DEPTH, MAX_SPLIT, 2.0 * V_TOL, 8.0 * P_TOL)
+_TIMES = (BISECT_DT_IN, BISECT_DT_OUT, CLIP_DT)
 #: the resolution kernel's working arrays (:mod:`daa_sil.daa.scratch`, kept from call to call): floats, ints, flags
 _WORK = ("resolve_f", "resolve_i", "resolve_b")
 _WORK_TYPES = (np.float64, np.int64, np.bool_)

@@ -211,6 +211,18 @@ def command_conflicts(own: AircraftState, intr: AircraftState, cmd: Command, cfg
     return t_in[..., 0], t_out[..., 0]
 
 
+def _command_first_entry(own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
+                         t_end: float) -> np.ndarray:
+    """The ``t_in`` (N, M) of :func:`command_conflicts` with ``exits=False``, by the same operations, without
+    its ``t_out`` (:func:`safety_metric` reads only the first entries)."""
+    paths = command_paths(own, cmd, cfg)
+    pc = path_conflicts(paths, intr, cfg.th, t_end, tails="last", exits=False)
+    pre_in = pc.prefix_in()  # (the segments past a path's last knot are clear: the last prefix is its own)
+    n = paths.n_seg.shape[0]
+    t_in = np.minimum(pre_in[..., -1], pc.tail_in[np.arange(n), :, :, paths.n_seg])  # (each path's own last tail)
+    return np.where(t_in <= t_end, t_in, np.inf)[..., 0]
+
+
 def safety_metric(own: AircraftState, intr: AircraftState, cmd: Command, cfg: DaaConfig,
                   horizon_s: "float | None" = None) -> np.ndarray:
     """Safety metric SM(u), s, ``(N,)``: ``min(t_LoWC(u), H + margin) - H``.
@@ -224,7 +236,7 @@ def safety_metric(own: AircraftState, intr: AircraftState, cmd: Command, cfg: Da
     """
     horizon = cfg.sm_horizon_s if horizon_s is None else float(horizon_s)
     t_end = horizon + cfg.sm_margin_s
-    t_in, _ = command_conflicts(own, intr, cmd, cfg, t_end, exits=False)
+    t_in = _command_first_entry(own, intr, cmd, cfg, t_end)
     return sm_from_tin(t_in.min(axis=-1) if t_in.shape[-1] else np.full(own.shape, np.inf), horizon, cfg)
 
 

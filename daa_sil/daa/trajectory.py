@@ -64,8 +64,8 @@ class PathEvaluator:
         m = intr.shape[1]
         self.paths, self.t_end, self.with_tails, self.exits = paths, float(t_end), tails, exits
         self.shape = (n, m, p, k)
-        tt = paths.knot_times()[:, None]  # (N, 1, P, K)
-        self.t = tt
+        knot_t = paths.knot_times()
+        self.t = knot_t[:, None]  # (N, 1, P, K)
         self.intr = intr
         self.ipos, self.ivel = intr.position(), intr.velocity()  # (N, M, 3)
         #: relative position ownship - intruder at the knots and relative velocity of the tails, per
@@ -76,9 +76,10 @@ class PathEvaluator:
             kernels.get().axis_relative_knots_into(kin[1], kin[2], kin[3], paths.axis_times(), self.ipos, self.ivel,
                                                    *self.s, *self.v)
         else:
-            self.s, self.v = relative_at_knots(paths.pos, paths.vel, paths.knot_times(), self.ipos, self.ivel,
-                                               self.shape)
+            self.s, self.v = relative_at_knots(paths.pos, paths.vel, knot_t, self.ipos, self.ivel, self.shape)
         self._vwin = None
+        self._vwin_flat_cache = None  #: :meth:`_vwin_flat` of the current ``_vwin``
+        self._kp = None  #: :meth:`_knots_per_path`, made once
         #: use the compiled kernels (False: the numpy reference, see :meth:`evaluate_reference`); ``fused``:
         #: resolve undecided pieces in one compiled loop (False: the numpy loop over compiled pieces)
         self.compiled, self.fused = True, True
@@ -94,11 +95,11 @@ class PathEvaluator:
     def _evaluate(self, th: Thresholds, compiled: bool) -> PathConflicts:
         self.compiled = compiled
         n, m, p, k = self.shape
-        tt = np.broadcast_to(self.t, self.shape)
         seg_shape = (n, m, p, max(k - 1, 0))
         if not compiled and self._reference_groups() is not None:
             return self._evaluate_by_groups(th)
         self._vwin = None
+        self._vwin_flat_cache = None
         if self.paths.vz_const_any():  # relative altitude linear in time on a path: one vertical window each
             self._vwin = wc.vertical_window(self.s[2][..., :1], self.v[2][..., :1], 0.0, self.t_end, th.zthr, th.tcoa)
         full_tails = self.with_tails is True
@@ -112,7 +113,7 @@ class PathEvaluator:
                 self._tails_compiled(th, pc)
             return pc
         if k > 1:
-            self._segments(th, tt, pc)
+            self._segments(th, np.broadcast_to(self.t, self.shape), pc)
         if self.with_tails:
             want = None
             if self.with_tails == "last":
@@ -156,11 +157,15 @@ class PathEvaluator:
         return pc
 
     def _vwin_flat(self):
-        """(lo, hi, on): the per-path vertical windows and which paths have one, as flat arrays."""
-        n_paths = int(np.prod(self.shape[:3]))
-        if self._vwin is None:
-            return _NONE, _NONE, np.zeros(n_paths, bool)
-        return self._vwin[0].reshape(-1), self._vwin[1].reshape(-1), self._vwin_on(n_paths)
+        """(lo, hi, on): the per-path vertical windows and which paths have one, as flat arrays (made once per
+        evaluation)."""
+        if self._vwin_flat_cache is None:
+            n_paths = self.shape[0] * self.shape[1] * self.shape[2]
+            if self._vwin is None:
+                self._vwin_flat_cache = _NONE, _NONE, np.zeros(n_paths, bool)
+            else:
+                self._vwin_flat_cache = (self._vwin[0].reshape(-1), self._vwin[1].reshape(-1), self._vwin_on(n_paths))
+        return self._vwin_flat_cache
 
     def _vwin_on(self, n_paths: int) -> np.ndarray:
         """(n_paths,) bool: which flat paths have a vertical window (their vertical speed is constant)."""
@@ -171,12 +176,18 @@ class PathEvaluator:
         return np.ascontiguousarray(np.broadcast_to(np.asarray(vz, bool)[:, None, None], (n, m, p))).reshape(-1)
 
     def _knots_per_path(self) -> np.ndarray:
-        """(n_paths,) int64: each flat path's own number of knots (``n_seg + 1``, or all)."""
-        n, m, p, k = self.shape
-        ns = self.paths.n_seg
-        if ns is None:
-            return np.full(n * m * p, k, np.int64)
-        return np.ascontiguousarray(np.broadcast_to((np.asarray(ns, np.int64) + 1)[:, None, None], (n, m, p))).reshape(-1)
+        """(n_paths,) int64: each flat path's own number of knots (``n_seg + 1``, or all; made once)."""
+        if self._kp is None:
+            n, m, p, k = self.shape
+            ns = self.paths.n_seg
+            if ns is None:
+                self._kp = np.full(n * m * p, k, np.int64)
+            elif m * p == 1:
+                self._kp = np.asarray(ns, np.int64) + 1
+            else:
+                self._kp = np.ascontiguousarray(np.broadcast_to((np.asarray(ns, np.int64) + 1)[:, None, None],
+                                                                (n, m, p))).reshape(-1)
+        return self._kp
 
     def _tails_compiled(self, th: Thresholds, pc: PathConflicts) -> None:
         """:meth:`_tails` (every knot, or the last one with ``tails="last"``) in one compiled pass."""

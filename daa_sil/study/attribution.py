@@ -48,9 +48,13 @@ def _allocation(x: dict) -> str:
     return (f"B-1's DAA allocations are the steps before its first command arrives: {_ci(lr, 'B-1', 'no_wait')} per "
             f"encounter with the 4 s round trip, {_ci(lr, 'B-1 (paper-one-way)', 'no_wait')} with 4 s on each link "
             f"(the paper: 7.88). B-2: {_ci(dd, 'B-2', 'no_wait')}, with one draw per encounter "
-            f"{_ci(dd, 'B-2 (paper-delay-per-encounter)', 'no_wait')} (the paper: 8.72). ID-2: "
-            f"{_ci(out, 'ID-2', 'no_wait')}, with the box's edge read for a far state "
-            f"{_ci(out, 'ID-2 (paper-clamp)', 'no_wait')} (the paper: 1.03)")
+            f"{_ci(dd, 'B-2 (paper-delay-per-encounter)', 'no_wait')} (the paper: 8.72). IC-1 and ID-1 almost never "
+            f"allocate: {_ci(lr, 'IC-1', 'no_wait')} and {_ci(lr, 'ID-1', 'no_wait')} (the paper: 1.02, 2.11), "
+            f"{_ci(lr, 'IC-1 (paper-one-way)', 'no_wait')} and {_ci(lr, 'ID-1 (paper-one-way)', 'no_wait')} with "
+            f"each link's delay: with a constant delay a gap in the commands ends within the wait, so neither reading "
+            f"gives the paper's counts. ID-2: {_ci(out, 'ID-2', 'no_wait')}, with the box's edge read for a far state "
+            f"{_ci(out, 'ID-2 (paper-clamp)', 'no_wait')} (the paper: 1.03). No single reading matches every group: "
+            f"the paper's counts fit neither rule for what its latency measures")
 
 
 def _reception(x: dict) -> str:
@@ -59,13 +63,14 @@ def _reception(x: dict) -> str:
         return _not_run("hold", "counting")
     return (f"received per encounter (B-2): {_ci(h, 'B-2', 'received')}; without the 'hold' stream "
             f"{_ci(h, 'B-2 (paper-no-hold)', 'received')}; counting one command per step "
-            f"{_ci(c, 'B-2 (one per step)', 'received')} (the paper: 79.4). Our pilot streams one command a second "
-            f"from its first telemetry until safe avoidance; the stream's length, which the paper does not give, sets "
-            f"the counts. DAA overrides (B-2): {_ci(h, 'B-2', 'daa_override')} per encounter, "
+            f"{_ci(c, 'B-2 (one per step)', 'received')} (the paper: 79.4). At one command a second, the paper's "
+            f"79.4 is a stream of about 80 s an encounter; ours runs from the first telemetry until our test of safe "
+            f"avoidance, about 112 s: the stream's length, which the paper does not give, sets every count of "
+            f"this cluster. DAA overrides (B-2): {_ci(h, 'B-2', 'daa_override')} per encounter, "
             f"{_ci(x.get('hold_none') or {}, 'B-2 (paper-hold-none)', 'daa_override')} with an unsafe 'hold' as no "
-            f"command (the paper: 0.76)")
-
-
+            f"command (the paper: 0.76): the paper's override count is closer to the reading Algorithm 1 "
+            f"contradicts; {_f(_axes_share(x, 'B-2', 'DAA override', ('none',)), 'pct')} of our overrides keep the "
+            f"current course against a pilot's 'hold' that would turn back toward the intruder")
 def _blend_match(x: dict) -> str:
     w, lat, s = x.get("blend_waiting"), x.get("blend_latency"), x.get("blend_searches")
     if not (w and lat and s):
@@ -94,13 +99,24 @@ def _safety(x: dict) -> str:
     if not (s and lw):
         return _not_run("severity", "lowc")
     auth = lw["groups"].get("ID-2", {}).get("authority_at_onset", {})
+    blend_unsafe = _unsafe_share(x, "IC-1", "blend of a maneuver")
+
+    def q(g):
+        return (lw["groups"].get(g, {}).get("from_alert2_s") or [None, None, None])[1]
+
     return (f"unmitigated, {_ci(s, 'unmitigated', 'p_lowc', 'pct')} of our encounters lose well clear and "
             f"{_ci(s, 'unmitigated', 'alert_share_2', 'pct')} reach a corrective alert; the paper reading's ID-2 "
             f"{_ci(s, 'ID-2', 'p_lowc', 'pct')}, {_ci(s, 'ID-2', 'p_lowc_step', 'sci')} of the time (the paper: "
-            f"2.81e-7 x 666.67 h = 1.87e-4). In ID-2, a LoWC begins under the DAA's authority in "
-            f"{_f(auth.get('daa'), 'pct')} of cases, the pilot's in {_f(auth.get('pilot'), 'pct')}. The paper's own "
-            f"pair (ID-2 the fewest LoWC encounters, yet a higher P(LoWC)/h than B-2) holds only if ID-2's LoWCs last "
-            f"longer: appendix-provenance.md")
+            f"2.81e-7 x 666.67 h = 1.87e-4). The paper gives no unmitigated rate, so no experiment can calibrate our "
+            f"encounter set to its. In ID-2, a LoWC begins under the DAA's authority in {_f(auth.get('daa'), 'pct')} "
+            f"of cases, the pilot's in {_f(auth.get('pilot'), 'pct')}. The integrated groups lose well clear less than "
+            f"the baselines (B-1 {_ci(s, 'B-1', 'p_lowc', 'pct')}, IC-1 {_ci(s, 'IC-1', 'p_lowc', 'pct')}), against "
+            f"the paper's slight increase: a baseline LoWC begins a median {_f(q('B-1'), 'f1')} s after the "
+            f"corrective alert, an integrated one {_f(q('IC-1'), 'f1')} s; the DAA's resolution flown as an override "
+            f"is itself unsafe by SM in {_f(_unsafe_share(x, 'B-1', 'DAA override'), 'pct')} of the overrides, "
+            f"Algorithm 2's blend in {_f(blend_unsafe, 'pct')} of the blends of "
+            f"a maneuver. The paper's pair (ID-2 the fewest LoWC encounters, yet a higher P(LoWC)/h than B-2) holds "
+            f"only if ID-2's LoWCs last longer: appendix-provenance.md")
 
 
 def _pi(x: dict) -> str:
@@ -117,7 +133,8 @@ def _pi(x: dict) -> str:
     return (f"{n} replayed LoWCs with PI above 3.79 over the five groups: {turn} with the intruder turning before the "
             f"onset, {daa} begun under the DAA's authority. In B-2, {_f(share, 'pct')} of the LoWCs follow an intruder's "
             f"turn (a median {_f(tq[1] if tq else None, 'f1')} s before the onset) and begin a median "
-            f"{_f(q[1] if q else None, 'f1')} s after the corrective alert")
+            f"{_f(q[1] if q else None, 'f1')} s after the corrective alert: a late turn of the intruder (our turns "
+            f"last up to 90° of heading, a choice) leaves our DAA and pilot a few seconds")
 
 
 def _deviation(x: dict) -> str:
@@ -125,13 +142,50 @@ def _deviation(x: dict) -> str:
     if not (d and s and ft):
         return _not_run("deviation", "severity", "feet")
     left = value(d, "B-1", "maneuvered_share")
-    need = 1690.0 / value(d, "B-1", "dev_h_maneuvered_mean") if value(d, "B-1", "dev_h_maneuvered_mean") else None
+    man = value(d, "B-1", "dev_h_maneuvered_mean")
+    if man is None:
+        reach = "–"
+    elif man >= 1690.0:
+        reach = (f"the paper's mean needs {_f(1690.0 / man, 'pct')} of the encounters to maneuver as far as ours that "
+                 f"do")
+    else:
+        reach = ("even if every encounter maneuvered as far as ours that do, the mean would stay below the paper's "
+                 "1,690 m: no definition we tried gives its size")
     return (f"B-1: {_ci(d, 'B-1', 'dev_h_mean', 'f0')} m (largest distance from the straight path, over all "
             f"encounters), {_ci(d, 'B-1', 'dev_h_tmean_mean', 'f0')} m as a time mean, "
             f"{_ci(d, 'B-1', 'dev_h_maneuvered_mean', 'f0')} m over the {_f(left, 'pct')} that left the plan; in feet "
-            f"{_ci(ft, 'B-1 (feet)', 'dev_h_mean', 'f0')} m (the paper: 1,690 m). With our maneuvering encounters' "
-            f"deviation, the paper's mean needs {_f(need, 'pct')} of the encounters to maneuver; "
-            f"{_ci(s, 'unmitigated', 'alert_share_2', 'pct')} of ours reach a corrective alert")
+            f"{_ci(ft, 'B-1 (feet)', 'dev_h_mean', 'f0')} m (the paper: 1,690 m). {reach[0].upper()}{reach[1:]}; "
+            f"{_ci(s, 'unmitigated', 'alert_share_2', 'pct')} of our encounters reach a corrective alert")
+
+
+def _kind(x: dict, group: str, kind: str) -> dict:
+    return ((x.get("exec_axes") or {}).get("groups", {}).get(group) or {}).get(kind) or {}
+
+
+def _axes_share(x: dict, group: str, kind: str, axes: tuple) -> "float | None":
+    k = _kind(x, group, kind)
+    return sum(k["axes"].get(a, 0) for a in axes) / k["n"] if k.get("n") else None
+
+
+def _unsafe_share(x: dict, group: str, kind: str) -> "float | None":
+    k = _kind(x, group, kind)
+    return k["unsafe"] / k["n"] if k.get("n") and k.get("unsafe") is not None else None
+
+
+def _deviation_setups(x: dict) -> str:
+    d, a = x.get("deviation"), x.get("exec_axes")
+    if not (d and a):
+        return _not_run("deviation", "exec_axes")
+    hold_kept = _axes_share(x, "ID-2", "blend of a 'hold'", ("none",))
+    return (f"an unsafe received command is overridden in B-2 by the DAA's resolution, a turn in "
+            f"{_f(_axes_share(x, 'B-2', 'DAA override', ('horizontal',)), 'pct')} of the overrides (the current course "
+            f"kept in {_f(_axes_share(x, 'B-2', 'DAA override', ('none',)), 'pct')}); in ID-2 Algorithm 2 blends it to "
+            f"the safe candidate closest to it: a blended maneuver is a climb or descent in "
+            f"{_f(_axes_share(x, 'ID-2', 'blend of a maneuver', ('vertical',)), 'pct')}, a blended 'hold' keeps the "
+            f"course in {_f(hold_kept, 'pct')}. Paired over the same "
+            f"encounters, ID-2 deviates {_ci(d, 'ID-2', 'dev_h_mean', 'f0', diff)} m horizontally and "
+            f"{_ci(d, 'ID-2', 'dev_v_mean', 'f1', diff)} m vertically against B-1, with the same share leaving the plan "
+            f"({_ci(d, 'ID-2', 'maneuvered_share', 'pct', diff)})")
 
 
 @dataclass(frozen=True)
@@ -171,14 +225,24 @@ CLUSTERS: tuple[Cluster, ...] = (
             ("nmac", "lowc-fewest-id2", "lowc-most-b2", "lowc-turning", "p-lowc-hr", "p-lowc-hr-remote",
              "p-lowc-hr-increase"), ("the encounter set", "the paper's inconsistency"),
             "how many encounters come close is the encounter set's (the paper gives only its parameter table); the "
-            "paper's LoWC statements do not fit one another", ("severity", "lowc"), _safety),
-    Cluster("pi", "penetration integral", ("pi-mean", "pi-max", "pi-severe"), ("our DAA", "our pilot"),
+            "paper's P(LoWC) per flight hour divides by its own campaign's hours, and its LoWC statements fit "
+            "together only if ID-2's LoWCs last longer; our baselines' DAA overrides lose well clear more often than "
+            "the integrated groups' blends", ("severity", "lowc", "exec_axes"), _safety),
+    Cluster("pi", "penetration integral", ("pi-mean", "pi-max", "pi-severe"),
+            ("the encounter set", "our DAA", "our pilot"),
             "the severe LoWCs are late turns of fast intruders: what our DAA and pilot do in the last seconds",
             ("lowc",), _pi),
-    Cluster("deviation", "trajectory deviation", ("dev-h", "dev-v", "dev-h-change", "dev-v-change"),
+    Cluster("deviation", "trajectory deviation: its size", ("dev-h", "dev-v"),
             ("the encounter set", "the paper's vagueness"),
             "the paper does not define its deviation; on our encounters few maneuver at all",
             ("deviation", "severity", "feet"), _deviation),
+    Cluster("deviation-setups", "trajectory deviation: 'almost the same for every setup'",
+            ("dev-h-change", "dev-v-change"), ("our DAA", "the paper's vagueness"),
+            "the setups fly different maneuvers instead of an unsafe command: the baselines the DAA's resolution "
+            "(when it maneuvers, a turn); the integrated groups Algorithm 2's safe candidate closest to the command "
+            "(when it maneuvers, mostly a climb or descent). The paper does not say which safe maneuver its "
+            "Algorithm 2 takes",
+            ("exec_axes", "deviation"), _deviation_setups),
 )
 
 
@@ -186,10 +250,20 @@ def cluster_of(finding_id: str) -> "Cluster | None":
     return next((c for c in CLUSTERS if finding_id in c.findings), None)
 
 
-def attribution_rows(rows, label: str, experiments: "dict | None", command: str = "") -> list[dict]:
+def row_commands(keys, experiments: dict, meta: "dict | None") -> list[str]:
+    """The commands behind the experiments ``keys`` of one row: the campaigns they read and the
+    experiments command (:func:`daa_sil.study.experiments.commands_for`); empty without ``meta``."""
+    from daa_sil.study.experiments import commands_for
+
+    runs = [r for k in keys for r in (experiments.get(k) or {}).get("runs", ())]
+    return commands_for(runs, meta) if meta and runs else []
+
+
+def attribution_rows(rows, label: str, experiments: "dict | None", meta: "dict | None" = None) -> list[dict]:
     """One row per cluster (its misses under reading ``label``: ``id — group``), plus one per miss that no
     cluster holds (cause *unattributed*). ``rows`` from :func:`daa_sil.study.verdicts.evaluate_all`;
-    ``experiments`` the ``experiments`` mapping of ``experiments.json`` (None: not run)."""
+    ``experiments`` the ``experiments`` mapping of ``experiments.json`` (None: not run), ``meta`` its
+    ``meta`` (seed and sizes: each row's ``commands``)."""
     exps = experiments or {}
     out, seen = [], set()
     for c in CLUSTERS:
@@ -197,14 +271,15 @@ def attribution_rows(rows, label: str, experiments: "dict | None", command: str 
                   for f, outs in rows if f.id in c.findings and outs[label].verdict in MISSES]
         seen.update(c.findings)
         out.append({"cluster": c.title, "key": c.key, "misses": misses, "causes": list(c.causes),
-                    "because": c.because, "experiments": list(c.experiments), "command": command,
+                    "because": c.because, "experiments": list(c.experiments),
+                    "commands": row_commands(c.experiments, exps, meta),
                     "showed": c.showed(exps) if exps else _not_run(*c.experiments)})
     for f, outs in rows:
         if f.id not in seen and not f.by_construction and outs[label].verdict in MISSES:
             out.append({"cluster": "unattributed", "key": "unattributed", "misses": [f"{f.id} — {f.group}"],
                         "causes": [], "because": "no cluster holds this finding: a defect of the attribution table",
-                        "experiments": [], "command": "", "showed": ""})
+                        "experiments": [], "commands": [], "showed": ""})
     return out
 
 
-__all__ = ["CAUSES", "MISSES", "Cluster", "CLUSTERS", "cluster_of", "attribution_rows"]
+__all__ = ["CAUSES", "MISSES", "Cluster", "CLUSTERS", "cluster_of", "attribution_rows", "row_commands"]

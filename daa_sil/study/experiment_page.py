@@ -94,16 +94,32 @@ def _blend_table(groups: dict) -> list[str]:
                             "found by ('hold')", "missed searches asked for"], body), ""]
 
 
+#: the axes of a flown command, in the order the page prints them
+AXES = ("none", "horizontal", "vertical", "speed")
+
+
+def _axes_table(groups: dict) -> list[str]:
+    body = []
+    for g, kinds in groups.items():
+        for kind, k in kinds.items():
+            tot = k["n"] or 1
+            unsafe = "–" if k.get("unsafe") is None else f"{100 * k['unsafe'] / tot:.1f} %"
+            body.append([g, kind, f"{k['n']:,}"] + [f"{100 * k['axes'].get(a, 0) / tot:.0f} %" for a in AXES]
+                        + [unsafe])
+    return [markdown_table(["group", "flown instead of the command", "executions", "course kept", "a turn",
+                            "a climb or descent", "a speed change", "itself unsafe (SM ≤ 0)"], body), ""]
+
+
 def experiments_page(res: dict) -> str:
     """The Markdown page of an ``experiments.json`` dictionary."""
     meta = res.get("meta", {})
     L = ["# Experiments: why the paper reading misses the paper where it does", "",
          "Single-factor experiments on the same encounters (one campaign seed: every run draws the same encounter "
          "set, so the groups of several runs compare encounter by encounter, with a paired bootstrap). "
-         f"Seed {meta.get('seed')}; {meta.get('n_small', 0):,} encounters per group, {meta.get('n_large', 0):,} for "
+         f"Campaign seed {meta.get('seed')}; {meta.get('n_small', 0):,} encounters per group, {meta.get('n_large', 0):,} for "
          "the rare-event runs (severity, feet); values with their encounter-level 95 % CIs.", "",
-         "Run again (after `docs/results/regenerate.py` has run the readings on the same seed into the same "
-         f"directory): `{meta.get('command', '')}`.", ""]
+         f"Run again: `{meta.get('command', '')}` (RUNS: the directory where `docs/results/regenerate.py` ran the "
+         "readings on the same seed; it runs this command too).", ""]
     if meta.get("missing"):
         L += [f"Not run here (their experiments are left out): {', '.join(sorted(set(meta['missing'])))}.", ""]
     for key, e in res.get("experiments", {}).items():
@@ -115,6 +131,9 @@ def experiments_page(res: dict) -> str:
             continue
         if key == "blend_searches":
             L += _blend_table(e["groups"])
+            continue
+        if key == "exec_axes":
+            L += _axes_table(e["groups"])
             continue
         L += pivot(e.get("rows", []))
         if e.get("diffs"):

@@ -136,4 +136,32 @@ def blend_searches(d: Path, groups: Sequence[str]) -> dict:
     return out
 
 
-__all__ = ["replay", "lowc_diagnostics", "blend_searches"]
+#: the agent's and the DAA's executions, as the decision table names them
+NOT_PILOT = (("blend of a maneuver", "blend", True), ("blend of a 'hold'", "blend", False),
+             ("DAA override", "daa_override", None), ("DAA allocation", "no_wait", None))
+
+
+def executed_axes(d: Path, groups: Sequence[str]) -> dict:
+    """What the vehicle flew when it did not fly the pilot's command as sent, from the decision tables of
+    ``groups`` in campaign ``d``: per kind (:data:`NOT_PILOT`) ``{"n", "axes", "unsafe"}``, the executions,
+    their count by the axis of the flown command (``none``: it keeps the current course, no maneuver)
+    and how many of the flown commands SM(u) judges unsafe themselves (SM not positive)."""
+    out = {}
+    for g in groups:
+        t = read_results(d, "decisions", [g])
+        col = {c: np.asarray(t.column(c).to_pylist(), dtype=object) for c in ("decision", "pilot_axis", "exec_axis")}
+        sm = np.asarray(t.column("sm_exec").to_pylist(), dtype=float) if "sm_exec" in t.column_names else None
+        kinds = {}
+        for name, decision, intent in NOT_PILOT:
+            m = col["decision"] == decision
+            if intent is not None:
+                m &= (col["pilot_axis"] != "none") if intent else (col["pilot_axis"] == "none")
+            if m.any():
+                axes, n = np.unique(col["exec_axis"][m].astype(str), return_counts=True)
+                kinds[name] = {"n": int(m.sum()), "axes": {str(a): int(k) for a, k in zip(axes, n)},
+                               "unsafe": None if sm is None else int(np.count_nonzero(~(sm[m] > 0.0)))}
+        out[g] = kinds
+    return out
+
+
+__all__ = ["replay", "lowc_diagnostics", "blend_searches", "executed_axes", "NOT_PILOT"]

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Callable
 
 from daa_sil.study.experiment_analysis import PAPER_COUNTING, compare
-from daa_sil.study.experiment_replays import blend_searches, lowc_diagnostics
+from daa_sil.study.experiment_replays import blend_searches, executed_axes, lowc_diagnostics
 from daa_sil.study.experiments import PAPER5, RUNS, run_dir
 
 #: how to run the experiments again (``{runs}`` etc. filled in by :func:`analyse`)
@@ -78,6 +78,11 @@ def analyse(runs: "str | Path", seed: int, n_small: int, n_large: int, replicate
         out["blend_searches"] = {"title": "Algorithm 2's searches", "why": "which rule found the blended maneuver, "
                                  "and what the searches that missed the pilot's (axis, direction) asked for",
                                  "runs": ["paper"], "groups": blend_searches(paper, ("IC-1", "ID-1", "ID-2"))}
+        out["exec_axes"] = {"title": "What the vehicle flies instead of the pilot's command", "why": "an unsafe "
+                            "received command is overridden by the DAA's resolution in the baselines and blended by "
+                            "Algorithm 2 in the integrated groups: the axis of what is flown instead (course kept: "
+                            "the command flown keeps the current course, which the pilot's command would have "
+                            "changed)", "runs": ["paper"], "groups": executed_axes(paper, PAPER5)}
     if have(exp["blend-no-wait"]):
         out["blend_waiting"] = _exp("Blends without waiting", next(r.why for r in RUNS if r.name == "blend-no-wait"),
                                     cmp([("ID-2", exp["blend-no-wait"], "ID-2"),
@@ -107,13 +112,14 @@ def analyse(runs: "str | Path", seed: int, n_small: int, n_large: int, replicate
              "whether the delay's variation within an encounter makes B-2's and ID-2's DAA allocations",
              ("B-1", "B-2", "ID-2")),
             ("latency_rule", "paper-one-way", "A group's latency: the round trip or each link's delay",
-             "B-1's no-wait decisions are the steps before its first command arrives: one round trip", ("B-1", "B-2",
-                                                                                                        "ID-2")),
+             "B-1's no-wait decisions are the steps before its first command arrives: one round trip",
+             ("B-1", "B-2", "IC-1", "ID-1", "ID-2")),
             ("outside", "paper-clamp", "The wait outside the map's box", "the map's DAA allocations when a far state "
              "reads the box edge's wait", ("IC-1", "ID-2")),
             ("outside_far", "paper-outside-far", "The wait outside the map's box: w = H", "the other rule the text "
              "allows", ("ID-2",)),
-            ("h60", "paper-h60", "The maps' horizon 60 s", "the 40 s horizon against the earlier 60 s", ("ID-2",)),
+            ("h60", "paper-h60", "The maps' horizon 60 s", "the 40 s horizon (the published maximum wait) against 60 s",
+             ("ID-2",)),
             ("hold", "paper-no-hold", "The 'hold' stream", "the pilot without 'hold' commands", ("B-2", "ID-2")),
             ("hold_none", "paper-hold-none", "An unsafe 'hold' as no command", "the setting Algorithm 1 contradicts",
              ("B-2", "ID-2")),
@@ -140,7 +146,7 @@ def analyse(runs: "str | Path", seed: int, n_small: int, n_large: int, replicate
                              pairs=[(f"{g} (SM {h} s)", g) for h in (35, 25) for g in ("B-2", "ID-2")]),
                          ["paper", "sm35", "sm25"])
     meta = {"seed": seed, "n_small": n_small, "n_large": n_large, "replicates": replicates, "missing": missing,
-            "command": COMMAND.format(runs=runs, seed=seed, small=n_small, large=n_large)}
+            "command": COMMAND.format(runs="RUNS", seed=seed, small=n_small, large=n_large)}
     return {"meta": meta, "experiments": out}
 
 

@@ -59,6 +59,9 @@ class Run:
         return self.groups() if callable(self.groups) else tuple(self.groups)
 
 
+#: the groups of every reading's campaign (``docs/results/regenerate.py``): the paper's five and the wait
+#: map's ablations
+READING_GROUPS = ("B-1", "B-2", "IC-1", "ID-1", "ID-2", "ID-2-projl", "ID-2-map")
 #: a pilot that never maneuvers and sends nothing (a stock GCS, or the unmitigated encounter)
 NO_PILOT = {"pilot_engage": "never", "hold_commands": False}
 PAPER5 = ("B-1", "B-2", "IC-1", "ID-1", "ID-2")
@@ -123,4 +126,20 @@ def run_experiments(runs: "str | Path", seed: int, n_small: int, n_large: int, w
     return out
 
 
-__all__ = ["Run", "RUNS", "READINGS_USED", "NO_PILOT", "PAPER5", "PAIRED", "run_dir", "run_config", "run_experiments"]
+def commands_for(runs, meta: dict) -> list[str]:
+    """The commands that make ``runs`` (reading and experiment names, as ``experiments.json`` lists them)
+    and their figures, with ``meta``'s seed and sizes (the reading ``paper`` at the large size, as
+    ``docs/results/regenerate.py`` runs it); RUNS stands for the runs directory."""
+    names = {r.name for r in RUNS}
+    seed, small, large = meta.get("seed"), meta.get("n_small"), meta.get("n_large")
+    out = [f"daa-sil campaign run --reading {r} --groups {','.join(READING_GROUPS)} --encounters "
+           f"{large if r == 'paper' else small} --seed {seed} --out RUNS/{r}" for r in dict.fromkeys(runs)
+           if r not in names]
+    exps = [r for r in dict.fromkeys(runs) if r in names]
+    out.append(f"python docs/results/experiments.py --runs RUNS --seed {seed} --small {small} --large {large} "
+               + (f"--only {','.join(exps)}" if exps else "--analyse-only"))
+    return out
+
+
+__all__ = ["Run", "RUNS", "READINGS_USED", "READING_GROUPS", "NO_PILOT", "PAPER5", "PAIRED", "run_dir", "run_config",
+           "run_experiments", "commands_for"]

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
 
@@ -28,8 +29,8 @@ import numpy as np
 from daa_sil.config.basis import KINDS, consumed_findings
 from daa_sil.files import atomic_write_json, atomic_write_text, ensure_dir
 from daa_sil.study.analysis import Study
-from daa_sil.study.attribution import attribution_rows
-from daa_sil.study.findings import APART, EMPIRICAL, NOT_TESTABLE, VERDICTS, fmt
+from daa_sil.study.attribution import CAUSES, attribution_rows
+from daa_sil.study.findings import APART, EMPIRICAL, NOT_TESTABLE, VERDICTS, fmt, untestable_statements
 from daa_sil.study.metrics import BASELINE_GROUP, CONF
 from daa_sil.study.report_appendix import (ABLATIONS, ablation_rows, ablations_page, provenance_page, readings_page,
                                            tally_lines)
@@ -45,7 +46,7 @@ from daa_sil.study.verdicts import RULES, evaluate_all
 APPENDICES = ("appendix-readings.md", "appendix-ablations.md", "appendix-provenance.md")
 #: what each kind of basis means (the basis table's legend)
 KIND_MEANING = {"text": "a quoted sentence says so", "inference": "we infer it, from a sentence or from a published "
-                "number (the arithmetic is given; a number used so is counted as input, not as a result)",
+                "number (the arithmetic is given; a number used so is never counted as a reproduction)",
                 "choice": "the paper says nothing; the value is ours"}
 
 
@@ -80,35 +81,65 @@ def findings_lines(rows, label: str) -> list[str]:
     return ["## Every finding of the paper", "",
             "Counts are per encounter (the paper's totals divided by its 10,000 encounters), changes in %. *Ours* is "
             "our value with its encounter-level 95 % CI; the evidence says how the verdict's rule (below) came out.",
-            "", markdown_table(["#", "finding", "source", "kind", "the paper's value", "ours [95 % CI]", "verdict",
+            "", markdown_table(["#", "finding", "source", "kind", "Tabassum & Bai", "ours [95 % CI]", "verdict",
                                 "evidence"], body), ""]
 
 
 def attribution_lines(rows, label: str, experiments: "dict | None") -> list[str]:
     exps = (experiments or {}).get("experiments")
-    cmd = ((experiments or {}).get("meta") or {}).get("command", "")
+    meta = (experiments or {}).get("meta") or {}
     L = ["## Where the misses come from", "",
-         "Every finding missed (not reproduced, or only its direction) belongs to one cluster, with its named cause and "
-         "the experiment that tests it" + (f" (`{cmd}`; figures: [experiments.md](experiments.md))" if cmd else "")
-         + ". Causes: our DAA, our pilot, the encounter set, the paper's vagueness, the paper's inconsistency, a "
-         "defect.", ""]
+         "Every finding missed (not reproduced, or only its direction) belongs to one cluster, with its named cause, "
+         "the experiments that test it, the commands that make them (RUNS: the runs directory; the figures: "
+         "[experiments.md](experiments.md)) and what they showed. Causes: " + ", ".join(CAUSES) + ". A miss "
+         "outside every cluster would show as a row *unattributed*; a cluster whose experiments found no cause "
+         "says so in its row.", ""]
     body = []
-    for r in attribution_rows(rows, label, exps, cmd):
-        body.append([r["cluster"], "; ".join(r["misses"]) or "none", ", ".join(r["causes"]) or "–", r["because"],
-                     ", ".join(f"`{e}`" for e in r["experiments"]) or "–", r["showed"] or "–"])
-    return L + [markdown_table(["cluster", "misses", "cause", "in words", "experiments", "what they showed"], body), ""]
+    for r in attribution_rows(rows, label, exps, meta):
+        body.append([r["cluster"], "; ".join(r["misses"]) or "none", ", ".join(r["causes"]) or "none found",
+                     r["because"], ", ".join(f"`{e}`" for e in r["experiments"]) or "–",
+                     "; then ".join(f"`{c}`" for c in r["commands"]) or "–", r["showed"] or "–"])
+    return L + [markdown_table(["cluster", "misses", "cause", "in words", "experiments", "commands",
+                                "what they showed"], body), ""]
+
+
+#: the signatures' short names in the main page's table headers
+SHORT_SIGNATURE = {"unsafe": "unsafe on arrival", "daa_per_received": "DAA / received", "received": "received / enc.",
+                   "wait_per_received": "waits / received"}
 
 
 def signature_lines(st: Study, label: str) -> list[str]:
-    body = []
-    for g in groups_in_order({label: st}):
-        for s in SIGNATURES:
-            body.append([s.label, g, paper_cell(s, g), our_cell(st, s, g)])
-    return ["## Signatures: does our simulator behave like the paper's?", "",
-            "Quantities the paper's tables give (arithmetic shown) or that characterise a simulator, ours with "
-            "their 95 % CIs. *Unsafe on arrival* is the share of arriving commands not executed as sent (overridden in "
-            "the baselines, blended in the integrated groups).", "",
-            markdown_table(["signature", "group", "the paper's value = its arithmetic", "ours [95 % CI]"], body), ""]
+    """Two tables: the signatures the paper's tables give (Tabassum & Bai's value with its arithmetic
+    beside ours, a row per group) and those it does not give (ours only)."""
+    groups = groups_in_order({label: st})
+    given = [s for s in SIGNATURES if any(s.paper(g) is not None for g in groups)]
+    rest = [s for s in SIGNATURES if s not in given]
+    head = ["group"]
+    for s in given:
+        name = SHORT_SIGNATURE.get(s.key, s.label)
+        head += [f"{name}: Tabassum & Bai", f"{name}: ours [95 % CI]"]
+    body = [[g] + [c for s in given for c in (paper_cell(s, g), our_cell(st, s, g))] for g in groups]
+    L = ["## Signatures: does our simulator behave like the paper's?", "",
+         "Quantities the paper's tables give (Tabassum & Bai's value = its arithmetic on their totals over 10,000 "
+         "encounters) or that characterise a simulator, ours with their 95 % CIs. *Unsafe on arrival* is the share "
+         "of arriving commands not executed as sent, (override + blend) / (pilot + override + blend): overridden in "
+         "the baselines, blended in the integrated groups. *DAA / received*: DAA allocations (no-wait decisions) per "
+         "received command; *waits / received*: waits per received command; *received / enc.*: commands received "
+         "per encounter.", "", markdown_table(head, body), ""]
+    if rest:
+        L += ["Not given by the paper (ours only; *authority* is the pilot, the waiting agent or the DAA, "
+              "step by step):", "",
+              markdown_table(["group"] + [s.label for s in rest], [[g] + [our_cell(st, s, g) for s in rest]
+                                                                   for g in groups]), ""]
+    return L
+
+
+def untestable_lines() -> list[str]:
+    un = untestable_statements()
+    if not un:
+        return []
+    return (["Statements of the paper with no quantity to test (no verdict, not in the tally):", ""]
+            + [f"- \"{u['claim']}\" — {u['why']}" for u in un] + [""])
 
 
 def rules_lines() -> list[str]:
@@ -120,22 +151,63 @@ def rules_lines() -> list[str]:
     return L + [""]
 
 
+def _grouped(rows, label: str, verdicts) -> list[str]:
+    """``finding (groups)`` of the rows of ``label`` whose verdict is in ``verdicts``, one entry per finding."""
+    out: dict = {}
+    for f, outs in rows:
+        if outs[label].verdict in verdicts:
+            out.setdefault(f.claim, []).append(f.group or ("pooled over " + ", ".join(f.pooled) if f.pooled else ""))
+    return [f"{k} ({', '.join(g for g in v if g)})" if any(v) else k for k, v in out.items()]
+
+
+def summary_lines(rows, label: str, experiments: "dict | None") -> list[str]:
+    """In short: the tally in words, what is reproduced, and each cluster of misses with its cause."""
+    from daa_sil.study.verdicts import tally
+
+    c = tally(rows, label)
+    n_emp = sum(c[v] for v in EMPIRICAL)
+    L = ["## In short", "",
+         f"The paper states {len(rows)} findings about its results (one row per group). {n_emp} are empirical: we "
+         f"reproduce **{c[VERDICTS[0]]}**, {c[VERDICTS[1]]} are consistent with ours without being shown, "
+         f"{c[VERDICTS[2]]} hold in direction but not in size, and **{c[VERDICTS[3]]} are not reproduced**. Counted "
+         "apart: " + ", ".join(f"{c[v]} {v}" for v in APART) + ".", ""]
+    rep = _grouped(rows, label, (VERDICTS[0],))
+    if rep:
+        L += ["- **Reproduced:** " + "; ".join(rep) + "."]
+    con = _grouped(rows, label, (VERDICTS[1],))
+    if con:
+        L += ["- **Consistent, not shown:** " + "; ".join(con) + "."]
+    dirs = _grouped(rows, label, (VERDICTS[2],))
+    if dirs:
+        L += ["- **The direction holds, not the size:** " + "; ".join(dirs) + "."]
+    for r in attribution_rows(rows, label, (experiments or {}).get("experiments")):
+        if r["misses"]:
+            cause = ", ".join(r["causes"]) or "none found"
+            n = len(r["misses"])
+            L += [f"- **Missed: {r['cluster']}** ({n} row{'s' if n > 1 else ''}). Cause: {cause} — {r['because']}."]
+    return L + ["", "The table *Where the misses come from* below gives each cluster's experiment, its command and "
+                "what it showed.", ""]
+
+
 def render_main(blocks: Sequence[Block], studies: dict, rows, *, figures: dict, experiments: "dict | None" = None,
                 notes: Sequence[str] = ()) -> str:
     """The main page's text: the first block against the paper."""
     b = blocks[0]
     st = studies[b.label]
-    L = [f"# Tabassum & Bai's findings against the {reading_label(b.label)} reading", "",
-         f"The fast-time study of {reading_label(b.label)}: {st.n:,} encounters per group, groups "
-         f"{', '.join(st.groups)}, campaign seed {b.seed}, results `{b.reading.source}`. The paper's numbers: "
-         "`daa_sil/data/paper_results.yaml`; its findings: `daa_sil/data/paper_findings.yaml`.", ""]
+    L = [f"# Tabassum & Bai's findings against the {reading_label(b.reading.name)} reading", "",
+         f"The fast-time study of the reading {reading_label(b.reading.name)} (our implementation of the paper's "
+         f"method; its settings and what each rests on are below): {st.n:,} encounters per group, groups "
+         f"{', '.join(st.groups)}, campaign seed {b.seed}, results `{b.reading.source}`. Tabassum & Bai's numbers: "
+         "`daa_sil/data/paper_results.yaml`; their findings: `daa_sil/data/paper_findings.yaml`.", ""]
     L += [str(x) for x in notes] + ([""] if notes else [])
     L += ["Appendices: " + ", ".join(f"[{a}]({a})" for a in APPENDICES)
           + (", [experiments.md](experiments.md)" if experiments else "") + ".", ""]
     c = tally_lines(rows, [b.label])
+    L += summary_lines(rows, b.label, experiments)
     L += ["## Headline tally", "",
           f"Empirical findings only; {', '.join(APART)} are counted apart (see the rules below).", ""] + c
-    L += basis_lines(b) + findings_lines(rows, b.label) + attribution_lines(rows, b.label, experiments)
+    L += basis_lines(b) + findings_lines(rows, b.label) + untestable_lines()
+    L += attribution_lines(rows, b.label, experiments)
     L += signature_lines(st, b.label) + rules_lines()
     L += ["## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figures.get(b.label, ())] + [""]
     return "\n".join(L) + "\n"
@@ -150,13 +222,24 @@ def findings_json(blocks, rows, replicates: int, seed: int, conf: float, experim
                           "source": b.reading.source, "campaign_seed": b.seed, "basis": (b.meta or {}).get("basis"),
                           "tally": tally(rows, b.label)} for b in blocks],
             "verdicts": {"words": list(VERDICTS), "empirical": list(EMPIRICAL), "apart": list(APART)},
-            "attribution": attribution_rows(rows, blocks[0].label, (experiments or {}).get("experiments")),
+            "attribution": attribution_rows(rows, blocks[0].label, (experiments or {}).get("experiments"),
+                                            (experiments or {}).get("meta")),
             "findings": [{"id": f.id, "claim": f.label, "source": f.source, "kind": f.kind, "metric": f.metric,
                           "group": f.group, "pooled": list(f.pooled), "paper": f.paper_value(),
                           "paper_text": f.paper_text(),
                           "outcomes": {lab: {"verdict": o.verdict, "text": o.text, "evidence": o.evidence,
                                              "value": _finite(o.value), "lo": _finite(o.lo), "hi": _finite(o.hi)}
                                        for lab, o in outs.items()}} for f, outs in rows]}
+
+
+def runs_relative(source: str, root: "str | os.PathLike") -> str:
+    """``source`` as ``RUNS/<path>`` when it lies under ``root`` (else unchanged)."""
+    if not source:
+        return source
+    try:
+        return "RUNS/" + Path(source).resolve().relative_to(Path(root).resolve()).as_posix()
+    except ValueError:
+        return source
 
 
 def _finite(x):
@@ -166,13 +249,18 @@ def _finite(x):
 def write_report(src, out_dir: "str | os.PathLike", baseline: str = BASELINE_GROUP, conf: float = CONF, *,
                  replicates: int = DEFAULT_REPLICATES, seed: int = DEFAULT_SEED, recount: Sequence[str] = (),
                  notes: Sequence[str] = (), experiments: "dict | None" = None,
-                 main_name: str = "report.md", all_figures: bool = True) -> Path:
+                 main_name: str = "report.md", all_figures: bool = True,
+                 runs_root: "str | os.PathLike | None" = None) -> Path:
     """Compute the study of ``src`` (a campaign directory, a list of them, or one results source) and
     write the main page ``out_dir/main_name``, the appendices, ``findings.json`` and the PNG figures;
     returns the main page's path. ``experiments``: the ``experiments.json`` dictionary (the attribution
-    table's figures); ``all_figures=False`` draws the figures of the first reading only. FileFormatError
-    for a missing, empty or corrupt results source (nothing written)."""
+    table's figures); ``all_figures=False`` draws the figures of the first reading only; ``runs_root``: the
+    pages name a campaign directory under it as ``RUNS/<its path>`` (not this machine's path).
+    FileFormatError for a missing, empty or corrupt results source (nothing written)."""
     blocks = build_blocks(src, recount)
+    if runs_root is not None:
+        blocks = [replace(b, reading=replace(b.reading, source=runs_relative(b.reading.source, runs_root)))
+                  for b in blocks]
     studies = {b.label: Study(b.enc, b.reading, dec=b.dec, replicates=replicates, seed=seed, conf=conf,
                               baseline=baseline, dt_s=float((b.meta or {}).get("dt_s") or 1.0)) for b in blocks}
     consumed = {b.label: consumed_findings((b.meta or {}).get("basis")) for b in blocks}

@@ -67,9 +67,9 @@ def readings_page(blocks, studies: dict, rows, figures: dict, intro: Sequence[st
     L += ["## Headline tally of every reading", ""] + tally_lines(rows, labels)
     L += sources_lines(blocks, studies)
     L += ["## Every finding under every reading", "",
-          "Each cell: the verdict, then our value [95 % CI]. The column *the paper's value* is the published number; "
+          "Each cell: the verdict, then our value [95 % CI]. The column *Tabassum & Bai* is the published number; "
           "the reading called `paper` is a column like the others.", ""]
-    fixed = ["#", "finding", "the paper's value"]
+    fixed = ["#", "finding", "Tabassum & Bai"]
     frows = [[str(i), f.label, f.paper_text()] for i, (f, _) in enumerate(rows, 1)]
     cells = [[(f"{outs[lab].verdict}: {outs[lab].text}" if outs[lab].verdict != NOT_TESTABLE
                else f"{NOT_TESTABLE} ({outs[lab].evidence})") for _, outs in rows] for lab in labels]
@@ -80,7 +80,7 @@ def readings_page(blocks, studies: dict, rows, figures: dict, intro: Sequence[st
         scells = [[our_cell(studies[lab], s, g) for s in SIGNATURES] for lab in labels]
         if all(all(c == "–" for c in col) for col in scells):
             continue
-        L += [f"**{g}**", ""] + wide_table(["signature", "the paper's value = its arithmetic"], srows,
+        L += [f"**{g}**", ""] + wide_table(["signature", "Tabassum & Bai = their arithmetic"], srows,
                                             [reading_label(x) for x in labels], scells, max_columns=8)
     if len(figures) > 1:
         L += ["## Figures of the other readings", ""]
@@ -106,7 +106,7 @@ def group_table_lines(studies: dict) -> list[str]:
                 else:
                     rows.append([g, fmt(pv, kind) if pv is not None and math.isfinite(pv) else "–"])
             cells = [[group_cell(studies[lab], g, metric, kind, total) for g in groups] for lab in labels]
-            L += [f"**{label}**", ""] + wide_table(["group", "the paper's value"], rows,
+            L += [f"**{label}**", ""] + wide_table(["group", "Tabassum & Bai"], rows,
                                                    [reading_label(x) for x in labels], cells, max_columns=8)
         if title.startswith("Penetration"):
             cells = [[fmt(studies[lab].pi_max(g), "f2") if g in studies[lab].groups else "–" for g in groups]

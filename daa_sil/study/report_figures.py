@@ -72,7 +72,7 @@ def group_figures(st: Study, out: Path, suffix: str = "") -> list[Path]:
         pbottom = pbottom + pv
     ax[2].set_title("(c) command execution")
     for a in ax:
-        a.set_xticks(x, groups)
+        a.set_xticks(x, groups, rotation=30, ha="right")
         a.legend(fontsize=7)
         a.set_ylabel("instances (steps) per encounter, 95 % CI")
     p = name(0)
@@ -103,7 +103,7 @@ def group_figures(st: Study, out: Path, suffix: str = "") -> list[Path]:
     ax[2].set_title("(c) penetration integral of LoWC encounters (s)")
     ax[2].legend(fontsize=7)
     for a in ax:
-        a.set_xticks(x, groups)
+        a.set_xticks(x, groups, rotation=30, ha="right")
     p = name(1)
     _save(fig, p)
     plt.close(fig)
@@ -113,7 +113,7 @@ def group_figures(st: Study, out: Path, suffix: str = "") -> list[Path]:
     v, e = err("exact_match")
     ax.bar(x, 100 * v, 0.6, yerr=100 * e, color="tab:purple", capsize=3, label="ours")
     ax.axhline(pr.get("blending_exact_match_pct", 84), color="k", ls="--", label="the paper (84 %)")
-    ax.set_xticks(x, groups)
+    ax.set_xticks(x, groups, rotation=30, ha="right")
     ax.set_ylim(0, 105)
     ax.set_ylabel("% of blends with the pilot's (axis, direction)")
     ax.legend(fontsize=7)

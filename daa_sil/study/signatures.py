@@ -121,7 +121,7 @@ def signature_section(studies: Mapping) -> list[str]:
         rows = [[s.label, paper_cell(s, g)] + [our_cell(studies[lab], s, g) for lab in labels] for s in SIGNATURES]
         if all(all(c == "–" for c in r[2:]) for r in rows):
             continue
-        L += [f"**{g}**", "", markdown_table(["signature", "paper's value = its arithmetic"] + labels, rows), ""]
+        L += [f"**{g}**", "", markdown_table(["signature", "Tabassum & Bai = their arithmetic"] + labels, rows), ""]
     return L
 
 

@@ -38,7 +38,8 @@ The rules (:data:`RULES`, printed in the report):
 * **nested** -- a claim implied by another (``nested_in``) is tested with it: one claim, counted once,
   under the other.
 * **input** -- a number a setting of the reading was inferred from (``campaign.json`` ``basis``) is
-  counted apart, whatever our value.
+  never a reproduction: counted apart when the reading matches it (or is consistent with it), and
+  *not reproduced* when the reading misses it anyway (a miss is never hidden as input).
 * **by construction** -- a finding marked ``by_construction`` in ``paper_findings.yaml`` (with why):
   its kind's rule is applied; if it holds the verdict is *by construction* (counted apart from the
   empirical findings), if not *not reproduced* (the construction has a defect).
@@ -89,7 +90,8 @@ RULES = {
                 "reproduced if any is significant the other way; otherwise consistent (not shown). Where the paper "
                 "gives both values, a relation that holds at another size (two samples) is direction holds",
     "nested": "a claim implied by another is tested with it: one claim, counted once under the other",
-    "input": "a number a setting of the reading was inferred from is counted apart, whatever our value",
+    "input": "a number a setting of the reading was inferred from is never a reproduction: counted apart when we "
+             "match it (or are consistent with it), not reproduced when we miss it anyway",
     "by construction": "a check the code makes true whatever the data (why: in paper_findings.yaml): its kind's "
                        "rule is applied; by construction if it holds (counted apart from the empirical findings), "
                        "not reproduced if it fails (a defect)",
@@ -295,8 +297,8 @@ def evaluate_all(studies: dict, consumed: "dict | None" = None) -> list[tuple[Fi
     """``[(finding, {reading label: Outcome})]`` for every finding; the ordering pairs of one source
     (table or figure) are Holm-corrected together within each reading. ``consumed`` maps a reading
     label to the ``(finding id, group)`` its settings were inferred from (:func:`daa_sil.config.basis.
-    consumed_findings`): those are *input*. A finding ``nested_in`` another takes the verdict
-    *nested* (its own outcome in the evidence)."""
+    consumed_findings`): those are *input* (*not reproduced* when missed anyway). A finding
+    ``nested_in`` another takes the verdict *nested* (its own outcome in the evidence)."""
     found = load_findings()
     rows = [(f, {}) for f in found]
     for label, st in studies.items():
@@ -311,9 +313,13 @@ def evaluate_all(studies: dict, consumed: "dict | None" = None) -> list[tuple[Fi
         used = (consumed or {}).get(label, set())
         for f, outs in rows:
             o = evaluate(f, st, holm_p if f.kind == "ordering" else None)
-            if (f.id, f.group) in used and o.verdict != NOT_TESTABLE:
+            if (f.id, f.group) in used and o.verdict in (REPRODUCED, CONSISTENT):
                 o = Outcome(INPUT, o.text, f"a setting of this reading was inferred from this number (campaign.json "
                             f"'basis'): not a reproduction; by the rule it would be {o.verdict}; {o.evidence}",
+                            o.value, o.lo, o.hi)
+            elif (f.id, f.group) in used and o.verdict in (DIRECTION, NOT_REPRODUCED):
+                o = Outcome(NOT_REPRODUCED, o.text, f"a setting of this reading was inferred from this number "
+                            f"(campaign.json 'basis'), and the reading still misses it: a miss; {o.evidence}",
                             o.value, o.lo, o.hi)
             outs[label] = o
         for f, outs in rows:

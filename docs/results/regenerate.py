@@ -16,7 +16,8 @@ Runs, on the campaign seed ``--seed`` (a fresh one: never a development seed, re
 4. the report: the main page ``paper-study.md`` (``paper`` against the paper: tally, the basis of every
    setting, every finding, the attribution of every miss, signatures, figures) and its appendices;
 5. the sensitivity sweeps under ``paper`` (``--sweep-encounters`` per point) into ``sensitivity.md``;
-6. the wait-map figures of the paper and alerting grids.
+6. the wait-map figures of the maps the study reads: the paper grid at the ``paper`` reading's horizon
+   (40 s) and the alerting grid.
 
 Pages go to ``--docs`` (default ``docs/results``; ``--smoke``: ``RUNS/docs``, never over the
 committed ones). ``--skip-sweeps`` / ``--skip-readings`` / ``--skip-experiments`` leave parts out.
@@ -34,7 +35,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-GROUPS = "B-1,B-2,IC-1,ID-1,ID-2,ID-2-projl,ID-2-map"
+from daa_sil.study.experiments import READING_GROUPS  # noqa: E402 -- after the checkout is on the path
+
+GROUPS = ",".join(READING_GROUPS)
 SWEEP_GROUPS = "B-2,ID-2,ID-2-projl"
 SWEEPS = (("latency", "latency=const:0.2;const:1;const:2;const:5;const:10;gauss:5,3"),
           ("wt", "wt=2,4,8,16"), ("gamma", "gamma=0.9,0.95,0.99"), ("grid", "grid=paper,fine,alerting"),
@@ -43,8 +46,11 @@ SWEEPS = (("latency", "latency=const:0.2;const:1;const:2;const:5;const:10;gauss:
 DEV_SEED = 424242
 #: the seed of the --smoke run
 SMOKE_SEED = 424243
-#: seeds used while developing the models and the analysis: never a report seed
-DEV_SEEDS = (0, 3, 5, 7, 8, 11, 13, 99, 101, 123, 2024, 99991, 99992, 20261201, DEV_SEED, SMOKE_SEED)
+#: seeds used while developing the models and the analysis (2718: the batch-invariance reference): never a
+#: report seed
+DEV_SEEDS = (0, 3, 5, 7, 8, 11, 13, 31, 99, 101, 123, 2024, 2718, 99991, 99992, 20261201, DEV_SEED, SMOKE_SEED)
+#: the file in the runs directory that records the code the campaigns were simulated with
+CODE_FILE = "code.json"
 
 
 def _run(argv: list, what: str) -> None:
@@ -70,23 +76,68 @@ def readings() -> list:
     return list(READINGS)
 
 
+def _git(*argv: str) -> str:
+    try:
+        out = subprocess.run(["git", *argv], cwd=ROOT, capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return out.stdout.strip() if out.returncode == 0 else ""
+
+
+def code_record(runs: Path) -> dict:
+    """The code the campaigns in ``runs`` were simulated with: read from ``runs/code.json``, written there
+    (the current commit, and whether the simulation code had uncommitted changes) when the first
+    campaign starts; a re-render on later code keeps the record of the code that simulated."""
+    f = runs / CODE_FILE
+    if f.is_file():
+        try:
+            return json.loads(f.read_text())
+        except (OSError, ValueError):
+            pass
+    rec = {"commit": _git("rev-parse", "HEAD") or "unknown",
+           "dirty": bool(_git("status", "--porcelain", "--", "daa_sil", "vehicle", "gcs"))}
+    runs.mkdir(parents=True, exist_ok=True)
+    f.write_text(json.dumps(rec) + "\n")
+    return rec
+
+
+def _again(args) -> str:
+    """The command that runs the study again (the runs directory as the reader's own)."""
+    sizes = "" if (args.encounters, args.alt_encounters, args.sweep_encounters) == (10000, 2000, 1000) else (
+        f" --encounters {args.encounters} --alt-encounters {args.alt_encounters} --sweep-encounters "
+        f"{args.sweep_encounters}")
+    return (f"python docs/results/regenerate.py --runs RUNS --seed {args.seed}{sizes}" + (" --smoke" if args.smoke
+                                                                                       else ""))
+
+
 def _report(args, dirs: list, experiments: "dict | None") -> None:
     from daa_sil.study.report import write_report
 
-    again = (f"python docs/results/regenerate.py --runs {args.runs} --seed {args.seed} --encounters {args.encounters} "
-             f"--alt-encounters {args.alt_encounters} --sweep-encounters {args.sweep_encounters}"
-             + (" --smoke" if args.smoke else ""))
-    note = [f"What ran: `paper` at {args.encounters:,} encounters per group on the campaign seed {args.seed}; every "
-            f"other reading, and `paper` again, at {args.alt_encounters:,} (the first encounters of the same seed); "
-            f"`paper` on the development seed {DEV_SEED} at {args.alt_encounters:,}; the experiments "
-            f"([experiments.md](experiments.md)). Run it again: `{again}` (resumable). Seeds used while developing "
-            f"(never a report seed): {', '.join(map(str, DEV_SEEDS))}."]
+    code = code_record(args.runs)
+    commit = str(code.get("commit", "unknown"))
+    sim = f"commit {commit[:10]}" + (" with uncommitted changes" if code.get("dirty") else "")
+    word = "smoke seed" if args.smoke else "report seed"
+    note = [f"What ran (simulated on {sim}): `paper` at {args.encounters:,} encounters per group on the {word} "
+            f"{args.seed}; every other reading, and `paper` again, at {args.alt_encounters:,} (the first encounters of "
+            f"the same seed); `paper` on the development seed {DEV_SEED} at {args.alt_encounters:,} (the seeds' "
+            f"agreement); the experiments ([experiments.md](experiments.md)); the sweeps "
+            f"([sensitivity.md](sensitivity.md)) at {args.sweep_encounters:,} per point; {args.replicates:,} bootstrap "
+            f"replicates; the figures of the wait maps `paper` reads (paper grid, H = 40 s: "
+            f"[histogram](waitmap/paper/histogram.png), [slices](waitmap/paper/slices_geometries.png), "
+            f"[the ±5 °/s pair](waitmap/paper/mirror_pair.png), [3-D](waitmap/paper/map_3d.png); the alerting grid's "
+            f"in `waitmap/alerting/`; the wait-map section's own claims are compared in "
+            f"[docs/waitmap.md](../waitmap.md), not counted here). Run it again: `{_again(args)}` (RUNS: any "
+            f"directory; resumable; 20 to 40 minutes on two cores). "
+            + ("" if args.smoke else f"The report seed {args.seed} was chosen before any run and never used while "
+               "developing; ")
+            + ("T" if args.smoke else "t") + "he seeds used while developing, which regenerate.py refuses as a report "
+            f"seed: {', '.join(map(str, DEV_SEEDS))}."]
     if args.smoke:
         note.insert(0, f"SMOKE RUN ({args.encounters} encounters per group): checks the chain, not the paper.")
     t = time.monotonic()
     print("== report", flush=True)
     write_report(dirs, args.docs, replicates=args.replicates, notes=note, experiments=experiments,
-                 main_name="paper-study.md", all_figures=False)
+                 main_name="paper-study.md", all_figures=False, runs_root=args.runs)
     print(f"   ({time.monotonic() - t:.0f} s)", flush=True)
 
 
@@ -107,6 +158,9 @@ def main(argv=None) -> int:
     ap.add_argument("--smoke", action="store_true", help="every step at a few encounters on a development seed; "
                                                          "pages under RUNS/docs")
     ap.add_argument("--docs", type=Path, default=None, help="where the pages go (default docs/results)")
+    ap.add_argument("--render-only", action="store_true",
+                    help="only the report pages, from the finished campaigns in --runs and the experiments.json in "
+                         "--docs (no campaign, experiment, sweep or figure run)")
     args = ap.parse_args(argv)
     if args.smoke:
         args.encounters = args.encounters or 40
@@ -127,6 +181,9 @@ def main(argv=None) -> int:
         if getattr(args, name) < 1:
             ap.error(f"--{name.replace('_', '-')} must be at least 1")
     runs = args.runs
+    if args.render_only:
+        return render_only(args)
+    code_record(runs)  # before the first campaign: the code that simulates
     seed = ["--seed", str(args.seed)]
     experiments = None
     if not args.skip_readings:
@@ -158,10 +215,47 @@ def main(argv=None) -> int:
             sweep_dirs.append(d)
         _run(["-m", "daa_sil.cli", "campaign", "sweep", "--collate", *map(str, sweep_dirs), "--out", str(args.docs)],
              "sensitivity page")
-    for grid in ("paper", "alerting"):
-        _run(["-m", "daa_sil.cli", "waitmap", "plot", grid, "--out", str(args.docs / "waitmap" / grid), "--force"],
-             f"wait-map figures ({grid})")
+    waitmap_figures(args.docs / "waitmap")
     return 0
+
+
+def campaign_dirs(args) -> list:
+    """The campaign directories of the report, in its column order (``paper`` first)."""
+    dirs = [args.runs / "paper"]
+    if args.alt_encounters != args.encounters:
+        dirs.append(args.runs / f"paper-{args.alt_encounters}")
+    return dirs + [args.runs / f"paper-seed{DEV_SEED}"] + [args.runs / r for r in readings()[1:]]
+
+
+def render_only(args) -> int:
+    """The report pages again from finished runs (``--render-only``): exit 2 naming what is missing."""
+    dirs = campaign_dirs(args)
+    missing = [str(d) for d in dirs if not (d / "campaign.json").is_file()]
+    exp = args.docs / "experiments.json"
+    if missing or not (args.runs / CODE_FILE).is_file():
+        what = f"{len(missing)} campaign(s), the first {missing[0]}" if missing else str(args.runs / CODE_FILE)
+        print(f"regenerate.py: --render-only needs the finished runs of a regeneration; missing: {what}",
+              file=sys.stderr)
+        return 2
+    experiments = json.loads(exp.read_text()) if exp.is_file() else None
+    _report(args, dirs, experiments)
+    return 0
+
+
+def waitmap_figures(out: Path) -> None:
+    """The figures of the wait maps the study reads: the paper grid at the ``paper`` reading's horizon
+    (its maps, from the cache its campaigns filled) and the alerting grid of ``paper-alerting``."""
+    from daa_sil.config.readings import READINGS
+    from daa_sil.waitmap import family_for
+    from daa_sil.waitmap.plots import write_plots
+
+    for grid, horizon in (("paper", READINGS["paper"].wait_horizon_s), ("alerting", None)):
+        t = time.monotonic()
+        print(f"== wait-map figures ({grid}, H = {f'{horizon:g} s' if horizon else 'the preset default'})",
+              flush=True)
+        for f in write_plots(family_for(grid, horizon=horizon), out / grid, overwrite=True):
+            print(f"   {f}", flush=True)
+        print(f"   ({time.monotonic() - t:.0f} s)", flush=True)
 
 
 if __name__ == "__main__":

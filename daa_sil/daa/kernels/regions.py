@@ -25,7 +25,7 @@ _HORIZONTAL = 1
 
 
 @inline
-def _first_ok(ok_row, k0, want, c_lo, c_hi):
+def first_ok(ok_row, k0, want, c_lo, c_hi):
     """``bands._first_on_side`` of one row whose candidates are columns ``c_lo`` .. ``c_hi``: (index, found)."""
     if want > 0:
         if k0 + 1 > c_hi:
@@ -237,8 +237,8 @@ def axis_regions_into(conflicts, from_paths, M, t_end, hfm, lists, tk, times, co
             ok[c] = r == NONE or r == RECOVERY
             if axis == _HORIZONTAL and dgrid:
                 ok[c] = ok[c] and abs(c_th[c]) < pi_cut
-        i_lo, f_lo = _first_ok(ok, k0, -1, c_lo, c_hi)
-        i_hi, f_hi = _first_ok(ok, k0, 1, c_lo, c_hi)
+        i_lo, f_lo = first_ok(ok, k0, -1, c_lo, c_hi)
+        i_hi, f_hi = first_ok(ok, k0, 1, c_lo, c_hi)
         if conflict:
             res_lo[n] = values[n, i_lo] if f_lo else -INF
             res_hi[n] = values[n, i_hi] if f_hi else INF
