@@ -31,7 +31,7 @@ import struct
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
 
-from daa_sil.config.settings import VEHICLE_SYSID
+from daa_sil.config.settings import STEP, VEHICLE_SYSID
 from daa_sil.link.codec import mavlink as M
 from daa_sil.link.messages import wire_int
 
@@ -129,7 +129,7 @@ class GcsServices:
 
     params: ParamTable
     plant: Plant
-    dt: float = 1.0
+    dt: float = STEP.default
     writable: frozenset = frozenset({"gcs"})
     events: "list[SettingEvent]" = field(default_factory=list)
     answered: int = 0

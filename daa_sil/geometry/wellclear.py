@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from daa_sil.config.settings import STEP
 from daa_sil.compiled import loaded_kernels
 from .thresholds import Thresholds, get_thresholds
 from .units import FT
@@ -302,7 +303,7 @@ def nmac_interval_reference(s, v, th: "Thresholds | str | None" = None, t_end=1.
     return np.where(empty, np.inf, lo), np.where(empty, -np.inf, hi)
 
 
-def segment_events(s0, s1, dt: float = 1.0, th: "Thresholds | str | None" = None
+def segment_events(s0, s1, dt: float = STEP.default, th: "Thresholds | str | None" = None
                    ) -> tuple[np.ndarray, np.ndarray]:
     """LoWC and NMAC *anywhere* on the segment between two sampled relative positions ``dt`` apart.
 
@@ -372,7 +373,7 @@ def penetration_rate(s, v, th: "Thresholds | str | None" = None) -> np.ndarray:
     return np.where(wcv(s, v, th), penetration_depth(s, v, th.dthr, th.zthr, th.tthr), 0.0)
 
 
-def penetration_integral(s, v, dt: float = 1.0, th: "Thresholds | str | None" = None, axis: int = 0
+def penetration_integral(s, v, dt: float = STEP.default, th: "Thresholds | str | None" = None, axis: int = 0
                          ) -> np.ndarray:
     """PI = sum over samples of ``penetration_rate * dt`` (s), along time ``axis`` of ``s``/``v``.
 
