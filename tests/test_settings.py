@@ -151,3 +151,49 @@ def test_a_campaign_reads_the_duration_range():
         with pytest.raises(UsageError, match="duration"):
             CampaignConfig(duration_s=bad).validate()
     CampaignConfig(duration_s=1.0).validate()
+
+
+def test_a_scenario_sets_projl_n_as_it_sets_w_t(tmp_path, capsys):
+    """ProjL's N is a per-group setting like W_T: a scenario sets it (by its name, or the old key with
+    a notice); a run configuration's value holds where the scenario gives none, a flag's over both."""
+    from daa_sil.config.overrides import Overrides
+    from daa_sil.config.run_config import config_from_dict
+    from daa_sil.sil.scenario import load_scenario
+    from vehicle.core import resolve_policy
+
+    d = yaml.safe_load((ROOT / "scenarios" / "head_on.yaml").read_text())
+    d["allocation"].update(projl_horizon_s=15, wait_threshold_s=6)
+    f = tmp_path / "n.yaml"
+    f.write_text(yaml.safe_dump(d))
+    sc = load_scenario(f)
+    pol = resolve_policy(sc)
+    assert (pol.projl_horizon_s, pol.wait_threshold_s) == (15.0, 6.0)
+    config = config_from_dict({"allocation": {"projl_horizon_s": 30, "wait_threshold_s": 8}, "link": {"link_timeout_s": 9}})
+    pol = resolve_policy(sc, config=config)
+    assert (pol.projl_horizon_s, pol.wait_threshold_s, pol.link_timeout_s) == (15.0, 6.0, 9.0)
+    pol = resolve_policy(sc, config=config, flags=Overrides.of_values({S.PROJL_HORIZON: 20.0}))
+    assert (pol.projl_horizon_s, pol.wait_threshold_s) == (20.0, 6.0)
+    del d["allocation"]["projl_horizon_s"]
+    d["allocation"]["projl_lookahead"] = 12
+    f.write_text(yaml.safe_dump(d))
+    capsys.readouterr()
+    assert resolve_policy(load_scenario(f)).projl_horizon_s == 12.0
+    assert "allocation.projl_lookahead is now called allocation.projl_horizon_s" in capsys.readouterr().err
+    d["allocation"]["projl_lookahead"] = 121
+    f.write_text(yaml.safe_dump(d))
+    with pytest.raises(FileFormatError, match=r"allocation.projl_lookahead: must be within \[0, 120\], got 121"):
+        load_scenario(f)
+
+
+def test_the_legacy_reading_of_an_old_campaign_file():
+    """A campaign.json that records no reading was flown before readings were recorded: under the
+    simulator's first reading, ``extended`` (not today's default)."""
+    from daa_sil.config.readings import DEFAULT_READING, LEGACY_READING, READINGS
+    from daa_sil.study.campaign_config import CampaignConfig
+
+    assert LEGACY_READING == "extended" and LEGACY_READING in READINGS and DEFAULT_READING == "paper"
+    d = CampaignConfig(groups=("B-2",), n_encounters=3).to_dict()
+    del d["reading"]
+    assert CampaignConfig.from_dict(d).reading == LEGACY_READING
+    d["reading"] = "paper"
+    assert CampaignConfig.from_dict(d).reading == "paper"

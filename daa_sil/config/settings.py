@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 from dataclasses import dataclass
 from typing import Any
 
@@ -218,6 +219,8 @@ def register(setting: Setting) -> Setting:
         raise UsageError(f"setting {key}: {clash[0]} already names another setting")
     if setting.per_group and (setting.lo is None or setting.applies not in APPLIES):
         raise UsageError(f"setting {key}: a per-group setting needs a numeric range and applies in {APPLIES}")
+    if setting.per_group and "daa_sil.config.policy" in sys.modules:  # its field would be missing: say so
+        raise UsageError(f"setting {key}: register a per-group setting before daa_sil.config.policy is imported")
     ALL[key] = setting
     return setting
 
