@@ -20,12 +20,11 @@ pilot's link.
 
 from __future__ import annotations
 
+from daa_sil.config.settings import STEP
 from daa_sil.link.codec import mavlink as M
 
 from . import identity as ident
 from . import telemetry as T
-from daa_sil.config.settings import STEP
-
 from .core import resolve_policy
 
 #: STATUSTEXT prefix of the boot's progress lines

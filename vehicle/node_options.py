@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from daa_sil.config.settings import GCS_PORT, udp
-from pathlib import Path
 
 
 @dataclass
