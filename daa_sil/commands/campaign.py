@@ -216,7 +216,8 @@ def _config_from_args(args):
     given = {"groups": parse_groups(args.groups) if args.groups is not None else None,
              "n_encounters": args.encounters, "seed": args.seed, "chunk_size": args.chunk_size,
              "preset": args.preset.lower() if args.preset else None, "duration_s": args.duration,
-             "waitmap": args.waitmap, "gamma": args.gamma, "latency": args.latency, "n_intruders": args.intruders, "reading": args.reading,
+             "waitmap": args.waitmap, "gamma": args.gamma, "latency": args.latency, "n_intruders": args.intruders,
+             "reading": args.reading,
              "reading_set": parse_reading_settings(args.reading_set) if args.reading_set else None}
     if args.preset and args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
