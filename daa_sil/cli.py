@@ -10,7 +10,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
+import threading
 
 from . import __version__
 from .commands.common_args import OneLineParser as _Parser
@@ -100,8 +102,6 @@ def _end_on_further_signals(code: int) -> None:
     """After the interrupt's line the command has stopped its workers and children and the interpreter
     is shutting down: another Ctrl-C (a user pressing it twice) is ignored, instead of a traceback from
     the exit handler it would interrupt; SIGTERM or SIGHUP end the process at once with ``code``."""
-    import signal
-
     def end_now(signum, frame):
         os._exit(code)
 
@@ -110,6 +110,11 @@ def _end_on_further_signals(code: int) -> None:
             signal.signal(getattr(signal, name), handler)
         except (AttributeError, ValueError):  # no such signal here, or not the main thread
             pass
+
+
+def _restore_ctrl_c() -> None:
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def main(argv: "list[str] | None" = None) -> int:
@@ -127,7 +132,10 @@ def main(argv: "list[str] | None" = None) -> int:
         print(f"daa-sil: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt as exc:
-        return _interrupted("daa-sil", exc, whole_process=whole)
+        code = _interrupted("daa-sil", exc, whole_process=whole)
+        if not whole:  # a caller from Python gets its Ctrl-C back (signals_interrupt left it ignored)
+            _restore_ctrl_c()
+        return code
     except BrokenPipeError:
         return 0
     return int(rc or 0)

@@ -17,7 +17,7 @@ lookup, the DAA configuration and the allocation policy. :meth:`OnboardCore.step
 4. evaluates LoWC and NMAC on the continuous segment ``[t_k, t_k + dt]``
    (:func:`daa_sil.geometry.wellclear.segment_events`; an event strictly between samples is detected),
    the time spent in LoWC on the segment, the minimum range on it, and the penetration integral over the segment's LoWC interval
-   (:func:`daa_sil.geometry.wellclear.segment_penetration`, with the preset's and with the paper's constants).
+   (:func:`daa_sil.geometry.penetration.segment_penetration`, with the preset's and with the paper's constants).
 
 Sans-IO: no sockets, no clock; the caller supplies ``t`` and the pilot input and moves the bytes.
 """
@@ -33,6 +33,7 @@ import numpy as np
 from daa_sil.config.settings import STEP
 from daa_sil.decision import Decision
 from .geometry import wellclear as wc
+from daa_sil.geometry import penetration as pen
 from daa_sil.geometry.frames import wrap_pi
 from daa_sil.geometry.kinematics import AircraftState, Command, Performance, advance, fly_command
 from .daa.alerting import relative_state
@@ -285,8 +286,8 @@ class OnboardCore:
         if self.outcomes:
             out.lowc_time_s = np.where(lowc_m, np.maximum(t_out - t_in, 0.0), 0.0).max(axis=1)
             # PI on the same segment and LoWC interval that detect the LoWC (issue 14)
-            out.pi_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.pi_constants(self.th)).max(axis=1)
-            out.pi_paper_s = wc.segment_penetration(s0, v_seg, t_in, t_out, wc.PAPER_PI_CONSTANTS).max(axis=1)
+            out.pi_s = pen.segment_penetration(s0, v_seg, t_in, t_out, pen.pi_constants(self.th)).max(axis=1)
+            out.pi_paper_s = pen.segment_penetration(s0, v_seg, t_in, t_out, pen.PAPER_PI_CONSTANTS).max(axis=1)
             rmin, vsep = wc.min_separation_on_segment(s0, s1)
             j = np.argmin(rmin, axis=1)
             rows = np.arange(self.n)
@@ -295,3 +296,31 @@ class OnboardCore:
         self.k += 1
         self.t = float(t) + self.dt
         return out
+
+
+def step_columns(out: StepOutput, delay_up: np.ndarray, delay_down: np.ndarray) -> dict:
+    """Step-log columns (:mod:`daa_sil.steplog`) of one :class:`StepOutput` (N encounters): the one row
+    builder of fast-time and the SIL vehicle (which takes its row with :func:`daa_sil.steplog.step_row`).
+    ``delay_up``, ``delay_down``: the link delays (s) at this step, ``(N,)`` or a scalar. Angles in
+    degrees; codes stay integers (the step log names them)."""
+    d, g, own, intr = out.decisions, out.geometry, out.own, out.intruders
+    deg = np.degrees
+    cols = {"step": np.full(own.shape[0], out.step, np.int32), "t": np.full(own.shape[0], out.t),
+            "own_x": own.x, "own_y": own.y, "own_z": own.z, "own_gs": own.gs, "own_trk_deg": deg(own.trk),
+            "own_vs": own.vs, "intr_x": intr.x, "intr_y": intr.y, "intr_z": intr.z, "intr_gs": intr.gs,
+            "intr_trk_deg": deg(intr.trk), "intr_vs": intr.vs, "range_m": g["range_m"], "hmd_m": g["hmd_m"],
+            "dh_m": g["dh_m"], "tau_mod_s": g["tau_mod_s"], "alert_level": out.telemetry.alert_level,
+            "wcv": g["wcv"], "delay_up_s": delay_up, "delay_down_s": delay_down, "lowc": out.lowc, "nmac": out.nmac}
+    for k in ("decision", "rule", "authority", "wait_s", "projl", "decided_by", "wait_p_lowc", "wait_in_box",
+              "wait_map_turn_dps", "pilot_cmd_received", "pilot_cmd_age_s", "sm_pilot", "sm_exec", "pilot_axis",
+              "pilot_dir", "exec_axis", "exec_dir"):
+        cols[k] = d[k]
+    cols["intr_turn_est_dps"] = deg(out.turn_est)
+    for src, dst in (("cmd", "cmd"), ("pilot", "pilot"), ("daa", "daa")):
+        cols[f"{dst}_trk_deg"] = deg(d[f"{src}_trk"])
+        cols[f"{dst}_vs"] = d[f"{src}_vs"]
+        cols[f"{dst}_gs"] = d[f"{src}_gs"]
+    cols.update(out.telemetry.extra)
+    return cols
+
+

@@ -24,20 +24,24 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from daa_sil.daa.config import AXIS_NAMES, DIR_NAMES, REGION_NAMES, RULE_NAMES
+from daa_sil.decision import AUTHORITY_NAMES, DECIDED_BY_NAMES, DECISION_NAMES
+
 from .errors import FileFormatError, UsageError
 from .files import atomic_path, local_file
 
 #: schema version stored in the file metadata under ``daa_sil.steplog``
 STEPLOG_VERSION = "2"
 
-# vocabularies of the string columns (integer codes index these tuples)
-DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
-RULES = ("-", "axis_dir", "axis", "any", "best_effort")
-AUTHORITIES = ("pilot", "daa", "waiting")
-AXES = ("none", "horizontal", "vertical", "speed")
-DIRECTIONS = ("none", "left", "right", "up", "down", "faster", "slower")
-REGIONS = ("none", "far", "mid", "near", "recovery")
-DECIDED_BY = ("none", "map", "projl", "both", "neither", "kept")  # daa_sil.decision.DECIDED_BY_NAMES
+# vocabularies of the string columns (integer codes index these tuples): the agent's and the DAA's code
+# names (daa_sil.decision.CODE_NAMES, daa_sil.daa.config), defined there once
+DECISIONS = DECISION_NAMES
+RULES = RULE_NAMES
+AUTHORITIES = AUTHORITY_NAMES
+AXES = AXIS_NAMES
+DIRECTIONS = DIR_NAMES
+REGIONS = REGION_NAMES
+DECIDED_BY = DECIDED_BY_NAMES
 
 #: values renamed since bba2fd8, applied when a step log (or a campaign table) is read: column -> {old: new}.
 #: The waiting authority was ``hold``, the same word as the pilot's "hold the current course" command
@@ -189,6 +193,56 @@ class StepLogBuilder:
         return table.take(pa.array(np.arange(k * n).reshape(k, n).T.ravel()))
 
 
+def step_row(cols: Mapping[str, np.ndarray], i: int = 0, encounter_id: int = 0) -> dict:
+    """Row ``i`` of one step's columns (as :meth:`StepLogBuilder.append` takes them, e.g.
+    :func:`daa_sil.onboard.step_columns`) as plain Python values, one per :data:`STEP_COLUMNS`: numbers,
+    bools, names for the coded string columns, lists for the per-intruder and band columns (the bands
+    cut to ``bands_count``). A float column that is missing is nan. The SIL vehicle keeps its step log as
+    these rows, and sends them to the live viewer."""
+    row: dict = {}
+    for f in STEP_SCHEMA:
+        name, typ = f.name, f.type
+        if name == "encounter_id":
+            row[name] = int(encounter_id)
+            continue
+        if name in BAND_COLUMNS:
+            continue
+        if name not in cols:
+            if typ != _F:
+                raise UsageError(f"step log column {name!r} is missing")
+            row[name] = float("nan")
+            continue
+        a = np.asarray(cols[name])
+        if name in INTRUDER_COLUMNS:
+            row[name] = _plain_list(a[i], typ.value_type, VOCAB.get(name))
+            continue
+        v = a[i] if a.ndim else a
+        row[name] = _plain_list(np.asarray(v).reshape(1), typ, VOCAB.get(name))[0]
+    row.update(band_row(cols, i))
+    return row
+
+
+def band_row(cols: Mapping[str, np.ndarray], i: int = 0) -> dict:
+    """The :data:`BAND_COLUMNS` of row ``i`` (padded ``(N, B)`` with ``bands_count``, as
+    :func:`daa_sil.onboard.band_intervals` gives them) as lists cut to the row's count, regions named;
+    empty lists without bands."""
+    counts = np.asarray(cols.get("bands_count", 0))
+    count = int(counts[i] if counts.ndim else counts)
+    return {name: _plain_list(np.asarray(cols[name])[i, :count] if count else np.zeros(0), typ,
+                              VOCAB.get(name))
+            for name, typ in BAND_COLUMNS.items()}
+
+
+def _plain_list(vals: np.ndarray, typ: pa.DataType, vocab: "tuple[str, ...] | None") -> list:
+    """``vals`` as a list of Python values of column type ``typ`` (codes named through ``vocab``)."""
+    vals = np.asarray(vals)
+    if typ == _S:
+        if vals.dtype.kind in "iu":
+            return [vocab[int(c)] for c in vals.tolist()]
+        return [str(v) for v in vals.tolist()]
+    return vals.astype(_np_dtype(typ)).tolist()
+
+
 def _values(vals: np.ndarray, typ: pa.DataType, vocab: "tuple[str, ...] | None") -> pa.Array:
     if typ == _S:
         return _string_array(vals, vocab)
@@ -300,7 +354,7 @@ def cells_equal(a, b) -> bool:
     return a == b
 
 
-__all__ = ["cells_equal", "STEP_SCHEMA", "STEP_COLUMNS", "STEPLOG_VERSION", "INTRUDER_COLUMNS", "BAND_COLUMNS", "VOCAB",
+__all__ = ["cells_equal", "step_row", "band_row", "STEP_SCHEMA", "STEP_COLUMNS", "STEPLOG_VERSION", "INTRUDER_COLUMNS", "BAND_COLUMNS", "VOCAB",
            "DECISIONS", "RULES", "AUTHORITIES", "AXES", "DIRECTIONS", "REGIONS", "StepLogBuilder",
            "concat_steplogs", "write_steplog", "read_steplog", "check_steplog_schema", "steplog_metadata", "RENAMED",
            "rename_legacy"]

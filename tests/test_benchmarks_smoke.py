@@ -42,10 +42,10 @@ def run(script: str, args: list[str], cwd: Path, timeout: float = 900.0) -> subp
 
 def test_every_benchmark_is_covered():
     scripts = {p.name for p in BENCH.glob("*.py")}
-    # compare_campaigns.py, check_identity.py and bench_daidalus.py are tested below; sil_probe.py (bench_sil.py's)
-    # and baseline_paths.py (where the baseline is installed) are helpers
+    # compare_campaigns.py, check_identity.py and bench_daidalus.py are tested below; sil_probe.py and sil_realtime.py
+    # (bench_sil.py's) and baseline_paths.py (where the baseline is installed) are helpers
     assert scripts - set(CASES) == {"compare_campaigns.py", "check_identity.py", "bench_daidalus.py", "sil_probe.py",
-                                    "baseline_paths.py"}
+                                    "sil_realtime.py", "baseline_paths.py"}
 
 
 def test_bench_daidalus_without_a_jar_says_so_in_one_line(tmp_path):

@@ -70,13 +70,10 @@ def test_two_ctrl_c_stop_the_campaign_with_one_line(tmp_path, workers):
         os.killpg(proc.pid, signal.SIGINT)
         time.sleep(0.02)
         os.killpg(proc.pid, signal.SIGINT)
-        t0 = time.monotonic()
-        rc, err = finish(proc)
-        took = time.monotonic() - t0
+        rc, err = finish(proc)  # a hang fails after WAIT_S
         assert rc == 130, err
         bounded.one_error_line(err, "daa-sil: interrupted by SIGINT", f"daa-sil campaign run --out {out} --resume")
         assert not bounded.wait_gone(kids, 10.0), [p.pid for p in bounded.alive(kids)]
-        assert took < 30.0, took  # "within seconds" (measured: 0.03-0.1 s)
     finally:
         bounded.kill_session(proc, kids)
     if workers > 1:
@@ -151,3 +148,29 @@ def test_a_finished_campaign_names_the_report_step(tmp_path):
     assert cp.returncode == 0, cp.stderr
     assert f"next: daa-sil campaign report {out}" in cp.stderr
     assert not (out / ".daa-sil.lock").exists()  # the lock goes with the run
+
+
+def test_a_ctrl_c_while_the_command_stops_is_ignored():
+    """The first Ctrl-C stops the command; a second one a few ms later, while it cleans up or reports,
+    must not escape as a bare KeyboardInterrupt (the interpreter would die by SIGINT, status -2)."""
+    from daa_sil.sil.children import signals_interrupt
+
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with signals_interrupt():
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(5.0)  # the handler raises at once
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+        os.kill(os.getpid(), signal.SIGINT)  # the second Ctrl-C: ignored, no exception
+        time.sleep(0.05)
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def test_an_uninterrupted_block_gives_ctrl_c_back():
+    from daa_sil.sil.children import signals_interrupt
+
+    before = signal.getsignal(signal.SIGINT)
+    with signals_interrupt():
+        pass
+    assert signal.getsignal(signal.SIGINT) is before

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from daa_sil.geometry import wellclear as wc
+from daa_sil.geometry import penetration as pen
 from daa_sil.agent import PilotInput, policy_for_group
 from daa_sil.daa import DaaConfig
 from daa_sil.daa.alerting import relative_state
@@ -13,23 +14,23 @@ from daa_sil.onboard import OnboardCore
 from daa_sil.geometry.thresholds import PAPER
 from daa_sil.geometry.units import FT
 
-PRESET = wc.pi_constants(PAPER)
+PRESET = pen.pi_constants(PAPER)
 
 
 def _segment_pi(s0, s1, constants=PRESET, th=PAPER, dt=1.0):
     s0, s1 = np.asarray(s0, float), np.asarray(s1, float)
     v = (s1 - s0) / dt
     t_in, t_out = wc.violation_interval(s0, v, th, 0.0, dt)
-    return wc.segment_penetration(s0, v, t_in, t_out, constants), t_in, t_out
+    return pen.segment_penetration(s0, v, t_in, t_out, constants), t_in, t_out
 
 
 def test_constants_are_the_papers_and_the_presets():
-    assert wc.PAPER_PI_CONSTANTS == pytest.approx((1219.2, 137.16, 35.0))
+    assert pen.PAPER_PI_CONSTANTS == pytest.approx((1219.2, 137.16, 35.0))
     assert PRESET == (1220.0, 122.0, 35.0)
     # a point straight above at 61 m inside DMOD: 1 - 61/122 = 0.5 (preset), 1 - 61/137.16 (paper Eq.)
     s, v = np.array([0.0, 0.0, 61.0]), np.array([0.0, 0.0, 0.0])
-    assert wc.penetration_depth(s, v, *PRESET) == pytest.approx(0.5)
-    assert wc.penetration_depth(s, v, *wc.PAPER_PI_CONSTANTS) == pytest.approx(1 - 61 / 137.16)
+    assert pen.penetration_depth(s, v, *PRESET) == pytest.approx(0.5)
+    assert pen.penetration_depth(s, v, *pen.PAPER_PI_CONSTANTS) == pytest.approx(1 - 61 / 137.16)
 
 
 def test_vertical_pass_between_samples_is_a_tent():
@@ -38,14 +39,14 @@ def test_vertical_pass_between_samples_is_a_tent():
     1 - |z|/122 rising to 1 and back: the tent's area is 244/600 s."""
     s0, s1 = np.array([0.0, 0.0, 150.0]), np.array([0.0, 0.0, -150.0])
     v = s1 - s0
-    assert wc.penetration_rate(s0, v, PAPER) == 0 and wc.penetration_rate(s1, v, PAPER) == 0
+    assert pen.penetration_rate(s0, v, PAPER) == 0 and pen.penetration_rate(s1, v, PAPER) == 0
     pi, t_in, t_out = _segment_pi(s0, s1)
     assert t_in == pytest.approx(28 / 300) and t_out == pytest.approx(272 / 300)
     assert pi == pytest.approx(244 / 600, rel=1e-9)  # midpoint rule is exact on this tent
     # the paper's constants: 1 - |z|/137.16 over the same interval |z| <= 122 m
     half = 122 / 300
     expect = 2 * (half - 300 * half ** 2 / (2 * 137.16))
-    pi_p, _, _ = _segment_pi(s0, s1, wc.PAPER_PI_CONSTANTS)
+    pi_p, _, _ = _segment_pi(s0, s1, pen.PAPER_PI_CONSTANTS)
     assert pi_p == pytest.approx(expect, rel=1e-9)
     assert pi_p > pi  # a larger vertical scale means a deeper penetration
 
@@ -55,7 +56,7 @@ def _dense_reference(s0, v, dt=1.0, th=PAPER, nodes=200_001):
     per node, no violation interval involved)."""
     t = np.linspace(0.0, dt, nodes)
     pts = s0[..., None, :] + t[:, None] * v[..., None, :]
-    f = wc.penetration_rate(pts, np.broadcast_to(v[..., None, :], pts.shape), th)
+    f = pen.penetration_rate(pts, np.broadcast_to(v[..., None, :], pts.shape), th)
     return np.trapezoid(f, t, axis=-1)
 
 
@@ -67,7 +68,7 @@ def test_random_segments_agree_with_dense_quadrature():
     s0 = rng.uniform(-1, 1, (n, 3)) * [2500, 2500, 250]
     v = rng.uniform(-1, 1, (n, 3)) * [300, 300, 150]
     t_in, t_out = wc.violation_interval(s0, v, PAPER, 0.0, 1.0)
-    pi = wc.segment_penetration(s0, v, t_in, t_out, PRESET)
+    pi = pen.segment_penetration(s0, v, t_in, t_out, PRESET)
     inside = np.isfinite(t_in)
     assert inside.sum() > 200 and (pi > 0.05).sum() > 100  # a non-trivial population
     ref = np.zeros(n)
@@ -95,9 +96,9 @@ def test_lowc_strictly_between_samples_gets_a_positive_pi_in_the_core():
     s0 = out.own.position()[:, None] - out.intruders.position()
     s1 = core.own.position()[:, None] - core.intruders.position()
     v = s1 - s0
-    assert wc.penetration_rate(s0, v, PAPER)[0, 0] == 0 and wc.penetration_rate(s1, v, PAPER)[0, 0] == 0
+    assert pen.penetration_rate(s0, v, PAPER)[0, 0] == 0 and pen.penetration_rate(s1, v, PAPER)[0, 0] == 0
     # what the old sample-based PI summed: the penetration rate of the sampled state and velocity
-    assert wc.penetration_rate(*relative_state(out.own, out.intruders), PAPER).max() == 0
+    assert pen.penetration_rate(*relative_state(out.own, out.intruders), PAPER).max() == 0
     assert out.lowc[0] and out.pi_s[0] > 0.3 and out.pi_paper_s[0] > out.pi_s[0]
     z0, z1 = -s0[0, 0, 2], -s1[0, 0, 2]  # intruder above the ownship: +150 then about -150
     slope = abs(z1 - z0)

@@ -1,5 +1,5 @@
-"""The README's tables say what the commands do: the preset each input flies when none is named,
-and the shim's options (``--listen-vehicle`` / ``--listen-gcs`` are its sockets; ``--vehicle`` /
+"""The tables of the command reference (docs/usage.md) say what the commands do: the preset each
+input flies when none is named, and the shim's options (``--listen-vehicle`` / ``--listen-gcs`` are its sockets; ``--vehicle`` /
 ``--gcs`` name its peers). Each claim is checked against what the command records or parses."""
 
 from __future__ import annotations
@@ -13,13 +13,13 @@ from pathlib import Path
 from daa_sil.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
-README = (ROOT / "README.md").read_text(encoding="utf-8")
+USAGE = (ROOT / "docs" / "usage.md").read_text(encoding="utf-8")  # the command and preset tables
 
 
 def preset_rows() -> dict[str, str]:
-    """``{preset: its row's first cell}`` of the README's threshold-preset table."""
+    """``{preset: its row's first cell}`` of the threshold-preset table."""
     rows = {}
-    for line in README.splitlines():
+    for line in USAGE.splitlines():
         m = re.match(r"\| `(\w+)`([^|]*)\|", line)
         if m and m.group(1) in ("do365", "paper", "daidalus"):
             rows.setdefault(m.group(1), m.group(2).strip())
@@ -50,7 +50,7 @@ def test_the_preset_table_names_the_default_of_each_input():
 
 
 def test_the_preset_table_default_of_waitmap_build(tmp_path):
-    from daa_sil.waitmap.store import load_family
+    from daa_sil.waitmap.family_files import load_family
 
     named = next(p for p, cell in preset_rows().items() if "`waitmap build`" in cell)
     with contextlib.redirect_stdout(io.StringIO()):
@@ -62,7 +62,7 @@ def test_the_preset_table_default_of_waitmap_build(tmp_path):
 def test_the_shim_row_shows_the_options_that_set_its_sockets():
     from daa_sil.commands.shim import build_parser
 
-    row = next(line for line in README.splitlines() if line.startswith("| `daa-sil shim"))
+    row = next(line for line in USAGE.splitlines() if line.startswith("| `daa-sil shim"))
     usage = row.split("`")[1]
     options = re.findall(r"--[a-z][a-z-]*", usage)
     known = {o for a in build_parser()._actions for o in a.option_strings}

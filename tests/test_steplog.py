@@ -139,3 +139,39 @@ def test_cells_equal_treats_nan_as_equal_and_compares_lists_elementwise():
     assert cells_equal(nan, nan) and cells_equal([1.0, nan], [1.0, nan]) and cells_equal("wait", "wait")
     assert not cells_equal(nan, 0.0) and not cells_equal([1.0], [1.0, 2.0]) and not cells_equal([1.0, 2.0], [1.0, 2.5])
     assert not cells_equal(1.0, 1.0 + 1e-12)  # exact: parity means identical logs
+
+
+def test_step_row_is_the_builders_row():
+    """The SIL vehicle's row of a step (``step_row``) is the row fast-time's builder writes for it: every
+    cell, named codes, bands cut to their count, plain Python types (the live feed sends them as JSON)."""
+    n, m, k = 3, 2, 3
+    ids = np.array([7, 8, 9])
+    tab = _build(n, m, k)
+    by_key = {(r["encounter_id"], r["step"]): r for r in tab.to_pylist()}
+    rows = []
+    for step in range(k):
+        cols = _step_cols(step, n, m)
+        for i in range(n):
+            row = sl.step_row(cols, i, encounter_id=int(ids[i]))
+            assert list(row) == list(sl.STEP_COLUMNS)
+            want = by_key[(int(ids[i]), step)]
+            assert all(sl.cells_equal(row[c], want[c]) for c in sl.STEP_COLUMNS), \
+                [c for c in sl.STEP_COLUMNS if not sl.cells_equal(row[c], want[c])]
+            assert row["bands_trk_region"] == [sl.REGIONS[j % len(sl.REGIONS)] for j in range(i)]
+            assert type(row["step"]) is int and type(row["own_x"]) is float and type(row["lowc"]) is bool
+            assert all(type(v) is int for v in row["alert_level"]) and type(row["decision"]) is str
+            rows.append(row)
+    # the vehicle's table of rows is the builder's table, rows in the same order
+    order = sorted(range(len(rows)), key=lambda j: (rows[j]["encounter_id"], rows[j]["step"]))
+    again = pa.Table.from_pylist([rows[j] for j in order], schema=sl.STEP_SCHEMA)
+    assert again.num_rows == tab.num_rows
+    assert all(sl.cells_equal(a[c], b[c]) for a, b in zip(again.to_pylist(), tab.to_pylist()) for c in sl.STEP_COLUMNS)
+
+
+def test_step_row_fills_missing_floats_and_refuses_other_missing_columns():
+    cols = _step_cols(0, 2, 1)
+    del cols["sm_pilot"]
+    assert np.isnan(sl.step_row(cols, 1)["sm_pilot"])
+    del cols["decision"]
+    with pytest.raises(UsageError, match="decision"):
+        sl.step_row(cols, 0)

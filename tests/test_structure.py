@@ -15,6 +15,9 @@ uses it). The test reads every ``.py`` file of ``daa_sil/``, ``vehicle/`` and ``
 A package's ``__init__.py`` re-exporting a submodule's private name is a crossing too: the package
 and its submodule are two modules. Dunder names (``__all__``, ``__version__``, ``__main__``) are not
 private. Run ``python tests/test_structure.py`` to list the crossings with their lines.
+
+It also finds import circles, and holds every module of ``daa_sil/``, ``vehicle/``, ``gcs/`` and
+``benchmarks/`` to :data:`MAX_MODULE_LINES` lines (the generated dialect excepted, tests exempt).
 """
 
 from __future__ import annotations
@@ -336,3 +339,50 @@ def test_no_import_circle_among_our_modules():
     circles = import_circles(graph)
     assert not circles, "import circles (module-level imports, TYPE_CHECKING included):\n" + "\n".join(
         " <-> ".join(c) for c in circles)
+
+
+# --- module size ---------------------------------------------------------------------------------------
+#: a module does one job: at most this many lines (CONTRIBUTING.md, "Style"); split a module by meaning past it
+MAX_MODULE_LINES = 400
+#: the directories the limit covers (tests are exempt; the generated MAVLink dialect is not written here)
+SIZED = ("daa_sil", "vehicle", "gcs", "benchmarks")
+
+
+def oversized(root: Path = ROOT, limit: int = MAX_MODULE_LINES) -> list[str]:
+    """``path: N lines`` of every ``.py`` file under :data:`SIZED` of ``root`` longer than ``limit`` lines."""
+    out = []
+    for top in SIZED:
+        for path in sorted((root / top).rglob("*.py")):
+            rel = path.relative_to(root)
+            if ".venv" in rel.parts or "__pycache__" in rel.parts or is_generated(".".join(rel.with_suffix("").parts)):
+                continue
+            n = len(path.read_text(encoding="utf-8").splitlines())
+            if n > limit:
+                out.append(f"{rel}: {n} lines")
+    return out
+
+
+def test_the_size_check_on_a_hand_made_tree(tmp_path):
+    def write(rel: str, n: int) -> None:
+        p = tmp_path / rel
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text("x = 1\n" * n)
+
+    write("daa_sil/ok.py", MAX_MODULE_LINES)
+    write("daa_sil/sub/long.py", MAX_MODULE_LINES + 1)
+    write("vehicle/long.py", 2 * MAX_MODULE_LINES)
+    write("benchmarks/bench_long.py", MAX_MODULE_LINES + 1)
+    write("gcs/ok.py", 3)
+    write("daa_sil/link/dialect/daa_sil.py", 10 * MAX_MODULE_LINES)  # generated: excepted
+    write("tests/test_long.py", 10 * MAX_MODULE_LINES)  # tests: exempt
+    write("daa_sil/__pycache__/stale.py", 10 * MAX_MODULE_LINES)
+    assert oversized(tmp_path) == [f"daa_sil/sub/long.py: {MAX_MODULE_LINES + 1} lines",
+                                   f"vehicle/long.py: {2 * MAX_MODULE_LINES} lines",
+                                   f"benchmarks/bench_long.py: {MAX_MODULE_LINES + 1} lines"]
+
+
+def test_no_module_is_over_the_size_limit():
+    # the population: the walker sees modules of every covered directory
+    assert all(any((ROOT / top).rglob("*.py")) for top in SIZED)
+    over = oversized()
+    assert not over, f"modules over {MAX_MODULE_LINES} lines (split each by meaning):\n" + "\n".join(over)

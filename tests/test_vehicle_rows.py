@@ -1,5 +1,6 @@
 """The step log's band summary (one definition for fast-time and the SIL vehicle): the vectorised
-merge against a plain loop, one row (the vehicle's) and whole batches (fast-time's)."""
+merge against a plain loop, one row (the vehicle's, through :func:`daa_sil.steplog.band_row`) and whole
+batches (fast-time's)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,13 @@ import pytest
 
 from daa_sil.daa.config import REGION_NAMES
 from daa_sil.onboard import band_intervals
-from vehicle.core import track_intervals
+from daa_sil.steplog import band_row
+
+
+def track_intervals(values, regions):
+    """One encounter's band samples ``(K,)`` as its step-log row holds them: (lo, hi, region names)."""
+    r = band_row(band_intervals(np.asarray(values, float)[None, :], np.asarray(regions)[None, :]), 0)
+    return r["bands_trk_lo_deg"], r["bands_trk_hi_deg"], r["bands_trk_region"]
 
 
 def _loop(values, regions):

@@ -30,7 +30,8 @@ from daa_sil import waitmap
 from daa_sil.errors import FileFormatError
 from daa_sil.waitmap.build import build_members
 from daa_sil.waitmap.source import map_params
-from daa_sil.waitmap.store import ARRAYS, check_family, load, map_filename
+from daa_sil.waitmap.family_files import check_family
+from daa_sil.waitmap.store import ARRAYS, load, map_filename
 
 SMALL = "paper,dx=6,dy=6,dh=3,vi=3,vh=3,theta=4"  # 3,888 states: a map in well under a second
 RATES = waitmap.PAPER_TURN_RATES

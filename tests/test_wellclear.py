@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from daa_sil.geometry import penetration as pen
 from daa_sil.geometry import wellclear as wc
 from daa_sil.geometry.thresholds import DO365, PAPER, get_thresholds
 from daa_sil.errors import UsageError
@@ -149,11 +150,11 @@ def test_penetration_integral_bounds_and_zero_outside():
     s, v = rel([0, 0, 0, 0, 55, 0], [0, 6000, 0, 0, -95, 0])  # closure 150 m/s: collision at t = 40
     t = np.arange(0, 80.0)
     ss = s + t[:, None] * v
-    rate = wc.penetration_rate(ss, np.broadcast_to(v, ss.shape))
+    rate = pen.penetration_rate(ss, np.broadcast_to(v, ss.shape))
     inside = wc.wcv(ss, np.broadcast_to(v, ss.shape))
     assert np.all(rate[~inside] == 0)
     assert np.all((rate >= 0) & (rate <= 1))
-    pi = wc.penetration_integral(ss, np.broadcast_to(v, ss.shape), 1.0)
+    pi = pen.penetration_integral(ss, np.broadcast_to(v, ss.shape), 1.0)
     assert 0 < pi <= inside.sum()
     # at the collision point (HMD 0, dz 0, tau 0) the integrand is exactly 1
     k = int(np.argmin(wc.horizontal_range(ss)))

@@ -108,19 +108,6 @@ def link_delay_processes(sc: Scenario) -> "dict | None":
     return link_delay_processes(link_legs(sc), seeds["up"], seeds["down"], epoch_s=sc.link.epoch_s)
 
 
-def track_intervals(values_deg: np.ndarray, regions: np.ndarray) -> tuple[list, list, list]:
-    """One encounter's track band samples (deg, region codes; ``(K,)``) merged into ``(lo, hi, region
-    name)`` lists: :func:`daa_sil.onboard.band_intervals` (the one definition, shared with fast-time)
-    of that row, as the step-log row holds it."""
-    from daa_sil.daa.config import REGION_NAMES
-    from daa_sil.onboard import band_intervals
-
-    b = band_intervals(np.asarray(values_deg, float)[None, :], np.asarray(regions)[None, :])
-    c = int(b["bands_count"][0])
-    return (b["bands_trk_lo_deg"][0, :c].tolist(), b["bands_trk_hi_deg"][0, :c].tolist(),
-            [REGION_NAMES[i] for i in b["bands_trk_region"][0, :c].tolist()])
-
-
 #: step-log rows kept in memory (a day at 1 s steps); a vehicle that flies on past its scenario keeps
 #: flying, and its step log holds the first MAX_ROWS steps (``rows_dropped`` counts the rest)
 MAX_ROWS = 86_400
@@ -207,10 +194,10 @@ class VehicleCore:
             self.delay_up_s = self._delay_procs["up"].delay(t)
             self.delay_down_s = self._delay_procs["down"].delay(t)
         out = self.core.step(t, self.pilot_input(t))
-        dec = out.decisions  # (N = 1: its coded fields are named one value at a time, see _row)
+        dec = out.decisions
         self.last_authority = A.AUTHORITY_NAMES[int(dec.authority[0])]
         self.last_decision = A.DECISION_NAMES[int(dec.decision[0])]
-        self.last_row = self._row(out, dec)
+        self.last_row = self._row(out)
         if len(self.rows) < MAX_ROWS:
             self.rows.append(self.last_row)
         else:
@@ -226,39 +213,12 @@ class VehicleCore:
         self.icao.append(int(intr.icao))
         self.callsigns.append(str(intr.callsign))
 
-    def _row(self, out, dec) -> dict:
-        o, it, g = out.own, out.intruders, out.geometry
+    def _row(self, out) -> dict:
+        """The step-log row of this step: :func:`daa_sil.onboard.step_columns`, fast-time's builder, at N = 1."""
+        from daa_sil.onboard import step_columns
+        from daa_sil.steplog import step_row
 
-        def deg(a):  # (math.degrees is numpy's x * (180 / pi), bit for bit)
-            a = float(a)
-            return math.degrees(a) if math.isfinite(a) else math.nan
-
-        lo, hi, rg = track_intervals(np.asarray(out.decisions["bands_trk"][0], float),
-                                     np.asarray(out.decisions["bands_trk_region"][0]))
-        row = {"encounter_id": 0, "step": out.step, "t": out.t,
-               "own_x": float(o.x[0]), "own_y": float(o.y[0]), "own_z": float(o.z[0]), "own_gs": float(o.gs[0]),
-               "own_trk_deg": deg(o.trk[0]), "own_vs": float(o.vs[0]),
-               "intr_x": it.x[0].tolist(), "intr_y": it.y[0].tolist(), "intr_z": it.z[0].tolist(),
-               "intr_gs": it.gs[0].tolist(), "intr_trk_deg": np.degrees(it.trk[0]).tolist(),
-               "intr_vs": it.vs[0].tolist(), "range_m": g["range_m"][0].tolist(), "hmd_m": g["hmd_m"][0].tolist(),
-               "dh_m": g["dh_m"][0].tolist(), "tau_mod_s": g["tau_mod_s"][0].tolist(),
-               "alert_level": np.asarray(out.telemetry.alert_level[0]).astype(int).tolist(),
-               "wcv": np.asarray(g["wcv"][0]).astype(bool).tolist(),
-               "intr_turn_est_dps": np.degrees(np.asarray(out.turn_est[0], float)).tolist(),
-               "lowc": bool(out.lowc[0]), "nmac": bool(out.nmac[0]),
-               "delay_up_s": self.delay_up_s, "delay_down_s": self.delay_down_s,
-               "bands_trk_lo_deg": lo, "bands_trk_hi_deg": hi, "bands_trk_region": rg}
-        for k in ("decision", "rule", "authority", "decided_by", "pilot_axis", "pilot_dir", "exec_axis", "exec_dir"):
-            row[k] = A.CODE_NAMES[k][int(dec[k][0])]
-        for k in ("wait_s", "wait_p_lowc", "wait_map_turn_dps", "pilot_cmd_age_s", "sm_pilot", "sm_exec", "cmd_vs",
-                  "cmd_gs", "pilot_vs", "pilot_gs", "daa_vs", "daa_gs"):
-            row[k] = float(dec[k][0])
-        row["wait_in_box"] = bool(dec["wait_in_box"][0])
-        for k in ("cmd_trk", "pilot_trk", "daa_trk"):
-            row[f"{k}_deg"] = deg(float(dec[k][0]))
-        row["projl"] = bool(dec["projl"][0])
-        row["pilot_cmd_received"] = bool(dec["pilot_cmd_received"][0])
-        return row
+        return step_row(step_columns(out, self.delay_up_s, self.delay_down_s), 0)
 
     # -- outputs ------------------------------------------------------------------------------------
 

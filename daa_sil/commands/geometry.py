@@ -8,6 +8,7 @@ import json
 import numpy as np
 
 from daa_sil.geometry import wellclear as wc
+from daa_sil.geometry import penetration as pen
 from ..errors import UsageError
 from daa_sil.config.settings import STANDARD_PRESET
 from daa_sil.files import to_jsonable
@@ -78,7 +79,7 @@ def geometry_report(own: np.ndarray, intr: np.ndarray, preset: str = "do365", lo
         "violation_interval_s": interval,
         "time_to_violation_s": float(t_in) if np.isfinite(t_in) else None,
         "nmac_now": bool(wc.nmac(s, th)),
-        "penetration_rate": float(wc.penetration_rate(s, v, th)),
+        "penetration_rate": float(pen.penetration_rate(s, v, th)),
     }
     return to_jsonable(out)
 

@@ -168,7 +168,8 @@ def run_build(args) -> int:
     from daa_sil.out_dir import check_not_busy, claim_out_dir
     from ..waitmap.model import params_hash
     from ..waitmap.build import build_memory, default_workers
-    from ..waitmap.store import FAMILY_INDEX, map_filename, read_meta, write_family_index
+    from ..waitmap.family_files import FAMILY_INDEX, write_family_index
+    from ..waitmap.store import map_filename, read_meta
 
     rc = load_config(args.config) if args.config else None
     args.preset = args.preset or (rc.thresholds if rc else "paper")

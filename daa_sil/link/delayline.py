@@ -5,8 +5,9 @@ code (items are anything). Nothing here reads a clock or touches a socket: the c
 times in and asks for what is due.
 
 Release rule (FIFO, the default): ``release_i = max(t_i + d_i, release_{i-1})`` over the packets
-that are not dropped, where ``d_i`` is the delay process value at ``t_i``. The same arithmetic is
-available vectorised as :func:`fifo_release` for batched fast-time code.
+that are not dropped, where ``d_i`` is the delay process value at ``t_i``. :func:`fifo_release` is
+that rule, batched: fast-time calls it for every encounter at once, :meth:`DelayLine.push` for one
+packet, so the SIL shim and fast-time share one definition.
 
 Impairments, each drawn from the line's own seeded generator (three uniforms per pushed packet,
 whatever is enabled, so switching one knob does not shift the others' draws). ``push(..., key=K)``
@@ -47,22 +48,22 @@ from daa_sil.models.delay_process import DelayProcess, as_seed_sequence, child_s
 KEYED_BRANCH = 1
 
 
-def fifo_release(t_in: np.ndarray, delay: np.ndarray, keep: "np.ndarray | None" = None,
-                 prev_release: "float | np.ndarray" = -np.inf) -> np.ndarray:
-    """FIFO release times (s) along the last axis: ``r_i = max(t_i + d_i, r_{i-1})``.
+def fifo_release(t_in: "np.ndarray | Sequence[float]", delay: "np.ndarray | Sequence[float]",
+                 keep: "np.ndarray | None" = None, prev_release: "float | np.ndarray" = -np.inf) -> np.ndarray:
+    """FIFO release times (s) along the last axis: ``r_i = max(t_i + d_i, r_{i-1})``, the link's one FIFO rule.
 
-    ``t_in``, ``delay``: send times and sampled delays, shape ``(..., K)`` with packets in send
+    Fast-time calls it with a batch of encounters, :meth:`DelayLine.push` (the SIL shim) with one
+    packet. ``t_in``, ``delay``: send times and sampled delays, shape ``(..., K)`` with packets in send
     order. ``keep``: bool mask of packets that survive loss (dropped ones get ``inf`` and do not
     hold later packets back). ``prev_release``: release time of the last packet before this
     batch (scalar or ``(...)``), to continue a line across calls.
     """
-    t_in = np.asarray(t_in, dtype=float)
-    arrive = t_in + np.asarray(delay, dtype=float)
+    arrive = np.add(t_in, delay, dtype=float)
     if keep is not None:
         arrive = np.where(keep, arrive, -np.inf)
-    prev = np.asarray(prev_release, dtype=float)[..., None]
-    out = np.maximum.accumulate(np.concatenate([np.broadcast_to(prev, arrive.shape[:-1] + (1,)), arrive],
-                                               axis=-1), axis=-1)[..., 1:]
+    # max(r_0, a_1, ..., a_i) as max(cummax(a)_i, r_0): the same values, one array op fewer
+    out = np.maximum.accumulate(arrive, axis=-1)
+    np.maximum(out, np.asarray(prev_release, dtype=float)[..., None], out=out)
     if keep is not None:
         out = np.where(keep, out, np.inf)
     return out
@@ -237,7 +238,7 @@ class DelayLine:
             t_out = t_in + self.reorder_fraction * d
             self.counters.reordered += 1
         elif self.fifo:
-            t_out = max(t_in + d, self._last_release)
+            t_out = float(fifo_release((t_in,), (d,), prev_release=self._last_release)[0])
             if t_out > t_in + d:
                 self.counters.clamped += 1
             self._last_release = t_out

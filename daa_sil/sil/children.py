@@ -90,21 +90,38 @@ def signal_name(signum: int) -> str:
 
 @contextmanager
 def signals_interrupt(signals: Sequence[int] = INTERRUPT_SIGNALS) -> Iterator[None]:
-    """Within the block SIGTERM/SIGHUP raise :class:`Interrupted` in the main thread (as SIGINT raises
-    KeyboardInterrupt); the previous handlers come back afterwards. A no-op outside the main thread."""
+    """Within the block SIGTERM/SIGHUP raise :class:`Interrupted` in the main thread and SIGINT raises
+    KeyboardInterrupt; the previous handlers come back afterwards. After the first of them the command is
+    stopping: a further Ctrl-C (a user pressing it twice) is ignored, also after the block, until the
+    caller has reported it (:func:`daa_sil.cli.main` restores Ctrl-C for a caller from Python). A no-op
+    outside the main thread."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
+    interrupted = []
+
+    def stopping() -> None:  # the first interrupt: the command is stopping, a further Ctrl-C is ignored
+        interrupted.append(True)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
     def raise_interrupted(signum, frame):
+        stopping()
         raise Interrupted(signum)
 
+    def raise_keyboard(signum, frame):
+        stopping()
+        raise KeyboardInterrupt
+
     old = {s: signal.signal(s, raise_interrupted) for s in signals}
+    old_int = signal.signal(signal.SIGINT, raise_keyboard)
     try:
         yield
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+        if not interrupted:  # interrupted: Ctrl-C stays ignored while the caller reports and exits
+            signal.signal(signal.SIGINT, old_int)
 
 
 def interruptible(command: Callable) -> Callable:

@@ -76,9 +76,9 @@ from daa_sil.models.encounters import concat_encounters
 from daa_sil.models.latency import DEFAULT_EPOCH_S, DelayModel
 from daa_sil.models.pilot_config import PilotConfig
 from daa_sil.ground import GroundCore
-from daa_sil.onboard import OnboardCore
+from daa_sil.onboard import OnboardCore, step_columns
 from daa_sil.study.fasttime_results import (DECISION_SCHEMA, ENCOUNTER_SCHEMA, Accumulators, decision_table,
-                                            encounter_table, step_columns)
+                                            encounter_table)
 from daa_sil.study.slot_ring import SlotRing
 
 

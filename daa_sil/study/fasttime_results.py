@@ -1,6 +1,6 @@
 """Fast-time results: the per-encounter and per-decision tables of the architecture contract
-("Campaign result tables"), their accumulators over the steps, and the step-log columns of one
-step (:mod:`daa_sil.steplog`). A batch of several parts (:func:`daa_sil.study.fasttime.simulate_parts`)
+("Campaign result tables") and their accumulators over the steps (a step's step-log columns are
+:func:`daa_sil.onboard.step_columns`, shared with the SIL vehicle). A batch of several parts (:func:`daa_sil.study.fasttime.simulate_parts`)
 accumulates once and cuts one pair of tables per part (a row range of the batch)."""
 
 from __future__ import annotations
@@ -216,28 +216,3 @@ def encounter_table(acc: Accumulators, lo: int, hi: int, encounters, group: str,
         "dev_xtrack_m": pa.array(g(acc.dev_xtrack)), "dev_h_end_m": pa.array(g(acc.dev_end)),
     }
     return pa.Table.from_arrays(list(cols.values()), schema=ENCOUNTER_SCHEMA)
-
-
-def step_columns(out: StepOutput, delay_up: np.ndarray, delay_down: np.ndarray) -> dict:
-    """Step-log columns (:mod:`daa_sil.steplog`) of one :class:`StepOutput`."""
-    d, g, own, intr = out.decisions, out.geometry, out.own, out.intruders
-    deg = np.degrees
-    cols = {"step": np.full(own.shape[0], out.step, np.int32), "t": np.full(own.shape[0], out.t),
-            "own_x": own.x, "own_y": own.y, "own_z": own.z, "own_gs": own.gs, "own_trk_deg": deg(own.trk),
-            "own_vs": own.vs, "intr_x": intr.x, "intr_y": intr.y, "intr_z": intr.z, "intr_gs": intr.gs,
-            "intr_trk_deg": deg(intr.trk), "intr_vs": intr.vs, "range_m": g["range_m"], "hmd_m": g["hmd_m"],
-            "dh_m": g["dh_m"], "tau_mod_s": g["tau_mod_s"], "alert_level": out.telemetry.alert_level,
-            "wcv": g["wcv"], "delay_up_s": delay_up, "delay_down_s": delay_down, "lowc": out.lowc, "nmac": out.nmac}
-    for k in ("decision", "rule", "authority", "wait_s", "projl", "decided_by", "wait_p_lowc", "wait_in_box",
-              "wait_map_turn_dps", "pilot_cmd_received", "pilot_cmd_age_s", "sm_pilot", "sm_exec", "pilot_axis",
-              "pilot_dir", "exec_axis", "exec_dir"):
-        cols[k] = d[k]
-    cols["intr_turn_est_dps"] = deg(out.turn_est)
-    for src, dst in (("cmd", "cmd"), ("pilot", "pilot"), ("daa", "daa")):
-        cols[f"{dst}_trk_deg"] = deg(d[f"{src}_trk"])
-        cols[f"{dst}_vs"] = d[f"{src}_vs"]
-        cols[f"{dst}_gs"] = d[f"{src}_gs"]
-    cols.update(out.telemetry.extra)
-    return cols
-
-

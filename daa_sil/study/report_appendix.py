@@ -313,7 +313,7 @@ def methods_lines(blocks, studies, replicates: int, seed: int, conf: float) -> l
          "encounters; it is not a rate. It is compared with the paper's Table 7 at the paper's 666.67 flight hours. "
          "The rate is the number of LoWC encounters per flight hour (Clopper-Pearson on the encounters, scaled).",
          "- **PI**: integrated on the continuous segment between two steps over the exact LoWC interval the LoWC "
-         "detector finds (`daa_sil/geometry/wellclear.py: segment_penetration`, midpoint rule with 16 nodes on the "
+         "detector finds (`daa_sil/geometry/penetration.py: segment_penetration`, midpoint rule with 16 nodes on the "
          "interval), with the paper's Eq. constants (4000 ft / 450 ft / 35 s; column `pi_paper`) and with the "
          "preset's (column `pi`). A LoWC of positive duration cannot get PI = 0 (the per-group table counts any).",
          "- **Counts**: per encounter over the counting window of the reading; a reading's counting settings select "

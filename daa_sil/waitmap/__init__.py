@@ -36,7 +36,8 @@ from .cache import cache_dir
 from .grid import GRID_PRESETS, Axis, Grid, alerting_grid, fine_grid, paper_grid, resolve_grid
 from .lookup import LookupResult, WaitMap, WaitMapFamily
 from .model import PAPER_TURN_RATES, WAIT_DEFINITIONS, MdpParams
-from .store import FORMAT_VERSION, check_family, load, load_family, save, save_family
+from .family_files import check_family, load_family, save_family
+from .store import FORMAT_VERSION, load, save
 
 __all__ = [
     "Axis", "DEFAULT_MAP", "FORMAT_VERSION", "GRID_PRESETS", "Grid", "LookupResult", "MAP_PRESETS", "MdpParams",

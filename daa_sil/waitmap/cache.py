@@ -3,7 +3,7 @@
 and the file format, :func:`~daa_sil.waitmap.model.params_hash`).
 
 An entry holds one ``waitmap_turn*.npz`` per turn rate and ``family.json`` (written last). It is
-used only after :func:`~daa_sil.waitmap.store.load_family` has checked it against what this family
+used only after :func:`~daa_sil.waitmap.family_files.load_family` has checked it against what this family
 must be: the index against the expected turn rates and family hash, every map against the index
 (size, declared content hash, zip CRC-32 of every array). On any mismatch the entry is repaired
 with a one-line warning: maps that still prove whole (SHA-256 recomputed, same grid, parameters and
@@ -30,7 +30,8 @@ from .grid import Grid
 from .lookup import WaitMapFamily
 from .model import MdpParams, params_hash
 from .build import build_members
-from .store import FAMILY_INDEX, check_family, load, load_family, map_filename, read_meta, write_family_index
+from .family_files import FAMILY_INDEX, check_family, load_family, write_family_index
+from .store import load, map_filename, read_meta
 
 
 def cache_dir() -> Path:
@@ -45,7 +46,7 @@ def entry_path(key: str) -> Path:
 
 
 def entry_ready(key: str, turn_rates: Sequence[float]) -> bool:
-    """True if the entry passes the cheap check (:func:`~.store.check_family`; milliseconds)."""
+    """True if the entry passes the cheap check (:func:`~.family_files.check_family`; milliseconds)."""
     try:
         check_family(entry_path(key), turn_rates, key)
     except (FileFormatError, UsageError):

@@ -15,7 +15,7 @@ from .cache import cached_family, entry_ready
 from .grid import Grid, resolve_grid
 from .lookup import WaitMapFamily
 from .model import PAPER_TURN_RATES, MdpParams, params_hash
-from .store import load_family
+from .family_files import load_family
 
 
 #: named wait-map configurations: grid preset and wait-time horizon H (s). ``alerting`` is the

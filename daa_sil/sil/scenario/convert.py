@@ -5,6 +5,7 @@ runs share)."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 from daa_sil.config.settings import STEP
 from daa_sil.errors import FileFormatError, UsageError
@@ -61,7 +62,7 @@ def encounter_set(sc: Scenario, encounter_id: int = 0):
     import numpy as np
 
     from daa_sil.models import encounters as enc
-    from daa_sil.models.encounter_geometry import IntruderGeometry, encounter_from_geometry
+    from daa_sil.models.encounter_geometry import encounter_from_geometry
     from daa_sil.geometry.kinematics import AircraftState
 
     own = ownship_state(sc)
@@ -77,9 +78,8 @@ def encounter_set(sc: Scenario, encounter_id: int = 0):
                 seg[0][0, j, k], seg[1][0, j, k] = st, en
                 seg[2][0, j, k], seg[3][0, j, k], seg[4][0, j, k] = math.radians(w), a, av
             if spec.cpa is not None:
-                c = spec.cpa
                 one = encounter_from_geometry(
-                    [IntruderGeometry(c.angle_deg, c.hmd_m, c.t_cpa_s, c.gs_mps, c.vmd_m, c.vs_mps, mv)],
+                    [replace(spec.cpa, maneuvers=mv)],
                     own=own, duration_s=sc.duration_s, dt_s=STEP.default, encounter_id=encounter_id, seed=sc.seed,
                     realised=False)  # only the placed state is kept: its realised CPA is never read
                 states.append(one.intr[:, 0])

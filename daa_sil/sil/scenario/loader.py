@@ -19,7 +19,7 @@ from daa_sil.config.yaml_input import compose_yaml, read_yaml_text
 
 from daa_sil.errors import FileFormatError, UsageError
 
-from .schema import (MAX_INTRUDERS, PILOT_RESPONSES, DECISIONS, FAULT_PROCESSES, FAULT_SIGNALS, AllocationSpec, CpaGeometry,
+from .schema import (MAX_INTRUDERS, PILOT_RESPONSES, DECISIONS, FAULT_PROCESSES, FAULT_SIGNALS, AllocationSpec, IntruderGeometry,
                      Expectation, InitialState, IntruderSpec, LinkSpec, Maneuver, Origin, Outage, PilotSpec, ProcessFault,
                      Scenario, ScriptedCommand)
 
@@ -144,7 +144,7 @@ def _intruder(v: _V, node, path, idx: int, dur: float) -> IntruderSpec:
     else:
         p = f"{path}.cpa"
         mm = v.mapping(m["cpa"], p, {"angle_deg", "hmd_m", "t_cpa_s", "gs_mps"}, {"vmd_m", "vs_mps"})
-        spec.cpa = CpaGeometry(
+        spec.cpa = IntruderGeometry(
             angle_deg=v.opt(mm, "angle_deg", p, v.number, lo=0, hi=360, hi_open=True),
             hmd_m=v.opt(mm, "hmd_m", p, v.number, lo=-5000, hi=5000),
             t_cpa_s=v.opt(mm, "t_cpa_s", p, v.number, lo=0, hi=dur, lo_open=True),

@@ -104,8 +104,11 @@ from typing import Any
 
 from daa_sil.config.overrides import Overrides
 from daa_sil.config.settings import DELAY_EPOCH, DURATION, SCENARIO_GROUP, SCENARIO_LINK, STANDARD_PRESET
+from daa_sil.decision import DECISION_NAMES
+from daa_sil.models.encounter_geometry import IntruderGeometry
 
-DECISIONS = ("none", "wait", "no_wait", "pilot", "blend", "daa_override", "daa", "stale", "link_lost")
+#: the decision names ``expect.decisions_include`` / ``decisions_exclude`` accept: the agent's (one definition)
+DECISIONS = DECISION_NAMES
 PILOT_RESPONSES = ("deterministic", "fixed", "guendel", "no_atc", "nasa_rayleigh5")
 MAX_INTRUDERS = 8
 
@@ -133,18 +136,6 @@ class InitialState:
 
 
 @dataclass
-class CpaGeometry:
-    """Intruder placement by its closest point of approach to the unmaneuvered ownship."""
-
-    angle_deg: float
-    hmd_m: float
-    t_cpa_s: float
-    gs_mps: float
-    vmd_m: float = 0.0
-    vs_mps: float = 0.0
-
-
-@dataclass
 class Maneuver:
     """Intruder script segment: rates held over ``[start_s, end_s)``."""
 
@@ -160,7 +151,8 @@ class IntruderSpec:
     id: int
     callsign: str
     initial: "InitialState | None" = None
-    cpa: "CpaGeometry | None" = None
+    #: placement by closest approach to the unmaneuvered ownship (its script is ``maneuvers``, not ``cpa.maneuvers``)
+    cpa: "IntruderGeometry | None" = None
     maneuvers: list = field(default_factory=list)
 
 
@@ -279,6 +271,9 @@ class Scenario:
             for k in ("initial", "cpa"):
                 if intr[k] is None:
                     intr.pop(k)
+            if "cpa" in intr:  # a scenario's CPA is at the CPA, its script under the intruder's own key
+                intr["cpa"].pop("maneuvers")
+                intr["cpa"].pop("angle_at")
         for k in ("up", "down", "round_trip"):  # absent (a round trip replaces up / down)
             if d["link"][k] is None:
                 d["link"].pop(k)
