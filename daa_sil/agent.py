@@ -214,11 +214,11 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     # active_from "encounter" (per row): decide every step from the start until safe avoidance
     encounter_over = memory.encounter_over
     whole = np.zeros(n, bool)
-    from_start = pol.value("active_from") == "encounter"
+    from_start = pol.active_from == "encounter"
     if from_start.any():
         encounter_over = encounter_over | (from_start & safe_avoidance(own, intr, max_alert))
         whole = from_start & ~encounter_over
-    active = ((max_alert >= 2) | in_progress | unsafe_revert | whole) & pol.value("enabled").astype(bool)
+    active = ((max_alert >= 2) | in_progress | unsafe_revert | whole) & pol.enabled.astype(bool)
     ia = np.nonzero(active)[0]
     daa_cmd, sm_daa, daa_axis, daa_dir, parts = _daa_resolutions(t, own, intr, cfg, memory, ia, alert, daa_state,
                                                                   bands)
@@ -240,13 +240,13 @@ def agent_step(t: float, own: AircraftState, intr: AircraftState, pilot: PilotIn
     p_axis = np.where(fresh, intent_axis, AXIS_NONE).astype(np.int8)
     p_dir = np.where(fresh, intent_dir, 0).astype(np.int8)
     # an unsafe "hold" decided as no command (policy.unsafe_hold): it carries no maneuver to blend
-    as_none = (pol.value("unsafe_hold") == "no-command") & active & fresh & (p_axis == AXIS_NONE) & ~(sm_pilot > 0)
+    as_none = (pol.unsafe_hold == "no-command") & active & fresh & (p_axis == AXIS_NONE) & ~(sm_pilot > 0)
     decide = fresh & ~as_none  #: fresh commands decided as commands
 
     ws = wait_step(t, own, intr, cfg, pol, memory, active, decide, link_lost, wait_lookup, turn_rate,
                    max_alert)  # sub-step 2
     wait = ws.wait
-    bl = blend_step(own, intr, cfg, active, decide, link_lost, sm_pilot, pol.value("blending").astype(bool),
+    bl = blend_step(own, intr, cfg, active, decide, link_lost, sm_pilot, pol.blending.astype(bool),
                     p_axis, p_dir, pcmd, parts)  # sub-step 3
     pilot_ok, blend = bl.pilot_ok, bl.blend
 

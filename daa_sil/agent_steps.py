@@ -43,9 +43,9 @@ def link_step(t: float, own: AircraftState, pilot: PilotInput, memory: AgentMemo
     received = np.asarray(pilot.received, bool)
     link_t = np.fmax(memory.last_packet_t, np.asarray(pilot.link_alive_t, float))
     link_t = np.where(received, np.fmax(link_t, pilot.t_recv), link_t)
-    link_lost = (t - link_t) > pol.value("link_timeout_s")
+    link_lost = (t - link_t) > pol.link_timeout_s
     age = np.where(received, t - np.asarray(pilot.t_sent, float), np.nan)
-    fresh = received & (age <= pol.value("stale_command_s"))
+    fresh = received & (age <= pol.stale_command_s)
     pcmd = pilot.cmd.resolved(own)
     last_pilot = Command(np.where(fresh, pcmd.trk, memory.pilot_trk), np.where(fresh, pcmd.vs, memory.pilot_vs),
                          np.where(fresh, pcmd.gs, memory.pilot_gs))
@@ -74,7 +74,7 @@ def wait_step(t: float, own: AircraftState, intr: AircraftState, cfg: DaaConfig,
     ia = np.nonzero(active)[0]
     projl = np.zeros(n, bool)
     if ia.size and intr.shape[1]:  # element-wise per encounter: one call per look-ahead present
-        horizons = pol.value("projl_horizon_s")[ia]
+        horizons = pol.projl_horizon_s[ia]
         for h in np.unique(horizons):
             r = ia[horizons == h]
             projl[r] = proj_lowc(own[r], intr[r], cfg, float(h)).any(axis=1)
@@ -85,19 +85,19 @@ def wait_step(t: float, own: AircraftState, intr: AircraftState, cfg: DaaConfig,
     if inc.size:
         wv = wait_values(own, intr, pol, wait_lookup, turn_rate, inc)
         w = wv.wait_s
-        countdown = pol.value("wait_rule")[inc] == "countdown"
+        countdown = pol.wait_rule[inc] == "countdown"
         if countdown.any():  # the wait is a budget counted from the start of the streak
             w = np.where(countdown, w - np.where(np.isfinite(wait_start[inc]), t - wait_start[inc], 0.0), w)
         value.wait_s[inc], value.p_lowc[inc], value.in_box[inc] = w, wv.p_lowc, wv.in_box
         value.turn_dps[inc], value.map_turn_dps[inc] = wv.turn_dps, wv.map_turn_dps
     if inc.size:
-        veto_map = nc & ~(np.nan_to_num(value.wait_s, nan=-np.inf) >= pol.value("wait_threshold_s"))
-        veto_projl = nc & projl & pol.value("projl").astype(bool)
+        veto_map = nc & ~(np.nan_to_num(value.wait_s, nan=-np.inf) >= pol.wait_threshold_s)
+        veto_projl = nc & projl & pol.projl.astype(bool)
         wait = nc & ~veto_map & ~veto_projl
         # the first that holds of: not decided here, both vetoes, the map's, ProjL's, neither
         decided_by = np.where(~nc, BY_NONE, np.where(veto_map & veto_projl, BY_BOTH, np.where(
             veto_map, BY_MAP, np.where(veto_projl, BY_PROJL, BY_NEITHER)))).astype(np.int8)
-        keep = pol.value("daa_authority") == "until-clear"
+        keep = pol.daa_authority == "until-clear"
         if keep.any() and max_alert is not None:  # the extension: the DAA keeps its authority until clear
             kept = wait & keep & (memory.authority == A_DAA) & (np.asarray(max_alert) >= 1)
             wait = wait & ~kept

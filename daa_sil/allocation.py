@@ -8,7 +8,7 @@ encounters of several groups at once, with exactly the numbers each group would 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Iterator, Sequence
 
 import numpy as np
@@ -17,12 +17,17 @@ from daa_sil.config.policy import WAIT_MODES, AllocationPolicy
 from daa_sil.errors import UsageError
 
 
+#: the fields a :class:`PolicyRows` reads per row (every setting of the policy)
+POLICY_FIELDS = frozenset(f.name for f in fields(AllocationPolicy))
+
+
 @dataclass(frozen=True)
 class PolicyRows:
     """The policies of a batch of N encounters: row ``i`` flies ``policies[index[i]]``.
 
-    :meth:`value` gives one setting per row ``(N,)``; :meth:`modes` splits rows by wait mode. A
-    single :class:`AllocationPolicy` is the batch where every row flies it (:meth:`of`).
+    Each field of :class:`AllocationPolicy` reads as an attribute, one value per row ``(N,)``
+    (``rows.wait_threshold_s``; :meth:`value`); :meth:`modes` splits rows by wait mode. A single
+    :class:`AllocationPolicy` is the batch where every row flies it (:meth:`of`).
     """
 
     policies: tuple
@@ -64,6 +69,12 @@ class PolicyRows:
             self._cache[name] = got
         return got
 
+    def __getattr__(self, name: str) -> np.ndarray:
+        """A field of :class:`AllocationPolicy`, per row (:meth:`value`)."""
+        if name in POLICY_FIELDS:
+            return self.value(name)
+        raise AttributeError(f"PolicyRows has no field {name!r}")
+
     def modes(self, rows: np.ndarray) -> Iterator[tuple[str, np.ndarray]]:
         """``(wait_mode, positions in rows)`` for each wait mode present among ``rows``."""
         mode = np.asarray([WAIT_MODES.index(p.wait_mode) for p in self.policies])[self.index[rows]]
@@ -71,4 +82,4 @@ class PolicyRows:
             yield WAIT_MODES[int(code)], np.flatnonzero(mode == code)
 
 
-__all__ = ["PolicyRows"]
+__all__ = ["PolicyRows", "POLICY_FIELDS"]

@@ -30,6 +30,7 @@ from typing import Callable
 
 import numpy as np
 
+from daa_sil.config.settings import STEP
 from daa_sil.decision import Decision
 from .geometry import wellclear as wc
 from daa_sil.geometry import penetration as pen
@@ -177,7 +178,7 @@ class OnboardCore:
 
     def __init__(self, own: AircraftState, intruders: AircraftState, controls: IntruderControls, policy,
                  daa_cfg=None, wait_lookup=None, *, thresholds: "Thresholds | str | None" = None,
-                 t0: float = 0.0, dt: float = 1.0, perf: "Performance | None" = None,
+                 t0: float = 0.0, dt: float = STEP.default, perf: "Performance | None" = None,
                  intruder_perf: "Performance | None" = None, memory=None, step_log: bool = True,
                  outcomes: bool = True):
         from . import agent

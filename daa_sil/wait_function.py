@@ -79,7 +79,7 @@ def wait_values(own, intr, pol: PolicyRows, lookup: "WaitLookup | None", turn_ra
     rate = np.zeros(intr.shape) if turn_rate is None else np.broadcast_to(np.asarray(turn_rate, float), intr.shape)
     for mode, pos in pol.modes(idx):
         rows = idx[pos]
-        w = WAIT_FUNCTIONS[mode](pol.value("constant_wait_s")[rows], lookup)
+        w = WAIT_FUNCTIONS[mode](pol.constant_wait_s[rows], lookup)
         wv = w(own[rows], intr[rows], rate[rows])
         out.wait_s[pos], out.p_lowc[pos], out.in_box[pos] = wv.wait_s, wv.p_lowc, wv.in_box
         out.turn_dps[pos], out.map_turn_dps[pos] = wv.turn_dps, wv.map_turn_dps

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
+from daa_sil.config.settings import VEHICLE_SYSID as VEHICLE_SYSTEM
 from daa_sil.geometry.frames import geodetic_to_enu
 from daa_sil.link.codec import MavCodec
 from daa_sil.link.codec import mavlink as M
@@ -44,7 +45,7 @@ from .view import READ_IDS as VIEW_READS, View
 #: verifies the rest of the vehicle's stream and counts it as ``unread`` without unpacking it
 READ_IDS = VIEW_READS | {M.MAVLINK_MSG_ID_SIM_TICK}
 GCS_SYSID, GCS_COMPID = 255, 190
-VEHICLE_SYSID = 1
+VEHICLE_SYSID = VEHICLE_SYSTEM.default
 #: wall seconds between the idle checks of a lockstep GCS (greeting, silence)
 LOCKSTEP_IDLE_S = 0.1
 #: free-running: longest wait between checks (s), and before the clock is synchronised

@@ -41,8 +41,9 @@ def _assert_same(a: dict, b: dict) -> None:
     (["--chunk-size", "x"], "--chunk-size must be an integer, got 'x'"),
     (["--preset", "nope"], "unknown --preset"),
     (["--waitmap", "nosuchgrid"], "--waitmap 'nosuchgrid'"),
-    (["--wt", "-1"], "--wt must be within"),
-    (["--projl-lookahead", "nan"], "--projl-lookahead"),
+    (["--wt", "-1"], "--wt must be a number within [0, 120], got -1"),
+    (["--projl-horizon", "nan"], "--projl-horizon must be a number within"),
+    (["--projl-lookahead", "121"], "--projl-horizon must be a number within [0, 120], got 121"),
     (["--gamma", "1.5"], "--gamma must be within"),
     (["--latency", "gauss:5"], "bad delay spec 'gauss:5'"),
     (["--intruders", "0"], "--intruders must be"),
@@ -172,13 +173,13 @@ def test_every_knob_is_recorded_and_checked_on_resume(tmp_path, capsys):
     meta = json.loads((out / "campaign.json").read_text())
     c = meta["config"]
     # the default reading (paper) sets its own grid, so an explicit --waitmap is recorded as the reading's grid
-    assert (c["wt"], c["projl_lookahead"], c["latency"], c["reading_set"]["waitmap"]) == (7.0, 12.0, "const:0.5", "paper")
+    assert (c["settings"]["wait_threshold_s"], c["settings"]["projl_horizon_s"], c["latency"], c["reading_set"]["waitmap"]) == (7.0, 12.0, "const:0.5", "paper")
     assert meta["groups"]["ID-2-projl"]["wait_threshold_s"] == 7.0 and meta["groups"]["B-2"]["wait_threshold_s"] == 4.0
     assert meta["groups"]["B-2"]["latency"] == {"type": "constant", "seconds": 0.5}
     assert meta["seeds"]["campaign"] == 0 and meta["waitmap"] is None  # neither group reads the map
     capsys.readouterr()
     assert main(argv[:-3] + ["--wt", "8", "--out", str(out), "--resume", "--no-progress"]) == 2
-    assert "different settings (wt)" in capsys.readouterr().err
+    assert "different settings (--wt)" in capsys.readouterr().err
     assert main(["campaign", "run", "--out", str(out), "--resume", "--no-progress"]) == 0  # stored knobs reused
 
 

@@ -12,6 +12,7 @@ import math
 import pytest
 import yaml
 
+from daa_sil.config.settings import WAIT_THRESHOLD
 from daa_sil.cli import main
 from daa_sil.config.run_config import PRESET_NAMES, config_from_dict, load_config, preset, save_config
 from daa_sil.errors import UsageError
@@ -33,15 +34,15 @@ def test_a_file_changes_only_what_it_names(tmp_path):
     f.write_text("base: do365\nallocation: {wt: 8}\nwaitmap: {gamma: 0.9}\ngroups: [B-2, ID-2]\n")
     cfg = load_config(f)
     assert (cfg.base, cfg.thresholds) == ("do365", "do365")
-    assert cfg.allocation == {"wt": 8, "projl_lookahead": None}
+    assert cfg.allocation == {"wait_threshold_s": 8, "projl_horizon_s": None}  # (the old key wt, read as W_T)
     assert cfg.waitmap == {"source": "alerting", "gamma": 0.9}
     assert cfg.groups == ("B-2", "ID-2")
     from daa_sil.study.campaign_config import CampaignConfig
 
     cc = CampaignConfig.from_run_config(cfg)
-    assert (cc.wt, cc.gamma, cc.preset, cc.group_names) == (8, 0.9, "do365", ("B-2", "ID-2"))
+    assert (cc.settings.of(WAIT_THRESHOLD), cc.gamma, cc.preset, cc.group_names) == (8, 0.9, "do365", ("B-2", "ID-2"))
     # W_T applies to the groups with a wait function only (B-2 has none: it keeps the table's 4 s)
-    assert cc.group("ID-2").wait_threshold_s == 8.0 and cc.group("B-2").wait_threshold_s == 4.0
+    assert cc.policy("ID-2").wait_threshold_s == 8.0 and cc.policy("B-2").wait_threshold_s == 4.0
 
 
 def test_save_and_load_round_trip(tmp_path):
@@ -99,7 +100,8 @@ def test_config_show_full_lists_each_shared_setting_once_and_loads_back(tmp_path
     shown = yaml.safe_load(text)["settings"]
     # the numbers the paper and the SIL use, written here by hand
     assert shown["allocation.wait_threshold_s"] == {"default": 4.0, "unit": "s", "range": [0.0, 120.0],
-                                                   "help": shown["allocation.wait_threshold_s"]["help"]}
+                                                   "help": shown["allocation.wait_threshold_s"]["help"],
+                                                   "flag": "--wt", "mavlink": "DAA_WT"}
     assert (shown["allocation.projl_horizon_s"]["default"], shown["allocation.constant_wait_s"]["default"],
             shown["link.epoch_s"]["default"], shown["study.duration_s"]["default"]) == (25.0, 5.0, 10.0, 240.0)
     assert (shown["thresholds"]["default"], shown["scenario.thresholds"]["default"]) == ("paper", "do365")
@@ -134,7 +136,7 @@ def test_campaign_records_the_file_and_flags_override_it(tmp_path, capsys):
     out = tmp_path / "run"
     assert main(["campaign", "run", "--config", str(f), "--out", str(out), "--no-progress"]) == 0
     meta = json.loads((out / "campaign.json").read_text())
-    assert meta["config"]["wt"] == 8 and meta["config"]["n_encounters"] == 6 and meta["config"]["seed"] == 3
+    assert meta["config"]["settings"]["wait_threshold_s"] == 8 and meta["config"]["n_encounters"] == 6 and meta["config"]["seed"] == 3
     pol = meta["resolved_config"]["policies"]
     assert pol["ID-2"]["wait_threshold_s"] == 8.0 and pol["B-2"]["wait_threshold_s"] == 4.0
     assert pol["ID-2"]["link_timeout_s"] == 12.0 and pol["ID-2"]["stale_command_s"] == 15.0
@@ -144,7 +146,7 @@ def test_campaign_records_the_file_and_flags_override_it(tmp_path, capsys):
     assert main(["campaign", "run", "--config", str(f), "--wt", "6", "--encounters", "4", "--out", str(out2),
                  "--no-progress"]) == 0
     meta2 = json.loads((out2 / "campaign.json").read_text())
-    assert meta2["config"]["wt"] == 6.0 and meta2["config"]["n_encounters"] == 4
+    assert meta2["config"]["settings"]["wait_threshold_s"] == 6.0 and meta2["config"]["n_encounters"] == 4
     assert meta2["resolved_config"]["policies"]["ID-2"]["wait_threshold_s"] == 6.0
     capsys.readouterr()
     # --config with --resume: the campaign's own configuration is in campaign.json

@@ -2,6 +2,8 @@
 
 import pytest
 
+from daa_sil.config.overrides import Overrides
+from daa_sil.config.settings import LINK_TIMEOUT, PROJL_HORIZON, STALE_COMMAND, WAIT_THRESHOLD
 from daa_sil.study.campaign_config import CampaignConfig
 from daa_sil.errors import UsageError
 from daa_sil.config.groups import PAPER_GROUPS, group_spec, group_table, load_group_file, parse_groups, policy_for_group
@@ -40,8 +42,8 @@ def test_group_file_with_base_and_overrides(tmp_path):
     f.write_text("slow-wt:\n  base: ID-2\n  wait_threshold_s: 8\n  latency: {type: constant, seconds: 2}\n"
                  "mine:\n  setup: integrated\n  latency: {type: constant, seconds: 1}\n  wait: 3\n")
     a, b = parse_groups(str(f))
-    assert (a.name, a.wait_mode, a.wait_threshold_s, a.delay_model().mean()) == ("slow-wt", "map", 8.0, 2.0)
-    assert a.blending and a.projl  # inherited from ID-2
+    assert (a.name, a.wait_mode, a.policy().wait_threshold_s, a.delay_model().mean()) == ("slow-wt", "map", 8.0, 2.0)
+    assert a.policy().blending and a.policy().projl  # inherited from ID-2
     assert (b.wait_mode, b.policy().constant_wait_s) == ("constant", 3.0)
 
 
@@ -63,31 +65,33 @@ def test_bad_group_file_is_one_line(tmp_path, body, message):
 
 
 def test_campaign_overrides_apply_to_the_right_groups():
-    cfg = CampaignConfig(groups=("B-2", "IC-1", "ID-2", "ID-2-projl"), wt=7.0, projl_lookahead=12.0,
-                         latency="const:0.5").validate()
-    eff = {g.name: g for g in cfg.effective_groups}
+    cfg = CampaignConfig(groups=("B-2", "IC-1", "ID-2", "ID-2-projl"), latency="const:0.5",
+                         settings=Overrides.of_values({WAIT_THRESHOLD: 7.0, PROJL_HORIZON: 12.0})).validate()
+    eff = {g.name: g.policy() for g in cfg.effective_groups}
     assert eff["B-2"].wait_threshold_s == 4.0  # no wait function: W_T does not apply
     assert all(eff[g].wait_threshold_s == 7.0 for g in ("IC-1", "ID-2", "ID-2-projl"))
-    assert all(g.projl_horizon_s == 12.0 and g.delay_model().mean() == 0.5 for g in eff.values())
+    assert all(p.projl_horizon_s == 12.0 for p in eff.values())
+    assert all(g.delay_model().mean() == 0.5 for g in cfg.effective_groups)
     # the definitions as given stay as they were (campaign.json records both)
-    assert {g.name: g.wait_threshold_s for g in cfg.groups}["ID-2"] == 4.0
+    assert {g.name: g.policy().wait_threshold_s for g in cfg.groups}["ID-2"] == 4.0
     assert CampaignConfig.from_dict(cfg.to_dict()) == cfg
 
 
 def test_one_override_rule_for_fast_time_and_the_vehicle():
-    """``apply_overrides`` is the rule both routes use: W_T only where a group waits, N everywhere,
+    """``group_policy`` is the rule both routes use: W_T only where a group waits, N everywhere,
     the reading's wait rule where a group waits; the flown policy matches the recorded group."""
-    from daa_sil.config.policy import apply_overrides
+    from daa_sil.config.overrides import group_policy
 
-    cfg = CampaignConfig(groups="B-2,IC-1,ID-2", wt=7.0, projl_lookahead=12.0,
-                         reading_set={"wait_rule": "countdown"}, link={"link_timeout_s": 9.0})
+    cfg = CampaignConfig(groups="B-2,IC-1,ID-2", reading_set={"wait_rule": "countdown"},
+                         settings=Overrides.of_values({WAIT_THRESHOLD: 7.0, PROJL_HORIZON: 12.0, LINK_TIMEOUT: 9.0}))
     want = {"B-2": (4.0, "threshold"), "IC-1": (7.0, "countdown"), "ID-2": (7.0, "countdown")}
     for name, (wt, rule) in want.items():
         pol = cfg.policy(name)
         assert (pol.wait_threshold_s, pol.projl_horizon_s, pol.wait_rule, pol.link_timeout_s) == (wt, 12.0, rule, 9.0)
-        rec = cfg.group(name)  # what campaign.json records
+        rec = cfg.group(name).policy()  # what campaign.json records
         assert (rec.wait_threshold_s, rec.projl_horizon_s, rec.wait_rule) == (wt, 12.0, rule)
     # the vehicle's route: a policy, not a group definition, through the same function
-    b2 = apply_overrides(policy_for_group("B-2"), wt=7.0, projl_lookahead=12.0, link={"stale_command_s": 3.0})
+    b2 = group_policy(policy_for_group("B-2"), flags=Overrides.of_values(
+        {WAIT_THRESHOLD: 7.0, PROJL_HORIZON: 12.0, STALE_COMMAND: 3.0}))
     assert (b2.wait_threshold_s, b2.projl_horizon_s, b2.stale_command_s) == (4.0, 12.0, 3.0)
-    assert apply_overrides(policy_for_group("ID-2")) == policy_for_group("ID-2")  # nothing given: unchanged
+    assert group_policy(policy_for_group("ID-2")) == policy_for_group("ID-2")  # nothing given: unchanged

@@ -34,6 +34,7 @@ from daa_sil.models.delay_process import DelayProcess
 from daa_sil.link.delayline import fifo_release
 from daa_sil.sil.scenario import delay_models, load_scenario
 from daa_sil.steplog import read_steplog
+from vehicle.core import build_policy
 
 ROOT = Path(__file__).resolve().parents[1]
 FAULTS = ROOT / "scenarios" / "faults"
@@ -84,7 +85,7 @@ def expected_link_lost(sc, t_steps: np.ndarray) -> np.ndarray:
     lost = np.zeros(t_send.size, bool)
     for i, t in enumerate(t_send):
         past = arrive[arrive <= t + 1e-9]
-        lost[i] = past.size > 0 and t - past.max() > sc.allocation.link_timeout_s
+        lost[i] = past.size > 0 and t - past.max() > build_policy(sc).link_timeout_s
     return lost
 
 
@@ -143,9 +144,9 @@ def test_outage_30s_hands_over_within_timeout_and_recovers(tmp_path):
     (a, b), = sc.link.outage_windows()
     d = delay_models(sc)[0].mean()
     last_arrival = a - 1 + d  # last datagram sent before the outage
-    assert f["link_lost_t"] and f["link_lost_t"][0] == last_arrival + sc.allocation.link_timeout_s + 1
+    assert f["link_lost_t"] and f["link_lost_t"][0] == last_arrival + build_policy(sc).link_timeout_s + 1
     # handed to the onboard DAA within the configured timeout of the last packet
-    assert f["link_lost_t"][0] - last_arrival <= sc.allocation.link_timeout_s + 1
+    assert f["link_lost_t"][0] - last_arrival <= build_policy(sc).link_timeout_s + 1
     # recovery: the first command sent after the outage is received when it arrives, and link_lost ends
     after = [(t, s) for t, s in f["rx"] if s >= b]
     assert after and after[0] == (b + d, b)
@@ -229,7 +230,7 @@ def test_gcs_killed_and_restarted_mid_encounter(tmp_path):
     after = [(t, s) for t, s in f["rx"] if s >= sent2[0]]
     assert before and after, "pilot commands before the kill and after the restart must both be received"
     last_rx = before[-1][0]  # the last command of the first GCS arrived here (HEARTBEAT in the same datagram)
-    timeout = sc.allocation.link_timeout_s
+    timeout = build_policy(sc).link_timeout_s
     # handed to the onboard DAA exactly when no GCS datagram arrived for more than the timeout
     lost = f["link_lost_t"]
     assert lost, "no link_lost while the GCS was dead"

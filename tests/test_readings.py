@@ -171,9 +171,12 @@ def test_whole_encounter_counts_and_no_hold_reading(tmp_path):
 def test_ic1_wait_time_under_both_rules(tmp_path):
     """IC-1's "wait time 5 s": under the threshold rule any constant >= W_T (4 s) gives identical runs;
     under the countdown rule (reading paper-countdown) 5 s and 50 s differ."""
+    from dataclasses import replace
+
     from daa_sil.config.groups import group_spec
 
-    ic = (group_spec("IC-1"), group_spec("IC-1").with_(name="IC-1-w50", wait=50.0))
+    ic1 = group_spec("IC-1")
+    ic = (ic1, ic1.with_(name="IC-1-w50", allocation=replace(ic1.allocation, constant_wait_s=50.0)))
     res = {}
     for rule in ("extended", "countdown"):
         cfg = CampaignConfig(groups=ic, n_encounters=40, seed=3, chunk_size=40, reading="extended",

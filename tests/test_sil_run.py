@@ -14,6 +14,7 @@ import pytest
 
 from daa_sil.sil.scenario import delay_models, encounter_set, load_scenario
 from daa_sil.steplog import read_steplog
+from vehicle.core import build_policy
 from sil_helpers import wait_for_vehicle_time
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -69,10 +70,10 @@ def test_link_loss_hands_control_to_daa_within_timeout(tmp_path):
     last_arrival = sc.link.outages[0].start_s - 1 + 4
     lost = [r for r in rows if r["decision"] == "link_lost"]
     assert lost, "the agent never declared link loss"
-    assert last_arrival + sc.allocation.link_timeout_s < lost[0]["t"] <= last_arrival + sc.allocation.link_timeout_s + 1
+    assert last_arrival + build_policy(sc).link_timeout_s < lost[0]["t"] <= last_arrival + build_policy(sc).link_timeout_s + 1
     assert all(r["authority"] == "daa" for r in lost)
     # no link_lost while packets were still arriving
-    assert not [r for r in rows if r["decision"] == "link_lost" and r["t"] <= last_arrival + sc.allocation.link_timeout_s]
+    assert not [r for r in rows if r["decision"] == "link_lost" and r["t"] <= last_arrival + build_policy(sc).link_timeout_s]
 
 
 def test_lockstep_is_deterministic_and_matches_fast_time(tmp_path):

@@ -34,6 +34,7 @@ from daa_sil.sil.endpoint import DropReporter, format_udp_address, open_endpoint
 from daa_sil.link.codec import MavCodec, mavlink as d
 from daa_sil.sil.scenario import load_scenario
 from daa_sil.steplog import read_steplog
+from vehicle.core import build_policy
 from sil_helpers import child_pid, wait_for_vehicle_time
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -279,7 +280,7 @@ def test_gcs_restart_really_kills_and_restarts_the_gcs(tmp_path):
     last_before = max(t for t, s in rx if s < 20)
     assert {s for t, s in rx if s >= 30} <= {c["t"] for c in second}  # all sent by the restarted GCS
     lost = [r["t"] for r in rows if r["decision"] == "link_lost"]
-    timeout = sc.allocation.link_timeout_s
+    timeout = build_policy(sc).link_timeout_s
     # the last datagram of the first GCS arrived at last_before; no data for more than 10 s -> link_lost
     assert lost and lost[0] == last_before + timeout + 1
     after = [(t, s) for t, s in rx if s >= 30]

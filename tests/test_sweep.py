@@ -13,7 +13,7 @@ from daa_sil.study.sweep import parse_vary
 
 def test_parse_vary():
     v = parse_vary("wt=2,4,8")
-    assert (v.name, v.field, v.values, v.numeric) == ("wt", "wt", (2.0, 4.0, 8.0), True)
+    assert (v.name, v.field, v.values, v.numeric) == ("wt", "wait_threshold_s", (2.0, 4.0, 8.0), True)
     lat = parse_vary("latency=const:0.2;gauss:5,3")
     assert lat.values == ("const:0.2", "gauss:5,3") and not lat.numeric
     assert parse_vary("intruders=1,2").values == (1, 2) and parse_vary("intruders=1,2").field == "n_intruders"

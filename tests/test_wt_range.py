@@ -71,18 +71,19 @@ def test_wt_200_is_refused_by_every_input(tmp_path):
 
 def test_wt_120_is_accepted_by_every_input(tmp_path):
     from daa_sil.config.groups import load_group_file
+    from daa_sil.config.overrides import Overrides
     from daa_sil.config.settings import WAIT_THRESHOLD
     from daa_sil.config.run_config import config_from_dict
     from daa_sil.sil.scenario import load_scenario
     from daa_sil.study.campaign_config import CampaignConfig
 
     assert WAIT_THRESHOLD.range == (0.0, 120.0)
-    CampaignConfig(wt=120.0).validate()
+    CampaignConfig(settings=Overrides.of_values({WAIT_THRESHOLD: 120.0})).validate()
     groups = tmp_path / "g.yaml"
     groups.write_text("IC-9: {base: IC-1, wait_threshold_s: 120}\n")
-    assert load_group_file(groups)[0].wait_threshold_s == 120.0
+    assert load_group_file(groups)[0].allocation.wait_threshold_s == 120.0
     assert config_from_dict({"allocation": {"wt": 120}}, "c.yaml").allocation["wt"] == 120
-    assert load_scenario(_scenario(tmp_path, 120)).allocation.wait_threshold_s == 120.0
+    assert load_scenario(_scenario(tmp_path, 120)).allocation.settings.of(WAIT_THRESHOLD) == 120.0
 
 
 def test_the_vehicle_parameter_has_the_same_range():

@@ -20,6 +20,7 @@ pilot's link.
 
 from __future__ import annotations
 
+from daa_sil.config.settings import STEP
 from daa_sil.link.codec import mavlink as M
 
 from . import identity as ident
@@ -55,9 +56,9 @@ class BootPlant:
 
     booting = True
 
-    def __init__(self, sc, config=None, dt: float = 1.0):
+    def __init__(self, sc, config=None, dt: float = STEP.default, flags=None):
         self.sc, self.dt = sc, float(dt)
-        self.policy = resolve_policy(sc, None, config)
+        self.policy = resolve_policy(sc, None, config, flags)
         self.n_steps = sc.n_steps
         self.last_authority = "pilot"
         self.last_decision = "none"

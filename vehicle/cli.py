@@ -20,7 +20,9 @@ from pathlib import Path
 
 from daa_sil.cli import run_guarded
 from daa_sil.commands.common_args import OneLineParser as _Parser, check_speed, load_key_option
+from daa_sil.config.overrides import Overrides, add_flags
 from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.config.settings import GCS_PORT, udp
 from daa_sil.errors import UsageError
 from daa_sil.process_gc import freeze_after_startup
 
@@ -112,6 +114,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "clock starts")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     add_config_argument(p)
+    add_flags(p, "of the scenario's group (over the scenario's and --config's)")  # --wt, --projl-horizon, ...
     return p
 
 
@@ -144,7 +147,7 @@ def _options(args):
     from daa_sil.sil.outputs import output_specs
 
     tap = None if args.tap in (None, "", "none") else args.tap
-    outs = args.out or ["udp:127.0.0.1:14550"]
+    outs = args.out or [udp(GCS_PORT)]
     if args.tap_writable and tap is None:
         raise UsageError("--tap-writable needs --tap udp:HOST:PORT")
     specs = output_specs(outs, tap, args.tap_writable)  # one line for a malformed --out / --tap
@@ -166,6 +169,7 @@ def _options(args):
                           clock=args.clock,
                           speed=args.speed, key=key, steplog=args.steplog, tick_timeout_s=args.tick_timeout, live=live,
                           waitmap=args.waitmap, config=load_config(args.config) if args.config else None,
+                          settings=Overrides.from_args(args),
                           tap_writable=args.tap_writable, start_timeout_s=args.start_timeout,
                           tick_sync=args.tick_sync, on_clock_start=clock_start, exit_at_end=args.exit_at_end,
                           wait_gcs=args.wait_gcs)

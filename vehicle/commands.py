@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from daa_sil.config.settings import VEHICLE_SYSID
 from daa_sil.link.codec import mavlink as M
 
 
@@ -111,7 +112,7 @@ _VEL_IGNORE = (M.POSITION_TARGET_TYPEMASK_VX_IGNORE | M.POSITION_TARGET_TYPEMASK
                | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE)
 
 
-def setpoint_command(msg, vehicle_sysid: int = 1) -> "PilotCommand | None":
+def setpoint_command(msg, vehicle_sysid: int = VEHICLE_SYSID.default) -> "PilotCommand | None":
     """A PILOT_MANEUVER or a stock SET_POSITION_TARGET_GLOBAL_INT velocity setpoint (NED m/s) as a pilot
     command; None if it is not for this vehicle or not a velocity setpoint. Values are checked by the
     :class:`CommandGate` (NaN = keep, infinities and out-of-range values invalid)."""

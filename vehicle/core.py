@@ -17,34 +17,37 @@ import numpy as np
 
 from daa_sil import agent as A
 from daa_sil.config.groups import policy_for_group
-from daa_sil.config.policy import AllocationPolicy, apply_overrides
+from daa_sil.config.settings import STEP
+from daa_sil.config.overrides import Overrides, group_policy
+from daa_sil.config.policy import AllocationPolicy
 from daa_sil.geometry.kinematics import Command
 from daa_sil.sil.scenario import Scenario, encounter_set
 
 from .commands import PilotCommand
 
 
-def build_policy(sc: Scenario) -> AllocationPolicy:
-    """The group's policy with the scenario's explicit overrides (wait mode, W_T, timeouts, blending)."""
+def scenario_policy(sc: Scenario) -> AllocationPolicy:
+    """The group's policy with the scenario's wait function, blending and ProjL veto (its per-group
+    settings come later, in :func:`resolve_policy`'s order)."""
     al = sc.allocation
-    pol = policy_for_group(al.group)
-    changes = {"wait_mode": al.wait, "blending": al.blending, "wait_threshold_s": al.wait_threshold_s,
-               "constant_wait_s": al.wait_constant_s, "projl": al.projl}
-    if al.link_timeout_s is not None:
-        changes["link_timeout_s"] = al.link_timeout_s
-    if al.stale_command_s is not None:
-        changes["stale_command_s"] = al.stale_command_s
-    return replace(pol, **changes)
+    return replace(policy_for_group(al.group), wait_mode=al.wait, blending=al.blending, projl=al.projl)
 
 
-def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, config=None):
+def build_policy(sc: Scenario) -> AllocationPolicy:
+    """The scenario's own policy: :func:`scenario_policy` with the per-group settings it gives (W_T, N,
+    the timeouts, ...), no run configuration."""
+    return sc.allocation.settings.applied(scenario_policy(sc), run_wide=False)
+
+
+def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, config=None,
+                  flags: "Overrides | None" = None):
     """``(OnboardCore, EncounterSet, policy, wait-map family or None)`` for scenario ``sc`` (N = 1). ``waitmap`` is a
     ``--waitmap`` value (map preset, grid spec or family directory; None = the configuration's, else
     the default map), read exactly as fast-time reads it (:func:`daa_sil.waitmap.family_for`, LoWC
     preset ``paper``). ``config`` (a :class:`daa_sil.config.run_config.RunConfig`) contributes its
-    ``daa`` changes on top of the scenario's threshold preset, its ``allocation`` (W_T of a group
-    that waits, ProjL N: as ``--wt`` / ``--projl-lookahead`` of a campaign, over the scenario's), its
-    ``link`` timeouts where the scenario sets none, and its wait-map source."""
+    ``daa`` changes on top of the scenario's threshold preset, its per-group settings (``allocation``,
+    ``link``) where the scenario gives none, and its wait-map source; ``flags`` the command line's
+    per-group settings (:func:`resolve_policy`)."""
     from daa_sil.daa import kernels
     from daa_sil.onboard import OnboardCore
 
@@ -53,7 +56,7 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
     kernels.get().search_into.compile()
     es = encounter_set(sc)
     config = run_config(config)
-    policy = resolve_policy(sc, policy, config)
+    policy = resolve_policy(sc, policy, config, flags)
     waitmap = waitmap if waitmap is not None else config.map_source
     daa_cfg = config.daa_config(sc.thresholds)
     lookup = family = None
@@ -76,16 +79,15 @@ def run_config(config=None):
     return load_config(None)
 
 
-def resolve_policy(sc: Scenario, policy=None, config=None) -> AllocationPolicy:
-    """The agent's policy for ``sc``: ``policy`` or the scenario's (:func:`build_policy`) with the run
-    configuration's reading rules, W_T, ProjL N and link timeouts (``config`` None: the defaults,
-    :func:`run_config`; the scenario's own timeouts win over the configuration's). Cheap (no kernels, no
-    maps): the booting vehicle answers parameters from it."""
+def resolve_policy(sc: Scenario, policy=None, config=None, flags: "Overrides | None" = None) -> AllocationPolicy:
+    """The agent's policy for ``sc``: ``policy``, else the scenario's group (:func:`scenario_policy`),
+    through :func:`daa_sil.config.overrides.group_policy`: the run configuration's reading rules and
+    per-group settings (``config`` None: the defaults, :func:`run_config`), then the scenario's, then
+    the ``flags``' (the order fast-time follows too). Cheap (no kernels, no maps): the booting vehicle
+    answers parameters from it."""
     config = run_config(config)
-    policy = policy or build_policy(sc)
-    link = {k: v for k, v in config.link.items() if v is not None and getattr(sc.allocation, k) is None}
-    return apply_overrides(config.onboard_policy(policy), wt=config.allocation["wt"],
-                           projl_lookahead=config.allocation["projl_lookahead"], link=link)
+    return group_policy(policy or scenario_policy(sc), reading=config.effective_reading, file=config.group_settings,
+                        scenario=None if policy is not None else sc.allocation.settings, flags=flags)
 
 
 def link_delay_processes(sc: Scenario) -> "dict | None":
@@ -119,10 +121,11 @@ class VehicleCore:
 
     booting = False  #: (:class:`vehicle.boot.BootPlant` is the plant before this one is ready)
 
-    def __init__(self, sc: Scenario, policy=None, waitmap: "str | None" = None, config=None):
+    def __init__(self, sc: Scenario, policy=None, waitmap: "str | None" = None, config=None,
+                 flags: "Overrides | None" = None):
         self.sc = sc
         self.config = config
-        self.core, self.es, self.policy, family = build_onboard(sc, policy, waitmap, config)
+        self.core, self.es, self.policy, family = build_onboard(sc, policy, waitmap, config, flags)
         #: the wait maps flown (``waitmap.describe``: grid, parameters, turn rates, the content hashes
         #: the load verified), None without a map; the step log's ``waitmap`` metadata
         self.waitmap_record = None
@@ -130,7 +133,7 @@ class VehicleCore:
             from daa_sil.waitmap import describe
 
             self.waitmap_record = describe(family)
-        self.dt = 1.0
+        self.dt = STEP.default
         self.n_steps = sc.n_steps
         self._new: list[PilotCommand] = []
         self.last_cmd: "PilotCommand | None" = None

@@ -69,7 +69,7 @@ class VehicleNode:
         self.opts = opts
         #: the simulation: given, or made by :meth:`prepare` (None until then)
         self.core: "VehicleCore | None" = core
-        self.boot = BootPlant(scenario, opts.config)
+        self.boot = BootPlant(scenario, opts.config, flags=opts.settings)
         self.specs = output_specs([opts.out, *opts.also_out], opts.tap, opts.tap_writable)
         self.out = self.specs[0].conn
         self.listen = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))

@@ -5,12 +5,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from daa_sil.config.settings import GCS_PORT, udp
+
 
 @dataclass
 class VehicleOptions:
     """Runtime options of the vehicle node (addresses ``udp:HOST:PORT``; timeouts in wall s)."""
 
-    out: str = "udp:127.0.0.1:14550"
+    out: str = udp(GCS_PORT)
     #: further outputs (``--out`` after the first): observers, ``CONN[,rw]`` (:mod:`daa_sil.sil.outputs`)
     also_out: tuple = ()
     listen: str = "udp:127.0.0.1:0"
@@ -29,6 +31,8 @@ class VehicleOptions:
     waitmap: "str | None" = None
     #: ``--config``: a :class:`daa_sil.config.run_config.RunConfig` (None = the scenario alone)
     config: "object | None" = None
+    #: the per-group settings of the command line (``--wt``, ...: an Overrides; None = none)
+    settings: "object | None" = None
     #: let the (undelayed) tap set parameters and modes; by default it may only read
     tap_writable: bool = False
     #: realtime: "auto" (start at once, wait for tick answers only from a partner that gives them) or

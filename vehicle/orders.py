@@ -25,10 +25,10 @@ from daa_sil.sil.outputs import PILOT_LINK
 from . import telemetry as T
 from .commands import CommandGate, reposition_command, setpoint_command
 from .ports import OutputLink, Outbox
-from .services import GcsServices, SettingEvent
+from .services import SYSID, GcsServices, SettingEvent
 from .traffic import intruder_from_adsb
 
-VEHICLE_SYSID = 1
+VEHICLE_SYSID = SYSID  #: (the setting daa_sil.config.settings.VEHICLE_SYSID)
 PILOT_MANEUVER_ID = M.MAVLINK_MSG_ID_PILOT_MANEUVER
 #: setting writes printed per step (a flood of PARAM_SET is summed up in one line instead)
 ANNOUNCED_PER_STEP = 20

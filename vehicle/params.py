@@ -23,7 +23,10 @@ DAA_WAIT_CONST REAL32  constant wait, s (``constant_wait_s``)   --           rea
 DAA_PRESET     INT8    threshold preset: 0 do365, 1 paper       --           read-only
 =============  ======  =====================================  ===========  ==========
 
-Ranges are those of every other input (:mod:`daa_sil.config.settings`); DAA_STALE_S and
+The parameters of the per-group settings (DAA_WT ... DAA_WAIT_CONST) are made from their
+:class:`~daa_sil.config.settings.Setting` (``mavlink``, ``writable``, range, help): a setting
+registered with a parameter name has one here, with no edit to this module. Ranges are those of
+every other input; DAA_STALE_S and
 DAA_LINK_TO start at :data:`MIN_TIMEOUT_S` (one sim step, 1 s): the GCS sends at most once per step,
 so a link timeout shorter than a step declares the link lost between any two packets, and a stale
 limit shorter than a step makes every command that crossed the link stale; a value like 1.4e-45 s
@@ -42,7 +45,7 @@ import struct
 from dataclasses import dataclass, replace
 from typing import Callable
 
-from daa_sil.config.settings import LINK_TIMEOUT, PROJL_HORIZON, STALE_COMMAND, WAIT_THRESHOLD
+from daa_sil.config.settings import STALE_COMMAND, Setting, group_settings
 from daa_sil.link.codec import mavlink as M
 
 REAL32, INT8 = M.MAV_PARAM_TYPE_REAL32, M.MAV_PARAM_TYPE_INT8
@@ -90,6 +93,15 @@ class SetResult:
         return self.status in ("accepted", "unchanged")
 
 
+def setting_param(s: Setting) -> ParamSpec:
+    """The REAL32 parameter of a per-group setting (:attr:`Setting.mavlink`): its policy field, range
+    and help; read-only unless :attr:`Setting.writable`."""
+    unit = f" ({s.unit})" if s.unit else ""
+    return ParamSpec(s.mavlink, REAL32, f"{s.help}{unit}" + ("" if s.writable else ", read-only"),
+                     lambda p, name=s.name: float(getattr(p, name)), s.name if s.writable else None,
+                     *(s.range if s.writable else (-math.inf, math.inf)))
+
+
 def float32(x: float) -> float:
     """The value as it travels in a float32 MAVLink field."""
     return struct.unpack("<f", struct.pack("<f", x))[0] if math.isfinite(x) else x
@@ -104,20 +116,14 @@ class ParamTable:
 
         presets = tuple(PRESETS)
         code = presets.index(preset) if preset in presets else -1
+        groups = [s for s in group_settings() if s.mavlink]  # every per-group setting with a parameter
         self.specs: tuple[ParamSpec, ...] = (
             ParamSpec("DAA_ENABLE", INT8, "onboard allocation agent on (1) / off (0)",
                       lambda p: float(bool(p.enabled)), "enabled", 0, 1, integer=True),
-            ParamSpec("DAA_WT", REAL32, "wait threshold W_T (s)", lambda p: float(p.wait_threshold_s),
-                      WAIT_THRESHOLD.name, *WAIT_THRESHOLD.range),
-            ParamSpec("DAA_PROJL_S", REAL32, "ProjL look-ahead (s)", lambda p: float(p.projl_horizon_s),
-                      PROJL_HORIZON.name, *PROJL_HORIZON.range),
-            ParamSpec("DAA_STALE_S", REAL32, "stale pilot command limit (s)", lambda p: float(p.stale_command_s),
-                      STALE_COMMAND.name, *STALE_COMMAND.range),
-            ParamSpec("DAA_LINK_TO", REAL32, "link-lost timeout (s)", lambda p: float(p.link_timeout_s),
-                      LINK_TIMEOUT.name, *LINK_TIMEOUT.range),
+            *(setting_param(s) for s in groups if s.writable),
             ParamSpec("DAA_WAIT_MODE", INT8, f"wait function: {', '.join(f'{i} {n}' for i, n in enumerate(WAIT_MODES))}"
                       " (read-only)", lambda p: float(WAIT_MODES.index(p.wait_mode))),
-            ParamSpec("DAA_WAIT_CONST", REAL32, "constant wait (s, read-only)", lambda p: float(p.constant_wait_s)),
+            *(setting_param(s) for s in groups if not s.writable),
             ParamSpec("DAA_PRESET", INT8, f"threshold preset: {', '.join(f'{i} {n}' for i, n in enumerate(presets))}"
                       " (read-only)", lambda p, c=code: float(c)),
         )

@@ -97,7 +97,8 @@ class Preparation:
         from .core import VehicleCore
 
         sc, opts = self.sc, self.opts
-        core = await _daemon(lambda: VehicleCore(sc, waitmap=opts.waitmap, config=opts.config), loop)
+        core = await _daemon(lambda: VehicleCore(sc, waitmap=opts.waitmap, config=opts.config,
+                                                         flags=opts.settings), loop)
         self.on_line(f"simulation loaded ({time.monotonic() - t0:.1f} s)")
         return core
 

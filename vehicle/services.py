@@ -31,6 +31,7 @@ import struct
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
 
+from daa_sil.config.settings import STEP, VEHICLE_SYSID
 from daa_sil.link.codec import mavlink as M
 from daa_sil.link.messages import wire_int
 
@@ -42,7 +43,7 @@ from .streams import StreamRates, msg_name
 if TYPE_CHECKING:
     from daa_sil.config.policy import AllocationPolicy
 
-SYSID, COMPID = 1, 1
+SYSID, COMPID = VEHICLE_SYSID.default, 1
 CMD_ACK_FOR_SET_MODE = M.MAVLINK_MSG_ID_SET_MODE  #: ArduPilot acks the SET_MODE message with command = 11
 FORCE_DISARM_MAGIC = 21196
 FTP_OP_NACK, FTP_ERR_UNKNOWN_COMMAND = 129, 7
@@ -128,7 +129,7 @@ class GcsServices:
 
     params: ParamTable
     plant: Plant
-    dt: float = 1.0
+    dt: float = STEP.default
     writable: frozenset = frozenset({"gcs"})
     events: "list[SettingEvent]" = field(default_factory=list)
     answered: int = 0

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 
+from daa_sil.config.settings import STEP
 from daa_sil.link.codec import mavlink as M
 
 HEARTBEAT = M.MAVLINK_MSG_ID_HEARTBEAT
@@ -64,7 +65,7 @@ def msg_name(msg_id: int) -> str:
 class StreamRates:
     """Which messages are due at each step for one link (intervals in sim seconds)."""
 
-    def __init__(self, dt: float = 1.0):
+    def __init__(self, dt: float = STEP.default):
         self.dt = float(dt)
         self.interval: dict[int, "float | None"] = dict(DEFAULT_INTERVAL_S)
         self._next: dict[int, float] = {m: 0.0 for m in STREAMED}

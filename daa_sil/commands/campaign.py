@@ -10,8 +10,9 @@ import sys
 from pathlib import Path
 
 from ..errors import UsageError
+from daa_sil.config.overrides import Overrides, add_flags, flag_dest
 from daa_sil.config.settings import (BATCH_ROWS, BOOTSTRAP_REPLICATES, CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA,
-                                     INTRUDERS, PRESET, PROJL_HORIZON, SEED, WAIT_THRESHOLD, WORKERS_PER_CORE)
+                                     INTRUDERS, PRESET, SEED, WORKERS_PER_CORE)
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.files import to_jsonable
 from daa_sil.sil.children import Interrupted, interrupt_signum, interruptible
@@ -36,7 +37,7 @@ RUN_EXAMPLES = """examples:
   daa-sil campaign run --groups ID-2,ID-2-projl,ID-2-map --waitmap paper --out runs/ablation
 
   # every knob of the agent from the command line (recorded in campaign.json, checked on --resume)
-  daa-sil campaign run --groups B-2,ID-2 --wt 8 --projl-lookahead 15 --latency gauss:5,3 --out runs/knobs
+  daa-sil campaign run --groups B-2,ID-2 --wt 8 --projl-horizon 15 --latency gauss:5,3 --out runs/knobs
 
   # your own groups (YAML: name -> fields, 'base: ID-2' to start from a built-in group)
   daa-sil campaign run --groups mygroups.yaml --out runs/mine
@@ -160,12 +161,7 @@ def _add_run_options(r) -> None:
                         "'waitmap build' directory")
     r.add_argument("--gamma", type=finite_float("--gamma", *GAMMA.range), default=None,
                    help="MDP discount of the wait maps (default: the map preset's, 0.95)")
-    r.add_argument("--wt", type=finite_float("--wt", *WAIT_THRESHOLD.range), default=None, metavar="S",
-                   help=WAIT_THRESHOLD.flag_help("wait threshold W_T of every group with a wait function")
-                   .replace("(default", "(default: each group's,"))
-    r.add_argument("--projl-lookahead", type=finite_float("--projl-lookahead", *PROJL_HORIZON.range), default=None,
-                   metavar="S", help=PROJL_HORIZON.flag_help("ProjL look-ahead N of every group")
-                   .replace("(default", "(default: each group's,"))
+    add_flags(r)  # --wt, --projl-horizon, ...: every per-group setting (daa_sil.config.settings)
     r.add_argument("--latency", default=None, metavar="SPEC",
                    help="latency of every group: const:4, gauss:5,3, uniform:1,8 (default: each group's); "
                         "the reading's rule applies it (paper: the round trip, half on each link; extended: "
@@ -220,8 +216,8 @@ def _config_from_args(args):
     given = {"groups": parse_groups(args.groups) if args.groups is not None else None,
              "n_encounters": args.encounters, "seed": args.seed, "chunk_size": args.chunk_size,
              "preset": args.preset.lower() if args.preset else None, "duration_s": args.duration,
-             "waitmap": args.waitmap, "gamma": args.gamma, "wt": args.wt, "projl_lookahead": args.projl_lookahead,
-             "latency": args.latency, "n_intruders": args.intruders, "reading": args.reading,
+             "waitmap": args.waitmap, "gamma": args.gamma, "latency": args.latency, "n_intruders": args.intruders,
+             "reading": args.reading,
              "reading_set": parse_reading_settings(args.reading_set) if args.reading_set else None}
     if args.preset and args.preset.lower() not in PRESETS:
         raise UsageError(f"unknown --preset {args.preset!r}; allowed: {', '.join(PRESETS)}")
@@ -240,7 +236,8 @@ def _config_from_args(args):
             print(f"daa-sil: note: {notice}", file=sys.stderr)
     fields = {k: (v if v is not None else getattr(base, k)) for k, v in given.items()}
     fields = _waitmap_into_reading(fields, args.waitmap)
-    return CampaignConfig(dt_s=base.dt_s, daa=base.daa, pilot=base.pilot, link=base.link, **fields).validate()
+    settings = Overrides.from_args(args).over(base.settings)  # the flags over the file's
+    return CampaignConfig(dt_s=base.dt_s, daa=base.daa, pilot=base.pilot, settings=settings, **fields).validate()
 
 
 def _waitmap_into_reading(fields: dict, given: "str | None") -> dict:
@@ -332,9 +329,12 @@ def sweep_cmd(args) -> int:
         raise UsageError("campaign sweep needs --vary NAME=V1,V2,... (or --collate SWEEP_DIR ...)")
     _check_resume_force(args)
     vary = sweep.parse_vary(args.vary)
-    given = getattr(args, vary.field if vary.field != "n_intruders" else "intruders", None)
-    if vary.field in ("waitmap", "gamma", "wt", "latency", "reading") and given is not None:
-        raise UsageError(f"--vary {vary.name} sets the {vary.field.replace('_', '-')} of every point; drop --{vary.field}")
+    if vary.setting is not None:
+        flag, given = vary.setting.flag, getattr(args, flag_dest(vary.setting), None)
+    else:
+        flag, given = f"--{vary.field}", getattr(args, vary.field, None)
+    if (vary.setting is not None or vary.field in ("waitmap", "gamma", "latency", "reading")) and given is not None:
+        raise UsageError(f"--vary {vary.name} sets the {flag[2:]} of every point; drop {flag}")
     base = _config_from_args(args)  # the sweep directory has no campaign.json: defaults + the options given
     check_scheduler(args.scheduler, args.workers)
     quiet = args.no_progress or args.json

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from ..errors import DaaSilError, UsageError
+from daa_sil.config.settings import GCS_PORT, udp
 from .common_args import load_key_option
 
 EXAMPLES = """examples:
@@ -37,8 +38,8 @@ def register(sub) -> None:
     p = sub.add_parser("inject", help="inject a scenario file's intruders into a flying vehicle",
                        description=__doc__, epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("file", type=Path, help="scenario YAML file whose intruders to inject")
-    p.add_argument("--vehicle", default="udpout:127.0.0.1:14550", metavar="CONN",
-                   help="the vehicle: udpout:HOST:PORT (its udpin: output; default udpout:127.0.0.1:14550), "
+    p.add_argument("--vehicle", default=udp(GCS_PORT, "udpout"), metavar="CONN",
+                   help=f"the vehicle: udpout:HOST:PORT (its udpin: output; default {udp(GCS_PORT, 'udpout')}), "
                         "udpin:HOST:PORT (its ,rw output streams here) or tcp:HOST:PORT (its tcpin: output)")
     p.add_argument("--id-offset", type=int, default=0, metavar="N",
                    help="add N to each intruder's ICAO address (the vehicle refuses one that flies already)")

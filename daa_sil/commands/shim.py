@@ -14,7 +14,7 @@ import signal
 import sys
 
 from ..errors import UsageError
-from daa_sil.config.settings import DELAY_EPOCH
+from daa_sil.config.settings import DELAY_EPOCH, SHIM_GCS_PORT, SHIM_VEHICLE_PORT, udp
 from daa_sil.models.delay_spec import SPEC_HELP, parse_delay_spec
 from daa_sil.models.link_rule import link_legs
 from daa_sil.sil.endpoint import format_udp_address
@@ -84,10 +84,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """Every ``daa-sil shim`` option on ``p``."""
     p.add_argument("--vehicle", metavar="udp:HOST:PORT", help="vehicle address (default: learned from its first datagram)")
     p.add_argument("--gcs", metavar="udp:HOST:PORT", help="GCS address (default: learned from its first datagram)")
-    p.add_argument("--listen-vehicle", default="udp:127.0.0.1:14601", metavar="udp:HOST:PORT",
-                   help="socket the vehicle sends to (default udp:127.0.0.1:14601; port 0 = OS-chosen)")
-    p.add_argument("--listen-gcs", default="udp:127.0.0.1:14602", metavar="udp:HOST:PORT",
-                   help="socket the GCS sends to (default udp:127.0.0.1:14602)")
+    p.add_argument("--listen-vehicle", default=udp(SHIM_VEHICLE_PORT), metavar="udp:HOST:PORT",
+                   help=f"socket the vehicle sends to (default {udp(SHIM_VEHICLE_PORT)}; port 0 = OS-chosen)")
+    p.add_argument("--listen-gcs", default=udp(SHIM_GCS_PORT), metavar="udp:HOST:PORT",
+                   help=f"socket the GCS sends to (default {udp(SHIM_GCS_PORT)})")
     p.add_argument("--delay", metavar="SPEC", help="one-way delay model for both directions")
     p.add_argument("--delay-up", metavar="SPEC", help="GCS -> vehicle delay (overrides --delay)")
     p.add_argument("--delay-down", metavar="SPEC", help="vehicle -> GCS delay (overrides --delay)")

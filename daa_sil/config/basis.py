@@ -139,7 +139,7 @@ PAPER_BASIS: tuple[Basis, ...] = (
     Basis("W_T", (), "4 s", "text", "\"we have chosen W_T = 4 sec given delays between 0.2 and 10 seconds\"", "",
           "the sweep `wt=2,4,8,16`"),
     Basis("ProjL's look-ahead N", (), "25 s", "choice", "\"a loss of well clear within the next N seconds\"",
-          "N is not given: the DO-365 warning alerting time", "the setting `allocation.projl_lookahead`"),
+          "N is not given: the DO-365 warning alerting time", "the setting `allocation.projl_horizon_s`"),
     Basis("the DAA's authority on a step without a command", ("daa_authority",), "Algorithm 1 every step", "text",
           "Design of the Control Allocation Agent: \"The command allocation at any time depends on the status of pilot "
           "command reception, ...\"", "", "`paper-keep-daa` (our extension): the DAA keeps it until no alert"),

@@ -20,13 +20,14 @@ from __future__ import annotations
 import functools
 import json
 import re
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
 from typing import Sequence
 
 from daa_sil.config.policy import AllocationPolicy
-from daa_sil.config.settings import CONSTANT_WAIT, PROJL_HORIZON, WAIT_THRESHOLD, Setting
+from daa_sil.config.overrides import Overrides, canonical_keys
+from daa_sil.config.settings import CONSTANT_WAIT, group_settings
 from daa_sil.errors import FileFormatError, UsageError
 
 #: the paper's groups (Table 2), in the paper's order
@@ -37,32 +38,33 @@ _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,39}$")
 
 @dataclass(frozen=True)
 class GroupSpec:
-    """One experiment group (see the module docstring). Times in s."""
+    """One experiment group (see the module docstring): its setup, its link latency and the agent's
+    :class:`~daa_sil.config.policy.AllocationPolicy` (``allocation``: wait function, W_T, ProjL and
+    N, blending, every per-group setting). Times in s."""
 
     name: str
     setup: str
     latency: dict  #: the YAML form of a :mod:`daa_sil.models.latency` model, used on uplink and downlink
-    wait: "str | float"  #: ``none`` | ``map`` | ``always`` | a constant wait in s
-    wait_threshold_s: float = WAIT_THRESHOLD.field()
-    projl: bool = True
-    projl_horizon_s: float = PROJL_HORIZON.field()
-    blending: bool = True
-    wait_rule: str = "threshold"
+    allocation: AllocationPolicy
     description: str = ""
-    #: False: the agent never takes authority (no DAA: the pilot's last command is always flown)
-    enabled: bool = True
 
     def __hash__(self) -> int:  # the latency mapping is not hashable; hash the JSON form
         return hash((self.name, json.dumps(self.to_dict(), sort_keys=True)))
 
     @property
+    def wait(self) -> "str | float":
+        """``none`` | ``map`` | ``always`` | the constant wait in s (the group file's ``wait``)."""
+        p = self.allocation
+        return p.constant_wait_s if p.wait_mode == "constant" else p.wait_mode
+
+    @property
     def wait_mode(self) -> str:
         """The policy's wait mode: ``none``, ``constant``, ``map`` or ``always``."""
-        return self.wait if isinstance(self.wait, str) else "constant"
+        return self.allocation.wait_mode
 
     @property
     def uses_map(self) -> bool:
-        return self.wait == "map"
+        return self.allocation.wait_mode == "map"
 
     def delay_model(self):
         """The :mod:`daa_sil.models.latency` model used on the uplink and on the downlink."""
@@ -72,18 +74,23 @@ class GroupSpec:
 
     def policy(self) -> AllocationPolicy:
         """The agent's :class:`~daa_sil.config.policy.AllocationPolicy` for this group."""
-        return AllocationPolicy(self.wait_mode, constant_wait_s=float(self.wait) if self.wait_mode == "constant"
-                                else CONSTANT_WAIT.default,
-                                wait_threshold_s=self.wait_threshold_s, projl=self.projl,
-                                projl_horizon_s=self.projl_horizon_s, blending=self.blending,
-                                wait_rule=self.wait_rule, name=self.name, enabled=self.enabled)
+        return self.allocation
 
     def with_(self, **changes) -> "GroupSpec":
+        """This group with ``changes``; a new ``name`` names its policy too (as :meth:`from_dict` does)."""
+        if "name" in changes:
+            changes["allocation"] = replace(changes.get("allocation", self.allocation), name=changes["name"])
         return replace(self, **changes)
 
     def to_dict(self) -> dict:
-        d = asdict(self)
-        d["latency"] = dict(self.latency)
+        """The group file's form: ``setup``, ``latency``, ``wait``, every per-group setting, ``projl``,
+        ``blending``, ``wait_rule``, ``description``, ``enabled`` (what :meth:`from_dict` reads)."""
+        p = self.allocation
+        d = {"name": self.name, "setup": self.setup, "latency": dict(self.latency), "wait": self.wait}
+        d.update({s.name: getattr(p, s.name) for s in group_settings() if s is not CONSTANT_WAIT})
+        d.update({k: getattr(p, k) for k in _FLAGS})
+        d.update({"wait_rule": p.wait_rule, "description": self.description})
+        d["enabled"] = p.enabled
         return d
 
     @classmethod
@@ -93,7 +100,8 @@ class GroupSpec:
             raise UsageError(f"{where}: group {name!r} must be a mapping of fields, got {type(d).__name__}")
         if not isinstance(name, str) or not _NAME.match(name):
             raise UsageError(f"{where}: bad group name {name!r}; use letters, digits, '.', '_' or '-' (up to 40)")
-        known = {f.name for f in fields(cls)} - {"name"}
+        known = {"setup", "latency", "wait", "wait_rule", "description", "enabled", *_FLAGS,
+                 *(k for k in Overrides.keys_read() if k not in CONSTANT_WAIT.keys)}
         unknown = set(d) - known
         if unknown:
             raise UsageError(f"{where}: group {name}: unknown field {sorted(unknown)[0]!r}; allowed: "
@@ -105,21 +113,21 @@ class GroupSpec:
         wait = d["wait"]
         if isinstance(wait, bool) or not (wait in WAITS or isinstance(wait, (int, float))):
             raise UsageError(f"{at}: wait must be none, map, always or a number of seconds, got {wait!r}")
+        settings = Overrides.read(d, at)
         if isinstance(wait, (int, float)):
-            wait = CONSTANT_WAIT.check(wait, at, "a constant wait")
+            settings = settings.with_(CONSTANT_WAIT, CONSTANT_WAIT.check(wait, at, "a constant wait"))
+        base = AllocationPolicy("constant" if isinstance(wait, (int, float)) else wait, name=name,
+                                wait_rule=str(d.get("wait_rule", "threshold")),
+                                **{k: _flag(d, k, True, at) for k in (*_FLAGS, "enabled")})  # validates wait_rule
         spec = cls(name=name, setup=str(d["setup"]), latency=dict(d["latency"]) if isinstance(d["latency"], dict)
-                   else d["latency"], wait=wait,
-                   wait_threshold_s=_number(d, WAIT_THRESHOLD, at),
-                   projl=_flag(d, "projl", True, at), projl_horizon_s=_number(d, PROJL_HORIZON, at),
-                   blending=_flag(d, "blending", True, at), wait_rule=str(d.get("wait_rule", "threshold")),
-                   description=str(d.get("description", "")), enabled=_flag(d, "enabled", True, at))
+                   else d["latency"], allocation=settings.applied(base, run_wide=False),
+                   description=str(d.get("description", "")))
         spec.delay_model()  # validates latency
-        spec.policy()  # validates wait_rule
         return spec
 
 
-def _number(d: dict, setting: Setting, where: str) -> float:
-    return setting.check(d.get(setting.name, setting.default), where)
+#: the on/off fields of a group (the ProjL veto, blending)
+_FLAGS = ("projl", "blending")
 
 
 def _flag(d: dict, key: str, default: bool, where: str) -> bool:
@@ -162,7 +170,7 @@ def load_group_file(path: "str | Path") -> tuple[GroupSpec, ...]:
         raise UsageError(f"{p}: expected a mapping of group name -> fields, got {type(raw).__name__}")
     out = []
     for name, d in raw.items():
-        d = dict(d) if isinstance(d, dict) else d
+        d = canonical_keys(d, str(p)) if isinstance(d, dict) else d
         if isinstance(d, dict) and "base" in d:
             base = group_spec(d.pop("base")).to_dict()
             base.pop("name")

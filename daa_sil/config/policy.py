@@ -5,17 +5,33 @@ Defaults and ranges of its numeric fields are the :mod:`daa_sil.config.settings`
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Mapping, TypeVar
+from dataclasses import dataclass
 
 from daa_sil.config.choices import AGENT_ACTIVE, DAA_AUTHORITY, UNSAFE_HOLDS, WAIT_RULES
-from daa_sil.config.settings import CONSTANT_WAIT, LINK_TIMEOUT, PROJL_HORIZON, STALE_COMMAND, WAIT_THRESHOLD
+from daa_sil.config.settings import (CONSTANT_WAIT, LINK_TIMEOUT, PROJL_HORIZON, STALE_COMMAND, WAIT_THRESHOLD,
+                                     group_settings)
 from daa_sil.errors import UsageError
 
 WAIT_MODES = ("none", "constant", "map", "always")
 
 
+def with_group_settings(cls):
+    """Add a field (default and setting from :meth:`Setting.field`) for every registered per-group
+    setting the class does not declare itself: a setting registered in
+    :mod:`daa_sil.config.settings` is a policy field with no other edit."""
+    notes = cls.__dict__.get("__annotations__")
+    if notes is None:
+        notes = {}
+        cls.__annotations__ = notes
+    for s in group_settings():
+        if s.name not in notes:
+            notes[s.name] = "float"
+            setattr(cls, s.name, s.field())
+    return cls
+
+
 @dataclass(frozen=True)
+@with_group_settings
 class AllocationPolicy:
     """One experimental group's allocation settings (groups are data, not code paths: see
     :mod:`daa_sil.config.groups`). Times in s."""
@@ -56,27 +72,4 @@ class AllocationPolicy:
             raise UsageError(f"daa_authority must be one of {', '.join(DAA_AUTHORITY)}, got {self.daa_authority!r}")
 
 
-T = TypeVar("T")
-
-
-def apply_overrides(target: T, *, wt: "float | None" = None, projl_lookahead: "float | None" = None,
-                    wait_rule: "str | None" = None, link: "Mapping | None" = None) -> T:
-    """``target`` (a :class:`~daa_sil.config.groups.GroupSpec` or an :class:`AllocationPolicy`) with a
-    run's overrides: the one rule fast-time (``CampaignConfig.effective_groups``) and the vehicle
-    (``vehicle.core.build_onboard``) share. ``wt`` (W_T, s) applies to a group with a wait function
-    only, ``projl_lookahead`` (N, s) to every group, ``wait_rule`` (a reading's) to a group that
-    waits, ``link`` (``stale_command_s`` / ``link_timeout_s``, s) as given. None = keep the group's."""
-    changes: dict = {}
-    waits = target.wait_mode != "none"
-    if link:
-        changes.update(link)
-    if wt is not None and waits:
-        changes["wait_threshold_s"] = float(wt)
-    if projl_lookahead is not None:
-        changes["projl_horizon_s"] = float(projl_lookahead)
-    if wait_rule is not None and waits and wait_rule != target.wait_rule:
-        changes["wait_rule"] = wait_rule
-    return replace(target, **changes) if changes else target
-
-
-__all__ = ["AllocationPolicy", "WAIT_MODES", "apply_overrides"]
+__all__ = ["AllocationPolicy", "WAIT_MODES", "with_group_settings"]

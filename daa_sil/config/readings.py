@@ -84,6 +84,9 @@ SUPERSEDED = ("dropped", "fate")
 PILOT_ENGAGES = ("corrective", "preventive", "never")
 #: the reading a campaign runs when none is named
 DEFAULT_READING = "paper"
+#: the reading a campaign.json that records none flew: campaigns were written before readings were
+#: recorded only under the simulator's first reading, called ``extended`` now
+LEGACY_READING = "extended"
 #: old reading names -> their current names (accepted with a one-line notice)
 ALIASES = {"literal": "extended"}
 
@@ -326,7 +329,7 @@ def readings_help() -> str:
         f"  {old:26s} old name of '{new}' (accepted, with a notice)" for old, new in ALIASES.items())
 
 
-__all__ = ["Reading", "READINGS", "ALIASES", "DEFAULT_READING", "reading_for", "canonical_name",
+__all__ = ["Reading", "READINGS", "ALIASES", "DEFAULT_READING", "LEGACY_READING", "reading_for", "canonical_name",
            "parse_reading_settings", "readings_help", "UNITS", "PILOT_STARTS", "PILOT_STOPS", "UNSAFE_HOLDS", "AGENT_ACTIVE",
            "OUTSIDE", "LATENCIES", "WAIT_RULES", "WINDOWS", "RECEIVED", "BLENDS", "SUPERSEDED", "PILOT_ENGAGES",
            "DAA_AUTHORITY", "DELAY_DRAWS", "COUNTING_KEYS", "NEVER_LEVEL"]

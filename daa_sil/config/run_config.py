@@ -8,13 +8,14 @@
                :class:`daa_sil.daa.config.DaaConfig`, SI units: m, s, m/s, rad)
 ``waitmap``    ``source`` (a map preset ``alerting`` / ``paper`` / ``fine``, a grid spec or a
                ``waitmap build`` directory) and ``gamma`` (the MDP discount; null = the source's)
-``allocation`` ``wt`` (W_T, s) and ``projl_lookahead`` (N, s) of every group (null = each group's)
+``allocation`` per-group settings of every group: ``wait_threshold_s`` (W_T, s), ``projl_horizon_s``
+               (ProjL N, s), ``constant_wait_s`` (null = each group's; :mod:`daa_sil.config.overrides`)
 ``groups``     the groups flown, by name from the group table ``daa_sil/data/groups.yaml`` (the
                one place groups are defined)
 ``pilot``      changes to the remote-pilot model (fields of
                :class:`daa_sil.models.pilot_config.PilotConfig`; times s, angles deg, ft)
 ``latency``    a delay spec (``const:4``, ``gauss:5,3``) for every group's links (null = each group's)
-``link``       ``stale_command_s`` and ``link_timeout_s`` of the agent (null = the policy's 15 / 20 s)
+``link``       per-group ``stale_command_s`` and ``link_timeout_s`` of the agent (null = the policy's 15 / 20 s)
 ``reading``    ``name`` (a named reading of :mod:`daa_sil.config.readings`) and ``set`` (its overrides)
 ``study``      ``encounters``, ``seed``, ``duration_s``, ``intruders``, ``chunk_size`` of a campaign
                (:meth:`daa_sil.study.campaign_config.CampaignConfig.from_run_config` reads them)
@@ -28,11 +29,13 @@ output shows what was flown):
 * ``waitmap build``: ``thresholds`` (unless ``--preset``) and ``waitmap.gamma``;
 * ``run``, ``demo``, ``daa-vehicle``, ``daa-gcs``: the scenario file sets the thresholds, the
   encounter, the link and the group; the configuration adds ``daa``, ``waitmap.source``,
-  ``allocation`` (over the scenario's, as ``--wt`` over a campaign's groups), ``link`` (where the
-  scenario sets none) and ``pilot``.
+  ``allocation`` and ``link`` (where the scenario sets none: a scenario's value wins over a
+  file's, a flag's over both) and ``pilot``.
 
-The fixed sections (``waitmap``, ``allocation``, ``link``, ``reading``, ``study``) are the typed
-dataclasses of :mod:`daa_sil.config.sections`; their defaults and ranges are those of
+The fixed sections (``waitmap``, ``reading``, ``study``) are the typed dataclasses of
+:mod:`daa_sil.config.sections`; ``allocation`` and ``link`` are
+:class:`~daa_sil.config.overrides.Overrides` (the per-group settings of that section, old keys
+such as ``wt`` and ``projl_lookahead`` read with a notice); their defaults and ranges are those of
 :mod:`daa_sil.config.settings`.
 
 Presets: ``paper`` (the paper's thresholds, HMD* 1220 m / d_h* 122 m; what ``campaign run`` flew
@@ -53,8 +56,8 @@ from typing import Any, Mapping
 import yaml
 
 from daa_sil.config.config_option import PRESET_NAMES, add_config_argument
-from daa_sil.config.sections import (SECTIONS, AllocationSection, LinkSection, ReadingSection, StudySection,
-                                     WaitmapSection)
+from daa_sil.config.overrides import Overrides, reading_rules
+from daa_sil.config.sections import SECTIONS, SETTING_SECTIONS, ReadingSection, StudySection, WaitmapSection
 from daa_sil.config.settings import PRESET
 from daa_sil.config.yaml_input import load_yaml_file
 from daa_sil.errors import UsageError
@@ -80,11 +83,11 @@ class RunConfig:
     thresholds: str = PRESET.default
     daa: dict = field(default_factory=dict)
     waitmap: WaitmapSection = field(default_factory=WaitmapSection)
-    allocation: AllocationSection = field(default_factory=AllocationSection)
+    allocation: Overrides = field(default_factory=lambda: Overrides(section="allocation"))
     groups: tuple = field(default_factory=_default_groups)
     pilot: dict = field(default_factory=dict)
     latency: "str | None" = None
-    link: LinkSection = field(default_factory=LinkSection)
+    link: Overrides = field(default_factory=lambda: Overrides(section="link"))
     reading: ReadingSection = field(default_factory=ReadingSection)
     study: StudySection = field(default_factory=StudySection)
     source: str = field(default="<preset>", compare=False)
@@ -116,14 +119,12 @@ class RunConfig:
         """``policy`` (an :class:`~daa_sil.config.policy.AllocationPolicy`) with the reading's agent
         rules (an unsafe 'hold', when the agent decides, the DAA's authority; the wait rule to a group
         that waits): what the SIL vehicle flies, as a campaign of the same reading."""
-        from dataclasses import replace as _replace
+        return reading_rules(policy, self.effective_reading)
 
-        from daa_sil.config.policy import apply_overrides
-
-        r = self.effective_reading
-        policy = apply_overrides(policy, wait_rule=r.wait_rule)
-        changes = {k: v for k, v in r.policy_overrides().items() if k != "wait_rule"}
-        return _replace(policy, **changes) if changes else policy
+    @property
+    def group_settings(self) -> Overrides:
+        """The per-group settings this file gives (``allocation`` and ``link`` together)."""
+        return self.link.over(self.allocation)
 
     @property
     def map_source(self) -> str:
@@ -213,6 +214,9 @@ def config_from_dict(data: Any, where: str = "<config>") -> RunConfig:
     for key in SECTIONS:
         if key in data:
             changes[key] = getattr(cfg, key).updated(data[key], key, where)
+    for key in SETTING_SECTIONS:
+        if key in data:
+            changes[key] = _settings(data[key], key, where)
     if "daa" in data:
         changes["daa"] = _field_changes(data["daa"], "daa", _dataclass_fields("daa"), where)
     if "pilot" in data:
@@ -249,6 +253,17 @@ def _field_changes(node, key: str, known: dict, where: str) -> dict:
     if bad:
         raise UsageError(f"{where}: unknown key '{key}.{bad[0]}'; allowed: {', '.join(known)}")
     return {k: (tuple(v) if isinstance(v, list) else v) for k, v in node.items()}
+
+
+def _settings(node, key: str, where: str) -> Overrides:
+    """A section of per-group settings: each key a setting's name (or old key), each value checked."""
+    allowed = Overrides.keys_read(key)
+    if not isinstance(node, dict):
+        raise UsageError(f"{where}: {key} must be a mapping with keys {', '.join(allowed)}")
+    bad = [k for k in node if k not in allowed]
+    if bad:
+        raise UsageError(f"{where}: unknown key '{key}.{bad[0]}'; allowed: {', '.join(allowed)}")
+    return Overrides.read(node, where, f"{key}.", key)
 
 
 def _groups(node, where: str) -> tuple:

@@ -1,9 +1,10 @@
 """The fixed sections of a run configuration (:class:`daa_sil.config.run_config.RunConfig`) as typed
-dataclasses: ``waitmap``, ``allocation``, ``link``, ``reading`` and ``study``.
+dataclasses: ``waitmap``, ``reading`` and ``study``. (``allocation`` and ``link`` hold per-group
+settings: :class:`daa_sil.config.overrides.Overrides`.)
 
 Each field takes its default, its range and its help from a :class:`~daa_sil.config.settings.Setting`
 (``metadata["setting"]``), so a YAML file, a command-line flag and ``config show --full`` check and
-describe the same thing. A section also reads as a mapping (``cfg.allocation["wt"]``,
+describe the same thing. A section also reads as a mapping (``cfg.study["seed"]``,
 ``dict(cfg.study)``) and compares equal to the plain mapping of its fields.
 """
 
@@ -14,8 +15,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from daa_sil.config.readings import DEFAULT_READING
-from daa_sil.config.settings import (CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA, INTRUDERS, LINK_TIMEOUT, PROJL_HORIZON,
-                                     SEED, STALE_COMMAND, WAIT_THRESHOLD, WAITMAP)
+from daa_sil.config.settings import CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA, INTRUDERS, SEED, WAITMAP
 from daa_sil.errors import UsageError
 
 
@@ -68,22 +68,6 @@ class WaitmapSection(Section):
 
 
 @dataclass(frozen=True, eq=False)
-class AllocationSection(Section):
-    """Overrides of every group's allocation settings (None = each group's own), s."""
-
-    wt: "float | None" = WAIT_THRESHOLD.override_field()  #: W_T of every group with a wait function
-    projl_lookahead: "float | None" = PROJL_HORIZON.override_field()  #: ProjL look-ahead N of every group
-
-
-@dataclass(frozen=True, eq=False)
-class LinkSection(Section):
-    """The agent's link timeouts (None = the policy's), s."""
-
-    stale_command_s: "float | None" = STALE_COMMAND.override_field()
-    link_timeout_s: "float | None" = LINK_TIMEOUT.override_field()
-
-
-@dataclass(frozen=True, eq=False)
 class ReadingSection(Section):
     """``name``: a named reading (:mod:`daa_sil.config.readings`); ``set``: its overrides."""
 
@@ -103,8 +87,8 @@ class StudySection(Section):
 
 
 #: the fixed sections by their key in a configuration file
-SECTIONS = {"waitmap": WaitmapSection, "allocation": AllocationSection, "link": LinkSection,
-            "reading": ReadingSection, "study": StudySection}
+SECTIONS = {"waitmap": WaitmapSection, "reading": ReadingSection, "study": StudySection}
+#: the sections of per-group settings (:func:`daa_sil.config.overrides.settings_of` each)
+SETTING_SECTIONS = ("allocation", "link")
 
-__all__ = ["Section", "WaitmapSection", "AllocationSection", "LinkSection", "ReadingSection", "StudySection",
-           "SECTIONS"]
+__all__ = ["Section", "WaitmapSection", "ReadingSection", "StudySection", "SECTIONS", "SETTING_SECTIONS"]

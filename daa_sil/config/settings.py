@@ -1,13 +1,20 @@
 """Every setting that more than one input reads, defined once: its default, its allowed range, its
-unit and its help.
+unit, its help, and where a user sets it (command-line flag, YAML key and old keys, MAVLink
+parameter).
 
 A :class:`Setting` is a value, not a parser. The inputs read it:
 
 * a dataclass field takes its default from it (:meth:`Setting.field`, which also records the
   setting in the field's metadata, so ``config show --full`` and the docs can list it);
-* a command-line flag takes its range and help (:meth:`Setting.flag_help`, :attr:`Setting.range`);
+* a command-line flag takes its name, range and help (:attr:`Setting.flag`, :meth:`Setting.flag_help`);
 * a YAML key (scenario, group file, run configuration) and a MAVLink parameter check the same range
   (:meth:`Setting.check`, :meth:`Setting.contains`).
+
+A **per-group** setting (``per_group=True``: W_T, ProjL N, the constant wait, the link timeouts) is a
+field of the agent's :class:`~daa_sil.config.policy.AllocationPolicy`; registering one
+(:func:`register`) is all it takes for it to be a policy field, a group-file key, a run
+configuration key, a scenario key, a flag of the commands that fly groups and a MAVLink parameter
+(:mod:`daa_sil.config.overrides` reads the registry for each of them).
 
 This module imports nothing of ours but :mod:`daa_sil.errors`, so any layer may read it.
 """
@@ -16,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,6 +41,28 @@ class Setting:
     lo: "float | None" = None
     hi: "float | None" = None
     help: str = ""
+    #: the command-line flag that sets it (``--wt``), None = none
+    flag: "str | None" = None
+    #: old YAML keys still read, each with a one-line notice (``wt`` for ``wait_threshold_s``)
+    aliases: tuple = ()
+    #: old command-line flags still read, each with a one-line notice
+    old_flags: tuple = ()
+    #: the vehicle's MAVLink parameter (<= 16 characters), None = none
+    mavlink: "str | None" = None
+    #: False: the MAVLink parameter is reported, a PARAM_SET of it refused
+    writable: bool = True
+    #: the run-configuration section it sits in (``allocation``, ``link``, ``study``, ...)
+    section: str = ""
+    #: a field of the agent's AllocationPolicy, set per group (see the module docstring)
+    per_group: bool = False
+    #: which groups a run-wide value (flag, run configuration) changes: ``all``, ``waiting`` (a group
+    #: with a wait function) or ``constant`` (a group with the constant wait function)
+    applies: str = "all"
+
+    @property
+    def keys(self) -> tuple:
+        """Every YAML key it is read under: its name, then the old ones."""
+        return (self.name, *self.aliases)
 
     @property
     def range(self) -> tuple[float, float]:
@@ -91,18 +121,25 @@ class Setting:
 #: 16 s, and no map value exceeds its horizon (60 s for the paper grid, 120 s for the alerting grid),
 #: so a larger W_T could never be met and would mean "never wait".
 WAIT_THRESHOLD = Setting("wait_threshold_s", 4.0, "s", 0.0, 120.0,
-                         "W_T: the agent waits only while the wait function w(S) >= W_T")
+                         "W_T: the agent waits only while the wait function w(S) >= W_T", flag="--wt",
+                         aliases=("wt",), mavlink="DAA_WT", section="allocation", per_group=True, applies="waiting")
 #: N, the ProjL look-ahead: 25 s is the DO-365 warning alerting time, a LoWC predicted that soon leaves
 #: no time to wait for a command delayed by up to 10 s plus a 5-10 s maneuver
 PROJL_HORIZON = Setting("projl_horizon_s", 25.0, "s", 0.0, 120.0,
-                        "ProjL look-ahead N: no wait while a LoWC is projected within N")
+                        "ProjL look-ahead N: no wait while a LoWC is projected within N", flag="--projl-horizon",
+                        aliases=("projl_lookahead",), old_flags=("--projl-lookahead",), mavlink="DAA_PROJL_S",
+                        section="allocation", per_group=True)
 #: the wait of the ``constant`` wait function (IC-1); capped like W_T, above which it means "always"
-CONSTANT_WAIT = Setting("constant_wait_s", 5.0, "s", 0.0, 120.0, "the constant wait function's value w")
+CONSTANT_WAIT = Setting("constant_wait_s", 5.0, "s", 0.0, 120.0, "the constant wait function's value w",
+                        flag="--constant-wait", aliases=("wait_constant_s",), mavlink="DAA_WAIT_CONST", writable=False,
+                        section="allocation", per_group=True, applies="constant")
 #: the agent's stale-command limit and link-lost timeout (by a command's send time / the last packet).
 #: At least one sim step: the GCS sends at most once per step, so a shorter link timeout declares
 #: the link lost between any two packets, and a shorter stale limit makes every command stale.
-STALE_COMMAND = Setting("stale_command_s", 15.0, "s", 1.0, 120.0, "a pilot command older than this is never flown")
-LINK_TIMEOUT = Setting("link_timeout_s", 20.0, "s", 1.0, 120.0, "no packet from the GCS for this long: link lost")
+STALE_COMMAND = Setting("stale_command_s", 15.0, "s", 1.0, 120.0, "a pilot command older than this is never flown",
+                        flag="--stale-command", mavlink="DAA_STALE_S", section="link", per_group=True)
+LINK_TIMEOUT = Setting("link_timeout_s", 20.0, "s", 1.0, 120.0, "no packet from the GCS for this long: link lost",
+                       flag="--link-timeout", mavlink="DAA_LINK_TO", section="link", per_group=True)
 #: a link delay process keeps one drawn delay for an epoch (0 = a draw per datagram)
 DELAY_EPOCH = Setting("epoch_s", 10.0, "s", 0.0, 600.0, "delay epoch: one drawn delay holds this long (0 = per datagram)")
 #: the encounter length T (paper Sec. IV); the closest point of approach is at T/2
@@ -140,6 +177,23 @@ STANDARD_PRESET = Setting("thresholds", "do365", help="well-clear threshold pres
 #: a scenario's group when it names none, and its uplink delay when its link names none
 SCENARIO_GROUP = Setting("group", "ID-1", help="the experiment group a scenario flies")
 SCENARIO_LINK = Setting("up", "const:4", help="uplink delay spec (GCS -> vehicle)")
+#: the simulation step dt: paper Sec. IV flies 1 s steps; fast-time, the lockstep SIL and the
+#: vehicle's clock all step by it (a campaign records it as ``dt_s``; no input changes it today)
+STEP = Setting("dt_s", 1.0, "s", help="simulation step dt")
+#: the SIL's UDP ports on 127.0.0.1: the shim listens for the vehicle and for the GCS; the vehicle's
+#: default output is the port ground stations listen on (QGroundControl, MAVProxy)
+SHIM_VEHICLE_PORT = Setting("listen_vehicle", 14601, "", 0, 65535, "UDP port the shim listens on for the vehicle")
+SHIM_GCS_PORT = Setting("listen_gcs", 14602, "", 0, 65535, "UDP port the shim listens on for the GCS")
+GCS_PORT = Setting("out", 14550, "", 1, 65535, "UDP port of the vehicle's default output (a ground station's)")
+#: the vehicle's MAVLink system id (the GCS's is 255, a ground station's usual one)
+VEHICLE_SYSID = Setting("system_id", 1, "", 1, 255, "the vehicle's MAVLink system id")
+#: the host every socket binds and sends to by default
+LOOPBACK = "127.0.0.1"
+
+
+def udp(port: "int | Setting", scheme: str = "udp") -> str:
+    """``udp:127.0.0.1:PORT`` of a port (or a port setting's default)."""
+    return f"{scheme}:{LOOPBACK}:{port.default if isinstance(port, Setting) else int(port)}"
 
 #: every setting above by where it is set (the key ``config show --full`` lists it under)
 ALL = {"allocation.wait_threshold_s": WAIT_THRESHOLD, "allocation.projl_horizon_s": PROJL_HORIZON,
@@ -148,16 +202,46 @@ ALL = {"allocation.wait_threshold_s": WAIT_THRESHOLD, "allocation.projl_horizon_
        "study.encounters": ENCOUNTERS, "study.seed": SEED, "study.duration_s": DURATION,
        "study.intruders": INTRUDERS, "study.chunk_size": CHUNK_SIZE,
        "thresholds": PRESET, "scenario.thresholds": STANDARD_PRESET, "scenario.allocation.group": SCENARIO_GROUP,
-       "scenario.link.up": SCENARIO_LINK}
+       "scenario.link.up": SCENARIO_LINK, "study.dt_s": STEP, "sil.listen_vehicle": SHIM_VEHICLE_PORT,
+       "sil.listen_gcs": SHIM_GCS_PORT, "sil.out": GCS_PORT, "sil.system_id": VEHICLE_SYSID}
+
+
+def register(setting: Setting) -> Setting:
+    """Add a setting to :data:`ALL` under ``section.name`` (one line: an already used key or flag);
+    a per-group one becomes a field of the AllocationPolicy and every input's key (module docstring).
+    Register before :mod:`daa_sil.config.policy` is imported: the policy's fields are built then."""
+    key = f"{setting.section}.{setting.name}" if setting.section else setting.name
+    if key in ALL:
+        raise UsageError(f"setting {key} is defined twice")
+    taken = {f for s in ALL.values() for f in (s.flag, *s.old_flags) if f} | {s.mavlink for s in ALL.values() if s.mavlink}
+    clash = [x for x in (setting.flag, *setting.old_flags, setting.mavlink) if x and x in taken]
+    if clash:
+        raise UsageError(f"setting {key}: {clash[0]} already names another setting")
+    if setting.per_group and (setting.lo is None or setting.applies not in APPLIES):
+        raise UsageError(f"setting {key}: a per-group setting needs a numeric range and applies in {APPLIES}")
+    if setting.per_group and "daa_sil.config.policy" in sys.modules:  # its field would be missing: say so
+        raise UsageError(f"setting {key}: register a per-group setting before daa_sil.config.policy is imported")
+    ALL[key] = setting
+    return setting
+
+
+#: the ``applies`` values of a per-group setting
+APPLIES = ("all", "waiting", "constant")
+
+
+def group_settings() -> tuple:
+    """The per-group settings, in registration order (the AllocationPolicy's order of them)."""
+    return tuple(s for s in ALL.values() if s.per_group)
 
 
 def describe() -> dict:
     """``{key: {default, unit, range, help}}`` of :data:`ALL` (``config show --full``)."""
     return {key: {"default": s.default, "unit": s.unit or None, "range": None if s.lo is None else [s.lo, s.hi],
-                  "help": s.help} for key, s in ALL.items()}
+                  "help": s.help, "flag": s.flag, "mavlink": s.mavlink} for key, s in ALL.items()}
 
 
 __all__ = ["Setting", "WAIT_THRESHOLD", "PROJL_HORIZON", "CONSTANT_WAIT", "STALE_COMMAND", "LINK_TIMEOUT",
            "DELAY_EPOCH", "DURATION", "ENCOUNTERS", "SEED", "INTRUDERS", "CHUNK_SIZE", "BATCH_ROWS", "WORKERS_PER_CORE",
            "GRID_AXIS_POINTS", "BOOTSTRAP_REPLICATES", "WAITMAP", "GAMMA", "PRESET", "STANDARD_PRESET", "SCENARIO_GROUP", "SCENARIO_LINK", "ALL",
-           "describe"]
+           "STEP", "SHIM_VEHICLE_PORT", "SHIM_GCS_PORT", "GCS_PORT", "VEHICLE_SYSID", "LOOPBACK", "udp", "register",
+           "APPLIES", "group_settings", "describe"]

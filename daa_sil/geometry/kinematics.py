@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from daa_sil.config.settings import STEP
 from daa_sil.compiled import loaded_kernels
 from .frames import TWO_PI, track_from_velocity, wrap_2pi, wrap_pi
 from .units import DEG, FPM, G0, KT
@@ -294,7 +295,7 @@ def _moved_compiled(kernel: str, state: AircraftState, inputs: tuple, dt, limits
     return AircraftState.adopt(*(a.reshape(s.shape) for a in out))
 
 
-def advance(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, dt: float = 1.0,
+def advance(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, dt: float = STEP.default,
             perf: Performance = DEFAULT_PERFORMANCE) -> AircraftState:
     """Move aircraft by ``dt`` s with constant turn rate (rad/s, + = right), along-track acceleration
     and vertical acceleration (m/s^2). Turn rate is clipped to ``perf.max_turn_rate``; speed and
@@ -305,7 +306,7 @@ def advance(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, 
     return moved if moved is not None else advance_reference(state, turn_rate, accel, vertical_accel, dt, perf)
 
 
-def advance_reference(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, dt: float = 1.0,
+def advance_reference(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_accel=0.0, dt: float = STEP.default,
                       perf: Performance = DEFAULT_PERFORMANCE) -> AircraftState:
     """:func:`advance` in numpy (the compiled kernel's reference)."""
     s = state
@@ -332,7 +333,7 @@ def advance_reference(state: AircraftState, turn_rate=0.0, accel=0.0, vertical_a
     return AircraftState(x, y, z, gs, wrap_2pi(trk), vs1)
 
 
-def fly_command(state: AircraftState, cmd: Command, dt: float = 1.0,
+def fly_command(state: AircraftState, cmd: Command, dt: float = STEP.default,
                 perf: Performance = DEFAULT_PERFORMANCE) -> AircraftState:
     """Fly ``dt`` s toward ``cmd`` at the performance limits (exact piecewise motion).
 
@@ -346,7 +347,7 @@ def fly_command(state: AircraftState, cmd: Command, dt: float = 1.0,
     return moved if moved is not None else fly_command_reference(state, cmd, dt, perf)
 
 
-def fly_command_reference(state: AircraftState, cmd: Command, dt: float = 1.0,
+def fly_command_reference(state: AircraftState, cmd: Command, dt: float = STEP.default,
                           perf: Performance = DEFAULT_PERFORMANCE) -> AircraftState:
     """:func:`fly_command` in numpy (the compiled kernel's reference)."""
     s = state

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from daa_sil.config.settings import STEP
+
 from .thresholds import Thresholds, get_thresholds
 from .units import FT
 from .wellclear import hmd, tau_mod, wcv
@@ -60,7 +62,7 @@ def penetration_rate(s, v, th: "Thresholds | str | None" = None) -> np.ndarray:
     return np.where(wcv(s, v, th), penetration_depth(s, v, th.dthr, th.zthr, th.tthr), 0.0)
 
 
-def penetration_integral(s, v, dt: float = 1.0, th: "Thresholds | str | None" = None, axis: int = 0
+def penetration_integral(s, v, dt: float = STEP.default, th: "Thresholds | str | None" = None, axis: int = 0
                          ) -> np.ndarray:
     """PI = sum over samples of ``penetration_rate * dt`` (s), along time ``axis`` of ``s``/``v``.
 

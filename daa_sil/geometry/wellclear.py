@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from daa_sil.config.settings import STEP
 from daa_sil.compiled import loaded_kernels
 from .thresholds import Thresholds, get_thresholds
 
@@ -301,7 +302,7 @@ def nmac_interval_reference(s, v, th: "Thresholds | str | None" = None, t_end=1.
     return np.where(empty, np.inf, lo), np.where(empty, -np.inf, hi)
 
 
-def segment_events(s0, s1, dt: float = 1.0, th: "Thresholds | str | None" = None
+def segment_events(s0, s1, dt: float = STEP.default, th: "Thresholds | str | None" = None
                    ) -> tuple[np.ndarray, np.ndarray]:
     """LoWC and NMAC *anywhere* on the segment between two sampled relative positions ``dt`` apart.
 

@@ -8,7 +8,7 @@ from typing import Sequence
 
 import numpy as np
 
-from daa_sil.config.settings import DURATION
+from daa_sil.config.settings import DURATION, STEP
 from daa_sil.errors import UsageError
 from daa_sil.geometry.frames import wrap_2pi, wrap_pi
 from daa_sil.geometry.kinematics import AircraftState
@@ -38,7 +38,7 @@ class IntruderGeometry:
 
 
 def encounter_from_geometry(intruders: "Sequence[IntruderGeometry] | IntruderGeometry", *,
-                            own: "AircraftState | None" = None, duration_s: float = DURATION.default, dt_s: float = 1.0,
+                            own: "AircraftState | None" = None, duration_s: float = DURATION.default, dt_s: float = STEP.default,
                             check_dt_s: float = 0.1, encounter_id: int = 0, seed: int = 0,
                             realised: bool = True) -> EncounterSet:
     """A one-encounter set (N = 1, M = len(intruders)) placed deterministically from CPA geometry.

@@ -57,7 +57,7 @@ from typing import Sequence
 
 import numpy as np
 
-from daa_sil.config.settings import DURATION, STANDARD_PRESET
+from daa_sil.config.settings import DURATION, STANDARD_PRESET, STEP
 from daa_sil.errors import UsageError
 from daa_sil.geometry.frames import wrap_2pi
 from daa_sil.geometry.kinematics import AircraftState
@@ -83,7 +83,7 @@ class EncounterConfig:
 
     n_intruders: int = 1
     duration_s: float = DURATION.default
-    dt_s: float = 1.0
+    dt_s: float = STEP.default
     own_speed_mps: float = 55.0
     own_alt_m: float = 1500.0
     speed: tuple = (100.0, 30.0, 70.0, 400.0)  #: Gaussian mean, sd, lo, hi
@@ -155,7 +155,7 @@ class EncounterSet:
     params: dict = field(default_factory=dict)
     root_seed: "int | None" = None
     duration_s: float = DURATION.default
-    dt_s: float = 1.0
+    dt_s: float = STEP.default
     config: dict = field(default_factory=dict)
 
     def __len__(self) -> int:

@@ -12,6 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
+from daa_sil.config.settings import SHIM_GCS_PORT, SHIM_VEHICLE_PORT, udp
 from daa_sil.errors import UsageError
 from daa_sil.link.codec import mavlink
 from daa_sil.link.delayline import check_outages
@@ -108,8 +109,8 @@ class ShimConfig:
     delay_down: DelayModel
     delay_up: DelayModel
     round_trip: bool = False
-    listen_vehicle: str = "udp:127.0.0.1:14601"
-    listen_gcs: str = "udp:127.0.0.1:14602"
+    listen_vehicle: str = udp(SHIM_VEHICLE_PORT)
+    listen_gcs: str = udp(SHIM_GCS_PORT)
     vehicle: "str | None" = None
     gcs: "str | None" = None
     epoch_s: float = DEFAULT_EPOCH_S

@@ -12,6 +12,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from daa_sil.config.settings import STEP
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.study.metrics import (BASELINE_GROUP, CONF, PAPER_FLIGHT_HOURS, PAPER_MAX_PI, PI_SIGNIFICANT, Estimate,
                                   check_columns, as_columns, groups_of)
@@ -40,7 +41,7 @@ class Study:
     instances one encounter can count)."""
 
     def __init__(self, enc, reading: "CountingRules | None" = None, *, dec=None, replicates: int = DEFAULT_REPLICATES,
-                 seed: int = DEFAULT_SEED, conf: float = CONF, baseline: str = BASELINE_GROUP, dt_s: float = 1.0):
+                 seed: int = DEFAULT_SEED, conf: float = CONF, baseline: str = BASELINE_GROUP, dt_s: float = STEP.default):
         cols = enc if isinstance(enc, dict) else as_columns(enc)
         cols = {k: np.asarray(v) for k, v in cols.items()}
         check_columns(cols)

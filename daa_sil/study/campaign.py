@@ -123,12 +123,12 @@ def simulate_group(cfg: CampaignConfig, group: str, encounters, seeds: np.ndarra
     the campaign runner and by ``daa-sil viz replay``. Returns ``(encounters, decisions, steplog)``."""
     from .fasttime import simulate
 
-    legs = cfg.link_legs(group)
-    daa_cfg = cfg.daa_config()
-    lookup = campaign_wait_lookup(cfg, daa_cfg) if cfg.group(group).uses_map else None
-    return simulate(encounters, cfg.policy(group), legs.up, legs.down, cfg.pilot_config(), daa_cfg=daa_cfg,
-                    wait_lookup=lookup, seeds=seeds, preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s,
-                    group=group, record_steps=record_steps, link_legs=legs, epoch_s=cfg.epoch_s)
+    run = cfg.resolve()
+    g = run.groups[group]
+    lookup = campaign_wait_lookup(cfg, run.daa) if g.uses_map else None
+    return simulate(encounters, g.policy, g.legs.up, g.legs.down, run.pilot, daa_cfg=run.daa,
+                    wait_lookup=lookup, seeds=seeds, preset=run.preset, duration_s=run.duration_s, dt=run.dt_s,
+                    group=group, record_steps=record_steps, link_legs=g.legs, epoch_s=run.epoch_s)
 
 
 def run_batch(task: BatchTask) -> list[ChunkResult]:
@@ -139,14 +139,14 @@ def run_batch(task: BatchTask) -> list[ChunkResult]:
 
     t0 = time.perf_counter()
     cfg = task.config
+    run = cfg.resolve()
     parts = []
     for g, c in task.units:
-        legs = cfg.link_legs(g)
-        parts.append(SimPart(task.encounters[c], cfg.policy(g), legs.up, legs.down, task.seeds[c], g, link_legs=legs))
-    daa_cfg = cfg.daa_config()
-    lookup = campaign_wait_lookup(cfg, daa_cfg) if any(cfg.group(g).uses_map for g, _ in task.units) else None
-    tables = simulate_parts(parts, cfg.pilot_config(), daa_cfg=daa_cfg, wait_lookup=lookup,
-                            preset=cfg.preset, duration_s=cfg.duration_s, dt=cfg.dt_s, epoch_s=cfg.epoch_s)
+        rg = run.groups[g]
+        parts.append(SimPart(task.encounters[c], rg.policy, rg.legs.up, rg.legs.down, task.seeds[c], g, link_legs=rg.legs))
+    lookup = campaign_wait_lookup(cfg, run.daa) if any(run.groups[g].uses_map for g, _ in task.units) else None
+    tables = simulate_parts(parts, run.pilot, daa_cfg=run.daa, wait_lookup=lookup,
+                            preset=run.preset, duration_s=run.duration_s, dt=run.dt_s, epoch_s=run.epoch_s)
     spent = time.perf_counter() - t0
     rows = sum(len(p.encounters) for p in parts)
     return [ChunkResult(g, c, enc, dec, spent * len(p.encounters) / rows, len(p.encounters))
@@ -198,7 +198,7 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
     if resume and meta_path.is_file():
         stored = CampaignConfig.from_dict(load_campaign_json(out)["config"], str(meta_path))
         if stored != config:
-            diff = [k for k in config.to_dict() if config.to_dict()[k] != stored.to_dict()[k]]
+            diff = config.differences(stored)
             raise UsageError(f"--resume: {meta_path} was made with different settings ({', '.join(diff)}); "
                              f"pass the same options or omit them")
         changed = reading_changes(load_campaign_json(out)["config"].get("readings"), config)

@@ -11,16 +11,16 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from daa_sil.config.groups import GroupSpec, parse_groups
-from daa_sil.config.policy import apply_overrides
-from daa_sil.config.readings import DEFAULT_READING
-from daa_sil.config.settings import (CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA, INTRUDERS, PRESET, PROJL_HORIZON, SEED,
-                                     WAIT_THRESHOLD)
+from daa_sil.config.overrides import Overrides, group_policy, setting_for_key
+from daa_sil.config.readings import DEFAULT_READING, LEGACY_READING
+from daa_sil.config.settings import (CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA, INTRUDERS, PRESET, SEED, STEP,
+                                     group_settings)
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.geometry.thresholds import PRESETS
 from daa_sil.waitmap.source import DEFAULT_MAP
 
-#: default step dt (s), paper §IV (the duration T: :data:`daa_sil.config.settings.DURATION`)
-DEFAULT_DT_S = 1.0
+#: default step dt (s), paper §IV (:data:`daa_sil.config.settings.STEP`)
+DEFAULT_DT_S = STEP.default
 
 
 #: encounters per task (:data:`daa_sil.config.settings.CHUNK_SIZE`, which says why 2000)
@@ -28,13 +28,36 @@ DEFAULT_CHUNK = CHUNK_SIZE.default
 
 
 @dataclass(frozen=True)
+class ResolvedGroup:
+    """One group as the simulation flies it: the agent's policy, the link legs, map or not."""
+
+    policy: object  #: :class:`~daa_sil.config.policy.AllocationPolicy`
+    legs: object  #: :class:`~daa_sil.models.link_rule.LinkLegs`
+    uses_map: bool
+
+
+@dataclass(frozen=True)
+class ResolvedCampaign:
+    """A campaign's settings resolved once (:meth:`CampaignConfig.resolve`): typed fields only."""
+
+    daa: object  #: :class:`~daa_sil.daa.config.DaaConfig`
+    pilot: object  #: :class:`~daa_sil.models.pilot_config.PilotConfig`
+    groups: dict  #: group name -> :class:`ResolvedGroup`
+    preset: str
+    duration_s: float
+    dt_s: float
+    epoch_s: float
+
+
+@dataclass(frozen=True)
 class CampaignConfig:
     """Everything that determines a campaign's results (stored in ``campaign.json``).
 
-    ``groups`` are the group definitions as given (:mod:`daa_sil.config.groups`); the overrides ``wt``
-    (W_T of every group with a wait function), ``projl_lookahead`` (ProjL look-ahead N of every
-    group) and ``latency`` (a delay spec such as ``gauss:5,3`` for every group's links) apply on
-    top (:attr:`effective_groups`). ``waitmap`` is a map preset, grid spec or family directory
+    ``groups`` are the group definitions as given (:mod:`daa_sil.config.groups`); ``settings`` (the
+    per-group settings the run configuration and the flags give: W_T of every group with a wait
+    function, ProjL N, the link timeouts, ...; :class:`~daa_sil.config.overrides.Overrides`) and
+    ``latency`` (a delay spec such as ``gauss:5,3`` for every group's links) apply on top
+    (:attr:`effective_groups`). ``waitmap`` is a map preset, grid spec or family directory
     (:func:`daa_sil.waitmap.family_for`), ``gamma`` the MDP discount (None: the map preset's).
     """
 
@@ -47,15 +70,13 @@ class CampaignConfig:
     dt_s: float = DEFAULT_DT_S
     waitmap: str = DEFAULT_MAP
     gamma: "float | None" = None
-    wt: "float | None" = None
-    projl_lookahead: "float | None" = None
+    settings: Overrides = field(default_factory=Overrides)  #: per-group settings of every group (flags, file)
     latency: "str | None" = None
     n_intruders: int = INTRUDERS.default
     reading: str = DEFAULT_READING  #: a named reading of :mod:`daa_sil.config.readings` (old names accepted)
     reading_set: dict = field(default_factory=dict)  #: overrides of the reading's settings
     daa: dict = field(default_factory=dict)  #: DaaConfig field changes on top of the preset's
     pilot: dict = field(default_factory=dict)  #: PilotConfig field changes (the reading's then apply)
-    link: dict = field(default_factory=dict)  #: agent ``stale_command_s`` / ``link_timeout_s`` (empty = policy's)
 
     def __post_init__(self):
         # groups may be given by name (``("B-2", "ID-2")``) or as a --groups string
@@ -85,18 +106,19 @@ class CampaignConfig:
         DURATION.check(self.duration_s, key="duration")
         if not (math.isfinite(self.dt_s) and self.dt_s > 0):
             raise UsageError(f"dt must be > 0 s, got {self.dt_s!r}")
-        for name, val, lo, hi in (("--wt", self.wt, *WAIT_THRESHOLD.range), ("--projl-lookahead", self.projl_lookahead, *PROJL_HORIZON.range),
-                                  ("--gamma", self.gamma, *GAMMA.range)):
-            if val is not None and not (isinstance(val, (int, float)) and math.isfinite(val) and lo <= val <= hi):
-                raise UsageError(f"{name} must be within [{lo:g}, {hi:g}], got {val!r}")
+        for setting in group_settings():  # (flags and files check theirs as they read them)
+            val = self.settings.of(setting)
+            if val is not None:
+                setting.check(val, key=setting.flag or setting.name)
+        lo, hi = GAMMA.range
+        if self.gamma is not None and not (isinstance(self.gamma, (int, float)) and math.isfinite(self.gamma)
+                                           and lo <= self.gamma <= hi):
+            raise UsageError(f"--gamma must be within [{lo:g}, {hi:g}], got {self.gamma!r}")
         if self.latency is not None:
             from daa_sil.models.delay_spec import parse_delay_spec
 
             parse_delay_spec(self.latency)
         self.effective_groups  # noqa: B018 -- validates the overridden definitions
-        bad = sorted(set(self.link) - {"stale_command_s", "link_timeout_s"})
-        if bad:
-            raise UsageError(f"unknown link setting {bad[0]!r}; allowed: stale_command_s, link_timeout_s")
         for what, build in (("daa", self.daa_config), ("pilot", self.pilot_config)):
             try:
                 build()
@@ -149,10 +171,9 @@ class CampaignConfig:
             from daa_sil.models.delay_spec import parse_delay_spec
 
             latency = parse_delay_spec(self.latency).to_dict()
-        rule = self.effective_reading.wait_rule
         out = []
         for g in self.groups:
-            g = apply_overrides(g, wt=self.wt, projl_lookahead=self.projl_lookahead, wait_rule=rule)
+            g = g.with_(allocation=self.policy(g.name))
             out.append(g.with_(latency=dict(latency)) if latency is not None else g)
         return tuple(out)
 
@@ -202,15 +223,29 @@ class CampaignConfig:
 
     def policy(self, name: str):
         """The agent's :class:`~daa_sil.config.policy.AllocationPolicy` of group ``name``: the group as
-        given with the campaign's overrides (:func:`~daa_sil.config.policy.apply_overrides`, the rule
-        :attr:`effective_groups` records) and :attr:`link`. W_T thus travels ``--wt`` ->
-        :attr:`wt` -> the policy, two objects."""
-        reading = self.effective_reading
-        pol = apply_overrides(self.given_group(name).policy(), wt=self.wt, projl_lookahead=self.projl_lookahead,
-                              wait_rule=reading.wait_rule)
-        changes = {**reading.policy_overrides(), **self.link}
-        changes.pop("wait_rule", None)  # applied above, to groups that wait
-        return replace(pol, **changes) if changes else pol
+        given, the reading's agent rules, then :attr:`settings`
+        (:func:`~daa_sil.config.overrides.group_policy`, the one rule the vehicle follows too). W_T
+        thus travels ``--wt`` -> :attr:`settings` (an Overrides) -> the policy: two types."""
+        return group_policy(self.given_group(name).policy(), reading=self.effective_reading, flags=self.settings)
+
+    def resolve(self) -> "ResolvedCampaign":
+        """Every object the simulation reads, built once (cached): the DAA and pilot configurations,
+        and per group its policy, its link legs and whether it reads the wait map."""
+        got = self.__dict__.get("_resolved")
+        if got is None:
+            groups = {g.name: ResolvedGroup(self.policy(g.name), self.link_legs(g.name), g.uses_map)
+                      for g in self.groups}
+            got = ResolvedCampaign(self.daa_config(), self.pilot_config(), groups, self.preset, self.duration_s,
+                                   self.dt_s, self.epoch_s)
+            object.__setattr__(self, "_resolved", got)  # (not a field: equality, to_dict, replace ignore it)
+        return got
+
+    def differences(self, other: "CampaignConfig") -> list:
+        """The fields where ``other`` differs (a per-group setting by its flag, ``--wt``, or name)."""
+        a, b = self.to_dict(), other.to_dict()
+        out = [k for k in a if k != "settings" and a[k] != b.get(k)]
+        mine, theirs = self.settings, other.settings
+        return out + [s.flag or s.name for s in group_settings() if mine.of(s) != theirs.of(s)]
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -218,7 +253,7 @@ class CampaignConfig:
         d["reading_set"] = dict(self.reading_set)
         d["daa"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.daa.items()}
         d["pilot"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.pilot.items()}
-        d["link"] = dict(self.link)
+        d["settings"] = self.settings.given()
         d["readings"] = self.effective_reading.to_dict()  # derived: every setting of the reading
         return d
 
@@ -244,27 +279,40 @@ class CampaignConfig:
         return cls(groups=parse_groups(list(run.groups)), n_encounters=int(s["encounters"]),
                    seed=int(s["seed"]), chunk_size=int(s["chunk_size"]), preset=run.thresholds,
                    duration_s=float(s["duration_s"]), waitmap=str(run.waitmap["source"]),
-                   gamma=run.waitmap["gamma"], wt=run.allocation["wt"],
-                   projl_lookahead=run.allocation["projl_lookahead"], latency=run.latency,
+                   gamma=run.waitmap["gamma"], settings=run.group_settings, latency=run.latency,
                    n_intruders=int(s["intruders"]), reading=str(run.reading["name"]),
-                   reading_set=dict(run.reading["set"]), daa=dict(run.daa), pilot=dict(run.pilot),
-                   link={k: v for k, v in run.link.items() if v is not None})
+                   reading_set=dict(run.reading["set"]), daa=dict(run.daa), pilot=dict(run.pilot))
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "campaign.json") -> "CampaignConfig":
         try:
             groups = tuple(GroupSpec.from_dict(g["name"], {k: v for k, v in g.items() if k != "name"}, where)
                            for g in d["groups"])
-            opt = {k: d.get(k) for k in ("gamma", "wt", "projl_lookahead", "latency")}
+            opt = {k: d.get(k) for k in ("gamma", "latency")}
             return cls(groups=groups, n_encounters=int(d["n_encounters"]), seed=int(d["seed"]),
                        chunk_size=int(d["chunk_size"]), preset=str(d["preset"]),
                        duration_s=float(d["duration_s"]), dt_s=float(d["dt_s"]), waitmap=str(d["waitmap"]),
-                       n_intruders=int(d.get("n_intruders", 1)), reading=str(d.get("reading", "extended")),
+                       n_intruders=int(d.get("n_intruders", 1)), reading=str(d.get("reading", LEGACY_READING)),
                        reading_set=dict(d.get("reading_set") or {}),
                        daa={k: (tuple(v) if isinstance(v, list) else v) for k, v in (d.get("daa") or {}).items()},
                        pilot={k: (tuple(v) if isinstance(v, list) else v) for k, v in (d.get("pilot") or {}).items()},
-                       link=dict(d.get("link") or {}), **opt).validate()
+                       settings=stored_settings(d), **opt).validate()
         except (KeyError, TypeError, ValueError) as exc:
             raise FileFormatError(f"{where}: bad or missing config field ({exc})") from None
         except UsageError as exc:
             raise FileFormatError(f"{where}: {exc}") from None
+
+
+def stored_settings(d: dict) -> Overrides:
+    """The per-group settings a ``campaign.json`` config records: ``settings`` (``{name: value}``), or
+    the keys of campaigns written before it (``wt``, ``projl_lookahead``, ``link``), read silently."""
+    old = {"wt": d.get("wt"), "projl_lookahead": d.get("projl_lookahead"), **(d.get("link") or {}),
+           **(d.get("settings") or {})}
+    out = Overrides()
+    for key, value in old.items():
+        setting = setting_for_key(str(key))
+        if setting is None:
+            raise UsageError(f"unknown setting {key!r}")
+        if value is not None:
+            out = out.with_(setting, value)
+    return out

@@ -15,7 +15,7 @@ the others ``n_small``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -27,8 +27,11 @@ from daa_sil.errors import UsageError
 PAIRED = "one campaign seed: the same encounter set, encounter by encounter"
 
 
-def _variant(base: str, name: str, **changes):
-    return group_spec(base).with_(name=name, **changes)
+def _variant(base: str, name: str, latency: "dict | None" = None, **policy):
+    """Group ``base`` named ``name``, with another ``latency`` and changes to its policy (``wait_mode``, ...)."""
+    g = group_spec(base)
+    g = g.with_(name=name, allocation=replace(g.allocation, **policy))
+    return g.with_(latency=latency) if latency is not None else g
 
 
 def _latency_groups() -> tuple:
@@ -67,7 +70,7 @@ RUNS: tuple[Run, ...] = (
     Run("unmitigated", "paper", ("unmitigated",), "the encounter set's own risk: no DAA, no pilot maneuver",
         reading_set=NO_PILOT, size="large"),
     Run("paper-feet", "paper-feet", PAPER5, "the HMD/VMD table read in feet, at the rare-event size", size="large"),
-    Run("blend-no-wait", "paper", lambda: (group_spec("ID-2"), _variant("ID-2", "ID-2-no-wait", wait="none")),
+    Run("blend-no-wait", "paper", lambda: (group_spec("ID-2"), _variant("ID-2", "ID-2-no-wait", wait_mode="none")),
         "Algorithm 2 without waiting (ID-2 with w = 0: no waits, blends as before): does waiting cost the exact "
         "match? ('As the system waits, the encounter may go in a closer proximity')"),
     Run("blend-latency", "paper", _latency_groups,

@@ -57,6 +57,7 @@ from typing import Mapping
 import numpy as np
 from scipy import stats
 
+from daa_sil.config.settings import STEP
 from daa_sil.errors import FileFormatError, UsageError
 from .stats import clopper_pearson
 
@@ -187,7 +188,7 @@ def _count(x) -> float:
     return float(np.nansum(np.asarray(x, float)))
 
 
-def group_metrics(enc, group: "str | None" = None, conf: float = CONF, dt_s: float = 1.0) -> dict:
+def group_metrics(enc, group: "str | None" = None, conf: float = CONF, dt_s: float = STEP.default) -> dict:
     """The old analytic metrics of one group (``group`` None: the table must hold exactly one group).
     Returns ``{name: Estimate}`` plus ``n_encounters`` and ``flight_hours`` floats.
 
@@ -269,7 +270,7 @@ def group_metrics(enc, group: "str | None" = None, conf: float = CONF, dt_s: flo
     return out
 
 
-def compute_metrics(enc, baseline: str = BASELINE_GROUP, conf: float = CONF, dt_s: float = 1.0) -> dict:
+def compute_metrics(enc, baseline: str = BASELINE_GROUP, conf: float = CONF, dt_s: float = STEP.default) -> dict:
     """``{group: group_metrics}`` for every group, plus the changes vs ``baseline``
     (``no_wait_reduction_pct``, ``received_change_pct``) where the baseline is present."""
     cols = as_columns(enc) if not isinstance(enc, dict) else {k: np.asarray(v) for k, v in enc.items()}

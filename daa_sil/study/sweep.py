@@ -33,14 +33,14 @@ from typing import Callable, Sequence
 
 from daa_sil.errors import FileFormatError, UsageError
 
-#: variable -> (CampaignConfig field, value parser, numeric axis?)
+#: variable -> (CampaignConfig field or per-group setting, value parser, numeric axis?)
 VARIABLES: dict[str, tuple[str, Callable[[str], object], bool]] = {
-    "wt": ("wt", float, True),
+    "wt": ("wait_threshold_s", float, True),
     "gamma": ("gamma", float, True),
     "grid": ("waitmap", str, False),
     "intruders": ("n_intruders", int, True),
     "latency": ("latency", str, False),
-    "projl": ("projl_lookahead", float, True),
+    "projl": ("projl_horizon_s", float, True),
     "reading": ("reading", str, False),
     "pilot": ("pilot", str, False),
 }
@@ -63,6 +63,13 @@ class Vary:
     @property
     def field(self) -> str:
         return VARIABLES[self.name][0]
+
+    @property
+    def setting(self):
+        """The per-group :class:`~daa_sil.config.settings.Setting` it varies (None: a campaign field)."""
+        from daa_sil.config.overrides import setting_for_key
+
+        return setting_for_key(self.field)
 
     @property
     def numeric(self) -> bool:
@@ -115,6 +122,8 @@ def _point(base, vary: Vary, value):
         return replace(base, pilot=pilot)
     if vary.name == "grid" and base.effective_reading.waitmap is not None:
         return replace(base, reading_set={**base.reading_set, "waitmap": value})
+    if vary.setting is not None:
+        return replace(base, settings=base.settings.with_(vary.setting, value))
     return replace(base, **{vary.field: value})
 
 

@@ -25,6 +25,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
+from daa_sil.config.settings import STEP
 from ..errors import UsageError
 from daa_sil.geometry.thresholds import PRESETS, Thresholds, get_thresholds
 
@@ -48,7 +49,7 @@ class MdpParams:
 
     preset: str = "paper"  #: threshold preset for LoWC (``paper`` or ``do365``)
     v_own: float = 55.0  #: ownship ground speed along +X, m/s
-    dt: float = 1.0  #: MDP step, s
+    dt: float = STEP.default  #: MDP step, s
     c1: float = 1220.0  #: reward weight on 1/HMD, m
     c2: float = 122.0  #: reward weight on 1/|d_h|, m
     c3: float = 1.0  #: wait bonus per second

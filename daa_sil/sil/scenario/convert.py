@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+from daa_sil.config.settings import STEP
 from daa_sil.errors import FileFormatError, UsageError
 
 from .schema import Scenario
@@ -79,7 +80,7 @@ def encounter_set(sc: Scenario, encounter_id: int = 0):
             if spec.cpa is not None:
                 one = encounter_from_geometry(
                     [replace(spec.cpa, maneuvers=mv)],
-                    own=own, duration_s=sc.duration_s, dt_s=1.0, encounter_id=encounter_id, seed=sc.seed,
+                    own=own, duration_s=sc.duration_s, dt_s=STEP.default, encounter_id=encounter_id, seed=sc.seed,
                     realised=False)  # only the placed state is kept: its realised CPA is never read
                 states.append(one.intr[:, 0])
             else:
@@ -93,4 +94,4 @@ def encounter_set(sc: Scenario, encounter_id: int = 0):
     return enc.EncounterSet(own=own, intr=intr, seg_start_s=seg[0], seg_end_s=seg[1], seg_turn_rate=seg[2],
                             seg_accel=seg[3], seg_vaccel=seg[4], encounter_id=np.array([encounter_id], np.int64),
                             seed=np.array([sc.seed], np.int64), params={}, root_seed=None,
-                            duration_s=float(sc.duration_s), dt_s=1.0, config={"source": f"scenario:{sc.name}"})
+                            duration_s=float(sc.duration_s), dt_s=STEP.default, config={"source": f"scenario:{sc.name}"})

@@ -14,8 +14,7 @@ from typing import Callable
 
 import yaml
 
-from daa_sil.config.settings import (CONSTANT_WAIT, DELAY_EPOCH, DURATION, LINK_TIMEOUT, SCENARIO_GROUP, SCENARIO_LINK,
-                                     STANDARD_PRESET, STALE_COMMAND, WAIT_THRESHOLD)
+from daa_sil.config.settings import DELAY_EPOCH, DURATION, SCENARIO_GROUP, SCENARIO_LINK, STANDARD_PRESET
 from daa_sil.config.yaml_input import compose_yaml, read_yaml_text
 
 from daa_sil.errors import FileFormatError, UsageError
@@ -247,24 +246,30 @@ def _pilot(v: _V, node, path, dur) -> PilotSpec:
 
 
 def _allocation(v: _V, node, path) -> AllocationSpec:
-    from daa_sil.config.policy import WAIT_MODES
     from daa_sil.config.groups import group_spec, group_table
+    from daa_sil.config.overrides import Overrides, notice, settings_of
+    from daa_sil.config.policy import WAIT_MODES
 
-    m = v.mapping(node, path, set(), {"group", "wait", "wait_constant_s", "blending", "wait_threshold_s", "projl",
-                                      "link_timeout_s", "stale_command_s"})
+    m = v.mapping(node, path, set(), {"group", "wait", "blending", "projl", *Overrides.keys_read()})
     group = v.opt(m, "group", path, v.string, SCENARIO_GROUP.default, choices=tuple(group_table()))
     g = group_spec(group).policy()
+    settings = Overrides()
+    for s in settings_of():  # every per-group setting, by its name or an old key (with a notice)
+        keys = [k for k in s.keys if k in m]
+        if len(keys) > 1:
+            v.fail(m[keys[1]], f"{path}.{keys[1]}", f"is {path}.{s.name}, given twice")
+        elif keys:
+            if keys[0] != s.name:
+                notice(f"{v.source}: {path}.{keys[0]} is now called {path}.{s.name} (read as such)")
+            value = v.opt(m, keys[0], path, v.number, None, lo=s.lo, hi=s.hi)
+            if value is not None:
+                settings = settings.with_(s, value)
     return AllocationSpec(
         group=group,
         wait=v.opt(m, "wait", path, v.string, g.wait_mode, choices=WAIT_MODES),
-        wait_constant_s=v.opt(m, "wait_constant_s", path, v.number, g.constant_wait_s, lo=CONSTANT_WAIT.lo,
-                              hi=CONSTANT_WAIT.hi),
         blending=v.opt(m, "blending", path, v.boolean, g.blending),
-        wait_threshold_s=v.opt(m, "wait_threshold_s", path, v.number, g.wait_threshold_s, lo=WAIT_THRESHOLD.lo,
-                               hi=WAIT_THRESHOLD.hi),
         projl=v.opt(m, "projl", path, v.boolean, g.projl),
-        link_timeout_s=v.opt(m, "link_timeout_s", path, v.number, None, lo=LINK_TIMEOUT.lo, hi=LINK_TIMEOUT.hi),
-        stale_command_s=v.opt(m, "stale_command_s", path, v.number, None, lo=STALE_COMMAND.lo, hi=STALE_COMMAND.hi))
+        settings=settings)
 
 
 def _expect(v: _V, node, path, dur) -> Expectation:

@@ -66,12 +66,14 @@ Schema (``*`` = required; defaults in brackets)::
       group: a group of daa_sil/data/groups.yaml (B-1 ... ID-2, ID-2-projl, ID-2-map) [ID-1]
                                       its wait function, W_T, ProjL and blending are the defaults below
       wait: none | constant | map | always  [from group]
-      wait_constant_s: [0, 120]       [from group, else 5]
       blending: bool                  [from group]
       projl: bool                     [from group]  ProjL veto
-      wait_threshold_s: [0, 120]      [from group]  W_T
-      link_timeout_s: [1, 120]        [agent default, 20]
-      stale_command_s: [1, 120]       [agent default, 15]
+      every per-group setting (docs/configuration.md), each [from group]:
+      wait_threshold_s: [0, 120]      W_T (old key wt)
+      projl_horizon_s: [0, 120]       ProjL look-ahead N (old key projl_lookahead)
+      constant_wait_s: [0, 120]       the constant wait (old key wait_constant_s)
+      link_timeout_s: [1, 120]        link-lost timeout
+      stale_command_s: [1, 120]       stale-command limit
     expect:                                   checked by ``daa-sil run`` (exit 1 if violated)
       lowc: bool                      LoWC must (true) / must not (false) occur
       nmac: bool
@@ -100,8 +102,8 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from daa_sil.config.settings import (CONSTANT_WAIT, DELAY_EPOCH, DURATION, SCENARIO_GROUP, SCENARIO_LINK,
-                                     STANDARD_PRESET, WAIT_THRESHOLD)
+from daa_sil.config.overrides import Overrides
+from daa_sil.config.settings import DELAY_EPOCH, DURATION, SCENARIO_GROUP, SCENARIO_LINK, STANDARD_PRESET
 from daa_sil.decision import DECISION_NAMES
 from daa_sil.models.encounter_geometry import IntruderGeometry
 
@@ -200,14 +202,14 @@ class PilotSpec:
 
 @dataclass
 class AllocationSpec:
+    """The scenario's group, its wait function, blending and ProjL veto (the group's unless given),
+    and ``settings``: the per-group settings the scenario gives (W_T, N, ...; unset = the group's)."""
+
     group: str = SCENARIO_GROUP.default
     wait: str = "map"
-    wait_constant_s: float = CONSTANT_WAIT.default
     blending: bool = True
-    wait_threshold_s: float = WAIT_THRESHOLD.field()
     projl: bool = True
-    link_timeout_s: "float | None" = None
-    stale_command_s: "float | None" = None
+    settings: Overrides = field(default_factory=Overrides)
 
 
 @dataclass
@@ -280,6 +282,8 @@ class Scenario:
         if d["pilot"]["mode"] == "model":
             d["pilot"].pop("commands")
         d["pilot"]["model"] = {"response": d["pilot"].pop("response")}
+        d["allocation"].pop("settings")
+        d["allocation"].update(self.allocation.settings.given())  # the per-group settings the scenario gives
         for sect in ("allocation", "expect"):
             d[sect] = {k: v for k, v in d[sect].items() if v is not None and v != []}
         if d["faults"]:
