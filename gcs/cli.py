@@ -17,7 +17,7 @@ from daa_sil.cli import run_guarded
 from daa_sil.commands.common_args import OneLineParser as _Parser, check_speed, load_key_option
 from daa_sil.config.config_option import add_config_argument, config_of
 from daa_sil.errors import UsageError
-from daa_sil.process_gc import freeze_after_startup
+from daa_sil.runtime.process_gc import freeze_after_startup
 
 EXAMPLES = """examples:
   # pilot model of the scenario, vehicle directly on 14550 (realtime)

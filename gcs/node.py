@@ -45,7 +45,7 @@ class GcsNode:
         else:
             self.daa_cfg = rc.daa_config() if rc is not None else DaaConfig()
         pilot = make_pilot(scenario, self.mode, self.daa_cfg, rc)
-        #: with the pilot model: step 1, a :class:`daa_sil.ground.GroundCore` of one encounter
+        #: with the pilot model: step 1, a :class:`daa_sil.models.ground.GroundCore` of one encounter
         self.ground = getattr(pilot, "ground", None)
         guard = MessageGuard("daa-gcs")
         if self.vehicle_conn.listens:  # --vehicle udpin:HOST:PORT: listen there, answer who sends first

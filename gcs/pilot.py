@@ -1,6 +1,6 @@
 """The GCS's pilot and what it sends, typed (no sockets, no clock).
 
-* :class:`ModelPilot`: :class:`daa_sil.ground.GroundCore` (N = 1; step 1, the same code fast-time
+* :class:`ModelPilot`: :class:`daa_sil.models.ground.GroundCore` (N = 1; step 1, the same code fast-time
   runs: the pilot's display and :class:`daa_sil.models.pilot.PilotModel`) on the observed ownship
   and intruders (:func:`observed`), streaming per the allocation semantics;
 * :class:`ScriptedPilot`: the scenario's ``pilot.commands`` (each sent once per step over
@@ -105,7 +105,7 @@ class ScriptedPilot:
 
 
 class ModelPilot:
-    """The pilot model of one encounter: a :class:`daa_sil.ground.GroundCore` of N = 1 (``ground``)."""
+    """The pilot model of one encounter: a :class:`daa_sil.models.ground.GroundCore` of N = 1 (``ground``)."""
 
     def __init__(self, ground):
         self.ground = ground
@@ -143,7 +143,7 @@ def make_pilot(sc, mode: str, daa_cfg, config=None):
     if mode != "model":
         return ScriptedPilot(sc.pilot.commands if sc is not None else ())
     from daa_sil.config.readings import reading_for
-    from daa_sil.ground import GroundCore
+    from daa_sil.models.ground import GroundCore
     from daa_sil.models.pilot_config import PilotConfig
     from daa_sil.models.streams import STREAM_PILOT, encounter_streams
     from daa_sil.sil.scenario import ownship_state

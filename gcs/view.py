@@ -7,7 +7,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable, NamedTuple
 
-from daa_sil.agent import AUTHORITY_NAMES, DECISION_NAMES  # the wire codes are the agent's (link/messages.py)
+from daa_sil.agent.decision import AUTHORITY_NAMES, DECISION_NAMES  # the wire codes are the agent's (link/messages.py)
 from daa_sil.geometry.kinematics import state_in_bounds
 from daa_sil.link.codec import mavlink as M
 

@@ -170,7 +170,7 @@ def test_a_campaign_samples_its_encounters_in_pieces_without_changing_them(readi
     in metres and one in feet (other HMD / VMD ranges)."""
     import concurrent.futures as cf
 
-    from daa_sil.study.campaign import MIN_SAMPLE_PART, CampaignConfig, sample_campaign_encounters
+    from daa_sil.study.campaign.run import MIN_SAMPLE_PART, CampaignConfig, sample_campaign_encounters
 
     cfg = CampaignConfig(groups=("B-1",), n_encounters=2 * MIN_SAMPLE_PART + 37, seed=5, n_intruders=2,
                          reading=reading)

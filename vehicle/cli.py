@@ -24,7 +24,7 @@ from daa_sil.config.overrides import Overrides, add_flags
 from daa_sil.config.run_config import add_config_argument, load_config
 from daa_sil.config.settings import GCS_PORT, udp
 from daa_sil.errors import UsageError
-from daa_sil.process_gc import freeze_after_startup
+from daa_sil.runtime.process_gc import freeze_after_startup
 
 EXAMPLES = """examples:
   # stream to a GCS (or MAVProxy/QGC) on 14550, real time

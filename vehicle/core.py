@@ -2,8 +2,8 @@
 
 :class:`VehicleCore` builds the onboard core from a scenario exactly as fast-time does
 (:func:`daa_sil.sil.scenario.encounter_set` for truth and scripts, the group's
-:class:`~daa_sil.agent.AllocationPolicy` with the scenario's overrides, the cached wait-map
-family), turns accepted pilot commands into the agent's :class:`~daa_sil.agent.PilotInput`, keeps
+:class:`~daa_sil.agent.step.AllocationPolicy` with the scenario's overrides, the cached wait-map
+family), turns accepted pilot commands into the agent's :class:`~daa_sil.agent.step.PilotInput`, keeps
 one step-log row per step and encodes the telemetry of a step as MAVLink messages.
 """
 
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from daa_sil import agent as A
+from daa_sil.agent import step as A
 from daa_sil.config.groups import policy_for_group
 from daa_sil.config.settings import STEP
 from daa_sil.config.overrides import Overrides, group_policy

@@ -1,6 +1,6 @@
 """The vehicle's parameters: the allocation agent's real settings, for the MAVLink parameter protocol.
 
-Sans-IO: :class:`ParamTable` reads the current :class:`daa_sil.agent.AllocationPolicy` and turns
+Sans-IO: :class:`ParamTable` reads the current :class:`daa_sil.agent.step.AllocationPolicy` and turns
 a PARAM_SET into a new policy (``dataclasses.replace``); the node swaps it in at the next step
 boundary and answers with PARAM_VALUE.
 

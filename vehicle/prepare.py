@@ -42,7 +42,7 @@ def waitmap_source(opts) -> "tuple[str, float | None]":
 
 def cold_parts(sc, opts, policy) -> "list[str]":
     """What a start would build rather than load: ``"kernels"``, ``"maps"`` (only if the policy reads a map)."""
-    from daa_sil.jit_cache import is_warm
+    from daa_sil.runtime.jit_cache import is_warm
 
     cold = [] if is_warm() else ["kernels"]
     if policy.wait_mode == "map":
@@ -144,7 +144,7 @@ def main(argv: "list[str] | None" = None) -> int:
         print(text, flush=True)
 
     if not args.no_kernels:
-        from daa_sil.jit_cache import COLD_COMPILE_TIME
+        from daa_sil.runtime.jit_cache import COLD_COMPILE_TIME
 
         say(f"compiling the DAA kernels ({COLD_COMPILE_TIME})")
         t0 = time.monotonic()

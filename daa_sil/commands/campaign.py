@@ -209,9 +209,9 @@ def _add_run_options(r) -> None:
 
 
 def _config_from_args(args):
-    from daa_sil.study.campaign import parse_groups
-    from daa_sil.study.campaign_config import CampaignConfig
-    from daa_sil.study.campaign_files import load_campaign_json
+    from daa_sil.study.campaign.run import parse_groups
+    from daa_sil.study.campaign.config import CampaignConfig
+    from daa_sil.study.campaign.files import load_campaign_json
 
     given = {"groups": parse_groups(args.groups) if args.groups is not None else None,
              "n_encounters": args.encounters, "seed": args.seed, "chunk_size": args.chunk_size,
@@ -281,7 +281,7 @@ def _interrupted(exc: KeyboardInterrupt, detail: str) -> Interrupted:
 
 
 def run_cmd(args) -> int:
-    from daa_sil.study.campaign import run_campaign
+    from daa_sil.study.campaign.run import run_campaign
 
     _check_resume_force(args)
     cfg = _config_from_args(args)
@@ -317,7 +317,7 @@ def run_cmd(args) -> int:
 
 
 def sweep_cmd(args) -> int:
-    from daa_sil.study import sweep
+    from daa_sil.study.analysis import sweep
 
     if args.collate:
         if args.vary:
@@ -355,10 +355,10 @@ def sweep_cmd(args) -> int:
 
 
 def report_cmd(args) -> int:
-    from daa_sil.study import report
-    from daa_sil.study.report_input import parse_recount
-    from daa_sil.study.findings import VERDICTS
-    from daa_sil.study.stats import DEFAULT_REPLICATES, DEFAULT_SEED
+    from daa_sil.study.report import pages as report
+    from daa_sil.study.analysis.report_input import parse_recount
+    from daa_sil.study.analysis.findings import VERDICTS
+    from daa_sil.study.analysis.stats import DEFAULT_REPLICATES, DEFAULT_SEED
 
     dirs = [Path(d) for d in args.dirs]
     for d in dirs:

@@ -77,10 +77,10 @@ def setting_int(name: str, setting):
 
 def workers_option(name: str = "--workers"):
     """argparse ``type=`` factory: a worker count within ``[1, WORKERS_PER_CORE x usable cores]``
-    (:func:`daa_sil.resources.check_workers`)."""
+    (:func:`daa_sil.runtime.resources.check_workers`)."""
 
     def conv(text: str) -> int:
-        from ..resources import check_workers
+        from daa_sil.runtime.resources import check_workers
 
         try:
             val = int(text)
@@ -94,7 +94,7 @@ def workers_option(name: str = "--workers"):
 
 def add_allow_large(p: argparse.ArgumentParser, what: str) -> None:
     """``--allow-large``: run even when the memory estimate exceeds the machine's memory."""
-    from ..resources import MEMORY_SHARE
+    from daa_sil.runtime.resources import MEMORY_SHARE
 
     p.add_argument("--allow-large", action="store_true",
                    help=f"run even when the estimated peak memory of {what} exceeds {MEMORY_SHARE * 100:.0f} %% of "

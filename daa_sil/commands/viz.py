@@ -150,7 +150,7 @@ def run_steplog(args) -> int:
 
 def pick_encounter(results, group: str, encounter: "int | None", worst: bool) -> tuple[int, dict]:
     """The encounter id to replay and its result row (``--worst``: max PI among LoWC, else min range)."""
-    from daa_sil.study import campaign_files
+    from daa_sil.study.campaign import files as campaign_files
 
     rows = campaign_files.read_results(results, "encounters", groups=[group])
     ids = np.asarray(rows.column("encounter_id").to_numpy(zero_copy_only=False))
@@ -173,7 +173,8 @@ def pick_encounter(results, group: str, encounter: "int | None", worst: bool) ->
 
 def campaign_group(results, name: str) -> str:
     """The campaign's group named ``name`` (case-insensitive), or a one-line error listing its groups."""
-    from daa_sil.study import campaign, campaign_files
+    from daa_sil.study.campaign import run as campaign
+    from daa_sil.study.campaign import files as campaign_files
 
     out = Path(results)
     cfg = campaign.CampaignConfig.from_dict(campaign_files.load_campaign_json(out)["config"], str(out / "campaign.json"))
@@ -185,7 +186,8 @@ def campaign_group(results, name: str) -> str:
 
 def replay_steplog(results, group: str, encounter_id: int):
     """Re-simulate one encounter of a campaign with step logging; returns (steplog, encounter row, config)."""
-    from daa_sil.study import campaign, campaign_files
+    from daa_sil.study.campaign import run as campaign
+    from daa_sil.study.campaign import files as campaign_files
     from daa_sil.models.encounter_files import load_encounters
 
     out = Path(results)

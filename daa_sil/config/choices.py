@@ -1,5 +1,5 @@
 """The allowed values of the agent's and the pilot model's switchable rules, defined once: the agent
-(:mod:`daa_sil.agent`), the pilot model (:mod:`daa_sil.models.pilot_config`) and the named readings
+(:mod:`daa_sil.agent.step`), the pilot model (:mod:`daa_sil.models.pilot_config`) and the named readings
 (:mod:`daa_sil.config.readings`) import them. What each value does is documented where it acts."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ UNSAFE_HOLDS = ("blend", "no-command")
 #: the wait read for a state outside the wait map's box: ``clamp`` (the nearest state of the box),
 #: ``far`` (the map does not model that intruder: w = H) or ``approach`` (the time the relative state
 #: needs, on a straight line, to enter the box plus the wait at its entry point, at most H; H where
-#: it never enters): :func:`daa_sil.wait_function.make_wait_lookup`
+#: it never enters): :func:`daa_sil.agent.wait_function.make_wait_lookup`
 OUTSIDE_BOX = ("clamp", "far", "approach")
 #: when the pilot model stops streaming: ``alert`` (when its alert clears) or ``safe-avoidance``
 #: (when its display shows no alert and every intruder past its closest point of approach)

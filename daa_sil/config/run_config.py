@@ -18,7 +18,7 @@
 ``link``       per-group ``stale_command_s`` and ``link_timeout_s`` of the agent (null = the policy's 15 / 20 s)
 ``reading``    ``name`` (a named reading of :mod:`daa_sil.config.readings`) and ``set`` (its overrides)
 ``study``      ``encounters``, ``seed``, ``duration_s``, ``intruders``, ``chunk_size`` of a campaign
-               (:meth:`daa_sil.study.campaign_config.CampaignConfig.from_run_config` reads them)
+               (:meth:`daa_sil.study.campaign.config.CampaignConfig.from_run_config` reads them)
 ============== ===================================================================================
 
 What each command reads (the rest of a configuration does not apply to it; the record in its

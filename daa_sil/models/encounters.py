@@ -121,7 +121,7 @@ class EncounterConfig:
 
 def encounter_seed(root_seed: int, encounter_ids) -> np.ndarray:
     """Per-encounter int64 seeds: ``SeedSequence(root_seed, spawn_key=(i,))`` hashed to 63 bits
-    (the same definition as :func:`daa_sil.study.campaign.encounter_seeds`)."""
+    (the same definition as :func:`daa_sil.study.campaign.run.encounter_seeds`)."""
     ids = np.asarray(encounter_ids, dtype=np.int64).ravel()
     out = np.empty(ids.size, dtype=np.int64)
     for k, i in enumerate(ids):

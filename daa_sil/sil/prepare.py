@@ -12,7 +12,7 @@ def prepare_kernels(say: "Callable[[str], None] | None") -> None:
     """Compile the DAA kernels here when their cache is cold, before the vehicle and the GCS start: they
     then load them instead of compiling on the same cores against their READY timeouts (docs/daa.md,
     "Compiled kernels"). Nothing is imported when the cache is warm."""
-    from daa_sil.jit_cache import COLD_COMPILE_TIME, cache_dir, is_warm
+    from daa_sil.runtime.jit_cache import COLD_COMPILE_TIME, cache_dir, is_warm
 
     if is_warm():
         return

@@ -29,7 +29,7 @@ from typing import Callable, Sequence
 
 from daa_sil.errors import DaaSilError
 from daa_sil.sil.children import spawn
-from daa_sil.spawned import signals_ignored
+from daa_sil.runtime.spawned import signals_ignored
 
 #: wall-clock limits (s)
 READY_TIMEOUT_S = 60.0  # start-up guard: 20 runs starting together on 2 cores take a while

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from ..errors import DaaSilError, error_class
-from ..spawned import die_with_parent, start_spawned, usable_cpus
+from daa_sil.runtime.spawned import die_with_parent, start_spawned, usable_cpus
 from .grid import Grid
 from .lookup import WaitMap, WaitMapFamily
 from .model import PAPER_TURN_RATES, MdpParams
@@ -83,8 +83,8 @@ BUILDER_BASE_BYTES = 120 * 2**20
 def build_memory(grid: Grid, n_maps: int, workers: "int | None" = None):
     """The estimated peak memory of building ``n_maps`` maps of ``grid`` in ``workers`` processes
     (default :func:`default_workers`) and loading the family: a
-    :class:`daa_sil.resources.MemoryEstimate` to ``check()`` before anything is allocated."""
-    from ..resources import MemoryEstimate
+    :class:`daa_sil.runtime.resources.MemoryEstimate` to ``check()`` before anything is allocated."""
+    from daa_sil.runtime.resources import MemoryEstimate
 
     n = default_workers(n_maps, grid.size) if workers is None else max(1, min(int(workers), int(n_maps)))
     builders = n * (BUILDER_BASE_BYTES + grid.size * BUILD_STATE_BYTES)

@@ -17,7 +17,7 @@ import sys
 import time
 from types import SimpleNamespace
 
-from daa_sil.jit_cache import READY_MARKER, cache_dir, is_warm, mark_ready
+from daa_sil.runtime.jit_cache import READY_MARKER, cache_dir, is_warm, mark_ready
 
 _MODULES = ("elementwise", "evaluate", "motion", "regions", "resolve", "axis_pass", "select", "flight",
             "command_plan", "recovery")
@@ -29,7 +29,7 @@ HELPER_MODULES = ("resolve", "command_plan", "select")
 HELPER_NAME = "daa-kernels"
 #: s the helper may take before it is stopped and its part compiled here (it takes ~30 s on two cores)
 HELPER_TIMEOUT_S = 1800.0
-#: where the kernels are cached (:func:`daa_sil.jit_cache.cache_dir`)
+#: where the kernels are cached (:func:`daa_sil.runtime.jit_cache.cache_dir`)
 CACHE_DIR = cache_dir()
 #: s this process waited for another one's compilation, and spent compiling / loading the kernels
 #: (None until :func:`get` has run)
@@ -92,7 +92,7 @@ def _load(clear: bool) -> tuple[float, float]:
                 _import(_MODULES)
             else:
                 _compile_everything()
-                try:  # every kernel is cached now (daa_sil.jit_cache.is_warm)
+                try:  # every kernel is cached now (daa_sil.runtime.jit_cache.is_warm)
                     mark_ready(CACHE_DIR)
                 except OSError:
                     pass
@@ -136,7 +136,7 @@ def _start_helper():
     Dask worker), with a cache it could not fill, or if it cannot be started."""
     import multiprocessing as mp
 
-    from daa_sil.spawned import start_spawned, usable_cpus
+    from daa_sil.runtime.spawned import start_spawned, usable_cpus
 
     if usable_cpus() < 2 or mp.current_process().daemon:  # (a daemonic process may not have children: Dask's)
         return None
@@ -183,7 +183,7 @@ def compile_part(parent_pid: int, names, cache: str, conn) -> None:
     a one-line reason on ``conn`` if it fails, or if it would not write to ``cache``, the parent's."""
     import signal
 
-    from daa_sil.spawned import die_with_parent
+    from daa_sil.runtime.spawned import die_with_parent
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's (it stops this process)
     die_with_parent(parent_pid, HELPER_NAME)
