@@ -94,7 +94,7 @@ def test_core_imports_nothing_from_the_io_side():
 @pytest.mark.parametrize("source, module, expected", [
     ("import asyncio\n", "daa_sil.agent.step", "daa_sil.agent.step:1 imports asyncio"),
     ("def f():\n    from socket import socket\n", "daa_sil.study.campaign.run", "daa_sil.study.campaign.run:2 imports socket"),
-    ("from ..sil.shim import DelayShim\n", "daa_sil.study.simulation.fasttime", "daa_sil.study.simulation.fasttime:1 imports daa_sil.sil.shim"),
+    ("from ...sil.shim import DelayShim\n", "daa_sil.study.simulation.fasttime", "daa_sil.study.simulation.fasttime:1 imports daa_sil.sil.shim"),
     ("from .. import viz\n", "daa_sil.models.pilot", "daa_sil.models.pilot:1 imports daa_sil.viz"),
     ("from daa_sil.commands.run import run\n", "daa_sil.onboard", "daa_sil.onboard:1 imports daa_sil.commands.run"),
     ("from . import sil\n", "daa_sil", "daa_sil:1 imports daa_sil.sil"),
