@@ -20,8 +20,9 @@ from pathlib import Path
 
 from daa_sil.cli import run_guarded
 from daa_sil.commands.common_args import OneLineParser as _Parser, check_speed, load_key_option
+from daa_sil.config.config_option import add_config_argument
 from daa_sil.config.overrides import Overrides, add_flags
-from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.config.run_config import load_config
 from daa_sil.config.settings import GCS_PORT, udp
 from daa_sil.errors import UsageError
 from daa_sil.runtime.process_gc import freeze_after_startup

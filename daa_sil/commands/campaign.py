@@ -13,7 +13,8 @@ from ..errors import UsageError
 from daa_sil.config.overrides import Overrides, add_flags, flag_dest
 from daa_sil.config.settings import (BATCH_ROWS, BOOTSTRAP_REPLICATES, CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA,
                                      INTRUDERS, PRESET, SEED, WORKERS_PER_CORE)
-from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.config.config_option import add_config_argument
+from daa_sil.config.run_config import load_config
 from daa_sil.files import to_jsonable
 from daa_sil.sil.children import Interrupted, interrupt_signum, interruptible
 from daa_sil.config.readings import DEFAULT_READING, READINGS, parse_reading_settings, readings_help

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UsageError
-from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.config.config_option import add_config_argument
+from daa_sil.config.run_config import load_config
 from daa_sil.files import to_jsonable
 from daa_sil.geometry.thresholds import PRESETS
 from ..waitmap.model import WAIT_DEFINITIONS

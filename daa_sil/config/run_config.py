@@ -55,7 +55,7 @@ from typing import Any, Mapping
 
 import yaml
 
-from daa_sil.config.config_option import PRESET_NAMES, add_config_argument
+from daa_sil.config.choices import PRESET_NAMES
 from daa_sil.config.overrides import Overrides, reading_rules
 from daa_sil.config.sections import SECTIONS, SETTING_SECTIONS, ReadingSection, StudySection, WaitmapSection
 from daa_sil.config.settings import PRESET
@@ -319,5 +319,4 @@ def _check(cfg: RunConfig, where: str) -> None:
             raise UsageError(f"{where}: {what}: bad value ({exc})") from None
 
 
-__all__ = ["RunConfig", "PRESET_NAMES", "preset", "load_config", "default_wait_maps", "config_from_dict", "save_config",
-           "add_config_argument"]
+__all__ = ["RunConfig", "PRESET_NAMES", "preset", "load_config", "default_wait_maps", "config_from_dict", "save_config"]

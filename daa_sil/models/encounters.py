@@ -192,18 +192,6 @@ class EncounterSet:
                        encounter_id=self.encounter_id[idx], seed=self.seed[idx],
                        params={k: v[idx] for k, v in self.params.items()})
 
-    def save(self, path: "str | os.PathLike") -> Path:
-        """Write atomically as Parquet (see :func:`save_encounters`)."""
-        from .encounter_files import save_encounters
-
-        return save_encounters(self, path)
-
-    @classmethod
-    def load(cls, path: "str | os.PathLike") -> "EncounterSet":
-        from .encounter_files import load_encounters
-
-        return load_encounters(path)
-
 
 def concat_encounters(sets: Sequence[EncounterSet]) -> EncounterSet:
     """Concatenate encounter sets with the same M and S along the encounter axis."""
