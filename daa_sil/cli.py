@@ -75,7 +75,7 @@ def build_parser(command: "str | None" = None) -> argparse.ArgumentParser:
 def _adopt(prog: "str | None") -> None:
     """Take the process name and parent watch of a child started by ``daa-sil run`` (or name a
     console script ``prog``): :func:`daa_sil.sil.children.adopt`."""
-    from daa_sil.sil.children import NAME_ENV, PARENT_ENV, adopt
+    from daa_sil.sil.children import NAME_ENV, PARENT_ENV, adopt  # lazy: start-up time
 
     if prog or NAME_ENV in os.environ or PARENT_ENV in os.environ:
         adopt(prog)
@@ -85,7 +85,7 @@ def _interrupted(prog: str, exc: KeyboardInterrupt, whole_process: bool = False)
     """One line for Ctrl-C / SIGTERM / SIGHUP (what was cut short, if the command said); exit 128 + signal.
     ``whole_process``: this is the process's own command (not a call from Python), so a further signal
     while the interpreter shuts down ends it at once (:func:`_end_on_further_signals`)."""
-    from daa_sil.sil.children import interrupt_signum
+    from daa_sil.sil.children import interrupt_signum  # lazy: start-up time
 
     detail = str(exc) if str(exc).startswith("interrupted") else "interrupted"
     try:

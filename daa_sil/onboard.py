@@ -40,6 +40,7 @@ from .daa.alerting import relative_state
 from .daa.intervals import interval_soa
 from daa_sil.models.intruder_flight import INTRUDER_PERFORMANCE
 from daa_sil.geometry.thresholds import Thresholds, get_thresholds
+from .daa.config import DEFAULT_CONFIG
 
 #: ``controls(t) -> (turn_rate rad/s compass +right, accel m/s^2, vertical_accel m/s^2)``, each (N, M)
 IntruderControls = Callable[[float], "tuple[np.ndarray, np.ndarray, np.ndarray]"]
@@ -181,8 +182,7 @@ class OnboardCore:
                  t0: float = 0.0, dt: float = STEP.default, perf: "Performance | None" = None,
                  intruder_perf: "Performance | None" = None, memory=None, step_log: bool = True,
                  outcomes: bool = True):
-        from daa_sil.agent import step as agent
-        from .daa.config import DEFAULT_CONFIG
+        from daa_sil.agent import step as agent  # lazy: start-up time
 
         self._agent = agent
         self.daa_cfg = daa_cfg if daa_cfg is not None else DEFAULT_CONFIG
@@ -238,7 +238,7 @@ class OnboardCore:
         :attr:`policy` is replaced (the vehicle may switch it mid-flight), so its settings are read
         once, not on every step."""
         if self._policy_rows is None or self._policy_rows[0] is not self.policy:
-            from daa_sil.agent.allocation import PolicyRows
+            from daa_sil.agent.allocation import PolicyRows  # lazy: start-up time
 
             self._policy_rows = (self.policy, PolicyRows.of(self.policy, self.n))
         return self._policy_rows[1]

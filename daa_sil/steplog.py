@@ -319,7 +319,7 @@ def _read_open(src, p: Path) -> pa.Table:
 def rename_legacy(table: pa.Table) -> pa.Table:
     """``table`` with the old names of :data:`RENAMED` replaced by the new ones (scalar string
     columns; other columns and the schema metadata untouched). A table without old names is returned as is."""
-    import pyarrow.compute as pc
+    import pyarrow.compute as pc  # lazy: start-up time
 
     for col, mapping in RENAMED.items():
         i = table.schema.get_field_index(col)

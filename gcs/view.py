@@ -107,7 +107,7 @@ class View:
 
     def _heartbeat(self, m, g: "_Given") -> None:
         if m.get_srcComponent() == 1:
-            from daa_sil.link.plane import mode_name
+            from daa_sil.link.plane import mode_name  # lazy: start-up time
 
             self.mode = mode_name(m.custom_mode)
 

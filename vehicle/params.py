@@ -111,8 +111,8 @@ class ParamTable:
     """The parameter list over a policy (``preset``: the scenario's threshold preset, read-only)."""
 
     def __init__(self, preset: str):
-        from daa_sil.config.policy import WAIT_MODES
-        from daa_sil.geometry.thresholds import PRESETS
+        from daa_sil.config.policy import WAIT_MODES  # lazy: start-up time
+        from daa_sil.geometry.thresholds import PRESETS  # lazy: start-up time
 
         presets = tuple(PRESETS)
         code = presets.index(preset) if preset in presets else -1

@@ -15,6 +15,8 @@ from daa_sil.daa.config import DaaConfig
 from daa_sil.errors import UsageError
 from daa_sil.geometry.frames import to_paper_state
 from daa_sil.geometry.kinematics import AircraftState
+from daa_sil.geometry import wellclear as wc
+from daa_sil.daa.alerting import relative_state
 
 
 @dataclass
@@ -110,8 +112,6 @@ def make_wait_lookup(family, cfg: "DaaConfig | None" = None, outside: str = "cla
         raise UsageError(f"outside must be one of {', '.join(OUTSIDE_BOX)}, got {outside!r}")
     horizon = float(family.params.horizon) if outside == "far" else None
     box = box_bounds(family.grid) if outside == "approach" else None
-    from daa_sil.geometry import wellclear as wc
-    from daa_sil.daa.alerting import relative_state
 
     def lookup(own: AircraftState, intr: AircraftState, turn_rate: np.ndarray) -> WaitValue:
         n, m = intr.shape

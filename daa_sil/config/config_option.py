@@ -27,6 +27,6 @@ def config_of(spec: "str | None"):
     imported only then."""
     if not spec:
         return None
-    from daa_sil.config.run_config import load_config
+    from daa_sil.config.run_config import load_config  # lazy: start-up time
 
     return load_config(spec)

@@ -149,7 +149,7 @@ class Reading:
 
     def pilot_config(self, base=None):
         """The :class:`daa_sil.models.pilot_config.PilotConfig` of this reading (from ``base``, default PilotConfig())."""
-        from daa_sil.models.pilot_config import PilotConfig
+        from daa_sil.models.pilot_config import PilotConfig  # lazy: start-up time
 
         base = base if base is not None else PilotConfig()
         engage = self.pilot_engage or ("preventive" if self.pilot_start == "preventive" else "corrective")

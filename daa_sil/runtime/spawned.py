@@ -11,6 +11,7 @@ import signal
 import sys
 import types
 from typing import Iterator, Sequence
+import ctypes
 
 #: signals that stop a command: Ctrl-C, and SIGTERM / SIGHUP, which our commands take as Ctrl-C
 STOP_SIGNALS = tuple(getattr(signal, s) for s in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, s))
@@ -31,8 +32,6 @@ def die_with_parent(parent_pid: int, name: str) -> None:
     normally; a killed parent leaves it to finish its task and exit."""
     if sys.platform.startswith("linux"):
         try:
-            import ctypes
-
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
             libc.prctl(15, ctypes.c_char_p(name.encode()), 0, 0, 0)  # 15 = PR_SET_NAME: pgrep finds it

@@ -44,6 +44,8 @@ from pathlib import Path
 import numba
 
 from daa_sil.runtime.jit_cache import cache_dir
+import fcntl
+from daa_sil.daa import kernels
 
 
 def _configure_cache() -> Path:
@@ -63,8 +65,6 @@ CACHE_DIR = _configure_cache()
 def compile_lock():
     """Exclusive lock on ``CACHE_DIR/.compile.lock`` while held (no lock where that cannot be had)."""
     try:
-        import fcntl
-
         fh = open(CACHE_DIR / ".compile.lock", "a+b")
     except (ImportError, OSError):
         yield
@@ -93,8 +93,6 @@ class LazyKernel:
     def compile(self):
         """The compiled kernel (compiled or loaded now if it was not yet)."""
         if self.dispatcher is None:
-            from daa_sil.daa import kernels
-
             with kernels.without_scipy_linalg():  # (as the eager kernels load: no BLAS probe)
                 self.dispatcher = numba.njit(self.signatures, **OPTIONS)(self.py_func)
         return self.dispatcher

@@ -275,7 +275,7 @@ def cluster_of(finding_id: str) -> "Cluster | None":
 def row_commands(keys, experiments: dict, meta: "dict | None") -> list[str]:
     """The commands behind the experiments ``keys`` of one row: the campaigns they read and the
     experiments command (:func:`daa_sil.study.campaign.experiments.commands_for`); empty without ``meta``."""
-    from daa_sil.study.campaign.experiments import commands_for
+    from daa_sil.study.campaign.experiments import commands_for  # lazy: start-up time
 
     runs = [r for k in keys for r in (experiments.get(k) or {}).get("runs", ())]
     return commands_for(runs, meta) if meta and runs else []

@@ -34,7 +34,7 @@ POWER = 0.8
 
 def n_paper() -> int:
     """Encounters per group of the paper's study (``paper_results.yaml``)."""
-    from daa_sil.study.analysis.metrics import paper_results
+    from daa_sil.study.analysis.metrics import paper_results  # lazy: start-up time
 
     return int(paper_results().get("encounters_per_group", PAPER_N_DEFAULT))
 

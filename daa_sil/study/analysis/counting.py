@@ -150,7 +150,7 @@ class CountingRules:
     def describe(self) -> str:
         """The reading's counting and other settings as recorded; the description (documentation, not a
         setting) is the current one of a reading of ``daa_sil/config/readings.py`` of the same name."""
-        from daa_sil.config.readings import READINGS
+        from daa_sil.config.readings import READINGS  # lazy: start-up time
 
         c = self.counting()
         rest = {k: v for k, v in self.settings.items() if k not in COUNTING_DEFAULTS and k != "columns"}
@@ -191,8 +191,8 @@ def normalise_decisions(dec) -> "dict | None":
         return None
     out = {}
     if hasattr(dec, "column_names"):
-        import pyarrow as pa
-        import pyarrow.compute as pc
+        import pyarrow as pa  # lazy: start-up time
+        import pyarrow.compute as pc  # lazy: start-up time
 
         def arr(c):
             return dec.column(c)

@@ -19,6 +19,7 @@ import numpy as np
 from daa_sil.errors import FileFormatError
 from daa_sil.study.analysis.study import Study
 from daa_sil.study.analysis.counting import DECISION_COLUMNS, CountingRules
+from daa_sil.study.analysis.metrics import as_columns
 
 #: the paper reading's counting (every comparison below counts alike)
 PAPER_COUNTING = {"window": "whole", "received": "pilot+blend", "blends": "all", "superseded": "fate"}
@@ -31,11 +32,10 @@ def _finite(x) -> "float | None":
 def load_part(d: Path, group: str, label: str) -> tuple[dict, "object | None"]:
     """The per-encounter columns (and decision provenance columns) of ``group`` in campaign ``d``,
     relabelled ``label``."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
+    import pyarrow as pa  # lazy: start-up time
+    import pyarrow.compute as pc  # lazy: start-up time
 
-    from daa_sil.study.campaign.files import read_results
-    from daa_sil.study.analysis.metrics import as_columns
+    from daa_sil.study.campaign.files import read_results  # lazy: start-up time
 
     enc = read_results(d, "encounters", [group])
     enc = enc.set_column(enc.column_names.index("group"), "group", pa.array([label] * enc.num_rows, pa.string()))
@@ -52,7 +52,7 @@ def load_part(d: Path, group: str, label: str) -> tuple[dict, "object | None"]:
 def combined_study(parts: Sequence[tuple], counting: "dict | None" = None, replicates: int = 1000) -> Study:
     """One study of ``parts`` ``(label, campaign dir, group)`` on the encounter ids all of them flew
     (the first encounters of one seed), counted by ``counting`` (default the paper's)."""
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: start-up time
 
     loaded = [load_part(Path(d), g, lab) for lab, d, g in parts]
     common = set.intersection(*(set(np.asarray(e["encounter_id"]).tolist()) for e, _ in loaded))

@@ -209,7 +209,7 @@ def _lookup(pr: dict, key: str, group: "str | None") -> float:
 
 @lru_cache(maxsize=1)
 def _raw() -> dict:
-    from daa_sil.config.yaml_input import load_yaml
+    from daa_sil.config.yaml_input import load_yaml  # lazy: start-up time
 
     text = resources.files("daa_sil").joinpath("data/paper_findings.yaml").read_text(encoding="utf-8")
     return load_yaml(text, "daa_sil/data/paper_findings.yaml", "list of the paper's findings")

@@ -129,7 +129,7 @@ def mean_t(x, conf: float = CONF) -> tuple[float, float, float]:
 @lru_cache(maxsize=1)
 def paper_results() -> dict:
     """The paper's published numbers (``daa_sil/data/paper_results.yaml``)."""
-    from daa_sil.config.yaml_input import load_yaml
+    from daa_sil.config.yaml_input import load_yaml  # lazy: start-up time
 
     text = resources.files("daa_sil").joinpath("data/paper_results.yaml").read_text(encoding="utf-8")
     return load_yaml(text, "daa_sil/data/paper_results.yaml", "table of the paper's results")
@@ -154,7 +154,7 @@ def as_columns(table) -> dict:
     if isinstance(table, Mapping):
         return {k: np.asarray(v) for k, v in table.items()}
     try:
-        import pyarrow as pa
+        import pyarrow as pa  # lazy: start-up time
     except ImportError:  # pragma: no cover
         pa = None
     if pa is not None and isinstance(table, pa.Table):

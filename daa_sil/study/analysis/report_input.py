@@ -21,8 +21,8 @@ from daa_sil.study.analysis.metrics import (
 
 
 def _read_parquet(path: Path, columns=None):
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    import pyarrow as pa  # lazy: start-up time
+    import pyarrow.parquet as pq  # lazy: start-up time
 
     try:
         with local_file(path) as fh:
@@ -33,7 +33,7 @@ def _read_parquet(path: Path, columns=None):
 
 
 def _concat(tables, what):
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: start-up time
 
     try:
         return pa.concat_tables(tables, promote_options="default")
@@ -53,7 +53,7 @@ def load_results(src) -> dict:
             files = sorted(d.glob("*/encounters-*.parquet"))
             if not files:
                 raise FileFormatError(f"{d} holds no <group>/encounters-*.parquet results")
-            from daa_sil.study.campaign.files import verify_chunks
+            from daa_sil.study.campaign.files import verify_chunks  # lazy: start-up time
 
             verify_chunks(d)  # a chunk damaged on disk is named here, not read as wrong numbers
     elif isinstance(src, (list, tuple)) and src and all(isinstance(s, (str, os.PathLike)) for s in src):
@@ -72,7 +72,7 @@ def load_results(src) -> dict:
 def load_decisions(d: Path):
     """The decision tables of directory ``d`` restricted to the provenance columns, or None when
     there are none or they carry neither ``decided_by`` nor ``in_box``."""
-    import pyarrow.parquet as pq
+    import pyarrow.parquet as pq  # lazy: start-up time
 
     files = sorted(Path(d).glob("*/decisions-*.parquet"))
     if not files:
@@ -116,7 +116,7 @@ def load_block(src) -> Block:
         d = Path(src)
         source = str(d)
         if (d / "campaign.json").is_file():
-            from daa_sil.study.campaign.files import load_campaign_json
+            from daa_sil.study.campaign.files import load_campaign_json  # lazy: start-up time
 
             cj = load_campaign_json(d)
             cfg = cj.get("config", {})

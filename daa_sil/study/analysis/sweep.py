@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from daa_sil.errors import FileFormatError, UsageError
+import shutil
 
 #: variable -> (CampaignConfig field or per-group setting, value parser, numeric axis?)
 VARIABLES: dict[str, tuple[str, Callable[[str], object], bool]] = {
@@ -67,7 +68,7 @@ class Vary:
     @property
     def setting(self):
         """The per-group :class:`~daa_sil.config.settings.Setting` it varies (None: a campaign field)."""
-        from daa_sil.config.overrides import setting_for_key
+        from daa_sil.config.overrides import setting_for_key  # lazy: start-up time
 
         return setting_for_key(self.field)
 
@@ -115,7 +116,7 @@ def _point(base, vary: Vary, value):
     """The configuration of one sweep point: ``pilot`` sets the pilot's response mode (keeping the
     base's other pilot settings); ``grid`` under a reading with its own grid sets the reading's grid."""
     if vary.name == "pilot":
-        from daa_sil.models.pilot_config import PilotConfig
+        from daa_sil.models.pilot_config import PilotConfig  # lazy: start-up time
 
         pilot = {**base.pilot, "mode": value}
         PilotConfig(**pilot).validate()
@@ -134,12 +135,12 @@ def run_sweep(base, vary: Vary, out_dir: "str | Path", *, workers: int = 1, sche
     ``batch_rows``: encounter rows per task of each campaign (default the campaign runner's). Every
     point's memory estimate is checked before the first starts (``allow_large`` as in
     :func:`~daa_sil.study.campaign.run.run_campaign`); ``force`` replaces a previous sweep in ``out_dir``."""
-    from daa_sil.study.campaign.run import run_campaign
-    from daa_sil.study.campaign.memory import campaign_memory
-    from daa_sil.study.campaign.plan import DEFAULT_BATCH_ROWS
-    from daa_sil.out_dir import claim_out_dir, contents
-    from daa_sil.study.campaign.files import check_out_dir
-    from daa_sil.files import atomic_write_json, to_jsonable
+    from daa_sil.study.campaign.run import run_campaign  # lazy: start-up time
+    from daa_sil.study.campaign.memory import campaign_memory  # lazy: start-up time
+    from daa_sil.study.campaign.plan import DEFAULT_BATCH_ROWS  # lazy: start-up time
+    from daa_sil.out_dir import claim_out_dir, contents  # lazy: start-up time
+    from daa_sil.study.campaign.files import check_out_dir  # lazy: start-up time
+    from daa_sil.files import atomic_write_json, to_jsonable  # lazy: start-up time
 
     configs = point_configs(base, vary)
     out = Path(out_dir)
@@ -179,7 +180,6 @@ def run_sweep(base, vary: Vary, out_dir: "str | Path", *, workers: int = 1, sche
 def remove_sweep(out: Path) -> None:
     """``--force``: remove a previous sweep's files from ``out`` (``sweep.json``, its table and figures,
     ``points/``); anything else stays."""
-    import shutil
 
     for f in ("sweep.json", "sweep.csv", "sweep.md", *(p.name for p in out.glob("sensitivity_*.png"))):
         (out / f).unlink(missing_ok=True)
@@ -201,9 +201,9 @@ def _load(out: Path) -> dict:
 
 def summarize(out: "str | Path", replicates: "int | None" = None, seed: "int | None" = None) -> list[dict]:
     """Rows ``{value, group, metric, estimate, lo, hi, method}`` for every point, group and metric."""
-    from daa_sil.study.analysis.study import Study
-    from daa_sil.study.analysis.report_input import load_block
-    from daa_sil.study.analysis.stats import DEFAULT_REPLICATES, DEFAULT_SEED
+    from daa_sil.study.analysis.study import Study  # lazy: start-up time
+    from daa_sil.study.analysis.report_input import load_block  # lazy: start-up time
+    from daa_sil.study.analysis.stats import DEFAULT_REPLICATES, DEFAULT_SEED  # lazy: start-up time
 
     out = Path(out)
     meta = _load(out)
@@ -229,7 +229,7 @@ def _fmt(x: float) -> str:
 
 def write_summary(out: "str | Path") -> list[Path]:
     """``sweep.csv``, ``sweep.md`` and one PNG per metric into the sweep directory."""
-    from daa_sil.files import atomic_write_text
+    from daa_sil.files import atomic_write_text  # lazy: start-up time
 
     out = Path(out)
     meta = _load(out)
@@ -247,7 +247,7 @@ def write_summary(out: "str | Path") -> list[Path]:
 def render(meta: dict, rows: Sequence[dict], image_prefix: str = "") -> str:
     """The sweep as Markdown: one table per metric (value x group, estimate [95 % CI]) and its figure."""
     base = meta["base"]
-    from daa_sil.study.campaign.config import CampaignConfig
+    from daa_sil.study.campaign.config import CampaignConfig  # lazy: start-up time
 
     # the maps the points read: a reading with its own grid (e.g. paper) overrides the campaign's --waitmap
     maps = CampaignConfig.from_dict(base, "sweep base").map_source
@@ -278,13 +278,13 @@ def render(meta: dict, rows: Sequence[dict], image_prefix: str = "") -> str:
 
 
 def _figures(out: Path, meta: dict, rows: Sequence[dict]) -> list[Path]:
-    import matplotlib
+    import matplotlib  # lazy: start-up time
 
     matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-    import numpy as np
+    import matplotlib.pyplot as plt  # lazy: start-up time
+    import numpy as np  # lazy: start-up time
 
-    from daa_sil.files import atomic_path
+    from daa_sil.files import atomic_path  # lazy: start-up time
 
     values = meta["values"]
     numeric = VARIABLES[meta["vary"]][2]
@@ -323,9 +323,8 @@ def _figures(out: Path, meta: dict, rows: Sequence[dict]) -> list[Path]:
 def collate(sweeps: Sequence["str | Path"], out_dir: "str | Path", title: str = "Sensitivity beyond the paper") -> Path:
     """One Markdown page (``out_dir/sensitivity.md``) from several sweep directories; their figures are
     copied next to it as ``<vary>_<metric>.png``."""
-    import shutil
 
-    from daa_sil.files import atomic_write_text, ensure_dir
+    from daa_sil.files import atomic_write_text, ensure_dir  # lazy: start-up time
 
     out = ensure_dir(out_dir)
     parts = [f"# {title}", "", "Generated by `daa-sil campaign sweep` (one directory per varied setting) and "

@@ -65,6 +65,7 @@ from daa_sil.study.analysis.outcome import Outcome
 from daa_sil.study.analysis.verdict_orderings import bootstrap_p, holm, ordering, ordering_pairs
 from daa_sil.study.analysis.metrics import Estimate, faa_category, paper_results
 from daa_sil.study.analysis.stats import Sample, clopper_pearson, zero_upper_bounds
+from daa_sil.study.analysis.findings import VERDICTS
 
 RULES = {
     "value": "two samples: reproduced if the 95 % interval of ours minus the paper's (the paper's standard error "
@@ -335,7 +336,6 @@ def evaluate_all(studies: dict, consumed: "dict | None" = None) -> list[tuple[Fi
 def tally(rows, label: str) -> dict:
     """Verdict counts of one reading: ``{verdict: n}`` over the findings with a verdict (the
     headline counts only the empirical verdicts; :data:`daa_sil.study.analysis.findings.EMPIRICAL`)."""
-    from daa_sil.study.analysis.findings import VERDICTS
 
     return {v: sum(1 for _, o in rows if o[label].verdict == v) for v in VERDICTS + (NOT_TESTABLE,)}
 

@@ -18,6 +18,12 @@ from daa_sil.config.settings import (CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA, IN
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.geometry.thresholds import PRESETS
 from daa_sil.waitmap.source import DEFAULT_MAP
+from daa_sil.config.readings import canonical_name
+from daa_sil.waitmap.source import check_source
+from daa_sil.config.settings import DELAY_EPOCH
+from daa_sil.config.readings import reading_for
+from daa_sil.models.link_rule import link_legs
+from daa_sil.geometry.thresholds import get_thresholds
 
 #: default step dt (s), paper §IV (:data:`daa_sil.config.settings.STEP`)
 DEFAULT_DT_S = STEP.default
@@ -88,7 +94,6 @@ class CampaignConfig:
             object.__setattr__(self, "groups", tuple(specs.get(p.name, p) for p in parsed))
         else:
             object.__setattr__(self, "groups", tuple(g))
-        from daa_sil.config.readings import canonical_name
 
         object.__setattr__(self, "reading", canonical_name(self.reading)[0])  # old names -> current
 
@@ -115,7 +120,7 @@ class CampaignConfig:
                                            and lo <= self.gamma <= hi):
             raise UsageError(f"--gamma must be within [{lo:g}, {hi:g}], got {self.gamma!r}")
         if self.latency is not None:
-            from daa_sil.models.delay_spec import parse_delay_spec
+            from daa_sil.models.delay_spec import parse_delay_spec  # lazy: start-up time
 
             parse_delay_spec(self.latency)
         self.effective_groups  # noqa: B018 -- validates the overridden definitions
@@ -129,8 +134,6 @@ class CampaignConfig:
             raise UsageError(f"reading {r.name!r} sets the wait maps to {r.waitmap!r}; to read {self.waitmap!r} "
                              f"instead, set the reading's grid (--reading-set waitmap={self.waitmap})")
         if self.uses_map:
-            from daa_sil.waitmap.source import check_source
-
             check_source(self.map_source, self.preset, self.gamma, self.map_horizon)
         return self
 
@@ -143,7 +146,6 @@ class CampaignConfig:
     def epoch_s(self) -> float:
         """The links' delay epoch (s): the link's (:data:`daa_sil.config.settings.DELAY_EPOCH`), or one
         draw per encounter under a reading with ``delay_draw = "encounter"``."""
-        from daa_sil.config.settings import DELAY_EPOCH
 
         return self.effective_reading.epoch_s(DELAY_EPOCH.default, self.duration_s, self.dt_s)
 
@@ -155,7 +157,6 @@ class CampaignConfig:
     @property
     def effective_reading(self):
         """The :class:`daa_sil.config.readings.Reading` flown and counted (named bundle + overrides)."""
-        from daa_sil.config.readings import reading_for
 
         return reading_for(self.reading, **dict(self.reading_set))
 
@@ -168,7 +169,7 @@ class CampaignConfig:
         """The groups with the campaign's overrides applied (what is flown)."""
         latency = None
         if self.latency is not None:
-            from daa_sil.models.delay_spec import parse_delay_spec
+            from daa_sil.models.delay_spec import parse_delay_spec  # lazy: start-up time
 
             latency = parse_delay_spec(self.latency).to_dict()
         out = []
@@ -180,7 +181,6 @@ class CampaignConfig:
     def link_legs(self, name: str):
         """What each link of group ``name`` applies (:class:`daa_sil.models.link_rule.LinkLegs`): the
         group's latency under the reading's rule (``one-way`` or ``round-trip``)."""
-        from daa_sil.models.link_rule import link_legs
 
         return link_legs(self.group(name).delay_model(), self.effective_reading.latency)
 
@@ -211,13 +211,13 @@ class CampaignConfig:
 
     def daa_config(self):
         """The :class:`~daa_sil.daa.config.DaaConfig` flown: the preset's with :attr:`daa` applied."""
-        from daa_sil.daa.config import DaaConfig
+        from daa_sil.daa.config import DaaConfig  # lazy: start-up time
 
         return DaaConfig.for_preset(self.preset, **self.daa)
 
     def pilot_config(self):
         """The :class:`~daa_sil.models.pilot_config.PilotConfig` flown: :attr:`pilot`, then the reading's."""
-        from daa_sil.models.pilot_config import PilotConfig
+        from daa_sil.models.pilot_config import PilotConfig  # lazy: start-up time
 
         return self.effective_reading.pilot_config(PilotConfig(**self.pilot))
 
@@ -260,7 +260,6 @@ class CampaignConfig:
     def resolved(self) -> dict:
         """Every value the campaign flies with, resolved: thresholds, the full DAA and pilot
         configurations, the agent policy of each group (recorded in ``campaign.json``)."""
-        from daa_sil.geometry.thresholds import get_thresholds
 
         def plain(obj):
             return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(obj).items()}

@@ -22,8 +22,8 @@ from daa_sil.study.campaign.files import load_campaign_json, read_results
 
 
 def _campaign(d: Path):
-    from daa_sil.models.encounter_files import load_encounters
-    from daa_sil.study.campaign.config import CampaignConfig
+    from daa_sil.models.encounter_files import load_encounters  # lazy: start-up time
+    from daa_sil.study.campaign.config import CampaignConfig  # lazy: start-up time
 
     cfg = CampaignConfig.from_dict(load_campaign_json(d)["config"], str(d / "campaign.json"))
     return cfg, load_encounters(d / "encounters.parquet")
@@ -43,7 +43,7 @@ def replay(d: Path, group: str, ids: np.ndarray):
     """The step log of encounters ``ids`` of ``group`` in campaign ``d``, flown again alone (one
     encounter, one answer: the campaign's run of each; :func:`lowc_diagnostics` reports the share that
     lost well clear again, a check of that)."""
-    from daa_sil.study.campaign.run import simulate_group
+    from daa_sil.study.campaign.run import simulate_group  # lazy: start-up time
 
     cfg, encs = _campaign(d)
     pos = np.searchsorted(np.asarray(encs.encounter_id), ids)

@@ -97,7 +97,7 @@ def run_dir(runs: Path, run: Run, n: int) -> Path:
 
 def run_config(run: Run, seed: int, n: int):
     """The :class:`~daa_sil.study.campaign.config.CampaignConfig` of an experiment run."""
-    from daa_sil.study.campaign.config import CampaignConfig
+    from daa_sil.study.campaign.config import CampaignConfig  # lazy: start-up time
 
     return CampaignConfig(groups=run.group_specs(), n_encounters=n, seed=seed, reading=run.reading,
                           reading_set=dict(run.reading_set), daa=dict(run.daa))
@@ -107,7 +107,7 @@ def run_experiments(runs: "str | Path", seed: int, n_small: int, n_large: int, w
                     only: "tuple | None" = None, log: Callable[[str], None] = print) -> dict:
     """Run (or resume) every experiment campaign of :data:`RUNS` (``only``: those names); returns
     ``{name: directory}``."""
-    from daa_sil.study.campaign.run import run_campaign
+    from daa_sil.study.campaign.run import run_campaign  # lazy: start-up time
 
     names = {r.name for r in RUNS}
     bad = sorted(set(only or ()) - names)

@@ -20,6 +20,10 @@ import pyarrow.parquet as pq
 from daa_sil import __version__
 from daa_sil.errors import FileFormatError, UsageError
 from daa_sil.files import atomic_write_bytes, atomic_write_text, local_file
+from importlib.metadata import version
+from daa_sil.errors import OutputError
+from daa_sil.files import check_output_path
+import shutil
 
 #: campaign.json format version
 CAMPAIGN_FORMAT = 1
@@ -182,7 +186,6 @@ def software_versions() -> dict:
     """The versions of daa-sil, Python and the libraries whose numbers a campaign's results depend on.
     numba's and llvmlite's are read from their installed metadata: importing numba only to ask costs the
     campaign's driver ~0.4 s while its workers wait."""
-    from importlib.metadata import version
 
     return {"daa_sil": __version__, "python": platform.python_version(), "numpy": np.__version__,
             "pyarrow": pa.__version__, "numba": version("numba"), "llvmlite": version("llvmlite")}
@@ -192,9 +195,7 @@ def check_out_dir(out_dir: "str | os.PathLike", resume: bool, force: bool = Fals
     """Validate ``DIR`` before anything is written: a path that can be written
     (:func:`daa_sil.files.check_output_path`: name, length, UTF-8, writable), not held by another
     process (:func:`daa_sil.out_dir.check_not_busy`), and empty unless resuming or replacing (``force``)."""
-    from daa_sil.errors import OutputError
-    from daa_sil.files import check_output_path
-    from daa_sil.out_dir import check_not_busy, contents
+    from daa_sil.out_dir import check_not_busy, contents  # lazy: start-up time
 
     try:
         p = check_output_path(out_dir, "--out", directory=True)
@@ -215,7 +216,6 @@ _CHUNK_FILE = re.compile(r"(encounters|decisions)-\d+\.parquet|chunk-\d+\.sha256
 def remove_campaign(out_dir: Path) -> None:
     """``--force``: remove a previous campaign's files from ``out_dir`` (``campaign.json``, the encounter
     set, the group directories holding only chunk files); anything else stays."""
-    import shutil
 
     for name in _CAMPAIGN_FILES:
         (out_dir / name).unlink(missing_ok=True)

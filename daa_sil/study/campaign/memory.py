@@ -23,6 +23,9 @@ from __future__ import annotations
 from daa_sil.runtime.resources import PROCESS_BASE_BYTES, MemoryEstimate
 from daa_sil.study.campaign.sampling import SAMPLE_PIECE
 from daa_sil.waitmap.build import MAP_STATE_BYTES
+from daa_sil.waitmap.build import build_memory
+from daa_sil.waitmap.model import PAPER_TURN_RATES
+from daa_sil.waitmap.source import check_source, is_cached
 
 #: bytes per encounter of the encounter set the driver holds, and per intruder of it
 ENCOUNTER_BYTES = 1_000
@@ -70,9 +73,6 @@ def _map_parts(config) -> tuple[list, list]:
     """``(loaded maps, first build)`` parts of a campaign whose groups read a wait map ([] otherwise)."""
     if not config.uses_map:
         return [], []
-    from daa_sil.waitmap.build import build_memory
-    from daa_sil.waitmap.model import PAPER_TURN_RATES
-    from daa_sil.waitmap.source import check_source, is_cached
 
     grid, _ = check_source(config.map_source, config.preset, config.gamma)
     if grid is None:  # a directory from 'waitmap build': its size is what its files hold, loaded once

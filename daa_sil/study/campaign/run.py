@@ -64,6 +64,10 @@ from daa_sil.study.campaign.config import CampaignConfig
 from daa_sil.study.campaign.plan import DEFAULT_BATCH_ROWS, plan_batches
 from daa_sil.study.campaign.sampling import (MIN_SAMPLE_PART, SAMPLE_PIECE, sample_campaign_encounters,
                                              sample_encounter_piece)
+from daa_sil import waitmap
+from daa_sil.config.readings import Reading
+from daa_sil.waitmap import describe
+from daa_sil.study.campaign.files import remove_campaign
 
 
 # --- configuration --------------------------------------------------------------------------------
@@ -74,7 +78,7 @@ def encounter_seeds(campaign_seed: int, encounter_ids: np.ndarray) -> np.ndarray
     (:func:`daa_sil.models.encounters.encounter_seed`). ``SeedSequence(seed_i)`` is the root of every random
     stream of encounter ``i`` in every group (:func:`daa_sil.models.streams.encounter_streams`), so one
     encounter can be replayed (e.g. in the SIL) from its ``seed`` column alone."""
-    from daa_sil.models.encounters import encounter_seed
+    from daa_sil.models.encounters import encounter_seed  # lazy: start-up time
 
     return encounter_seed(int(campaign_seed), encounter_ids)
 
@@ -95,7 +99,6 @@ class BatchTask:
 @functools.lru_cache(maxsize=4)
 def _wait_family(source: str, preset: str, gamma: "float | None" = None, horizon: "float | None" = None):
     """The wait-map family of a campaign, loaded once per process (builds the cache if needed)."""
-    from daa_sil import waitmap
 
     return waitmap.family_for(source, preset=preset, gamma=gamma, horizon=horizon)
 
@@ -111,7 +114,7 @@ def campaign_family(config: CampaignConfig):
 def campaign_wait_lookup(cfg: CampaignConfig, daa_cfg):
     """The wait function a campaign's map groups read: its family under the reading's outside-the-box
     rule (:func:`daa_sil.agent.wait_function.make_wait_lookup`)."""
-    from daa_sil.agent.wait_function import make_wait_lookup
+    from daa_sil.agent.wait_function import make_wait_lookup  # lazy: start-up time
 
     return make_wait_lookup(campaign_family(cfg), cfg=daa_cfg, outside=cfg.effective_reading.outside)
 
@@ -121,7 +124,7 @@ def simulate_group(cfg: CampaignConfig, group: str, encounters, seeds: np.ndarra
     campaign's settings (policy, link legs of the reading's latency rule, pilot, DAA, wait maps and
     the reading's outside-the-box rule) become a :func:`daa_sil.study.simulation.fasttime.simulate` call. Used by
     the campaign runner and by ``daa-sil viz replay``. Returns ``(encounters, decisions, steplog)``."""
-    from daa_sil.study.simulation.fasttime import simulate
+    from daa_sil.study.simulation.fasttime import simulate  # lazy: start-up time
 
     run = cfg.resolve()
     g = run.groups[group]
@@ -135,7 +138,7 @@ def run_batch(task: BatchTask) -> list[ChunkResult]:
     """Simulate the units of a batch together (pure function of the task; safe in any worker); each
     unit's tables are those of :func:`simulate_group` of the unit alone
     (:func:`daa_sil.study.simulation.fasttime.simulate_parts`)."""
-    from daa_sil.study.simulation.fasttime import SimPart, simulate_parts
+    from daa_sil.study.simulation.fasttime import SimPart, simulate_parts  # lazy: start-up time
 
     t0 = time.perf_counter()
     cfg = task.config
@@ -171,9 +174,9 @@ class CampaignSummary:
 
 
 def _progress(enabled: bool):
-    from rich.console import Console
+    from rich.console import Console  # lazy: start-up time
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
-                               TimeRemainingColumn)
+                               TimeRemainingColumn)  # lazy: start-up time
 
     return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("encounters"),
                     TimeElapsedColumn(), TimeRemainingColumn(), console=Console(stderr=True),
@@ -189,7 +192,7 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
     A new encounter set is sampled in ``parts`` pieces on ``executor`` (:func:`sample_campaign_encounters`,
     which calls ``on_piece``).
     """
-    from daa_sil.models.encounter_files import load_encounters, save_encounters
+    from daa_sil.models.encounter_files import load_encounters, save_encounters  # lazy: start-up time
 
     config.validate()
     out = check_out_dir(out_dir, resume)
@@ -220,7 +223,7 @@ def prepare_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", resum
     ensure_dir(out)
     encs = sample_campaign_encounters(config, executor, parts, on_piece)
     save_encounters(encs, enc_path)  # atomic
-    from daa_sil.config.basis import basis_records
+    from daa_sil.config.basis import basis_records  # lazy: start-up time
 
     meta = {"format": CAMPAIGN_FORMAT, "config": config.to_dict(), "resolved_config": config.resolved(),
             "basis": basis_records(config.effective_reading),
@@ -243,7 +246,6 @@ def reading_changes(stored: "dict | None", config: CampaignConfig) -> list[str]:
     (``config.readings``; a setting it lacks counts at its old default). Empty when they agree."""
     if not isinstance(stored, dict):
         return []
-    from daa_sil.config.readings import Reading
 
     now = config.effective_reading.to_dict()
     then = {**Reading(name=now["name"]).to_dict(), **stored}
@@ -251,8 +253,6 @@ def reading_changes(stored: "dict | None", config: CampaignConfig) -> list[str]:
 
 
 def _describe_family(fam) -> dict:
-    from daa_sil.waitmap import describe
-
     return describe(fam)
 
 
@@ -267,10 +267,9 @@ def run_campaign(config: CampaignConfig, out_dir: "str | os.PathLike", *, worker
     not held by another process, empty unless ``resume``; ``force`` replaces a previous campaign's
     files there) and the estimated peak memory (:func:`~daa_sil.study.campaign.memory.campaign_memory`;
     ``allow_large`` runs it even beyond the machine's memory)."""
-    from daa_sil.out_dir import claim_out_dir
-    from daa_sil.runtime.resources import check_workers
-    from daa_sil.study.campaign.files import remove_campaign
-    from daa_sil.study.campaign.memory import campaign_memory
+    from daa_sil.out_dir import claim_out_dir  # lazy: start-up time
+    from daa_sil.runtime.resources import check_workers  # lazy: start-up time
+    from daa_sil.study.campaign.memory import campaign_memory  # lazy: start-up time
 
     remote = bool(scheduler) and scheduler != "local-dask"
     if not remote:

@@ -28,7 +28,7 @@ def sample_campaign_encounters(config: CampaignConfig, executor: "cf.Executor | 
 
     Each encounter is drawn from its own random stream and its geometry is computed element-wise, so
     the pieces concatenated are the set sampled at once (``tests/test_encounters.py``)."""
-    from daa_sil.models import encounters as enc_mod
+    from daa_sil.models import encounters as enc_mod  # lazy: start-up time
 
     kw = dict(seed=config.seed, preset=config.preset, duration_s=config.duration_s, dt_s=config.dt_s,
               t_cpa_s=config.duration_s / 2.0,  # paper: CPA at T/2
@@ -57,8 +57,8 @@ def sample_encounter_piece(n: int, start: int, kw: dict):
     """Encounters ``start .. start+n-1`` on a worker, which loads the compiled kernels first (it does for
     its chunks anyway): the realised-CPA integration then flies the compiled ``advance``, the same numbers
     (2,000 encounters: 1.8 -> 0.7 s CPU)."""
-    from daa_sil.daa import kernels
-    from daa_sil.models import encounters as enc_mod
+    from daa_sil.daa import kernels  # lazy: start-up time
+    from daa_sil.models import encounters as enc_mod  # lazy: start-up time
 
     kernels.get()
     return enc_mod.sample_encounters(n, start=start, **kw)

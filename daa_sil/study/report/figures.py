@@ -21,10 +21,10 @@ def _save(fig, path: Path) -> None:
 
 def group_figures(st: Study, out: Path, suffix: str = "") -> list[Path]:
     """Draw the report's figures of ``st`` into ``out`` (names end in ``suffix``); the paths written."""
-    import matplotlib
+    import matplotlib  # lazy: start-up time
 
     matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: start-up time
 
     pr = paper_results()
     groups = list(st.groups)

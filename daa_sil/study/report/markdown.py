@@ -10,6 +10,7 @@ from daa_sil.study.analysis.study import Study
 from daa_sil.study.analysis.counting import paper_setup
 from daa_sil.study.analysis.findings import fmt
 from daa_sil.study.analysis.metrics import PAPER_FLIGHT_HOURS, Estimate, paper_results
+from daa_sil.study.analysis.metrics import GROUP_ORDER
 
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
@@ -145,6 +146,5 @@ def groups_in_order(studies: dict) -> list[str]:
         for g in st.groups:
             if g not in seen:
                 seen.append(g)
-    from daa_sil.study.analysis.metrics import GROUP_ORDER
 
     return [g for g in GROUP_ORDER if g in seen] + [g for g in seen if g not in GROUP_ORDER]

@@ -42,6 +42,7 @@ from daa_sil.study.analysis.report_input import Block, build_blocks
 from daa_sil.study.report.signatures import SIGNATURES, our_cell, paper_cell
 from daa_sil.study.analysis.stats import DEFAULT_REPLICATES, DEFAULT_SEED
 from daa_sil.study.analysis.verdicts import RULES, evaluate_all
+from daa_sil.study.analysis.verdicts import tally
 
 #: the appendix pages, in the order the main page links them
 APPENDICES = ("appendix-readings.md", "appendix-ablations.md", "appendix-provenance.md")
@@ -163,7 +164,6 @@ def _grouped(rows, label: str, verdicts) -> list[str]:
 
 def summary_lines(rows, label: str, experiments: "dict | None") -> list[str]:
     """In short: the tally in words, what is reproduced, and each cluster of misses with its cause."""
-    from daa_sil.study.analysis.verdicts import tally
 
     c = tally(rows, label)
     n_emp = sum(c[v] for v in EMPIRICAL)
@@ -224,7 +224,6 @@ def render_main(blocks: Sequence[Block], studies: dict, rows, *, figures: dict, 
 
 def findings_json(blocks, rows, replicates: int, seed: int, conf: float, experiments: "dict | None" = None) -> dict:
     """Machine-readable: every finding, the paper's value, each reading's outcome, tallies, attribution."""
-    from daa_sil.study.analysis.verdicts import tally
 
     ref = (blocks[0].meta or {}).get("basis")
     return {"bootstrap": {"replicates": replicates, "seed": seed, "conf": conf},

@@ -24,6 +24,7 @@ import math
 from typing import Mapping
 
 from daa_sil.study.analysis.metrics import PAPER_FLIGHT_HOURS, paper_results
+from daa_sil.study.analysis.metrics import faa_category
 
 INTEGRATED = ("IC-1", "ID-1", "ID-2")
 BASELINES = ("B-1", "B-2")
@@ -98,15 +99,13 @@ def lowc_time() -> list[dict]:
 
 
 def _faa(rate: float) -> str:
-    from daa_sil.study.analysis.metrics import faa_category
-
     return faa_category(rate)
 
 
 def inconsistency_section(studies: "Mapping | None" = None) -> list[str]:
     """The report section (the two run checks on every study that has B-2 and ID-2)."""
-    from daa_sil.study.analysis.findings import fmt
-    from daa_sil.study.report.markdown import estimate_text, markdown_table
+    from daa_sil.study.analysis.findings import fmt  # lazy: start-up time
+    from daa_sil.study.report.markdown import estimate_text, markdown_table  # lazy: start-up time
 
     pr = _pr()
     L = ["## Where the paper contradicts itself", "",

@@ -89,7 +89,7 @@ SIGNATURES = (
 
 def paper_cell(sig: Signature, group: str) -> str:
     """The paper's value with its arithmetic, or why there is none."""
-    from daa_sil.study.analysis.findings import fmt
+    from daa_sil.study.analysis.findings import fmt  # lazy: start-up time
 
     p = sig.paper(group)
     if p is None:
@@ -99,7 +99,7 @@ def paper_cell(sig: Signature, group: str) -> str:
 
 def our_cell(st, sig: Signature, group: str) -> str:
     """Our value [95 % CI] on a :class:`daa_sil.study.analysis.study.Study`."""
-    from daa_sil.study.report.markdown import estimate_text
+    from daa_sil.study.report.markdown import estimate_text  # lazy: start-up time
 
     if group not in st.groups or not st.available(group, sig.metric):
         return "–"
@@ -108,7 +108,7 @@ def our_cell(st, sig: Signature, group: str) -> str:
 
 def signature_section(studies: Mapping) -> list[str]:
     """The report section: one table per group, the paper's value (with arithmetic) and each reading's."""
-    from daa_sil.study.report.markdown import groups_in_order, markdown_table
+    from daa_sil.study.report.markdown import groups_in_order, markdown_table  # lazy: start-up time
 
     labels = list(studies)
     L = ["## Signatures: does our simulator behave like the paper's?", "",
@@ -128,9 +128,9 @@ def signature_section(studies: Mapping) -> list[str]:
 def signature_table(dirs: Mapping[str, "str | Path"], replicates: int = 400) -> str:
     """A compact Markdown table (run x group x signature, value [95 % CI]) of campaign directories:
     a quick summary of a few campaign directories."""
-    from daa_sil.study.analysis.study import Study
-    from daa_sil.study.report.markdown import markdown_table
-    from daa_sil.study.analysis.report_input import load_block
+    from daa_sil.study.analysis.study import Study  # lazy: start-up time
+    from daa_sil.study.report.markdown import markdown_table  # lazy: start-up time
+    from daa_sil.study.analysis.report_input import load_block  # lazy: start-up time
 
     rows = []
     for name, d in dirs.items():

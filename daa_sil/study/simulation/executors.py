@@ -26,6 +26,8 @@ from typing import Iterator
 
 from daa_sil.errors import UsageError
 from daa_sil.runtime.spawned import STOP_SIGNALS, die_with_parent, signals_ignored
+import multiprocessing as mp
+import logging
 
 DASK_HINT = "pip install 'daa-sil[dist]'"
 #: the name a pool worker shows to ``ps`` and ``pgrep`` (at most 15 characters)
@@ -76,7 +78,6 @@ def stop_pool(ex: cf.ProcessPoolExecutor) -> None:
 def start_pool(workers: int) -> cf.ProcessPoolExecutor:
     """A fork pool of ``workers`` processes, started now with Ctrl-C ignored (a fork pool starts all its
     workers at the first submit; :func:`init_worker` then sets their signals)."""
-    import multiprocessing as mp
 
     ex = cf.ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"), initializer=init_worker,
                                 initargs=(os.getpid(),))
@@ -111,14 +112,12 @@ def make_executor(workers: int = 1, scheduler: "str | None" = None) -> Iterator[
 
 def _dask_executor(workers: int, scheduler: str) -> Iterator[cf.Executor]:
     try:
-        from dask.distributed import Client, LocalCluster
+        from dask.distributed import Client, LocalCluster  # lazy: optional dependency
     except ImportError:
         raise UsageError(f"--scheduler needs dask.distributed, which is not installed: {DASK_HINT}") from None
     stack = contextlib.ExitStack()
     try:
         if scheduler == "local-dask":
-            import logging
-
             with signals_ignored((signal.SIGINT,)):  # its processes start with Ctrl-C ignored (the driver stops them)
                 cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                                            host="127.0.0.1", dashboard_address=None,
