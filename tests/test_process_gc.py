@@ -20,7 +20,7 @@ def test_startup_relaxes_collects_garbage_and_then_freezes_and_restores():
     generation and the thresholds are the ones found at the start."""
     code = """
 import gc, json, weakref
-from daa_sil import process_gc as S
+from daa_sil.runtime import process_gc as S
 before = gc.get_threshold()
 S.relax_for_startup()
 relaxed = gc.get_threshold()
