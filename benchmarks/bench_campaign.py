@@ -65,7 +65,7 @@ def _warm(python: str, env: dict, m: int) -> None:
 
 
 def _identical(a: Path, b: Path) -> str:
-    from daa_sil.study.campaign_compare import compare_dirs
+    from daa_sil.study.campaign.compare import compare_dirs
 
     res = compare_dirs(a, b)
     return "yes" if res.identical else f"NO ({len(res.differences)} differences: {res.differences[0]})"

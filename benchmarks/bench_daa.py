@@ -34,7 +34,10 @@ from pathlib import Path
 
 import numpy as np
 
-from daa_sil.agent import AgentMemory, PilotInput, WaitValue, agent_step, policy_for_group
+from daa_sil.agent.memory import AgentMemory, PilotInput
+from daa_sil.agent.wait_function import WaitValue
+from daa_sil.agent.step import agent_step
+from daa_sil.config.groups import policy_for_group
 from daa_sil.daa import DaaConfig, compute_bands
 from daa_sil.geometry.kinematics import AircraftState, Command
 

@@ -40,8 +40,8 @@ def synth_campaign(d: Path, n: int, seed: int = 0) -> Path:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from daa_sil.study.fasttime import ENCOUNTER_SCHEMA
-    from daa_sil.study.fasttime_results import SUPERSEDED_COLUMNS
+    from daa_sil.study.simulation.fasttime import ENCOUNTER_SCHEMA
+    from daa_sil.study.simulation.fasttime_results import SUPERSEDED_COLUMNS
 
     rng = np.random.default_rng(seed)
     active = rng.random(n) < 0.15
@@ -115,8 +115,8 @@ def old_report_module():
     mod.__package__ = "daa_sil"
     # the baseline's relative imports name the modules by their paths of that commit
     import daa_sil.files
-    import daa_sil.study.metrics
-    aliases = {"daa_sil.io": daa_sil.files, "daa_sil.metrics": daa_sil.study.metrics}
+    import daa_sil.study.analysis.metrics
+    aliases = {"daa_sil.io": daa_sil.files, "daa_sil.metrics": daa_sil.study.analysis.metrics}
     added = [k for k in aliases if k not in sys.modules]
     sys.modules.update({k: aliases[k] for k in added})
     try:
@@ -144,10 +144,11 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=2, help="runs per figure (best is printed)")
     args = ap.parse_args()
 
-    from daa_sil.study import report, report_input
-    from daa_sil.study.verdicts import evaluate_all
-    from daa_sil.study.analysis import Study
-    from daa_sil.study.stats import DEFAULT_REPLICATES
+    from daa_sil.study.report import pages as report
+    from daa_sil.study.analysis import report_input
+    from daa_sil.study.analysis.verdicts import evaluate_all
+    from daa_sil.study.analysis.study import Study
+    from daa_sil.study.analysis.stats import DEFAULT_REPLICATES
 
     reps = args.replicates or DEFAULT_REPLICATES
     with tempfile.TemporaryDirectory(prefix="bench-report-") as tmp:

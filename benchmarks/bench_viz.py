@@ -24,7 +24,7 @@ Prints, all measured in this run:
 2. **Live logging cost** on the same step log: the time the control loop spends inside
    ``EncounterLogger.log_step`` (per step, it only queues the row) and the background thread's total
    (until ``close()``), each as a fraction of the SIL run's wall time.
-3. **Fast-time**: one encounter simulated by ``daa_sil.study.fasttime.simulate(record_steps=True)``
+3. **Fast-time**: one encounter simulated by ``daa_sil.study.simulation.fasttime.simulate(record_steps=True)``
    against ``log_steplog`` of its step log (the batch path, ``send_columns``).
 4. **Realtime with live streaming** (``--clock realtime --speed 20 --connect URL --rrd FILE`` to a
    headless viewer, the rerun binary serving gRPC on 127.0.0.1): how late the vehicle finished its
@@ -172,7 +172,7 @@ def bench_fasttime(tmp: Path) -> None:
     from daa_sil import viz
     from daa_sil.config.groups import group_spec
     from daa_sil.models.encounters import sample_encounters
-    from daa_sil.study.fasttime import simulate
+    from daa_sil.study.simulation.fasttime import simulate
 
     es = sample_encounters(1, seed=3)
     spec = group_spec("B-1")
@@ -244,7 +244,7 @@ def _any_steplog(tmp: Path) -> Path:
     from daa_sil import steplog
     from daa_sil.config.groups import group_spec
     from daa_sil.models.encounters import sample_encounters
-    from daa_sil.study.fasttime import simulate
+    from daa_sil.study.simulation.fasttime import simulate
 
     spec = group_spec("B-1")
     model = spec.delay_model()

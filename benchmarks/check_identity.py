@@ -1,7 +1,7 @@
 """Check that this checkout's results are identical to a baseline commit's (issue 21: "0 differences").
 
 Runs, for this checkout and for a baseline checkout installed apart (its own ``.venv`` and its own
-``DAA_SIL_CACHE``, e.g. bba2fd8), and compares with :func:`daa_sil.study.campaign_compare.compare_dirs`
+``DAA_SIL_CACHE``, e.g. bba2fd8), and compares with :func:`daa_sil.study.campaign.compare.compare_dirs`
 (floats bit for bit, NaN equal to NaN):
 
 * **campaigns**: every reading of ``--readings`` x the groups of ``--groups`` x ``--encounters``
@@ -80,7 +80,7 @@ class Side:
 def compare(a: Path, b: Path, allow_added: bool = False) -> bool:
     """True when the result tables (or step logs) under ``a`` and ``b`` are identical (with
     ``allow_added``, on the columns both have; the new side's added columns are listed)."""
-    from daa_sil.study.campaign_compare import compare_dirs
+    from daa_sil.study.campaign.compare import compare_dirs
 
     res = compare_dirs(a, b, allow_added=allow_added)
     if res.added:

@@ -1,7 +1,7 @@
 """Compare the result tables of two campaign directories (or two SIL step logs) column by column.
 
 Used to show that a change left a campaign's numbers unchanged. The comparison itself is
-:func:`daa_sil.study.campaign_compare.compare_dirs` (the golden-campaign test uses the same one):
+:func:`daa_sil.study.campaign.compare.compare_dirs` (the golden-campaign test uses the same one):
 per-encounter and per-decision tables of every group and the shared ``encounters.parquet``,
 floats bit for bit, NaN equal to NaN; ``campaign.json`` is metadata and is not compared.
 
@@ -25,7 +25,7 @@ from pathlib import Path
 
 from daa_sil.errors import DaaSilError
 from daa_sil.steplog import RENAMED
-from daa_sil.study.campaign_compare import compare_dirs
+from daa_sil.study.campaign.compare import compare_dirs
 
 RENAMED_HELP = "; ".join(f"column {col!r}: " + ", ".join(f"{old!r} -> {new!r}" for old, new in m.items())
                          for col, m in RENAMED.items())

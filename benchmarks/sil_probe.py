@@ -186,7 +186,7 @@ def in_process(python: str, tree: Path, probe: Path, scenario: Path, cache: "str
     code = r'''
 import json, sys, time
 try:  # the garbage collector as python -m vehicle runs it (relaxed until READY), in a checkout that has that
-    from daa_sil.process_gc import freeze_after_startup, relax_for_startup
+    from daa_sil.runtime.process_gc import freeze_after_startup, relax_for_startup
 except ImportError:
     freeze_after_startup = relax_for_startup = lambda: None
 relax_for_startup()

@@ -17,7 +17,7 @@ import threading
 from . import __version__
 from .commands.common_args import OneLineParser as _Parser
 from .errors import DaaSilError
-from .process_gc import freeze_at_exit
+from daa_sil.runtime.process_gc import freeze_at_exit
 
 #: modules providing ``register(subparsers)``; order = order in ``--help``
 COMMAND_MODULES = [
@@ -75,7 +75,7 @@ def build_parser(command: "str | None" = None) -> argparse.ArgumentParser:
 def _adopt(prog: "str | None") -> None:
     """Take the process name and parent watch of a child started by ``daa-sil run`` (or name a
     console script ``prog``): :func:`daa_sil.sil.children.adopt`."""
-    from daa_sil.sil.children import NAME_ENV, PARENT_ENV, adopt
+    from daa_sil.sil.children import NAME_ENV, PARENT_ENV, adopt  # lazy: start-up time
 
     if prog or NAME_ENV in os.environ or PARENT_ENV in os.environ:
         adopt(prog)
@@ -85,7 +85,7 @@ def _interrupted(prog: str, exc: KeyboardInterrupt, whole_process: bool = False)
     """One line for Ctrl-C / SIGTERM / SIGHUP (what was cut short, if the command said); exit 128 + signal.
     ``whole_process``: this is the process's own command (not a call from Python), so a further signal
     while the interpreter shuts down ends it at once (:func:`_end_on_further_signals`)."""
-    from daa_sil.sil.children import interrupt_signum
+    from daa_sil.sil.children import interrupt_signum  # lazy: start-up time
 
     detail = str(exc) if str(exc).startswith("interrupted") else "interrupted"
     try:
@@ -119,7 +119,7 @@ def _restore_ctrl_c() -> None:
 
 def main(argv: "list[str] | None" = None) -> int:
     _adopt(None)
-    freeze_at_exit()  # the interpreter's shutdown skips traversing numba's objects (daa_sil.process_gc)
+    freeze_at_exit()  # the interpreter's shutdown skips traversing numba's objects (daa_sil.runtime.process_gc)
     whole = argv is None  # the console script (not a call from Python, e.g. a test)
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv[0] if argv else None)
@@ -145,7 +145,7 @@ def run_guarded(prog: str, fn) -> int:
     """Run ``fn()`` for a console script named ``prog``: a DaaSilError becomes one line on stderr and
     its exit code, Ctrl-C exits 130 (tracebacks only with ``DAA_SIL_DEBUG=1``). The process is named
     ``prog`` (ps/pgrep) and, when ``daa-sil run`` started it, dies with its parent. Its exit is made cheap
-    as :func:`main`'s (:func:`daa_sil.process_gc.freeze_at_exit`)."""
+    as :func:`main`'s (:func:`daa_sil.runtime.process_gc.freeze_at_exit`)."""
     _adopt(prog)
     freeze_at_exit()
     try:

@@ -5,6 +5,7 @@ never a traceback.
 """
 
 from __future__ import annotations
+import sys
 
 
 class DaaSilError(Exception):
@@ -34,7 +35,6 @@ class OutputError(DaaSilError):
 def warn(message: str) -> None:
     """Print ``daa-sil: warning: <message>`` as one line on stderr (something was wrong and was
     repaired or worked around; the command goes on)."""
-    import sys
 
     print(f"daa-sil: warning: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
 

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Iterator
 
 from .errors import OutputError, UsageError
+import math
 
 #: errno values that mean "no room for this file"
 _FULL = {errno.ENOSPC: "disk full", errno.EFBIG: "file size limit reached", errno.EDQUOT: "disk quota exceeded"}
@@ -225,7 +226,7 @@ def local_file(path: "str | os.PathLike", mode: str = "rb"):
     pyarrow reads a string path with a colon in it (``run-12:30/steplog.parquet``) as a URI and
     fails ("Unrecognized filesystem type in URI"); a file object is never parsed, so an output
     directory is a path whatever characters it holds."""
-    import pyarrow as pa
+    import pyarrow as pa  # lazy: start-up time
 
     return pa.OSFile(os.fspath(path), mode)
 
@@ -250,9 +251,8 @@ def atomic_write_json(path: "str | os.PathLike", obj, overwrite: bool = True) ->
 
 def to_jsonable(obj):
     """Convert numpy scalars/arrays and non-finite floats (-> None) into plain JSON values."""
-    import math
 
-    import numpy as np
+    import numpy as np  # lazy: start-up time
 
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}

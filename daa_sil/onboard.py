@@ -8,7 +8,7 @@ lookup, the DAA configuration and the allocation policy. :meth:`OnboardCore.step
 
 1. updates each intruder's turn-rate estimate from the tracks it has seen
    (:class:`TurnRateEstimator`; it picks the wait map), then runs DAA + wait map + agent
-   (:func:`daa_sil.agent.agent_step`) on the truth state at ``t_k`` with the pilot input that
+   (:func:`daa_sil.agent.step.agent_step`) on the truth state at ``t_k`` with the pilot input that
    arrived at or before ``t_k``;
 2. returns the command flown, the decision record and the telemetry for ``t_k`` (ownship,
    intruders, alert levels, band summary) -- the caller downlinks it;
@@ -31,7 +31,7 @@ from typing import Callable
 import numpy as np
 
 from daa_sil.config.settings import STEP
-from daa_sil.decision import Decision
+from daa_sil.agent.decision import Decision
 from .geometry import wellclear as wc
 from daa_sil.geometry import penetration as pen
 from daa_sil.geometry.frames import wrap_pi
@@ -40,6 +40,7 @@ from .daa.alerting import relative_state
 from .daa.intervals import interval_soa
 from daa_sil.models.intruder_flight import INTRUDER_PERFORMANCE
 from daa_sil.geometry.thresholds import Thresholds, get_thresholds
+from .daa.config import DEFAULT_CONFIG
 
 #: ``controls(t) -> (turn_rate rad/s compass +right, accel m/s^2, vertical_accel m/s^2)``, each (N, M)
 IntruderControls = Callable[[float], "tuple[np.ndarray, np.ndarray, np.ndarray]"]
@@ -72,7 +73,7 @@ class StepOutput:
     own: AircraftState  #: (N,) truth at t
     intruders: AircraftState  #: (N, M) truth at t
     command: Command  #: (N,) command flown over [t, t + dt]
-    decisions: "Decision"  #: the agent's decision record (:class:`daa_sil.decision.Decision`)
+    decisions: "Decision"  #: the agent's decision record (:class:`daa_sil.agent.decision.Decision`)
     telemetry: Telemetry  #: downlink payload for t
     geometry: "dict | None"  #: (N, M) range_m, hmd_m, dh_m, tau_mod_s, wcv at t (None without a step log)
     lowc: np.ndarray  #: (N,) LoWC with any intruder on [t, t + dt]
@@ -168,7 +169,7 @@ class OnboardCore:
     Parameters: ``own`` (N,) and ``intruders`` (N, M) initial truth states; ``controls`` the
     intruder scripts; ``policy`` an :class:`~daa_sil.config.policy.AllocationPolicy`; ``daa_cfg`` a
     :class:`~daa_sil.daa.config.DaaConfig` (its thresholds are the LoWC volume unless
-    ``thresholds`` is given); ``wait_lookup`` from :func:`daa_sil.agent.make_wait_lookup` (None when
+    ``thresholds`` is given); ``wait_lookup`` from :func:`daa_sil.agent.step.make_wait_lookup` (None when
     the policy needs no map); ``t0`` start time (s); ``dt`` step (s); ``perf`` ownship limits
     (default from ``daa_cfg``); ``intruder_perf`` limits for the scripted intruders. ``outcomes=False``
     skips the segment figures only fast-time's results read (``lowc_time_s``, ``seg_min_range_m``,
@@ -181,8 +182,7 @@ class OnboardCore:
                  t0: float = 0.0, dt: float = STEP.default, perf: "Performance | None" = None,
                  intruder_perf: "Performance | None" = None, memory=None, step_log: bool = True,
                  outcomes: bool = True):
-        from . import agent
-        from .daa.config import DEFAULT_CONFIG
+        from daa_sil.agent import step as agent  # lazy: start-up time
 
         self._agent = agent
         self.daa_cfg = daa_cfg if daa_cfg is not None else DEFAULT_CONFIG
@@ -234,11 +234,11 @@ class OnboardCore:
         self.turn_estimator.add_columns(intruders.trk)
 
     def policy_rows(self):
-        """:attr:`policy` as a :class:`~daa_sil.allocation.PolicyRows` of the N rows, made again only when
+        """:attr:`policy` as a :class:`~daa_sil.agent.allocation.PolicyRows` of the N rows, made again only when
         :attr:`policy` is replaced (the vehicle may switch it mid-flight), so its settings are read
         once, not on every step."""
         if self._policy_rows is None or self._policy_rows[0] is not self.policy:
-            from .allocation import PolicyRows
+            from daa_sil.agent.allocation import PolicyRows  # lazy: start-up time
 
             self._policy_rows = (self.policy, PolicyRows.of(self.policy, self.n))
         return self._policy_rows[1]

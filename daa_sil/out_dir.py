@@ -25,6 +25,8 @@ from typing import Callable, Iterator
 
 from .errors import OutputError, UsageError, warn
 from .files import shown
+import fcntl
+from .files import check_output_path, ensure_dir
 
 #: the lock file of an output directory (ignored when deciding whether the directory is empty)
 LOCK_NAME = ".daa-sil.lock"
@@ -60,8 +62,6 @@ def check_not_busy(directory: "str | os.PathLike", option: str = "--out") -> Non
     claim itself is :func:`claim_out_dir`)."""
     lock = Path(directory) / LOCK_NAME
     try:
-        import fcntl
-
         fh = open(lock, "rb")
     except (ImportError, OSError):  # no lock file (or no fcntl): nobody holds it
         return
@@ -87,7 +87,6 @@ def claim_out_dir(directory: "str | os.PathLike", option: str = "--out", *, keep
     command continues what is there) nor ``replace`` (called with the directory under the lock to
     clear the previous run's outputs: ``--force``) is given. ``hint`` ends the not-empty message.
     """
-    from .files import check_output_path, ensure_dir
 
     path = check_output_path(directory, option, directory=True)  # name, length, kind, writable: one line
     top = _first_missing(path)
@@ -129,7 +128,6 @@ def _lock(lock: Path, directory: Path, option: str):
     A holder removes the file before it lets go, so a claimer that opened the file just before and
     got the lock just after holds a removed file: it checks that the path still names what it locked
     and tries again if not."""
-    import fcntl
 
     for _ in range(10):
         try:

@@ -25,7 +25,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from daa_sil.daa.config import AXIS_NAMES, DIR_NAMES, REGION_NAMES, RULE_NAMES
-from daa_sil.decision import AUTHORITY_NAMES, DECIDED_BY_NAMES, DECISION_NAMES
+from daa_sil.agent.decision import AUTHORITY_NAMES, DECIDED_BY_NAMES, DECISION_NAMES
 
 from .errors import FileFormatError, UsageError
 from .files import atomic_path, local_file
@@ -34,7 +34,7 @@ from .files import atomic_path, local_file
 STEPLOG_VERSION = "2"
 
 # vocabularies of the string columns (integer codes index these tuples): the agent's and the DAA's code
-# names (daa_sil.decision.CODE_NAMES, daa_sil.daa.config), defined there once
+# names (daa_sil.agent.decision.CODE_NAMES, daa_sil.daa.config), defined there once
 DECISIONS = DECISION_NAMES
 RULES = RULE_NAMES
 AUTHORITIES = AUTHORITY_NAMES
@@ -319,7 +319,7 @@ def _read_open(src, p: Path) -> pa.Table:
 def rename_legacy(table: pa.Table) -> pa.Table:
     """``table`` with the old names of :data:`RENAMED` replaced by the new ones (scalar string
     columns; other columns and the schema metadata untouched). A table without old names is returned as is."""
-    import pyarrow.compute as pc
+    import pyarrow.compute as pc  # lazy: start-up time
 
     for col, mapping in RENAMED.items():
         i = table.schema.get_field_index(col)

@@ -17,7 +17,9 @@ from daa_sil.cli import run_guarded
 from daa_sil.commands.common_args import OneLineParser as _Parser, check_speed, load_key_option
 from daa_sil.config.config_option import add_config_argument, config_of
 from daa_sil.errors import UsageError
-from daa_sil.process_gc import freeze_after_startup
+from daa_sil.runtime.process_gc import freeze_after_startup
+import math
+import re
 
 EXAMPLES = """examples:
   # pilot model of the scenario, vehicle directly on 14550 (realtime)
@@ -65,11 +67,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def parse_setting(text: str) -> "ScheduledSetting":
     """``"30:DAA_WT=6"`` -> ``(30.0, "DAA_WT", 6.0)``; ``"90:MODE=GUIDED"`` -> ``(90.0, "MODE", 15.0)``."""
-    import math
-    import re
 
-    from daa_sil.link.plane import PLANE_MODES
-    from gcs.pilot import ScheduledSetting
+    from daa_sil.link.plane import PLANE_MODES  # lazy: start-up time
+    from gcs.pilot import ScheduledSetting  # lazy: start-up time
 
     m = re.fullmatch(r"\s*([^:]+):([A-Za-z0-9_]{1,16})=(\S+)\s*", str(text))
     if m is None:
@@ -96,8 +96,8 @@ def parse_setting(text: str) -> "ScheduledSetting":
 
 
 async def _amain(args) -> int:
-    from daa_sil.sil.scenario import load_scenario
-    from gcs.node import GcsNode, GcsOptions
+    from daa_sil.sil.scenario import load_scenario  # lazy: start-up time
+    from gcs.node import GcsNode, GcsOptions  # lazy: start-up time
 
     check_speed(args.speed)
     sc = load_scenario(args.scenario) if args.scenario else None
@@ -105,7 +105,7 @@ async def _amain(args) -> int:
         raise UsageError("give --scenario FILE (pilot model settings, origin); without it only --pilot scripted "
                          "with no commands is possible")
     key = load_key_option(args.key, "daa-gcs")
-    from daa_sil.sil.connstr import LISTEN, SEND, parse_connection
+    from daa_sil.sil.connstr import LISTEN, SEND, parse_connection  # lazy: start-up time
 
     vconn = parse_connection(args.vehicle, "--vehicle", SEND)
     if args.listen is not None:

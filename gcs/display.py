@@ -71,7 +71,7 @@ def render_line(node, t: float, n_cmd: int) -> None:
     line = format_line(node, t, n_cmd)
     if sys.stdout.isatty():
         if _console is None:
-            from rich.console import Console
+            from rich.console import Console  # lazy: start-up time
 
             _console = Console()
         style = {"daa": "bold red", "waiting": "yellow", "pilot": "green"}.get(node.view.authority, "")

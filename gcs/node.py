@@ -23,6 +23,8 @@ from daa_sil.sil.msgguard import MessageGuard
 
 from .pilot import make_pilot
 from .protocol import GCS_COMPID, GCS_SYSID, READ_IDS, VEHICLE_SYSID, GcsOptions, GcsProtocol, Notice, Stepped
+from daa_sil.daa.config import DaaConfig
+from daa_sil.sil.msgguard import stderr_line
 
 __all__ = ["GcsNode", "GcsOptions", "READ_IDS"]
 
@@ -37,7 +39,6 @@ class GcsNode:
         self.listen_conn = parse_connection(opts.listen, "--listen", LISTEN, allow=(LISTEN,))
         self.codec = MavCodec(GCS_SYSID, GCS_COMPID, key=opts.key, read_ids=READ_IDS)
         self.mode = opts.pilot or (scenario.pilot.mode if scenario is not None else "scripted")
-        from daa_sil.daa.config import DaaConfig
 
         rc = opts.config
         if scenario is not None:
@@ -45,7 +46,7 @@ class GcsNode:
         else:
             self.daa_cfg = rc.daa_config() if rc is not None else DaaConfig()
         pilot = make_pilot(scenario, self.mode, self.daa_cfg, rc)
-        #: with the pilot model: step 1, a :class:`daa_sil.ground.GroundCore` of one encounter
+        #: with the pilot model: step 1, a :class:`daa_sil.models.ground.GroundCore` of one encounter
         self.ground = getattr(pilot, "ground", None)
         guard = MessageGuard("daa-gcs")
         if self.vehicle_conn.listens:  # --vehicle udpin:HOST:PORT: listen there, answer who sends first
@@ -60,7 +61,7 @@ class GcsNode:
                                       "the GCS takes telemetry only from there")
         assumed_down = 0.0
         if scenario is not None and opts.clock != "lockstep":
-            from daa_sil.sil.scenario import delay_models
+            from daa_sil.sil.scenario import delay_models  # lazy: start-up time
 
             assumed_down = delay_models(scenario)[1].mean()
         #: the protocol: the view, the tick protocol, the pilot's steps, the settings to send
@@ -119,12 +120,10 @@ class GcsNode:
                 self.ep.transport.sendto(s.data, s.addr)
         for ev in self.protocol.take_events():
             if isinstance(ev, Stepped):
-                from .display import render_line
+                from .display import render_line  # lazy: start-up time
 
                 render_line(self.protocol, ev.t, ev.n_cmd)
             elif isinstance(ev, Notice):
-                from daa_sil.sil.msgguard import stderr_line
-
                 stderr_line(f"daa-gcs: {ev.text}")  # (after the status lines gcs.display flushes in batches)
 
     def close(self) -> None:
@@ -152,7 +151,7 @@ class GcsNode:
         """Write the commands sent (JSONL) atomically."""
         if self.opts.log is None:
             return None
-        from daa_sil.files import atomic_write_text, to_jsonable
+        from daa_sil.files import atomic_write_text, to_jsonable  # lazy: start-up time
 
         text = "".join(json.dumps(to_jsonable(r.as_dict()), sort_keys=True) + "\n" for r in self.sent)
         return atomic_write_text(self.opts.log, text)

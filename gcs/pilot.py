@@ -1,6 +1,6 @@
 """The GCS's pilot and what it sends, typed (no sockets, no clock).
 
-* :class:`ModelPilot`: :class:`daa_sil.ground.GroundCore` (N = 1; step 1, the same code fast-time
+* :class:`ModelPilot`: :class:`daa_sil.models.ground.GroundCore` (N = 1; step 1, the same code fast-time
   runs: the pilot's display and :class:`daa_sil.models.pilot.PilotModel`) on the observed ownship
   and intruders (:func:`observed`), streaming per the allocation semantics;
 * :class:`ScriptedPilot`: the scenario's ``pilot.commands`` (each sent once per step over
@@ -21,6 +21,7 @@ import numpy as np
 from daa_sil.geometry.kinematics import AircraftState
 
 from .view import View
+from daa_sil.daa import kernels
 
 
 class ScheduledSetting(NamedTuple):
@@ -105,7 +106,7 @@ class ScriptedPilot:
 
 
 class ModelPilot:
-    """The pilot model of one encounter: a :class:`daa_sil.ground.GroundCore` of N = 1 (``ground``)."""
+    """The pilot model of one encounter: a :class:`daa_sil.models.ground.GroundCore` of N = 1 (``ground``)."""
 
     def __init__(self, ground):
         self.ground = ground
@@ -142,11 +143,11 @@ def make_pilot(sc, mode: str, daa_cfg, config=None):
     to after the conflict), and ``config``'s pilot changes."""
     if mode != "model":
         return ScriptedPilot(sc.pilot.commands if sc is not None else ())
-    from daa_sil.config.readings import reading_for
-    from daa_sil.ground import GroundCore
-    from daa_sil.models.pilot_config import PilotConfig
-    from daa_sil.models.streams import STREAM_PILOT, encounter_streams
-    from daa_sil.sil.scenario import ownship_state
+    from daa_sil.config.readings import reading_for  # lazy: start-up time
+    from daa_sil.models.ground import GroundCore  # lazy: start-up time
+    from daa_sil.models.pilot_config import PilotConfig  # lazy: start-up time
+    from daa_sil.models.streams import STREAM_PILOT, encounter_streams  # lazy: start-up time
+    from daa_sil.sil.scenario import ownship_state  # lazy: start-up time
 
     seed = encounter_streams(sc.seed if sc is not None else 0)[STREAM_PILOT]
     response = sc.pilot.response if sc else "guendel"
@@ -154,7 +155,6 @@ def make_pilot(sc, mode: str, daa_cfg, config=None):
     pcfg = (config.pilot_config(mode=response) if config is not None
             else reading_for().pilot_config(PilotConfig(mode=response)))
     ground = GroundCore(1, [seed], pcfg, daa_cfg, plan=ownship_state(sc) if sc is not None else None)
-    from daa_sil.daa import kernels
 
     kernels.get()  # load the compiled DAA before READY, not at the first conflict in realtime
     return ModelPilot(ground)

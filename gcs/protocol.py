@@ -216,7 +216,7 @@ class GcsProtocol:
                                                        M.MAV_PARAM_TYPE_REAL32))
             self.sent.append(SettingSent(t, "mode" if name == "MODE" else "param", name, float(value), wall))
         if out:
-            from daa_sil.link.plane import system_time
+            from daa_sil.link.plane import system_time  # lazy: start-up time
 
             out.insert(0, system_time(t))
         return out

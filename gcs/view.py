@@ -7,7 +7,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable, NamedTuple
 
-from daa_sil.agent import AUTHORITY_NAMES, DECISION_NAMES  # the wire codes are the agent's (link/messages.py)
+from daa_sil.agent.decision import AUTHORITY_NAMES, DECISION_NAMES  # the wire codes are the agent's (link/messages.py)
 from daa_sil.geometry.kinematics import state_in_bounds
 from daa_sil.link.codec import mavlink as M
 
@@ -107,7 +107,7 @@ class View:
 
     def _heartbeat(self, m, g: "_Given") -> None:
         if m.get_srcComponent() == 1:
-            from daa_sil.link.plane import mode_name
+            from daa_sil.link.plane import mode_name  # lazy: start-up time
 
             self.mode = mode_name(m.custom_mode)
 

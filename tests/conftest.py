@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from daa_sil.jit_cache import COLD_COMPILE_TIME, cache_dir, is_warm
+from daa_sil.runtime.jit_cache import COLD_COMPILE_TIME, cache_dir, is_warm
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -15,7 +15,7 @@ def warm_kernel_cache(request) -> None:
     """The DAA kernels compiled into their cache before the first test, as ``python -m daa_sil.daa.kernels``
     does (once per machine and source version; a no-op when the cache is complete). Without it, on a
     fresh machine the first tests that start SIL processes would have them compile the kernels
-    (:data:`~daa_sil.jit_cache.COLD_COMPILE_TIME`) against their READY timeouts. Its lines are shown
+    (:data:`~daa_sil.runtime.jit_cache.COLD_COMPILE_TIME`) against their READY timeouts. Its lines are shown
     whatever pytest captures; a failed compilation stops the session with one line."""
     if is_warm():
         return

@@ -50,7 +50,7 @@ def sil_fast_time(sc):
     or None, pilot config, DAA config)``."""
     from daa_sil import waitmap
     from daa_sil.config.run_config import load_config
-    from daa_sil.wait_function import make_wait_lookup
+    from daa_sil.agent.wait_function import make_wait_lookup
     from vehicle.core import build_policy
 
     cfg = load_config(None)

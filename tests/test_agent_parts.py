@@ -11,13 +11,14 @@ from collections.abc import Mapping
 import numpy as np
 import pytest
 
-from daa_sil.agent import AgentMemory, PilotInput, link_step
-from daa_sil.allocation import PolicyRows
+from daa_sil.agent.memory import AgentMemory, PilotInput
+from daa_sil.agent.substeps import link_step
+from daa_sil.agent.allocation import PolicyRows
 from daa_sil.config.policy import WAIT_MODES, AllocationPolicy
-from daa_sil.decision import DECISION_FIELDS, Decision, decode
+from daa_sil.agent.decision import DECISION_FIELDS, Decision, decode
 from daa_sil.errors import UsageError
 from daa_sil.geometry.kinematics import Command
-from daa_sil.wait_function import WAIT_FUNCTIONS, WaitValue, wait_values
+from daa_sil.agent.wait_function import WAIT_FUNCTIONS, WaitValue, wait_values
 
 from daa_helpers import intruders, own_state
 

@@ -4,8 +4,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from daa_sil.agent import (AgentMemory, DECISION_FIELDS, D_BLEND, D_NO_WAIT, D_NONE, D_PILOT, D_STALE, D_WAIT,
-                           D_LINK_LOST, D_DAA_OVERRIDE, PilotInput, WaitValue, agent_step, decode, policy_for_group)
+from daa_sil.agent.memory import AgentMemory, PilotInput
+from daa_sil.agent.decision import (DECISION_FIELDS, D_BLEND, D_NO_WAIT, D_NONE, D_PILOT, D_STALE, D_WAIT, D_LINK_LOST,
+    D_DAA_OVERRIDE, decode)
+from daa_sil.agent.wait_function import WaitValue
+from daa_sil.agent.step import agent_step
+from daa_sil.config.groups import policy_for_group
 from daa_sil.daa import (AXIS_NONE, AXIS_HORIZONTAL, AXIS_VERTICAL, DIR_DOWN, DIR_LEFT, DIR_UP, RULE_AXIS, RULE_AXIS_DIR,
                          RULE_ANY, DaaConfig, alert_levels, compute_bands)
 from daa_sil.geometry.kinematics import Command
@@ -250,7 +254,9 @@ def test_stateful_preset_takes_the_whole_batchs_bands_on_its_active_rows():
     """With a stateful preset (DAIDALUS hysteresis), bands passed for the whole batch while only some rows are
     active (the agent then reads a rows view of them) give the decisions of bands computed by the agent
     itself; the hysteresis once failed on the rows view (``dataclasses.replace`` of it)."""
-    from daa_sil.agent import PilotInput, WaitValue, policy_for_group
+    from daa_sil.agent.memory import PilotInput
+    from daa_sil.agent.wait_function import WaitValue
+    from daa_sil.config.groups import policy_for_group
     from daa_sil.daa import DaaConfig, compute_bands
     from daa_sil.geometry.kinematics import AircraftState
 

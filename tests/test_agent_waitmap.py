@@ -6,8 +6,11 @@ import numpy as np
 import pytest
 
 from daa_sil import waitmap
-from daa_sil.agent import (BY_BOTH, BY_MAP, BY_NEITHER, BY_NONE, BY_PROJL, D_NO_WAIT, D_WAIT, AgentMemory,
-                           PilotInput, WaitValue, agent_step, make_wait_lookup, policy_for_group)
+from daa_sil.agent.decision import BY_BOTH, BY_MAP, BY_NEITHER, BY_NONE, BY_PROJL, D_NO_WAIT, D_WAIT
+from daa_sil.agent.memory import AgentMemory, PilotInput
+from daa_sil.agent.wait_function import WaitValue, make_wait_lookup
+from daa_sil.agent.step import agent_step
+from daa_sil.config.groups import policy_for_group
 from daa_sil.daa import DaaConfig
 from daa_sil.geometry.frames import to_paper_state
 

@@ -6,9 +6,9 @@ from dataclasses import replace
 
 import pytest
 
-from daa_sil.study.attribution import CAUSES, CLUSTERS, attribution_rows
-from daa_sil.study.findings import NOT_REPRODUCED, REPRODUCED, load_findings
-from daa_sil.study.outcome import Outcome
+from daa_sil.study.analysis.attribution import CAUSES, CLUSTERS, attribution_rows
+from daa_sil.study.analysis.findings import NOT_REPRODUCED, REPRODUCED, load_findings
+from daa_sil.study.analysis.outcome import Outcome
 
 
 def test_every_empirical_finding_is_in_exactly_one_cluster():

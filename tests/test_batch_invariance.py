@@ -17,7 +17,10 @@ from dataclasses import fields
 import numpy as np
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from daa_sil.agent import AgentMemory, PilotInput, WaitValue, agent_step, policy_for_group
+from daa_sil.agent.memory import AgentMemory, PilotInput
+from daa_sil.agent.wait_function import WaitValue
+from daa_sil.agent.step import agent_step
+from daa_sil.config.groups import policy_for_group
 from daa_sil.daa import DaaConfig, compute_bands, safety_metric
 from daa_sil.daa.bands import AxisBands
 from daa_sil.geometry.kinematics import AircraftState, Command
@@ -187,7 +190,7 @@ def test_agent_steps_of_an_encounter_do_not_depend_on_its_batch(seed, preset, n,
 def test_sm_reused_within_a_step_equals_sm_computed_again(seed, preset, n, m, group, monkeypatch):
     """SM(u) is computed once per row, state and command in a step (the revert check's, the pilot's, the
     executed command's): every output equals that of an agent that computes each of them afresh."""
-    import daa_sil.agent as agent_mod
+    import daa_sil.agent.step as agent_mod
 
     cfg = DaaConfig.for_preset(preset)
     own, intr, cmd = _encounters(seed, n, m, cfg)

@@ -130,7 +130,7 @@ def test_compare_campaigns_maps_old_authority_names_so_old_step_logs_still_compa
     from daa_sil.models.pilot_config import PilotConfig
     from daa_sil.sil.scenario import delay_models, encounter_set, load_scenario
     from daa_sil.steplog import read_steplog, write_steplog
-    from daa_sil.study.fasttime import simulate
+    from daa_sil.study.simulation.fasttime import simulate
     from vehicle.core import build_policy
 
     old = ROOT / "tests" / "data" / "steplog_head_on_bba2fd8.parquet"

@@ -47,7 +47,7 @@ def machine_gib() -> str:
 @pytest.fixture
 def no_work(monkeypatch):
     """Fail the test if a campaign gets as far as running, or any process pool is created."""
-    import daa_sil.study.campaign as campaign
+    import daa_sil.study.campaign.run as campaign
 
     def refuse(*a, **k):
         raise AssertionError("the campaign started: the input was not checked first")
@@ -100,7 +100,7 @@ def test_daa_takes_at_most_eight_intruders():
 
 def test_campaign_config_validate_checks_the_upper_limits():
     from daa_sil.errors import UsageError
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.config import CampaignConfig
 
     for kw, needle in ((dict(n_intruders=9), "--intruders"), (dict(n_intruders=1000), "--intruders"),
                        (dict(n_encounters=10_000_001), "--encounters"), (dict(chunk_size=10_000_001), "--chunk-size"),
@@ -135,10 +135,10 @@ def test_absurd_campaign_sizes_are_one_line_and_allocate_nothing(tmp_path):
 def test_allow_large_is_the_explicit_way_past_the_memory_check(tmp_path, monkeypatch):
     """The refusal names --allow-large; with it the same campaign goes on to run (stopped here before
     any work by a fake run, as this machine could not hold it)."""
-    from daa_sil.resources import memory_budget
-    from daa_sil.study import campaign
-    from daa_sil.study.campaign_config import CampaignConfig
-    from daa_sil.study.campaign_memory import campaign_memory
+    from daa_sil.runtime.resources import memory_budget
+    from daa_sil.study.campaign import run as campaign
+    from daa_sil.study.campaign.config import CampaignConfig
+    from daa_sil.study.campaign.memory import campaign_memory
 
     cfg = CampaignConfig(groups=("B-1",), n_encounters=10_000_000)
     assert campaign_memory(cfg, 1, 10_000).total > memory_budget()
@@ -191,8 +191,8 @@ def test_wait_map_grids_are_bounded_before_any_array_is_made(tmp_path):
 
 # --- the estimates against measured runs ----------------------------------------------------------
 def test_campaign_memory_estimate_bounds_a_measured_campaign(tmp_path):
-    from daa_sil.study.campaign_config import CampaignConfig
-    from daa_sil.study.campaign_memory import campaign_memory
+    from daa_sil.study.campaign.config import CampaignConfig
+    from daa_sil.study.campaign.memory import campaign_memory
 
     cfg = CampaignConfig(groups=("B-1", "ID-2"), n_encounters=3000, n_intruders=2)
     out = tmp_path / "c"

@@ -12,9 +12,9 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from daa_sil.study.campaign import run_campaign
-from daa_sil.study.campaign_config import CampaignConfig
-from daa_sil.study.campaign_files import checksum_path, chunk_paths, read_results
+from daa_sil.study.campaign.run import run_campaign
+from daa_sil.study.campaign.config import CampaignConfig
+from daa_sil.study.campaign.files import checksum_path, chunk_paths, read_results
 from daa_sil.cli import main
 from daa_sil.errors import UsageError
 

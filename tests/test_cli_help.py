@@ -49,7 +49,7 @@ def test_daa_gcs_help_switches_the_agent_off_with_daa_enable():
     from gcs.cli import EXAMPLES, build_parser, parse_setting
     from vehicle import identity
     from vehicle.params import ParamTable
-    from daa_sil.agent import policy_for_group
+    from daa_sil.config.groups import policy_for_group
 
     lines = _example_lines(EXAMPLES, "daa-gcs")
     parser = build_parser()

@@ -37,7 +37,7 @@ def test_a_file_changes_only_what_it_names(tmp_path):
     assert cfg.allocation == {"wait_threshold_s": 8, "projl_horizon_s": None}  # (the old key wt, read as W_T)
     assert cfg.waitmap == {"source": "alerting", "gamma": 0.9}
     assert cfg.groups == ("B-2", "ID-2")
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.config import CampaignConfig
 
     cc = CampaignConfig.from_run_config(cfg)
     assert (cc.settings.of(WAIT_THRESHOLD), cc.gamma, cc.preset, cc.group_names) == (8, 0.9, "do365", ("B-2", "ID-2"))
@@ -156,7 +156,7 @@ def test_campaign_records_the_file_and_flags_override_it(tmp_path, capsys):
 
 def test_no_config_keeps_the_campaign_defaults():
     """The default campaign (no --config) is the paper preset: same groups, thresholds, maps."""
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.config import CampaignConfig
 
     assert CampaignConfig.from_run_config(preset("paper")).to_dict() == CampaignConfig().to_dict()
 

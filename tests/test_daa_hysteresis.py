@@ -7,7 +7,9 @@ M-of-N 2 of 4, early alerting times 75 / 75 / 55 s, preferred-direction delta 15
 import numpy as np
 import pytest
 
-from daa_sil.agent import AgentMemory, PilotInput, agent_step, policy_for_group
+from daa_sil.agent.memory import AgentMemory, PilotInput
+from daa_sil.agent.step import agent_step
+from daa_sil.config.groups import policy_for_group
 from daa_sil.daa import DaaConfig, DaaState, alert_levels
 from daa_sil.daa.bands import AxisBands, Bands, compute_bands
 from daa_sil.daa.config import AXIS_HORIZONTAL, REGION_MID, REGION_NEAR, REGION_NONE

@@ -92,9 +92,9 @@ def test_lazy_kernels_are_loaded_at_their_first_call():
 
 
 def test_the_numba_free_locator_agrees_with_the_kernels():
-    """daa_sil.jit_cache (which the SIL driver asks without importing numba) names the directory the kernels
+    """daa_sil.runtime.jit_cache (which the SIL driver asks without importing numba) names the directory the kernels
     use, and says it is warm once they are loaded."""
-    from daa_sil import jit_cache
+    from daa_sil.runtime import jit_cache
     from daa_sil.daa import kernels
 
     kernels.get()
@@ -178,7 +178,7 @@ def test_a_copy_of_the_sources_elsewhere_has_its_own_cache_directory(tmp_path, m
     and the lazy kernels in the middle of a run."""
     import shutil
 
-    from daa_sil import jit_cache
+    from daa_sil.runtime import jit_cache
 
     copies = []
     for name in ("a", "b"):

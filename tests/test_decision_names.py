@@ -1,4 +1,4 @@
-"""The agent's decision names are defined once (``daa_sil.decision.DECISION_NAMES``) and every schema
+"""The agent's decision names are defined once (``daa_sil.agent.decision.DECISION_NAMES``) and every schema
 outside Python that spells them agrees with that definition: the MAVLink dialect's DAA_SIL_DECISION enum
 (read from the XML, not through the generated module), the step-log schema in docs/architecture.md and
 the scenario-file reference in ``daa_sil.sil.scenario.schema``."""
@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from daa_sil import decision, steplog
+from daa_sil import steplog
+from daa_sil.agent import decision
 from daa_sil.sil.scenario import schema as scenario_schema
 from daa_sil.sil.scenario import scenario_from_dict
 from daa_sil.errors import FileFormatError

@@ -22,7 +22,7 @@ import pytest
 from daa_sil.link.delayline import DelayLine, fifo_release
 from daa_sil.models.delay_process import BatchedDelay, DelayProcess
 from daa_sil.models.latency import Constant, TruncatedGaussian
-from daa_sil.study.fasttime import STREAM_UP, _release_pointer, encounter_streams
+from daa_sil.study.simulation.fasttime import STREAM_UP, _release_pointer, encounter_streams
 
 N, STEPS, EPOCH = 64, 240, 10.0
 

@@ -118,7 +118,7 @@ def test_multi_intruder_and_controls():
 
 def test_parquet_round_trip_bit_exact(tmp_path):
     es = E.sample_encounters(7, seed=3, n_intruders=2)
-    path = es.save(tmp_path / "e.parquet")
+    path = EF.save_encounters(es, tmp_path / "e.parquet")
     back = EF.load_encounters(path)
     for f in ("x", "y", "z", "gs", "trk", "vs"):
         assert np.array_equal(getattr(es.intr, f), getattr(back.intr, f))
@@ -139,7 +139,7 @@ def test_bad_files_give_one_line_errors(tmp_path):
     other = tmp_path / "other.parquet"
     pq.write_table(pa.table({"a": [1]}), other)
     es = E.sample_encounters(2, seed=1)
-    good = es.save(tmp_path / "good.parquet")
+    good = EF.save_encounters(es, tmp_path / "good.parquet")
     t = pq.read_table(good)
     broken = tmp_path / "broken.parquet"
     pq.write_table(t.drop(["intr_x"]), broken)
@@ -170,7 +170,7 @@ def test_a_campaign_samples_its_encounters_in_pieces_without_changing_them(readi
     in metres and one in feet (other HMD / VMD ranges)."""
     import concurrent.futures as cf
 
-    from daa_sil.study.campaign import MIN_SAMPLE_PART, CampaignConfig, sample_campaign_encounters
+    from daa_sil.study.campaign.run import MIN_SAMPLE_PART, CampaignConfig, sample_campaign_encounters
 
     cfg = CampaignConfig(groups=("B-1",), n_encounters=2 * MIN_SAMPLE_PART + 37, seed=5, n_intruders=2,
                          reading=reading)

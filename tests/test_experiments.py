@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from daa_sil.errors import UsageError
-from daa_sil.study.counting import authority_switches
-from daa_sil.study.experiment_analysis import compare, diff, value
-from daa_sil.study.experiment_page import experiments_page
-from daa_sil.study.experiments import RUNS, run_experiments
+from daa_sil.study.analysis.counting import authority_switches
+from daa_sil.study.analysis.experiment_analysis import compare, diff, value
+from daa_sil.study.report.experiment_page import experiments_page
+from daa_sil.study.campaign.experiments import RUNS, run_experiments
 
 
 def test_authority_switches_by_hand():
@@ -53,7 +53,7 @@ def test_what_is_flown_instead_of_the_command_by_hand(tmp_path):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from daa_sil.study.experiment_replays import executed_axes
+    from daa_sil.study.campaign.experiment_replays import executed_axes
 
     (tmp_path / "IC-1").mkdir()
     rows = [("pilot", "none", "none"), ("blend", "vertical", "vertical"), ("blend", "horizontal", "vertical"),

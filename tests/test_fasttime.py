@@ -4,9 +4,9 @@ import numpy as np
 import pyarrow.compute as pc
 import pytest
 
-from daa_sil.agent import policy_for_group
+from daa_sil.config.groups import policy_for_group
 from daa_sil.models.encounters import concat_encounters, sample_encounters
-from daa_sil.study.fasttime import DECISION_SCHEMA, ENCOUNTER_SCHEMA, simulate
+from daa_sil.study.simulation.fasttime import DECISION_SCHEMA, ENCOUNTER_SCHEMA, simulate
 from daa_sil.models.latency import Constant, TruncatedGaussian
 
 N = 40

@@ -10,17 +10,17 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-import daa_sil.agent as agent_mod
-import daa_sil.study.fasttime as ft
-from daa_sil.agent import policy_for_group
+import daa_sil.agent.step as agent_mod
+import daa_sil.study.simulation.fasttime as ft
+from daa_sil.config.groups import policy_for_group
 from daa_sil.config.groups import group_spec
 from daa_sil.daa import DaaConfig, compute_bands
 from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_VERTICAL
 from daa_sil.geometry.kinematics import AircraftState
 from daa_sil.models.encounters import sample_encounters
 from daa_sil.models.latency import Constant, TruncatedGaussian
-from daa_sil.study.campaign_compare import compare_tables
-from daa_sil.study.fasttime import SimPart, simulate, simulate_parts
+from daa_sil.study.campaign.compare import compare_tables
+from daa_sil.study.simulation.fasttime import SimPart, simulate, simulate_parts
 
 N = 30
 
@@ -38,8 +38,8 @@ def encs():
 
 @pytest.fixture(scope="module")
 def family():
-    from daa_sil.study.campaign import campaign_family
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.run import campaign_family
+    from daa_sil.study.campaign.config import CampaignConfig
 
     return campaign_family(CampaignConfig(groups=("ID-2",)))
 
@@ -159,9 +159,9 @@ def test_fancy_indexing_a_state_gives_independent_arrays():
 
 
 def test_a_campaign_with_group_batches_resumes_and_matches(tmp_path):
-    from daa_sil.study.campaign import run_campaign
-    from daa_sil.study.campaign_compare import compare_dirs
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.run import run_campaign
+    from daa_sil.study.campaign.compare import compare_dirs
+    from daa_sil.study.campaign.config import CampaignConfig
 
     cfg = CampaignConfig(groups=("B-2", "IC-1", "ID-1"), n_encounters=9, seed=5, chunk_size=3, duration_s=60.0)
     one_by_one = run_campaign(cfg, tmp_path / "units", batch_rows=3, progress=False)  # one unit per task
@@ -232,9 +232,9 @@ def test_a_round_trip_draws_one_table_for_both_links(encs, family, monkeypatch):
 def test_campaign_results_do_not_depend_on_chunk_size_batch_rows_or_workers(tmp_path):
     """Every column of every table, bit for bit, whatever the chunking, the rows per task and the number of
     workers. On 3e5dc69 the chunk size moved sm_pilot / sm_exec here (and, through them, decisions)."""
-    from daa_sil.study.campaign import run_campaign
-    from daa_sil.study.campaign_compare import compare_dirs
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.run import run_campaign
+    from daa_sil.study.campaign.compare import compare_dirs
+    from daa_sil.study.campaign.config import CampaignConfig
 
     base = dict(groups=("B-1", "IC-1", "ID-2"), n_encounters=16, seed=23, duration_s=150.0)
     runs = {"whole": (dict(chunk_size=16), dict(batch_rows=1000, workers=1)),
@@ -254,7 +254,8 @@ def test_viz_replay_gives_the_campaigns_rows_bit_for_bit(tmp_path):
     import pyarrow.compute as pc
 
     from daa_sil.commands.viz import replay_steplog
-    from daa_sil.study import campaign, campaign_files
+    from daa_sil.study.campaign import run as campaign
+    from daa_sil.study.campaign import files as campaign_files
 
     cfg = campaign.CampaignConfig(groups=("IC-1",), n_encounters=16, seed=23, chunk_size=16, duration_s=150.0)
     campaign.run_campaign(cfg, tmp_path / "camp", workers=1, progress=False)

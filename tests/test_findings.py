@@ -8,11 +8,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from daa_sil.study import findings as F
-from daa_sil.study import verdicts as V
-from daa_sil.study import metrics as M
-from daa_sil.study import analysis as A
-from daa_sil.study.stats import zero_upper_bounds
+from daa_sil.study.analysis import findings as F
+from daa_sil.study.analysis import verdicts as V
+from daa_sil.study.analysis import metrics as M
+from daa_sil.study.analysis import study as A
+from daa_sil.study.analysis.stats import zero_upper_bounds
 
 COUNTS = ("n_wait", "n_no_wait", "n_pilot_received", "n_pilot_exec", "n_blend", "n_blend_exact", "n_blend_axis",
           "n_blend_intent", "n_daa_override", "n_stale", "n_link_lost")

@@ -3,7 +3,7 @@
 Every group x 200 encounters, seed 4242, reading ``extended`` (formerly ``literal``), produced by the
 code since one encounter's DAA numbers no longer depend on its batch (see ``tests/data/README.md``).
 The campaign is run again from the configuration stored in its ``campaign.json`` and compared with
-:func:`daa_sil.study.campaign_compare.compare_dirs`, the same comparison as
+:func:`daa_sil.study.campaign.compare.compare_dirs`, the same comparison as
 ``benchmarks/compare_campaigns.py``. With one worker the seven groups run as batched tasks, so the
 group batching of the campaign runner is part of what is checked.
 
@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from daa_sil.study.campaign import run_campaign
-from daa_sil.study.campaign_compare import compare_dirs
-from daa_sil.study.campaign_config import CampaignConfig
+from daa_sil.study.campaign.run import run_campaign
+from daa_sil.study.campaign.compare import compare_dirs
+from daa_sil.study.campaign.config import CampaignConfig
 
 DATA = Path(__file__).resolve().parent / "data"
 GOLDENS = sorted(p for p in DATA.glob("golden-literal*") if p.is_dir())
@@ -52,7 +52,7 @@ def test_golden_campaign_is_reproduced_exactly(tmp_path):
     assert summary.chunks_run == 7
     # columns written since bba2fd8 are listed apart; every column the golden has must match bit for bit
     results = {g.name: compare_dirs(g, tmp_path / "run", allow_added=True) for g in GOLDENS}
-    from daa_sil.study.fasttime_results import EXTRA_COLUMNS, SUPERSEDED_COLUMNS
+    from daa_sil.study.simulation.fasttime_results import EXTRA_COLUMNS, SUPERSEDED_COLUMNS
 
     for res in results.values():
         assert len(res.tables) == 1 + 2 * 7  # the encounter set and both tables of every group were compared

@@ -1,4 +1,4 @@
-"""Step 1 (the ground station) is one sans-IO object, :class:`daa_sil.ground.GroundCore`, that fast-time
+"""Step 1 (the ground station) is one sans-IO object, :class:`daa_sil.models.ground.GroundCore`, that fast-time
 and the SIL GCS both run (issue 23): its display changes only for the encounters whose telemetry is
 fresh, and both callers step the pilot through it. End-to-end equality of the SIL and fast-time is
 tests/test_sil_parity.py's."""
@@ -10,7 +10,7 @@ import pytest
 
 from daa_sil.daa.config import DaaConfig
 from daa_sil.geometry.kinematics import AircraftState
-from daa_sil.ground import GroundCore
+from daa_sil.models.ground import GroundCore
 from daa_sil.models.pilot_config import PilotConfig
 
 
@@ -67,10 +67,10 @@ def test_a_step_with_nothing_fresh_keeps_the_display():
 
 
 def test_fast_time_steps_the_pilot_through_the_ground_core(monkeypatch):
-    from daa_sil.agent import policy_for_group
+    from daa_sil.config.groups import policy_for_group
     from daa_sil.models.encounters import sample_encounters
     from daa_sil.models.latency import Constant
-    from daa_sil.study.fasttime import simulate
+    from daa_sil.study.simulation.fasttime import simulate
 
     calls = []
     real = GroundCore.step

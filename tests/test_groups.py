@@ -4,7 +4,7 @@ import pytest
 
 from daa_sil.config.overrides import Overrides
 from daa_sil.config.settings import LINK_TIMEOUT, PROJL_HORIZON, STALE_COMMAND, WAIT_THRESHOLD
-from daa_sil.study.campaign_config import CampaignConfig
+from daa_sil.study.campaign.config import CampaignConfig
 from daa_sil.errors import UsageError
 from daa_sil.config.groups import PAPER_GROUPS, group_spec, group_table, load_group_file, parse_groups, policy_for_group
 

@@ -20,7 +20,7 @@ from vehicle.params import ParamTable, float32
 
 
 def _policy():
-    from daa_sil.agent import policy_for_group
+    from daa_sil.config.groups import policy_for_group
 
     return policy_for_group("ID-1")
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from daa_sil import agent
+from daa_sil.agent import step as agent
 from daa_sil.daa import config as daa_config
 from daa_sil.errors import UsageError
 from daa_sil.link.codec import MavCodec, mavlink as d

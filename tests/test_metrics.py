@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from daa_sil.study import metrics as M
-from daa_sil.study import analysis as A
-from daa_sil.study import counting as C
+from daa_sil.study.analysis import metrics as M
+from daa_sil.study.analysis import study as A
+from daa_sil.study.analysis import counting as C
 from daa_sil.errors import FileFormatError, UsageError
 
 
@@ -238,7 +238,7 @@ def test_decision_tables_from_parquet_types(in_box):
 def test_a_new_counting_is_one_table_entry(monkeypatch):
     """A simulator column for a new way of counting plus one COUNT_SOURCES entry is all a reading
     needs: the study, the allowed values and --recount pick it up."""
-    from daa_sil.study.report_input import parse_recount
+    from daa_sil.study.analysis.report_input import parse_recount
 
     keys, tab = C.COUNT_SOURCES["received"]
     monkeypatch.setitem(C.COUNT_SOURCES, "received",

@@ -4,7 +4,10 @@ import numpy as np
 import pytest
 
 from daa_sil.geometry import wellclear as wc
-from daa_sil.agent import D_NO_WAIT, PilotInput, WaitValue, policy_for_group
+from daa_sil.agent.decision import D_NO_WAIT
+from daa_sil.agent.memory import PilotInput
+from daa_sil.agent.wait_function import WaitValue
+from daa_sil.config.groups import policy_for_group
 from daa_sil.daa import DaaConfig
 from daa_sil.models.encounter_geometry import IntruderGeometry, encounter_from_geometry
 from daa_sil.geometry.kinematics import AircraftState
@@ -125,7 +128,7 @@ def test_one_encounter_makes_no_daa_call_on_no_rows(scenario, monkeypatch):
     # nothing to revert makes no bands or SM(u) call (each used to cost ~1.8 ms on an empty set)
     from pathlib import Path
 
-    import daa_sil.agent as agent_mod
+    import daa_sil.agent.step as agent_mod
     from daa_sil.sil.scenario import load_scenario
     from vehicle.core import VehicleCore
 

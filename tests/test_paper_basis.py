@@ -8,15 +8,18 @@ from dataclasses import fields, replace
 import numpy as np
 import pytest
 
-from daa_sil.agent import (A_DAA, AgentMemory, D_DAA_OVERRIDE, D_NO_WAIT, D_WAIT, PilotInput, WaitValue, agent_step,
-                           make_wait_lookup, policy_for_group)
+from daa_sil.agent.decision import A_DAA, D_DAA_OVERRIDE, D_NO_WAIT, D_WAIT
+from daa_sil.agent.memory import AgentMemory, PilotInput
+from daa_sil.agent.wait_function import WaitValue, make_wait_lookup
+from daa_sil.agent.step import agent_step
+from daa_sil.config.groups import policy_for_group
 from daa_sil.config.basis import PAPER_BASIS, basis_records, consumed_findings
 from daa_sil.config.readings import READINGS, Reading, reading_for
 from daa_sil.daa import DaaConfig, alert_levels
-from daa_sil.decision import BY_KEPT
+from daa_sil.agent.decision import BY_KEPT
 from daa_sil.errors import UsageError
 from daa_sil.geometry.kinematics import Command
-from daa_sil.wait_function import box_entry_time
+from daa_sil.agent.wait_function import box_entry_time
 
 from daa_helpers import intruders, own_state
 
@@ -132,7 +135,7 @@ def test_every_released_command_is_counted_burst_by_hand():
     and superseded within their step: counted, not lost."""
     from daa_sil.models.delay_spec import parse_delay_spec
     from daa_sil.models.pilot_config import PilotConfig
-    from daa_sil.study.fasttime import simulate
+    from daa_sil.study.simulation.fasttime import simulate
 
     pilot = reading_for("paper").pilot_config(PilotConfig())
     b2 = replace(policy_for_group("B-2"), active_from="encounter")
@@ -146,9 +149,9 @@ def test_every_released_command_is_counted_burst_by_hand():
 def test_received_equals_its_fates_under_the_paper_counting(tmp_path):
     """Under paper every fresh released command lands in one execution column (executed as sent,
     blended, overridden), itself or with the newer command it was released with."""
-    from daa_sil.study.campaign import run_campaign
-    from daa_sil.study.campaign_config import CampaignConfig
-    from daa_sil.study.campaign_files import read_results
+    from daa_sil.study.campaign.run import run_campaign
+    from daa_sil.study.campaign.config import CampaignConfig
+    from daa_sil.study.campaign.files import read_results
 
     run_campaign(CampaignConfig(groups=("B-2", "ID-2"), n_encounters=16, seed=3), tmp_path / "c", progress=False)
     for g in ("B-2", "ID-2"):
@@ -162,8 +165,8 @@ def test_received_equals_its_fates_under_the_paper_counting(tmp_path):
 
 
 def test_a_delay_drawn_once_per_encounter_is_the_first_epoch_of_the_same_stream():
-    from daa_sil.study.campaign import simulate_group
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.run import simulate_group
+    from daa_sil.study.campaign.config import CampaignConfig
 
     encs = _one_encounter()
     seeds = np.asarray(encs.seed, np.int64)
@@ -179,8 +182,8 @@ def test_a_delay_drawn_once_per_encounter_is_the_first_epoch_of_the_same_stream(
 def test_resume_refuses_a_reading_whose_settings_changed(tmp_path):
     import json
 
-    from daa_sil.study.campaign import run_campaign
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.run import run_campaign
+    from daa_sil.study.campaign.config import CampaignConfig
 
     cfg = CampaignConfig(groups=("B-2",), n_encounters=4, seed=3)
     run_campaign(cfg, tmp_path / "c", progress=False)
@@ -194,6 +197,6 @@ def test_resume_refuses_a_reading_whose_settings_changed(tmp_path):
 
 def test_the_step_log_names_every_provenance_code():
     from daa_sil import steplog
-    from daa_sil.decision import DECIDED_BY_NAMES
+    from daa_sil.agent.decision import DECIDED_BY_NAMES
 
     assert steplog.DECIDED_BY == DECIDED_BY_NAMES  # 'kept' (the extension) is written, not refused

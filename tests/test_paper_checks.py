@@ -4,9 +4,9 @@ expected number is typed from the paper's tables and worked by hand here, not ta
 import numpy as np
 import pytest
 
-from daa_sil.study import paper_checks as C
-from daa_sil.study.analysis import Study
-from daa_sil.study.signatures import SIGNATURES, paper_cell, signature_section
+from daa_sil.study.report import paper_checks as C
+from daa_sil.study.analysis.study import Study
+from daa_sil.study.report.signatures import SIGNATURES, paper_cell, signature_section
 
 
 def test_reception_table_against_its_own_counts():

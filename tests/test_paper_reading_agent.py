@@ -6,8 +6,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from daa_sil.agent import (AgentMemory, D_BLEND, D_NO_WAIT, D_WAIT, PilotInput, WaitValue, agent_step,
-                           make_wait_lookup, policy_for_group)
+from daa_sil.agent.memory import AgentMemory, PilotInput
+from daa_sil.agent.decision import D_BLEND, D_NO_WAIT, D_WAIT
+from daa_sil.agent.wait_function import WaitValue, make_wait_lookup
+from daa_sil.agent.step import agent_step
+from daa_sil.config.groups import policy_for_group
 from daa_sil.daa import AXIS_NONE, DaaConfig, alert_levels
 from daa_sil.errors import UsageError
 from daa_sil.geometry.kinematics import Command

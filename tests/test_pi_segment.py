@@ -6,7 +6,8 @@ import pytest
 
 from daa_sil.geometry import wellclear as wc
 from daa_sil.geometry import penetration as pen
-from daa_sil.agent import PilotInput, policy_for_group
+from daa_sil.agent.memory import PilotInput
+from daa_sil.config.groups import policy_for_group
 from daa_sil.daa import DaaConfig
 from daa_sil.daa.alerting import relative_state
 from daa_sil.geometry.kinematics import AircraftState, Performance

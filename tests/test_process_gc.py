@@ -1,4 +1,4 @@
-"""The garbage collector over a process's life (:mod:`daa_sil.process_gc`): relaxed while a SIL node starts,
+"""The garbage collector over a process's life (:mod:`daa_sil.runtime.process_gc`): relaxed while a SIL node starts,
 frozen at its READY, and frozen at the exit of every command, each in a fresh interpreter (the test
 process's collector is left alone)."""
 
@@ -20,7 +20,7 @@ def test_startup_relaxes_collects_garbage_and_then_freezes_and_restores():
     generation and the thresholds are the ones found at the start."""
     code = """
 import gc, json, weakref
-from daa_sil import process_gc as S
+from daa_sil.runtime import process_gc as S
 before = gc.get_threshold()
 S.relax_for_startup()
 relaxed = gc.get_threshold()
@@ -38,7 +38,7 @@ print(json.dumps({"before": before, "relaxed": relaxed, "early": early, "late": 
     res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stderr[-2000:]
     out = json.loads(res.stdout.strip().splitlines()[-1])
-    from daa_sil.process_gc import STARTUP_THRESHOLD
+    from daa_sil.runtime.process_gc import STARTUP_THRESHOLD
 
     assert out["relaxed"] == [STARTUP_THRESHOLD, *out["before"][1:]] and out["before"][0] < STARTUP_THRESHOLD
     assert (out["early"], out["late"]) == (False, True)  # relaxed, not off: the cycle went once the threshold passed
@@ -51,7 +51,7 @@ def test_sil_nodes_start_relaxed_and_are_frozen_with_default_thresholds_at_ready
     """The real ``python -m vehicle`` / ``python -m gcs`` start-up, stopped at its READY line: by then the
     start-up's objects (numba's, the kernels', the dialect's) are frozen and the thresholds are the
     interpreter's defaults again; before READY (here: ``--help``) the collector is the relaxed one."""
-    from daa_sil.process_gc import STARTUP_THRESHOLD
+    from daa_sil.runtime.process_gc import STARTUP_THRESHOLD
 
     argv = {"vehicle": ["vehicle", "scenarios/head_on.yaml", "--listen", "udp:127.0.0.1:0", "--out", "udp:127.0.0.1:9",
                         "--steplog", str(tmp_path / "steps.parquet"), "--tap", "none", "--clock", "lockstep"],

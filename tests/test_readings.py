@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from daa_sil.study.campaign import run_campaign
-from daa_sil.study.campaign_config import CampaignConfig
-from daa_sil.study.campaign_files import read_results
+from daa_sil.study.campaign.run import run_campaign
+from daa_sil.study.campaign.config import CampaignConfig
+from daa_sil.study.campaign.files import read_results
 from daa_sil.cli import main
 from daa_sil.errors import UsageError
 from daa_sil.config.readings import READINGS, canonical_name, parse_reading_settings, reading_for

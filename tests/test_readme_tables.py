@@ -35,7 +35,7 @@ def cli_json(argv) -> dict:
 
 def test_the_preset_table_names_the_default_of_each_input():
     from daa_sil.config.settings import PRESET, STANDARD_PRESET
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.config import CampaignConfig
 
     rows = preset_rows()
     assert all("(default)" != cell for cell in rows.values()), rows  # a bare "default" hides who defaults to it

@@ -110,8 +110,8 @@ def maps(work) -> Path:
 @pytest.fixture(scope="module")
 def camp(work) -> Path:
     """A finished one-group campaign (3 encounters, 60 s)."""
-    from daa_sil.study.campaign import run_campaign
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.run import run_campaign
+    from daa_sil.study.campaign.config import CampaignConfig
 
     d = work / "camp"
     run_campaign(CampaignConfig(groups=("B-1",), n_encounters=3, chunk_size=3, seed=5, duration_s=60.0), d,

@@ -24,7 +24,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from daa_sil.study.campaign_files import read_results
+from daa_sil.study.campaign.files import read_results
 from daa_sil.cli import main
 
 #: wraps ``daa-sil``; argv[1] names the point at which the process SIGKILLs itself
@@ -33,7 +33,7 @@ import os, signal, sys
 from pathlib import Path
 point, argv = sys.argv[1], sys.argv[2:]
 import pyarrow.parquet as pq
-import daa_sil.study.campaign as camp
+import daa_sil.study.campaign.run as camp
 
 def die():
     os.kill(os.getpid(), signal.SIGKILL)

@@ -10,11 +10,11 @@ import pyarrow.parquet as pq
 import pytest
 
 from daa_sil.errors import FileFormatError, UsageError
-from daa_sil.study.report import APPENDICES, ablation_rows, write_report
-from daa_sil.study.report_figures import FIGURES
-from daa_sil.study.report_input import build_blocks, parse_recount
-from daa_sil.study.analysis import Study
-from daa_sil.study.findings import load_findings
+from daa_sil.study.report.pages import APPENDICES, ablation_rows, write_report
+from daa_sil.study.report.figures import FIGURES
+from daa_sil.study.analysis.report_input import build_blocks, parse_recount
+from daa_sil.study.analysis.study import Study
+from daa_sil.study.analysis.findings import load_findings
 
 COLS = ("n_wait", "n_no_wait", "n_pilot_received", "n_pilot_exec", "n_blend", "n_blend_exact", "n_blend_axis",
         "n_daa_override")
@@ -265,7 +265,7 @@ def test_report_errors(tmp_path):
 
 
 def test_findings_json_rounds_floats_and_stores_each_basis_row_once():
-    from daa_sil.study.report_findings import basis_changes, rounded
+    from daa_sil.study.report.verdict_words import basis_changes, rounded
 
     assert rounded({"a": [0.0018427397934059897, 795163.0, 1 / 3], "b": "x"}) == {"a": [0.00184274, 795163.0, 0.333333],
                                                                                  "b": "x"}

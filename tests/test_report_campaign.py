@@ -14,7 +14,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from daa_sil.cli import main
-from daa_sil.study.findings import BY_CONSTRUCTION, NOT_TESTABLE, VERDICTS, load_findings
+from daa_sil.study.analysis.findings import BY_CONSTRUCTION, NOT_TESTABLE, VERDICTS, load_findings
 
 N = 80
 GROUPS = ("B-2", "IC-1", "ID-2")
@@ -135,7 +135,7 @@ def test_a_planted_override_is_not_reproduced(campaign, tmp_path):
 
 
 def test_report_labels_tell_apart_one_reading_on_two_sizes_of_one_seed():
-    from daa_sil.study.report_input import Block, CountingRules, unique_labels
+    from daa_sil.study.analysis.report_input import Block, CountingRules, unique_labels
 
     def block(seed, n):
         return Block("paper", CountingRules("paper", {}, ""), {}, meta={"seed": seed, "n_encounters": n})

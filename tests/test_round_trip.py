@@ -5,7 +5,7 @@ seconds"), from one draw per epoch on the uplink stream."""
 import numpy as np
 import pytest
 
-from daa_sil.agent import policy_for_group
+from daa_sil.config.groups import policy_for_group
 from daa_sil.errors import UsageError
 from daa_sil.models.delay_process import BatchedDelay, DelayProcess, batched_link_delays, link_delay_processes
 from daa_sil.models.delay_spec import delay_model_from_dict, parse_delay_spec
@@ -13,7 +13,7 @@ from daa_sil.models.latency import Constant, TruncatedGaussian
 from daa_sil.models.link_rule import HalfRoundTrip, link_legs
 from daa_sil.models.pilot_config import PilotConfig
 from daa_sil.sil.scenario import encounter_set, load_scenario
-from daa_sil.study.fasttime import simulate
+from daa_sil.study.simulation.fasttime import simulate
 
 GAUSS = TruncatedGaussian(5.0, 3.0)
 

@@ -2,7 +2,7 @@
 (here a dummy, ``dummy_gain_s``) makes it a field of the agent's policy, a ``campaign run`` and
 ``daa-vehicle`` flag, a key of a run configuration, a group file and a scenario, and a MAVLink
 parameter, each checked against its one range, and each reaching the consumer: the policy rows
-:func:`daa_sil.agent.agent_step` is handed every step (spied on, in fast-time and in the vehicle).
+:func:`daa_sil.agent.step.agent_step` is handed every step (spied on, in fast-time and in the vehicle).
 
 The policy's fields are built when :mod:`daa_sil.config.policy` is first imported, so the dummy is
 registered in a fresh interpreter (a bounded child process) before anything else of ours.
@@ -28,7 +28,7 @@ CHILD = textwrap.dedent('''
     DUMMY = register(Setting("dummy_gain_s", 3.0, "s", 0.0, 50.0, "a dummy per-group setting", flag="--dummy-gain",
                              aliases=("dummy_gain",), mavlink="DAA_DUMMY", section="allocation", per_group=True))
 
-    import daa_sil.agent as agent
+    import daa_sil.agent.step as agent
 
     seen = []
     real_step = agent.agent_step

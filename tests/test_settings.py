@@ -32,7 +32,7 @@ def test_the_defaults_every_consumer_holds():
     from daa_sil.models.encounters import EncounterConfig
     from daa_sil.models.latency import DEFAULT_EPOCH_S
     from daa_sil.sil.scenario.schema import AllocationSpec, LinkSpec, Scenario
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.config import CampaignConfig
     from daa_sil.waitmap.source import DEFAULT_MAP
 
     pol = AllocationPolicy("map")
@@ -83,7 +83,7 @@ def test_the_fields_name_their_setting():
 def test_a_run_configuration_and_a_campaign_check_the_same_range(key, setting):
     from daa_sil.config.overrides import Overrides
     from daa_sil.config.run_config import config_from_dict
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.config import CampaignConfig
 
     assert config_from_dict({"allocation": {key: 120}}, "c.yaml").allocation[key] == 120
     with pytest.raises(UsageError, match=rf"c.yaml: allocation.{key} must be a number within \[0, 120\], got 121"):
@@ -145,7 +145,7 @@ def test_an_integer_too_large_for_a_float_is_out_of_range_not_a_crash():
 
 
 def test_a_campaign_reads_the_duration_range():
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.config import CampaignConfig
 
     for bad in (0.5, 1e6, float("nan")):
         with pytest.raises(UsageError, match="duration"):
@@ -189,7 +189,7 @@ def test_the_legacy_reading_of_an_old_campaign_file():
     """A campaign.json that records no reading was flown before readings were recorded: under the
     simulator's first reading, ``extended`` (not today's default)."""
     from daa_sil.config.readings import DEFAULT_READING, LEGACY_READING, READINGS
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.config import CampaignConfig
 
     assert LEGACY_READING == "extended" and LEGACY_READING in READINGS and DEFAULT_READING == "paper"
     d = CampaignConfig(groups=("B-2",), n_encounters=3).to_dict()

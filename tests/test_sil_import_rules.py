@@ -89,9 +89,9 @@ def test_the_sil_keeps_its_import_rules():
 @pytest.mark.parametrize("source, module, expected", [
     ("def f():\n    from vehicle.identity import mode_name\n", "gcs.view", "gcs.view:2 imports vehicle.identity"),
     ("import vehicle.telemetry\n", "gcs.node", "gcs.node:1 imports vehicle.telemetry"),
-    ("from daa_sil.study.fasttime import STREAM_UP\n", "daa_sil.sil.shim_config",
-     "daa_sil.sil.shim_config:1 imports daa_sil.study.fasttime"),
-    ("from daa_sil.study import fasttime\n", "gcs.node", "gcs.node:1 imports daa_sil.study.fasttime"),
+    ("from daa_sil.study.simulation.fasttime import STREAM_UP\n", "daa_sil.sil.shim_config",
+     "daa_sil.sil.shim_config:1 imports daa_sil.study.simulation.fasttime"),
+    ("from daa_sil.study.simulation import fasttime\n", "gcs.node", "gcs.node:1 imports daa_sil.study.simulation.fasttime"),
     ("import asyncio\n", "daa_sil.sil.shim_core", "daa_sil.sil.shim_core:1 imports asyncio"),
     ("from .shim_socket import ShimSocket\n", "daa_sil.sil.shim_core", "daa_sil.sil.shim_core:1 imports daa_sil.sil.shim_socket"),
     ("from . import endpoint\n", "daa_sil.sil.lockstep", "daa_sil.sil.lockstep:1 imports daa_sil.sil.endpoint"),

@@ -4,7 +4,7 @@ The shim draws its per-direction delays from the encounter's fast-time streams
 (``encounter_streams(seed)[STREAM_UP / STREAM_DOWN]``), so with the paper's Gaussian delay
 (groups B-2/ID-2: N(5 s, 3 s) truncated to [0.2, 10] s, a new draw every 10 s epoch) the SIL
 vehicle receives every pilot command, and the GCS every telemetry frame, at the step fast-time
-says it does. What the vehicle logs must then equal ``daa_sil.study.fasttime.simulate``'s step log,
+says it does. What the vehicle logs must then equal ``daa_sil.study.simulation.fasttime.simulate``'s step log,
 every column bit for bit (the sign of a zero included), with the encounter alone and inside a batch of
 other encounters.
 
@@ -51,7 +51,7 @@ def _fast_time(sc, seed: int, others: "list | None" = None):
     reading); with ``others`` (scenarios), inside a batch of them too (encounter ids 1, 2, ...; seeds
     ``seed + 1``, ...): then the step log's rows of encounter 0."""
     from daa_sil.models.encounters import concat_encounters
-    from daa_sil.study.fasttime import simulate
+    from daa_sil.study.simulation.fasttime import simulate
     from sil_helpers import sil_fast_time
 
     up, down = delay_models(sc)

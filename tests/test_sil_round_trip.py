@@ -40,7 +40,7 @@ allocation: {group: ID-2}
 
 
 def _fast_time(sc, seed):
-    from daa_sil.study.fasttime import simulate
+    from daa_sil.study.simulation.fasttime import simulate
     from sil_helpers import sil_fast_time
 
     legs = link_legs(sc)

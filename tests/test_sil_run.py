@@ -77,7 +77,7 @@ def test_link_loss_hands_control_to_daa_within_timeout(tmp_path):
 
 
 def test_lockstep_is_deterministic_and_matches_fast_time(tmp_path):
-    from daa_sil.study.fasttime import simulate
+    from daa_sil.study.simulation.fasttime import simulate
     from sil_helpers import sil_fast_time
 
     path = ROOT / "scenarios" / "head_on.yaml"

@@ -45,7 +45,7 @@ def _under(mods: set, *prefixes: str) -> list:
 def test_shim_entry_point_imports_only_the_link_side():
     mods = _modules_after("from daa_sil.commands import shim\nshim.build_parser().parse_args(['--delay', 'const:4'])")
     heavy = _under(mods, "scipy", "pyarrow", "daa_sil.waitmap", "daa_sil.daa", "daa_sil.config", "daa_sil.study",
-                   "daa_sil.agent", "daa_sil.onboard", "daa_sil.commands.waitmap", "daa_sil.commands.run")
+                   "daa_sil.agent.step", "daa_sil.onboard", "daa_sil.commands.waitmap", "daa_sil.commands.run")
     # the one table of shared defaults (the delay epoch) imports nothing of ours but errors: any layer may read it
     allowed = ["daa_sil.config", "daa_sil.config.settings"]
     assert [m for m in heavy if m not in allowed] == [], heavy
@@ -90,7 +90,7 @@ def test_gcs_start_up_imports_no_fast_time_or_parquet_code():
 
 def test_streams_are_the_fast_time_ones():
     from daa_sil.models import streams
-    from daa_sil.study import fasttime
+    from daa_sil.study.simulation import fasttime
 
     assert fasttime.encounter_streams is streams.encounter_streams
     assert (fasttime.STREAM_PILOT, fasttime.STREAM_UP, fasttime.STREAM_DOWN) == (0, 1, 2)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from daa_sil.errors import UsageError
-from daa_sil.study.campaign_plan import plan_batches
-from daa_sil.study.slot_ring import SlotRing
+from daa_sil.study.campaign.plan import plan_batches
+from daa_sil.study.simulation.slot_ring import SlotRing
 
 
 def test_ring_holds_what_is_still_read_and_grows_when_a_reader_lags():

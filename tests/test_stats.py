@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from daa_sil.study import metrics as M
-from daa_sil.study import stats as S
+from daa_sil.study.analysis import metrics as M
+from daa_sil.study.analysis import stats as S
 from daa_sil.errors import UsageError
 
 

@@ -215,7 +215,7 @@ def test_what_is_not_a_crossing():
 def test_no_private_name_crosses_a_module():
     mods = our_modules()
     # the population: a rename of a package would empty it
-    for m in ("daa_sil.study.fasttime", "vehicle.node", "gcs.node", "daa_sil.link.codec"):
+    for m in ("daa_sil.study.simulation.fasttime", "vehicle.node", "gcs.node", "daa_sil.link.codec"):
         assert m in mods
     found = all_crossings()
     assert not found, f"{len(found)} private names cross a module:\n" + "\n".join(found)
@@ -227,29 +227,18 @@ if __name__ == "__main__":
     print(f"{len(found)} crossings", file=sys.stderr)
 
 
-# --- no import circle among our modules -----------------------------------------------------------
-# An arrow A -> B is an import of B written at A's module level, including inside a top-level ``if``
-# (``if TYPE_CHECKING:``) or ``try``: a class a module only annotates with still makes the module
-# depend on the one that defines it, so the class belongs below (issue 23). An import inside a
-# function is a deliberate deferral and is not an arrow here. Importing one's own parent package is
-# not an arrow either (Python runs a package's ``__init__`` first whatever one writes).
+# --- no import circle among our modules, and no import from a lower layer to a higher one ----------------------
+# An arrow A -> B is an import of B anywhere in A: at module level, inside a top-level ``if``
+# (``if TYPE_CHECKING:``) or ``try``, and inside a function. A class a module only annotates with still
+# makes the module depend on the one that defines it, and an import deferred into a function is still
+# a dependency: deferring it only hides a circle. Importing one's own parent package is not an arrow
+# (Python runs a package's ``__init__`` first whatever one writes).
 
 
 def module_imports(source: str, module: str, is_package: bool, ours: set[str]) -> set[str]:
-    """Our modules that ``module`` imports at module level (``from pkg import sub`` -> ``pkg.sub``)."""
-
-    def top_level(body):
-        for node in body:
-            yield node
-            if isinstance(node, (ast.If, ast.Try)):
-                yield from top_level(node.body)
-                yield from top_level(node.orelse)
-                for h in getattr(node, "handlers", ()):
-                    yield from top_level(h.body)
-                yield from top_level(getattr(node, "finalbody", ()))
-
+    """Our modules that ``module`` imports anywhere (``from pkg import sub`` -> ``pkg.sub``)."""
     names = []
-    for node in top_level(ast.parse(source).body):
+    for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
             names.extend(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -320,12 +309,13 @@ def test_the_circle_finder_on_hand_written_modules():
     ours = {"daa_sil", "daa_sil.pkg", "daa_sil.pkg.a", "daa_sil.pkg.b", "daa_sil.pkg.c"}
     a = "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from daa_sil.pkg.b import Thing\n"
     b = "from . import a\nimport numpy\n"
-    c = "def f():\n    from daa_sil.pkg import a\nfrom daa_sil import pkg\n"
+    c = "def f():\n    from daa_sil.pkg import a  # lazy: start-up time\nfrom daa_sil import pkg\n"
     graph = {"daa_sil.pkg.a": module_imports(a, "daa_sil.pkg.a", False, ours),
              "daa_sil.pkg.b": module_imports(b, "daa_sil.pkg.b", False, ours),
              "daa_sil.pkg.c": module_imports(c, "daa_sil.pkg.c", False, ours)}
-    # a type-only import is an arrow; a function-level one and the parent package are not
-    assert graph == {"daa_sil.pkg.a": {"daa_sil.pkg.b"}, "daa_sil.pkg.b": {"daa_sil.pkg.a"}, "daa_sil.pkg.c": set()}
+    # a type-only import is an arrow, and so is a function-level one; the parent package is not
+    assert graph == {"daa_sil.pkg.a": {"daa_sil.pkg.b"}, "daa_sil.pkg.b": {"daa_sil.pkg.a"},
+                     "daa_sil.pkg.c": {"daa_sil.pkg.a"}}
     assert import_circles(graph) == [["daa_sil.pkg.a", "daa_sil.pkg.b"]]
     assert import_circles({"x": {"y"}, "y": {"z"}, "z": {"x"}, "w": {"x"}}) == [["x", "y", "z"]]
     assert import_circles({"x": {"y"}, "y": set()}) == []
@@ -335,9 +325,9 @@ def test_no_import_circle_among_our_modules():
     graph = our_import_graph()
     # the population: the walker sees the arrows it should
     assert "daa_sil.config.policy" in graph["daa_sil.config.groups"]
-    assert "daa_sil.study.campaign_files" in graph["daa_sil.study.campaign"]
+    assert "daa_sil.study.campaign.files" in graph["daa_sil.study.campaign.run"]
     circles = import_circles(graph)
-    assert not circles, "import circles (module-level imports, TYPE_CHECKING included):\n" + "\n".join(
+    assert not circles, "import circles (every import, TYPE_CHECKING and inside functions included):\n" + "\n".join(
         " <-> ".join(c) for c in circles)
 
 
@@ -386,3 +376,116 @@ def test_no_module_is_over_the_size_limit():
     assert all(any((ROOT / top).rglob("*.py")) for top in SIZED)
     over = oversized()
     assert not over, f"modules over {MAX_MODULE_LINES} lines (split each by meaning):\n" + "\n".join(over)
+
+
+# --- the layers, lowest first ---------------------------------------------------------------------------------
+# A module belongs to the layer of the longest prefix below that names it. It may import its own layer
+# and the layers below, never one above (docs/architecture.md, "Packages"). config/ spans two layers:
+# its definitions (settings, choices, the YAML loader, the policy fields) are the foundation everything
+# reads; its assemblers (groups, readings, sections, basis, run_config, the --config option) build a
+# run's configuration from daa/, models/ and geometry/ and sit above them.
+
+LAYERS: list[tuple[str, tuple[str, ...]]] = [
+    ("foundation", ("daa_sil", "daa_sil.errors", "daa_sil.files", "daa_sil.out_dir",
+                    "daa_sil.runtime", "daa_sil.config", "daa_sil.config.settings", "daa_sil.config.choices",
+                    "daa_sil.config.yaml_input", "daa_sil.config.policy")),
+    ("geometry", ("daa_sil.geometry",)),
+    ("daa", ("daa_sil.daa",)),
+    ("waitmap", ("daa_sil.waitmap",)),
+    ("models", ("daa_sil.models",)),
+    ("link", ("daa_sil.link",)),
+    ("configuration", ("daa_sil.config.groups", "daa_sil.config.readings", "daa_sil.config.sections",
+                       "daa_sil.config.basis", "daa_sil.config.run_config", "daa_sil.config.config_option")),
+    ("agent", ("daa_sil.agent",)),
+    ("onboard", ("daa_sil.onboard", "daa_sil.steplog")),  # the step log names the agent's decisions
+    ("study.simulation", ("daa_sil.study.simulation",)),
+    ("study.campaign", ("daa_sil.study.campaign",)),
+    ("study.analysis", ("daa_sil.study.analysis",)),
+    ("study.report", ("daa_sil.study.report",)),
+    ("io", ("daa_sil.sil", "daa_sil.viz")),
+    ("commands", ("daa_sil.commands", "daa_sil.cli")),
+    ("programs", ("vehicle", "gcs")),
+]
+
+
+def layer_of(module: str, layers=LAYERS) -> int:
+    """Index in ``layers`` of the longest prefix naming ``module`` (KeyError if none does)."""
+    best, rank = -1, None
+    for i, (_, prefixes) in enumerate(layers):
+        for p in prefixes:
+            if (module == p or module.startswith(p + ".")) and len(p) > best:
+                best, rank = len(p), i
+    if rank is None:
+        raise KeyError(module)
+    return rank
+
+
+def upward_imports(graph: dict[str, set[str]], layers=LAYERS) -> list[str]:
+    """Every arrow from a module to one in a higher layer, as ``a (layer) -> b (layer)``."""
+    out = []
+    for a in sorted(graph):
+        for b in sorted(graph[a]):
+            la, lb = layer_of(a, layers), layer_of(b, layers)
+            if lb > la:
+                out.append(f"{a} ({layers[la][0]}) -> {b} ({layers[lb][0]})")
+    return out
+
+
+LAZY = "# lazy:"
+
+
+def unexplained_function_imports(source: str, module: str) -> list[str]:
+    """Imports inside a function without a ``# lazy: why`` comment on one of their lines."""
+    lines = source.splitlines()
+    out = []
+
+    def visit(node, in_fn):
+        for ch in ast.iter_child_nodes(node):
+            if in_fn and isinstance(ch, (ast.Import, ast.ImportFrom)):
+                if LAZY not in "\n".join(lines[ch.lineno - 1:ch.end_lineno]):
+                    out.append(f"{module}:{ch.lineno} {lines[ch.lineno - 1].strip()}")
+            visit(ch, in_fn or isinstance(ch, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)))
+
+    visit(ast.parse(source), False)
+    return out
+
+
+def test_the_layer_check_on_hand_written_modules():
+    layers = [("low", ("daa_sil", "daa_sil.low")), ("high", ("daa_sil.high",))]
+    ours = {"daa_sil", "daa_sil.low", "daa_sil.high", "daa_sil.high.x"}
+    low = "def f():\n    from daa_sil.high import x  # lazy: start-up time\n"
+    graph = {"daa_sil.low": module_imports(low, "daa_sil.low", False, ours),
+             "daa_sil.high.x": module_imports("from daa_sil import low\n", "daa_sil.high.x", False, ours)}
+    # the import inside a function is an arrow up, even with its comment; the other one points down
+    assert upward_imports(graph, layers) == ["daa_sil.low (low) -> daa_sil.high (high)",
+                                             "daa_sil.low (low) -> daa_sil.high.x (high)"]
+    assert layer_of("daa_sil.high.x", layers) == 1 and layer_of("daa_sil.other", layers) == 0
+
+
+def test_the_lazy_comment_check_on_hand_written_modules():
+    src = ("import os\n"
+           "def f():\n    import json\n    from daa_sil import (\n        a,\n        b)  # lazy: start-up time\n"
+           "    class C:\n        def g(self):\n            import yaml\n")
+    assert unexplained_function_imports(src, "m") == ["m:3 import json", "m:9 import yaml"]
+
+
+def test_every_module_has_a_layer_and_no_import_goes_up():
+    graph = our_import_graph()
+    for m in ("daa_sil.agent.step", "daa_sil.study.simulation.fasttime", "vehicle.node", "daa_sil.config.groups"):
+        assert m in graph  # the population
+    # the walker sees function-level arrows: the --config option loads run_config only when given
+    assert "daa_sil.config.run_config" in graph["daa_sil.config.config_option"]
+    unplaced = [m for m in graph if not any(m == p or m.startswith(p + ".") for _, ps in LAYERS for p in ps)]
+    assert not unplaced
+    up = upward_imports(graph)
+    assert not up, f"{len(up)} imports from a lower layer to a higher one:\n" + "\n".join(up)
+
+
+def test_imports_inside_functions_say_why():
+    """Allowed only where they buy start-up time or guard an optional dependency, with ``# lazy: why``."""
+    found = []
+    for mod, path in our_modules().items():
+        if not is_generated(mod):
+            found.extend(unexplained_function_imports(path.read_text(), mod))
+    assert not found, (f"{len(found)} imports inside functions without a '{LAZY} why' comment (move them to the "
+                       "module's top, or say why they wait):\n" + "\n".join(found))

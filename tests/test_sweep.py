@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from daa_sil.study.campaign_files import read_results
+from daa_sil.study.campaign.files import read_results
 from daa_sil.cli import main
 from daa_sil.errors import UsageError
-from daa_sil.study.sweep import parse_vary
+from daa_sil.study.analysis.sweep import parse_vary
 
 
 def test_parse_vary():
@@ -61,8 +61,8 @@ def test_sweep_refuses_a_fixed_value_of_the_varied_setting(tmp_path, capsys):
 
 
 def test_pilot_and_grid_sweeps_set_the_pilot_mode_and_the_readings_grid():
-    from daa_sil.study.campaign_config import CampaignConfig
-    from daa_sil.study.sweep import point_configs
+    from daa_sil.study.campaign.config import CampaignConfig
+    from daa_sil.study.analysis.sweep import point_configs
 
     base = CampaignConfig(groups=("B-2", "ID-2", "ID-2-projl"), pilot={"prob_turn": 0.5})
     pts = point_configs(base, parse_vary("pilot=guendel,nasa_rayleigh5"))

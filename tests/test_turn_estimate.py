@@ -37,7 +37,7 @@ def test_every_map_of_the_family_is_read_in_a_campaign_with_turning_intruders():
     decisions read all five conditioning maps."""
     from daa_sil import waitmap
     from daa_sil.models.encounters import sample_encounters
-    from daa_sil.study.fasttime import simulate
+    from daa_sil.study.simulation.fasttime import simulate
     from daa_sil.config.groups import group_spec
 
     es = sample_encounters(300, seed=2024, preset="paper")

@@ -19,7 +19,7 @@ from vehicle.streams import StreamRates
 def test_authorities_map_to_arduplane_modes_by_name():
     assert [ident.mode_name(ident.mode_of(a)) for a in ("pilot", "daa", "waiting")] == ["GUIDED", "AVOID_ADSB", "CRUISE"]
     assert ident.mode_of("daa", agent_enabled=False) == ident.GUIDED  # the agent off never takes authority
-    from daa_sil.agent import AUTHORITY_NAMES
+    from daa_sil.agent.decision import AUTHORITY_NAMES
 
     # every authority the agent names has its mode and its wire code (a renamed one cannot fall back silently)
     assert set(ident.AUTHORITY_MODE) == set(AUTHORITY_NAMES) == set(T.AUTHORITY_CODE)

@@ -9,9 +9,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from daa_sil.study import findings as F
-from daa_sil.study import verdicts as V
-from daa_sil.study.analysis import Study
+from daa_sil.study.analysis import findings as F
+from daa_sil.study.analysis import verdicts as V
+from daa_sil.study.analysis.study import Study
 
 N = 2000
 

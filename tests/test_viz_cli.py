@@ -85,7 +85,8 @@ def test_headless_spawn_viewer_warns_and_still_writes(tmp_path, steplog_file, ca
 
 def test_replay_worst_encounter(tmp_path, capsys):
     """A tiny real campaign, then the replay of its worst encounter equals the stored result."""
-    from daa_sil.study import campaign, campaign_files
+    from daa_sil.study.campaign import run as campaign
+    from daa_sil.study.campaign import files as campaign_files
 
     cfg = campaign.CampaignConfig(groups=("B-1",), n_encounters=12, seed=5, chunk_size=12)
     campaign.run_campaign(cfg, tmp_path / "camp", workers=1, progress=False)

@@ -75,7 +75,7 @@ def test_wt_120_is_accepted_by_every_input(tmp_path):
     from daa_sil.config.settings import WAIT_THRESHOLD
     from daa_sil.config.run_config import config_from_dict
     from daa_sil.sil.scenario import load_scenario
-    from daa_sil.study.campaign_config import CampaignConfig
+    from daa_sil.study.campaign.config import CampaignConfig
 
     assert WAIT_THRESHOLD.range == (0.0, 120.0)
     CampaignConfig(settings=Overrides.of_values({WAIT_THRESHOLD: 120.0})).validate()

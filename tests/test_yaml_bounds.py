@@ -98,7 +98,7 @@ def test_the_bounds_leave_real_inputs_alone():
     """Every scenario and data file we ship parses (deepest nesting, largest size within bounds)."""
     from daa_sil.config.groups import group_table
     from daa_sil.sil.scenario import load_scenario
-    from daa_sil.study.findings import load_findings
+    from daa_sil.study.analysis.findings import load_findings
 
     scenarios = sorted((ROOT / "scenarios").rglob("*.yaml"))
     assert scenarios and all(load_scenario(p).name for p in scenarios)

@@ -20,11 +20,15 @@ from pathlib import Path
 
 from daa_sil.cli import run_guarded
 from daa_sil.commands.common_args import OneLineParser as _Parser, check_speed, load_key_option
+from daa_sil.config.config_option import add_config_argument
 from daa_sil.config.overrides import Overrides, add_flags
-from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.config.run_config import load_config
 from daa_sil.config.settings import GCS_PORT, udp
 from daa_sil.errors import UsageError
-from daa_sil.process_gc import freeze_after_startup
+from daa_sil.runtime.process_gc import freeze_after_startup
+from daa_sil.errors import OutputError
+import math
+import numpy as np
 
 EXAMPLES = """examples:
   # stream to a GCS (or MAVProxy/QGC) on 14550, real time
@@ -121,8 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
 def check_steplog_path(path: Path) -> None:
     """``--steplog``: a one-line usage error now, not after the whole flight, if it cannot be written
     (its directory is created if missing and probed with a file, as ``daa-sil run --out`` is)."""
-    from daa_sil.errors import OutputError
-    from daa_sil.files import check_output_path, ensure_dir
+    from daa_sil.files import check_output_path, ensure_dir  # lazy: start-up time
 
     try:  # name (UTF-8, length), kind, writable: before the flight, not after it
         check_output_path(path, "--steplog")
@@ -132,9 +135,7 @@ def check_steplog_path(path: Path) -> None:
 
 
 def _options(args):
-    import math
-
-    from vehicle.node import VehicleOptions
+    from vehicle.node import VehicleOptions  # lazy: start-up time
 
     check_speed(args.speed)
     if not (math.isfinite(args.tick_timeout) and 0.1 <= args.tick_timeout <= 3600):
@@ -142,9 +143,9 @@ def _options(args):
     if args.start_timeout is not None and not (math.isfinite(args.start_timeout) and 0.1 <= args.start_timeout <= 3600):
         raise UsageError(f"--start-timeout must be within [0.1, 3600] s, got {args.start_timeout:g}")
     key = load_key_option(args.key, "daa-vehicle")
-    from daa_sil.sil.connstr import LISTEN, parse_connection
+    from daa_sil.sil.connstr import LISTEN, parse_connection  # lazy: start-up time
 
-    from daa_sil.sil.outputs import output_specs
+    from daa_sil.sil.outputs import output_specs  # lazy: start-up time
 
     tap = None if args.tap in (None, "", "none") else args.tap
     outs = args.out or [udp(GCS_PORT)]
@@ -159,7 +160,7 @@ def _options(args):
         check_steplog_path(args.steplog)
     live = None if args.live in (None, "", "none") else args.live
     if live is not None:
-        from daa_sil.sil.live import parse_live_address
+        from daa_sil.sil.live import parse_live_address  # lazy: start-up time
 
         parse_live_address(live)
     def clock_start(wall0: float) -> None:  # orchestrators time scheduled faults from this line
@@ -176,11 +177,9 @@ def _options(args):
 
 
 async def _amain(args) -> int:
-    import numpy as np
-
-    from daa_sil.sil.endpoint import format_udp_address
-    from daa_sil.sil.scenario import load_scenario
-    from vehicle.node import VehicleNode
+    from daa_sil.sil.endpoint import format_udp_address  # lazy: start-up time
+    from daa_sil.sil.scenario import load_scenario  # lazy: start-up time
+    from vehicle.node import VehicleNode  # lazy: start-up time
 
     sc = load_scenario(args.scenario)
     opts = _options(args)

@@ -88,7 +88,7 @@ def reposition_command(msg, own_xyz: tuple, origin, t_sent: float, seq: int) -> 
     keep); the vertical speed is kept (the altitude ``z`` / ``param7`` is not flown: there is no
     altitude-hold setpoint). Returns the command, or a one-line reason it is invalid.
     """
-    from daa_sil.geometry.frames import geodetic_to_enu
+    from daa_sil.geometry.frames import geodetic_to_enu  # lazy: start-up time
 
     if msg.get_type() == "COMMAND_INT":
         lat, lon = msg.x / 1e7, msg.y / 1e7

@@ -2,8 +2,8 @@
 
 :class:`VehicleCore` builds the onboard core from a scenario exactly as fast-time does
 (:func:`daa_sil.sil.scenario.encounter_set` for truth and scripts, the group's
-:class:`~daa_sil.agent.AllocationPolicy` with the scenario's overrides, the cached wait-map
-family), turns accepted pilot commands into the agent's :class:`~daa_sil.agent.PilotInput`, keeps
+:class:`~daa_sil.agent.step.AllocationPolicy` with the scenario's overrides, the cached wait-map
+family), turns accepted pilot commands into the agent's :class:`~daa_sil.agent.step.PilotInput`, keeps
 one step-log row per step and encodes the telemetry of a step as MAVLink messages.
 """
 
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from daa_sil import agent as A
+from daa_sil.agent import step as A
 from daa_sil.config.groups import policy_for_group
 from daa_sil.config.settings import STEP
 from daa_sil.config.overrides import Overrides, group_policy
@@ -24,6 +24,9 @@ from daa_sil.geometry.kinematics import Command
 from daa_sil.sil.scenario import Scenario, encounter_set
 
 from .commands import PilotCommand
+from daa_sil.daa import kernels
+from daa_sil.sil.scenario import link_legs
+from daa_sil.geometry.kinematics import AircraftState
 
 
 def scenario_policy(sc: Scenario) -> AllocationPolicy:
@@ -48,8 +51,7 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
     ``daa`` changes on top of the scenario's threshold preset, its per-group settings (``allocation``,
     ``link``) where the scenario gives none, and its wait-map source; ``flags`` the command line's
     per-group settings (:func:`resolve_policy`)."""
-    from daa_sil.daa import kernels
-    from daa_sil.onboard import OnboardCore
+    from daa_sil.onboard import OnboardCore  # lazy: start-up time
 
     # load the compiled DAA now, not at the first conflict (a realtime run would stall); Algorithm 2's search
     # too, lazy elsewhere: a blend can come at any step, and a parameter can switch blending on mid-run
@@ -61,7 +63,7 @@ def build_onboard(sc: Scenario, policy=None, waitmap: "str | None" = None, confi
     daa_cfg = config.daa_config(sc.thresholds)
     lookup = family = None
     if policy.wait_mode == "map":
-        from daa_sil import waitmap as wm
+        from daa_sil import waitmap as wm  # lazy: start-up time
 
         family = wm.family_for(waitmap, preset="paper", horizon=config.map_horizon(waitmap))
         lookup = A.make_wait_lookup(family, cfg=daa_cfg, outside=config.effective_reading.outside)
@@ -74,7 +76,7 @@ def run_config(config=None):
     """``config``, or the defaults: the study's default reading (its maps, its agent rules)."""
     if config is not None:
         return config
-    from daa_sil.config.run_config import load_config
+    from daa_sil.config.run_config import load_config  # lazy: start-up time
 
     return load_config(None)
 
@@ -98,9 +100,8 @@ def link_delay_processes(sc: Scenario) -> "dict | None":
     (s), i.e. the *configured* one-way delay of a packet sent at ``t`` before the FIFO rule, not a
     measurement. With ``link.epoch_s = 0`` (a draw per datagram) there is no per-step value: None.
     """
-    from daa_sil.models.delay_process import link_delay_processes
-    from daa_sil.sil.shim_config import delay_stream_seeds
-    from daa_sil.sil.scenario import link_legs
+    from daa_sil.models.delay_process import link_delay_processes  # lazy: start-up time
+    from daa_sil.sil.shim_config import delay_stream_seeds  # lazy: start-up time
 
     if sc.link.epoch_s <= 0:
         return None
@@ -130,7 +131,7 @@ class VehicleCore:
         #: the load verified), None without a map; the step log's ``waitmap`` metadata
         self.waitmap_record = None
         if family is not None:
-            from daa_sil.waitmap import describe
+            from daa_sil.waitmap import describe  # lazy: start-up time
 
             self.waitmap_record = describe(family)
         self.dt = STEP.default
@@ -157,7 +158,7 @@ class VehicleCore:
 
     def mode(self) -> int:
         """The ArduPlane mode the vehicle shows now (:func:`vehicle.identity.mode_of` of the last authority)."""
-        from .identity import mode_of
+        from .identity import mode_of  # lazy: start-up time
 
         return mode_of(self.last_authority, bool(self.core.policy.enabled))
 
@@ -206,7 +207,6 @@ class VehicleCore:
 
     def inject_intruder(self, intr) -> None:
         """Fly a :class:`vehicle.traffic.Intruder` from this step on (straight, constant velocity)."""
-        from daa_sil.geometry.kinematics import AircraftState
 
         self.core.add_intruders(AircraftState(*(np.full((1, 1), float(v)) for v in (intr.x, intr.y, intr.z, intr.gs,
                                                                                         intr.trk, intr.vs))))
@@ -215,8 +215,8 @@ class VehicleCore:
 
     def _row(self, out) -> dict:
         """The step-log row of this step: :func:`daa_sil.onboard.step_columns`, fast-time's builder, at N = 1."""
-        from daa_sil.onboard import step_columns
-        from daa_sil.steplog import step_row
+        from daa_sil.onboard import step_columns  # lazy: start-up time
+        from daa_sil.steplog import step_row  # lazy: start-up time
 
         return step_row(step_columns(out, self.delay_up_s, self.delay_down_s), 0)
 
@@ -225,9 +225,9 @@ class VehicleCore:
     def steplog_table(self, n_rows: "int | None" = None):
         """The first ``n_rows`` rows (all if None) as a step-log ``pyarrow.Table`` (schema of
         :mod:`daa_sil.steplog`)."""
-        import pyarrow as pa
+        import pyarrow as pa  # lazy: start-up time
 
-        from daa_sil.steplog import STEP_SCHEMA
+        from daa_sil.steplog import STEP_SCHEMA  # lazy: start-up time
 
         rows = self.rows if n_rows is None else self.rows[:n_rows]
         cols = {name: [r.get(name, math.nan) for r in rows] for name in STEP_SCHEMA.names}
@@ -236,8 +236,8 @@ class VehicleCore:
     def write_steplog(self, path: "str | Path", meta: dict, n_rows: "int | None" = None) -> Path:
         """Write the first ``n_rows`` rows (all if None) atomically to ``path``; if its directory can no
         longer take it, to :func:`daa_sil.out_dir.rescue_path` (a warning says where). Returns where."""
-        from daa_sil.out_dir import write_or_rescue
-        from daa_sil.steplog import write_steplog
+        from daa_sil.out_dir import write_or_rescue  # lazy: start-up time
+        from daa_sil.steplog import write_steplog  # lazy: start-up time
 
         table = self.steplog_table(n_rows)
         return write_or_rescue(path, lambda p: write_steplog(table, p, metadata=meta), "step log")

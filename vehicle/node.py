@@ -48,6 +48,8 @@ from .node_options import VehicleOptions, VehicleStats
 from .node_steplog import StepTiming, steplog_meta
 from .protocol import MAIN, VEHICLE_COMPID, VEHICLE_SYSID, OutputLink, VehicleProtocol
 from .tick_rules import TickOptions
+from daa_sil.sil.connstr import describe
+import os
 
 __all__ = ["VehicleNode", "VehicleOptions", "VEHICLE_SYSID", "VEHICLE_COMPID"]
 
@@ -95,7 +97,7 @@ class VehicleNode:
                               lambda: self.ep.last_refused if self.ep is not None else None)
         self.live = None
         if opts.live:
-            from daa_sil.sil.live import LiveSender
+            from daa_sil.sil.live import LiveSender  # lazy: start-up time
 
             self.live = LiveSender(opts.live)
 
@@ -142,7 +144,6 @@ class VehicleNode:
 
     def bound_address(self, out) -> str:
         """Where output ``out`` (an :class:`vehicle.ports.OutputLink`) listens or sends, as bound."""
-        from daa_sil.sil.connstr import describe
 
         if not out.listens:
             return describe(out.spec.conn)
@@ -156,7 +157,7 @@ class VehicleNode:
     async def start(self) -> None:
         """Bind one socket per protocol port: the main one (``--listen``, or the first ``--out`` if it is
         ``udpin:``) and one per further ``udpin:`` / ``tcpin:`` output. A taken port: one-line UsageError."""
-        from daa_sil.sil.tcp_server import TcpServer
+        from daa_sil.sil.tcp_server import TcpServer  # lazy: start-up time
 
         p = self.protocol
         try:
@@ -231,7 +232,7 @@ class VehicleNode:
     async def prepare(self) -> None:
         """Ready the simulation beside the link (:mod:`vehicle.prepare`), serving the link as a booting vehicle
         meanwhile."""
-        from .prepare import Preparation
+        from .prepare import Preparation  # lazy: start-up time
 
         p = self.protocol
         if self.core is None:
@@ -269,9 +270,8 @@ class VehicleNode:
         """Realtime: like the shim, wake at deadlines without timer coalescing, and ask for a short EEVDF
         slice so a woken vehicle preempts sooner on a busy machine (unprivileged; no-op elsewhere).
         ``DAA_SIL_VEHICLE_SLICE_US``: the slice asked for (0 = keep the default; benchmarks compare both)."""
-        import os
 
-        from daa_sil.sil.rtclock import request_short_slice, set_timer_slack
+        from daa_sil.sil.rtclock import request_short_slice, set_timer_slack  # lazy: start-up time
 
         self.stats.extra["timer_slack_1us"] = set_timer_slack(1000)
         slice_us = float(os.environ.get("DAA_SIL_VEHICLE_SLICE_US", "100") or 0)

@@ -29,7 +29,7 @@ class StepTiming:
 
     def p99_ms(self) -> float:
         """99th percentile of the lateness (ms); only when steps were published in realtime."""
-        import numpy as np
+        import numpy as np  # lazy: start-up time
 
         return round(float(np.percentile(self.late_ms, 99)), 3)
 
@@ -38,7 +38,7 @@ def config_record(sc, opts, core) -> dict:
     """The full configuration the vehicle flew: the run configuration (if any) with the scenario's
     threshold preset, the DAA configuration and the agent's policy actually used (``core``: the
     :class:`vehicle.core.VehicleCore`)."""
-    from daa_sil.config.run_config import preset
+    from daa_sil.config.run_config import preset  # lazy: start-up time
 
     rc = opts.config if opts.config is not None else preset("paper")
     rec = rc.with_(thresholds=sc.thresholds).to_dict(full=True)

@@ -1,6 +1,6 @@
 """The vehicle's parameters: the allocation agent's real settings, for the MAVLink parameter protocol.
 
-Sans-IO: :class:`ParamTable` reads the current :class:`daa_sil.agent.AllocationPolicy` and turns
+Sans-IO: :class:`ParamTable` reads the current :class:`daa_sil.agent.step.AllocationPolicy` and turns
 a PARAM_SET into a new policy (``dataclasses.replace``); the node swaps it in at the next step
 boundary and answers with PARAM_VALUE.
 
@@ -111,8 +111,8 @@ class ParamTable:
     """The parameter list over a policy (``preset``: the scenario's threshold preset, read-only)."""
 
     def __init__(self, preset: str):
-        from daa_sil.config.policy import WAIT_MODES
-        from daa_sil.geometry.thresholds import PRESETS
+        from daa_sil.config.policy import WAIT_MODES  # lazy: start-up time
+        from daa_sil.geometry.thresholds import PRESETS  # lazy: start-up time
 
         presets = tuple(PRESETS)
         code = presets.index(preset) if preset in presets else -1

@@ -33,7 +33,7 @@ MAP_PROGRESS_STEP = 0.1
 def waitmap_source(opts) -> "tuple[str, float | None]":
     """The wait maps the vehicle will fly, as :func:`vehicle.core.build_onboard` reads them: ``(source,
     horizon)`` -- ``--waitmap``, else the configuration's (the default reading's without one)."""
-    from .core import run_config
+    from .core import run_config  # lazy: start-up time
 
     config = run_config(opts.config)
     source = opts.waitmap if opts.waitmap is not None else config.map_source
@@ -42,11 +42,11 @@ def waitmap_source(opts) -> "tuple[str, float | None]":
 
 def cold_parts(sc, opts, policy) -> "list[str]":
     """What a start would build rather than load: ``"kernels"``, ``"maps"`` (only if the policy reads a map)."""
-    from daa_sil.jit_cache import is_warm
+    from daa_sil.runtime.jit_cache import is_warm  # lazy: start-up time
 
     cold = [] if is_warm() else ["kernels"]
     if policy.wait_mode == "map":
-        from daa_sil.waitmap.source import is_cached
+        from daa_sil.waitmap.source import is_cached  # lazy: start-up time
 
         source, horizon = waitmap_source(opts)
         if not is_cached(source, preset="paper", horizon=horizon):
@@ -94,7 +94,7 @@ class Preparation:
                 self.on_line(f"worker failed (exit {rc}); preparing here")
         self.on_line("loading the simulation")
         t0 = time.monotonic()
-        from .core import VehicleCore
+        from .core import VehicleCore  # lazy: start-up time
 
         sc, opts = self.sc, self.opts
         core = await _daemon(lambda: VehicleCore(sc, waitmap=opts.waitmap, config=opts.config,
@@ -103,7 +103,7 @@ class Preparation:
         return core
 
     async def _worker(self, loop, cold: "list[str]") -> int:
-        from daa_sil.sil.children import spawn
+        from daa_sil.sil.children import spawn  # lazy: start-up time
 
         argv = [sys.executable, "-m", "vehicle.prepare"]
         if "kernels" not in cold:
@@ -131,7 +131,7 @@ class Preparation:
 
 def main(argv: "list[str] | None" = None) -> int:
     """The worker process: compile the kernels and build the maps into their caches, saying each stage."""
-    from daa_sil.sil.children import adopt
+    from daa_sil.sil.children import adopt  # lazy: start-up time
 
     adopt("daa-prepare")
     p = argparse.ArgumentParser(prog="python -m vehicle.prepare", description=main.__doc__)
@@ -144,16 +144,16 @@ def main(argv: "list[str] | None" = None) -> int:
         print(text, flush=True)
 
     if not args.no_kernels:
-        from daa_sil.jit_cache import COLD_COMPILE_TIME
+        from daa_sil.runtime.jit_cache import COLD_COMPILE_TIME  # lazy: start-up time
 
         say(f"compiling the DAA kernels ({COLD_COMPILE_TIME})")
         t0 = time.monotonic()
-        from daa_sil.daa import kernels
+        from daa_sil.daa import kernels  # lazy: start-up time
 
         kernels.get().search_into.compile()
         say(f"DAA kernels ready ({time.monotonic() - t0:.0f} s)")
     if args.maps is not None:
-        from daa_sil import waitmap
+        from daa_sil import waitmap  # lazy: start-up time
 
         say("building the wait maps")
         t0 = time.monotonic()

@@ -33,6 +33,7 @@ from daa_sil.link.plane import system_time, time_ms
 from daa_sil.geometry.units import G0
 
 from . import identity as ident
+from daa_sil import __version__
 
 ADSB_FLAGS = (M.ADSB_FLAGS_VALID_COORDS | M.ADSB_FLAGS_VALID_ALTITUDE | M.ADSB_FLAGS_VALID_HEADING
               | M.ADSB_FLAGS_VALID_VELOCITY | M.ADSB_FLAGS_VALID_CALLSIGN | M.ADSB_FLAGS_SIMULATED
@@ -272,7 +273,6 @@ def software_version(version: str) -> int:
 
 def autopilot_version() -> "M.MAVLink_message":
     """AUTOPILOT_VERSION with the capabilities actually served (:data:`vehicle.identity.CAPABILITIES`)."""
-    from daa_sil import __version__
 
     return M.MAVLink_autopilot_version_message(ident.CAPABILITIES, software_version(__version__), 0, 0, 0,
                                                [0] * 8, [0] * 8, [0] * 8, 0, 0, 0)

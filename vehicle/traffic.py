@@ -58,8 +58,8 @@ def intruder_from_adsb(msg, origin, own_xyz: "tuple[float, float, float]", known
     """An ADSB_VEHICLE as an intruder (``origin``: the scenario's lat_deg / lon_deg / alt_m; ``own_xyz`` the
     ownship's ENU position, m; ``known_icao`` the addresses flying; ``flying`` how many intruders fly), or
     the reason it is refused (one line, at most 50 characters, for a STATUSTEXT)."""
-    from daa_sil.geometry.frames import geodetic_to_enu
-    from daa_sil.geometry.kinematics import state_in_bounds
+    from daa_sil.geometry.frames import geodetic_to_enu  # lazy: start-up time
+    from daa_sil.geometry.kinematics import state_in_bounds  # lazy: start-up time
 
     icao = int(msg.ICAO_address)
     if int(msg.flags) & REQUIRED_FLAGS != REQUIRED_FLAGS:

@@ -13,12 +13,17 @@ from ..errors import UsageError
 from daa_sil.config.overrides import Overrides, add_flags, flag_dest
 from daa_sil.config.settings import (BATCH_ROWS, BOOTSTRAP_REPLICATES, CHUNK_SIZE, DURATION, ENCOUNTERS, GAMMA,
                                      INTRUDERS, PRESET, SEED, WORKERS_PER_CORE)
-from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.config.config_option import add_config_argument
+from daa_sil.config.run_config import load_config
 from daa_sil.files import to_jsonable
 from daa_sil.sil.children import Interrupted, interrupt_signum, interruptible
 from daa_sil.config.readings import DEFAULT_READING, READINGS, parse_reading_settings, readings_help
 from daa_sil.geometry.thresholds import PRESETS
 from .common_args import add_allow_large, finite_float, int_at_least, setting_int, workers_option
+from daa_sil.config.readings import canonical_name
+from daa_sil.config.readings import reading_for
+from daa_sil.errors import OutputError
+from daa_sil.files import check_output_path
 
 RUN_EXAMPLES = """examples:
   # the paper's study (reading 'paper'): 10,000 encounters x 5 groups (B-1, B-2, IC-1, ID-1, ID-2), T = 240 s
@@ -209,9 +214,9 @@ def _add_run_options(r) -> None:
 
 
 def _config_from_args(args):
-    from daa_sil.study.campaign import parse_groups
-    from daa_sil.study.campaign_config import CampaignConfig
-    from daa_sil.study.campaign_files import load_campaign_json
+    from daa_sil.study.campaign.run import parse_groups  # lazy: start-up time
+    from daa_sil.study.campaign.config import CampaignConfig  # lazy: start-up time
+    from daa_sil.study.campaign.files import load_campaign_json  # lazy: start-up time
 
     given = {"groups": parse_groups(args.groups) if args.groups is not None else None,
              "n_encounters": args.encounters, "seed": args.seed, "chunk_size": args.chunk_size,
@@ -229,8 +234,6 @@ def _config_from_args(args):
                              f"{out / 'campaign.json'} (drop --config)")
         base = CampaignConfig.from_dict(load_campaign_json(out)["config"], str(out / "campaign.json"))
     if args.reading is not None:
-        from daa_sil.config.readings import canonical_name
-
         _, notice = canonical_name(args.reading)
         if notice:
             print(f"daa-sil: note: {notice}", file=sys.stderr)
@@ -243,8 +246,7 @@ def _config_from_args(args):
 def _waitmap_into_reading(fields: dict, given: "str | None") -> dict:
     """An explicit ``--waitmap`` under a reading that sets its own grid (e.g. ``paper``) sets the
     reading's grid (recorded as ``reading_set.waitmap``); otherwise it is the campaign's."""
-    from daa_sil.config.readings import reading_for
-    from daa_sil.waitmap.source import DEFAULT_MAP
+    from daa_sil.waitmap.source import DEFAULT_MAP  # lazy: start-up time
 
     if given is None:
         return fields
@@ -281,7 +283,7 @@ def _interrupted(exc: KeyboardInterrupt, detail: str) -> Interrupted:
 
 
 def run_cmd(args) -> int:
-    from daa_sil.study.campaign import run_campaign
+    from daa_sil.study.campaign.run import run_campaign  # lazy: start-up time
 
     _check_resume_force(args)
     cfg = _config_from_args(args)
@@ -317,7 +319,7 @@ def run_cmd(args) -> int:
 
 
 def sweep_cmd(args) -> int:
-    from daa_sil.study import sweep
+    from daa_sil.study.analysis import sweep  # lazy: start-up time
 
     if args.collate:
         if args.vary:
@@ -355,10 +357,10 @@ def sweep_cmd(args) -> int:
 
 
 def report_cmd(args) -> int:
-    from daa_sil.study import report
-    from daa_sil.study.report_input import parse_recount
-    from daa_sil.study.findings import VERDICTS
-    from daa_sil.study.stats import DEFAULT_REPLICATES, DEFAULT_SEED
+    from daa_sil.study.report import pages as report  # lazy: start-up time
+    from daa_sil.study.analysis.report_input import parse_recount  # lazy: start-up time
+    from daa_sil.study.analysis.findings import VERDICTS  # lazy: start-up time
+    from daa_sil.study.analysis.stats import DEFAULT_REPLICATES, DEFAULT_SEED  # lazy: start-up time
 
     dirs = [Path(d) for d in args.dirs]
     for d in dirs:
@@ -369,8 +371,6 @@ def report_cmd(args) -> int:
     for spec in args.recount:
         parse_recount(spec)  # one-line error before anything is read or written
     out = Path(args.out) if args.out else dirs[0] / "report"
-    from daa_sil.errors import OutputError
-    from daa_sil.files import check_output_path
 
     try:  # a bad name (UTF-8, length) now; an unwritable directory when the report is written (exit 1)
         check_output_path(out, "--out", directory=True)

@@ -36,9 +36,8 @@ def load_key_option(path, prog: str = "daa-sil") -> "bytes | None":
     (mode, passphrase or raw key) go to stderr as ``PROG: warning: ...``."""
     if path is None:
         return None
-    import sys
 
-    from ..link.keys import load_key
+    from ..link.keys import load_key  # lazy: start-up time
 
     return load_key(path, warn=lambda text: print(f"{prog}: warning: {text}", file=sys.stderr, flush=True))
 
@@ -77,10 +76,10 @@ def setting_int(name: str, setting):
 
 def workers_option(name: str = "--workers"):
     """argparse ``type=`` factory: a worker count within ``[1, WORKERS_PER_CORE x usable cores]``
-    (:func:`daa_sil.resources.check_workers`)."""
+    (:func:`daa_sil.runtime.resources.check_workers`)."""
 
     def conv(text: str) -> int:
-        from ..resources import check_workers
+        from daa_sil.runtime.resources import check_workers  # lazy: start-up time
 
         try:
             val = int(text)
@@ -94,7 +93,7 @@ def workers_option(name: str = "--workers"):
 
 def add_allow_large(p: argparse.ArgumentParser, what: str) -> None:
     """``--allow-large``: run even when the memory estimate exceeds the machine's memory."""
-    from ..resources import MEMORY_SHARE
+    from daa_sil.runtime.resources import MEMORY_SHARE  # lazy: start-up time
 
     p.add_argument("--allow-large", action="store_true",
                    help=f"run even when the estimated peak memory of {what} exceeds {MEMORY_SHARE * 100:.0f} %% of "

@@ -9,7 +9,8 @@ import sys
 from ..daa import DaaConfig
 from ..daa import conformance as conf
 from ..errors import UsageError
-from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.config.config_option import add_config_argument
+from daa_sil.config.run_config import load_config
 from daa_sil.files import to_jsonable
 from daa_sil.geometry.thresholds import PRESETS
 from .common_args import int_at_least

@@ -9,7 +9,8 @@ import numpy as np
 
 from ..daa import ALERT_NAMES, AXIS_NAMES, DIR_NAMES, DaaConfig, compute_bands, resolve
 from ..errors import UsageError
-from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.config.config_option import add_config_argument
+from daa_sil.config.run_config import load_config
 from daa_sil.config.settings import INTRUDERS
 from daa_sil.files import to_jsonable
 from daa_sil.geometry.kinematics import AircraftState

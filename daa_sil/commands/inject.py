@@ -17,6 +17,7 @@ from pathlib import Path
 from ..errors import DaaSilError, UsageError
 from daa_sil.config.settings import GCS_PORT, udp
 from .common_args import load_key_option
+from dataclasses import replace
 
 EXAMPLES = """examples:
   # a vehicle listening like SITL: inject the crossing scenario's intruder around it, now
@@ -53,8 +54,8 @@ class _Link:
     """One ground-station socket to the vehicle: UDP (send to it, or listen where it streams) or TCP."""
 
     def __init__(self, text: str):
-        from daa_sil.link.framing import StreamFramer
-        from daa_sil.sil.endpoint import norm_host, parse_udp_address
+        from daa_sil.link.framing import StreamFramer  # lazy: start-up time
+        from daa_sil.sil.endpoint import norm_host, parse_udp_address  # lazy: start-up time
 
         scheme, _, rest = text.strip().partition(":")
         self.tcp = scheme.lower() in ("tcp", "tcpout")
@@ -95,17 +96,15 @@ class _Link:
 
 
 def inject(args) -> int:
-    from daa_sil.link.codec import MavCodec
-    from daa_sil.link.codec import mavlink as M
-    from daa_sil.sil.scenario import load_scenario
-    from daa_sil.sil.traffic import own_from_telemetry, traffic_reports
+    from daa_sil.link.codec import MavCodec  # lazy: start-up time
+    from daa_sil.link.codec import mavlink as M  # lazy: start-up time
+    from daa_sil.sil.scenario import load_scenario  # lazy: start-up time
+    from daa_sil.sil.traffic import own_from_telemetry, traffic_reports  # lazy: start-up time
 
     if not (0.5 <= args.timeout <= 3600):
         raise UsageError(f"--timeout must be within [0.5, 3600] s, got {args.timeout:g}")
     sc = load_scenario(args.file)
     if args.id_offset:
-        from dataclasses import replace
-
         ids = [i.id + args.id_offset for i in sc.intruders]
         if not all(1 <= i <= 0xFFFFFF for i in ids):
             raise UsageError(f"--id-offset {args.id_offset}: ICAO addresses must stay within [1, 16777215]")

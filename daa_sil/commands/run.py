@@ -27,6 +27,8 @@ from daa_sil.sil.play import RunOptions, check_faults_allowed, prepare_waitmap, 
 from daa_sil.sil.run_files import remove_run_outputs
 from daa_sil.files import check_output_path
 from daa_sil.out_dir import check_not_busy, claim_out_dir
+import importlib.util
+from daa_sil.files import to_jsonable
 
 
 EXAMPLES = """examples:
@@ -76,8 +78,6 @@ or a process failed, 2 = bad input, 130 = interrupted by Ctrl-C, 143 = by SIGTER
 # CLI
 
 def _viz_available() -> bool:
-    import importlib.util
-
     return importlib.util.find_spec("daa_sil.viz") is not None
 
 
@@ -116,7 +116,7 @@ def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
                             "the recorder over loopback, fire-and-forget); lockstep runs are shown when the "
                             "vehicle exits, so nothing runs next to the SIL. on: live in lockstep too; off: "
                             "never. The --rrd file is always made from the step log (the same either way)")
-        from daa_sil.sil.web_ports import add_web_viewer_arguments
+        from daa_sil.sil.web_ports import add_web_viewer_arguments  # lazy: start-up time
 
         add_web_viewer_arguments(p, "when the run ends, serve its recording in the Rerun web viewer until "
                                     "Ctrl-C (as 'viz steplog --serve-web'; no display needed)")
@@ -170,35 +170,35 @@ def _check_args(args):
             raise UsageError(f"--key: key file {args.key} does not exist")
         load_key_option(args.key)  # a bad key file fails here (one line), its warnings show once
     if args.tap:
-        from daa_sil.sil.endpoint import parse_udp_address
+        from daa_sil.sil.endpoint import parse_udp_address  # lazy: start-up time
 
         parse_udp_address(args.tap, "--tap")
     if args.vehicle_outs:
-        from daa_sil.sil.outputs import check_listening, output_specs
+        from daa_sil.sil.outputs import check_listening, output_specs  # lazy: start-up time
 
         # the shim's side is the vehicle's first --out; these follow it (a malformed one: one line, exit 2)
         specs = output_specs(["udp:127.0.0.1:1", *args.vehicle_outs], args.tap, option_of_extra="--vehicle-out")
         check_listening(specs[1:], "--vehicle-out")  # a taken udpin: / tcpin: port: now, not after the vehicle started
     if getattr(args, "connect", None):
-        from ..viz import url_host_port
+        from ..viz import url_host_port  # lazy: start-up time
 
         url_host_port(args.connect)  # a malformed URL is a usage error; a missing viewer only a warning
     if hasattr(args, "serve_web"):
-        from daa_sil.sil.web_ports import check_web_viewer_arguments
+        from daa_sil.sil.web_ports import check_web_viewer_arguments  # lazy: start-up time
 
         check_web_viewer_arguments(args)  # a taken port fails before the run
     rrd = getattr(args, "rrd", None)
     if rrd is not None:
         if rrd.suffix != ".rrd":
             raise UsageError(f"--rrd {str(rrd)!r} should end in .rrd")
-        from ..viz import check_rrd_path
+        from ..viz import check_rrd_path  # lazy: start-up time
 
         check_output_path(rrd, "--rrd")  # name, length, UTF-8; a directory: one line
         if rrd.resolve().parent != Path(args.out).resolve():  # --out is created by the run
             check_rrd_path(rrd, overwrite=True)  # a missing/unwritable directory fails before any process starts
     if args.scenario is None:
         return None
-    from daa_sil.sil.scenario import load_scenario
+    from daa_sil.sil.scenario import load_scenario  # lazy: start-up time
 
     sc = load_scenario(args.scenario)  # fail fast, one line, before any process starts
     check_faults_allowed(sc, args.clock, args.scenario)
@@ -224,8 +224,6 @@ def _options(args, scenario: Path) -> RunOptions:
 
 def _finish(args, result: dict, sc, legend: "str | None" = None) -> int:
     if args.json:
-        from daa_sil.files import to_jsonable
-
         print(json.dumps(to_jsonable(result), indent=2, sort_keys=True))
     else:
         print(human_summary(result, sc, Path(args.out)))
@@ -249,9 +247,9 @@ def _finish(args, result: dict, sc, legend: "str | None" = None) -> int:
 
 def _serve_web(args, result: dict) -> None:
     """``--serve-web``: the run's step log in the Rerun web viewer until Ctrl-C (as ``viz steplog``)."""
-    from daa_sil.steplog import read_steplog
-    from daa_sil.viz import SinkOptions, log_steplog
-    from daa_sil.viz.warning import one_line_warnings
+    from daa_sil.steplog import read_steplog  # lazy: start-up time
+    from daa_sil.viz import SinkOptions, log_steplog  # lazy: start-up time
+    from daa_sil.viz.warning import one_line_warnings  # lazy: start-up time
 
     sinks = SinkOptions(serve_web=True, bind=args.bind, web_port=args.web_port, grpc_port=args.grpc_port)
     with one_line_warnings():
@@ -295,7 +293,7 @@ def demo_scenario_path() -> Path:
 
 
 def demo(args) -> int:
-    from daa_sil.sil.scenario import load_scenario
+    from daa_sil.sil.scenario import load_scenario  # lazy: start-up time
 
     _check_args(args)
     path = demo_scenario_path()

@@ -21,6 +21,8 @@ from daa_sil.sil.endpoint import format_udp_address
 from daa_sil.sil.shim import run_shim
 from daa_sil.sil.shim_config import CLOCKS, ShimConfig
 from .common_args import finite_float, load_key_option
+from .common_args import OneLineParser
+from daa_sil.files import check_output_path
 
 EXAMPLES = """examples:
   # paper group B-2/ID-2 delays, vehicle sends to 14601, GCS to 14602, peers learned
@@ -72,7 +74,6 @@ def register(sub) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The shim's own parser (``python -m daa_sil.commands.shim``): the arguments of ``daa-sil shim``."""
-    from .common_args import OneLineParser
 
     p = OneLineParser(prog="daa-sil shim", description=DESCRIPTION, epilog=EXAMPLES,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -131,8 +132,6 @@ def config_from_args(args) -> ShimConfig:
     if args.seed < 0:
         raise UsageError(f"--seed must be >= 0, got {args.seed}")
     if args.stats_json:
-        from daa_sil.files import check_output_path
-
         check_output_path(args.stats_json, "--stats-json")  # name, length, UTF-8, writable: before binding
     if rt:
         legs = link_legs(parse_delay_spec(rt), "round-trip")
@@ -190,7 +189,7 @@ def run(args) -> int:
 
 def main(argv: "list[str] | None" = None) -> int:
     """``python -m daa_sil.commands.shim ARGS``: ``daa-sil shim ARGS`` without the other commands' imports."""
-    from daa_sil.cli import run_guarded
+    from daa_sil.cli import run_guarded  # lazy: start-up time
 
     args = build_parser().parse_args(argv)
     return run_guarded("daa-sil", lambda: run(args))

@@ -16,6 +16,9 @@ from .common_args import finite_float
 from daa_sil.sil.children import interruptible
 from daa_sil.viz.warning import one_line_warnings
 from daa_sil.sil.web_ports import add_web_viewer_arguments, check_web_viewer_arguments
+from daa_sil.files import check_output_path
+from ..viz import SinkOptions
+from .. import steplog, viz
 
 STEPLOG_EX = """examples:
   daa-sil viz steplog runs/headon/steps.parquet --rrd headon.rrd
@@ -79,8 +82,6 @@ def register(sub) -> None:
 def output_name_ok(path, option: str) -> None:
     """A bad output name (not UTF-8, too long) is a one-line usage error now; whether its directory can
     be written is found out after the input was read (bad input is reported first)."""
-    from daa_sil.errors import OutputError
-    from daa_sil.files import check_output_path
 
     try:
         check_output_path(path, option)
@@ -90,7 +91,6 @@ def output_name_ok(path, option: str) -> None:
 
 def sink_options(args):
     """SinkOptions from the CLI flags (UsageError if none is chosen)."""
-    from ..viz import SinkOptions
 
     if not (args.rrd or args.spawn_viewer or args.connect or args.serve_web):
         raise UsageError("choose an output: --rrd FILE, --serve-web, --spawn-viewer or --connect URL")
@@ -131,8 +131,6 @@ def _finish(args, path, logger, summary: dict) -> int:
 
 
 def run_steplog(args) -> int:
-    from .. import steplog, viz
-
     opts = sink_options(args)
     table = steplog.read_steplog(args.steplog)
     meta = steplog.steplog_metadata(args.steplog)
@@ -150,7 +148,7 @@ def run_steplog(args) -> int:
 
 def pick_encounter(results, group: str, encounter: "int | None", worst: bool) -> tuple[int, dict]:
     """The encounter id to replay and its result row (``--worst``: max PI among LoWC, else min range)."""
-    from daa_sil.study import campaign_files
+    from daa_sil.study.campaign import files as campaign_files  # lazy: start-up time
 
     rows = campaign_files.read_results(results, "encounters", groups=[group])
     ids = np.asarray(rows.column("encounter_id").to_numpy(zero_copy_only=False))
@@ -173,7 +171,8 @@ def pick_encounter(results, group: str, encounter: "int | None", worst: bool) ->
 
 def campaign_group(results, name: str) -> str:
     """The campaign's group named ``name`` (case-insensitive), or a one-line error listing its groups."""
-    from daa_sil.study import campaign, campaign_files
+    from daa_sil.study.campaign import run as campaign  # lazy: start-up time
+    from daa_sil.study.campaign import files as campaign_files  # lazy: start-up time
 
     out = Path(results)
     cfg = campaign.CampaignConfig.from_dict(campaign_files.load_campaign_json(out)["config"], str(out / "campaign.json"))
@@ -185,8 +184,9 @@ def campaign_group(results, name: str) -> str:
 
 def replay_steplog(results, group: str, encounter_id: int):
     """Re-simulate one encounter of a campaign with step logging; returns (steplog, encounter row, config)."""
-    from daa_sil.study import campaign, campaign_files
-    from daa_sil.models.encounter_files import load_encounters
+    from daa_sil.study.campaign import run as campaign  # lazy: start-up time
+    from daa_sil.study.campaign import files as campaign_files  # lazy: start-up time
+    from daa_sil.models.encounter_files import load_encounters  # lazy: start-up time
 
     out = Path(results)
     cfg = campaign.CampaignConfig.from_dict(campaign_files.load_campaign_json(out)["config"], str(out / "campaign.json"))
@@ -204,8 +204,6 @@ def replay_steplog(results, group: str, encounter_id: int):
 
 
 def run_replay(args) -> int:
-    from daa_sil import steplog, viz
-
     opts = sink_options(args)
     group = campaign_group(args.results, args.group)
     enc_id, stored = pick_encounter(args.results, group, args.encounter, args.worst)

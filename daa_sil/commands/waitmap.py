@@ -10,12 +10,21 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UsageError
-from daa_sil.config.run_config import add_config_argument, load_config
+from daa_sil.config.config_option import add_config_argument
+from daa_sil.config.run_config import load_config
 from daa_sil.files import to_jsonable
 from daa_sil.geometry.thresholds import PRESETS
 from ..waitmap.model import WAIT_DEFINITIONS
 from daa_sil.config.settings import WORKERS_PER_CORE
 from .common_args import add_allow_large, finite_float, workers_option
+from ..waitmap.store import map_filename
+from .. import waitmap
+from daa_sil.files import check_output_path
+from ..waitmap.model import params_hash
+from ..waitmap.build import build_memory, default_workers
+from ..waitmap.family_files import FAMILY_INDEX, write_family_index
+from ..waitmap.store import map_filename, read_meta
+from ..errors import OutputError
 
 BUILD_EX = """examples:
   daa-sil waitmap build --out maps/paper                      # the paper grid, 5 turn-rate maps
@@ -71,7 +80,6 @@ def _turn_rates(text: str) -> list[float]:
         raise UsageError(f"--turn-rates must be comma-separated numbers in deg/s, got {text!r}") from None
     if not vals or not all(math.isfinite(v) and abs(v) <= 30 for v in vals):
         raise UsageError(f"--turn-rates must be finite values within [-30, 30] deg/s, got {text!r}")
-    from ..waitmap.store import map_filename
 
     seen: dict[str, float] = {}
     for v in vals:
@@ -150,7 +158,6 @@ def register(sub) -> None:
 
 def _load_any(path: str):
     """A family directory, one map file, or a map preset (built and cached like a campaign's)."""
-    from .. import waitmap
 
     p = Path(path)
     if p.is_dir():
@@ -161,15 +168,9 @@ def _load_any(path: str):
 
 
 def run_build(args) -> int:
-    from rich.progress import Progress
+    from rich.progress import Progress  # lazy: start-up time
 
-    from .. import waitmap
-    from daa_sil.files import check_output_path
-    from daa_sil.out_dir import check_not_busy, claim_out_dir
-    from ..waitmap.model import params_hash
-    from ..waitmap.build import build_memory, default_workers
-    from ..waitmap.family_files import FAMILY_INDEX, write_family_index
-    from ..waitmap.store import map_filename, read_meta
+    from daa_sil.out_dir import check_not_busy, claim_out_dir  # lazy: start-up time
 
     rc = load_config(args.config) if args.config else None
     args.preset = args.preset or (rc.thresholds if rc else "paper")
@@ -191,8 +192,6 @@ def run_build(args) -> int:
         clash = [out / map_filename(r) for r in rates] + [out / FAMILY_INDEX]
         clash = [c for c in clash if c.exists()]
         if clash:
-            from ..errors import OutputError
-
             raise OutputError(f"{clash[0]} exists; refusing to overwrite (use --force or another --out)")
     with claim_out_dir(out, keep=True):  # other files may stay; a second build into DIR meanwhile is refused
         (out / FAMILY_INDEX).unlink(missing_ok=True)  # --force: the old index must not describe new maps
@@ -234,8 +233,7 @@ def run_show(args) -> int:
 
 
 def run_check(args) -> int:
-    from .. import waitmap
-    from ..waitmap.oracles import check_family
+    from ..waitmap.oracles import check_family  # lazy: start-up time
 
     fam = _load_any(args.map)
     rep = check_family(fam)
@@ -271,8 +269,7 @@ def run_check(args) -> int:
 
 
 def run_plot(args) -> int:
-    from daa_sil.files import check_output_path
-    from ..waitmap.plots import write_plots
+    from ..waitmap.plots import write_plots  # lazy: start-up time
 
     check_output_path(args.out, "--out", directory=True)
     if args.rerun:
@@ -281,7 +278,7 @@ def run_plot(args) -> int:
     for p in write_plots(fam, Path(args.out), vi=args.vi, dh=args.dh, vh=args.vh, overwrite=args.force):
         print(p)
     if args.rerun:
-        from ..viz import SinkOptions, write_waitmap
+        from ..viz import SinkOptions, write_waitmap  # lazy: start-up time
 
         path, _, _ = write_waitmap(fam, SinkOptions(rrd=args.rerun, overwrite=args.force), vi=args.vi, vh=args.vh,
                                    theta_deg=args.theta)

@@ -205,7 +205,7 @@ def _value(reading, keys) -> dict:
 def basis_records(reading) -> list[dict]:
     """The basis rows of ``reading`` (a :class:`~daa_sil.config.readings.Reading`), plain data: a row
     whose settings differ from ``paper``'s is marked ``differs`` with this reading's values."""
-    from daa_sil.config.readings import READINGS
+    from daa_sil.config.readings import READINGS  # lazy: start-up time
 
     paper = READINGS["paper"]
     out = []

@@ -1,6 +1,7 @@
 """The allowed values of the agent's and the pilot model's switchable rules, defined once: the agent
-(:mod:`daa_sil.agent`), the pilot model (:mod:`daa_sil.models.pilot_config`) and the named readings
-(:mod:`daa_sil.config.readings`) import them. What each value does is documented where it acts."""
+(:mod:`daa_sil.agent.step`), the pilot model (:mod:`daa_sil.models.pilot_config`) and the named readings
+(:mod:`daa_sil.config.readings`) import them; so do the run configuration's presets
+(:mod:`daa_sil.config.run_config` and the ``--config`` option, :mod:`daa_sil.config.config_option`). What each value does is documented where it acts."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ UNSAFE_HOLDS = ("blend", "no-command")
 #: the wait read for a state outside the wait map's box: ``clamp`` (the nearest state of the box),
 #: ``far`` (the map does not model that intruder: w = H) or ``approach`` (the time the relative state
 #: needs, on a straight line, to enter the box plus the wait at its entry point, at most H; H where
-#: it never enters): :func:`daa_sil.wait_function.make_wait_lookup`
+#: it never enters): :func:`daa_sil.agent.wait_function.make_wait_lookup`
 OUTSIDE_BOX = ("clamp", "far", "approach")
 #: when the pilot model stops streaming: ``alert`` (when its alert clears) or ``safe-avoidance``
 #: (when its display shows no alert and every intruder past its closest point of approach)
@@ -34,5 +35,9 @@ DAA_AUTHORITY = ("per-step", "until-clear")
 #: :data:`daa_sil.config.settings.DELAY_EPOCH`) or one draw per ``encounter`` (constant over it)
 DELAY_DRAWS = ("epoch", "encounter")
 
+#: the named run-configuration presets (:func:`daa_sil.config.run_config.preset`); here, below both
+#: the ``--config`` option and the configuration it loads, so that neither imports the other for them
+PRESET_NAMES = ("paper", "do365", "daidalus")
+
 __all__ = ["WAIT_RULES", "UNSAFE_HOLDS", "OUTSIDE_BOX", "PILOT_STOPS", "AGENT_ACTIVE", "DAA_AUTHORITY",
-           "DELAY_DRAWS"]
+           "DELAY_DRAWS", "PRESET_NAMES"]

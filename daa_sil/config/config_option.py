@@ -10,10 +10,8 @@ from __future__ import annotations
 
 import argparse
 
+from daa_sil.config.choices import PRESET_NAMES
 from daa_sil.config.settings import PRESET
-
-#: the named run-configuration presets (:func:`daa_sil.config.run_config.preset`)
-PRESET_NAMES = ("paper", "do365", "daidalus")
 
 
 def add_config_argument(p: argparse.ArgumentParser, default_help: str = PRESET.default) -> None:
@@ -29,6 +27,6 @@ def config_of(spec: "str | None"):
     imported only then."""
     if not spec:
         return None
-    from daa_sil.config.run_config import load_config
+    from daa_sil.config.run_config import load_config  # lazy: start-up time
 
     return load_config(spec)

@@ -68,7 +68,7 @@ class GroupSpec:
 
     def delay_model(self):
         """The :mod:`daa_sil.models.latency` model used on the uplink and on the downlink."""
-        from daa_sil.models.delay_spec import delay_model_from_dict
+        from daa_sil.models.delay_spec import delay_model_from_dict  # lazy: start-up time
 
         return delay_model_from_dict(dict(self.latency), where=f"group {self.name} latency")
 
@@ -140,7 +140,7 @@ def _flag(d: dict, key: str, default: bool, where: str) -> bool:
 @functools.lru_cache(maxsize=1)
 def group_table() -> dict[str, GroupSpec]:
     """The built-in groups (``daa_sil/data/groups.yaml``) by name, in file order."""
-    from daa_sil.config.yaml_input import load_yaml
+    from daa_sil.config.yaml_input import load_yaml  # lazy: start-up time
 
     text = resources.files("daa_sil").joinpath("data/groups.yaml").read_text(encoding="utf-8")
     raw = load_yaml(text, "daa_sil/data/groups.yaml", "group table")
@@ -159,7 +159,7 @@ def group_spec(name: str) -> GroupSpec:
 
 def load_group_file(path: "str | Path") -> tuple[GroupSpec, ...]:
     """Group definitions from a YAML file (mapping name -> fields, ``base:`` a built-in group)."""
-    from daa_sil.config.yaml_input import load_yaml_file
+    from daa_sil.config.yaml_input import load_yaml_file  # lazy: start-up time
 
     p = Path(path)
     try:

@@ -1,5 +1,5 @@
 """One experimental group's allocation settings (:class:`AllocationPolicy`): what the agent
-(:func:`daa_sil.agent.agent_step`) reads per row. It sits in config/ because the group table
+(:func:`daa_sil.agent.step.agent_step`) reads per row. It sits in config/ because the group table
 (:mod:`daa_sil.config.groups`) builds it and the agent reads it: both import it from here, downward.
 Defaults and ranges of its numeric fields are the :mod:`daa_sil.config.settings` ones."""
 

@@ -43,7 +43,7 @@ Settings that change the **simulation** (one campaign each):
 * ``delay_draw`` -- a Gaussian (any drawn) delay is redrawn every delay epoch (``epoch``, 10 s) or
   drawn once per encounter (``encounter``);
 * ``wait_rule`` -- unset (each group's, ``threshold``: Eq. "W(k)" every step) or ``countdown``
-  (the wait read from the map is a budget counted from the start of a wait, :mod:`daa_sil.agent`);
+  (the wait read from the map is a budget counted from the start of a wait, :mod:`daa_sil.agent.step`);
 * ``agent_active`` -- when the agent decides: from the ``corrective`` alert (its active phase) or over
   the whole ``encounter``, from its start until safe avoidance (:data:`daa_sil.config.choices.AGENT_ACTIVE`);
 * ``daa_authority`` -- ``per-step`` (Algorithm 1 every step) or ``until-clear`` (our extension: the
@@ -149,7 +149,7 @@ class Reading:
 
     def pilot_config(self, base=None):
         """The :class:`daa_sil.models.pilot_config.PilotConfig` of this reading (from ``base``, default PilotConfig())."""
-        from daa_sil.models.pilot_config import PilotConfig
+        from daa_sil.models.pilot_config import PilotConfig  # lazy: start-up time
 
         base = base if base is not None else PilotConfig()
         engage = self.pilot_engage or ("preventive" if self.pilot_start == "preventive" else "corrective")
@@ -159,7 +159,7 @@ class Reading:
                        stream_until=self.pilot_stop)
 
     def policy_overrides(self) -> dict:
-        """:class:`daa_sil.agent.AllocationPolicy` fields this reading sets (for groups that wait)."""
+        """:class:`daa_sil.agent.step.AllocationPolicy` fields this reading sets (for groups that wait)."""
         out = {"unsafe_hold": self.unsafe_hold} if self.unsafe_hold != "blend" else {}
         if self.agent_active != "corrective":
             out["active_from"] = self.agent_active

@@ -18,7 +18,7 @@
 ``link``       per-group ``stale_command_s`` and ``link_timeout_s`` of the agent (null = the policy's 15 / 20 s)
 ``reading``    ``name`` (a named reading of :mod:`daa_sil.config.readings`) and ``set`` (its overrides)
 ``study``      ``encounters``, ``seed``, ``duration_s``, ``intruders``, ``chunk_size`` of a campaign
-               (:meth:`daa_sil.study.campaign_config.CampaignConfig.from_run_config` reads them)
+               (:meth:`daa_sil.study.campaign.config.CampaignConfig.from_run_config` reads them)
 ============== ===================================================================================
 
 What each command reads (the rest of a configuration does not apply to it; the record in its
@@ -55,13 +55,14 @@ from typing import Any, Mapping
 
 import yaml
 
-from daa_sil.config.config_option import PRESET_NAMES, add_config_argument
+from daa_sil.config.choices import PRESET_NAMES
 from daa_sil.config.overrides import Overrides, reading_rules
 from daa_sil.config.sections import SECTIONS, SETTING_SECTIONS, ReadingSection, StudySection, WaitmapSection
 from daa_sil.config.settings import PRESET
 from daa_sil.config.yaml_input import load_yaml_file
 from daa_sil.errors import UsageError
 from daa_sil.geometry.thresholds import PRESETS as THRESHOLD_PRESETS
+from daa_sil.config.readings import reading_for
 
 #: keys ``config show --full`` adds (derived values, ignored when a file is read back)
 DERIVED_KEYS = ("resolved", "settings")
@@ -70,7 +71,7 @@ TOP_KEYS = ("base", "thresholds", "daa", "waitmap", "allocation", "groups", "pil
 
 
 def _default_groups() -> tuple:
-    from daa_sil.config.groups import PAPER_GROUPS
+    from daa_sil.config.groups import PAPER_GROUPS  # lazy: start-up time
 
     return tuple(PAPER_GROUPS)
 
@@ -95,14 +96,14 @@ class RunConfig:
     # --- the objects of the core --------------------------------------------------------------------
     def daa_config(self, thresholds: "str | None" = None):
         """The :class:`~daa_sil.daa.config.DaaConfig`: the threshold preset's, with ``daa`` applied."""
-        from daa_sil.daa.config import DaaConfig
+        from daa_sil.daa.config import DaaConfig  # lazy: start-up time
 
         return DaaConfig.for_preset(thresholds or self.thresholds, **self.daa)
 
     def pilot_config(self, **changes):
         """The :class:`~daa_sil.models.pilot_config.PilotConfig` with ``pilot`` (and ``changes``) applied,
         then the reading's pilot settings (when it streams, maneuvers and stops; the SIL GCS flies it)."""
-        from daa_sil.models.pilot_config import PilotConfig
+        from daa_sil.models.pilot_config import PilotConfig  # lazy: start-up time
 
         return self.effective_reading.pilot_config(PilotConfig(**{**self.pilot, **changes}))
 
@@ -111,7 +112,6 @@ class RunConfig:
     def effective_reading(self):
         """The named :class:`~daa_sil.config.readings.Reading` with its overrides (``reading`` section;
         default ``paper``, the study's)."""
-        from daa_sil.config.readings import reading_for
 
         return reading_for(str(self.reading["name"]), **dict(self.reading["set"]))
 
@@ -144,8 +144,7 @@ class RunConfig:
              for k, v in ((f.name, getattr(self, f.name)) for f in fields(self) if f.name != "source")}
         d["reading"] = {"name": self.reading["name"], "set": dict(self.reading["set"])}
         if full:
-            from daa_sil.config.groups import group_spec
-            from daa_sil.config.readings import reading_for
+            from daa_sil.config.groups import group_spec  # lazy: start-up time
 
             dc = self.daa_config()
             th = dc.th
@@ -232,7 +231,7 @@ def config_from_dict(data: Any, where: str = "<config>") -> RunConfig:
 
 def save_config(cfg: RunConfig, path: "str | Path", overwrite: bool = False) -> Path:
     """Write ``cfg`` as YAML (atomically; loadable by :func:`load_config`)."""
-    from daa_sil.files import atomic_write_text
+    from daa_sil.files import atomic_write_text  # lazy: start-up time
 
     return atomic_write_text(path, cfg.to_yaml(), overwrite=overwrite)
 
@@ -240,9 +239,9 @@ def save_config(cfg: RunConfig, path: "str | Path", overwrite: bool = False) -> 
 # --- validation ---------------------------------------------------------------------------------------
 def _dataclass_fields(which: str) -> dict:
     if which == "daa":
-        from daa_sil.daa.config import DaaConfig as cls
+        from daa_sil.daa.config import DaaConfig as cls  # lazy: start-up time
     else:
-        from daa_sil.models.pilot_config import PilotConfig as cls
+        from daa_sil.models.pilot_config import PilotConfig as cls  # lazy: start-up time
     return {f.name: f for f in fields(cls) if f.name != "thresholds"}
 
 
@@ -267,7 +266,7 @@ def _settings(node, key: str, where: str) -> Overrides:
 
 
 def _groups(node, where: str) -> tuple:
-    from daa_sil.config.groups import group_table
+    from daa_sil.config.groups import group_table  # lazy: start-up time
 
     names = node.split(",") if isinstance(node, str) else node
     if not isinstance(names, (list, tuple)) or not names:
@@ -282,7 +281,7 @@ def _groups(node, where: str) -> tuple:
 def _latency(node, where: str) -> "str | None":
     if node is None:
         return None
-    from daa_sil.models.delay_spec import SPEC_HELP, parse_delay_spec
+    from daa_sil.models.delay_spec import SPEC_HELP, parse_delay_spec  # lazy: start-up time
 
     try:
         parse_delay_spec(str(node))
@@ -299,7 +298,6 @@ def _check(cfg: RunConfig, where: str) -> None:
         raise UsageError(f"{where}: waitmap.source must be a map preset, grid spec or directory, got {w['source']!r}")
     for key in SECTIONS:
         getattr(cfg, key).check(key, where)
-    from daa_sil.config.readings import reading_for
 
     r = cfg.reading
     if not isinstance(r["set"], dict):
@@ -319,5 +317,4 @@ def _check(cfg: RunConfig, where: str) -> None:
             raise UsageError(f"{where}: {what}: bad value ({exc})") from None
 
 
-__all__ = ["RunConfig", "PRESET_NAMES", "preset", "load_config", "default_wait_maps", "config_from_dict", "save_config",
-           "add_config_argument"]
+__all__ = ["RunConfig", "PRESET_NAMES", "preset", "load_config", "default_wait_maps", "config_from_dict", "save_config"]

@@ -152,7 +152,7 @@ INTRUDERS = Setting("intruders", 1, "", 1, 8, "intruders per encounter")
 #: faster (500 -> 2000 about 1.9x per core); one 2000-encounter chunk peaks at about 0.2 GB RSS
 CHUNK_SIZE = Setting("chunk_size", 2000, "", 1, 10_000_000, "encounters per chunk (one result file per group and chunk)")
 #: encounter rows per task of a campaign (several chunks of several groups side by side): peak memory
-#: grows with them (:mod:`daa_sil.study.campaign_plan`); results do not depend on them
+#: grows with them (:mod:`daa_sil.study.campaign.plan`); results do not depend on them
 BATCH_ROWS = Setting("batch_rows", 10_000, "", 1, 10_000_000, "encounter rows per task (results do not depend on it)")
 #: worker processes (campaign, wait-map build): at most this many per usable core. More only adds
 #: processes that wait for a core and memory (one worker holds 0.3-1 GB), and on 2 cores 1,000

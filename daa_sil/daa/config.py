@@ -28,6 +28,7 @@ from ..errors import UsageError
 from daa_sil.geometry.thresholds import PRESETS, Thresholds, get_thresholds
 from daa_sil.config.settings import STANDARD_PRESET
 from daa_sil.geometry.units import DEG, FPM, FT, G0, KT, NMI
+import numpy as np
 
 # --- codes -----------------------------------------------------------------------------------
 ALERT_NAMES = ("none", "preventive", "corrective", "warning")
@@ -68,7 +69,6 @@ def dir_code(direction) -> int:
 
 def side_to_dir(axis, side):
     """Direction code of (axis code, side +-1) arrays (0 where side is 0 or axis none)."""
-    import numpy as np
 
     axis = np.asarray(axis)
     side = np.asarray(side)

@@ -103,7 +103,7 @@ class AxisState:
 @dataclass
 class DaaState:
     """Hysteresis state of N encounters x M intruders (module docstring). Mutable; copy before updating
-    if the previous state must be kept (:func:`daa_sil.agent.agent_step` does)."""
+    if the previous state must be kept (:func:`daa_sil.agent.step.agent_step` does)."""
 
     last_time: np.ndarray  #: (N,) s, last alert update (nan = none)
     init_time: np.ndarray  #: (N, M) s, when the current output level was raised (nan = none)

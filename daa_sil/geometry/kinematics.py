@@ -17,7 +17,7 @@ Two ways to move aircraft by ``dt``:
 
 Both (and :func:`horizontal_segment`) run as compiled kernels (:mod:`daa_sil.daa.kernels.flight`, the same
 numbers) in a process that has loaded the DAA's kernels, and as the numpy functions ``*_reference`` (their
-test oracles) in one that has not: moving aircraft never starts numba itself (:mod:`daa_sil.compiled`).
+test oracles) in one that has not: moving aircraft never starts numba itself (:mod:`daa_sil.runtime.compiled`).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from daa_sil.config.settings import STEP
-from daa_sil.compiled import loaded_kernels
+from daa_sil.runtime.compiled import loaded_kernels
 from .frames import TWO_PI, track_from_velocity, wrap_2pi, wrap_pi
 from .units import DEG, FPM, G0, KT
 

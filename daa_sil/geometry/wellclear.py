@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from daa_sil.config.settings import STEP
-from daa_sil.compiled import loaded_kernels
+from daa_sil.runtime.compiled import loaded_kernels
 from .thresholds import Thresholds, get_thresholds
 
 _EPS = 1e-12
@@ -137,7 +137,7 @@ def encounter_geometry(s, v, th: "Thresholds | str | None" = None, lookahead: fl
     """Per relative state (``s``, ``v`` of one shape ``(..., 3)``): ``range_m`` (:func:`horizontal_range`),
     ``hmd_m`` (:func:`hmd` within ``lookahead`` s), ``dh_m`` (``-s_z``), ``tau_mod_s`` (:func:`tau_mod` with
     DMOD = DTHR) and ``wcv`` (:func:`wcv`) of thresholds ``th``: one compiled pass where the process has the
-    kernels (:mod:`daa_sil.compiled`), else :func:`encounter_geometry_reference` (the same numbers)."""
+    kernels (:mod:`daa_sil.runtime.compiled`), else :func:`encounter_geometry_reference` (the same numbers)."""
     th = get_thresholds(th)
     s, v = _f(s), _f(v)
     k = loaded_kernels()
@@ -278,7 +278,7 @@ def _slab_interval(z, vz, half, t_end):
 
 def nmac_interval(s, v, th: "Thresholds | str | None" = None, t_end=1.0) -> tuple[np.ndarray, np.ndarray]:
     """Interval within ``[0, t_end]`` during which straight-line motion ``s + t v`` is an NMAC (compiled
-    where the process has the kernels, :mod:`daa_sil.compiled`; else :func:`nmac_interval_reference`)."""
+    where the process has the kernels, :mod:`daa_sil.runtime.compiled`; else :func:`nmac_interval_reference`)."""
     th = get_thresholds(th)
     s, v = _f(s), _f(v)
     k = loaded_kernels()

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Callable
 
 from ..errors import FileFormatError, OutputError, UsageError
+import tempfile
 
 #: bytes in a MAVLink 2 signing key
 KEY_LEN = 32
@@ -85,7 +86,6 @@ def generate_key_file(path: "str | os.PathLike", overwrite: bool = False) -> byt
     The key never exists on disk with wider permissions: it is written to a ``mkstemp`` file
     (created 0600) in the target directory, fsynced and renamed over ``path``.
     """
-    import tempfile
 
     target = Path(path)
     if not overwrite and target.exists():

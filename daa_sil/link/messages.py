@@ -4,7 +4,7 @@ Times: every ``t_s`` argument is shared sim time in seconds; on the wire it is m
 ``time_boot_ms``, uint32). Tracks are degrees clockwise from north on the wire; builders that take
 agent records convert from the agent's compass radians.
 
-Enum codes on the wire equal the agent's integer codes (``daa_sil.agent`` / ``daa_sil.daa.config``
+Enum codes on the wire equal the agent's integer codes (``daa_sil.agent.step`` / ``daa_sil.daa.config``
 name tables); :data:`CODES` maps names to codes for each field kind.
 
 Pilot commands: :func:`pilot_maneuver` builds the custom PILOT_MANEUVER (send time + command
@@ -180,7 +180,7 @@ def bands_from(msgs: Sequence) -> "dict[int, tuple[list[float], list[float], lis
 
 
 def allocation_decision(t_s: float, record: dict, i: int = 0, pilot_cmd_seq: int = 0):
-    """ALLOCATION_DECISION from row ``i`` of an agent decision record (``daa_sil.agent.DECISION_FIELDS``).
+    """ALLOCATION_DECISION from row ``i`` of an agent decision record (``daa_sil.agent.step.DECISION_FIELDS``).
 
     Integer code fields are sent as is (same codes); ``cmd_trk`` is compass radians in the record
     and degrees on the wire; missing fields are sent as NaN / 0.

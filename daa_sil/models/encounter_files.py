@@ -21,8 +21,8 @@ _STATE = ("x", "y", "z", "gs", "trk", "vs")
 def save_encounters(es: EncounterSet, path: "str | os.PathLike") -> Path:
     """Write ``es`` as one Parquet file (one row per encounter; intruder values as list columns)
     atomically. The schema carries ``format``/``version``/``m``/``s`` metadata checked on load."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    import pyarrow as pa  # lazy: start-up time
+    import pyarrow.parquet as pq  # lazy: start-up time
 
     n, m = len(es), es.m
     s = es.seg_start_s.shape[-1]
@@ -52,8 +52,8 @@ def save_encounters(es: EncounterSet, path: "str | os.PathLike") -> Path:
 def load_encounters(path: "str | os.PathLike") -> EncounterSet:
     """Read a file written by :func:`save_encounters`; FileFormatError (one line) if it is missing,
     not Parquet, not an encounter set, of another version, or has missing/ill-shaped columns."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    import pyarrow as pa  # lazy: start-up time
+    import pyarrow.parquet as pq  # lazy: start-up time
 
     p = Path(path)
     if not p.is_file():

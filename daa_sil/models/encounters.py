@@ -121,7 +121,7 @@ class EncounterConfig:
 
 def encounter_seed(root_seed: int, encounter_ids) -> np.ndarray:
     """Per-encounter int64 seeds: ``SeedSequence(root_seed, spawn_key=(i,))`` hashed to 63 bits
-    (the same definition as :func:`daa_sil.study.campaign.encounter_seeds`)."""
+    (the same definition as :func:`daa_sil.study.campaign.run.encounter_seeds`)."""
     ids = np.asarray(encounter_ids, dtype=np.int64).ravel()
     out = np.empty(ids.size, dtype=np.int64)
     for k, i in enumerate(ids):
@@ -191,18 +191,6 @@ class EncounterSet:
                        **{k: getattr(self, k)[idx] for k in SEGMENT_FIELDS},
                        encounter_id=self.encounter_id[idx], seed=self.seed[idx],
                        params={k: v[idx] for k, v in self.params.items()})
-
-    def save(self, path: "str | os.PathLike") -> Path:
-        """Write atomically as Parquet (see :func:`save_encounters`)."""
-        from .encounter_files import save_encounters
-
-        return save_encounters(self, path)
-
-    @classmethod
-    def load(cls, path: "str | os.PathLike") -> "EncounterSet":
-        from .encounter_files import load_encounters
-
-        return load_encounters(path)
 
 
 def concat_encounters(sets: Sequence[EncounterSet]) -> EncounterSet:

@@ -89,6 +89,7 @@ from daa_sil.daa.alerting import safe_avoidance
 from daa_sil.models.pilot_display import guidance_from_daa
 from daa_sil.models.pilot_choice import DRAW_KEYS, as_generator, draw_decisions, choose_maneuver, sample_response_components
 from daa_sil.models.pilot_config import Guidance, PilotConfig, PilotOutput
+from daa_sil.daa import DaaConfig, safety_metric
 
 
 # --------------------------------------------------------------------------------------------------
@@ -321,8 +322,6 @@ class PilotModel:
         done = (np.abs(dz) <= c.recover_alt_tol_m) & (np.abs(wrap_pi(own.trk[i] - p_trk)) <= c.recover_trk_tol_deg * DEG)
         vs = np.where(done, 0.0, np.clip(dz / c.recover_capture_s, -rate, rate))
         if intr is not None and intr.shape[1]:
-            from daa_sil.daa import DaaConfig, safety_metric
-
             clear = safety_metric(own[i], intr[i], Command(p_trk, vs, p_gs), self.daa_cfg or DaaConfig()) > 0
             if not clear.all():
                 act[i[~clear]] = False

@@ -46,8 +46,8 @@ def guidance_from_bands(bands) -> Guidance:
 def display_bands(own: AircraftState, intr: AircraftState, cfg):
     """The bands a display computes for ownship (R,) and intruders (R, M): only the track and
     vertical-speed axes, the ones :func:`guidance_from_bands` reads (never ground speed)."""
-    from daa_sil.daa.bands import compute_bands
-    from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_VERTICAL
+    from daa_sil.daa.bands import compute_bands  # lazy: start-up time
+    from daa_sil.daa.config import AXIS_HORIZONTAL, AXIS_VERTICAL  # lazy: start-up time
 
     return compute_bands(own, intr, cfg, axes=(AXIS_HORIZONTAL, AXIS_VERTICAL))
 
@@ -96,8 +96,8 @@ class PilotDisplay:
     def refresh(self, rows: np.ndarray, own: AircraftState, intr: AircraftState, alert: np.ndarray) -> None:
         """Pilots ``rows`` (indices) now see ownship ``own`` (R,), intruders ``intr`` (R, M) and the
         vehicle's alert level ``alert`` (R,) sent with them."""
-        from daa_sil.daa.alerting import relative_state
-        from daa_sil.geometry.wellclear import encounter_geometry
+        from daa_sil.daa.alerting import relative_state  # lazy: start-up time
+        from daa_sil.geometry.wellclear import encounter_geometry  # lazy: start-up time
 
         rows = np.asarray(rows, np.int64)
         if not rows.size:
@@ -121,9 +121,9 @@ class PilotDisplay:
 def guidance_from_daa(own: AircraftState, intr: AircraftState, cfg=None) -> Guidance:
     """Compute :class:`Guidance` with :mod:`daa_sil.daa` for ownship (N,) and intruders (N, M)
     (``cfg``: a :class:`daa_sil.daa.config.DaaConfig`, default DO-365B); ``wcv`` from the preset."""
-    from daa_sil.daa.alerting import relative_state
-    from daa_sil.daa.config import DaaConfig
-    from daa_sil.geometry.wellclear import wcv
+    from daa_sil.daa.alerting import relative_state  # lazy: start-up time
+    from daa_sil.daa.config import DaaConfig  # lazy: start-up time
+    from daa_sil.geometry.wellclear import wcv  # lazy: start-up time
 
     cfg = cfg or DaaConfig()
     g = guidance_from_bands(display_bands(own, intr, cfg))

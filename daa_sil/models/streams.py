@@ -1,6 +1,6 @@
 """The random streams of one encounter: children of ``SeedSequence(seed)``, one per consumer.
 
-Fast-time (:func:`daa_sil.study.fasttime.simulate`), the SIL GCS (its pilot model) and the SIL shim
+Fast-time (:func:`daa_sil.study.simulation.fasttime.simulate`), the SIL GCS (its pilot model) and the SIL shim
 (its delay processes) derive the same streams from an encounter's seed, so a SIL run sees draw for
 draw what fast-time gives that encounter. A light module on purpose: the GCS and the shim import
 it without the fast-time machinery.

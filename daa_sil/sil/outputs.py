@@ -28,6 +28,7 @@ from functools import cached_property
 from daa_sil.errors import UsageError
 from .connstr import SEND, Connection, parse_connection
 from .endpoint import norm_host
+import socket
 
 #: name of the first --out (the pilot's link) and of --tap
 PILOT_LINK, TAP = "gcs", "tap"
@@ -99,7 +100,6 @@ def output_specs(outs: "list[str] | tuple[str, ...]", tap: "str | None" = None,
 def check_listening(specs: "list[OutputSpec]", option: str = "--out") -> None:
     """Bind (and close at once) the port of every listening output (``udpin:`` / ``tcpin:``): a taken one is a
     one-line UsageError now, before a run starts any process or any work."""
-    import socket
 
     for s in specs:
         if not s.listens or s.addr[1] == 0:

@@ -33,6 +33,8 @@ from daa_sil.sil.supervise import (
     parse_shim_ready,
     python_module_argv,
 )
+import importlib
+import threading
 
 #: wall s the vehicle waits for the answer to tick 0 under ``daa-sil run`` (start-up on a busy machine)
 START_TIMEOUT_S = 120.0
@@ -42,7 +44,7 @@ def shim_argv(sc, clock_args: list, key_args: list, stats_json: Path, vehicle_po
               gcs_port: int = 0) -> list[str]:
     """``daa-sil shim`` command line for scenario ``sc`` (link delays, loss, outages, seed), run as
     ``python -m daa_sil.commands.shim``: the shim's own entry point imports only what it needs."""
-    from daa_sil.sil.scenario import delay_spec_string
+    from daa_sil.sil.scenario import delay_spec_string  # lazy: start-up time
 
     link = sc.link
     delays = (["--delay-round-trip", delay_spec_string(link.round_trip)] if link.round_trip is not None else
@@ -99,13 +101,13 @@ def run_sil(opts: RunOptions, scenario=None) -> dict:
     exists without checking the expectation, and raises :class:`~daa_sil.sil.children.Interrupted`
     saying so.
     """
-    from daa_sil.files import ensure_dir
-    from daa_sil.sil.scenario import load_scenario
+    from daa_sil.files import ensure_dir  # lazy: start-up time
+    from daa_sil.sil.scenario import load_scenario  # lazy: start-up time
 
     sc = scenario if scenario is not None else load_scenario(opts.scenario_path)
     check_faults_allowed(sc, opts.clock, opts.scenario_path)
     if opts.vehicle_outs:  # a taken udpin: / tcpin: port: one line now, not after the vehicle started
-        from daa_sil.sil.outputs import check_listening, output_specs
+        from daa_sil.sil.outputs import check_listening, output_specs  # lazy: start-up time
 
         check_listening(output_specs(["udp:127.0.0.1:1", *opts.vehicle_outs], option_of_extra="--vehicle-out")[1:],
                         "--vehicle-out")
@@ -140,9 +142,9 @@ def _start_recorder(opts: RunOptions, sc):
     """
     if not (opts.rrd or opts.spawn_viewer or opts.connect):
         return None
-    from daa_sil.viz.recorder import BackgroundRecorder
+    from daa_sil.viz.recorder import BackgroundRecorder  # lazy: start-up time
 
-    from daa_sil.viz import SinkOptions
+    from daa_sil.viz import SinkOptions  # lazy: start-up time
 
     try:
         return BackgroundRecorder(SinkOptions(rrd=opts.rrd, spawn=opts.spawn_viewer, connect=opts.connect,
@@ -157,7 +159,7 @@ def _start_recorder(opts: RunOptions, sc):
 
 def _finish_recorder(recorder, steplog: Path) -> "Path | None":
     """Hand the step log to the recorder; its warnings become ``daa-sil: warning: ...`` lines."""
-    from daa_sil.viz.warning import one_line_warnings
+    from daa_sil.viz.warning import one_line_warnings  # lazy: start-up time
 
     with one_line_warnings():
         return recorder.finish(steplog)
@@ -183,8 +185,6 @@ def _gcs_argv(opts: RunOptions, out: Path, listen: str, gcs_side: str, clock_arg
 def _preload(*modules: str) -> None:
     """Import ``modules`` (in order) in a daemon thread: while the vehicle is the only process still
     starting up, a core is free, and the end of the run then does not wait for the imports."""
-    import importlib
-    import threading
 
     def load():
         for m in modules:
@@ -194,8 +194,8 @@ def _preload(*modules: str) -> None:
 
 
 def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_args: list, recorder) -> dict:
-    from daa_sil.files import atomic_write_json
-    from daa_sil.out_dir import rescue_path, write_or_rescue
+    from daa_sil.files import atomic_write_json  # lazy: start-up time
+    from daa_sil.out_dir import rescue_path, write_or_rescue  # lazy: start-up time
 
     prepare_kernels(lambda m: _say(opts, m))
     t0 = time.monotonic()
@@ -273,7 +273,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
         if interrupted is not None:
             raise Interrupted(interrupt_signum(interrupted), "before the vehicle wrote a step log")
         raise DaaSilError(failure or f"the vehicle wrote no step log (logs: {out / 'logs'})")
-    from daa_sil.steplog import read_steplog  # pyarrow: imported while the vehicle started (_preload)
+    from daa_sil.steplog import read_steplog  # lazy: start-up time; pyarrow: imported while the vehicle started (_preload)
 
     table = read_steplog(steplog)
     result = summarize_steplog(table, sc)
@@ -293,7 +293,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
                    "process_died": monitor.death if monitor is not None else None,
                    "files": {"steplog": str(steplog), "gcs_log": str(out / "gcs_commands.jsonl"),
                              "gcs_logs": [str(x) for x in gcs_logs if x.is_file()], "logs": str(out / "logs")}})
-    from daa_sil.steplog import steplog_metadata
+    from daa_sil.steplog import steplog_metadata  # lazy: start-up time
 
     try:  # the full configuration the vehicle flew (its step-log metadata)
         result["config"] = json.loads(steplog_metadata(steplog).get("config") or "null")
@@ -302,7 +302,7 @@ def _play(opts: RunOptions, sc, out: Path, steplog: Path, key_args: list, clock_
     if sc.faults:
         result["faults"] = monitor.fault_report() if monitor is not None else []
     if opts.clock == "realtime":
-        from daa_sil.steplog import steplog_metadata
+        from daa_sil.steplog import steplog_metadata  # lazy: start-up time
 
         shim_stats = None
         try:
@@ -351,14 +351,14 @@ def _waitmap_record(sc, source: "str | None", steplog: Path) -> "dict | None":
     (not written by this vehicle) falls back to loading the family."""
     if sc.allocation.wait != "map":
         return None
-    from daa_sil import waitmap
-    from daa_sil.steplog import steplog_metadata
+    from daa_sil import waitmap  # lazy: start-up time
+    from daa_sil.steplog import steplog_metadata  # lazy: start-up time
 
     try:
         described = json.loads(steplog_metadata(steplog).get("waitmap") or "null")
     except ValueError:
         described = None
-    from daa_sil.config.run_config import default_wait_maps
+    from daa_sil.config.run_config import default_wait_maps  # lazy: start-up time
 
     source, horizon = (source, None) if source else default_wait_maps()  # the vehicle's, when none is named
     if not isinstance(described, dict):  # cached: loaded, not built

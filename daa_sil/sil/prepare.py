@@ -12,14 +12,14 @@ def prepare_kernels(say: "Callable[[str], None] | None") -> None:
     """Compile the DAA kernels here when their cache is cold, before the vehicle and the GCS start: they
     then load them instead of compiling on the same cores against their READY timeouts (docs/daa.md,
     "Compiled kernels"). Nothing is imported when the cache is warm."""
-    from daa_sil.jit_cache import COLD_COMPILE_TIME, cache_dir, is_warm
+    from daa_sil.runtime.jit_cache import COLD_COMPILE_TIME, cache_dir, is_warm  # lazy: start-up time
 
     if is_warm():
         return
     t = time.monotonic()
     if say:
         say(f"compiling the DAA kernels (first run: {COLD_COMPILE_TIME}; cached in {cache_dir()}) ...")
-    from daa_sil.daa import kernels
+    from daa_sil.daa import kernels  # lazy: start-up time
 
     kernels.get()
 
@@ -34,11 +34,11 @@ def prepare_waitmap(sc, source: "str | None", say: "Callable[[str], None] | None
     broken file is its one-line error, relayed by the run). ``say`` gets progress lines."""
     if sc.allocation.wait != "map":
         return
-    from daa_sil import waitmap
-    from daa_sil.config.run_config import default_wait_maps
-    from daa_sil.waitmap.build import build_memory
-    from daa_sil.waitmap.model import PAPER_TURN_RATES
-    from daa_sil.waitmap.source import check_source
+    from daa_sil import waitmap  # lazy: start-up time
+    from daa_sil.config.run_config import default_wait_maps  # lazy: start-up time
+    from daa_sil.waitmap.build import build_memory  # lazy: start-up time
+    from daa_sil.waitmap.model import PAPER_TURN_RATES  # lazy: start-up time
+    from daa_sil.waitmap.source import check_source  # lazy: start-up time
 
     t = time.monotonic()
     source, horizon = (source, None) if source else default_wait_maps()  # the vehicle's, when none is named

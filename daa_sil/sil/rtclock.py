@@ -38,6 +38,7 @@ import struct
 import sys
 import time
 from typing import Callable
+import platform
 
 #: ``SO_TIMESTAMPNS`` / ``SCM_TIMESTAMPNS`` (asm-generic Linux value; Python 3.11 lacks the constant)
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
@@ -96,7 +97,6 @@ def request_short_slice(slice_s: float = 0.0001) -> bool:
     Keeps the policy (must be ``SCHED_OTHER``) and the nice value; only the slice changes. On older
     kernels the call succeeds but the value is ignored.
     """
-    import platform
 
     nums = _SYS_SCHED_ATTR.get(platform.machine())
     if _LIBC is None or nums is None:

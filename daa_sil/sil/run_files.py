@@ -10,7 +10,7 @@ from pathlib import Path
 def rescued_steplog(steplog: Path, since: float) -> "Path | None":
     """The step log the vehicle saved at :func:`daa_sil.out_dir.rescue_path` because ``steplog``'s
     directory could not take it (written after ``since``, a wall time), or None."""
-    from daa_sil.out_dir import rescue_path
+    from daa_sil.out_dir import rescue_path  # lazy: start-up time
 
     if steplog.exists():
         return None

@@ -20,9 +20,9 @@ def summarize_steplog(table, scenario=None) -> dict:
     ``decision_sequence`` lists every active step's decision as ``{t, decision, rule, authority}``
     (decision != ``none``), in step order. Distances in m, times in s.
     """
-    import numpy as np
+    import numpy as np  # lazy: start-up time
 
-    from daa_sil.sil.scenario import DECISIONS, check_expectation
+    from daa_sil.sil.scenario import DECISIONS, check_expectation  # lazy: start-up time
 
     n = table.num_rows
     col = {name: table.column(name).to_pylist() for name in
@@ -225,7 +225,7 @@ DECISION_MEANINGS = {
 def demo_legend(result: dict, scenario, out_dir: Path) -> str:
     """The words of the summary (the timeline's decisions, the pilot's ``hold``, LoWC, NMAC) and the
     command that opens the run's recording."""
-    from daa_sil.geometry.thresholds import get_thresholds
+    from daa_sil.geometry.thresholds import get_thresholds  # lazy: start-up time
 
     th = get_thresholds(getattr(scenario, "thresholds", None))
     seen = [d for d in DECISION_MEANINGS if (result.get("decision_counts") or {}).get(d)]

@@ -29,7 +29,8 @@ from typing import Callable, Sequence
 
 from daa_sil.errors import DaaSilError
 from daa_sil.sil.children import spawn
-from daa_sil.spawned import signals_ignored
+from daa_sil.runtime.spawned import signals_ignored
+import socket
 
 #: wall-clock limits (s)
 READY_TIMEOUT_S = 60.0  # start-up guard: 20 runs starting together on 2 cores take a while
@@ -196,7 +197,6 @@ def parse_shim_ready(line: str) -> "dict | None":
 
 def free_udp_ports(n: int) -> list[int]:
     """``n`` distinct UDP ports on 127.0.0.1 that were free a moment ago (bound together, then released)."""
-    import socket
 
     socks = []
     try:

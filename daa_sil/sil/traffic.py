@@ -40,8 +40,8 @@ def own_from_telemetry(gpi) -> dict:
 def traffic_reports(sc, own: dict) -> list:
     """ADSB_VEHICLE messages for the intruders of scenario ``sc`` around the ownship ``own``
     (:func:`own_from_telemetry`), in the file's order."""
-    from daa_sil.geometry.frames import enu_to_geodetic
-    from daa_sil.sil.scenario import encounter_set
+    from daa_sil.geometry.frames import enu_to_geodetic  # lazy: start-up time
+    from daa_sil.sil.scenario import encounter_set  # lazy: start-up time
 
     start = sc.ownship
     now = replace(start, x_m=0.0, y_m=0.0, alt_m=0.0, gs_mps=own["gs"], track_deg=own["trk"], vs_mps=own["vs"])

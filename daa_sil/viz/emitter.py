@@ -27,6 +27,7 @@ from .draw import track_arc, fmt_value, track_unit_enu, decision_text
 from .records import StepColumns
 from .style import (ALERT_COLORS, BAND_RADIUS_FACTOR, DAA_COLOR, EXEC_COLOR, LEAD_S, OWN_COLOR, PILOT_COLOR,
                     REGION_COLORS, REGION_WIDTH, TRAIL_S, WC_OK, WC_VIOLATED)
+from daa_sil.geometry.frames import to_paper_state
 
 class StepEmitter:
     """Turns :class:`StepColumns` batches into ``send_columns`` calls; keeps trails across batches."""
@@ -199,8 +200,6 @@ class StepEmitter:
         self.steps_logged += n
 
     def _wait_lookup(self, j: int, own, own_v, ipos, ivel) -> None:
-        from daa_sil.geometry.frames import to_paper_state
-
         ok = np.all(np.isfinite(ipos), axis=-1) & np.all(np.isfinite(own_v), axis=-1)
         w = np.full(len(ok), np.nan)
         if ok.any():
@@ -267,6 +266,6 @@ class StepEmitter:
 
 def rerun_module():
     """The ``rerun`` module, imported on first use (so that importing the viewer code does not load Rerun)."""
-    import rerun as rr
+    import rerun as rr  # lazy: start-up time
 
     return rr

@@ -7,8 +7,8 @@ from typing import Iterable
 def blueprint(center: "Iterable[float] | None" = None, extent_m: float = 8000.0, top_height_m: float = 6000.0):
     """Default layout: 3-D view (looking at ``center`` from ``extent_m`` away), ownship-centred top-down
     view (from ``top_height_m`` above), decision log, plots, state lanes."""
-    import rerun as rr
-    import rerun.blueprint as rrb
+    import rerun as rr  # lazy: start-up time
+    import rerun.blueprint as rrb  # lazy: start-up time
 
     cx, cy, cz = (0.0, 0.0, 0.0) if center is None else (float(v) for v in center)
     d = max(float(extent_m), 3000.0)

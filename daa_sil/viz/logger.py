@@ -18,11 +18,11 @@ from .layout import blueprint
 from .records import StepColumns
 from .sinks import Recording, SinkOptions, WebServer
 from .warning import warn_viz
+import json
 
 def intruder_names(table) -> "list[str]":
     """The intruders' callsigns of a step log, by index (its ``intruders`` metadata, written by the SIL
     vehicle: scenario and injected intruders); [] without it (fast-time step logs)."""
-    import json
 
     meta = getattr(getattr(table, "schema", None), "metadata", None) or {}
     raw = meta.get(b"intruders")

@@ -25,6 +25,8 @@ from daa_sil.viz import (
     predicted_focus,
     select_encounter,
 )
+from daa_sil.steplog import read_steplog
+from daa_sil.sil.children import adopt
 
 #: how often the live helper hands queued rows to Rerun, s
 LIVE_FLUSH_S = 0.1
@@ -61,7 +63,7 @@ class _LiveIn:
     """The helper's end of the live feed: datagrams -> :class:`~daa_sil.sil.live.LiveFeed` -> ``log_step``."""
 
     def __init__(self, fd: int):
-        from daa_sil.sil.live import LiveFeed
+        from daa_sil.sil.live import LiveFeed  # lazy: start-up time
 
         self.sock = socket.socket(fileno=fd)
         self.sock.setblocking(False)
@@ -135,8 +137,6 @@ def serve_requests(args: dict, requests: IO[str], replies: IO[str]) -> int:
     lines = _Lines(requests)
     status = 1
     try:
-        from daa_sil.steplog import read_steplog
-
         while True:
             if live is not None and logger is not None and not lines.ready():
                 readable, _, _ = select.select([lines.fd, live.sock], [], [], 1.0)
@@ -195,7 +195,6 @@ def serve_requests(args: dict, requests: IO[str], replies: IO[str]) -> int:
 
 def main(argv: "list[str] | None" = None) -> int:
     """Entry point of the ``mode="exec"`` helper: the JSON arguments in ``argv[0]``, stdin/stdout pipes."""
-    from daa_sil.sil.children import adopt
 
     adopt()  # the name and the parent watch spawn() handed over
     args = json.loads((sys.argv[1:] if argv is None else argv)[0])

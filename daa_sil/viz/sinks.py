@@ -74,7 +74,7 @@ def port_open(host: str, port: int, timeout: float = 0.5) -> bool:
 
 def rerun_binary() -> str:
     """Path of the real rerun viewer binary (not the Python wrapper script)."""
-    import rerun_cli
+    import rerun_cli  # lazy: start-up time
 
     exe = "rerun.exe" if os.name == "nt" else "rerun"
     return str(Path(rerun_cli.__file__).parent / exe)
@@ -164,7 +164,7 @@ class Recording:
             self._discard()
 
     def _open(self, recording_id, blueprint_) -> None:
-        import rerun as rr
+        import rerun as rr  # lazy: start-up time
 
         o = self.sinks
         batcher = rr.ChunkBatcherConfig.NEVER() if o.deterministic else None

@@ -54,7 +54,7 @@ def log_waitmap(rec, waitmap, vi: float = 155.0, vh: float = 0.0, theta_deg: flo
                 turn_rate_deg: float = 0.0, entity: str = "waitmap") -> dict:
     """Log a wait-map slice as a 3-D point cloud over (dX, dY, d_h) coloured by wait time (paper frame:
     ownship at the origin flying +X, Y to the left, d_h up); return the slice actually shown."""
-    import rerun as rr
+    import rerun as rr  # lazy: start-up time
 
     pts, w, chosen = waitmap_slice(waitmap, vi, vh, theta_deg, turn_rate_deg)
     title = (f"wait map (turn {chosen['turn_rate_deg']:+.1f} deg/s, {chosen['preset']}) at v_i = {chosen['vi']:.0f} m/s, "
@@ -69,7 +69,7 @@ def log_waitmap(rec, waitmap, vi: float = 155.0, vh: float = 0.0, theta_deg: flo
 def write_waitmap(waitmap, sinks: SinkOptions, vi: float = 155.0, vh: float = 0.0, theta_deg: float = 180.0,
                   turn_rate_deg: float = 0.0, keep_serving: bool = False) -> "tuple[Path | None, dict, Recording]":
     """:func:`log_waitmap` into the sinks of ``sinks`` (own recording and layout)."""
-    import rerun.blueprint as rrb
+    import rerun.blueprint as rrb  # lazy: start-up time
 
     bp = rrb.Blueprint(rrb.Horizontal(rrb.Spatial3DView(name="Wait map", origin="/waitmap"),
                                       rrb.TextDocumentView(name="Slice", origin="/waitmap/info"),
@@ -88,7 +88,7 @@ def write_waitmap(waitmap, sinks: SinkOptions, vi: float = 155.0, vh: float = 0.
 def log_waitmap_points(rec, points: np.ndarray, wait_s: np.ndarray, entity: str = "waitmap",
                        title: str = "", radius: float = -5.0) -> None:
     """Log wait times at paper-frame points ``(K, 3)`` = (dX, dY, d_h) as a coloured point cloud."""
-    import rerun as rr
+    import rerun as rr  # lazy: start-up time
 
     pts = np.asarray(points, float).reshape(-1, 3)
     w = np.asarray(wait_s, float).reshape(-1)

@@ -17,13 +17,15 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from ..errors import DaaSilError, error_class
-from ..spawned import die_with_parent, start_spawned, usable_cpus
+from daa_sil.runtime.spawned import die_with_parent, start_spawned, usable_cpus
 from .grid import Grid
 from .lookup import WaitMap, WaitMapFamily
 from .model import PAPER_TURN_RATES, MdpParams
 from .solve import value_iteration, wait_time
 from .store import map_filename, save
 from .transitions import build_transitions
+import multiprocessing as mp
+from multiprocessing.connection import wait
 
 
 def build_map(grid: Grid, params: MdpParams, turn_rate_deg: float = 0.0) -> WaitMap:
@@ -83,8 +85,8 @@ BUILDER_BASE_BYTES = 120 * 2**20
 def build_memory(grid: Grid, n_maps: int, workers: "int | None" = None):
     """The estimated peak memory of building ``n_maps`` maps of ``grid`` in ``workers`` processes
     (default :func:`default_workers`) and loading the family: a
-    :class:`daa_sil.resources.MemoryEstimate` to ``check()`` before anything is allocated."""
-    from ..resources import MemoryEstimate
+    :class:`daa_sil.runtime.resources.MemoryEstimate` to ``check()`` before anything is allocated."""
+    from daa_sil.runtime.resources import MemoryEstimate  # lazy: start-up time
 
     n = default_workers(n_maps, grid.size) if workers is None else max(1, min(int(workers), int(n_maps)))
     builders = n * (BUILDER_BASE_BYTES + grid.size * BUILD_STATE_BYTES)
@@ -117,8 +119,6 @@ def build_members(grid: Grid, params: MdpParams, turn_rates: Sequence[float], di
 def _build_in_processes(grid: Grid, params: MdpParams, rates: list, d: Path, n: int, progress) -> None:
     """``n`` spawned builder processes, each taking the next turn rate as soon as it is free; a
     builder answers each ``(rate, path)`` with ``("ok",)`` or ``("error", class name, message)``."""
-    import multiprocessing as mp
-    from multiprocessing.connection import wait
 
     ctx = mp.get_context("spawn")  # no fork of a process that may hold threads (progress bars, the SIL)
     pending, builders, busy = list(rates), [], {}

@@ -32,6 +32,8 @@ from .model import MdpParams, params_hash
 from .build import build_members
 from .family_files import FAMILY_INDEX, check_family, load_family, write_family_index
 from .store import load, map_filename, read_meta
+import json
+import fcntl
 
 
 def cache_dir() -> Path:
@@ -115,8 +117,6 @@ def _sort_members(entry: Path, grid: Grid, params: MdpParams, rates: list) -> tu
 
 
 def _same_json(a: dict, b: dict) -> bool:
-    import json
-
     return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
 
 
@@ -132,7 +132,7 @@ def _entry_lock(entry: Path) -> Iterator[None]:
     """Hold an exclusive ``flock`` on the entry's ``.lock`` file (none where ``fcntl`` is missing);
     say so once if another process holds it."""
     try:
-        import fcntl
+        pass
     except ImportError:  # not POSIX: concurrent builders write identical files atomically
         yield
         return

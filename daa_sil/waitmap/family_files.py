@@ -21,6 +21,7 @@ from daa_sil.files import atomic_write_json
 from .lookup import WaitMapFamily
 from .model import FORMAT_VERSION, settings_hash
 from .store import load, map_filename, read_meta, save
+from ..errors import OutputError
 
 FAMILY_INDEX = "family.json"
 
@@ -39,8 +40,6 @@ def save_family(fam: WaitMapFamily, directory: "str | os.PathLike", overwrite: b
     if not overwrite:
         clash = [p for p in targets if p.exists()]
         if clash:
-            from ..errors import OutputError
-
             raise OutputError(f"{clash[0]} exists; refusing to overwrite (use --force or another --out)")
     paths = [save(m, d / map_filename(m.turn_rate_deg), overwrite=True) for m in fam.maps]
     rates = [float(m.turn_rate_deg) for m in fam.maps]

@@ -289,7 +289,7 @@ def resolve_grid(spec: "str | os.PathLike | Grid | dict | None") -> Grid:
         return GRID_PRESETS[text]()
     path = Path(text)
     if path.suffix.lower() in (".yaml", ".yml", ".json") or path.is_file():
-        from daa_sil.config.yaml_input import load_yaml_file
+        from daa_sil.config.yaml_input import load_yaml_file  # lazy: start-up time
 
         try:
             data = load_yaml_file(path, "grid")  # bounded size, depth and aliases; one-line errors

@@ -26,6 +26,7 @@ import numpy as np
 from .grid import Grid
 from .model import DEG, MdpParams
 from .transitions import lowc_states
+from .solve import paper_wait
 
 
 @dataclass
@@ -126,7 +127,6 @@ class WaitMap:
 
     def lookup(self, paper_states) -> LookupResult:
         """Wait time etc. at continuous paper states ``(..., 6)`` (theta in rad). See module docstring."""
-        from .solve import paper_wait
 
         st = np.asarray(paper_states, dtype=float)
         if st.shape[-1:] != (6,):

@@ -14,10 +14,10 @@ GEOMETRIES = (("head-on", 180.0), ("crossing-from-right", 90.0), ("crossing-from
 
 
 def _plt():
-    import matplotlib
+    import matplotlib  # lazy: start-up time
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: start-up time
 
     return plt
 
@@ -88,7 +88,7 @@ def write_plots(fam: WaitMapFamily, out: Path, vi: float = 155.0, dh: float = 20
 
 def _histogram(plt, fam: WaitMapFamily, path: Path, overwrite: bool) -> Path:
     """The paper's Fig. 3 kind: wait times of the threatening states, next to the paper's description."""
-    from .oracles import histogram, paper_shape, shape_checks, threatening
+    from .oracles import histogram, paper_shape, shape_checks, threatening  # lazy: start-up time
 
     h = histogram(fam)
     w = np.concatenate([threatening(m) for m in fam.maps])

@@ -97,7 +97,7 @@ def value_iteration_csr(P_wait: sp.csr_matrix, P_evade: sp.csr_matrix, r_wait: n
 
     ``fixed`` pins terminal values (state index -> value). Returns ``(V, sweeps)``.
     """
-    import scipy.sparse as sp  # lazily: only building a map needs scipy
+    import scipy.sparse as sp  # lazy: start-up time; lazily: only building a map needs scipy
 
     n = P_wait.shape[0]
     P = sp.vstack([P_wait, P_evade]).tocsr()

@@ -32,6 +32,7 @@ import numpy as np
 from daa_sil.geometry import wellclear as wc
 from .grid import Grid
 from .model import MdpParams, Outcome, outcomes
+from .model import turn_distribution
 
 #: offsets of the special states after the S grid states
 EXIT, LOWC, OUT = 0, 1, 2
@@ -72,7 +73,7 @@ def reward_of(dxn, dyn, dhn, vin, thn, params: MdpParams) -> np.ndarray:
 
 def _axis_matrix(axis, deltas: np.ndarray, probs: np.ndarray) -> sp.csr_matrix:
     """n x n matrix of the next node of one kinematic axis: value + delta, saturated or periodic."""
-    import scipy.sparse as sp  # lazily: only building a map needs scipy
+    import scipy.sparse as sp  # lazy: start-up time; lazily: only building a map needs scipy
 
     vals = axis.values
     nxt = vals[:, None] + deltas[None, :]
@@ -89,9 +90,8 @@ def _axis_matrix(axis, deltas: np.ndarray, probs: np.ndarray) -> sp.csr_matrix:
 
 def kinematic_matrix(grid: Grid, params: MdpParams, turn_rate_deg: float) -> sp.csr_matrix:
     """K (nk x nk, CSR, rows sum to 1): the intruder maneuver over the (vi, vh, theta) nodes."""
-    import scipy.sparse as sp  # lazily: only building a map needs scipy
+    import scipy.sparse as sp  # lazy: start-up time; lazily: only building a map needs scipy
 
-    from .model import turn_distribution
 
     a_vi_d = np.array([v for v, _ in params.dv]) * params.dt
     a_vi_p = np.array([p for _, p in params.dv])
@@ -111,7 +111,7 @@ def kinematic_matrix(grid: Grid, params: MdpParams, turn_rate_deg: float) -> sp.
 
 def spatial_matrix(grid: Grid, params: MdpParams) -> sp.csr_matrix:
     """Sp (S x S, CSR): the deterministic position step split over <= 8 nodes; EXIT rows are empty."""
-    import scipy.sparse as sp  # lazily: only building a map needs scipy
+    import scipy.sparse as sp  # lazy: start-up time; lazily: only building a map needs scipy
 
     shape = grid.shape
     nk = shape[3] * shape[4] * shape[5]
@@ -225,7 +225,7 @@ def assemble(tr: Transitions) -> tuple[sp.csr_matrix, sp.csr_matrix]:
     LOWC; LoWC nodes themselves are absorbed into LOWC; EXIT, LOWC and OUT are absorbing. Evade
     sends every non-special state to OUT (paper Eq. 14).
     """
-    import scipy.sparse as sp  # lazily: only building a map needs scipy
+    import scipy.sparse as sp  # lazy: start-up time; lazily: only building a map needs scipy
 
     S = tr.grid.size
     nx = S // tr.nk

@@ -7,7 +7,7 @@ run them, then write ``experiments.json`` and the experiments page.
 
 RUNS must hold the readings' campaigns of the same seed (``RUNS/paper``, ``RUNS/paper-clamp``, ...:
 ``docs/results/regenerate.py`` runs them; the experiments read ``paper`` and the readings listed in
-``daa_sil.study.experiments.READINGS_USED``). The experiment campaigns go to ``RUNS/exp-<name>-<N>``
+``daa_sil.study.campaign.experiments.READINGS_USED``). The experiment campaigns go to ``RUNS/exp-<name>-<N>``
 (resumable: an interrupted call picks up where it stopped). ``--out`` gets ``experiments.json`` and
 ``experiments.md``. Never run it on the report seed while developing.
 """
@@ -23,7 +23,7 @@ sys.path.insert(0, str(ROOT))
 
 
 def main(argv=None) -> int:
-    from daa_sil.study.experiments import RUNS
+    from daa_sil.study.campaign.experiments import RUNS
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  epilog="experiments: " + ", ".join(r.name for r in RUNS))
@@ -44,9 +44,9 @@ def main(argv=None) -> int:
             ap.error(f"--{name} must be at least 1")
     from daa_sil.errors import UsageError
     from daa_sil.files import atomic_write_json, atomic_write_text, ensure_dir
-    from daa_sil.study.experiment_page import experiments_page
-    from daa_sil.study.experiment_suite import analyse
-    from daa_sil.study.experiments import run_experiments
+    from daa_sil.study.report.experiment_page import experiments_page
+    from daa_sil.study.analysis.experiment_suite import analyse
+    from daa_sil.study.campaign.experiments import run_experiments
 
     try:
         if not args.analyse_only:

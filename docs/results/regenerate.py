@@ -35,7 +35,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from daa_sil.study.experiments import READING_GROUPS  # noqa: E402 -- after the checkout is on the path
+from daa_sil.study.campaign.experiments import READING_GROUPS  # noqa: E402 -- after the checkout is on the path
 
 GROUPS = ",".join(READING_GROUPS)
 SWEEP_GROUPS = "B-2,ID-2,ID-2-projl"
@@ -111,7 +111,7 @@ def _again(args) -> str:
 
 
 def _report(args, dirs: list, experiments: "dict | None") -> None:
-    from daa_sil.study.report import write_report
+    from daa_sil.study.report.pages import write_report
 
     code = code_record(args.runs)
     commit = str(code.get("commit", "unknown"))

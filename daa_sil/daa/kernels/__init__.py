@@ -17,7 +17,9 @@ import sys
 import time
 from types import SimpleNamespace
 
-from daa_sil.jit_cache import READY_MARKER, cache_dir, is_warm, mark_ready
+from daa_sil.runtime.jit_cache import READY_MARKER, cache_dir, is_warm, mark_ready
+import multiprocessing as mp
+import signal
 
 _MODULES = ("elementwise", "evaluate", "motion", "regions", "resolve", "axis_pass", "select", "flight",
             "command_plan", "recovery")
@@ -29,7 +31,7 @@ HELPER_MODULES = ("resolve", "command_plan", "select")
 HELPER_NAME = "daa-kernels"
 #: s the helper may take before it is stopped and its part compiled here (it takes ~30 s on two cores)
 HELPER_TIMEOUT_S = 1800.0
-#: where the kernels are cached (:func:`daa_sil.jit_cache.cache_dir`)
+#: where the kernels are cached (:func:`daa_sil.runtime.jit_cache.cache_dir`)
 CACHE_DIR = cache_dir()
 #: s this process waited for another one's compilation, and spent compiling / loading the kernels
 #: (None until :func:`get` has run)
@@ -76,7 +78,7 @@ def _load(clear: bool) -> tuple[float, float]:
     only reads, so the SIL's vehicle and GCS load side by side instead of one after the other. A
     process that waited for the lock finds the cache complete and loads. Returns (s waited for the
     lock, s compiling / loading)."""
-    from daa_sil.daa.kernels.jit import compile_lock
+    from daa_sil.daa.kernels.jit import compile_lock  # lazy: start-up time
 
     t0 = time.perf_counter()
     warm = not clear and is_warm(CACHE_DIR)
@@ -92,7 +94,7 @@ def _load(clear: bool) -> tuple[float, float]:
                 _import(_MODULES)
             else:
                 _compile_everything()
-                try:  # every kernel is cached now (daa_sil.jit_cache.is_warm)
+                try:  # every kernel is cached now (daa_sil.runtime.jit_cache.is_warm)
                     mark_ready(CACHE_DIR)
                 except OSError:
                     pass
@@ -134,9 +136,8 @@ def _start_helper():
     process's ``sys.path``, and dies with this process; it ends before this call returns, so the thread
     that started it outlives it) and the pipe it reports on; None on one core, in a daemonic process (a
     Dask worker), with a cache it could not fill, or if it cannot be started."""
-    import multiprocessing as mp
 
-    from daa_sil.spawned import start_spawned, usable_cpus
+    from daa_sil.runtime.spawned import start_spawned, usable_cpus  # lazy: start-up time
 
     if usable_cpus() < 2 or mp.current_process().daemon:  # (a daemonic process may not have children: Dask's)
         return None
@@ -181,9 +182,8 @@ def compile_part(parent_pid: int, names, cache: str, conn) -> None:
     """The helper process of a cold cache: compile the kernel modules ``names`` and their lazy kernels into
     the cache (the process that started it holds the compile lock and loads them afterwards). Exits 1 with
     a one-line reason on ``conn`` if it fails, or if it would not write to ``cache``, the parent's."""
-    import signal
 
-    from daa_sil.spawned import die_with_parent
+    from daa_sil.runtime.spawned import die_with_parent  # lazy: start-up time
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's (it stops this process)
     die_with_parent(parent_pid, HELPER_NAME)
@@ -205,7 +205,7 @@ def compile_part(parent_pid: int, names, cache: str, conn) -> None:
 def lazy_kernels(modules=_MODULES) -> list:
     """The :class:`~daa_sil.daa.kernels.jit.LazyKernel` objects of the imported kernel ``modules`` (names; default
     all)."""
-    from daa_sil.daa.kernels.jit import LazyKernel
+    from daa_sil.daa.kernels.jit import LazyKernel  # lazy: start-up time
 
     mods = [m for m in (sys.modules.get(f"{__name__}.{name}") for name in modules) if m is not None]
     return [v for m in mods for name, v in vars(m).items() if name.endswith("_into") and isinstance(v, LazyKernel)]
@@ -226,7 +226,7 @@ def get() -> SimpleNamespace:
         LOCK_WAIT_S, LOAD_S = _load(clear=True)
     # numba's typing of an array argument imports numpy.ma (to refuse masked arrays) at the first call of
     # any kernel: 20-35 ms that would otherwise fall in the first DAA step (a realtime deadline), not here
-    import numpy.ma  # noqa: F401
+    import numpy.ma  # lazy: start-up time; noqa: F401
     ns = SimpleNamespace()
     for name in _MODULES:
         mod = sys.modules[f"{__name__}.{name}"]
@@ -251,7 +251,7 @@ def get_unfused():
     name = f"{__name__}.unfused"
     if name not in sys.modules:
         get()
-        from daa_sil.daa.kernels.jit import compile_lock
+        from daa_sil.daa.kernels.jit import compile_lock  # lazy: start-up time
 
         with compile_lock(), without_scipy_linalg():
             importlib.import_module(name)

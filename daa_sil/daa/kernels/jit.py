@@ -7,7 +7,7 @@
 * **Cache.** Compiled machine code is written to ``$NUMBA_CACHE_DIR`` when that is set, else to
   ``$XDG_CACHE_HOME/daa-sil-numba`` (``~/.cache/daa-sil-numba``), in a subdirectory named after a
   hash of the kernel sources, their directory and the numba / llvmlite / numpy / Python versions
-  (:mod:`daa_sil.jit_cache`, which answers without importing numba; a ``ready`` file there says every
+  (:mod:`daa_sil.runtime.jit_cache`, which answers without importing numba; a ``ready`` file there says every
   kernel is cached). numba keys its own entries on each kernel file's contents and directory only, so
   a change in a helper another file calls would otherwise go unnoticed, and a second checkout would
   find the first one's ``ready`` file without its entries; the hash makes either a fresh directory. numba
@@ -43,7 +43,9 @@ from pathlib import Path
 
 import numba
 
-from daa_sil.jit_cache import cache_dir
+from daa_sil.runtime.jit_cache import cache_dir
+import fcntl
+from daa_sil.daa import kernels
 
 
 def _configure_cache() -> Path:
@@ -63,8 +65,6 @@ CACHE_DIR = _configure_cache()
 def compile_lock():
     """Exclusive lock on ``CACHE_DIR/.compile.lock`` while held (no lock where that cannot be had)."""
     try:
-        import fcntl
-
         fh = open(CACHE_DIR / ".compile.lock", "a+b")
     except (ImportError, OSError):
         yield
@@ -93,8 +93,6 @@ class LazyKernel:
     def compile(self):
         """The compiled kernel (compiled or loaded now if it was not yet)."""
         if self.dispatcher is None:
-            from daa_sil.daa import kernels
-
             with kernels.without_scipy_linalg():  # (as the eager kernels load: no BLAS probe)
                 self.dispatcher = numba.njit(self.signatures, **OPTIONS)(self.py_func)
         return self.dispatcher

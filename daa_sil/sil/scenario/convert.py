@@ -11,11 +11,15 @@ from daa_sil.config.settings import STEP
 from daa_sil.errors import FileFormatError, UsageError
 
 from .schema import Scenario
+import numpy as np
+from daa_sil.geometry.kinematics import AircraftState
+from daa_sil.models import encounters as enc
+from daa_sil.models.encounter_geometry import encounter_from_geometry
 
 
 def delay_spec_string(spec) -> str:
     """A scenario delay spec (str or dict) as the ``--delay`` string of ``daa-sil shim``."""
-    from daa_sil.models import delay_spec
+    from daa_sil.models import delay_spec  # lazy: start-up time
 
     return spec if isinstance(spec, str) else delay_spec.delay_model_from_dict(spec).spec()
 
@@ -23,7 +27,7 @@ def delay_spec_string(spec) -> str:
 def link_legs(sc: Scenario):
     """The scenario link's :class:`daa_sil.models.link_rule.LinkLegs`: ``up`` / ``down`` one-way, or the
     ``round_trip`` split evenly (each link half of one draw per epoch, from the uplink stream)."""
-    from daa_sil.models import delay_spec, link_rule
+    from daa_sil.models import delay_spec, link_rule  # lazy: start-up time
 
     def build(spec):
         return delay_spec.parse_delay_spec(spec) if isinstance(spec, str) else delay_spec.delay_model_from_dict(spec)
@@ -43,9 +47,7 @@ def delay_models(sc: Scenario):
 
 def ownship_state(sc: Scenario):
     """The ownship at t = 0 as an ``(1,)`` :class:`daa_sil.geometry.kinematics.AircraftState`."""
-    import numpy as np
 
-    from daa_sil.geometry.kinematics import AircraftState
 
     o = sc.ownship
     return AircraftState(np.array([o.x_m]), np.array([o.y_m]), np.array([o.alt_m]), np.array([o.gs_mps]),
@@ -59,11 +61,7 @@ def encounter_set(sc: Scenario, encounter_id: int = 0):
     scenario's (unmaneuvered) ownship; ``initial`` intruders start as given. Scripts become the
     set's segments. This is the one conversion the SIL vehicle and fast-time parity runs share.
     """
-    import numpy as np
 
-    from daa_sil.models import encounters as enc
-    from daa_sil.models.encounter_geometry import encounter_from_geometry
-    from daa_sil.geometry.kinematics import AircraftState
 
     own = ownship_state(sc)
     m = len(sc.intruders)

@@ -22,6 +22,7 @@ from daa_sil.errors import FileFormatError, UsageError
 from .schema import (MAX_INTRUDERS, PILOT_RESPONSES, DECISIONS, FAULT_PROCESSES, FAULT_SIGNALS, AllocationSpec, IntruderGeometry,
                      Expectation, InitialState, IntruderSpec, LinkSpec, Maneuver, Origin, Outage, PilotSpec, ProcessFault,
                      Scenario, ScriptedCommand)
+from daa_sil.config.overrides import Overrides, notice, settings_of
 
 
 # --------------------------------------------------------------------------------------------
@@ -169,7 +170,7 @@ def _intruder(v: _V, node, path, idx: int, dur: float) -> IntruderSpec:
 
 def _delay(v: _V, node, path):
     """A latency spec string or dict, checked by building the model (daa_sil.models.latency)."""
-    from daa_sil.models import delay_spec
+    from daa_sil.models import delay_spec  # lazy: start-up time
 
     try:
         if isinstance(node, yaml.ScalarNode):
@@ -246,9 +247,8 @@ def _pilot(v: _V, node, path, dur) -> PilotSpec:
 
 
 def _allocation(v: _V, node, path) -> AllocationSpec:
-    from daa_sil.config.groups import group_spec, group_table
-    from daa_sil.config.overrides import Overrides, notice, settings_of
-    from daa_sil.config.policy import WAIT_MODES
+    from daa_sil.config.groups import group_spec, group_table  # lazy: start-up time
+    from daa_sil.config.policy import WAIT_MODES  # lazy: start-up time
 
     m = v.mapping(node, path, set(), {"group", "wait", "blending", "projl", *Overrides.keys_read()})
     group = v.opt(m, "group", path, v.string, SCENARIO_GROUP.default, choices=tuple(group_table()))
@@ -375,6 +375,6 @@ def dump_scenario(sc: Scenario) -> str:
 
 def save_scenario(sc: Scenario, path: "str | os.PathLike", overwrite: bool = False) -> Path:
     """Write ``sc`` as YAML atomically."""
-    from daa_sil.files import atomic_write_text
+    from daa_sil.files import atomic_write_text  # lazy: start-up time
 
     return atomic_write_text(path, dump_scenario(sc), overwrite=overwrite)

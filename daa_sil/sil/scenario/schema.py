@@ -104,7 +104,7 @@ from typing import Any
 
 from daa_sil.config.overrides import Overrides
 from daa_sil.config.settings import DELAY_EPOCH, DURATION, SCENARIO_GROUP, SCENARIO_LINK, STANDARD_PRESET
-from daa_sil.decision import DECISION_NAMES
+from daa_sil.agent.decision import DECISION_NAMES
 from daa_sil.models.encounter_geometry import IntruderGeometry
 
 #: the decision names ``expect.decisions_include`` / ``decisions_exclude`` accept: the agent's (one definition)

@@ -1,0 +1,1 @@
+"""Process and runtime helpers: the compiled-kernel cache (:mod:`.jit_cache`), whether this process runs the compiled kernels (:mod:`.compiled`), spawned children (:mod:`.spawned`), the garbage collector of short processes (:mod:`.process_gc`) and memory / core budgets (:mod:`.resources`)."""

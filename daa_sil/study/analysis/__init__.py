@@ -1,0 +1,1 @@
+"""What the campaigns' tables say: statistics, paper metrics, counting, the study of a reading (:mod:`.study`), the paper's findings and the verdict rules, the experiments' figures and attribution, sensitivity sweeps. Above ``study/campaign/``."""

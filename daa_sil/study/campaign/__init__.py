@@ -1,0 +1,1 @@
+"""Campaigns over the paper's groups: the run (:mod:`.run`), its configuration, files, plan, sampling and memory estimate, the bit-for-bit comparison of two campaigns, and the experiment campaigns. Above ``study/simulation/``."""

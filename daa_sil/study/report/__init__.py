@@ -1,0 +1,1 @@
+"""The report pages (Markdown + PNG) from the analysis: the main page (:mod:`.pages`), the appendix, figures, the experiments page, the simulator's signatures and the paper's own consistency checks. The top layer of the study."""

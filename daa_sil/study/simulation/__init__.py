@@ -1,0 +1,1 @@
+"""Batched fast-time simulation of N encounters (paper §IV): the step loop (:mod:`.fasttime`), its result tables (:mod:`.fasttime_results`), the link's ring of step slots (:mod:`.slot_ring`) and the executors that run chunks (:mod:`.executors`). The lowest layer of the study."""
