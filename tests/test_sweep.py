@@ -1,6 +1,7 @@
 """campaign sweep: parsing, one campaign per value on the same encounters, resume, table, collate."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -75,3 +76,25 @@ def test_pilot_and_grid_sweeps_set_the_pilot_mode_and_the_readings_grid():
     assert [g.map_source for g in grid] == ["paper", "alerting"]
     ext = point_configs(CampaignConfig(groups=("ID-2",), reading="extended"), parse_vary("grid=paper,alerting"))
     assert [g.map_source for g in ext] == ["paper", "alerting"] and ext[0].reading_set == {}
+
+
+def test_a_sweep_started_by_the_previous_version_resumes(tmp_path, capsys):
+    """tests/data/sweep-0.3.json is the sweep.json the previous version wrote for the command below (its
+    base records W_T, ProjL's look-ahead and the link under their old keys): --resume reads it as the
+    same configuration, and still refuses one that differs."""
+    old = json.loads((Path(__file__).parent / "data" / "sweep-0.3.json").read_text())
+    assert "wt" in old["base"] and "settings" not in old["base"]  # the old keys
+    argv = ["campaign", "sweep", "--vary", "wt=2,4", "--groups", "ID-2", "--encounters", "10", "--duration", "60",
+            "--chunk-size", "10", "--waitmap", "paper", "--no-progress", "--resume"]
+    out = tmp_path / "old"
+    out.mkdir()
+    (out / "sweep.json").write_text(json.dumps(old))
+    assert main(argv + ["--out", str(out)]) == 0, capsys.readouterr().err
+    assert (out / "points/wt=4/campaign.json").is_file()
+    other = tmp_path / "other"
+    other.mkdir()
+    old["base"]["n_encounters"] = 11  # another campaign: refused
+    (other / "sweep.json").write_text(json.dumps(old))
+    capsys.readouterr()
+    assert main(argv + ["--out", str(other)]) == 2
+    assert "different settings (base)" in capsys.readouterr().err

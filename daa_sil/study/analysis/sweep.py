@@ -158,7 +158,9 @@ def run_sweep(base, vary: Vary, out_dir: "str | Path", *, workers: int = 1, sche
     meta = json.loads(json.dumps(to_jsonable(meta)))
     if meta_path.is_file() and not force:
         stored = json.loads(meta_path.read_text(encoding="utf-8"))
-        diff = [k for k in ("vary", "values", "base") if stored.get(k) != meta[k]]
+        diff = [k for k in ("vary", "values") if stored.get(k) != meta[k]]
+        if not same_base(stored.get("base"), meta["base"]):
+            diff.append("base")
         if diff:
             raise UsageError(f"--resume: {meta_path} was made with different settings ({', '.join(diff)}); "
                              f"pass the same --vary and options or choose a new --out")
@@ -175,6 +177,22 @@ def run_sweep(base, vary: Vary, out_dir: "str | Path", *, workers: int = 1, sche
                          **({"batch_rows": batch_rows} if batch_rows is not None else {}))
         write_summary(out)
     return meta
+
+
+def same_base(stored: "dict | None", base: dict) -> bool:
+    """Whether a sweep.json's recorded base configuration is ``base`` (both as ``to_dict`` gives them),
+    read as a configuration: a sweep started by an earlier version records the same campaign under its
+    older keys (``wt``, ``projl_lookahead``, ``link``)."""
+    if stored == base:
+        return True
+    from daa_sil.files import to_jsonable  # lazy: start-up time
+    from daa_sil.study.campaign.config import CampaignConfig  # lazy: start-up time
+
+    try:
+        again = CampaignConfig.from_dict(stored, "sweep.json base").to_dict()
+    except (FileFormatError, AttributeError):  # not a configuration at all: it differs
+        return False
+    return json.loads(json.dumps(to_jsonable(again))) == base
 
 
 def remove_sweep(out: Path) -> None:
