@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from daa_sil.agent.memory import PilotInput
+from daa_sil.daa import alert_levels
 from daa_sil.geometry import wellclear as wc
 from daa_sil.geometry.kinematics import AircraftState, Command, fly_command
 
@@ -32,3 +34,14 @@ def brute_first_lowc(own: AircraftState, intr: AircraftState, cmd: Command, perf
     hit = wc.wcv(s, v, th).any(axis=1)  # (N, T)
     first = np.where(hit.any(axis=1), t[np.argmax(hit, axis=1)], np.inf)
     return first
+
+
+def hold_into_head_on(cfg):
+    """A head-on intruder 3 km ahead, co-altitude: the pilot's 'hold' (the course it saw: north) is unsafe
+    (checked: the alert level reaches 2 under ``cfg``). Returns ``(own, intruders, PilotInput)``."""
+    own = own_state(gs=30.0)
+    intr = intruders([[[0.0, 3000.0, 1000.0, 20.0, np.pi, 0.0]]])
+    hold = Command(np.array([0.0]), np.array([0.0]), np.array([30.0]))
+    pin = PilotInput(np.array([True]), hold, np.array([9.0]), np.array([10.0]), np.array([10.0]))
+    assert alert_levels(own, intr, cfg)[0, 0] >= 2
+    return own, intr, pin

@@ -15,13 +15,12 @@ from daa_sil.agent.step import agent_step
 from daa_sil.config.groups import policy_for_group
 from daa_sil.config.basis import PAPER_BASIS, basis_records, consumed_findings
 from daa_sil.config.readings import READINGS, Reading, reading_for
-from daa_sil.daa import DaaConfig, alert_levels
+from daa_sil.daa import DaaConfig
 from daa_sil.agent.decision import BY_KEPT
 from daa_sil.errors import UsageError
-from daa_sil.geometry.kinematics import Command
 from daa_sil.agent.wait_function import box_entry_time
 
-from daa_helpers import intruders, own_state
+from daa_helpers import hold_into_head_on, intruders, own_state
 
 CFG = DaaConfig()
 
@@ -86,19 +85,11 @@ def test_outside_the_box_the_wait_falls_as_the_intruder_closes(paper_family):
     assert side.wait_s[0] == pytest.approx(40.0) and side.p_lowc[0] == 0.0
 
 
-def _hold_into_head_on():
-    own = own_state(gs=30.0)
-    intr = intruders([[[0.0, 3000.0, 1000.0, 20.0, np.pi, 0.0]]])
-    hold = Command(np.array([0.0]), np.array([0.0]), np.array([30.0]))
-    pin = PilotInput(np.array([True]), hold, np.array([9.0]), np.array([10.0]), np.array([10.0]))
-    assert alert_levels(own, intr, CFG)[0, 0] >= 2
-    return own, intr, pin
-
 
 def test_an_unsafe_hold_is_overridden_in_the_baseline():
     """Algorithm 1 + the paper's definition of an override: an unsafe received command, a 'hold' too, is
     a DAA override in a baseline group (it was 'no command', a no-wait, under the old setting)."""
-    own, intr, pin = _hold_into_head_on()
+    own, intr, pin = hold_into_head_on(CFG)
     b2 = policy_for_group("B-2")
     _, dec, _ = agent_step(10.0, own, intr, pin, AgentMemory.initial(1, own), b2, CFG)
     assert dec["decision"][0] == D_DAA_OVERRIDE and dec["sm_pilot"][0] <= 0
@@ -107,7 +98,7 @@ def test_an_unsafe_hold_is_overridden_in_the_baseline():
 
 
 def test_the_daa_keeps_its_authority_until_clear_under_the_extension():
-    own, intr, _ = _hold_into_head_on()
+    own, intr, _ = hold_into_head_on(CFG)
     nothing = PilotInput.nothing(1, 10.0)
     lookup = lambda o, i, t: WaitValue.constant(o.shape[0], 30.0)  # noqa: E731 -- the map says: wait
     pol = replace(policy_for_group("ID-2"), projl=False, active_from="encounter")

@@ -13,27 +13,17 @@ from daa_sil.agent.step import agent_step
 from daa_sil.config.groups import policy_for_group
 from daa_sil.daa import AXIS_NONE, DaaConfig, alert_levels
 from daa_sil.errors import UsageError
-from daa_sil.geometry.kinematics import Command
 from daa_sil.waitmap.lookup import LookupResult
 
-from daa_helpers import intruders, own_state
+from daa_helpers import hold_into_head_on, intruders, own_state
 
 CFG = DaaConfig()
 
 
-def _hold_into_head_on():
-    """A head-on intruder 3 km ahead, co-altitude: the pilot's 'hold' (the course it saw: north) is unsafe."""
-    own = own_state(gs=30.0)
-    intr = intruders([[[0.0, 3000.0, 1000.0, 20.0, np.pi, 0.0]]])
-    hold = Command(np.array([0.0]), np.array([0.0]), np.array([30.0]))
-    pin = PilotInput(np.array([True]), hold, np.array([9.0]), np.array([10.0]), np.array([10.0]))
-    assert alert_levels(own, intr, CFG)[0, 0] >= 2
-    return own, intr, pin
-
 
 @pytest.mark.parametrize("wait_s, decision", [(60.0, D_WAIT), (0.0, D_NO_WAIT)])
 def test_unsafe_hold_is_decided_as_no_command(wait_s, decision):
-    own, intr, pin = _hold_into_head_on()
+    own, intr, pin = hold_into_head_on(CFG)
     lookup = lambda o, i, t: WaitValue.constant(o.shape[0], wait_s)  # noqa: E731
     pol = replace(policy_for_group("ID-2"), projl=False)
     _, dec, _ = agent_step(10.0, own, intr, pin, AgentMemory.initial(1, own), pol, CFG, lookup)
