@@ -71,6 +71,15 @@ def _own_columns(batch: AxisBands, alone: AxisBands) -> slice:
     return slice(start, start + alone.values.shape[1])
 
 
+def _assert_same_axis(a: AxisBands, b: AxisBands, skip: tuple = ("axis",), *where) -> None:
+    """Every field of two axes' bands bit for bit (fields in ``skip`` aside; both None counts as equal)."""
+    for f in fields(AxisBands):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if f.name in skip or (x is None and y is None):
+            continue
+        assert _same(np.asarray(x), np.asarray(y)), (*where, a.name, f.name)
+
+
 def _assert_axis_row(alone: AxisBands, batch: AxisBands, i: int, what: str) -> None:
     cols = _own_columns(batch, alone)
     for f in fields(AxisBands):
@@ -227,11 +236,7 @@ def test_cylinder_bands_on_the_one_pass_path_equal_the_evaluators(monkeypatch):
         ref = compute_bands(own, intr, cfg)
         monkeypatch.setattr(bands_mod, "FUSED", True)
         for a, b in zip(fused.axes(), ref.axes()):
-            for f in fields(AxisBands):
-                x, y = getattr(a, f.name), getattr(b, f.name)
-                if f.name in ("axis", "own_lo", "own_hi") or (x is None and y is None):
-                    continue
-                assert _same(np.asarray(x), np.asarray(y)), (seed, a.name, f.name)
+            _assert_same_axis(a, b, ("axis", "own_lo", "own_hi"), seed)
             checked += int(np.sum(np.isfinite(np.asarray(a.recovery_time))))
     assert checked > 0  # (some rows did search a recovery)
 
@@ -256,11 +261,7 @@ def test_cylinder_recovery_search_compiled_equals_numpy(monkeypatch):
         ref = compute_bands(own, intr, cfg)
         monkeypatch.setattr(recovery_mod, "COMPILED", True)
         for a, b in zip(got.axes(), ref.axes()):
-            for f in fields(AxisBands):
-                x, y = getattr(a, f.name), getattr(b, f.name)
-                if f.name == "axis" or (x is None and y is None):
-                    continue
-                assert _same(np.asarray(x), np.asarray(y)), (a.name, f.name)
+            _assert_same_axis(a, b)
             recovered += int(np.sum(np.isfinite(np.asarray(a.recovery_time))))
     assert recovered > 40
 
@@ -294,11 +295,7 @@ def test_cylinder_rows_compiled_equal_the_evaluators(monkeypatch):
         ref = compute_bands(own, intr, c)
         monkeypatch.setattr(bands_mod, "CYLINDER_COMPILED", True)
         for a, b in zip(got.axes(), ref.axes()):
-            for f in fields(AxisBands):
-                x, y = getattr(a, f.name), getattr(b, f.name)
-                if f.name == "axis" or (x is None and y is None):
-                    continue
-                assert _same(np.asarray(x), np.asarray(y)), (a.name, f.name, own.shape)
+            _assert_same_axis(a, b, ("axis",), own.shape)
             recovered += int(np.sum(np.asarray(a.recovery_nfactor) >= 0))
     assert recovered > 40  # (rows did search a recovery on the compiled path)
 
