@@ -73,6 +73,11 @@ def stop_pool(ex: cf.ProcessPoolExecutor) -> None:
         if p.is_alive():
             p.kill()
             p.join(STOP_WAIT_S)
+    # let the pool's manager thread finish closing its wake-up pipe before the interpreter exits: on
+    # Python 3.11 the exit hook can write to it while the thread closes it ("Bad file descriptor")
+    manager = getattr(ex, "_executor_manager_thread", None)  # the stdlib keeps no public handle
+    if manager is not None:
+        manager.join(STOP_WAIT_S)
 
 
 def start_pool(workers: int) -> cf.ProcessPoolExecutor:
